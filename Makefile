@@ -1,0 +1,26 @@
+# The two commands a newcomer needs: `make test` and `make run`. Both install what is
+# missing first (scripts/bootstrap: Debian packages, the Python venv, the dialect XML).
+SHELL := /bin/bash
+export LANG := C.UTF-8
+export LC_ALL := C.UTF-8
+export MIX_HOME ?= $(CURDIR)/_build/mix_home
+
+.PHONY: bootstrap test run bench dialyzer clean
+
+bootstrap:
+	@scripts/bootstrap
+
+test: bootstrap
+	MIX_ENV=test mix test $(ARGS)
+
+run: bootstrap
+	@scripts/demo
+
+bench: bootstrap
+	MIX_ENV=prod mix bench
+
+dialyzer: bootstrap
+	mix dialyzer
+
+clean:
+	rm -rf _build priv/mavlink/*.xml

@@ -1,0 +1,102 @@
+defmodule Dolphin.MAVLink.Message do
+  @moduledoc """
+  What every generated message module provides, and functions over any message.
+
+  A dialect (`Dolphin.MAVLink.Dialect`) generates one struct module per
+  message, e.g. `Dolphin.MAVLink.Ardupilotmega.Heartbeat`, whose fields are
+  named as in the XML and hold values as described in `Dolphin.MAVLink.Value`.
+  Build messages as structs; unset fields are zero (empty string, zero list).
+
+      iex> alias Dolphin.MAVLink.Ardupilotmega.Heartbeat
+      iex> msg = %Heartbeat{type: 6, autopilot: 8}
+      iex> Dolphin.MAVLink.Message.name(msg)
+      "HEARTBEAT"
+      iex> Dolphin.MAVLink.Message.to_fields(msg)
+      [type: 6, autopilot: 8, base_mode: 0, custom_mode: 0, system_status: 0, mavlink_version: 3]
+  """
+
+  alias Dolphin.MAVLink.Value
+
+  @typedoc "A message struct of some dialect."
+  @type t :: struct()
+
+  @doc "Static facts of the message: `:id`, `:name`, `:crc_extra`, `:min_len`, `:max_len`, `:dialect`, `:fields`, `:wire`, `:frame` (`{id, crc_extra, min_len}`)."
+  @callback __mavlink__(atom()) :: term()
+
+  @doc "Decodes a payload of exactly `max_len` bytes."
+  @callback decode(binary()) :: t()
+
+  @doc "Encodes to the full (`max_len`) wire payload; raises `ArgumentError` on a bad field value."
+  @callback encode(t()) :: binary()
+
+  @doc "The message id."
+  @spec id(t()) :: non_neg_integer()
+  def id(%mod{}), do: mod.__mavlink__(:id)
+
+  @doc "The message name as in the XML."
+  @spec name(t()) :: String.t()
+  def name(%mod{}), do: mod.__mavlink__(:name)
+
+  @doc "Field values in XML declaration order."
+  @spec to_fields(t()) :: keyword()
+  def to_fields(%mod{} = message) do
+    for %{name: name} <- mod.__mavlink__(:fields), do: {name, Map.fetch!(message, name)}
+  end
+
+  @doc """
+  Builds a message of `module` from field values given by name (atom or
+  string keys); fields not given are zero. Returns `{:error, reason}` for an
+  unknown field name; values are checked when the message is encoded.
+  """
+  @spec new(module(), Enumerable.t()) :: {:ok, t()} | {:error, String.t()}
+  def new(module, values) do
+    known = Map.new(module.__mavlink__(:fields), &{Atom.to_string(&1.name), &1.name})
+
+    Enum.reduce_while(values, {:ok, struct(module)}, fn {key, value}, {:ok, msg} ->
+      case Map.fetch(known, to_string(key)) do
+        {:ok, name} -> {:cont, {:ok, Map.put(msg, name, value)}}
+        :error -> {:halt, {:error, "#{module.__mavlink__(:name)} has no field #{inspect(to_string(key))}"}}
+      end
+    end)
+  end
+
+  @doc false
+  # The general decoder: field by field, for payloads the generated pattern
+  # cannot match (a NaN or infinite float).
+  @spec decode_fields(module(), binary()) :: t()
+  def decode_fields(module, payload) do
+    {values, <<>>} =
+      Enum.map_reduce(module.__mavlink__(:wire), payload, fn {name, type, n}, rest ->
+        size = Value.size(type) * (n || 1)
+        <<bytes::binary-size(size), rest::binary>> = rest
+        {{name, Value.decode(type, n, bytes)}, rest}
+      end)
+
+    struct(module, values)
+  end
+
+  @doc false
+  # The general encoder: field by field, raising an ArgumentError that names the
+  # message, the field and the value when one cannot be encoded.
+  @spec encode_fields!(t()) :: binary()
+  def encode_fields!(%module{} = message) do
+    module.__mavlink__(:wire)
+    |> Enum.map(fn {name, _type, _n} -> encode_field!(module, name, Map.fetch!(message, name)) end)
+    |> IO.iodata_to_binary()
+  end
+
+  @doc false
+  @spec encode_field!(module(), atom(), term()) :: binary()
+  def encode_field!(module, name, value) do
+    {^name, type, n} = List.keyfind(module.__mavlink__(:wire), name, 0)
+
+    case Value.encode(type, n, value) do
+      {:ok, bytes} ->
+        bytes
+
+      {:error, why} ->
+        raise ArgumentError,
+              "cannot encode #{module.__mavlink__(:name)}.#{name} = #{inspect(value)}: #{why}"
+    end
+  end
+end

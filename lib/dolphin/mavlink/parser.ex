@@ -1,0 +1,126 @@
+defmodule Dolphin.MAVLink.Parser do
+  @moduledoc """
+  A streaming MAVLink decoder: feed it bytes in chunks of any size (a UDP
+  datagram holding several frames, a TCP stream split anywhere) and get back
+  the frames completed so far. It is pure data: the process owning a socket
+  keeps it.
+
+      iex> alias Dolphin.MAVLink.{Frame, Parser}
+      iex> bytes = Frame.encode(%Dolphin.MAVLink.Ardupilotmega.Heartbeat{type: 2}, sysid: 1)
+      iex> parser = Parser.new()
+      iex> {[], parser} = Parser.feed(parser, "noise" <> binary_part(bytes, 0, 4))
+      iex> {[frame], parser} = Parser.feed(parser, binary_part(bytes, 4, byte_size(bytes) - 4))
+      iex> {frame.sysid, frame.message.type}
+      {1, 2}
+      iex> Parser.stats(parser).bytes_skipped
+      5
+
+  After bytes that are not a valid frame it resynchronises by scanning for the
+  next magic byte, starting one byte after a failed candidate, so that a valid
+  frame is found even right after a truncated or corrupted one. Nothing is
+  raised; each dropped byte is counted, with the reason, in `stats/1`.
+
+  Options of `new/1`:
+
+    * `:dialect` — the dialect module (default `Dolphin.MAVLink.Ardupilotmega`);
+    * `:signing` — a `Dolphin.MAVLink.Signing` state: signed frames are then
+      verified (bad signature or replayed timestamp: dropped), unsigned ones
+      follow its policy. Without it, frames pass unverified.
+
+  Frames with a message id the dialect does not know come out with
+  `message: nil` (for forwarding) and are counted as `unknown_id`.
+  """
+
+  alias Dolphin.MAVLink.{Frame, Signing}
+
+  alias Dolphin.MAVLink.Parser.Stats
+
+  defstruct dialect: Dolphin.MAVLink.Ardupilotmega, signing: nil, buffer: <<>>, in_sync: true, stats: %Stats{}
+
+  @type t :: %__MODULE__{
+          dialect: module(),
+          signing: Signing.t() | nil,
+          buffer: binary(),
+          in_sync: boolean(),
+          stats: Stats.t()
+        }
+
+  @doc "A parser; see the module doc for options."
+  @spec new(keyword()) :: t()
+  def new(opts \\ []) do
+    %__MODULE__{
+      dialect: Keyword.get(opts, :dialect, Dolphin.MAVLink.Ardupilotmega),
+      signing: Keyword.get(opts, :signing)
+    }
+  end
+
+  @doc "Feeds a chunk of bytes; returns the frames it completed, in order."
+  @spec feed(t(), binary()) :: {[Frame.t()], t()}
+  def feed(%__MODULE__{buffer: buffer, stats: stats} = parser, chunk) do
+    buf = if buffer == <<>>, do: chunk, else: buffer <> chunk
+    parser = %{parser | stats: %{stats | bytes: stats.bytes + byte_size(chunk)}}
+    loop(buf, parser, [])
+  end
+
+  @doc """
+  Ends the stream: what is left in the buffer (a frame cut off at the end) is
+  dropped and counted as `truncated`.
+  """
+  @spec finish(t()) :: t()
+  def finish(%__MODULE__{buffer: <<>>} = parser), do: parser
+
+  def finish(%__MODULE__{buffer: rest, stats: stats} = parser) do
+    %{parser | buffer: <<>>, stats: %{stats | truncated: stats.truncated + 1, bytes_skipped: stats.bytes_skipped + byte_size(rest)}}
+  end
+
+  @doc "Counters of what was decoded and dropped."
+  @spec stats(t()) :: Stats.t()
+  def stats(%__MODULE__{stats: stats}), do: stats
+
+  defp loop(buf, parser, acc) do
+    case Frame.decode(buf, parser.dialect, in_sync: parser.in_sync) do
+      {:ok, frame, rest} ->
+        case check_signature(parser, frame) do
+          {:ok, parser} ->
+            loop(rest, %{parser | in_sync: true, stats: count_frame(parser.stats, frame)}, [frame | acc])
+
+          # A bad signature may be a frame cut short whose "signature" is the
+          # start of the next frame: look again from the byte after its magic.
+          {:error, :bad_signature, parser} ->
+            loop(binary_part(buf, 1, byte_size(buf) - 1), %{parser | in_sync: false, stats: drop(parser.stats, :bad_signature, 1)}, acc)
+
+          # A replayed or refused frame is whole: drop all of it.
+          {:error, reason, parser} ->
+            loop(rest, %{parser | in_sync: false, stats: drop(parser.stats, reason, byte_size(frame.raw))}, acc)
+        end
+
+      {:more, rest} ->
+        # Keep only the unfinished tail, not the whole chunk it points into.
+        {Enum.reverse(acc), %{parser | buffer: :binary.copy(rest)}}
+
+      {:error, reason, rest} ->
+        stats = drop(parser.stats, reason, byte_size(buf) - byte_size(rest))
+        loop(rest, %{parser | in_sync: false, stats: stats}, acc)
+    end
+  end
+
+  defp check_signature(%__MODULE__{signing: nil} = parser, _frame), do: {:ok, parser}
+
+  defp check_signature(%__MODULE__{signing: signing} = parser, frame) do
+    case Signing.verify(signing, frame) do
+      {:ok, signing} -> {:ok, %{parser | signing: signing}}
+      {:error, reason, signing} -> {:error, reason, %{parser | signing: signing}}
+    end
+  end
+
+  defp count_frame(stats, %Frame{message: nil}), do: %{stats | unknown_id: stats.unknown_id + 1}
+  defp count_frame(stats, _frame), do: %{stats | frames: stats.frames + 1}
+
+  defp drop(stats, :garbage, bytes), do: %{stats | bytes_skipped: stats.bytes_skipped + bytes}
+
+  defp drop(stats, reason, bytes) do
+    stats
+    |> Map.update!(reason, &(&1 + 1))
+    |> Map.update!(:bytes_skipped, &(&1 + bytes))
+  end
+end

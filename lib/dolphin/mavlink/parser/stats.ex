@@ -1,0 +1,33 @@
+defmodule Dolphin.MAVLink.Parser.Stats do
+  @moduledoc """
+  What a `Dolphin.MAVLink.Parser` has seen: `frames` decoded, `unknown_id`
+  frames returned raw (a message id the dialect does not define), `bytes` fed,
+  `bytes_skipped` (dropped: not part of any returned frame), and what was
+  dropped by reason: `bad_crc`, `bad_incompat_flags`, `bad_signature`,
+  `old_timestamp` (replayed), `unsigned` (refused by the signing policy),
+  `truncated` (a frame cut off by the end of the stream).
+  """
+  defstruct frames: 0,
+            bytes: 0,
+            bytes_skipped: 0,
+            unknown_id: 0,
+            bad_crc: 0,
+            bad_incompat_flags: 0,
+            bad_signature: 0,
+            old_timestamp: 0,
+            unsigned: 0,
+            truncated: 0
+
+  @type t :: %__MODULE__{
+          frames: non_neg_integer(),
+          bytes: non_neg_integer(),
+          bytes_skipped: non_neg_integer(),
+          unknown_id: non_neg_integer(),
+          bad_crc: non_neg_integer(),
+          bad_incompat_flags: non_neg_integer(),
+          bad_signature: non_neg_integer(),
+          old_timestamp: non_neg_integer(),
+          unsigned: non_neg_integer(),
+          truncated: non_neg_integer()
+        }
+end
