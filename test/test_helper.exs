@@ -1,0 +1,3 @@
+# Interop tests talk to the reference implementation (pymavlink) in the project's
+# venv, which scripts/bootstrap creates; `make test` runs them all.
+ExUnit.start()
