@@ -17,7 +17,7 @@ run: bootstrap
 	@scripts/demo
 
 bench: bootstrap
-	MIX_ENV=prod mix bench
+	MIX_ENV=prod ERL_FLAGS="+S 1:1" mix bench
 
 dialyzer: bootstrap
 	mix dialyzer

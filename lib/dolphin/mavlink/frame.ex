@@ -21,9 +21,10 @@ defmodule Dolphin.MAVLink.Frame do
   checked (its CRC_EXTRA is unknown). It is returned with `message: nil` and
   its raw bytes, so that a router can forward it, when the stream is in sync
   (option `in_sync`, default true; a parser sets it false after dropped bytes)
-  and the bytes after it begin with a magic byte or are the end of the data.
-  Otherwise it is treated as garbage: a random magic byte inside noise must not
-  swallow the frames after it.
+  and the bytes after it begin with a magic byte (or, with `at_end: true`, the
+  data ends right after it; otherwise `{:more, buffer}` until the next byte
+  comes). Otherwise it is treated as garbage: a random magic byte inside noise
+  must not swallow the frames after it.
 
   Decoding zero-fills a payload shorter than the message (MAVLink 2 truncation,
   MAVLink 1 frames without extension fields) and ignores bytes past it (fields
@@ -204,19 +205,22 @@ defmodule Dolphin.MAVLink.Frame do
   defp bad_crc(buf), do: {:error, :bad_crc, binary_part(buf, 1, byte_size(buf) - 1)}
 
   # Without CRC_EXTRA nothing vouches for an unknown frame but the framing itself:
-  # trust it only right after a good frame and when the next frame (or the end of
-  # the data) starts where its length says it ends.
+  # trust it only right after a good frame and when the next frame starts where
+  # its length says it ends. Until the byte after it is there, wait (so that the
+  # result does not depend on where a stream was cut into chunks), unless the
+  # caller says the data ends here (`at_end: true`, e.g. a whole datagram).
   defp unknown(buf, opts, accept) do
     {:ok, _frame, rest} = result = accept.()
 
-    if Keyword.get(opts, :in_sync, true) and framed?(rest),
-      do: result,
-      else: {:error, :garbage, binary_part(buf, 1, byte_size(buf) - 1)}
+    cond do
+      not Keyword.get(opts, :in_sync, true) -> {:error, :garbage, binary_part(buf, 1, byte_size(buf) - 1)}
+      rest == <<>> -> if Keyword.get(opts, :at_end, false), do: result, else: {:more, buf}
+      framed?(rest) -> result
+      true -> {:error, :garbage, binary_part(buf, 1, byte_size(buf) - 1)}
+    end
   end
 
-  defp framed?(<<>>), do: true
-  defp framed?(<<magic, _::binary>>) when magic in [@magic_v1, @magic_v2], do: true
-  defp framed?(_), do: false
+  defp framed?(<<magic, _::binary>>), do: magic in [@magic_v1, @magic_v2]
 
   defp signature(<<>>), do: nil
 
@@ -243,32 +247,41 @@ defmodule Dolphin.MAVLink.Frame do
   def encode(%module{} = message, opts \\ []) do
     {id, crc_extra, min_len} = module.__mavlink__(:frame)
     payload = module.encode(message)
-    sysid = Keyword.get(opts, :sysid, 0)
-    compid = Keyword.get(opts, :compid, 0)
-    seq = Keyword.get(opts, :seq, 0)
 
-    case Keyword.get(opts, :version, 2) do
-      2 ->
+    case encode_opts(opts, {2, 0, 0, 0, 0, nil}) do
+      {2, sysid, compid, seq, compat, signing} ->
         payload = trim_zeros(payload, byte_size(payload))
-        signing = Keyword.get(opts, :signing)
         flags = if signing, do: @signed, else: 0
-        compat = Keyword.get(opts, :compat_flags, 0)
-        header = <<byte_size(payload), flags, compat, seq, sysid, compid, id::little-24>>
-        unsigned = <<@magic_v2, header::binary, payload::binary, checksum(header, payload, crc_extra)::little-16>>
+        body = <<byte_size(payload), flags, compat, seq, sysid, compid, id::little-24, payload::binary>>
+        unsigned = <<@magic_v2, body::binary, checksum(body, crc_extra)::little-16>>
         if signing, do: sign(unsigned, signing), else: unsigned
 
-      1 when id <= 255 ->
-        payload = binary_part(payload, 0, min_len)
-        header = <<min_len, seq, sysid, compid, id>>
-        <<@magic_v1, header::binary, payload::binary, checksum(header, payload, crc_extra)::little-16>>
+      {1, sysid, compid, seq, _compat, nil} when id <= 255 ->
+        body = <<min_len, seq, sysid, compid, id, binary_part(payload, 0, min_len)::binary>>
+        <<@magic_v1, body::binary, checksum(body, crc_extra)::little-16>>
 
-      1 ->
+      {1, _, _, _, _, nil} ->
         raise ArgumentError, "#{Message.name(message)} (id #{id}) cannot travel as MAVLink 1: ids above 255 need MAVLink 2"
 
-      other ->
-        raise ArgumentError, "unknown MAVLink version #{inspect(other)} (expected 1 or 2)"
+      {1, _, _, _, _, _signing} ->
+        raise ArgumentError, "MAVLink 1 frames cannot be signed"
     end
   end
+
+  # One pass over the options (this is on the hot path of every frame sent).
+  defp encode_opts([], acc), do: acc
+  defp encode_opts([{:version, v} | t], acc) when v in [1, 2], do: encode_opts(t, put_elem(acc, 0, v))
+  defp encode_opts([{:sysid, v} | t], acc) when v in 0..255, do: encode_opts(t, put_elem(acc, 1, v))
+  defp encode_opts([{:compid, v} | t], acc) when v in 0..255, do: encode_opts(t, put_elem(acc, 2, v))
+  defp encode_opts([{:seq, v} | t], acc) when v in 0..255, do: encode_opts(t, put_elem(acc, 3, v))
+  defp encode_opts([{:compat_flags, v} | t], acc) when v in 0..255, do: encode_opts(t, put_elem(acc, 4, v))
+  defp encode_opts([{:signing, nil} | t], acc), do: encode_opts(t, put_elem(acc, 5, nil))
+
+  defp encode_opts([{:signing, %{key: <<_::binary-32>>, link_id: l, timestamp: ts} = s} | t], acc)
+       when l in 0..255 and is_integer(ts) and ts >= 0 and ts < 0x1000000000000,
+       do: encode_opts(t, put_elem(acc, 5, s))
+
+  defp encode_opts([other | _], _acc), do: raise(ArgumentError, "bad frame option: #{inspect(other)}")
 
   @doc """
   Appends a signature block to an encoded MAVLink 2 frame whose incompat flags
@@ -282,8 +295,7 @@ defmodule Dolphin.MAVLink.Frame do
     <<signed::binary, signature::binary>>
   end
 
-  defp checksum(header, payload, crc_extra),
-    do: CRC.accumulate_byte(crc_extra, CRC.accumulate(payload, CRC.accumulate(header, 0xFFFF)))
+  defp checksum(body, crc_extra), do: CRC.accumulate_byte(crc_extra, CRC.accumulate(body, 0xFFFF))
 
   # MAVLink 2 drops trailing zero bytes of the payload, keeping at least one.
   defp trim_zeros(payload, 1), do: binary_part(payload, 0, 1)

@@ -174,33 +174,55 @@ defmodule Dolphin.MAVLink.Generator do
 
   # decode/1 takes a payload of exactly max_len bytes (the frame layer zero-fills
   # truncated MAVLink 2 payloads and MAVLink 1 payloads without extensions).
+  # The first clause matches floats with float segments, which fail on NaN and
+  # infinities; the second (only for messages with scalar floats) takes their
+  # bits and converts them, so every payload of the right size is decoded.
   defp decode_clauses(spec) do
-    segments = Enum.map(spec.wire, &decode_segment/1)
-    values = Enum.map(spec.fields, &{&1.name, decode_value(&1)})
+    fast = decode_clause(spec, false)
+
+    if Enum.any?(spec.wire, &scalar_float?/1),
+      do: quote(do: (unquote(fast); unquote(decode_clause(spec, true)))),
+      else: fast
+  end
+
+  defp decode_clause(spec, floats_as_bits?) do
+    segments = Enum.map(spec.wire, &decode_segment(&1, floats_as_bits?))
+    values = Enum.map(spec.fields, &{&1.name, decode_value(&1, floats_as_bits?)})
 
     quote do
       @doc false
       @impl true
       def decode(<<unquote_splicing(segments)>>), do: %__MODULE__{unquote_splicing(values)}
-      def decode(payload) when byte_size(payload) == unquote(spec.max_len), do: Dolphin.MAVLink.Message.decode_fields(__MODULE__, payload)
     end
   end
 
-  defp decode_segment(%{type: t, array_length: n} = f) when t == :char or n != nil do
+  defp scalar_float?(%{type: t, array_length: nil}), do: t in [:float, :double]
+  defp scalar_float?(_), do: false
+
+  defp decode_segment(%{type: t, array_length: n} = f, _bits?) when t == :char or n != nil do
     quote(do: unquote(var(f)) :: binary - size(unquote(field_size(f))))
   end
 
-  defp decode_segment(%{type: t} = f) when t in [:float, :double] do
+  defp decode_segment(%{type: t} = f, true) when t in [:float, :double] do
+    quote(do: unquote(var(f)) :: binary - size(unquote(Value.size(t))))
+  end
+
+  defp decode_segment(%{type: t} = f, false) when t in [:float, :double] do
     quote(do: unquote(var(f)) :: little - float - size(unquote(Value.size(t) * 8)))
   end
 
-  defp decode_segment(%{type: t} = f) when t in [:int8, :int16, :int32, :int64] do
+  defp decode_segment(%{type: t} = f, _bits?) when t in [:int8, :int16, :int32, :int64] do
     quote(do: unquote(var(f)) :: little - signed - size(unquote(Value.size(t) * 8)))
   end
 
-  defp decode_segment(%{type: t} = f) do
+  defp decode_segment(%{type: t} = f, _bits?) do
     quote(do: unquote(var(f)) :: little - size(unquote(Value.size(t) * 8)))
   end
+
+  defp decode_value(%{type: t, array_length: nil} = f, true) when t in [:float, :double],
+    do: quote(do: Dolphin.MAVLink.Value.decode(unquote(t), nil, unquote(var(f))))
+
+  defp decode_value(f, _bits?), do: decode_value(f)
 
   defp decode_value(%{type: :char} = f), do: quote(do: Dolphin.MAVLink.Value.cstring(unquote(var(f))))
   defp decode_value(%{array_length: nil} = f), do: var(f)
@@ -208,29 +230,66 @@ defmodule Dolphin.MAVLink.Generator do
 
   # encode/1 returns the full wire-ordered payload (max_len bytes); the frame
   # layer cuts it to MAVLink 1 length or truncates trailing zeros for MAVLink 2.
+  # Like decoding: a first clause for plain numbers; a second, for messages
+  # with scalar floats, that writes NaN and infinities through
+  # Dolphin.MAVLink.Value; and a last one, the general encoder, which pads
+  # short arrays and raises an ArgumentError naming a bad field.
   defp encode_clauses(spec) do
-    bindings = Enum.map(spec.fields, &{&1.name, var(&1)})
-    guards = spec.fields |> Enum.map(&encode_guard/1) |> Enum.reduce(&quote(do: unquote(&2) and unquote(&1)))
-    arrays = for f <- spec.fields, f.array_length != nil and f.type != :char, do: f
+    # Not a plain `message` variable: a field could be called that.
+    message = Macro.var(:message__, __MODULE__)
+    floats = Enum.filter(spec.wire, &scalar_float?/1)
 
-    array_binds =
-      for f <- arrays do
-        quote do
-          unquote(var(f)) = Dolphin.MAVLink.Message.encode_field!(__MODULE__, unquote(f.name), unquote(var(f)))
-        end
+    specials =
+      if floats != [] do
+        encode_clause(spec, message, Enum.reject(spec.fields, &scalar_float?/1), floats)
       end
 
-    segments = Enum.flat_map(spec.wire, &encode_segments/1)
+    quote do
+      unquote(encode_clause(spec, message, spec.fields, []))
+      unquote(specials)
+
+      def encode(%__MODULE__{} = unquote(message)), do: Dolphin.MAVLink.Message.encode_fields!(unquote(message))
+    end
+  end
+
+  defp encode_clause(spec, message, guarded, float_bits) do
+    bindings = Enum.map(spec.fields, &{&1.name, var(&1)})
+    guards = guarded |> Enum.map(&encode_guard/1) |> Enum.reduce(true, &quote(do: unquote(&2) and unquote(&1)))
+    bits? = float_bits != []
+    payload = quote(do: <<unquote_splicing(Enum.flat_map(spec.wire, &encode_segments(&1, bits?)))>>)
+
+    # Arrays (and, in the second clause, floats) are converted first; anything
+    # that does not convert sends the whole message down the general path.
+    converts =
+      for(f <- float_bits, do: {f, quote(do: Dolphin.MAVLink.Value.float_bytes(unquote(f.type), unquote(var(f))))}) ++
+        for f <- spec.fields, f.array_length != nil and f.type != :char do
+          {f, quote(do: Dolphin.MAVLink.Value.pack_array(unquote(f.type), unquote(f.array_length), unquote(var(f))))}
+        end
+
+    body =
+      case converts do
+        [] ->
+          payload
+
+        converts ->
+          steps = for {f, call} <- converts, do: quote(do: unquote(var(f)) when is_binary(unquote(var(f))) <- unquote(call))
+
+          quote do
+            with unquote_splicing(steps) do
+              unquote(payload)
+            else
+              _ -> Dolphin.MAVLink.Message.encode_fields!(unquote(message))
+            end
+          end
+      end
 
     quote do
       @doc false
       @impl true
-      def encode(%__MODULE__{unquote_splicing(bindings)}) when unquote(guards) do
-        unquote_splicing(array_binds)
-        <<unquote_splicing(segments)>>
+      def encode(%__MODULE__{unquote_splicing(bindings)} = unquote(message)) when unquote(guards) do
+        _ = unquote(message)
+        unquote(body)
       end
-
-      def encode(%__MODULE__{} = message), do: Dolphin.MAVLink.Message.encode_fields!(message)
     end
   end
 
@@ -247,6 +306,11 @@ defmodule Dolphin.MAVLink.Generator do
     v = var(f)
     quote(do: is_integer(unquote(v)) and unquote(v) >= unquote(min) and unquote(v) <= unquote(max))
   end
+
+  defp encode_segments(%{type: t, array_length: nil} = f, true) when t in [:float, :double],
+    do: [quote(do: unquote(var(f)) :: binary)]
+
+  defp encode_segments(f, _bits?), do: encode_segments(f)
 
   defp encode_segments(%{type: :char} = f) do
     v = var(f)

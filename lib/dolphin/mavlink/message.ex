@@ -61,21 +61,6 @@ defmodule Dolphin.MAVLink.Message do
   end
 
   @doc false
-  # The general decoder: field by field, for payloads the generated pattern
-  # cannot match (a NaN or infinite float).
-  @spec decode_fields(module(), binary()) :: t()
-  def decode_fields(module, payload) do
-    {values, <<>>} =
-      Enum.map_reduce(module.__mavlink__(:wire), payload, fn {name, type, n}, rest ->
-        size = Value.size(type) * (n || 1)
-        <<bytes::binary-size(size), rest::binary>> = rest
-        {{name, Value.decode(type, n, bytes)}, rest}
-      end)
-
-    struct(module, values)
-  end
-
-  @doc false
   # The general encoder: field by field, raising an ArgumentError that names the
   # message, the field and the value when one cannot be encoded.
   @spec encode_fields!(t()) :: binary()

@@ -28,7 +28,10 @@ defmodule Dolphin.MAVLink.Parser do
       follow its policy. Without it, frames pass unverified.
 
   Frames with a message id the dialect does not know come out with
-  `message: nil` (for forwarding) and are counted as `unknown_id`.
+  `message: nil` (for forwarding) and are counted as `unknown_id`, once the
+  byte after them has arrived and is a magic byte (see
+  `Dolphin.MAVLink.Frame.decode/3`): so the frames returned never depend on how
+  the stream was cut into chunks.
   """
 
   alias Dolphin.MAVLink.{Frame, Signing}
@@ -77,50 +80,54 @@ defmodule Dolphin.MAVLink.Parser do
   @spec stats(t()) :: Stats.t()
   def stats(%__MODULE__{stats: stats}), do: stats
 
-  defp loop(buf, parser, acc) do
+  # Good frames are counted in loop arguments and written into the stats once
+  # per feed: a struct update per frame costs more than decoding a small message.
+  defp loop(buf, parser, acc, frames \\ 0, unknown \\ 0) do
     case Frame.decode(buf, parser.dialect, in_sync: parser.in_sync) do
+      {:ok, %Frame{signature: nil} = frame, rest} when parser.signing == nil ->
+        loop_ok(rest, parser, [frame | acc], frame, frames, unknown)
+
       {:ok, frame, rest} ->
         case check_signature(parser, frame) do
           {:ok, parser} ->
-            loop(rest, %{parser | in_sync: true, stats: count_frame(parser.stats, frame)}, [frame | acc])
+            loop_ok(rest, parser, [frame | acc], frame, frames, unknown)
 
           # A bad signature may be a frame cut short whose "signature" is the
           # start of the next frame: look again from the byte after its magic.
           {:error, :bad_signature, parser} ->
-            loop(binary_part(buf, 1, byte_size(buf) - 1), %{parser | in_sync: false, stats: drop(parser.stats, :bad_signature, 1)}, acc)
+            parser = %{parser | in_sync: false, stats: Stats.drop(parser.stats, :bad_signature, 1)}
+            loop(binary_part(buf, 1, byte_size(buf) - 1), parser, acc, frames, unknown)
 
           # A replayed or refused frame is whole: drop all of it.
           {:error, reason, parser} ->
-            loop(rest, %{parser | in_sync: false, stats: drop(parser.stats, reason, byte_size(frame.raw))}, acc)
+            parser = %{parser | in_sync: false, stats: Stats.drop(parser.stats, reason, byte_size(frame.raw))}
+            loop(rest, parser, acc, frames, unknown)
         end
 
       {:more, rest} ->
+        stats = %{parser.stats | frames: parser.stats.frames + frames, unknown_id: parser.stats.unknown_id + unknown}
         # Keep only the unfinished tail, not the whole chunk it points into.
-        {Enum.reverse(acc), %{parser | buffer: :binary.copy(rest)}}
+        {:lists.reverse(acc), %{parser | buffer: :binary.copy(rest), stats: stats}}
 
       {:error, reason, rest} ->
-        stats = drop(parser.stats, reason, byte_size(buf) - byte_size(rest))
-        loop(rest, %{parser | in_sync: false, stats: stats}, acc)
+        stats = Stats.drop(parser.stats, reason, byte_size(buf) - byte_size(rest))
+        loop(rest, %{parser | in_sync: false, stats: stats}, acc, frames, unknown)
     end
   end
 
-  defp check_signature(%__MODULE__{signing: nil} = parser, _frame), do: {:ok, parser}
+  defp loop_ok(rest, %__MODULE__{in_sync: true} = parser, acc, %Frame{message: nil}, frames, unknown),
+    do: loop(rest, parser, acc, frames, unknown + 1)
 
-  defp check_signature(%__MODULE__{signing: signing} = parser, frame) do
-    case Signing.verify(signing, frame) do
+  defp loop_ok(rest, %__MODULE__{in_sync: true} = parser, acc, _frame, frames, unknown),
+    do: loop(rest, parser, acc, frames + 1, unknown)
+
+  defp loop_ok(rest, parser, acc, frame, frames, unknown),
+    do: loop_ok(rest, %{parser | in_sync: true}, acc, frame, frames, unknown)
+
+  defp check_signature(parser, frame) do
+    case Signing.verify(parser.signing, frame) do
       {:ok, signing} -> {:ok, %{parser | signing: signing}}
       {:error, reason, signing} -> {:error, reason, %{parser | signing: signing}}
     end
-  end
-
-  defp count_frame(stats, %Frame{message: nil}), do: %{stats | unknown_id: stats.unknown_id + 1}
-  defp count_frame(stats, _frame), do: %{stats | frames: stats.frames + 1}
-
-  defp drop(stats, :garbage, bytes), do: %{stats | bytes_skipped: stats.bytes_skipped + bytes}
-
-  defp drop(stats, reason, bytes) do
-    stats
-    |> Map.update!(reason, &(&1 + 1))
-    |> Map.update!(:bytes_skipped, &(&1 + bytes))
   end
 end

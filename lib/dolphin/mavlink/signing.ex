@@ -102,11 +102,14 @@ defmodule Dolphin.MAVLink.Signing do
   end
 
   @doc """
-  Checks an incoming frame. Returns the updated state, or the reason to drop it:
+  Checks an incoming frame (with no signing state, `nil`, every frame passes
+  unchecked). Returns the updated state, or the reason to drop it:
   `:bad_signature`, `:old_timestamp` (a replay, or a new stream too far in the
   past) or `:unsigned` (an unsigned frame the policy refuses).
   """
-  @spec verify(t(), Frame.t()) :: {:ok, t()} | {:error, reject_reason(), t()}
+  @spec verify(t() | nil, Frame.t()) :: {:ok, t() | nil} | {:error, reject_reason(), t()}
+  def verify(nil, _frame), do: {:ok, nil}
+
   def verify(%__MODULE__{} = state, %Frame{signature: nil} = frame) do
     accept? =
       case state.unsigned do

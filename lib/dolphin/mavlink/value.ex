@@ -60,8 +60,8 @@ defmodule Dolphin.MAVLink.Value do
   defp scalar_zero(_int), do: 0
 
   @doc false
-  # Decodes one field from exactly its bytes (the generated fast path falls back
-  # here when a float is NaN or infinite, which a binary pattern cannot match).
+  # Decodes one field from exactly its bytes (generated decoders call it for
+  # floats that may be NaN or infinite, which a float segment cannot match).
   @spec decode(base_type(), pos_integer() | nil, binary()) :: term()
   def decode(:char, _n, bytes), do: cstring(bytes)
   def decode(type, nil, bytes), do: decode_scalar(type, bytes)
@@ -151,6 +151,48 @@ defmodule Dolphin.MAVLink.Value do
   end
 
   def encode(_type, n, _value), do: {:error, "expected a list of at most #{n} elements"}
+
+  @doc false
+  # Bytes of a float or double value, special values included; :error otherwise.
+  @spec float_bytes(:float | :double, term()) :: binary() | :error
+  def float_bytes(type, value) do
+    case encode_scalar(type, value) do
+      {:ok, bytes} -> bytes
+      {:error, _} -> :error
+    end
+  end
+
+  @doc false
+  # The generated encoders' fast path for arrays: exactly `n` plain values
+  # (numbers in range), else :error and the caller takes the general path,
+  # which pads short lists, writes NaN/infinities and explains bad values.
+  @spec pack_array(base_type(), pos_integer(), term()) :: binary() | :error
+  def pack_array(:uint8, n, list) when is_list(list) and length(list) == n do
+    :erlang.list_to_binary(list)
+  rescue
+    ArgumentError -> :error
+  end
+
+  def pack_array(type, n, list) when is_list(list) and length(list) == n, do: pack(type, list, <<>>)
+  def pack_array(_type, _n, _list), do: :error
+
+  for {type, bits, min, max} <- [
+        {:int8, 8, -0x80, 0x7F},
+        {:uint16, 16, 0, 0xFFFF},
+        {:int16, 16, -0x8000, 0x7FFF},
+        {:uint32, 32, 0, 0xFFFF_FFFF},
+        {:int32, 32, -0x8000_0000, 0x7FFF_FFFF},
+        {:uint64, 64, 0, 0xFFFF_FFFF_FFFF_FFFF},
+        {:int64, 64, -0x8000_0000_0000_0000, 0x7FFF_FFFF_FFFF_FFFF}
+      ] do
+    defp pack(unquote(type), [v | rest], acc) when is_integer(v) and v >= unquote(min) and v <= unquote(max),
+      do: pack(unquote(type), rest, <<acc::binary, v::little-size(unquote(bits))>>)
+  end
+
+  defp pack(:float, [v | rest], acc) when is_number(v), do: pack(:float, rest, <<acc::binary, v::little-float-32>>)
+  defp pack(:double, [v | rest], acc) when is_number(v), do: pack(:double, rest, <<acc::binary, v::little-float-64>>)
+  defp pack(_type, [], acc), do: acc
+  defp pack(_type, _bad, _acc), do: :error
 
   defp encode_scalar(type, v) when type in [:float, :double] do
     bits = size(type) * 8

@@ -30,4 +30,18 @@ defmodule Dolphin.MAVLink.Parser.Stats do
           unsigned: non_neg_integer(),
           truncated: non_neg_integer()
         }
+
+  @doc false
+  # A frame returned: decoded, or raw with an unknown id.
+  @spec count(t(), Dolphin.MAVLink.Frame.t()) :: t()
+  def count(stats, %Dolphin.MAVLink.Frame{message: nil}), do: %{stats | unknown_id: stats.unknown_id + 1}
+  def count(stats, _frame), do: %{stats | frames: stats.frames + 1}
+
+  @doc false
+  # `bytes` dropped for `reason` (garbage is counted in bytes only).
+  @spec drop(t(), atom(), non_neg_integer()) :: t()
+  def drop(stats, :garbage, bytes), do: %{stats | bytes_skipped: stats.bytes_skipped + bytes}
+
+  def drop(stats, reason, bytes),
+    do: %{stats | bytes_skipped: stats.bytes_skipped + bytes} |> Map.update!(reason, &(&1 + 1))
 end

@@ -1,0 +1,122 @@
+defmodule Dolphin.MAVLink.VectorsTest do
+  # Byte-exactness against the reference implementation's vectors (pymavlink,
+  # cross-checked with the MAVLink C library): see ../shared/mavlink/vectors/README.md.
+  use ExUnit.Case, async: true
+
+  alias Dolphin.MAVLink.{Ardupilotmega, Frame, Parser, Record, Signing}
+  alias Dolphin.Test.Vectors
+
+  @dialect Ardupilotmega
+
+  test "CRC_EXTRA and payload lengths of every message agree with the reference" do
+    {:ok, table} = Dolphin.MAVLink.JSON.decode(File.read!(Vectors.path!("crc_extra.json")))
+    assert map_size(table) == 301
+    assert length(@dialect.messages()) == 301
+
+    for {id, %{"name" => name, "crc_extra" => crc, "min_len" => min, "max_len" => max}} <- table do
+      assert {module, ^crc, ^min, ^max} = @dialect.message_info(String.to_integer(id)), "#{name} (#{id})"
+      assert module.__mavlink__(:name) == name
+    end
+  end
+
+  for file <- ~w(ardupilotmega.v2.jsonl ardupilotmega.v1.jsonl ardupilotmega.signed.jsonl) do
+    test "every record of #{file} decodes to its fields and encodes back to its frame" do
+      for {n, line, rec} <- Vectors.records(unquote(file)) do
+        frame = Base.decode16!(rec["frame"], case: :lower)
+        where = "#{unquote(file)}:#{n} #{rec["msg"]}"
+
+        assert {:ok, decoded, <<>>} = Frame.decode(frame, @dialect), where
+        assert decoded.message != nil, where
+        assert {decoded.sysid, decoded.compid, decoded.seq, decoded.version} == {rec["sysid"], rec["compid"], rec["seq"], rec["mavlink"]}, where
+        assert Vectors.same?(Vectors.json_fields(decoded), rec["fields"]), "#{where}: decoded #{inspect(Vectors.json_fields(decoded))}"
+
+        if rec["signed"] do
+          assert {:ok, _} = Signing.verify(Signing.new(key: Vectors.key(), unsigned: :reject), decoded), where
+        end
+
+        assert {:ok, message, opts} = Record.decode(line, @dialect), where
+        assert Base.encode16(Frame.encode(message, opts), case: :lower) == rec["frame"], where
+      end
+    end
+  end
+
+  test "a signed record fails verification with another key, and a replay is refused" do
+    [{_, _, rec} | _] = Vectors.records("ardupilotmega.signed.jsonl")
+    {:ok, frame, <<>>} = Frame.decode(Base.decode16!(rec["frame"], case: :lower), @dialect)
+
+    assert {:error, :bad_signature, _} = Signing.verify(Signing.new(key: :binary.copy(<<1>>, 32)), frame)
+
+    signing = Signing.new(key: Vectors.key())
+    assert {:ok, signing} = Signing.verify(signing, frame)
+    assert {:error, :old_timestamp, _} = Signing.verify(signing, frame)
+  end
+
+  describe "stream.bin" do
+    setup do
+      bytes = File.read!(Vectors.path!("stream.bin"))
+      expected = for {_, _, rec} <- Vectors.records("stream.expected.jsonl"), do: rec
+      %{bytes: bytes, expected: expected}
+    end
+
+    test "yields exactly the expected frames, in order", %{bytes: bytes, expected: expected} do
+      {frames, parser} = Parser.feed(Parser.new(signing: Signing.new(key: Vectors.key())), bytes)
+      stats = Parser.stats(Parser.finish(parser))
+
+      decoded = Enum.filter(frames, & &1.message)
+      assert length(decoded) == 1500
+      assert stats.frames == 1500
+      assert_same_frames(decoded, expected)
+      # Everything that is not an expected frame was dropped and counted.
+      expected_bytes = expected |> Enum.map(&(byte_size(&1["frame"]) |> div(2))) |> Enum.sum()
+      unknown_bytes = frames |> Enum.reject(& &1.message) |> Enum.map(&byte_size(&1.raw)) |> Enum.sum()
+      assert stats.bytes_skipped == byte_size(bytes) - expected_bytes - unknown_bytes
+      assert stats.bad_crc > 0 and stats.bad_incompat_flags > 0 and stats.truncated == 1
+    end
+
+    test "chunking changes nothing: random split points, 1-byte feeds", %{bytes: bytes, expected: expected} do
+      for seed <- 1..3 do
+        :rand.seed(:exsss, {seed, seed, seed})
+        chunks = random_chunks(bytes, [])
+
+        {frames, parser} =
+          Enum.reduce(chunks, {[], Parser.new(signing: Signing.new(key: Vectors.key()))}, fn chunk, {acc, p} ->
+            {frames, p} = Parser.feed(p, chunk)
+            {acc ++ frames, p}
+          end)
+
+        assert_same_frames(Enum.filter(frames, & &1.message), expected)
+        assert Parser.stats(Parser.finish(parser)).frames == 1500
+      end
+
+      {frames, _} =
+        bytes
+        |> binary_part(0, 20_000)
+        |> :binary.bin_to_list()
+        |> Enum.reduce({[], Parser.new(signing: Signing.new(key: Vectors.key()))}, fn byte, {acc, p} ->
+          {frames, p} = Parser.feed(p, <<byte>>)
+          {Enum.reverse(frames) ++ acc, p}
+        end)
+
+      {whole, _} = Parser.feed(Parser.new(signing: Signing.new(key: Vectors.key())), binary_part(bytes, 0, 20_000))
+      assert Enum.map(Enum.reverse(frames), & &1.raw) == Enum.map(whole, & &1.raw)
+    end
+  end
+
+  defp assert_same_frames(frames, expected) do
+    assert length(frames) == length(expected)
+
+    for {frame, rec} <- Enum.zip(frames, expected) do
+      where = "expected ##{rec["index"]} at offset #{rec["offset"]} (#{rec["msg"]})"
+      assert Base.encode16(frame.raw, case: :lower) == rec["frame"], where
+      assert Vectors.same?(Vectors.json_fields(frame), rec["fields"]), where
+    end
+  end
+
+  defp random_chunks(<<>>, acc), do: Enum.reverse(acc)
+
+  defp random_chunks(bytes, acc) do
+    n = min(:rand.uniform(300), byte_size(bytes))
+    <<chunk::binary-size(n), rest::binary>> = bytes
+    random_chunks(rest, [chunk | acc])
+  end
+end
