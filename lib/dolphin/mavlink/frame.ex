@@ -24,7 +24,8 @@ defmodule Dolphin.MAVLink.Frame do
   and the bytes after it begin with a magic byte (or, with `at_end: true`, the
   data ends right after it; otherwise `{:more, buffer}` until the next byte
   comes). Otherwise it is treated as garbage: a random magic byte inside noise
-  must not swallow the frames after it.
+  must not swallow the frames after it. A caller that checks framing itself
+  (a `.tlog` reader: a timestamp follows every frame) passes `unknown: :accept`.
 
   Decoding zero-fills a payload shorter than the message (MAVLink 2 truncation,
   MAVLink 1 frames without extension fields) and ignores bytes past it (fields
@@ -34,7 +35,7 @@ defmodule Dolphin.MAVLink.Frame do
 
   import Bitwise
 
-  alias Dolphin.MAVLink.{CRC, Message}
+  alias Dolphin.MAVLink.{CRC, Message, Value}
 
   @magic_v1 0xFE
   @magic_v2 0xFD
@@ -85,113 +86,52 @@ defmodule Dolphin.MAVLink.Frame do
           {:ok, t(), binary()} | {:more, binary()} | {:error, error_reason(), binary()}
   def decode(buffer, dialect, opts \\ [])
 
-  def decode(<<@magic_v2, len, flags, compat, seq, sysid, compid, msgid::little-24, _::binary>> = buf, dialect, opts)
-      when (flags &&& bnot(@signed)) == 0 do
-    total = 12 + len + (flags &&& @signed) * 13
+  # One pattern per frame shape, matched in the function head: the fewer
+  # sub-binaries made per frame, the faster (see bench/codec.exs).
+  def decode(
+        <<@magic_v2, len, 0, compat, seq, sysid, compid, msgid::little-24, payload::binary-size(len), crc::little-16,
+          rest::binary>> = buf,
+        dialect,
+        opts
+      ) do
+    frame = %__MODULE__{sysid: sysid, compid: compid, seq: seq, msgid: msgid, compat_flags: compat}
+    checked(buf, 12 + len, 1, 9 + len, crc, payload, frame, rest, dialect, opts)
+  end
 
-    case buf do
-      <<frame::binary-size(total), rest::binary>> ->
-        <<_, header_payload::binary-size(9 + len), crc::little-16, sig::binary>> = frame
+  def decode(
+        <<@magic_v2, len, @signed, compat, seq, sysid, compid, msgid::little-24, payload::binary-size(len),
+          crc::little-16, link_id, timestamp::little-48, signature::binary-6, rest::binary>> = buf,
+        dialect,
+        opts
+      ) do
+    frame = %__MODULE__{
+      sysid: sysid,
+      compid: compid,
+      seq: seq,
+      msgid: msgid,
+      incompat_flags: @signed,
+      compat_flags: compat,
+      signature: %{link_id: link_id, timestamp: timestamp, signature: signature}
+    }
 
-        case dialect.message_info(msgid) do
-          {module, crc_extra, _min, max_len} ->
-            if CRC.accumulate_byte(crc_extra, CRC.accumulate(header_payload, 0xFFFF)) == crc do
-              payload = binary_part(header_payload, 9, len)
-
-              {:ok,
-               %__MODULE__{
-                 version: 2,
-                 sysid: sysid,
-                 compid: compid,
-                 seq: seq,
-                 msgid: msgid,
-                 incompat_flags: flags,
-                 compat_flags: compat,
-                 message: decode_payload(module, payload, len, max_len),
-                 payload: payload,
-                 signature: signature(sig),
-                 raw: frame
-               }, rest}
-            else
-              bad_crc(buf)
-            end
-
-          nil ->
-            unknown(buf, opts, fn ->
-              {:ok,
-               %__MODULE__{
-                 version: 2,
-                 sysid: sysid,
-                 compid: compid,
-                 seq: seq,
-                 msgid: msgid,
-                 incompat_flags: flags,
-                 compat_flags: compat,
-                 payload: binary_part(header_payload, 9, len),
-                 signature: signature(sig),
-                 raw: frame
-               }, rest}
-            end)
-        end
-
-      _short ->
-        {:more, buf}
-    end
+    checked(buf, 25 + len, 1, 9 + len, crc, payload, frame, rest, dialect, opts)
   end
 
   def decode(<<@magic_v2, _len, flags, _::binary>> = buf, _dialect, _opts) when (flags &&& bnot(@signed)) != 0,
     do: {:error, :bad_incompat_flags, binary_part(buf, 1, byte_size(buf) - 1)}
 
-  def decode(<<@magic_v2, _::binary>> = buf, _dialect, _opts) when byte_size(buf) < 10, do: {:more, buf}
+  def decode(<<@magic_v2, _::binary>> = buf, _dialect, _opts), do: {:more, buf}
 
-  def decode(<<@magic_v1, len, seq, sysid, compid, msgid, _::binary>> = buf, dialect, opts) do
-    total = 8 + len
-
-    case buf do
-      <<frame::binary-size(total), rest::binary>> ->
-        <<_, header_payload::binary-size(5 + len), crc::little-16>> = frame
-
-        case dialect.message_info(msgid) do
-          {module, crc_extra, _min, max_len} ->
-            if CRC.accumulate_byte(crc_extra, CRC.accumulate(header_payload, 0xFFFF)) == crc do
-              payload = binary_part(header_payload, 5, len)
-
-              {:ok,
-               %__MODULE__{
-                 version: 1,
-                 sysid: sysid,
-                 compid: compid,
-                 seq: seq,
-                 msgid: msgid,
-                 message: decode_payload(module, payload, len, max_len),
-                 payload: payload,
-                 raw: frame
-               }, rest}
-            else
-              bad_crc(buf)
-            end
-
-          nil ->
-            unknown(buf, opts, fn ->
-              {:ok,
-               %__MODULE__{
-                 version: 1,
-                 sysid: sysid,
-                 compid: compid,
-                 seq: seq,
-                 msgid: msgid,
-                 payload: binary_part(header_payload, 5, len),
-                 raw: frame
-               }, rest}
-            end)
-        end
-
-      _short ->
-        {:more, buf}
-    end
+  def decode(
+        <<@magic_v1, len, seq, sysid, compid, msgid, payload::binary-size(len), crc::little-16, rest::binary>> = buf,
+        dialect,
+        opts
+      ) do
+    frame = %__MODULE__{version: 1, sysid: sysid, compid: compid, seq: seq, msgid: msgid}
+    checked(buf, 8 + len, 1, 5 + len, crc, payload, frame, rest, dialect, opts)
   end
 
-  def decode(<<@magic_v1, _::binary>> = buf, _dialect, _opts) when byte_size(buf) < 6, do: {:more, buf}
+  def decode(<<@magic_v1, _::binary>> = buf, _dialect, _opts), do: {:more, buf}
 
   def decode(<<>>, _dialect, _opts), do: {:more, <<>>}
 
@@ -201,6 +141,24 @@ defmodule Dolphin.MAVLink.Frame do
       :nomatch -> {:error, :garbage, <<>>}
     end
   end
+
+  # The checksum covers the bytes after the magic through the payload
+  # (`crc_len` bytes from `crc_from`), then the message's CRC_EXTRA.
+  defp checked(buf, size, crc_from, crc_len, crc, payload, frame, rest, dialect, opts) do
+    case dialect.message_info(frame.msgid) do
+      {module, crc_extra, _min, max_len} ->
+        if CRC.accumulate_byte(crc_extra, CRC.accumulate(binary_part(buf, crc_from, crc_len), 0xFFFF)) == crc do
+          message = decode_payload(module, payload, byte_size(payload), max_len)
+          {:ok, %{frame | message: message, payload: payload, raw: binary_part(buf, 0, size)}, rest}
+        else
+          bad_crc(buf)
+        end
+
+      nil ->
+        unknown(buf, opts, fn -> {:ok, %{frame | payload: payload, raw: binary_part(buf, 0, size)}, rest} end)
+    end
+  end
+
 
   defp bad_crc(buf), do: {:error, :bad_crc, binary_part(buf, 1, byte_size(buf) - 1)}
 
@@ -213,6 +171,7 @@ defmodule Dolphin.MAVLink.Frame do
     {:ok, _frame, rest} = result = accept.()
 
     cond do
+      Keyword.get(opts, :unknown) == :accept -> result
       not Keyword.get(opts, :in_sync, true) -> {:error, :garbage, binary_part(buf, 1, byte_size(buf) - 1)}
       rest == <<>> -> if Keyword.get(opts, :at_end, false), do: result, else: {:more, buf}
       framed?(rest) -> result
@@ -222,15 +181,11 @@ defmodule Dolphin.MAVLink.Frame do
 
   defp framed?(<<magic, _::binary>>), do: magic in [@magic_v1, @magic_v2]
 
-  defp signature(<<>>), do: nil
-
-  defp signature(<<link_id, timestamp::little-48, signature::binary-6>>),
-    do: %{link_id: link_id, timestamp: timestamp, signature: signature}
-
   defp decode_payload(module, payload, len, max_len) when len == max_len, do: module.decode(payload)
 
+  # One allocation; `<<payload::binary, ...>>` would be an append (see encode).
   defp decode_payload(module, payload, len, max_len) when len < max_len,
-    do: module.decode(<<payload::binary, 0::size((max_len - len) * 8)>>)
+    do: module.decode(IO.iodata_to_binary([payload | Value.zeros(max_len - len)]))
 
   defp decode_payload(module, payload, _len, max_len), do: module.decode(binary_part(payload, 0, max_len))
 
@@ -244,44 +199,49 @@ defmodule Dolphin.MAVLink.Frame do
   that does not fit, or a message id above 255 in MAVLink 1.
   """
   @spec encode(Message.t(), [encode_opt()]) :: binary()
-  def encode(%module{} = message, opts \\ []) do
+  def encode(%_{} = message, opts \\ []), do: encode(opts, message, 2, 0, 0, 0, 0, nil)
+
+  # The options are walked into arguments (this is on the hot path of every
+  # frame sent), and the frame is built in one construction that starts with a
+  # literal: appending to a small binary (`<<bin::binary, ...>>`) would make it
+  # a separately allocated writable binary, which costs more than the encoding.
+  defp encode([], %module{} = message, version, sysid, compid, seq, compat, signing) do
     {id, crc_extra, min_len} = module.__mavlink__(:frame)
     payload = module.encode(message)
 
-    case encode_opts(opts, {2, 0, 0, 0, 0, nil}) do
-      {2, sysid, compid, seq, compat, signing} ->
+    case version do
+      2 ->
         payload = trim_zeros(payload, byte_size(payload))
         flags = if signing, do: @signed, else: 0
-        body = <<byte_size(payload), flags, compat, seq, sysid, compid, id::little-24, payload::binary>>
-        unsigned = <<@magic_v2, body::binary, checksum(body, crc_extra)::little-16>>
-        if signing, do: sign(unsigned, signing), else: unsigned
+        header = <<byte_size(payload), flags, compat, seq, sysid, compid, id::little-24>>
+        frame = <<@magic_v2, header::binary, payload::binary, checksum(header, payload, crc_extra)::little-16>>
+        if signing, do: sign(frame, signing), else: frame
 
-      {1, sysid, compid, seq, _compat, nil} when id <= 255 ->
-        body = <<min_len, seq, sysid, compid, id, binary_part(payload, 0, min_len)::binary>>
-        <<@magic_v1, body::binary, checksum(body, crc_extra)::little-16>>
-
-      {1, _, _, _, _, nil} ->
-        raise ArgumentError, "#{Message.name(message)} (id #{id}) cannot travel as MAVLink 1: ids above 255 need MAVLink 2"
-
-      {1, _, _, _, _, _signing} ->
+      1 when signing != nil ->
         raise ArgumentError, "MAVLink 1 frames cannot be signed"
+
+      1 when id <= 255 ->
+        payload = binary_part(payload, 0, min_len)
+        header = <<min_len, seq, sysid, compid, id>>
+        <<@magic_v1, header::binary, payload::binary, checksum(header, payload, crc_extra)::little-16>>
+
+      1 ->
+        raise ArgumentError, "#{Message.name(message)} (id #{id}) cannot travel as MAVLink 1: ids above 255 need MAVLink 2"
     end
   end
 
-  # One pass over the options (this is on the hot path of every frame sent).
-  defp encode_opts([], acc), do: acc
-  defp encode_opts([{:version, v} | t], acc) when v in [1, 2], do: encode_opts(t, put_elem(acc, 0, v))
-  defp encode_opts([{:sysid, v} | t], acc) when v in 0..255, do: encode_opts(t, put_elem(acc, 1, v))
-  defp encode_opts([{:compid, v} | t], acc) when v in 0..255, do: encode_opts(t, put_elem(acc, 2, v))
-  defp encode_opts([{:seq, v} | t], acc) when v in 0..255, do: encode_opts(t, put_elem(acc, 3, v))
-  defp encode_opts([{:compat_flags, v} | t], acc) when v in 0..255, do: encode_opts(t, put_elem(acc, 4, v))
-  defp encode_opts([{:signing, nil} | t], acc), do: encode_opts(t, put_elem(acc, 5, nil))
+  defp encode([{:sysid, v} | t], m, ver, _, c, q, f, s) when v in 0..255, do: encode(t, m, ver, v, c, q, f, s)
+  defp encode([{:compid, v} | t], m, ver, y, _, q, f, s) when v in 0..255, do: encode(t, m, ver, y, v, q, f, s)
+  defp encode([{:seq, v} | t], m, ver, y, c, _, f, s) when v in 0..255, do: encode(t, m, ver, y, c, v, f, s)
+  defp encode([{:version, v} | t], m, _, y, c, q, f, s) when v in [1, 2], do: encode(t, m, v, y, c, q, f, s)
+  defp encode([{:compat_flags, v} | t], m, ver, y, c, q, _, s) when v in 0..255, do: encode(t, m, ver, y, c, q, v, s)
+  defp encode([{:signing, nil} | t], m, ver, y, c, q, f, _), do: encode(t, m, ver, y, c, q, f, nil)
 
-  defp encode_opts([{:signing, %{key: <<_::binary-32>>, link_id: l, timestamp: ts} = s} | t], acc)
+  defp encode([{:signing, %{key: <<_::binary-32>>, link_id: l, timestamp: ts} = s} | t], m, ver, y, c, q, f, _)
        when l in 0..255 and is_integer(ts) and ts >= 0 and ts < 0x1000000000000,
-       do: encode_opts(t, put_elem(acc, 5, s))
+       do: encode(t, m, ver, y, c, q, f, s)
 
-  defp encode_opts([other | _], _acc), do: raise(ArgumentError, "bad frame option: #{inspect(other)}")
+  defp encode([other | _], _m, _ver, _y, _c, _q, _f, _s), do: raise(ArgumentError, "bad frame option: #{inspect(other)}")
 
   @doc """
   Appends a signature block to an encoded MAVLink 2 frame whose incompat flags
@@ -290,19 +250,30 @@ defmodule Dolphin.MAVLink.Frame do
   """
   @spec sign(binary(), %{key: binary(), link_id: byte(), timestamp: non_neg_integer()}) :: binary()
   def sign(unsigned, %{key: key, link_id: link_id, timestamp: timestamp}) do
-    signed = <<unsigned::binary, link_id, timestamp::little-48>>
-    <<signature::binary-6, _::binary>> = :crypto.hash(:sha256, [key, signed])
-    <<signed::binary, signature::binary>>
+    block = <<link_id, timestamp::little-48>>
+    <<signature::binary-6, _::binary>> = :crypto.hash(:sha256, [key, unsigned, block])
+    IO.iodata_to_binary([unsigned, block, signature])
   end
 
-  defp checksum(body, crc_extra), do: CRC.accumulate_byte(crc_extra, CRC.accumulate(body, 0xFFFF))
+  defp checksum(header, payload, crc_extra),
+    do: CRC.accumulate_byte(crc_extra, CRC.accumulate(payload, CRC.accumulate(header, 0xFFFF)))
 
-  # MAVLink 2 drops trailing zero bytes of the payload, keeping at least one.
-  defp trim_zeros(payload, 1), do: binary_part(payload, 0, 1)
-
-  defp trim_zeros(payload, n) do
+  # MAVLink 2 drops trailing zero bytes of the payload, keeping at least one;
+  # eight at a time first (extension fields are often all zero).
+  defp trim_zeros(payload, n) when n > 8 do
     case payload do
-      <<_::binary-size(n - 1), 0, _::binary>> -> trim_zeros(payload, n - 1)
+      <<_::binary-size(n - 8), 0::64, _::binary>> -> trim_zeros(payload, n - 8)
+      _ -> trim_ones(payload, n)
+    end
+  end
+
+  defp trim_zeros(payload, n), do: trim_ones(payload, n)
+
+  defp trim_ones(payload, 1), do: binary_part(payload, 0, 1)
+
+  defp trim_ones(payload, n) do
+    case payload do
+      <<_::binary-size(n - 1), 0, _::binary>> -> trim_ones(payload, n - 1)
       _ -> binary_part(payload, 0, n)
     end
   end

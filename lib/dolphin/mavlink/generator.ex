@@ -315,7 +315,7 @@ defmodule Dolphin.MAVLink.Generator do
   defp encode_segments(%{type: :char} = f) do
     v = var(f)
     n = f.array_length || 1
-    [quote(do: unquote(v) :: binary), quote(do: 0 :: size((unquote(n) - byte_size(unquote(v))) * 8))]
+    [quote(do: unquote(v) :: binary), quote(do: Dolphin.MAVLink.Value.zeros(unquote(n) - byte_size(unquote(v))) :: binary)]
   end
 
   defp encode_segments(%{array_length: n} = f) when n != nil, do: [quote(do: unquote(var(f)) :: binary)]

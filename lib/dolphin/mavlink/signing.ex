@@ -29,7 +29,7 @@ defmodule Dolphin.MAVLink.Signing do
       iex> checker = Signing.new(key: :binary.copy(<<7>>, 32), unsigned: :reject)
       iex> {:ok, _checker} = Signing.verify(checker, frame)
       iex> frame.signature.timestamp
-      1001
+      1000
   """
 
   alias Dolphin.MAVLink.{Frame, Message}

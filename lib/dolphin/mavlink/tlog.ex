@@ -41,7 +41,18 @@ defmodule Dolphin.MAVLink.Tlog do
     loop(buffer <> chunk, reader, [])
   end
 
-  @doc "Ends the log: a record cut off at the end is counted as `truncated`."
+  @doc """
+  Ends the log: returns a last record that was waiting for what follows it (a
+  frame with an unknown id, see below), and counts a record cut off at the end
+  as `truncated`.
+  """
+  @spec flush(t()) :: {[{non_neg_integer(), Frame.t()}], t()}
+  def flush(%__MODULE__{buffer: buffer} = reader) do
+    {records, reader} = loop(buffer, %{reader | buffer: <<>>}, [], true)
+    {records, finish(reader)}
+  end
+
+  @doc "Ends the log, dropping and counting what is left (see `flush/1` to keep a last record)."
   @spec finish(t()) :: t()
   def finish(%__MODULE__{buffer: <<>>} = reader), do: reader
 
@@ -53,27 +64,49 @@ defmodule Dolphin.MAVLink.Tlog do
   @spec stats(t()) :: Stats.t()
   def stats(%__MODULE__{stats: stats}), do: stats
 
-  defp loop(<<ts::big-64, rest::binary>> = buf, reader, acc) do
-    case Frame.decode(rest, reader.dialect) do
-      {:ok, frame, after_frame} ->
-        case verify(reader, frame) do
-          {:ok, reader} ->
-            loop(after_frame, %{reader | stats: Stats.count(reader.stats, frame)}, [{ts, frame} | acc])
+  # A record is a timestamp and a frame of the size its header declares. A frame
+  # whose id the dialect does not know has no checksum we can check, so it is
+  # taken only when the next record (or the end of the log) starts right after it.
+  defp loop(buf, reader, acc, at_end \\ false)
 
-          {:error, reason, reader} ->
-            loop(after_frame, %{reader | stats: Stats.drop(reader.stats, reason, 8 + byte_size(frame.raw))}, acc)
+  defp loop(<<ts::big-64, rest::binary>> = buf, reader, acc, at_end) do
+    case Frame.decode(rest, reader.dialect, unknown: :accept) do
+      {:ok, %Frame{message: nil} = frame, after_frame} ->
+        case after_frame do
+          <<_next_ts::64, magic, _::binary>> when magic in [0xFD, 0xFE] -> accept(ts, frame, after_frame, reader, acc, at_end)
+          <<>> when at_end -> accept(ts, frame, after_frame, reader, acc, at_end)
+          short when byte_size(short) < 9 and not at_end -> wait(buf, reader, acc)
+          _ -> skip(buf, :garbage, reader, acc, at_end)
         end
 
+      {:ok, frame, after_frame} ->
+        accept(ts, frame, after_frame, reader, acc, at_end)
+
       {:more, _} ->
-        {Enum.reverse(acc), %{reader | buffer: :binary.copy(buf)}}
+        wait(buf, reader, acc)
 
       {:error, reason, _} ->
-        # Not a record here: move on one byte and try again.
-        loop(binary_part(buf, 1, byte_size(buf) - 1), %{reader | stats: Stats.drop(reader.stats, reason, 1)}, acc)
+        skip(buf, reason, reader, acc, at_end)
     end
   end
 
-  defp loop(buf, reader, acc), do: {Enum.reverse(acc), %{reader | buffer: :binary.copy(buf)}}
+  defp loop(buf, reader, acc, _at_end), do: wait(buf, reader, acc)
+
+  defp accept(ts, frame, rest, reader, acc, at_end) do
+    case verify(reader, frame) do
+      {:ok, reader} ->
+        loop(rest, %{reader | stats: Stats.count(reader.stats, frame)}, [{ts, frame} | acc], at_end)
+
+      {:error, reason, reader} ->
+        loop(rest, %{reader | stats: Stats.drop(reader.stats, reason, 8 + byte_size(frame.raw))}, acc, at_end)
+    end
+  end
+
+  # Not a record here: move on one byte and try again.
+  defp skip(buf, reason, reader, acc, at_end),
+    do: loop(binary_part(buf, 1, byte_size(buf) - 1), %{reader | stats: Stats.drop(reader.stats, reason, 1)}, acc, at_end)
+
+  defp wait(buf, reader, acc), do: {Enum.reverse(acc), %{reader | buffer: :binary.copy(buf)}}
 
   defp verify(reader, frame) do
     case Signing.verify(reader.signing, frame) do

@@ -32,6 +32,14 @@ defmodule Dolphin.MAVLink.Value do
   @typedoc "Base types of fields, as `Dolphin.MAVLink.XML` names them."
   @type base_type :: Dolphin.MAVLink.XML.base_type()
 
+  @zeros :binary.copy(<<0>>, 256)
+
+  @doc false
+  # `n` zero bytes (n <= 256; a payload is at most 255): taken from a literal,
+  # because a `0::size(n * 8)` segment wider than 64 bits is built bit by bit.
+  @spec zeros(0..256) :: binary()
+  def zeros(n), do: binary_part(@zeros, 0, n)
+
   @doc "Size in bytes of one value of a base type."
   @spec size(base_type()) :: 1 | 2 | 4 | 8
   def size(t) when t in [:uint8, :int8, :char], do: 1
@@ -125,7 +133,7 @@ defmodule Dolphin.MAVLink.Value do
     cond do
       not is_binary(value) -> {:error, "expected a binary of at most #{n} bytes"}
       byte_size(value) > n -> {:error, "longer than #{n} bytes"}
-      true -> {:ok, <<value::binary, 0::size((n - byte_size(value)) * 8)>>}
+      true -> {:ok, <<value::binary, zeros(n - byte_size(value))::binary>>}
     end
   end
 
@@ -173,9 +181,12 @@ defmodule Dolphin.MAVLink.Value do
     ArgumentError -> :error
   end
 
-  def pack_array(type, n, list) when is_list(list) and length(list) == n, do: pack(type, list, <<>>)
+  def pack_array(type, n, list) when is_list(list) and length(list) == n, do: pack(type, list, [])
   def pack_array(_type, _n, _list), do: :error
 
+  # Element bytes are gathered as iodata and joined once: appending to a
+  # binary in a loop starts by allocating a writable binary, which costs more
+  # than a short array.
   for {type, bits, min, max} <- [
         {:int8, 8, -0x80, 0x7F},
         {:uint16, 16, 0, 0xFFFF},
@@ -186,12 +197,12 @@ defmodule Dolphin.MAVLink.Value do
         {:int64, 64, -0x8000_0000_0000_0000, 0x7FFF_FFFF_FFFF_FFFF}
       ] do
     defp pack(unquote(type), [v | rest], acc) when is_integer(v) and v >= unquote(min) and v <= unquote(max),
-      do: pack(unquote(type), rest, <<acc::binary, v::little-size(unquote(bits))>>)
+      do: pack(unquote(type), rest, [acc | <<v::little-size(unquote(bits))>>])
   end
 
-  defp pack(:float, [v | rest], acc) when is_number(v), do: pack(:float, rest, <<acc::binary, v::little-float-32>>)
-  defp pack(:double, [v | rest], acc) when is_number(v), do: pack(:double, rest, <<acc::binary, v::little-float-64>>)
-  defp pack(_type, [], acc), do: acc
+  defp pack(:float, [v | rest], acc) when is_number(v), do: pack(:float, rest, [acc | <<v::little-float-32>>])
+  defp pack(:double, [v | rest], acc) when is_number(v), do: pack(:double, rest, [acc | <<v::little-float-64>>])
+  defp pack(_type, [], acc), do: IO.iodata_to_binary(acc)
   defp pack(_type, _bad, _acc), do: :error
 
   defp encode_scalar(type, v) when type in [:float, :double] do

@@ -6,7 +6,8 @@ defmodule Dolphin.MAVLink.XML do
   follows its `<include>` elements transitively (each file once, paths relative
   to the including file) and returns one `t:definitions/0` map: every message
   sorted by id, every enum with the entries of all files merged (dialects extend
-  `MAV_CMD` and friends), and the list of files read (the generator declares them
+  `MAV_CMD` and friends; included files' entries first), and the list of files
+  read, the dialect's own first (the generator declares them
   as `@external_resource` so that editing one recompiles the dialect).
 
   Nothing here generates code: see `Dolphin.MAVLink.Generator`.
@@ -75,7 +76,7 @@ defmodule Dolphin.MAVLink.XML do
        %{
          messages: messages,
          enums: merge_enums(files),
-         files: Enum.map(files, & &1.path)
+         files: files |> Enum.reverse() |> Enum.map(& &1.path)
        }}
     end
   end
@@ -236,12 +237,12 @@ defmodule Dolphin.MAVLink.XML do
     end
   end
 
-  # The same enum may be declared in several files, each adding entries; the
-  # first declaration (in include order) keeps its place.
+  # The same enum may be declared in several files, each adding entries.
+  # `files` comes from read_tree newest first, so an included file comes before
+  # the file including it: base entries first, a dialect's additions after.
   defp merge_enums(files) do
     {order, by_name} =
       files
-      |> Enum.reverse()
       |> Enum.flat_map(& &1.enums)
       |> Enum.reduce({[], %{}}, fn enum, {order, by_name} ->
         case Map.fetch(by_name, enum.name) do

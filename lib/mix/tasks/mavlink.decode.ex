@@ -84,23 +84,27 @@ defmodule Mix.Tasks.Mavlink.Decode do
 
     {feed, finish, stats} =
       if opts[:tlog] do
-        {fn r, chunk -> {records, r} = Tlog.read(r, chunk); {Enum.map(records, &elem(&1, 1)), r} end, &Tlog.finish/1, &Tlog.stats/1}
+        frames = fn {records, r} -> {Enum.map(records, &elem(&1, 1)), r} end
+        {&frames.(Tlog.read(&1, &2)), &frames.(Tlog.flush(&1)), &Tlog.stats/1}
       else
-        {&Parser.feed/2, &Parser.finish/1, &Parser.stats/1}
+        {&Parser.feed/2, &{[], Parser.finish(&1)}, &Parser.stats/1}
       end
 
+    write = fn frames -> IO.binwrite(output, for(f <- frames, f.message != nil, do: [Record.encode(f, key: key), ?\n])) end
     state = if opts[:tlog], do: Tlog.reader(signing: signing), else: Parser.new(signing: signing)
 
-    input
-    |> read_chunks()
-    |> Enum.reduce(state, fn chunk, state ->
-      {frames, state} = feed.(state, chunk)
-      lines = for f <- frames, f.message != nil, do: [Record.encode(f, key: key), ?\n]
-      IO.binwrite(output, lines)
-      state
-    end)
-    |> finish.()
-    |> stats.()
+    state =
+      input
+      |> read_chunks()
+      |> Enum.reduce(state, fn chunk, state ->
+        {frames, state} = feed.(state, chunk)
+        write.(frames)
+        state
+      end)
+
+    {frames, state} = finish.(state)
+    write.(frames)
+    stats.(state)
   end
 
   defp read_chunks(:stdio), do: IO.binstream(:stdio, 65_536)

@@ -1,0 +1,91 @@
+defmodule Dolphin.MAVLink.TlogTest do
+  use ExUnit.Case, async: true
+
+  alias Dolphin.MAVLink.{Frame, Tlog}
+  alias Dolphin.MAVLink.Ardupilotmega.{Attitude, Heartbeat}
+
+  doctest Dolphin.MAVLink.Tlog
+
+  defp log(records), do: IO.iodata_to_binary(for {t, frame} <- records, do: Tlog.record(t, frame))
+
+  test "records come back with their timestamps, whatever the chunking" do
+    records = for i <- 1..50, do: {1_700_000_000_000_000 + i * 1000, Frame.encode(%Attitude{time_boot_ms: i, roll: i / 10}, seq: i)}
+    bytes = log(records)
+
+    for size <- [1, 7, 64, byte_size(bytes)] do
+      {got, reader} =
+        for(<<chunk::binary-size(size) <- bytes>>, do: chunk)
+        |> Kernel.++([binary_part(bytes, div(byte_size(bytes), size) * size, rem(byte_size(bytes), size))])
+        |> Enum.reduce({[], Tlog.reader()}, fn chunk, {acc, r} ->
+          {recs, r} = Tlog.read(r, chunk)
+          {acc ++ recs, r}
+        end)
+
+      assert Enum.map(got, fn {t, f} -> {t, f.raw} end) == records
+      assert Tlog.stats(Tlog.finish(reader)).frames == 50
+    end
+  end
+
+  test "a corrupt record is skipped and counted; the records after it survive" do
+    a = Frame.encode(%Heartbeat{type: 1})
+    b = Frame.encode(%Heartbeat{type: 2})
+    <<head::binary-size(11), byte, tail::binary>> = b
+    bad = <<head::binary, Bitwise.bxor(byte, 0x40), tail::binary>>
+    bytes = log([{1, a}, {2, bad}, {3, a}]) <> <<0, 0, 0>>
+
+    {got, reader} = Tlog.read(Tlog.reader(), bytes)
+    assert Enum.map(got, &elem(&1, 0)) == [1, 3]
+    stats = Tlog.stats(Tlog.finish(reader))
+    assert stats.frames == 2 and stats.bad_crc >= 1 and stats.truncated == 1
+  end
+
+  test "frames with an id the dialect does not know are kept (for forwarding), counted apart" do
+    known = Frame.encode(%Heartbeat{type: 1})
+    # A well-formed MAVLink 2 frame of message id 0x7FFF00, which no dialect defines.
+    unknown = <<0xFD, 2, 0, 0, 0, 1, 1, 0x00, 0xFF, 0x7F, 0xAA, 0xBB, 0x12, 0x34>>
+    bytes = log([{1, known}, {2, unknown}, {3, known}, {4, unknown}])
+
+    for split <- 0..byte_size(bytes) do
+      <<a::binary-size(split), b::binary>> = bytes
+      {r1, reader} = Tlog.read(Tlog.reader(), a)
+      {r2, reader} = Tlog.read(reader, b)
+      {r3, reader} = Tlog.flush(reader)
+      got = r1 ++ r2 ++ r3
+      assert Enum.map(got, fn {t, f} -> {t, f.message && f.message.type} end) == [{1, 1}, {2, nil}, {3, 1}, {4, nil}], "split at #{split}"
+      stats = Tlog.stats(reader)
+      assert {stats.frames, stats.unknown_id, stats.bytes_skipped} == {2, 2, 0}
+    end
+  end
+
+  @tag :interop
+  @tag :tmp_dir
+  test "pymavlink's mavutil reads our .tlog", %{tmp_dir: dir} do
+    python = Path.expand("../../../.venv/bin/python", __DIR__)
+    assert File.exists?(python), "#{python} is missing: run scripts/bootstrap (make test does)"
+    path = Path.join(dir, "flight.tlog")
+    t0 = 1_700_000_000_000_000
+    File.write!(path, log(for i <- 0..9, do: {t0 + i * 250_000, Frame.encode(%Attitude{time_boot_ms: i * 250, yaw: 0.5}, sysid: 1, seq: i)}))
+
+    script = """
+    import sys
+    from pymavlink import mavutil
+    m = mavutil.mavlink_connection(sys.argv[1], dialect="ardupilotmega")
+    while True:
+        msg = m.recv_match(blocking=False)
+        if msg is None:
+            break
+        print(msg.get_type(), msg.time_boot_ms, "%.6f" % msg._timestamp)
+    """
+
+    {out, 0} = System.cmd(python, ["-c", script, path])
+    lines = String.split(out, "\n", trim: true)
+    assert length(lines) == 10
+
+    for {line, i} <- Enum.with_index(lines) do
+      [type, boot_ms, ts] = String.split(line)
+      assert type == "ATTITUDE"
+      assert String.to_integer(boot_ms) == i * 250
+      assert_in_delta String.to_float(ts), (t0 + i * 250_000) / 1_000_000, 1.0e-5
+    end
+  end
+end

@@ -1,0 +1,69 @@
+defmodule Mix.Tasks.MavlinkTasksTest do
+  use ExUnit.Case, async: true
+
+  import ExUnit.CaptureIO
+
+  alias Dolphin.MAVLink.{JSON, Signing}
+  alias Dolphin.Test.Vectors
+  alias Mix.Tasks.Mavlink.{Decode, Encode}
+
+  test "decode prints exactly the expected records of stream.bin, and a summary" do
+    {:ok, input} = File.open(Vectors.path!("stream.bin"), [:read, :binary])
+    {:ok, output} = StringIO.open("")
+    stats = Decode.decode(input, output, signing: Signing.new(key: Vectors.key()))
+    {_, out} = StringIO.contents(output)
+
+    lines = String.split(out, "\n", trim: true)
+    expected = for {_, _, rec} <- Vectors.records("stream.expected.jsonl"), do: rec
+    assert length(lines) == 1500
+
+    for {line, rec} <- Enum.zip(lines, expected) do
+      {:ok, got} = JSON.decode(line)
+      keys = ~w(msg id mavlink signed sysid compid seq fields)
+      assert Map.take(got, keys) |> Vectors.same?(Map.take(rec, keys)), "record #{rec["index"]}"
+      if rec["signed"], do: assert(Map.drop(got["signing"], ["secret_key"]) == Map.drop(rec["signing"], ["secret_key"]))
+    end
+
+    assert Decode.summary(stats) =~ "frames: 1500, bytes: 133260"
+  end
+
+  test "encode turns records back into their frames, and reports bad lines by number" do
+    lines = for {_, line, _} <- Vectors.records("ardupilotmega.signed.jsonl"), do: line
+    frames = for {_, _, rec} <- Vectors.records("ardupilotmega.signed.jsonl"), do: rec["frame"]
+    {:ok, output} = StringIO.open("")
+
+    errors =
+      capture_io(:stderr, fn ->
+        send(self(), {:errors, Encode.encode(lines ++ ["", ~s({"msg":"NOPE","fields":{}}), ~s({"msg":"HEARTBEAT","fields":{"type":300}}), "{"], output)})
+      end)
+
+    assert_received {:errors, [{_, "unknown message \"NOPE\""}, {_, type_error}, {_, json_error}]}
+    assert type_error =~ "cannot encode HEARTBEAT.type = 300"
+    assert json_error =~ "not valid JSON"
+    assert errors =~ "line #{length(lines) + 2}: unknown message"
+    {_, out} = StringIO.contents(output)
+    assert String.split(out, "\n", trim: true) == frames
+  end
+
+  test "decode reads .tlog files and rejects bad usage" do
+    assert_raise Mix.Error, ~r/usage: mix mavlink.decode/, fn -> Decode.run([]) end
+    assert_raise Mix.Error, ~r/cannot read .*nope.bin/, fn -> Decode.run(["nope.bin"]) end
+    assert_raise Mix.Error, ~r/--reject-unsigned needs --key/, fn -> Decode.run(["x", "--reject-unsigned"]) end
+    assert_raise Mix.Error, ~r/--key: signing key/, fn -> Decode.run(["x", "--key", "abc"]) end
+    assert_raise Mix.Error, ~r/unknown or malformed option --bogus/, fn -> Decode.run(["x", "--bogus"]) end
+    assert_raise Mix.Error, ~r/usage: mix mavlink.encode/, fn -> Encode.run([]) end
+
+    frame = Dolphin.MAVLink.Frame.encode(%Dolphin.MAVLink.Ardupilotmega.Heartbeat{type: 6}, sysid: 3)
+    tlog = IO.iodata_to_binary([Dolphin.MAVLink.Tlog.record(1, frame), Dolphin.MAVLink.Tlog.record(2, frame)])
+    {:ok, output} = StringIO.open("")
+    # A file, not a StringIO: StringIO hands back characters, not bytes.
+    path = Path.join(System.tmp_dir!(), "dolphin-#{System.unique_integer([:positive])}.tlog")
+    File.write!(path, tlog)
+    {:ok, io} = File.open(path, [:read, :binary])
+    stats = Decode.decode(io, output, tlog: true)
+    File.rm!(path)
+    {_, out} = StringIO.contents(output)
+    assert stats.frames == 2
+    assert [%{"msg" => "HEARTBEAT", "sysid" => 3, "fields" => %{"type" => 6}} | _] = Enum.map(String.split(out, "\n", trim: true), &elem(JSON.decode(&1), 1))
+  end
+end
