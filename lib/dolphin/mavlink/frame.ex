@@ -86,16 +86,15 @@ defmodule Dolphin.MAVLink.Frame do
           {:ok, t(), binary()} | {:more, binary()} | {:error, error_reason(), binary()}
   def decode(buffer, dialect, opts \\ [])
 
-  # One pattern per frame shape, matched in the function head: the fewer
-  # sub-binaries made per frame, the faster (see bench/codec.exs).
+  # One pattern per frame shape, matched in the function head, and one struct
+  # built per frame: the fewer terms made per frame, the faster (bench/codec.exs).
   def decode(
         <<@magic_v2, len, 0, compat, seq, sysid, compid, msgid::little-24, payload::binary-size(len), crc::little-16,
           rest::binary>> = buf,
         dialect,
         opts
       ) do
-    frame = %__MODULE__{sysid: sysid, compid: compid, seq: seq, msgid: msgid, compat_flags: compat}
-    checked(buf, 12 + len, 1, 9 + len, crc, payload, frame, rest, dialect, opts)
+    checked(buf, 12 + len, crc, payload, rest, dialect, opts, 2, 0, compat, seq, sysid, compid, msgid, nil)
   end
 
   def decode(
@@ -104,17 +103,8 @@ defmodule Dolphin.MAVLink.Frame do
         dialect,
         opts
       ) do
-    frame = %__MODULE__{
-      sysid: sysid,
-      compid: compid,
-      seq: seq,
-      msgid: msgid,
-      incompat_flags: @signed,
-      compat_flags: compat,
-      signature: %{link_id: link_id, timestamp: timestamp, signature: signature}
-    }
-
-    checked(buf, 25 + len, 1, 9 + len, crc, payload, frame, rest, dialect, opts)
+    signature = %{link_id: link_id, timestamp: timestamp, signature: signature}
+    checked(buf, 25 + len, crc, payload, rest, dialect, opts, 2, @signed, compat, seq, sysid, compid, msgid, signature)
   end
 
   def decode(<<@magic_v2, _len, flags, _::binary>> = buf, _dialect, _opts) when (flags &&& bnot(@signed)) != 0,
@@ -127,8 +117,7 @@ defmodule Dolphin.MAVLink.Frame do
         dialect,
         opts
       ) do
-    frame = %__MODULE__{version: 1, sysid: sysid, compid: compid, seq: seq, msgid: msgid}
-    checked(buf, 8 + len, 1, 5 + len, crc, payload, frame, rest, dialect, opts)
+    checked(buf, 8 + len, crc, payload, rest, dialect, opts, 1, 0, 0, seq, sysid, compid, msgid, nil)
   end
 
   def decode(<<@magic_v1, _::binary>> = buf, _dialect, _opts), do: {:more, buf}
@@ -142,23 +131,53 @@ defmodule Dolphin.MAVLink.Frame do
     end
   end
 
-  # The checksum covers the bytes after the magic through the payload
-  # (`crc_len` bytes from `crc_from`), then the message's CRC_EXTRA.
-  defp checked(buf, size, crc_from, crc_len, crc, payload, frame, rest, dialect, opts) do
-    case dialect.message_info(frame.msgid) do
+  # The checksum covers the bytes after the magic through the payload (the
+  # header is 9 bytes in MAVLink 2, 5 in MAVLink 1), then the message's CRC_EXTRA.
+  defp checked(buf, size, crc, payload, rest, dialect, opts, version, flags, compat, seq, sysid, compid, msgid, sig) do
+    len = byte_size(payload)
+    crc_len = if version == 2, do: 9 + len, else: 5 + len
+
+    case dialect.message_info(msgid) do
       {module, crc_extra, _min, max_len} ->
-        if CRC.accumulate_byte(crc_extra, CRC.accumulate(binary_part(buf, crc_from, crc_len), 0xFFFF)) == crc do
-          message = decode_payload(module, payload, byte_size(payload), max_len)
-          {:ok, %{frame | message: message, payload: payload, raw: binary_part(buf, 0, size)}, rest}
+        if CRC.accumulate_byte(crc_extra, CRC.accumulate(binary_part(buf, 1, crc_len), 0xFFFF)) == crc do
+          frame = %__MODULE__{
+            version: version,
+            sysid: sysid,
+            compid: compid,
+            seq: seq,
+            msgid: msgid,
+            incompat_flags: flags,
+            compat_flags: compat,
+            message: decode_payload(module, payload, len, max_len),
+            payload: payload,
+            signature: sig,
+            raw: binary_part(buf, 0, size)
+          }
+
+          {:ok, frame, rest}
         else
           bad_crc(buf)
         end
 
       nil ->
-        unknown(buf, opts, fn -> {:ok, %{frame | payload: payload, raw: binary_part(buf, 0, size)}, rest} end)
+        unknown(buf, opts, fn ->
+          frame = %__MODULE__{
+            version: version,
+            sysid: sysid,
+            compid: compid,
+            seq: seq,
+            msgid: msgid,
+            incompat_flags: flags,
+            compat_flags: compat,
+            payload: payload,
+            signature: sig,
+            raw: binary_part(buf, 0, size)
+          }
+
+          {:ok, frame, rest}
+        end)
     end
   end
-
 
   defp bad_crc(buf), do: {:error, :bad_crc, binary_part(buf, 1, byte_size(buf) - 1)}
 

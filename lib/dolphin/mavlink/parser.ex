@@ -83,7 +83,10 @@ defmodule Dolphin.MAVLink.Parser do
   # Good frames are counted in loop arguments and written into the stats once
   # per feed: a struct update per frame costs more than decoding a small message.
   defp loop(buf, parser, acc, frames \\ 0, unknown \\ 0) do
-    case Frame.decode(buf, parser.dialect, in_sync: parser.in_sync) do
+    # Literal option lists: nothing is built per frame for them.
+    opts = if parser.in_sync, do: [in_sync: true], else: [in_sync: false]
+
+    case Frame.decode(buf, parser.dialect, opts) do
       {:ok, %Frame{signature: nil} = frame, rest} when parser.signing == nil ->
         loop_ok(rest, parser, [frame | acc], frame, frames, unknown)
 
