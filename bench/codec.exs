@@ -11,7 +11,10 @@ defmodule CodecBench do
 
   def decode_all(bytes, chunk), do: decode_chunks(bytes, chunk, Parser.new(), 0)
 
-  defp decode_chunks(<<>>, _chunk, parser, n), do: {n, Parser.stats(Parser.finish(parser))}
+  defp decode_chunks(<<>>, _chunk, parser, n) do
+    {frames, parser} = Parser.finish(parser)
+    {n + length(frames), Parser.stats(parser)}
+  end
 
   defp decode_chunks(bytes, chunk, parser, n) do
     size = min(chunk, byte_size(bytes))

@@ -47,7 +47,9 @@ stream = IO.iodata_to_binary([garbage.(), hb, garbage.(), sys, flipped, cut, ite
   end)
   |> Enum.reduce({[], Parser.new()}, fn chunk, {acc, p} -> {f, p} = Parser.feed(p, chunk); {acc ++ f, p} end)
 
-stats = Parser.stats(Parser.finish(parser))
+{rest, parser} = Parser.finish(parser)
+decoded = decoded ++ rest
+stats = Parser.stats(parser)
 IO.puts("  recovered #{length(decoded)} frames: #{decoded |> Enum.map(&Message.name(&1.message)) |> Enum.join(", ")}")
 IO.puts("  dropped: #{stats.bytes_skipped} bytes of #{stats.bytes}, #{stats.bad_crc} candidate frames failed their CRC (the flipped and the cut one among them)")
 yaw = Enum.find(decoded, &match?(%APM.MissionItemInt{}, &1.message)).message.param4

@@ -66,15 +66,14 @@ defmodule Dolphin.MAVLink.Parser do
   end
 
   @doc """
-  Ends the stream: what is left in the buffer (a frame cut off at the end) is
-  dropped and counted as `truncated`.
+  Ends the stream and returns the frames still in the buffer: the last
+  unknown-id frame that was waiting for the byte after it, and any frame behind
+  a candidate cut off by the end of the stream (that candidate is dropped and
+  counted as `truncated`, and the scan goes on inside it).
   """
-  @spec finish(t()) :: t()
-  def finish(%__MODULE__{buffer: <<>>} = parser), do: parser
-
-  def finish(%__MODULE__{buffer: rest, stats: stats} = parser) do
-    %{parser | buffer: <<>>, stats: %{stats | truncated: stats.truncated + 1, bytes_skipped: stats.bytes_skipped + byte_size(rest)}}
-  end
+  @spec finish(t()) :: {[Frame.t()], t()}
+  def finish(%__MODULE__{buffer: <<>>} = parser), do: {[], parser}
+  def finish(%__MODULE__{buffer: buf} = parser), do: loop(buf, %{parser | buffer: <<>>}, [], 0, 0, :first)
 
   @doc "Counters of what was decoded and dropped."
   @spec stats(t()) :: Stats.t()
@@ -82,50 +81,61 @@ defmodule Dolphin.MAVLink.Parser do
 
   # Good frames are counted in loop arguments and written into the stats once
   # per feed: a struct update per frame costs more than decoding a small message.
-  defp loop(buf, parser, acc, frames \\ 0, unknown \\ 0) do
-    # Literal option lists: nothing is built per frame for them.
-    opts = if parser.in_sync, do: [in_sync: true], else: [in_sync: false]
-
-    case Frame.decode(buf, parser.dialect, opts) do
+  # `at_end` is false while the stream goes on; in finish/1 it is :first until a
+  # cut-off candidate has been counted as truncated, then true.
+  defp loop(buf, parser, acc, frames \\ 0, unknown \\ 0, at_end \\ false) do
+    case Frame.decode(buf, parser.dialect, decode_opts(parser.in_sync, at_end)) do
       {:ok, %Frame{signature: nil} = frame, rest} when parser.signing == nil ->
-        loop_ok(rest, parser, [frame | acc], frame, frames, unknown)
+        loop_ok(rest, parser, [frame | acc], frame, frames, unknown, at_end)
 
       {:ok, frame, rest} ->
         case check_signature(parser, frame) do
           {:ok, parser} ->
-            loop_ok(rest, parser, [frame | acc], frame, frames, unknown)
+            loop_ok(rest, parser, [frame | acc], frame, frames, unknown, at_end)
 
           # A bad signature may be a frame cut short whose "signature" is the
           # start of the next frame: look again from the byte after its magic.
           {:error, :bad_signature, parser} ->
             parser = %{parser | in_sync: false, stats: Stats.drop(parser.stats, :bad_signature, 1)}
-            loop(binary_part(buf, 1, byte_size(buf) - 1), parser, acc, frames, unknown)
+            loop(binary_part(buf, 1, byte_size(buf) - 1), parser, acc, frames, unknown, at_end)
 
           # A replayed or refused frame is whole: drop all of it.
           {:error, reason, parser} ->
             parser = %{parser | in_sync: false, stats: Stats.drop(parser.stats, reason, byte_size(frame.raw))}
-            loop(rest, parser, acc, frames, unknown)
+            loop(rest, parser, acc, frames, unknown, at_end)
         end
 
-      {:more, rest} ->
+      {:more, rest} when at_end == false or rest == <<>> ->
         stats = %{parser.stats | frames: parser.stats.frames + frames, unknown_id: parser.stats.unknown_id + unknown}
         # Keep only the unfinished tail, not the whole chunk it points into.
         {:lists.reverse(acc), %{parser | buffer: :binary.copy(rest), stats: stats}}
 
+      # The stream ended inside this candidate: drop its first byte and look on.
+      {:more, rest} ->
+        reason = if at_end == :first, do: :truncated, else: :garbage
+        parser = %{parser | in_sync: false, stats: Stats.drop(parser.stats, reason, 1)}
+        loop(binary_part(rest, 1, byte_size(rest) - 1), parser, acc, frames, unknown, true)
+
       {:error, reason, rest} ->
         stats = Stats.drop(parser.stats, reason, byte_size(buf) - byte_size(rest))
-        loop(rest, %{parser | in_sync: false, stats: stats}, acc, frames, unknown)
+        loop(rest, %{parser | in_sync: false, stats: stats}, acc, frames, unknown, at_end)
     end
   end
 
-  defp loop_ok(rest, %__MODULE__{in_sync: true} = parser, acc, %Frame{message: nil}, frames, unknown),
-    do: loop(rest, parser, acc, frames, unknown + 1)
+  # Literal option lists: nothing is built per frame for them.
+  defp decode_opts(true, false), do: [in_sync: true]
+  defp decode_opts(false, false), do: [in_sync: false]
+  defp decode_opts(true, _at_end), do: [in_sync: true, at_end: true]
+  defp decode_opts(false, _at_end), do: [in_sync: false, at_end: true]
 
-  defp loop_ok(rest, %__MODULE__{in_sync: true} = parser, acc, _frame, frames, unknown),
-    do: loop(rest, parser, acc, frames + 1, unknown)
+  defp loop_ok(rest, %__MODULE__{in_sync: true} = parser, acc, %Frame{message: nil}, frames, unknown, at_end),
+    do: loop(rest, parser, acc, frames, unknown + 1, at_end)
 
-  defp loop_ok(rest, parser, acc, frame, frames, unknown),
-    do: loop_ok(rest, %{parser | in_sync: true}, acc, frame, frames, unknown)
+  defp loop_ok(rest, %__MODULE__{in_sync: true} = parser, acc, _frame, frames, unknown, at_end),
+    do: loop(rest, parser, acc, frames + 1, unknown, at_end)
+
+  defp loop_ok(rest, parser, acc, frame, frames, unknown, at_end),
+    do: loop_ok(rest, %{parser | in_sync: true}, acc, frame, frames, unknown, at_end)
 
   defp check_signature(parser, frame) do
     case Signing.verify(parser.signing, frame) do

@@ -87,7 +87,7 @@ defmodule Mix.Tasks.Mavlink.Decode do
         frames = fn {records, r} -> {Enum.map(records, &elem(&1, 1)), r} end
         {&frames.(Tlog.read(&1, &2)), &frames.(Tlog.flush(&1)), &Tlog.stats/1}
       else
-        {&Parser.feed/2, &{[], Parser.finish(&1)}, &Parser.stats/1}
+        {&Parser.feed/2, &Parser.finish/1, &Parser.stats/1}
       end
 
     write = fn frames -> IO.binwrite(output, for(f <- frames, f.message != nil, do: [Record.encode(f, key: key), ?\n])) end

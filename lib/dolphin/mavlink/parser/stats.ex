@@ -5,7 +5,8 @@ defmodule Dolphin.MAVLink.Parser.Stats do
   `bytes_skipped` (dropped: not part of any returned frame), and what was
   dropped by reason: `bad_crc`, `bad_incompat_flags`, `bad_signature`,
   `old_timestamp` (replayed), `unsigned` (refused by the signing policy),
-  `truncated` (a frame cut off by the end of the stream).
+  `truncated` (a frame cut off by the end of the stream: 1 byte is counted
+  for it, since the scan goes on inside it).
   """
   defstruct frames: 0,
             bytes: 0,
