@@ -8,7 +8,8 @@ defmodule Dolphin.MAVLink.Tlog do
       iex> frame = Frame.encode(%Dolphin.MAVLink.Ardupilotmega.Heartbeat{}, sysid: 1)
       iex> log = IO.iodata_to_binary([Tlog.record(1_700_000_000_000_000, frame), Tlog.record(1_700_000_000_500_000, frame)])
       iex> {records, reader} = Tlog.read(Tlog.reader(), log)
-      iex> {Enum.map(records, &elem(&1, 0)), Tlog.stats(Tlog.finish(reader)).frames}
+      iex> {[], reader} = Tlog.finish(reader)
+      iex> {Enum.map(records, &elem(&1, 0)), Tlog.stats(reader).frames}
       {[1700000000000000, 1700000000500000], 2}
 
   Reading is streaming (`read/2` takes chunks of any size) and forgiving: when a
@@ -42,23 +43,12 @@ defmodule Dolphin.MAVLink.Tlog do
   end
 
   @doc """
-  Ends the log: returns a last record that was waiting for what follows it (a
-  frame with an unknown id, see below), and counts a record cut off at the end
-  as `truncated`.
+  Ends the log and returns the records still in the buffer: a last frame with an
+  unknown id (see below), and any record behind one cut off by the end of the
+  log (that one is dropped and counted as `truncated`, and the scan goes on).
   """
-  @spec flush(t()) :: {[{non_neg_integer(), Frame.t()}], t()}
-  def flush(%__MODULE__{buffer: buffer} = reader) do
-    {records, reader} = loop(buffer, %{reader | buffer: <<>>}, [], true)
-    {records, finish(reader)}
-  end
-
-  @doc "Ends the log, dropping and counting what is left (see `flush/1` to keep a last record)."
-  @spec finish(t()) :: t()
-  def finish(%__MODULE__{buffer: <<>>} = reader), do: reader
-
-  def finish(%__MODULE__{buffer: rest, stats: stats} = reader) do
-    %{reader | buffer: <<>>, stats: %{stats | truncated: stats.truncated + 1, bytes_skipped: stats.bytes_skipped + byte_size(rest)}}
-  end
+  @spec finish(t()) :: {[{non_neg_integer(), Frame.t()}], t()}
+  def finish(%__MODULE__{buffer: buffer} = reader), do: loop(buffer, %{reader | buffer: <<>>}, [], :first)
 
   @doc "Counters of what was read and dropped (`Dolphin.MAVLink.Parser.Stats`)."
   @spec stats(t()) :: Stats.t()
@@ -67,6 +57,8 @@ defmodule Dolphin.MAVLink.Tlog do
   # A record is a timestamp and a frame of the size its header declares. A frame
   # whose id the dialect does not know has no checksum we can check, so it is
   # taken only when the next record (or the end of the log) starts right after it.
+  # `at_end`: false while the log goes on; in finish/1, :first until a cut-off
+  # record has been counted as truncated, then true.
   defp loop(buf, reader, acc, at_end \\ false)
 
   defp loop(<<ts::big-64, rest::binary>> = buf, reader, acc, at_end) do
@@ -74,23 +66,33 @@ defmodule Dolphin.MAVLink.Tlog do
       {:ok, %Frame{message: nil} = frame, after_frame} ->
         case after_frame do
           <<_next_ts::64, magic, _::binary>> when magic in [0xFD, 0xFE] -> accept(ts, frame, after_frame, reader, acc, at_end)
-          <<>> when at_end -> accept(ts, frame, after_frame, reader, acc, at_end)
-          short when byte_size(short) < 9 and not at_end -> wait(buf, reader, acc)
+          <<>> when at_end != false -> accept(ts, frame, after_frame, reader, acc, at_end)
+          short when byte_size(short) < 9 and at_end == false -> wait(buf, reader, acc)
           _ -> skip(buf, :garbage, reader, acc, at_end)
         end
 
       {:ok, frame, after_frame} ->
         accept(ts, frame, after_frame, reader, acc, at_end)
 
-      {:more, _} ->
+      {:more, _} when at_end == false ->
         wait(buf, reader, acc)
+
+      {:more, _} ->
+        skip(buf, cut_off(at_end), reader, acc, true)
 
       {:error, reason, _} ->
         skip(buf, reason, reader, acc, at_end)
     end
   end
 
-  defp loop(buf, reader, acc, _at_end), do: wait(buf, reader, acc)
+  defp loop(buf, reader, acc, false), do: wait(buf, reader, acc)
+  defp loop(<<>>, reader, acc, _at_end), do: wait(<<>>, reader, acc)
+
+  defp loop(rest, reader, acc, at_end),
+    do: wait(<<>>, %{reader | stats: Stats.drop(reader.stats, cut_off(at_end), byte_size(rest))}, acc)
+
+  defp cut_off(:first), do: :truncated
+  defp cut_off(true), do: :garbage
 
   defp accept(ts, frame, rest, reader, acc, at_end) do
     case verify(reader, frame) do

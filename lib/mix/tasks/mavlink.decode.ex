@@ -85,7 +85,7 @@ defmodule Mix.Tasks.Mavlink.Decode do
     {feed, finish, stats} =
       if opts[:tlog] do
         frames = fn {records, r} -> {Enum.map(records, &elem(&1, 1)), r} end
-        {&frames.(Tlog.read(&1, &2)), &frames.(Tlog.flush(&1)), &Tlog.stats/1}
+        {&frames.(Tlog.read(&1, &2)), &frames.(Tlog.finish(&1)), &Tlog.stats/1}
       else
         {&Parser.feed/2, &Parser.finish/1, &Parser.stats/1}
       end

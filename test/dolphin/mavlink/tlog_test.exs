@@ -2,7 +2,7 @@ defmodule Dolphin.MAVLink.TlogTest do
   use ExUnit.Case, async: true
 
   alias Dolphin.MAVLink.{Frame, Tlog}
-  alias Dolphin.MAVLink.Ardupilotmega.{Attitude, Heartbeat}
+  alias Dolphin.MAVLink.Ardupilotmega.{Attitude, Heartbeat, Statustext}
 
   doctest Dolphin.MAVLink.Tlog
 
@@ -21,8 +21,9 @@ defmodule Dolphin.MAVLink.TlogTest do
           {acc ++ recs, r}
         end)
 
+      assert {[], reader} = Tlog.finish(reader)
       assert Enum.map(got, fn {t, f} -> {t, f.raw} end) == records
-      assert Tlog.stats(Tlog.finish(reader)).frames == 50
+      assert Tlog.stats(reader).frames == 50
     end
   end
 
@@ -35,8 +36,17 @@ defmodule Dolphin.MAVLink.TlogTest do
 
     {got, reader} = Tlog.read(Tlog.reader(), bytes)
     assert Enum.map(got, &elem(&1, 0)) == [1, 3]
-    stats = Tlog.stats(Tlog.finish(reader))
+    assert {[], reader} = Tlog.finish(reader)
+    stats = Tlog.stats(reader)
     assert stats.frames == 2 and stats.bad_crc >= 1 and stats.truncated == 1
+
+    # A log that ends inside a record (its frame claims more bytes than are
+    # left) whose bytes hide a whole record: that one is kept.
+    long = Frame.encode(%Statustext{text: String.duplicate("x", 50)})
+    cut = binary_part(IO.iodata_to_binary(Tlog.record(5, long)), 0, 14)
+    {[], reader} = Tlog.read(Tlog.reader(), cut <> IO.iodata_to_binary(Tlog.record(6, a)))
+    assert {[{6, %Frame{raw: ^a}}], reader} = Tlog.finish(reader)
+    assert Tlog.stats(reader).truncated == 1
   end
 
   test "frames with an id the dialect does not know are kept (for forwarding), counted apart" do
@@ -49,7 +59,7 @@ defmodule Dolphin.MAVLink.TlogTest do
       <<a::binary-size(split), b::binary>> = bytes
       {r1, reader} = Tlog.read(Tlog.reader(), a)
       {r2, reader} = Tlog.read(reader, b)
-      {r3, reader} = Tlog.flush(reader)
+      {r3, reader} = Tlog.finish(reader)
       got = r1 ++ r2 ++ r3
       assert Enum.map(got, fn {t, f} -> {t, f.message && f.message.type} end) == [{1, 1}, {2, nil}, {3, 1}, {4, nil}], "split at #{split}"
       stats = Tlog.stats(reader)
