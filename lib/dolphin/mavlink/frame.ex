@@ -139,7 +139,7 @@ defmodule Dolphin.MAVLink.Frame do
 
     case dialect.message_info(msgid) do
       {module, crc_extra, _min, max_len} ->
-        if CRC.accumulate_byte(crc_extra, CRC.accumulate(binary_part(buf, 1, crc_len), 0xFFFF)) == crc do
+        if CRC.checksum(buf, 1, crc_len, crc_extra) == crc do
           frame = %__MODULE__{
             version: version,
             sysid: sysid,
@@ -232,17 +232,16 @@ defmodule Dolphin.MAVLink.Frame do
       2 ->
         payload = trim_zeros(payload, byte_size(payload))
         flags = if signing, do: @signed, else: 0
-        header = <<byte_size(payload), flags, compat, seq, sysid, compid, id::little-24>>
-        frame = <<@magic_v2, header::binary, payload::binary, checksum(header, payload, crc_extra)::little-16>>
+        body = <<byte_size(payload), flags, compat, seq, sysid, compid, id::little-24, payload::binary>>
+        frame = <<@magic_v2, body::binary, CRC.checksum(body, 0, byte_size(body), crc_extra)::little-16>>
         if signing, do: sign(frame, signing), else: frame
 
       1 when signing != nil ->
         raise ArgumentError, "MAVLink 1 frames cannot be signed"
 
       1 when id <= 255 ->
-        payload = binary_part(payload, 0, min_len)
-        header = <<min_len, seq, sysid, compid, id>>
-        <<@magic_v1, header::binary, payload::binary, checksum(header, payload, crc_extra)::little-16>>
+        body = <<min_len, seq, sysid, compid, id, binary_part(payload, 0, min_len)::binary>>
+        <<@magic_v1, body::binary, CRC.checksum(body, 0, byte_size(body), crc_extra)::little-16>>
 
       1 ->
         raise ArgumentError, "#{Message.name(message)} (id #{id}) cannot travel as MAVLink 1: ids above 255 need MAVLink 2"
@@ -273,9 +272,6 @@ defmodule Dolphin.MAVLink.Frame do
     <<signature::binary-6, _::binary>> = :crypto.hash(:sha256, [key, unsigned, block])
     IO.iodata_to_binary([unsigned, block, signature])
   end
-
-  defp checksum(header, payload, crc_extra),
-    do: CRC.accumulate_byte(crc_extra, CRC.accumulate(payload, CRC.accumulate(header, 0xFFFF)))
 
   # MAVLink 2 drops trailing zero bytes of the payload, keeping at least one;
   # eight at a time first (extension fields are often all zero).
