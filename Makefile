@@ -20,7 +20,7 @@ bench: bootstrap
 	MIX_ENV=prod ERL_FLAGS="+S 1:1" mix bench
 
 dialyzer: bootstrap
-	mix dialyzer
+	scripts/dialyzer
 
 clean:
 	rm -rf _build priv/mavlink/*.xml

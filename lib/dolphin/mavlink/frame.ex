@@ -33,7 +33,6 @@ defmodule Dolphin.MAVLink.Frame do
   and strips trailing zero bytes from MAVLink 2 payloads (keeping one).
   """
 
-  import Bitwise
 
   alias Dolphin.MAVLink.{CRC, Message, Value}
 
@@ -107,7 +106,7 @@ defmodule Dolphin.MAVLink.Frame do
     checked(buf, 25 + len, crc, payload, rest, dialect, opts, 2, @signed, compat, seq, sysid, compid, msgid, signature)
   end
 
-  def decode(<<@magic_v2, _len, flags, _::binary>> = buf, _dialect, _opts) when (flags &&& bnot(@signed)) != 0,
+  def decode(<<@magic_v2, _len, flags, _::binary>> = buf, _dialect, _opts) when flags > @signed,
     do: {:error, :bad_incompat_flags, binary_part(buf, 1, byte_size(buf) - 1)}
 
   def decode(<<@magic_v2, _::binary>> = buf, _dialect, _opts), do: {:more, buf}
