@@ -139,43 +139,33 @@ defmodule Dolphin.MAVLink.Frame do
     case dialect.message_info(msgid) do
       {module, crc_extra, _min, max_len} ->
         if CRC.checksum(buf, 1, crc_len, crc_extra) == crc do
-          frame = %__MODULE__{
-            version: version,
-            sysid: sysid,
-            compid: compid,
-            seq: seq,
-            msgid: msgid,
-            incompat_flags: flags,
-            compat_flags: compat,
-            message: decode_payload(module, payload, len, max_len),
-            payload: payload,
-            signature: sig,
-            raw: binary_part(buf, 0, size)
-          }
-
-          {:ok, frame, rest}
+          message = decode_payload(module, payload, len, max_len)
+          {:ok, new(version, flags, compat, seq, sysid, compid, msgid, message, payload, sig, binary_part(buf, 0, size)), rest}
         else
           bad_crc(buf)
         end
 
       nil ->
         unknown(buf, opts, fn ->
-          frame = %__MODULE__{
-            version: version,
-            sysid: sysid,
-            compid: compid,
-            seq: seq,
-            msgid: msgid,
-            incompat_flags: flags,
-            compat_flags: compat,
-            payload: payload,
-            signature: sig,
-            raw: binary_part(buf, 0, size)
-          }
-
-          {:ok, frame, rest}
+          {:ok, new(version, flags, compat, seq, sysid, compid, msgid, nil, payload, sig, binary_part(buf, 0, size)), rest}
         end)
     end
+  end
+
+  defp new(version, flags, compat, seq, sysid, compid, msgid, message, payload, signature, raw) do
+    %__MODULE__{
+      version: version,
+      sysid: sysid,
+      compid: compid,
+      seq: seq,
+      msgid: msgid,
+      incompat_flags: flags,
+      compat_flags: compat,
+      message: message,
+      payload: payload,
+      signature: signature,
+      raw: raw
+    }
   end
 
   defp bad_crc(buf), do: {:error, :bad_crc, binary_part(buf, 1, byte_size(buf) - 1)}

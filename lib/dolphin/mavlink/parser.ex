@@ -89,7 +89,7 @@ defmodule Dolphin.MAVLink.Parser do
         loop_ok(rest, parser, [frame | acc], frame, frames, unknown, at_end)
 
       {:ok, frame, rest} ->
-        case check_signature(parser, frame) do
+        case Signing.verify_for(parser, frame) do
           {:ok, parser} ->
             loop_ok(rest, parser, [frame | acc], frame, frames, unknown, at_end)
 
@@ -136,11 +136,4 @@ defmodule Dolphin.MAVLink.Parser do
 
   defp loop_ok(rest, parser, acc, frame, frames, unknown, at_end),
     do: loop_ok(rest, %{parser | in_sync: true}, acc, frame, frames, unknown, at_end)
-
-  defp check_signature(parser, frame) do
-    case Signing.verify(parser.signing, frame) do
-      {:ok, signing} -> {:ok, %{parser | signing: signing}}
-      {:error, reason, signing} -> {:error, reason, %{parser | signing: signing}}
-    end
-  end
 end

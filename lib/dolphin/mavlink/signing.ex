@@ -143,6 +143,17 @@ defmodule Dolphin.MAVLink.Signing do
     end
   end
 
+  @doc false
+  # verify/2 for a reader that keeps its signing state in a `signing` field
+  # (Dolphin.MAVLink.Parser, Dolphin.MAVLink.Tlog): the reader comes back updated.
+  @spec verify_for(holder, Frame.t()) :: {:ok, holder} | {:error, reject_reason(), holder} when holder: %{signing: t() | nil}
+  def verify_for(%{signing: signing} = holder, frame) do
+    case verify(signing, frame) do
+      {:ok, signing} -> {:ok, %{holder | signing: signing}}
+      {:error, reason, signing} -> {:error, reason, %{holder | signing: signing}}
+    end
+  end
+
   defp stale?({:ok, last}, timestamp, _local), do: timestamp <= last
   defp stale?(:error, timestamp, local), do: timestamp + @new_stream_window < local
 

@@ -95,7 +95,7 @@ defmodule Dolphin.MAVLink.Tlog do
   defp cut_off(true), do: :garbage
 
   defp accept(ts, frame, rest, reader, acc, at_end) do
-    case verify(reader, frame) do
+    case Signing.verify_for(reader, frame) do
       {:ok, reader} ->
         loop(rest, %{reader | stats: Stats.count(reader.stats, frame)}, [{ts, frame} | acc], at_end)
 
@@ -109,11 +109,4 @@ defmodule Dolphin.MAVLink.Tlog do
     do: loop(binary_part(buf, 1, byte_size(buf) - 1), %{reader | stats: Stats.drop(reader.stats, reason, 1)}, acc, at_end)
 
   defp wait(buf, reader, acc), do: {Enum.reverse(acc), %{reader | buffer: :binary.copy(buf)}}
-
-  defp verify(reader, frame) do
-    case Signing.verify(reader.signing, frame) do
-      {:ok, signing} -> {:ok, %{reader | signing: signing}}
-      {:error, reason, signing} -> {:error, reason, %{reader | signing: signing}}
-    end
-  end
 end
