@@ -2,10 +2,13 @@
 # frames), the way a link uses the codec:
 #   decode: the file fed to a streaming parser in 4 KiB chunks (a TCP read; UDP
 #           datagrams are smaller), every frame checked and decoded into structs;
-#   encode: every decoded message re-encoded with its header; the bytes must be
-#           the file's.
+#   encode: every decoded message re-encoded with its header, as a sender does
+#           (each frame handed on and forgotten); a separate, untimed pass checks
+#           that the re-encoded bytes are the file's.
 # `make bench` runs it on one scheduler (+S 1), so the figures are per core.
-# Environment: BENCH_FILE, BENCH_ROUNDS (default 5), BENCH_CHUNK (default 4096).
+# Environment: BENCH_FILE, BENCH_ROUNDS (default 5), BENCH_CHUNK (default 4096),
+# BENCH_MIN_HEAP (initial heap of the benchmark process, in words; default 233,
+# Erlang's own default).
 defmodule CodecBench do
   alias Dolphin.MAVLink.{Frame, Parser}
 
@@ -28,14 +31,17 @@ defmodule CodecBench do
     frames
   end
 
-  def encode_all(frames), do: encode_all(frames, [])
+  # Timed: encodes every frame, keeping only a byte count.
+  def encode_all(frames), do: encode_all(frames, 0)
 
-  defp encode_all([], acc), do: :lists.reverse(acc)
+  defp encode_all([], size), do: size
+  defp encode_all([f | rest], size), do: encode_all(rest, size + byte_size(encode(f)))
 
-  defp encode_all([%Frame{} = f | rest], acc) do
-    bytes = Frame.encode(f.message, sysid: f.sysid, compid: f.compid, seq: f.seq, compat_flags: f.compat_flags)
-    encode_all(rest, [bytes | acc])
-  end
+  # Untimed: the re-encoded stream.
+  def encode_list(frames), do: Enum.map(frames, &encode/1)
+
+  defp encode(%Frame{} = f),
+    do: Frame.encode(f.message, sysid: f.sysid, compid: f.compid, seq: f.seq, compat_flags: f.compat_flags)
 
   # Best of N rounds: the machine is shared; the best round is the least
   # disturbed. Wall time and the VM's CPU time are both kept: with one scheduler
@@ -57,35 +63,46 @@ defmodule CodecBench do
   end
 end
 
-path = System.get_env("BENCH_FILE", Path.expand("../../shared/mavlink/bench/telemetry_mix.bin", __DIR__))
-rounds = String.to_integer(System.get_env("BENCH_ROUNDS", "5"))
-chunk = String.to_integer(System.get_env("BENCH_CHUNK", "4096"))
+main = fn ->
+  path = System.get_env("BENCH_FILE", Path.expand("../../shared/mavlink/bench/telemetry_mix.bin", __DIR__))
+  rounds = String.to_integer(System.get_env("BENCH_ROUNDS", "5"))
+  chunk = String.to_integer(System.get_env("BENCH_CHUNK", "4096"))
 
-bytes =
-  case File.read(path) do
-    {:ok, bytes} -> bytes
-    {:error, why} -> Mix.raise("cannot read #{path}: #{:file.format_error(why)}")
-  end
+  bytes =
+    case File.read(path) do
+      {:ok, bytes} -> bytes
+      {:error, why} -> Mix.raise("cannot read #{path}: #{:file.format_error(why)}")
+    end
 
-{decode_us, decode_cpu, {n, stats}} = CodecBench.best(rounds, fn -> CodecBench.decode_all(bytes, chunk) end)
+  {decode_us, decode_cpu, {n, stats}} = CodecBench.best(rounds, fn -> CodecBench.decode_all(bytes, chunk) end)
 
-if stats.bytes_skipped != 0 or n != stats.frames,
-  do: Mix.raise("decode dropped data: #{inspect(stats)}")
+  if stats.bytes_skipped != 0 or n != stats.frames,
+    do: Mix.raise("decode dropped data: #{inspect(stats)}")
 
-frames = CodecBench.collect(bytes)
-{encode_us, encode_cpu, encoded} = CodecBench.best(rounds, fn -> CodecBench.encode_all(frames) end)
+  frames = CodecBench.collect(bytes)
+  {encode_us, encode_cpu, size} = CodecBench.best(rounds, fn -> CodecBench.encode_all(frames) end)
 
-if IO.iodata_to_binary(encoded) != bytes,
-  do: Mix.raise("re-encoded bytes differ from #{path}")
+  if size != byte_size(bytes) or IO.iodata_to_binary(CodecBench.encode_list(frames)) != bytes,
+    do: Mix.raise("re-encoded bytes differ from #{path}")
 
-rate = fn us -> round(n / (max(us, 1) / 1_000_000)) end
-line = fn us, cpu -> "#{rate.(us)} frames/s wall (#{Float.round(us / n * 1000, 1)} ns/frame), #{rate.(cpu)} frames/s CPU" end
+  rate = fn us -> round(n / (max(us, 1) / 1_000_000)) end
+  line = fn us, cpu -> "#{rate.(us)} frames/s wall (#{Float.round(us / n * 1000, 1)} ns/frame), #{rate.(cpu)} frames/s CPU" end
 
-IO.puts("""
-codec benchmark: #{n} frames, #{byte_size(bytes)} bytes, #{chunk}-byte chunks, best of #{rounds} rounds, \
-#{System.schedulers_online()} scheduler(s) online
-OTP #{System.otp_release()}, Elixir #{System.version()}, #{:erlang.system_info(:system_architecture)}
-decode: #{line.(decode_us, decode_cpu)}
-encode: #{line.(encode_us, encode_cpu)}
-re-encoded bytes identical to the file: yes
-""")
+  IO.puts("""
+  codec benchmark: #{n} frames, #{byte_size(bytes)} bytes, #{chunk}-byte chunks, best of #{rounds} rounds, \
+  #{System.schedulers_online()} scheduler(s) online
+  OTP #{System.otp_release()}, Elixir #{System.version()}, #{:erlang.system_info(:system_architecture)}
+  decode: #{line.(decode_us, decode_cpu)}
+  encode: #{line.(encode_us, encode_cpu)}
+  re-encoded bytes identical to the file: yes
+  """)
+end
+
+# BENCH_MIN_HEAP (words): run in a process that starts with that heap, to see
+# how much of the time is garbage collection.
+{pid, ref} = :erlang.spawn_opt(main, [:monitor, min_heap_size: String.to_integer(System.get_env("BENCH_MIN_HEAP", "233"))])
+
+receive do
+  {:DOWN, ^ref, :process, ^pid, :normal} -> :ok
+  {:DOWN, ^ref, :process, ^pid, reason} -> Mix.raise("benchmark failed: #{Exception.format_exit(reason)}")
+end
