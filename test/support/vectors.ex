@@ -28,6 +28,12 @@ defmodule Dolphin.Test.Vectors do
     end)
   end
 
+  @doc """
+  A signing state for reading the vectors' recorded traffic: their timestamps
+  are in the past (replay window from 0) and the stream mixes unsigned frames.
+  """
+  def signing, do: Dolphin.MAVLink.Signing.new(key: key(), unsigned: :accept, timestamp: 0)
+
   @doc "The signing key of the visible vectors."
   def key, do: Base.decode16!("9d3487bc04d9cc324c57a07307e5d89594ac6b1b6813c161392253380de56baa", case: :lower)
 

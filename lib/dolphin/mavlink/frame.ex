@@ -15,17 +15,19 @@ defmodule Dolphin.MAVLink.Frame do
 
   Reasons: `:garbage` (bytes before a magic byte), `:bad_incompat_flags` (a
   MAVLink 2 header with flags other than "signed", which nothing can parse),
-  `:bad_crc`.
+  `:bad_crc`, `:unknown_id` (see below).
 
-  A frame with an id the dialect does not define cannot have its checksum
-  checked (its CRC_EXTRA is unknown). It is returned with `message: nil` and
-  its raw bytes, so that a router can forward it, when the stream is in sync
-  (option `in_sync`, default true; a parser sets it false after dropped bytes)
-  and the bytes after it begin with a magic byte (or, with `at_end: true`, the
+  A candidate with a message id the dialect does not define cannot have its
+  checksum checked (its CRC_EXTRA is unknown), so by default it is refused
+  like a bad checksum: `{:error, :unknown_id, rest}`, resuming one byte after
+  its magic (what the MAVLink C library's parser amounts to). With
+  `unknown: :forward` it is returned with `message: nil` and its raw bytes, for
+  a router, but only when nothing else is likely: the stream is in sync
+  (`in_sync: true`, the default; a parser says false after dropped bytes) and
+  the bytes after it begin with a magic byte (or, with `at_end: true`, the
   data ends right after it; otherwise `{:more, buffer}` until the next byte
-  comes). Otherwise it is treated as garbage: a random magic byte inside noise
-  must not swallow the frames after it. A caller that checks framing itself
-  (a `.tlog` reader: a timestamp follows every frame) passes `unknown: :accept`.
+  comes). A caller that checks framing itself (a `.tlog` reader: a timestamp
+  follows every frame) passes `unknown: :accept`.
 
   Decoding zero-fills a payload shorter than the message (MAVLink 2 truncation,
   MAVLink 1 frames without extension fields) and ignores bytes past it (fields
@@ -69,7 +71,7 @@ defmodule Dolphin.MAVLink.Frame do
           raw: binary()
         }
 
-  @type error_reason :: :garbage | :bad_incompat_flags | :bad_crc
+  @type error_reason :: :garbage | :bad_incompat_flags | :bad_crc | :unknown_id
 
   @typedoc "Header of a frame to encode, and its signing parameters for a signed MAVLink 2 frame."
   @type encode_opt ::
@@ -171,19 +173,27 @@ defmodule Dolphin.MAVLink.Frame do
   defp bad_crc(buf), do: {:error, :bad_crc, binary_part(buf, 1, byte_size(buf) - 1)}
 
   # Without CRC_EXTRA nothing vouches for an unknown frame but the framing itself:
-  # trust it only right after a good frame and when the next frame starts where
-  # its length says it ends. Until the byte after it is there, wait (so that the
-  # result does not depend on where a stream was cut into chunks), unless the
-  # caller says the data ends here (`at_end: true`, e.g. a whole datagram).
+  # when forwarding, trust it only right after a good frame and when the next
+  # frame starts where its length says it ends. Until the byte after it is
+  # there, wait (so that the result does not depend on where a stream was cut
+  # into chunks), unless the caller says the data ends here.
   defp unknown(buf, opts, accept) do
-    {:ok, _frame, rest} = result = accept.()
+    case Keyword.get(opts, :unknown, :drop) do
+      :accept ->
+        accept.()
 
-    cond do
-      Keyword.get(opts, :unknown) == :accept -> result
-      not Keyword.get(opts, :in_sync, true) -> {:error, :garbage, binary_part(buf, 1, byte_size(buf) - 1)}
-      rest == <<>> -> if Keyword.get(opts, :at_end, false), do: result, else: {:more, buf}
-      framed?(rest) -> result
-      true -> {:error, :garbage, binary_part(buf, 1, byte_size(buf) - 1)}
+      :forward ->
+        {:ok, _frame, rest} = result = accept.()
+
+        cond do
+          not Keyword.get(opts, :in_sync, true) -> {:error, :unknown_id, binary_part(buf, 1, byte_size(buf) - 1)}
+          rest == <<>> -> if Keyword.get(opts, :at_end, false), do: result, else: {:more, buf}
+          framed?(rest) -> result
+          true -> {:error, :unknown_id, binary_part(buf, 1, byte_size(buf) - 1)}
+        end
+
+      :drop ->
+        {:error, :unknown_id, binary_part(buf, 1, byte_size(buf) - 1)}
     end
   end
 

@@ -81,8 +81,8 @@ defmodule Dolphin.MAVLink.JSON do
   end
 
   defp string(<<"\\u", hi::binary-4, "\\u", lo::binary-4, rest::binary>> = bin, text, acc) do
-    with {h, ""} when h in 0xD800..0xDBFF <- Integer.parse(hi, 16),
-         {l, ""} when l in 0xDC00..0xDFFF <- Integer.parse(lo, 16) do
+    with {:ok, h} when h in 0xD800..0xDBFF <- hex4(hi),
+         {:ok, l} when l in 0xDC00..0xDFFF <- hex4(lo) do
       string(rest, text, [<<0x10000 + (h - 0xD800) * 0x400 + (l - 0xDC00)::utf8>> | acc])
     else
       _ -> escape_u(bin, text, acc)
@@ -97,15 +97,22 @@ defmodule Dolphin.MAVLink.JSON do
   # \u00XX stands for the byte XX in our records (char[N] fields are bytes);
   # higher code points are written as UTF-8.
   defp escape_u(<<"\\u", hex::binary-4, rest::binary>> = bin, text, acc) do
-    case Integer.parse(hex, 16) do
-      {cp, ""} when cp < 0x100 -> string(rest, text, [cp | acc])
-      {cp, ""} when cp in 0xD800..0xDFFF -> error("lone surrogate in a string", bin, text)
-      {cp, ""} -> string(rest, text, [<<cp::utf8>> | acc])
-      _ -> error("bad \\u escape", bin, text)
+    case hex4(hex) do
+      {:ok, cp} when cp < 0x100 -> string(rest, text, [cp | acc])
+      {:ok, cp} when cp in 0xD800..0xDFFF -> error("lone surrogate in a string", bin, text)
+      {:ok, cp} -> string(rest, text, [<<cp::utf8>> | acc])
+      :error -> error("bad \\u escape", bin, text)
     end
   end
 
   defp escape_u(bin, text, _acc), do: error("bad \\u escape", bin, text)
+
+  # Exactly four hex digits (Integer.parse/2 would take a sign too).
+  defp hex4(<<a, b, c, d>> = hex) do
+    if Enum.all?([a, b, c, d], &(&1 in ?0..?9 or &1 in ?a..?f or &1 in ?A..?F)),
+      do: {:ok, String.to_integer(hex, 16)},
+      else: :error
+  end
 
   defp number(bin, text) do
     case Regex.run(~r/\A(-?(?:0|[1-9][0-9]*))(?:\.([0-9]+))?(?:[eE]([+-]?[0-9]+))?/, bin) do

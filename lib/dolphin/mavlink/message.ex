@@ -5,7 +5,8 @@ defmodule Dolphin.MAVLink.Message do
   A dialect (`Dolphin.MAVLink.Dialect`) generates one struct module per
   message, e.g. `Dolphin.MAVLink.Ardupilotmega.Heartbeat`, whose fields are
   named as in the XML and hold values as described in `Dolphin.MAVLink.Value`.
-  Build messages as structs; unset fields are zero (empty string, zero list).
+  Build messages as structs; unset fields are zero (empty string, zero list),
+  except HEARTBEAT's `mavlink_version`, which is 3 (MAVLink 2) as senders write it.
 
       iex> alias Dolphin.MAVLink.Ardupilotmega.Heartbeat
       iex> msg = %Heartbeat{type: 6, autopilot: 8}
@@ -45,8 +46,9 @@ defmodule Dolphin.MAVLink.Message do
 
   @doc """
   Builds a message of `module` from field values given by name (atom or
-  string keys); fields not given are zero. Returns `{:error, reason}` for an
-  unknown field name; values are checked when the message is encoded.
+  string keys); fields not given keep the struct's default (zero, except
+  HEARTBEAT's `mavlink_version`, 3). Returns `{:error, reason}` for an unknown
+  field name; values are checked when the message is encoded.
   """
   @spec new(module(), Enumerable.t()) :: {:ok, t()} | {:error, String.t()}
   def new(module, values) do

@@ -27,22 +27,31 @@ defmodule Dolphin.MAVLink.Parser do
       verified (bad signature or replayed timestamp: dropped), unsigned ones
       follow its policy. Without it, frames pass unverified.
 
-  Frames with a message id the dialect does not know come out with
-  `message: nil` (for forwarding) and are counted as `unknown_id`, once the
-  byte after them has arrived and is a magic byte (see
-  `Dolphin.MAVLink.Frame.decode/3`): so the frames returned never depend on how
-  the stream was cut into chunks.
+    * `:unknown` — `:drop` (default) refuses candidates whose message id the
+      dialect does not define, as the MAVLink C library does (their checksum
+      cannot be checked); `:forward` returns the well-framed ones with
+      `message: nil`, for a router (see `Dolphin.MAVLink.Frame.decode/3`: such
+      a frame comes out once the byte after it has arrived). Either way they
+      are counted as `unknown_id`.
+
+  The frames returned never depend on how the stream was cut into chunks.
   """
 
   alias Dolphin.MAVLink.{Frame, Signing}
 
   alias Dolphin.MAVLink.Parser.Stats
 
-  defstruct dialect: Dolphin.MAVLink.Ardupilotmega, signing: nil, buffer: <<>>, in_sync: true, stats: %Stats{}
+  defstruct dialect: Dolphin.MAVLink.Ardupilotmega,
+            signing: nil,
+            unknown: :drop,
+            buffer: <<>>,
+            in_sync: true,
+            stats: %Stats{}
 
   @type t :: %__MODULE__{
           dialect: module(),
           signing: Signing.t() | nil,
+          unknown: :drop | :forward,
           buffer: binary(),
           in_sync: boolean(),
           stats: Stats.t()
@@ -53,9 +62,13 @@ defmodule Dolphin.MAVLink.Parser do
   def new(opts \\ []) do
     %__MODULE__{
       dialect: Keyword.get(opts, :dialect, Dolphin.MAVLink.Ardupilotmega),
-      signing: Keyword.get(opts, :signing)
+      signing: Keyword.get(opts, :signing),
+      unknown: unknown!(Keyword.get(opts, :unknown, :drop))
     }
   end
+
+  defp unknown!(mode) when mode in [:drop, :forward], do: mode
+  defp unknown!(other), do: raise(ArgumentError, "unknown: must be :drop or :forward, got: #{inspect(other)}")
 
   @doc "Feeds a chunk of bytes; returns the frames it completed, in order."
   @spec feed(t(), binary()) :: {[Frame.t()], t()}
@@ -84,7 +97,7 @@ defmodule Dolphin.MAVLink.Parser do
   # `at_end` is false while the stream goes on; in finish/1 it is :first until a
   # cut-off candidate has been counted as truncated, then true.
   defp loop(buf, parser, acc, frames \\ 0, unknown \\ 0, at_end \\ false) do
-    case Frame.decode(buf, parser.dialect, decode_opts(parser.in_sync, at_end)) do
+    case Frame.decode(buf, parser.dialect, decode_opts(parser.unknown, parser.in_sync, at_end)) do
       {:ok, %Frame{signature: nil} = frame, rest} when parser.signing == nil ->
         loop_ok(rest, parser, [frame | acc], frame, frames, unknown, at_end)
 
@@ -94,9 +107,10 @@ defmodule Dolphin.MAVLink.Parser do
             loop_ok(rest, parser, [frame | acc], frame, frames, unknown, at_end)
 
           # A bad signature may be a frame cut short whose "signature" is the
-          # start of the next frame: look again from the byte after its magic.
-          {:error, :bad_signature, parser} ->
-            parser = %{parser | in_sync: false, stats: Stats.drop(parser.stats, :bad_signature, 1)}
+          # start of the next frame, and an unknown-id frame is vouched for by
+          # nothing: look again from the byte after the magic.
+          {:error, reason, parser} when reason == :bad_signature or frame.message == nil ->
+            parser = %{parser | in_sync: false, stats: Stats.drop(parser.stats, reason, 1)}
             loop(binary_part(buf, 1, byte_size(buf) - 1), parser, acc, frames, unknown, at_end)
 
           # A replayed or refused frame is whole: drop all of it.
@@ -123,10 +137,11 @@ defmodule Dolphin.MAVLink.Parser do
   end
 
   # Literal option lists: nothing is built per frame for them.
-  defp decode_opts(true, false), do: [in_sync: true]
-  defp decode_opts(false, false), do: [in_sync: false]
-  defp decode_opts(true, _at_end), do: [in_sync: true, at_end: true]
-  defp decode_opts(false, _at_end), do: [in_sync: false, at_end: true]
+  defp decode_opts(:drop, _in_sync, _at_end), do: []
+  defp decode_opts(:forward, true, false), do: [unknown: :forward, in_sync: true]
+  defp decode_opts(:forward, false, false), do: [unknown: :forward, in_sync: false]
+  defp decode_opts(:forward, true, _at_end), do: [unknown: :forward, in_sync: true, at_end: true]
+  defp decode_opts(:forward, false, _at_end), do: [unknown: :forward, in_sync: false, at_end: true]
 
   defp loop_ok(rest, %__MODULE__{in_sync: true} = parser, acc, %Frame{message: nil}, frames, unknown, at_end),
     do: loop(rest, parser, acc, frames, unknown + 1, at_end)

@@ -72,10 +72,11 @@ defmodule Dolphin.MAVLink.Record do
 
   defp message_module(map, dialect) do
     case {Map.get(map, "msg"), Map.get(map, "id")} do
-      {name, _} when is_binary(name) ->
+      {name, id} when is_binary(name) ->
         case dialect.message_module(name) do
           nil -> {:error, "unknown message #{inspect(name)}"}
-          module -> {:ok, module}
+          module when id == nil -> {:ok, module}
+          module -> if module.__mavlink__(:id) == id, do: {:ok, module}, else: {:error, "\"msg\" #{name} has id #{module.__mavlink__(:id)}, not #{inspect(id)}"}
         end
 
       {nil, id} when is_integer(id) ->
@@ -103,7 +104,7 @@ defmodule Dolphin.MAVLink.Record do
   defp signing(false, _), do: {:ok, []}
 
   defp signing(true, %{"secret_key" => hex, "link_id" => link_id, "timestamp" => ts})
-       when is_integer(link_id) and link_id in 0..255 and is_integer(ts) and ts >= 0 and ts < 0x1000000000000 do
+       when is_binary(hex) and is_integer(link_id) and link_id in 0..255 and is_integer(ts) and ts >= 0 and ts < 0x1000000000000 do
     case Base.decode16(hex, case: :mixed) do
       {:ok, <<_::binary-32>> = key} -> {:ok, signing: %{key: key, link_id: link_id, timestamp: ts}}
       _ -> {:error, "signing.secret_key must be 64 hex digits"}
@@ -150,7 +151,12 @@ defmodule Dolphin.MAVLink.Record do
   end
 
   defp from_json_float(v) when is_float(v), do: {:ok, v}
-  defp from_json_float(v) when is_integer(v), do: {:ok, v * 1.0}
+  defp from_json_float(v) when is_integer(v) do
+    {:ok, v * 1.0}
+  rescue
+    # Beyond the range of a double.
+    ArithmeticError -> :error
+  end
   defp from_json_float("NaN"), do: {:ok, :nan}
   defp from_json_float("Infinity"), do: {:ok, :infinity}
   defp from_json_float("-Infinity"), do: {:ok, :neg_infinity}

@@ -14,8 +14,9 @@ defmodule Dolphin.MAVLink.Signing do
     * `timestamp`: the link's local timestamp: the latest of the clock, every
       timestamp we signed with and every accepted incoming timestamp;
     * `streams`: the last accepted timestamp per `{sysid, compid, link_id}`;
-    * `unsigned`: what to do with unsigned frames: `:accept`, `:reject`, or a
-      function `frame -> boolean` (the spec lets a system accept, say, RADIO_STATUS
+    * `unsigned`: what to do with unsigned frames: `:reject` (the default, as
+      the spec wants of a system with signing on), `:accept`, or a function
+      `frame -> boolean` (the spec lets a system accept, say, RADIO_STATUS
       unsigned while demanding signatures on everything else).
 
   An incoming signed frame is accepted when its signature matches, and its
@@ -24,12 +25,12 @@ defmodule Dolphin.MAVLink.Signing do
 
       iex> alias Dolphin.MAVLink.{Frame, Signing}
       iex> signer = Signing.new(key: :binary.copy(<<7>>, 32), link_id: 3)
-      iex> {bytes, _signer} = Signing.encode(signer, %Dolphin.MAVLink.Ardupilotmega.Heartbeat{type: 6}, sysid: 255, now: 1_000)
+      iex> {bytes, _signer} = Signing.encode(signer, %Dolphin.MAVLink.Ardupilotmega.Heartbeat{type: 6}, sysid: 255)
       iex> {:ok, frame, <<>>} = Frame.decode(bytes, Dolphin.MAVLink.Ardupilotmega)
-      iex> checker = Signing.new(key: :binary.copy(<<7>>, 32), unsigned: :reject)
-      iex> {:ok, _checker} = Signing.verify(checker, frame)
-      iex> frame.signature.timestamp
-      1000
+      iex> {:ok, _checker} = Signing.verify(Signing.new(key: :binary.copy(<<7>>, 32)), frame)
+      iex> {:error, :old_timestamp, _} = Signing.verify(Signing.new(key: :binary.copy(<<7>>, 32), timestamp: Signing.now() + 7_000_000), frame)
+      iex> frame.signature.link_id
+      3
   """
 
   alias Dolphin.MAVLink.{Frame, Message}
@@ -39,7 +40,7 @@ defmodule Dolphin.MAVLink.Signing do
   # A new stream may start at most one minute (in 10 µs units) behind the local timestamp.
   @new_stream_window 6_000_000
 
-  defstruct key: nil, link_id: 0, timestamp: 0, streams: %{}, unsigned: :accept
+  defstruct key: nil, link_id: 0, timestamp: 0, streams: %{}, unsigned: :reject
 
   @type unsigned_policy :: :accept | :reject | (Frame.t() -> boolean())
 
@@ -55,16 +56,18 @@ defmodule Dolphin.MAVLink.Signing do
 
   @doc """
   A signing state. Options: `:key` (32 bytes, or 64 hex digits; required),
-  `:link_id` (default 0), `:unsigned` (default `:accept`), `:timestamp` (the
-  starting local timestamp, default 0).
+  `:link_id` (default 0), `:unsigned` (default `:reject`), `:timestamp` (the
+  starting local timestamp, default the clock, `now/0`: a new stream more than
+  a minute older than that is refused as a replay; a reader of recorded
+  traffic, whose timestamps are in the past, passes 0).
   """
   @spec new(keyword()) :: t()
   def new(opts) do
     %__MODULE__{
       key: key!(Keyword.fetch!(opts, :key)),
       link_id: Keyword.get(opts, :link_id, 0),
-      timestamp: Keyword.get(opts, :timestamp, 0),
-      unsigned: unsigned!(Keyword.get(opts, :unsigned, :accept))
+      timestamp: Keyword.get_lazy(opts, :timestamp, &now/0),
+      unsigned: unsigned!(Keyword.get(opts, :unsigned, :reject))
     }
   end
 

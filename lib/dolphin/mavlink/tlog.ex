@@ -24,15 +24,21 @@ defmodule Dolphin.MAVLink.Tlog do
   @spec record(non_neg_integer(), iodata()) :: iodata()
   def record(timestamp_us, frame), do: [<<timestamp_us::big-64>>, frame]
 
-  defstruct dialect: Dolphin.MAVLink.Ardupilotmega, signing: nil, buffer: <<>>, stats: %Stats{}
+  defstruct dialect: Dolphin.MAVLink.Ardupilotmega, signing: nil, unknown: :drop, buffer: <<>>, stats: %Stats{}
 
-  @type t :: %__MODULE__{dialect: module(), signing: Signing.t() | nil, buffer: binary(), stats: Stats.t()}
+  @type t :: %__MODULE__{
+          dialect: module(),
+          signing: Signing.t() | nil,
+          unknown: :drop | :forward,
+          buffer: binary(),
+          stats: Stats.t()
+        }
 
-  @doc "A reader; options `:dialect` and `:signing` as for `Dolphin.MAVLink.Parser.new/1`."
+  @doc "A reader; options `:dialect`, `:signing` and `:unknown` as for `Dolphin.MAVLink.Parser.new/1`."
   @spec reader(keyword()) :: t()
   def reader(opts \\ []) do
     parser = Parser.new(opts)
-    %__MODULE__{dialect: parser.dialect, signing: parser.signing}
+    %__MODULE__{dialect: parser.dialect, signing: parser.signing, unknown: parser.unknown}
   end
 
   @doc "Feeds a chunk; returns `{timestamp_us, frame}` for each complete record, in order."
@@ -43,9 +49,10 @@ defmodule Dolphin.MAVLink.Tlog do
   end
 
   @doc """
-  Ends the log and returns the records still in the buffer: a last frame with an
-  unknown id (see below), and any record behind one cut off by the end of the
-  log (that one is dropped and counted as `truncated`, and the scan goes on).
+  Ends the log and returns the records still in the buffer: a last record that
+  was waiting for what follows it (see below), and any record behind one cut
+  off by the end of the log (that one is dropped and counted as `truncated`,
+  and the scan goes on).
   """
   @spec finish(t()) :: {[{non_neg_integer(), Frame.t()}], t()}
   def finish(%__MODULE__{buffer: buffer} = reader), do: loop(buffer, %{reader | buffer: <<>>}, [], :first)
@@ -54,16 +61,19 @@ defmodule Dolphin.MAVLink.Tlog do
   @spec stats(t()) :: Stats.t()
   def stats(%__MODULE__{stats: stats}), do: stats
 
-  # A record is a timestamp and a frame of the size its header declares. A frame
-  # whose id the dialect does not know has no checksum we can check, so it is
-  # taken only when the next record (or the end of the log) starts right after it.
-  # `at_end`: false while the log goes on; in finish/1, :first until a cut-off
-  # record has been counted as truncated, then true.
+  # A record is a timestamp and a frame of the size its header declares. What
+  # the checksum does not cover is taken only when the next record (or the end
+  # of the log) starts right after it: the signature block of a signed frame,
+  # and a frame whose id the dialect does not know (with `unknown: :forward`;
+  # dropped otherwise). `at_end`: false while the log goes on; in finish/1,
+  # :first until a cut-off record has been counted as truncated, then true.
   defp loop(buf, reader, acc, at_end \\ false)
 
   defp loop(<<ts::big-64, rest::binary>> = buf, reader, acc, at_end) do
-    case Frame.decode(rest, reader.dialect, unknown: :accept) do
-      {:ok, %Frame{message: nil} = frame, after_frame} ->
+    unknown = if reader.unknown == :forward, do: :accept, else: :drop
+
+    case Frame.decode(rest, reader.dialect, unknown: unknown) do
+      {:ok, %Frame{} = frame, after_frame} when frame.message == nil or frame.signature != nil ->
         case after_frame do
           <<_next_ts::64, magic, _::binary>> when magic in [0xFD, 0xFE] -> accept(ts, frame, after_frame, reader, acc, at_end)
           <<>> when at_end != false -> accept(ts, frame, after_frame, reader, acc, at_end)
@@ -98,6 +108,10 @@ defmodule Dolphin.MAVLink.Tlog do
     case Signing.verify_for(reader, frame) do
       {:ok, reader} ->
         loop(rest, %{reader | stats: Stats.count(reader.stats, frame)}, [{ts, frame} | acc], at_end)
+
+      # A bad signature may be a record cut short: look again from the next byte.
+      {:error, :bad_signature, reader} ->
+        skip(<<ts::big-64, frame.raw::binary, rest::binary>>, :bad_signature, reader, acc, at_end)
 
       {:error, reason, reader} ->
         loop(rest, %{reader | stats: Stats.drop(reader.stats, reason, 8 + byte_size(frame.raw))}, acc, at_end)

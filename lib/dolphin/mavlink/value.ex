@@ -176,9 +176,8 @@ defmodule Dolphin.MAVLink.Value do
   # which pads short lists, writes NaN/infinities and explains bad values.
   @spec pack_array(base_type(), pos_integer(), term()) :: binary() | :error
   def pack_array(:uint8, n, list) when is_list(list) and length(list) == n do
-    :erlang.list_to_binary(list)
-  rescue
-    ArgumentError -> :error
+    # list_to_binary/1 would also take binaries and nested lists as elements.
+    if bytes?(list), do: :erlang.list_to_binary(list), else: :error
   end
 
   def pack_array(type, n, list) when is_list(list) and length(list) == n, do: pack(type, list, [])
@@ -199,6 +198,10 @@ defmodule Dolphin.MAVLink.Value do
     defp pack(unquote(type), [v | rest], acc) when is_integer(v) and v >= unquote(min) and v <= unquote(max),
       do: pack(unquote(type), rest, [acc | <<v::little-size(unquote(bits))>>])
   end
+
+  defp bytes?([b | rest]) when is_integer(b) and b >= 0 and b <= 255, do: bytes?(rest)
+  defp bytes?([]), do: true
+  defp bytes?(_), do: false
 
   defp pack(:float, [v | rest], acc) when is_number(v), do: pack(:float, rest, [acc | <<v::little-float-32>>])
   defp pack(:double, [v | rest], acc) when is_number(v), do: pack(:double, rest, [acc | <<v::little-float-64>>])

@@ -18,7 +18,8 @@ defmodule Mix.Tasks.Mavlink.Decode do
     * `--key HEX` — the 32-byte signing key (64 hex digits): signed frames are
       verified (bad signature or replayed timestamp: dropped and counted), and
       their records carry `signing.secret_key`
-    * `--reject-unsigned` — with `--key`, drop unsigned frames too
+    * `--reject-unsigned` — with `--key`, drop unsigned frames too (by default
+      they are decoded: a capture may mix signed and unsigned traffic)
 
   Frames whose message id the dialect does not define are counted, not printed.
   Exits with status 1 if the file cannot be read.
@@ -57,13 +58,20 @@ defmodule Mix.Tasks.Mavlink.Decode do
     end
   end
 
+  # A recording's timestamps are in the past: the replay window starts at 0,
+  # and only the order of each stream's timestamps is checked.
   defp new_signing(hex, unsigned) do
-    Signing.new(key: hex, unsigned: unsigned)
-  rescue
-    e in ArgumentError -> Mix.raise("mavlink.decode: --key: " <> Exception.message(e))
+    case Base.decode16(hex, case: :mixed) do
+      {:ok, <<_::binary-32>> = key} -> Signing.new(key: key, unsigned: unsigned, timestamp: 0)
+      _ -> Mix.raise("mavlink.decode: --key must be 64 hex digits (a 32-byte key), got #{inspect(hex)}")
+    end
   end
 
-  defp open!("-"), do: :stdio
+  defp open!("-") do
+    # Bytes, not characters: standard input is read without any decoding.
+    :ok = :io.setopts(:standard_io, encoding: :latin1)
+    :stdio
+  end
 
   defp open!(path) do
     case File.open(path, [:read, :binary, :raw, :read_ahead]) do
@@ -113,7 +121,8 @@ defmodule Mix.Tasks.Mavlink.Decode do
     Stream.unfold(io, fn io ->
       case IO.binread(io, 65_536) do
         data when is_binary(data) -> {data, io}
-        _eof_or_error -> nil
+        :eof -> nil
+        {:error, why} -> Mix.raise("mavlink.decode: read error: #{inspect(why)}")
       end
     end)
   end

@@ -27,6 +27,9 @@ defmodule Dolphin.MAVLink.JSONTest do
     assert {:error, "unexpected data after the value" <> _} = JSON.decode("{} x")
     assert {:error, "number out of range" <> _} = JSON.decode("1e999")
     assert {:error, "lone surrogate" <> _} = JSON.decode(~S("\ud800"))
+    # Exactly four hex digits: no sign.
+    assert {:error, "bad \\u escape" <> _} = JSON.decode(~S("\u-004"))
+    assert {:error, "bad \\u escape" <> _} = JSON.decode(~S("\u+041"))
   end
 
   test "writing keeps order, -0.0, specials, and escapes bytes" do

@@ -30,15 +30,17 @@ defmodule Dolphin.MAVLink.PropertiesTest do
 
   test "the parser never raises on random bytes, in any chunks, and accounts for every byte" do
     check(
-      forall({noisy_stream(), chunk_sizes(), parser_signing()}, fn {bytes, sizes, signing} ->
-        {frames, parser} = feed_chunks(Parser.new(signing: signing), bytes, sizes)
+      forall({noisy_stream(), chunk_sizes(), parser_signing(), T.elements([:drop, :forward])}, fn {bytes, sizes, signing, unknown} ->
+        {frames, parser} = feed_chunks(Parser.new(signing: signing, unknown: unknown), bytes, sizes)
         stats = Parser.stats(parser)
 
         assert stats.bytes == byte_size(bytes)
         # Every byte is either in a returned frame or counted as skipped.
         assert stats.bytes_skipped + Enum.sum(Enum.map(frames, &byte_size(&1.raw))) == byte_size(bytes)
-        assert stats.frames + stats.unknown_id == length(frames)
-        assert stats.unknown_id == Enum.count(frames, &(&1.message == nil))
+        raw = Enum.count(frames, &(&1.message == nil))
+        assert stats.frames + raw == length(frames)
+        # Unknown-id frames come out only when forwarded.
+        if unknown == :drop, do: assert(raw == 0), else: assert(raw <= stats.unknown_id)
         # Frames are made of input bytes.
         assert Enum.all?(frames, &(:binary.match(bytes, &1.raw) != :nomatch))
       end),
@@ -135,7 +137,7 @@ defmodule Dolphin.MAVLink.PropertiesTest do
 
     check(
       forall({stream_of(junk, true), chunk_sizes()}, fn {{stream, expected, _}, sizes} ->
-        {frames, _parser} = feed_chunks(Parser.new(signing: Signing.new(key: @key)), stream, sizes)
+        {frames, _parser} = feed_chunks(Parser.new(signing: Signing.new(key: @key, unsigned: :accept, timestamp: 0)), stream, sizes)
 
         known = for %Frame{message: msg} = f <- frames, msg != nil, do: {f.raw, norm(msg)}
         assert known == Enum.map(expected, fn {bytes, msg} -> {bytes, norm(msg)} end)
@@ -155,7 +157,7 @@ defmodule Dolphin.MAVLink.PropertiesTest do
     check(
       forall({items, chunk_sizes()}, fn {items, sizes} ->
         stream = IO.iodata_to_binary(Enum.map(items, &elem(&1, 0)))
-        {frames, parser} = feed_chunks(Parser.new(), stream, sizes)
+        {frames, parser} = feed_chunks(Parser.new(unknown: :forward), stream, sizes)
         stats = Parser.stats(parser)
 
         assert Enum.map(frames, &{&1.raw, norm(&1.message)}) == Enum.map(items, fn {bytes, msg} -> {bytes, norm(msg)} end)
@@ -177,20 +179,26 @@ defmodule Dolphin.MAVLink.PropertiesTest do
       %{h1: h1, h2: h2, unknown: unknown}
     end
 
-    test "is returned raw right after a frame when a magic byte follows it", %{h1: h1, unknown: unknown} do
-      {frames, _} = Parser.feed(Parser.new(), h1 <> unknown <> h1)
+    test "is refused by default (its checksum cannot be checked); the frame inside it is found", %{h1: h1, h2: h2, unknown: unknown} do
+      {frames, parser} = Parser.feed(Parser.new(), h1 <> unknown <> h1)
+      assert Enum.map(frames, & &1.raw) == [h1, h2, h1]
+      assert Parser.stats(parser).unknown_id == 1
+    end
+
+    test "is returned raw right after a frame when a magic byte follows it, when forwarding", %{h1: h1, unknown: unknown} do
+      {frames, _} = Parser.feed(Parser.new(unknown: :forward), h1 <> unknown <> h1)
       assert Enum.map(frames, & &1.raw) == [h1, unknown, h1]
       assert [%APM.Heartbeat{}, nil, %APM.Heartbeat{}] = Enum.map(frames, & &1.message)
       assert Enum.at(frames, 1).msgid == 0xFFFFFF
     end
 
     test "is not trusted when other bytes follow it: the frame inside it is found", %{h1: h1, h2: h2, unknown: unknown} do
-      {frames, _} = Parser.feed(Parser.new(), h1 <> unknown <> <<0>> <> h1)
+      {frames, _} = Parser.feed(Parser.new(unknown: :forward), h1 <> unknown <> <<0>> <> h1)
       assert Enum.map(frames, & &1.raw) == [h1, h2, h1]
     end
 
     test "is not trusted after dropped bytes: the frame inside it is found", %{h1: h1, h2: h2, unknown: unknown} do
-      {frames, _} = Parser.feed(Parser.new(), "xx" <> unknown <> h1)
+      {frames, _} = Parser.feed(Parser.new(unknown: :forward), "xx" <> unknown <> h1)
       assert Enum.map(frames, & &1.raw) == [h2, h1]
     end
   end
@@ -208,15 +216,17 @@ defmodule Dolphin.MAVLink.PropertiesTest do
   #
   # After the corrupted candidate fails, the parser looks for frames inside it,
   # by design; a CRC-valid frame of a known id hidden in the payload (again a
-  # 2^-16 coincidence) would be legitimately returned. So the property is: no
-  # known-id frame is decoded from the corrupted frame's own first byte, and any
-  # frame returned lies strictly inside it.
+  # 2^-16 coincidence) would be legitimately returned. So the property is:
+  # nothing is returned from the corrupted frame's own first byte, not even a
+  # raw frame (a flipped msgid bit can make an unknown id, which a parser that
+  # does not forward unknown ids refuses), and any frame returned lies strictly
+  # inside it.
   test "a frame with one flipped bit outside the length byte never decodes" do
     check(
       forall({flipped_frame(), chunk_sizes()}, fn {{flipped, _original}, sizes} ->
         {frames, _parser} = feed_chunks(Parser.new(), flipped, sizes)
 
-        for %Frame{message: msg, raw: raw} <- frames, msg != nil do
+        for %Frame{message: msg, raw: raw} <- frames do
           refute :binary.longest_common_prefix([raw, flipped]) == byte_size(raw),
                  "the corrupted frame decoded as #{inspect(msg)}"
 
@@ -263,7 +273,7 @@ defmodule Dolphin.MAVLink.PropertiesTest do
   test "an unknown-id frame that ends the stream is returned by finish/1" do
     h1 = Frame.encode(%APM.Heartbeat{type: 1}, sysid: 1)
     unknown = <<0xFD, 1, 0, 0, 0, 9, 9, 0xFFFFFF::little-24, 7, 0xAB, 0xCD>>
-    {[first], parser} = Parser.feed(Parser.new(), h1 <> unknown)
+    {[first], parser} = Parser.feed(Parser.new(unknown: :forward), h1 <> unknown)
     assert first.raw == h1
     {[frame], parser} = Parser.finish(parser)
     assert frame.raw == unknown and frame.message == nil
@@ -284,13 +294,13 @@ defmodule Dolphin.MAVLink.PropertiesTest do
     assert norm(frame.message) == norm(msg)
 
     # Signed MAVLink 2
-    {signed, _} = Signing.encode(Signing.new(key: key, link_id: link_id), msg, header ++ [compat_flags: compat, now: timestamp])
+    {signed, _} = Signing.encode(Signing.new(key: key, link_id: link_id, timestamp: 0), msg, header ++ [compat_flags: compat, now: timestamp])
     assert {:ok, frame, ""} = Frame.decode(signed, @dialect)
     assert_header(frame, 2, id, sysid, compid, seq, signed)
     assert {frame.incompat_flags, frame.compat_flags} == {1, compat}
     assert %{link_id: ^link_id, timestamp: ^timestamp} = frame.signature
     assert norm(frame.message) == norm(msg)
-    assert {:ok, checker} = Signing.verify(Signing.new(key: key, unsigned: :reject), frame)
+    assert {:ok, checker} = Signing.verify(Signing.new(key: key, timestamp: 0), frame)
     assert {:error, :old_timestamp, _} = Signing.verify(checker, frame)
     <<k, other_key::binary>> = key
     assert {:error, :bad_signature, _} = Signing.verify(Signing.new(key: <<bxor(k, 1), other_key::binary>>), frame)
@@ -495,7 +505,7 @@ defmodule Dolphin.MAVLink.PropertiesTest do
             true
 
           {:ok, %Frame{message: %_{}} = frame, _} ->
-            not verified? or match?({:ok, _}, Signing.verify(Signing.new(key: @key), frame))
+            not verified? or match?({:ok, _}, Signing.verify(Signing.new(key: @key, timestamp: 0), frame))
 
           _ ->
             false
@@ -603,7 +613,7 @@ defmodule Dolphin.MAVLink.PropertiesTest do
   defp parser_signing do
     T.frequency([
       {2, T.exactly(nil)},
-      {1, map(T.elements([:accept, :reject]), &Signing.new(key: @key, unsigned: &1))}
+      {1, map(T.elements([:accept, :reject]), &Signing.new(key: @key, unsigned: &1, timestamp: 0))}
     ])
   end
 

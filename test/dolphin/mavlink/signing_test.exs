@@ -16,7 +16,7 @@ defmodule Dolphin.MAVLink.SigningTest do
   end
 
   test "timestamps of a signer strictly increase, even when the clock stands still" do
-    signer = Signing.new(key: @key, link_id: 4)
+    signer = Signing.new(key: @key, link_id: 4, timestamp: 0)
     {a, signer} = signed(signer, %Heartbeat{}, now: 500)
     {b, signer} = signed(signer, %Heartbeat{}, now: 500)
     {c, _} = signed(signer, %Heartbeat{}, now: 10_000)
@@ -31,12 +31,12 @@ defmodule Dolphin.MAVLink.SigningTest do
   end
 
   test "replay protection is per (sysid, compid, link id) stream" do
-    signer = Signing.new(key: @key, link_id: 1)
+    signer = Signing.new(key: @key, link_id: 1, timestamp: 0)
     {f1, signer} = signed(signer, %Heartbeat{}, sysid: 1, now: 10_000_000)
     {f2, _} = signed(signer, %Heartbeat{}, sysid: 1, now: 20_000_000)
-    {other, _} = signed(Signing.new(key: @key, link_id: 1), %Heartbeat{}, sysid: 2, now: 15_000_000)
+    {other, _} = signed(Signing.new(key: @key, link_id: 1, timestamp: 0), %Heartbeat{}, sysid: 2, now: 15_000_000)
 
-    checker = Signing.new(key: @key)
+    checker = Signing.new(key: @key, timestamp: 0)
     {:ok, checker} = Signing.verify(checker, f2)
     # The same stream going back in time is a replay...
     assert {:error, :old_timestamp, _} = Signing.verify(checker, f1)
@@ -44,12 +44,19 @@ defmodule Dolphin.MAVLink.SigningTest do
     # ...another stream less than a minute behind is fine.
     assert {:ok, checker} = Signing.verify(checker, other)
     # A new stream more than a minute (6,000,000 units) behind the local timestamp is not.
-    {stale, _} = signed(Signing.new(key: @key, link_id: 9), %Heartbeat{}, sysid: 3, now: 1)
+    {stale, _} = signed(Signing.new(key: @key, link_id: 9, timestamp: 0), %Heartbeat{}, sysid: 3, now: 1)
     assert {:error, :old_timestamp, _} = Signing.verify(checker, stale)
   end
 
+  test "a fresh signing state starts its replay window at the clock: old captured traffic is refused" do
+    {old, _} = signed(Signing.new(key: @key, timestamp: 0), %Heartbeat{}, now: 1_000)
+    assert {:error, :old_timestamp, _} = Signing.verify(Signing.new(key: @key), old)
+    {fresh, _} = signed(Signing.new(key: @key), %Heartbeat{}, [])
+    assert {:ok, _} = Signing.verify(Signing.new(key: @key), fresh)
+  end
+
   test "a changed byte or another key breaks the signature" do
-    {frame, _} = signed(Signing.new(key: @key), %Heartbeat{type: 1}, now: 42)
+    {frame, _} = signed(Signing.new(key: @key, timestamp: 0), %Heartbeat{type: 1}, now: 42)
     assert {:error, :bad_signature, _} = Signing.verify(Signing.new(key: :binary.copy(<<1>>, 32)), frame)
 
     <<head::binary-size(byte_size(frame.raw) - 1), last>> = frame.raw
@@ -61,8 +68,9 @@ defmodule Dolphin.MAVLink.SigningTest do
     {:ok, plain, <<>>} = Frame.decode(Frame.encode(%Heartbeat{}), @dialect)
     {:ok, radio, <<>>} = Frame.decode(Frame.encode(%RadioStatus{rssi: 200}), @dialect)
 
-    assert {:ok, _} = Signing.verify(Signing.new(key: @key), plain)
-    assert {:error, :unsigned, _} = Signing.verify(Signing.new(key: @key, unsigned: :reject), plain)
+    # Rejected by default, as the spec wants of a system with signing on.
+    assert {:error, :unsigned, _} = Signing.verify(Signing.new(key: @key), plain)
+    assert {:ok, _} = Signing.verify(Signing.new(key: @key, unsigned: :accept), plain)
     radio_ok = Signing.new(key: @key, unsigned: &match?(%RadioStatus{}, &1.message))
     assert {:ok, _} = Signing.verify(radio_ok, radio)
     assert {:error, :unsigned, _} = Signing.verify(radio_ok, plain)
@@ -79,13 +87,13 @@ defmodule Dolphin.MAVLink.SigningTest do
   end
 
   test "a parser with signing drops and counts bad, replayed and refused frames, keeping the rest" do
-    signer = Signing.new(key: @key, link_id: 2)
+    signer = Signing.new(key: @key, link_id: 2, timestamp: 0)
     {good1, signer} = Signing.encode(signer, %Heartbeat{type: 1}, now: 100)
     {good2, _} = Signing.encode(signer, %Heartbeat{type: 2}, now: 200)
-    {foreign, _} = Signing.encode(Signing.new(key: :binary.copy(<<7>>, 32)), %Heartbeat{type: 3}, now: 300)
+    {foreign, _} = Signing.encode(Signing.new(key: :binary.copy(<<7>>, 32), timestamp: 0), %Heartbeat{type: 3}, now: 300)
     plain = Frame.encode(%Heartbeat{type: 4})
 
-    parser = Parser.new(signing: Signing.new(key: @key, unsigned: :reject))
+    parser = Parser.new(signing: Signing.new(key: @key, timestamp: 0))
     {frames, parser} = Parser.feed(parser, good1 <> foreign <> good2 <> good1 <> plain)
     assert Enum.map(frames, & &1.message.type) == [1, 2]
     stats = Parser.stats(parser)

@@ -1,7 +1,7 @@
 defmodule Dolphin.MAVLink.TlogTest do
   use ExUnit.Case, async: true
 
-  alias Dolphin.MAVLink.{Frame, Tlog}
+  alias Dolphin.MAVLink.{Frame, Signing, Tlog}
   alias Dolphin.MAVLink.Ardupilotmega.{Attitude, Heartbeat, Statustext}
 
   doctest Dolphin.MAVLink.Tlog
@@ -49,7 +49,27 @@ defmodule Dolphin.MAVLink.TlogTest do
     assert Tlog.stats(reader).truncated == 1
   end
 
-  test "frames with an id the dialect does not know are kept (for forwarding), counted apart" do
+  test "by default unknown ids are dropped; a signed frame cut in its signature does not swallow the next record" do
+    known = Frame.encode(%Heartbeat{type: 1})
+    unknown = <<0xFD, 2, 0, 0, 0, 1, 1, 0x00, 0xFF, 0x7F, 0xAA, 0xBB, 0x12, 0x34>>
+    {got, reader} = Tlog.read(Tlog.reader(), log([{1, known}, {2, unknown}, {3, known}]))
+    {last, reader} = Tlog.finish(reader)
+    assert Enum.map(got ++ last, &elem(&1, 0)) == [1, 3]
+    assert Tlog.stats(reader).unknown_id >= 1
+
+    key = :binary.copy(<<9>>, 32)
+    {signed, _} = Signing.encode(Signing.new(key: key, timestamp: 0), %Heartbeat{type: 5}, now: 100)
+    cut = binary_part(signed, 0, byte_size(signed) - 7)
+    bytes = log([{1, cut}, {2, known}, {3, known}])
+
+    for signing <- [nil, Signing.new(key: key, timestamp: 0, unsigned: :accept)] do
+      {got, reader} = Tlog.read(Tlog.reader(signing: signing), bytes)
+      {last, _} = Tlog.finish(reader)
+      assert Enum.map(got ++ last, &elem(&1, 0)) == [2, 3], "signing: #{inspect(signing != nil)}"
+    end
+  end
+
+  test "frames with an id the dialect does not know are kept when forwarding, counted apart" do
     known = Frame.encode(%Heartbeat{type: 1})
     # A well-formed MAVLink 2 frame of message id 0x7FFF00, which no dialect defines.
     unknown = <<0xFD, 2, 0, 0, 0, 1, 1, 0x00, 0xFF, 0x7F, 0xAA, 0xBB, 0x12, 0x34>>
@@ -57,7 +77,7 @@ defmodule Dolphin.MAVLink.TlogTest do
 
     for split <- 0..byte_size(bytes) do
       <<a::binary-size(split), b::binary>> = bytes
-      {r1, reader} = Tlog.read(Tlog.reader(), a)
+      {r1, reader} = Tlog.read(Tlog.reader(unknown: :forward), a)
       {r2, reader} = Tlog.read(reader, b)
       {r3, reader} = Tlog.finish(reader)
       got = r1 ++ r2 ++ r3

@@ -3,14 +3,14 @@ defmodule Mix.Tasks.MavlinkTasksTest do
 
   import ExUnit.CaptureIO
 
-  alias Dolphin.MAVLink.{JSON, Signing}
+  alias Dolphin.MAVLink.JSON
   alias Dolphin.Test.Vectors
   alias Mix.Tasks.Mavlink.{Decode, Encode}
 
   test "decode prints exactly the expected records of stream.bin, and a summary" do
     {:ok, input} = File.open(Vectors.path!("stream.bin"), [:read, :binary])
     {:ok, output} = StringIO.open("")
-    stats = Decode.decode(input, output, signing: Signing.new(key: Vectors.key()))
+    stats = Decode.decode(input, output, signing: Vectors.signing())
     {_, out} = StringIO.contents(output)
 
     lines = String.split(out, "\n", trim: true)
@@ -45,11 +45,33 @@ defmodule Mix.Tasks.MavlinkTasksTest do
     assert String.split(out, "\n", trim: true) == frames
   end
 
+  test "records that cannot be encoded are errors, never crashes" do
+    huge = String.duplicate("9", 400)
+
+    lines = [
+      ~s({"msg":"WHEEL_DISTANCE","fields":{"distance":[#{huge}]}}),
+      ~s({"msg":"HEARTBEAT","signed":true,"signing":{"secret_key":5,"link_id":0,"timestamp":1},"fields":{}}),
+      ~s({"msg":"HEARTBEAT","id":30,"fields":{}}),
+      ~s({"msg":"GOPRO_SET_REQUEST","fields":{"value":["ab",3,4,5]}})
+    ]
+
+    {:ok, output} = StringIO.open("")
+    capture_io(:stderr, fn -> send(self(), {:errors, Encode.encode(lines, output)}) end)
+    assert_received {:errors, [{1, e1}, {2, e2}, {3, e3}, {4, e4}]}
+    assert e1 =~ "WHEEL_DISTANCE.distance: not a number"
+    assert e2 =~ "a signed record needs"
+    assert e3 == ~s("msg" HEARTBEAT has id 0, not 30)
+    assert e4 =~ ~s(element "ab")
+    assert StringIO.contents(output) == {"", ""}
+  end
+
   test "decode reads .tlog files and rejects bad usage" do
     assert_raise Mix.Error, ~r/usage: mix mavlink.decode/, fn -> Decode.run([]) end
     assert_raise Mix.Error, ~r/cannot read .*nope.bin/, fn -> Decode.run(["nope.bin"]) end
     assert_raise Mix.Error, ~r/--reject-unsigned needs --key/, fn -> Decode.run(["x", "--reject-unsigned"]) end
-    assert_raise Mix.Error, ~r/--key: signing key/, fn -> Decode.run(["x", "--key", "abc"]) end
+    assert_raise Mix.Error, ~r/--key must be 64 hex digits/, fn -> Decode.run(["x", "--key", "abc"]) end
+    # 32 characters would be a raw 32-byte key to Signing.new/1; on the command line it is a mistake.
+    assert_raise Mix.Error, ~r/--key must be 64 hex digits/, fn -> Decode.run(["x", "--key", String.duplicate("ab", 16)]) end
     assert_raise Mix.Error, ~r/unknown or malformed option --bogus/, fn -> Decode.run(["x", "--bogus"]) end
     assert_raise Mix.Error, ~r/usage: mix mavlink.encode/, fn -> Encode.run([]) end
 

@@ -1,7 +1,8 @@
 defmodule Dolphin.MAVLink.Parser.Stats do
   @moduledoc """
   What a `Dolphin.MAVLink.Parser` has seen: `frames` decoded, `unknown_id`
-  frames returned raw (a message id the dialect does not define), `bytes` fed,
+  candidates with a message id the dialect does not define (dropped, or
+  returned raw when the parser forwards them), `bytes` fed,
   `bytes_skipped` (dropped: not part of any returned frame), and what was
   dropped by reason: `bad_crc`, `bad_incompat_flags`, `bad_signature`,
   `old_timestamp` (replayed), `unsigned` (refused by the signing policy),
