@@ -1,0 +1,34 @@
+defmodule Dolphin.PubSub do
+  @moduledoc """
+  Publish/subscribe on a `Registry` with duplicate keys: a subscriber registers
+  itself under a topic and receives `{:dolphin, topic, event}` messages. The
+  registry monitors subscribers, so one that dies is dropped without help.
+
+  Topics: `{:vehicle, sysid}` (that vehicle's state changes and link events)
+  and `:vehicles` (discoveries, losses and reconnections of every vehicle).
+  """
+
+  @registry __MODULE__
+
+  @doc false
+  def child_spec(_opts), do: Registry.child_spec(keys: :duplicate, name: @registry, partitions: 1)
+
+  @doc "Subscribes the calling process to `topic`."
+  @spec subscribe(term()) :: :ok
+  def subscribe(topic) do
+    {:ok, _} = Registry.register(@registry, topic, nil)
+    :ok
+  end
+
+  @doc "Unsubscribes the calling process from `topic`."
+  @spec unsubscribe(term()) :: :ok
+  def unsubscribe(topic), do: Registry.unregister(@registry, topic)
+
+  @doc "Sends `{:dolphin, topic, event}` to every subscriber of `topic`."
+  @spec publish(term(), term()) :: :ok
+  def publish(topic, event) do
+    Registry.dispatch(@registry, topic, fn entries ->
+      for {pid, _} <- entries, do: send(pid, {:dolphin, topic, event})
+    end)
+  end
+end

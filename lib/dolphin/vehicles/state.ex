@@ -1,0 +1,170 @@
+defmodule Dolphin.Vehicles.State do
+  @moduledoc """
+  What the ground station knows of one vehicle, kept by a pure function:
+  `apply(state, frame, now_ms)` folds one received frame into the state.
+
+  | field | from | meaning |
+  | --- | --- | --- |
+  | `type`, `autopilot` | HEARTBEAT (autopilot component) | `MAV_TYPE` number; `:ardupilot`, `:px4` or `:other` |
+  | `mode` | HEARTBEAT | mode name (`:guided`, `:auto`, ... see `Dolphin.Vehicles.Modes`) or `{:custom, n}` |
+  | `armed`, `system_status` | HEARTBEAT | `base_mode` bit 128; `MAV_STATE` number |
+  | `position` | GLOBAL_POSITION_INT | `%{lat, lon, alt, relative_alt, heading}`: degrees, metres, degrees (nil when unknown) |
+  | `home` | HOME_POSITION | `%{lat, lon, alt}` |
+  | `battery` | SYS_STATUS, BATTERY_STATUS (id 0) | remaining fraction 0.0..1.0, `nil` until reported |
+  | `mission` | MISSION_CURRENT, MISSION_ITEM_REACHED | `%{current, total, state, reached}` |
+  | `landed` | EXTENDED_SYS_STATE | `:on_ground`, `:in_air`, `:takeoff`, `:landing` or nil |
+  | `status_texts` | STATUSTEXT | the last 20 `{severity, text}`, newest first |
+  | `components` | HEARTBEAT of other components | e.g. `:camera`, `:gimbal` |
+  | `link` | every frame | `%{received, lost, last_seen_ms}`: `lost` counts sequence gaps |
+  """
+
+  import Bitwise
+
+  alias Dolphin.MAVLink.Ardupilotmega, as: M
+  alias Dolphin.MAVLink.Frame
+  alias Dolphin.Vehicles.Modes
+
+  @max_texts 20
+  @camera_type 30
+  @gimbal_type 26
+  @camera_compids 100..105
+
+  defstruct sysid: nil,
+            type: nil,
+            autopilot: nil,
+            mode: nil,
+            armed: false,
+            system_status: nil,
+            position: nil,
+            home: nil,
+            battery: nil,
+            mission: %{current: nil, total: nil, state: nil, reached: nil},
+            landed: nil,
+            status_texts: [],
+            components: MapSet.new(),
+            link: %{received: 0, lost: 0, last_seen_ms: nil},
+            seqs: %{}
+
+  @type t :: %__MODULE__{}
+
+  @doc "The state of a vehicle not heard from yet."
+  @spec new(byte()) :: t()
+  def new(sysid), do: %__MODULE__{sysid: sysid}
+
+  @doc "Folds one frame from the vehicle into its state."
+  @spec apply(t(), Frame.t(), integer()) :: t()
+  def apply(%__MODULE__{} = state, %Frame{} = frame, now_ms) do
+    state
+    |> count(frame, now_ms)
+    |> message(frame.compid, frame.message)
+  end
+
+  # Sequence numbers are per component; a gap is frames lost on the way.
+  defp count(%{link: link, seqs: seqs} = state, %Frame{compid: compid, seq: seq}, now_ms) do
+    lost =
+      case Map.fetch(seqs, compid) do
+        {:ok, last} -> rem(seq - last - 1 + 256, 256)
+        :error -> 0
+      end
+
+    # A jump of more than half the sequence space is a restart or a reordering, not a loss.
+    lost = if lost > 128, do: 0, else: lost
+    link = %{link | received: link.received + 1, lost: link.lost + lost, last_seen_ms: now_ms}
+    %{state | link: link, seqs: Map.put(seqs, compid, seq)}
+  end
+
+  defp message(state, compid, %M.Heartbeat{type: type} = hb) when compid in @camera_compids or type == @camera_type do
+    _ = hb
+    %{state | components: MapSet.put(state.components, :camera)}
+  end
+
+  defp message(state, _compid, %M.Heartbeat{type: @gimbal_type}),
+    do: %{state | components: MapSet.put(state.components, :gimbal)}
+
+  # A GCS or another non-vehicle component on the same system says nothing of the vehicle.
+  defp message(state, _compid, %M.Heartbeat{autopilot: 8}), do: state
+
+  defp message(state, _compid, %M.Heartbeat{} = hb) do
+    autopilot =
+      case hb.autopilot do
+        3 -> :ardupilot
+        12 -> :px4
+        _ -> :other
+      end
+
+    %{
+      state
+      | type: hb.type,
+        autopilot: autopilot,
+        mode: Modes.name(autopilot, hb.type, hb.custom_mode),
+        armed: (hb.base_mode &&& 128) != 0,
+        system_status: hb.system_status
+    }
+  end
+
+  defp message(state, _compid, %M.SysStatus{battery_remaining: remaining}) when remaining >= 0 and remaining <= 100,
+    do: %{state | battery: remaining / 100}
+
+  defp message(state, _compid, %M.BatteryStatus{id: 0, battery_remaining: remaining}) when remaining >= 0 and remaining <= 100,
+    do: %{state | battery: remaining / 100}
+
+  defp message(state, _compid, %M.GlobalPositionInt{} = p) do
+    position = %{
+      lat: p.lat / 1.0e7,
+      lon: p.lon / 1.0e7,
+      alt: p.alt / 1000,
+      relative_alt: p.relative_alt / 1000,
+      heading: if(p.hdg == 65_535, do: nil, else: p.hdg / 100)
+    }
+
+    %{state | position: position}
+  end
+
+  defp message(state, _compid, %M.HomePosition{} = h),
+    do: %{state | home: %{lat: h.latitude / 1.0e7, lon: h.longitude / 1.0e7, alt: h.altitude / 1000}}
+
+  defp message(state, _compid, %M.MissionCurrent{} = m) do
+    mission_state =
+      case m.mission_state do
+        1 -> :no_mission
+        2 -> :not_started
+        3 -> :active
+        4 -> :paused
+        5 -> :complete
+        _ -> nil
+      end
+
+    %{state | mission: %{state.mission | current: m.seq, total: m.total, state: mission_state}}
+  end
+
+  defp message(state, _compid, %M.MissionItemReached{seq: seq}), do: %{state | mission: %{state.mission | reached: seq}}
+
+  defp message(state, _compid, %M.ExtendedSysState{landed_state: landed}) do
+    landed =
+      case landed do
+        1 -> :on_ground
+        2 -> :in_air
+        3 -> :takeoff
+        4 -> :landing
+        _ -> nil
+      end
+
+    %{state | landed: landed}
+  end
+
+  defp message(state, _compid, %M.Statustext{severity: severity, text: text}),
+    do: %{state | status_texts: Enum.take([{severity, text} | state.status_texts], @max_texts)}
+
+  defp message(state, _compid, _other), do: state
+
+  @doc """
+  The public fields that differ between two states, as `{field, new_value}`
+  (link counters excepted: they change with every frame).
+  """
+  @spec changes(t(), t()) :: [{atom(), term()}]
+  def changes(old, new) do
+    for field <- [:type, :autopilot, :mode, :armed, :system_status, :position, :home, :battery, :mission, :landed, :status_texts, :components],
+        Map.fetch!(old, field) != Map.fetch!(new, field),
+        do: {field, Map.fetch!(new, field)}
+  end
+end

@@ -1,0 +1,118 @@
+defmodule Dolphin.Vehicles.Vehicle do
+  @moduledoc false
+  # One process per discovered vehicle: folds its frames into a
+  # Dolphin.Vehicles.State, publishes what changed, watches for silence (lost /
+  # reconnected) and asks the vehicle for the telemetry the ground station needs.
+  # It holds nothing that the next telemetry does not restore, so a crash only
+  # costs the state until the next frames.
+  use GenServer, restart: :permanent
+
+  alias Dolphin.{Clock, PubSub}
+  alias Dolphin.Link.UDP
+  alias Dolphin.MAVLink.Ardupilotmega, as: M
+  alias Dolphin.Vehicles.State
+
+  # Messages asked for by interval (µs of vehicle time) on top of the streams:
+  # ArduPilot sends EXTENDED_SYS_STATE only when asked this way.
+  @intervals [
+    {33, 200_000},
+    {1, 1_000_000},
+    {147, 1_000_000},
+    {42, 1_000_000},
+    {245, 1_000_000},
+    {242, 5_000_000}
+  ]
+  # Until position telemetry arrives, the requests are repeated this often, this many times.
+  @request_every_ms 3_000
+  @request_tries 5
+
+  def child_spec({sysid, _link, _opts} = args),
+    do: %{id: {__MODULE__, sysid}, start: {__MODULE__, :start_link, [args]}, restart: :permanent}
+
+  def start_link({sysid, _link, _opts} = args),
+    do: GenServer.start_link(__MODULE__, args, name: {:via, Registry, {Dolphin.Registry, {:vehicle, sysid}}})
+
+  @impl true
+  def init({sysid, link, opts}) do
+    timeout = Keyword.get(opts, :timeout_ms, Application.get_env(:dolphin, :vehicle_timeout_ms, 20_000))
+    send(self(), :request_telemetry)
+    Clock.send_after(self(), :check_link, check_period(timeout))
+
+    {:ok,
+     %{
+       sysid: sysid,
+       link: link,
+       state: State.new(sysid),
+       timeout_ms: timeout,
+       lost: false,
+       requests_left: @request_tries
+     }}
+  end
+
+  @impl true
+  def handle_cast({:frame, frame, link}, s) do
+    s = if s.lost, do: reconnected(s), else: s
+    new = State.apply(s.state, frame, Clock.now_ms())
+
+    case State.changes(s.state, new) do
+      [] -> :ok
+      changes -> PubSub.publish({:vehicle, s.sysid}, {:state, s.sysid, changes})
+    end
+
+    # Position telemetry flowing means the requests were heard.
+    requests_left = if match?(%M.GlobalPositionInt{}, frame.message), do: 0, else: s.requests_left
+    {:noreply, %{s | state: new, link: link, requests_left: requests_left}}
+  end
+
+  def handle_cast({:send, message}, s) do
+    UDP.send_message(s.link, s.sysid, message)
+    {:noreply, s}
+  end
+
+  @impl true
+  def handle_call(:state, _from, s), do: {:reply, %{s.state | seqs: %{}} |> Map.put(:lost, s.lost), s}
+
+  def handle_call({:set_timeout, ms}, _from, s), do: {:reply, :ok, %{s | timeout_ms: ms}}
+
+  @impl true
+  def handle_info(:request_telemetry, %{requests_left: 0} = s), do: {:noreply, s}
+
+  def handle_info(:request_telemetry, s) do
+    request_telemetry(s)
+    Clock.send_after(self(), :request_telemetry, @request_every_ms)
+    {:noreply, %{s | requests_left: s.requests_left - 1}}
+  end
+
+  def handle_info(:check_link, s) do
+    Clock.send_after(self(), :check_link, check_period(s.timeout_ms))
+    last = s.state.link.last_seen_ms
+
+    if not s.lost and last != nil and Clock.now_ms() - last > s.timeout_ms do
+      PubSub.publish(:vehicles, {:vehicle_lost, s.sysid})
+      PubSub.publish({:vehicle, s.sysid}, {:vehicle_lost, s.sysid})
+      {:noreply, %{s | lost: true}}
+    else
+      {:noreply, s}
+    end
+  end
+
+  # Heard again after a silence: say so, and ask for telemetry again (the
+  # vehicle may have rebooted and forgotten the rates).
+  defp reconnected(s) do
+    PubSub.publish(:vehicles, {:vehicle_reconnected, s.sysid})
+    PubSub.publish({:vehicle, s.sysid}, {:vehicle_reconnected, s.sysid})
+    if s.requests_left == 0, do: send(self(), :request_telemetry)
+    %{s | lost: false, requests_left: @request_tries}
+  end
+
+  defp check_period(timeout_ms), do: max(div(timeout_ms, 10), 50)
+
+  defp request_telemetry(s) do
+    # MAV_DATA_STREAM_ALL at 4 Hz, then the messages that matter at their own rates.
+    UDP.send_message(s.link, s.sysid, %M.RequestDataStream{target_system: s.sysid, target_component: 0, req_stream_id: 0, req_message_rate: 4, start_stop: 1})
+
+    for {msgid, interval_us} <- @intervals do
+      UDP.send_message(s.link, s.sysid, %M.CommandLong{target_system: s.sysid, target_component: 0, command: 511, param1: msgid * 1.0, param2: interval_us * 1.0})
+    end
+  end
+end

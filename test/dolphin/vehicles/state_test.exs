@@ -1,0 +1,78 @@
+defmodule Dolphin.Vehicles.StateTest do
+  use ExUnit.Case, async: true
+
+  alias Dolphin.MAVLink.Frame
+  alias Dolphin.MAVLink.Ardupilotmega, as: M
+  alias Dolphin.Vehicles.{Modes, State}
+
+  doctest Modes
+
+  defp frame(message, opts \\ []), do: struct(Frame, Keyword.merge([sysid: 1, compid: 1, seq: 0, message: message], opts))
+  defp fold(messages), do: Enum.reduce(messages, State.new(1), fn {m, opts}, s -> State.apply(s, frame(m, opts), 100) end)
+
+  test "heartbeat: type, autopilot, mode by name, armed" do
+    s = fold([{%M.Heartbeat{type: 2, autopilot: 3, base_mode: 0x81 + 0x08, custom_mode: 17, system_status: 4}, []}])
+    assert {s.type, s.autopilot, s.mode, s.armed, s.system_status} == {2, :ardupilot, :brake, true, 4}
+
+    plane = fold([{%M.Heartbeat{type: 1, autopilot: 3, custom_mode: 10}, []}])
+    assert plane.mode == :auto and not plane.armed
+    rover = fold([{%M.Heartbeat{type: 10, autopilot: 3, custom_mode: 4}, []}])
+    assert rover.mode == :hold
+    px4 = fold([{%M.Heartbeat{type: 2, autopilot: 12, custom_mode: 0x03040000}, []}])
+    assert px4.mode == :loiter
+    odd = fold([{%M.Heartbeat{type: 2, autopilot: 3, custom_mode: 99}, []}])
+    assert odd.mode == {:custom, 99}
+  end
+
+  test "another component's heartbeat does not overwrite the vehicle; a camera is a payload" do
+    s =
+      fold([
+        {%M.Heartbeat{type: 2, autopilot: 3, custom_mode: 4}, []},
+        {%M.Heartbeat{type: 30, autopilot: 8}, [compid: 100]},
+        {%M.Heartbeat{type: 18, autopilot: 8}, [compid: 191]}
+      ])
+
+    assert s.mode == :guided and s.type == 2
+    assert MapSet.member?(s.components, :camera)
+  end
+
+  test "battery is unknown until reported; -1 stays unknown" do
+    assert fold([]).battery == nil
+    assert fold([{%M.SysStatus{battery_remaining: -1}, []}]).battery == nil
+    assert fold([{%M.SysStatus{battery_remaining: 87}, []}]).battery == 0.87
+    assert fold([{%M.BatteryStatus{id: 0, battery_remaining: 30}, []}]).battery == 0.3
+    assert fold([{%M.BatteryStatus{id: 1, battery_remaining: 30}, []}]).battery == nil
+  end
+
+  test "position, home, mission progress, landed state, status texts" do
+    s =
+      fold([
+        {%M.GlobalPositionInt{lat: 411_780_000, lon: -85_960_000, alt: 132_000, relative_alt: 20_500, hdg: 65_535}, []},
+        {%M.HomePosition{latitude: 411_770_000, longitude: -85_950_000, altitude: 111_500}, []},
+        {%M.MissionCurrent{seq: 3, total: 6, mission_state: 3}, []},
+        {%M.MissionItemReached{seq: 2}, []},
+        {%M.ExtendedSysState{landed_state: 2}, []},
+        {%M.Statustext{severity: 6, text: "Reached command #2"}, []}
+      ])
+
+    assert s.position == %{lat: 41.178, lon: -8.596, alt: 132.0, relative_alt: 20.5, heading: nil}
+    assert s.home == %{lat: 41.177, lon: -8.595, alt: 111.5}
+    assert s.mission == %{current: 3, total: 6, state: :active, reached: 2}
+    assert s.landed == :in_air
+    assert s.status_texts == [{6, "Reached command #2"}]
+  end
+
+  test "link quality: sequence gaps per component are counted as lost" do
+    s = fold([{%M.Heartbeat{}, [seq: 254]}, {%M.Heartbeat{}, [seq: 255]}, {%M.Heartbeat{}, [seq: 2]}, {%M.Heartbeat{}, [seq: 0, compid: 100]}])
+    assert s.link.received == 4
+    assert s.link.lost == 2
+    assert s.link.last_seen_ms == 100
+  end
+
+  test "changes lists what a subscriber should hear" do
+    a = fold([{%M.Heartbeat{type: 2, autopilot: 3, custom_mode: 4}, []}])
+    b = State.apply(a, frame(%M.SysStatus{battery_remaining: 50}), 200)
+    assert State.changes(a, b) == [battery: 0.5]
+    assert State.changes(b, State.apply(b, frame(%M.SysStatus{battery_remaining: 50}), 300)) == []
+  end
+end

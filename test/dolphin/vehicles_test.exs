@@ -1,0 +1,132 @@
+defmodule Dolphin.VehiclesTest do
+  # A scripted MAVLink peer talks to a real UDP link on 127.0.0.1. Changes the
+  # global clock speed-up and shares the vehicle registry: not async.
+  use ExUnit.Case, async: false
+
+  alias Dolphin.{Clock, Link, Vehicles}
+  alias Dolphin.Link.UDP
+  alias Dolphin.MAVLink.{Frame, Tlog}
+  alias Dolphin.MAVLink.Ardupilotmega, as: M
+  alias Dolphin.Test.UDPPeer
+
+  @moduletag :tmp_dir
+
+  setup %{tmp_dir: dir} do
+    name = "test-#{System.unique_integer([:positive])}"
+    tlog = Path.join(dir, "link.tlog")
+    {:ok, link} = Link.connect("udpin:127.0.0.1:0", name: name, tlog: tlog)
+    port = UDP.port(name)
+    peer = UDPPeer.open()
+
+    on_exit(fn ->
+      Clock.set_speedup(1)
+      DynamicSupervisor.terminate_child(Dolphin.Link.Supervisor, link)
+      for sysid <- Vehicles.list(), pid = Vehicles.whereis(sysid), pid != nil, do: DynamicSupervisor.terminate_child(Dolphin.Vehicles.Supervisor, pid)
+    end)
+
+    %{name: name, port: port, peer: peer, tlog: tlog}
+  end
+
+  defp copter(mode \\ 4), do: %M.Heartbeat{type: 2, autopilot: 3, base_mode: 0x81, custom_mode: mode, system_status: 4}
+
+  test "a vehicle is discovered from its heartbeat, asked for telemetry, and sent the GCS heartbeat", %{port: port, peer: peer} do
+    Vehicles.subscribe(:all)
+    UDPPeer.send_message(peer, port, copter(), sysid: 11)
+    assert_receive {:dolphin, :vehicles, {:vehicle_discovered, 11}}, 2_000
+    assert 11 in Vehicles.list()
+
+    # What ArduPilot needs to start streaming: REQUEST_DATA_STREAM and SET_MESSAGE_INTERVAL.
+    assert %Frame{sysid: 255, message: %M.RequestDataStream{target_system: 11, start_stop: 1}} =
+             UDPPeer.receive_until(peer, &match?(%M.RequestDataStream{}, &1.message))
+
+    assert %Frame{message: %M.CommandLong{command: 511, param1: 245.0}} =
+             UDPPeer.receive_until(peer, &match?(%M.CommandLong{command: 511, param1: 245.0}, &1.message))
+
+    assert %Frame{sysid: 255, compid: 190, message: %M.Heartbeat{type: 6, autopilot: 8}} =
+             UDPPeer.receive_until(peer, &match?(%M.Heartbeat{}, &1.message))
+
+    {:ok, state} = Vehicles.state(11)
+    assert {state.mode, state.armed, state.autopilot, state.lost} == {:guided, true, :ardupilot, false}
+  end
+
+  test "state changes are published to subscribers", %{port: port, peer: peer} do
+    UDPPeer.send_message(peer, port, copter(), sysid: 12)
+    wait_for(fn -> Vehicles.whereis(12) end)
+    Vehicles.subscribe(12)
+
+    UDPPeer.send_message(peer, port, %M.SysStatus{battery_remaining: 55}, sysid: 12, seq: 1)
+    assert_receive {:dolphin, {:vehicle, 12}, {:state, 12, [battery: 0.55]}}, 2_000
+
+    UDPPeer.send_message(peer, port, %M.GlobalPositionInt{lat: 411_780_000, lon: -85_960_000, relative_alt: 10_000}, sysid: 12, seq: 2)
+    assert_receive {:dolphin, {:vehicle, 12}, {:state, 12, [position: %{lat: 41.178, relative_alt: 10.0}]}}, 2_000
+
+    # A GCS's heartbeat (another ground station on the link) is not a vehicle.
+    UDPPeer.send_message(peer, port, %M.Heartbeat{type: 6, autopilot: 8}, sysid: 250)
+    UDPPeer.send_message(peer, port, copter(), sysid: 12, seq: 3)
+    wait_for(fn -> match?({:ok, %{link: %{received: 4}}}, Vehicles.state(12)) end)
+    refute 250 in Vehicles.list()
+    assert {:error, :unknown_vehicle} = Vehicles.state(250)
+  end
+
+  test "a silent vehicle is lost after its timeout in clock time, and reconnects when heard", %{port: port, peer: peer} do
+    Vehicles.subscribe(:all)
+    UDPPeer.send_message(peer, port, copter(), sysid: 13)
+    assert_receive {:dolphin, :vehicles, {:vehicle_discovered, 13}}, 2_000
+    # 20 s of clock time at 200x: 100 ms of real time.
+    Clock.set_speedup(200)
+    assert_receive {:dolphin, :vehicles, {:vehicle_lost, 13}}, 3_000
+    assert {:ok, %{lost: true}} = Vehicles.state(13)
+
+    UDPPeer.send_message(peer, port, copter(5), sysid: 13, seq: 1)
+    assert_receive {:dolphin, :vehicles, {:vehicle_reconnected, 13}}, 2_000
+    assert {:ok, %{lost: false, mode: :loiter}} = Vehicles.state(13)
+  end
+
+  test "a crashed vehicle process is restarted and rebuilt from the next telemetry; a crashed link loses no vehicle",
+       %{name: name, port: port, peer: peer} do
+    UDPPeer.send_message(peer, port, copter(), sysid: 14)
+    pid = wait_for(fn -> Vehicles.whereis(14) end)
+    Process.exit(pid, :kill)
+    new_pid = wait_for(fn -> (p = Vehicles.whereis(14)) != pid && p end)
+    assert is_pid(new_pid)
+    UDPPeer.send_message(peer, port, copter(17), sysid: 14, seq: 1)
+    wait_for(fn -> match?({:ok, %{mode: :brake}}, Vehicles.state(14)) end)
+
+    [{link, _}] = Registry.lookup(Dolphin.Registry, {:link, name})
+    Process.exit(link, :kill)
+    wait_for(fn -> match?([{p, _}] when p != link, Registry.lookup(Dolphin.Registry, {:link, name})) end)
+    assert 14 in Vehicles.list()
+  end
+
+  test "every frame in and out is recorded to the .tlog", %{name: name, port: port, peer: peer, tlog: tlog} do
+    UDPPeer.send_message(peer, port, copter(), sysid: 15)
+    UDPPeer.receive_until(peer, &match?(%M.RequestDataStream{}, &1.message))
+    # Stop the link so the file is flushed and closed.
+    [{link, _}] = Registry.lookup(Dolphin.Registry, {:link, name})
+    :ok = DynamicSupervisor.terminate_child(Dolphin.Link.Supervisor, link)
+
+    {records, reader} = Tlog.read(Tlog.reader(), File.read!(tlog))
+    {[], _} = Tlog.finish(reader)
+    senders = records |> Enum.map(fn {_t, f} -> f.sysid end) |> Enum.uniq() |> Enum.sort()
+    assert senders == [15, 255]
+    assert Enum.any?(records, fn {_t, f} -> match?(%M.RequestDataStream{}, f.message) end)
+  end
+
+  test "connect reports bad endpoints and busy ports clearly", %{port: port} do
+    assert {:error, "endpoint \"udpin:127.0.0.1\"" <> _} = Link.connect("udpin:127.0.0.1")
+    assert {:error, "tcp:127.0.0.1:5760: TCP links are not built yet"} = Link.connect("tcp:127.0.0.1:5760")
+    # The setup's link holds `port`.
+    assert {:error, message} = Link.connect("udpin:127.0.0.1:#{port}", name: "busy")
+    assert message == "udpin:127.0.0.1:#{port}: cannot open the socket: address already in use"
+  end
+
+  defp wait_for(fun, tries \\ 100) do
+    case fun.() do
+      result when result in [nil, false] ->
+        if tries == 0, do: flunk("condition not met in time"), else: (Process.sleep(20); wait_for(fun, tries - 1))
+
+      result ->
+        result
+    end
+  end
+end
