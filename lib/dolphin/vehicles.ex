@@ -13,15 +13,22 @@ defmodule Dolphin.Vehicles do
       Dolphin.Vehicles.subscribe(1)         # {:dolphin, {:vehicle, 1}, {:state, 1, [battery: 0.86]}}, ...
       Dolphin.Vehicles.send_message(1, %Dolphin.MAVLink.Ardupilotmega.CommandLong{...})
 
+  Commands (`command/3` and the helpers below) follow the MAVLink command
+  protocol (`Dolphin.Vehicles.CommandProtocol`: retransmission, IN_PROGRESS)
+  and return `{:ok, :accepted}` or `{:error, %Dolphin.CommandError{}}`.
+
   Events: `{:vehicle_discovered, sysid}`, `{:vehicle_lost, sysid}` (silent for
   longer than its timeout: 20 s of `Dolphin.Clock` time by default, set with
   `set_timeout/2` or `config :dolphin, vehicle_timeout_ms:`),
   `{:vehicle_reconnected, sysid}`, and per vehicle `{:state, sysid, changes}`.
   """
 
+  alias Dolphin.CommandError
   alias Dolphin.MAVLink.Frame
+  alias Dolphin.MAVLink.Ardupilotmega, as: M
   alias Dolphin.MAVLink.Ardupilotmega.Heartbeat
   alias Dolphin.PubSub
+  alias Dolphin.Vehicles.Modes
 
   # MAV_TYPE_GCS, and MAV_AUTOPILOT_INVALID (what a ground station sends).
   @gcs_type 6
@@ -75,6 +82,132 @@ defmodule Dolphin.Vehicles do
       [] -> nil
     end
   end
+
+  @typedoc "Options of a command: `:attempts`, `:ack_timeout_ms`, `:progress_timeout_ms`, `:progress_to`, `:target_component`."
+  @type command_opts :: keyword()
+
+  @doc """
+  Sends a COMMAND_LONG (`MAV_CMD` number or name, e.g. `:mav_cmd_do_set_mode`)
+  with up to 7 parameters and waits for the vehicle's answer.
+  """
+  @spec command(byte(), atom() | non_neg_integer(), [number()], command_opts()) :: {:ok, :accepted} | {:error, CommandError.t()}
+  def command(sysid, command, params \\ [], opts \\ []) when length(params) <= 7 do
+    params = Enum.map(params, &(&1 * 1.0)) ++ List.duplicate(0.0, 7 - length(params))
+    run(sysid, command, %{params: params, int: false, frame: 0}, opts)
+  end
+
+  @doc """
+  Sends a COMMAND_INT: parameters 1-4, then a position (`lat`, `lon` in
+  degrees, `alt` in metres) in `frame` (default
+  MAV_FRAME_GLOBAL_RELATIVE_ALT_INT, 6).
+  """
+  @spec command_int(byte(), atom() | non_neg_integer(), [number()], {number(), number(), number()}, command_opts()) ::
+          {:ok, :accepted} | {:error, CommandError.t()}
+  def command_int(sysid, command, params, {lat, lon, alt}, opts \\ []) when length(params) <= 4 do
+    params = Enum.map(params, &(&1 * 1.0)) ++ List.duplicate(0.0, 4 - length(params))
+    position = [round(lat * 1.0e7), round(lon * 1.0e7), alt * 1.0]
+    run(sysid, command, %{params: params ++ position, int: true, frame: Keyword.get(opts, :frame, 6)}, opts)
+  end
+
+  defp run(sysid, command, request, opts) do
+    {:ok, id} = command_id(command)
+    name = if is_atom(command), do: command, else: id
+
+    request =
+      Map.merge(request, %{
+        command: id,
+        target_component: Keyword.get(opts, :target_component, 1),
+        progress_to: Keyword.get(opts, :progress_to)
+      })
+
+    case whereis(sysid) do
+      nil ->
+        {:error, %CommandError{command: name, vehicle: sysid, result: :vehicle_gone, attempts: 0, detail: "no such vehicle"}}
+
+      pid ->
+        try do
+          GenServer.call(pid, {:command, request, opts}, :infinity)
+        catch
+          :exit, _ -> {:error, %CommandError{command: name, vehicle: sysid, result: :vehicle_gone, attempts: 0}}
+        end
+    end
+  end
+
+  defp command_id(n) when is_integer(n), do: {:ok, n}
+
+  defp command_id(name) when is_atom(name) do
+    case M.enum_value(:mav_cmd, name) do
+      {:ok, n} -> {:ok, n}
+      :error -> raise ArgumentError, "unknown MAV_CMD #{inspect(name)}"
+    end
+  end
+
+  @doc "Arms the motors (`force: true` overrides pre-arm checks, as ArduPilot's magic number 21196 does)."
+  def arm(sysid, opts \\ []), do: command(sysid, :mav_cmd_component_arm_disarm, [1, if(opts[:force], do: 21_196, else: 0)], opts)
+
+  @doc "Disarms the motors."
+  def disarm(sysid, opts \\ []), do: command(sysid, :mav_cmd_component_arm_disarm, [0, if(opts[:force], do: 21_196, else: 0)], opts)
+
+  @doc """
+  Sets the flight mode by name (`:guided`, `:auto`, `:brake`, `:rtl`, ... for
+  ArduPilot; `:mission`, `:posctl`, ... for PX4; see `Dolphin.Vehicles.Modes`).
+  """
+  @spec set_mode(byte(), atom(), command_opts()) :: {:ok, :accepted} | {:error, CommandError.t()}
+  def set_mode(sysid, mode, opts \\ []) do
+    with {:ok, state} <- state(sysid),
+         {:ok, number} <- mode_number(state, mode) do
+      params = if is_tuple(number), do: [1, elem(number, 0), elem(number, 1)], else: [1, number]
+      command(sysid, :mav_cmd_do_set_mode, params, opts)
+    else
+      {:error, :unknown_vehicle} ->
+        {:error, %CommandError{command: :mav_cmd_do_set_mode, vehicle: sysid, result: :vehicle_gone, attempts: 0, detail: "no such vehicle"}}
+
+      {:error, detail} ->
+        {:error, %CommandError{command: :mav_cmd_do_set_mode, vehicle: sysid, result: :unsupported, attempts: 0, detail: detail}}
+    end
+  end
+
+  defp mode_number(%{autopilot: autopilot, type: type}, mode) when autopilot in [:ardupilot, :px4] do
+    case Modes.number(autopilot, type, mode) do
+      {:ok, n} -> {:ok, n}
+      :error -> {:error, "no mode #{inspect(mode)} on this vehicle; it has #{inspect(Modes.names(autopilot, type))}"}
+    end
+  end
+
+  defp mode_number(_state, mode), do: {:error, "mode #{inspect(mode)}: the vehicle's autopilot is not known yet"}
+
+  @doc "Takes off to `altitude` metres (relative to home)."
+  def takeoff(sysid, altitude, opts \\ []), do: command(sysid, :mav_cmd_nav_takeoff, [0, 0, 0, 0, 0, 0, altitude], opts)
+
+  @doc "Lands where the vehicle is."
+  def land(sysid, opts \\ []), do: command(sysid, :mav_cmd_nav_land, [], opts)
+
+  @doc "Returns to launch."
+  def return_to_launch(sysid, opts \\ []), do: command(sysid, :mav_cmd_nav_return_to_launch, [], opts)
+
+  @doc "Starts the uploaded mission (ArduCopter switches to AUTO itself)."
+  def start_mission(sysid, opts \\ []), do: command(sysid, :mav_cmd_mission_start, [0, 0], opts)
+
+  @doc "Makes mission item `seq` the current one."
+  def set_current_item(sysid, seq, opts \\ []), do: command(sysid, :mav_cmd_do_set_mission_current, [seq], opts)
+
+  @doc "Sets home: `:current` (where the vehicle is) or `{lat, lon, alt}` (degrees, metres AMSL)."
+  def set_home(sysid, where, opts \\ [])
+  def set_home(sysid, :current, opts), do: command(sysid, :mav_cmd_do_set_home, [1], opts)
+  def set_home(sysid, {lat, lon, alt}, opts), do: command(sysid, :mav_cmd_do_set_home, [0, 0, 0, 0, lat, lon, alt], opts)
+
+  @doc "Changes the speed (m/s; `type:` `:ground` (default) or `:air`)."
+  def change_speed(sysid, speed, opts \\ []) do
+    type = if opts[:type] == :air, do: 0, else: 1
+    command(sysid, :mav_cmd_do_change_speed, [type, speed, -1], opts)
+  end
+
+  @doc "Asks for message `msgid` every `interval_us` µs (-1 stops it)."
+  def set_message_interval(sysid, msgid, interval_us, opts \\ []),
+    do: command(sysid, :mav_cmd_set_message_interval, [msgid, interval_us], opts)
+
+  @doc "Reboots the autopilot."
+  def reboot(sysid, opts \\ []), do: command(sysid, :mav_cmd_preflight_reboot_shutdown, [1], opts)
 
   @doc false
   # Called by links for every frame: cast it to its vehicle, discovering the

@@ -59,8 +59,25 @@ defmodule Dolphin.Vehicles.Modes do
   def name(:ardupilot, type, custom_mode), do: Map.get(table(type), custom_mode, {:custom, custom_mode})
   def name(_other, _type, custom_mode), do: {:custom, custom_mode}
 
-  @doc "The `custom_mode` number of a mode name for an ArduPilot vehicle type."
-  @spec number(:ardupilot, non_neg_integer(), atom()) :: {:ok, non_neg_integer()} | :error
+  @doc """
+  The number(s) that select a mode by name: ArduPilot's `custom_mode`, or PX4's
+  `{main_mode, sub_mode}` (as MAV_CMD_DO_SET_MODE's param2 and param3 take them).
+  """
+  @spec number(:ardupilot | :px4, non_neg_integer(), atom()) ::
+          {:ok, non_neg_integer() | {non_neg_integer(), non_neg_integer()}} | :error
+  def number(:px4, _type, name) do
+    case Enum.find(@px4_main, fn {_n, mode} -> mode == name end) do
+      {main, _} ->
+        {:ok, {main, 0}}
+
+      nil ->
+        case Enum.find(@px4_auto, fn {_n, mode} -> mode == name end) do
+          {sub, _} -> {:ok, {4, sub}}
+          nil -> :error
+        end
+    end
+  end
+
   def number(:ardupilot, type, name) do
     case Enum.find(table(type), fn {_n, mode} -> mode == name end) do
       {n, _} -> {:ok, n}
@@ -68,9 +85,13 @@ defmodule Dolphin.Vehicles.Modes do
     end
   end
 
-  @doc "The mode names of an ArduPilot vehicle type."
-  @spec names(:ardupilot, non_neg_integer()) :: [atom()]
+  def number(_other, _type, _name), do: :error
+
+  @doc "The mode names of a vehicle type."
+  @spec names(:ardupilot | :px4, non_neg_integer()) :: [atom()]
   def names(:ardupilot, type), do: table(type) |> Enum.sort() |> Enum.map(&elem(&1, 1))
+  def names(:px4, _type), do: Map.values(@px4_main) ++ Map.values(@px4_auto)
+  def names(_other, _type), do: []
 
   defp table(type) when type in @fixed_wing, do: @plane
   defp table(type) when type in @ground, do: @rover

@@ -10,7 +10,7 @@ defmodule Dolphin.Vehicles.Vehicle do
   alias Dolphin.{Clock, PubSub}
   alias Dolphin.Link.UDP
   alias Dolphin.MAVLink.Ardupilotmega, as: M
-  alias Dolphin.Vehicles.State
+  alias Dolphin.Vehicles.{CommandProtocol, State}
 
   # Messages asked for by interval (µs of vehicle time) on top of the streams:
   # ArduPilot sends EXTENDED_SYS_STATE only when asked this way.
@@ -34,6 +34,8 @@ defmodule Dolphin.Vehicles.Vehicle do
 
   @impl true
   def init({sysid, link, opts}) do
+    # Command protocols are linked to this process: their exits come as messages.
+    Process.flag(:trap_exit, true)
     timeout = Keyword.get(opts, :timeout_ms, Application.get_env(:dolphin, :vehicle_timeout_ms, 20_000))
     send(self(), :request_telemetry)
     Clock.send_after(self(), :check_link, check_period(timeout))
@@ -45,7 +47,10 @@ defmodule Dolphin.Vehicles.Vehicle do
        state: State.new(sysid),
        timeout_ms: timeout,
        lost: false,
-       requests_left: @request_tries
+       requests_left: @request_tries,
+       # command id => {protocol pid, caller}; command id => queue of {request, opts}
+       commands: %{},
+       queued: %{}
      }}
   end
 
@@ -58,6 +63,10 @@ defmodule Dolphin.Vehicles.Vehicle do
       [] -> :ok
       changes -> PubSub.publish({:vehicle, s.sysid}, {:state, s.sysid, changes})
     end
+
+    with %M.CommandAck{command: command} = ack <- frame.message,
+         {:ok, {pid, _from}} <- Map.fetch(s.commands, command),
+         do: send(pid, {:ack, ack})
 
     # Position telemetry flowing means the requests were heard.
     requests_left = if match?(%M.GlobalPositionInt{}, frame.message), do: 0, else: s.requests_left
@@ -74,6 +83,19 @@ defmodule Dolphin.Vehicles.Vehicle do
 
   def handle_call({:set_timeout, ms}, _from, s), do: {:reply, :ok, %{s | timeout_ms: ms}}
 
+  # One command of an id at a time (a COMMAND_ACK names only the command id);
+  # more of the same id wait their turn. The protocol replies to the caller.
+  def handle_call({:command, request, opts}, from, s) do
+    request = Map.merge(request, %{sysid: s.sysid, reply_to: from})
+
+    if Map.has_key?(s.commands, request.command) do
+      queue = Map.get(s.queued, request.command, :queue.new())
+      {:noreply, %{s | queued: Map.put(s.queued, request.command, :queue.in({request, opts}, queue))}}
+    else
+      {:noreply, start_command(s, request, opts)}
+    end
+  end
+
   @impl true
   def handle_info(:request_telemetry, %{requests_left: 0} = s), do: {:noreply, s}
 
@@ -81,6 +103,19 @@ defmodule Dolphin.Vehicles.Vehicle do
     request_telemetry(s)
     Clock.send_after(self(), :request_telemetry, @request_every_ms)
     {:noreply, %{s | requests_left: s.requests_left - 1}}
+  end
+
+  def handle_info({:EXIT, pid, reason}, s) do
+    case Enum.find(s.commands, fn {_command, {p, _from}} -> p == pid end) do
+      {command, {_pid, from}} ->
+        # A protocol that crashed did not answer its caller.
+        if reason != :normal, do: GenServer.reply(from, {:error, crashed(s, command, reason)})
+        s = %{s | commands: Map.delete(s.commands, command)}
+        {:noreply, next_command(s, command)}
+
+      nil ->
+        {:noreply, s}
+    end
   end
 
   def handle_info(:check_link, s) do
@@ -106,6 +141,26 @@ defmodule Dolphin.Vehicles.Vehicle do
   end
 
   defp check_period(timeout_ms), do: max(div(timeout_ms, 10), 50)
+
+  defp start_command(s, request, opts) do
+    link = s.link
+    sysid = s.sysid
+    request = Map.put(request, :send, fn message -> UDP.send_message(link, sysid, message) end)
+    {:ok, pid} = CommandProtocol.start_link(request, opts)
+    %{s | commands: Map.put(s.commands, request.command, {pid, request.reply_to})}
+  end
+
+  defp next_command(s, command) do
+    with {:ok, queue} <- Map.fetch(s.queued, command),
+         {{:value, {request, opts}}, rest} <- :queue.out(queue) do
+      start_command(%{s | queued: Map.put(s.queued, command, rest)}, request, opts)
+    else
+      _ -> %{s | queued: Map.delete(s.queued, command)}
+    end
+  end
+
+  defp crashed(s, command, reason),
+    do: %Dolphin.CommandError{command: command, vehicle: s.sysid, result: :failed, attempts: 0, detail: "protocol crashed: #{inspect(reason)}"}
 
   defp request_telemetry(s) do
     # MAV_DATA_STREAM_ALL at 4 Hz, then the messages that matter at their own rates.
