@@ -209,6 +209,43 @@ defmodule Dolphin.Vehicles do
   @doc "Reboots the autopilot."
   def reboot(sysid, opts \\ []), do: command(sysid, :mav_cmd_preflight_reboot_shutdown, [1], opts)
 
+  @typedoc "Options of a mission transfer: `:mission_type` (`:mission`, `:fence`, `:rally`), `:progress_to`, `:attempts`, `:item_timeout_ms`, `:total_timeout_ms`."
+  @type mission_opts :: keyword()
+
+  @doc """
+  Uploads a mission: `MISSION_ITEM_INT` structs in order (their `seq` and
+  targets are filled in; for ArduPilot item 0 is home). See
+  `Dolphin.Vehicles.MissionProtocol`.
+  """
+  @spec upload_mission(byte(), [struct()], mission_opts()) :: :ok | {:error, Dolphin.MissionError.t()}
+  def upload_mission(sysid, items, opts \\ []), do: transfer(sysid, :upload, %{items: items}, opts)
+
+  @doc "Downloads a mission (or fence or rally list) as `MISSION_ITEM_INT` structs."
+  @spec download_mission(byte(), mission_opts()) :: {:ok, [struct()]} | {:error, Dolphin.MissionError.t()}
+  def download_mission(sysid, opts \\ []), do: transfer(sysid, :download, %{}, opts)
+
+  @doc "Clears the vehicle's mission (or fence or rally list)."
+  @spec clear_mission(byte(), mission_opts()) :: :ok | {:error, Dolphin.MissionError.t()}
+  def clear_mission(sysid, opts \\ []), do: transfer(sysid, :clear, %{}, opts)
+
+  defp transfer(sysid, operation, request, opts) do
+    type = Keyword.get(opts, :mission_type, :mission)
+    request = Map.merge(request, %{operation: operation, mission_type: type, progress_to: Keyword.get(opts, :progress_to)})
+    gone = %Dolphin.MissionError{operation: operation, vehicle: sysid, mission_type: type, result: :vehicle_gone}
+
+    case whereis(sysid) do
+      nil ->
+        {:error, %{gone | detail: "no such vehicle"}}
+
+      pid ->
+        try do
+          GenServer.call(pid, {:mission, request, opts}, :infinity)
+        catch
+          :exit, _ -> {:error, gone}
+        end
+    end
+  end
+
   @doc false
   # Called by links for every frame: cast it to its vehicle, discovering the
   # vehicle on its first HEARTBEAT from a vehicle component.

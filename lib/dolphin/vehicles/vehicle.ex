@@ -10,7 +10,7 @@ defmodule Dolphin.Vehicles.Vehicle do
   alias Dolphin.{Clock, PubSub}
   alias Dolphin.Link.UDP
   alias Dolphin.MAVLink.Ardupilotmega, as: M
-  alias Dolphin.Vehicles.{CommandProtocol, State}
+  alias Dolphin.Vehicles.{CommandProtocol, MissionProtocol, State}
 
   # Messages asked for by interval (µs of vehicle time) on top of the streams:
   # ArduPilot sends EXTENDED_SYS_STATE only when asked this way.
@@ -48,8 +48,10 @@ defmodule Dolphin.Vehicles.Vehicle do
        timeout_ms: timeout,
        lost: false,
        requests_left: @request_tries,
-       # command id => {protocol pid, caller}; command id => queue of {request, opts}
-       commands: %{},
+       # Operations under way: a command id, or :mission (one transfer at a
+       # time), => {protocol pid, caller}; and what waits for each: a queue of
+       # {module, request, opts}.
+       ops: %{},
        queued: %{}
      }}
   end
@@ -64,9 +66,7 @@ defmodule Dolphin.Vehicles.Vehicle do
       changes -> PubSub.publish({:vehicle, s.sysid}, {:state, s.sysid, changes})
     end
 
-    with %M.CommandAck{command: command} = ack <- frame.message,
-         {:ok, {pid, _from}} <- Map.fetch(s.commands, command),
-         do: send(pid, {:ack, ack})
+    route_to_op(s, frame.message)
 
     # Position telemetry flowing means the requests were heard.
     requests_left = if match?(%M.GlobalPositionInt{}, frame.message), do: 0, else: s.requests_left
@@ -83,18 +83,11 @@ defmodule Dolphin.Vehicles.Vehicle do
 
   def handle_call({:set_timeout, ms}, _from, s), do: {:reply, :ok, %{s | timeout_ms: ms}}
 
-  # One command of an id at a time (a COMMAND_ACK names only the command id);
-  # more of the same id wait their turn. The protocol replies to the caller.
-  def handle_call({:command, request, opts}, from, s) do
-    request = Map.merge(request, %{sysid: s.sysid, reply_to: from})
-
-    if Map.has_key?(s.commands, request.command) do
-      queue = Map.get(s.queued, request.command, :queue.new())
-      {:noreply, %{s | queued: Map.put(s.queued, request.command, :queue.in({request, opts}, queue))}}
-    else
-      {:noreply, start_command(s, request, opts)}
-    end
-  end
+  # One command of an id at a time (a COMMAND_ACK names only the command id),
+  # one mission transfer at a time; the rest wait their turn. The protocol
+  # replies to the caller.
+  def handle_call({:command, request, opts}, from, s), do: {:noreply, run_op(s, request.command, CommandProtocol, request, opts, from)}
+  def handle_call({:mission, request, opts}, from, s), do: {:noreply, run_op(s, :mission, MissionProtocol, request, opts, from)}
 
   @impl true
   def handle_info(:request_telemetry, %{requests_left: 0} = s), do: {:noreply, s}
@@ -106,12 +99,11 @@ defmodule Dolphin.Vehicles.Vehicle do
   end
 
   def handle_info({:EXIT, pid, reason}, s) do
-    case Enum.find(s.commands, fn {_command, {p, _from}} -> p == pid end) do
-      {command, {_pid, from}} ->
+    case Enum.find(s.ops, fn {_key, {p, _from}} -> p == pid end) do
+      {key, {_pid, from}} ->
         # A protocol that crashed did not answer its caller.
-        if reason != :normal, do: GenServer.reply(from, {:error, crashed(s, command, reason)})
-        s = %{s | commands: Map.delete(s.commands, command)}
-        {:noreply, next_command(s, command)}
+        if reason != :normal, do: GenServer.reply(from, {:error, crashed(s, key, reason)})
+        {:noreply, next_op(%{s | ops: Map.delete(s.ops, key)}, key)}
 
       nil ->
         {:noreply, s}
@@ -142,22 +134,46 @@ defmodule Dolphin.Vehicles.Vehicle do
 
   defp check_period(timeout_ms), do: max(div(timeout_ms, 10), 50)
 
-  defp start_command(s, request, opts) do
+  @mission_messages [M.MissionRequest, M.MissionRequestInt, M.MissionAck, M.MissionCount, M.MissionItemInt, M.MissionItem]
+
+  defp route_to_op(s, %M.CommandAck{command: command} = ack), do: notify_op(s, command, {:ack, ack})
+  defp route_to_op(s, %m{} = message) when m in @mission_messages, do: notify_op(s, :mission, {:mission, message})
+  defp route_to_op(_s, _message), do: :ok
+
+  defp notify_op(s, key, event) do
+    with {:ok, {pid, _from}} <- Map.fetch(s.ops, key), do: send(pid, event)
+  end
+
+  defp run_op(s, key, module, request, opts, from) do
+    request = Map.merge(request, %{sysid: s.sysid, reply_to: from})
+
+    if Map.has_key?(s.ops, key) do
+      queue = Map.get(s.queued, key, :queue.new())
+      %{s | queued: Map.put(s.queued, key, :queue.in({module, request, opts}, queue))}
+    else
+      start_op(s, key, module, request, opts)
+    end
+  end
+
+  defp start_op(s, key, module, request, opts) do
     link = s.link
     sysid = s.sysid
     request = Map.put(request, :send, fn message -> UDP.send_message(link, sysid, message) end)
-    {:ok, pid} = CommandProtocol.start_link(request, opts)
-    %{s | commands: Map.put(s.commands, request.command, {pid, request.reply_to})}
+    {:ok, pid} = module.start_link(request, opts)
+    %{s | ops: Map.put(s.ops, key, {pid, request.reply_to})}
   end
 
-  defp next_command(s, command) do
-    with {:ok, queue} <- Map.fetch(s.queued, command),
-         {{:value, {request, opts}}, rest} <- :queue.out(queue) do
-      start_command(%{s | queued: Map.put(s.queued, command, rest)}, request, opts)
+  defp next_op(s, key) do
+    with {:ok, queue} <- Map.fetch(s.queued, key),
+         {{:value, {module, request, opts}}, rest} <- :queue.out(queue) do
+      start_op(%{s | queued: Map.put(s.queued, key, rest)}, key, module, request, opts)
     else
-      _ -> %{s | queued: Map.delete(s.queued, command)}
+      _ -> %{s | queued: Map.delete(s.queued, key)}
     end
   end
+
+  defp crashed(s, :mission, reason),
+    do: %Dolphin.MissionError{operation: :upload, vehicle: s.sysid, mission_type: :mission, result: :error, detail: "protocol crashed: #{inspect(reason)}"}
 
   defp crashed(s, command, reason),
     do: %Dolphin.CommandError{command: command, vehicle: s.sysid, result: :failed, attempts: 0, detail: "protocol crashed: #{inspect(reason)}"}

@@ -1,0 +1,136 @@
+defmodule Dolphin.Vehicles.MissionProtocolTest do
+  # The ground station's mission protocol against a scripted ArduCopter-like
+  # vehicle (test/support/mission_vehicle.ex) over UDP on 127.0.0.1, clean and
+  # lossy. Changes the clock speed-up: not async.
+  use ExUnit.Case, async: false
+
+  import Dolphin.Property
+
+  alias :proper_types, as: T
+  alias Dolphin.{Clock, Link, MissionError, Vehicles}
+  alias Dolphin.Link.UDP
+  alias Dolphin.MAVLink.Ardupilotmega, as: M
+  alias Dolphin.Test.MissionVehicle
+
+  doctest Dolphin.MissionError
+
+  @speedup 50
+
+  setup do
+    name = "mission-#{System.unique_integer([:positive])}"
+    {:ok, link} = Link.connect("udpin:127.0.0.1:0", name: name)
+    Clock.set_speedup(@speedup)
+
+    on_exit(fn ->
+      Clock.set_speedup(1)
+      DynamicSupervisor.terminate_child(Dolphin.Link.Supervisor, link)
+    end)
+
+    %{port: UDP.port(name)}
+  end
+
+  defp vehicle(port, opts) do
+    sysid = 30 + rem(System.unique_integer([:positive]), 200)
+    {:ok, pid} = MissionVehicle.start_link([port: port, sysid: sysid, speedup: @speedup] ++ opts)
+    wait_for(fn -> Vehicles.whereis(sysid) end)
+
+    on_exit(fn ->
+      if v = Vehicles.whereis(sysid), do: DynamicSupervisor.terminate_child(Dolphin.Vehicles.Supervisor, v)
+    end)
+
+    {sysid, pid}
+  end
+
+  defp items(n) do
+    for i <- 0..(n - 1)//1 do
+      %M.MissionItemInt{frame: 6, command: 16, autocontinue: 1, param4: :nan, x: 411_780_000 + i * 100, y: -85_960_000 - i, z: 20.0 + i}
+    end
+  end
+
+  # What the vehicle holds, compared with what was uploaded.
+  defp same_mission?(held, uploaded) do
+    length(held) == length(uploaded) and
+      Enum.all?(Enum.zip(held, uploaded), fn {h, u} -> meaning(h) == meaning(u) end)
+  end
+
+  # An item without what only addresses it (targets, position in the list).
+  defp meaning(item), do: %{item | seq: 0, mission_type: 0, target_system: 0, target_component: 0}
+
+
+  test "upload, download and clear over a clean link, with progress", %{port: port} do
+    {sysid, vehicle} = vehicle(port, [])
+    mission = items(6)
+    assert :ok = Vehicles.upload_mission(sysid, mission, progress_to: self())
+    for i <- 1..6, do: assert_received({:mission_progress, :upload, ^i, 6})
+    assert same_mission?(MissionVehicle.mission(vehicle), mission)
+
+    assert {:ok, downloaded} = Vehicles.download_mission(sysid)
+    assert Enum.map(downloaded, & &1.seq) == Enum.to_list(0..5)
+    assert same_mission?(downloaded, mission)
+
+    assert :ok = Vehicles.clear_mission(sysid)
+    assert {:ok, []} = Vehicles.download_mission(sysid)
+  end
+
+  test "a refusal is a clear error; a second transfer waits for the first", %{port: port} do
+    {sysid, _vehicle} = vehicle(port, limit: 10)
+    assert {:error, %MissionError{result: :no_space} = e} = Vehicles.upload_mission(sysid, items(11))
+    assert Exception.message(e) == "vehicle #{sysid} refused the mission upload: MAV_MISSION_NO_SPACE"
+
+    t1 = Task.async(fn -> Vehicles.upload_mission(sysid, items(8)) end)
+    t2 = Task.async(fn -> Vehicles.download_mission(sysid) end)
+    assert :ok = Task.await(t1)
+    assert {:ok, got} = Task.await(t2)
+    assert length(got) == 8
+  end
+
+  test "a vehicle that stops answering: a timeout error within the time limit", %{port: port} do
+    {sysid, vehicle} = vehicle(port, [])
+    MissionVehicle.set_faults(vehicle, loss: 1.0)
+    assert {:error, %MissionError{result: :timeout, operation: :download}} = Vehicles.download_mission(sysid, attempts: 3)
+    assert {:error, %MissionError{result: :timeout, operation: :upload}} = Vehicles.upload_mission(sysid, items(3), attempts: 3)
+  end
+
+  # Random missions over a link that drops, duplicates and reorders frames both
+  # ways: the upload either leaves the vehicle with exactly that mission and
+  # says :ok, or says why not; it never says :ok for anything else.
+  @tag timeout: 300_000
+  test "lossy link: an accepted upload is exactly the mission, or a clear error", %{port: port} do
+    {sysid, vehicle} = vehicle(port, [])
+
+    check(
+      forall({T.integer(1, 120), T.integer(0, 40), T.integer(0, 20), T.integer(0, 20)}, fn {n, loss, dup, reorder} ->
+        MissionVehicle.set_faults(vehicle, loss: loss / 100, duplicate: dup / 100, reorder: reorder / 100)
+        mission = items(n)
+
+        case Vehicles.upload_mission(sysid, mission, attempts: 8) do
+          :ok ->
+            assert same_mission?(MissionVehicle.mission(vehicle), mission), "accepted, but the vehicle holds another mission"
+            if loss + dup + reorder > 0, do: Process.put(:faulty_ok, Process.get(:faulty_ok, 0) + 1)
+
+          {:error, %MissionError{result: result}} -> assert result in [:timeout, :operation_cancelled]
+        end
+
+        MissionVehicle.set_faults(vehicle, [])
+        true
+      end),
+      numtests: 25
+    )
+
+    # The property is not won by failing: uploads through faults do succeed.
+    assert Process.get(:faulty_ok, 0) > 0
+
+    # And on a clean link it always works.
+    MissionVehicle.set_faults(vehicle, [])
+    assert :ok = Vehicles.upload_mission(sysid, items(700))
+    assert length(MissionVehicle.mission(vehicle)) == 700
+  end
+
+  defp wait_for(fun, tries \\ 100) do
+    cond do
+      fun.() -> :ok
+      tries == 0 -> flunk("condition not met in time")
+      true -> Process.sleep(20) && wait_for(fun, tries - 1)
+    end
+  end
+end
