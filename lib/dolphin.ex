@@ -9,7 +9,7 @@ defmodule Dolphin do
   ├─ Dolphin.Registry            vehicles {:vehicle, sysid} and links {:link, name}
   ├─ Dolphin.PubSub              Registry with duplicate keys: state changes, fleet events
   ├─ Dolphin.Vehicles.Supervisor one Dolphin.Vehicles.Vehicle per discovered vehicle
-  └─ Dolphin.Link.Supervisor     one Dolphin.Link.UDP per endpoint (owns its socket)
+  └─ Dolphin.Link.Supervisor     one Dolphin.Link.Connection per endpoint (owns its socket)
   ```
 
   - `Dolphin.MAVLink` — the codec (pure).

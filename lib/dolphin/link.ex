@@ -6,26 +6,41 @@ defmodule Dolphin.Link do
 
       {:ok, _pid} = Dolphin.Link.connect("udpin:0.0.0.0:14550", tlog: "flight.tlog")
 
-  UDP endpoints (`udpin`, `udpout`) are served by `Dolphin.Link.UDP`.
+  Every kind of endpoint (`udpin`, `udpout`, `tcp`) is served by `Dolphin.Link.Connection`.
   """
 
   alias Dolphin.Link.Endpoint
 
-  @doc "Starts a link. Options as for `Dolphin.Link.UDP.start_link/1` (but `:endpoint`)."
+  @doc """
+  Starts a link. Options as for `Dolphin.Link.Connection.start_link/1` (but
+  `:endpoint`); `:forward` may be given as endpoint strings.
+  """
   @spec connect(String.t(), keyword()) :: {:ok, pid()} | {:error, String.t()}
   def connect(endpoint, opts \\ []) do
     with {:ok, %Endpoint{} = ep} <- Endpoint.parse(endpoint),
-         :ok <- supported(ep) do
-      case DynamicSupervisor.start_child(Dolphin.Link.Supervisor, {Dolphin.Link.UDP, [endpoint: ep] ++ opts}) do
+         {:ok, forward} <- parse_all(Keyword.get(opts, :forward, [])) do
+      opts = Keyword.put(opts, :forward, forward)
+
+      case DynamicSupervisor.start_child(Dolphin.Link.Supervisor, {Dolphin.Link.Connection, [endpoint: ep] ++ opts}) do
         {:ok, pid} -> {:ok, pid}
         {:error, {:already_started, _}} -> {:error, "#{endpoint}: already connected"}
-        {:error, {{:cannot_open, where, why}, _}} -> {:error, "#{where}: cannot open the socket: #{why}"}
-        {:error, {:cannot_open, where, why}} -> {:error, "#{where}: cannot open the socket: #{why}"}
+        {:error, {{:cannot_open, where, why}, _}} -> {:error, "#{where}: cannot open: #{why}"}
+        {:error, {:cannot_open, where, why}} -> {:error, "#{where}: cannot open: #{why}"}
         {:error, other} -> {:error, "#{endpoint}: #{inspect(other)}"}
       end
     end
   end
 
-  defp supported(%Endpoint{kind: :tcp} = ep), do: {:error, "#{Endpoint.to_string(ep)}: TCP links are not built yet"}
-  defp supported(_ep), do: :ok
+  defp parse_all(endpoints) do
+    Enum.reduce_while(endpoints, {:ok, []}, fn
+      %Endpoint{} = ep, {:ok, acc} ->
+        {:cont, {:ok, acc ++ [ep]}}
+
+      string, {:ok, acc} ->
+        case Endpoint.parse(string) do
+          {:ok, ep} -> {:cont, {:ok, acc ++ [ep]}}
+          error -> {:halt, error}
+        end
+    end)
+  end
 end

@@ -4,7 +4,7 @@ defmodule Dolphin.VehiclesTest do
   use ExUnit.Case, async: false
 
   alias Dolphin.{Clock, Link, Vehicles}
-  alias Dolphin.Link.UDP
+  alias Dolphin.Link.Connection
   alias Dolphin.MAVLink.{Frame, Tlog}
   alias Dolphin.MAVLink.Ardupilotmega, as: M
   alias Dolphin.Test.UDPPeer
@@ -15,7 +15,7 @@ defmodule Dolphin.VehiclesTest do
     name = "test-#{System.unique_integer([:positive])}"
     tlog = Path.join(dir, "link.tlog")
     {:ok, link} = Link.connect("udpin:127.0.0.1:0", name: name, tlog: tlog)
-    port = UDP.port(name)
+    port = Connection.port(name)
     peer = UDPPeer.open()
 
     on_exit(fn ->
@@ -114,10 +114,12 @@ defmodule Dolphin.VehiclesTest do
 
   test "connect reports bad endpoints and busy ports clearly", %{port: port} do
     assert {:error, "endpoint \"udpin:127.0.0.1\"" <> _} = Link.connect("udpin:127.0.0.1")
-    assert {:error, "tcp:127.0.0.1:5760: TCP links are not built yet"} = Link.connect("tcp:127.0.0.1:5760")
+    assert {:error, "endpoint \"serial:x:1\"" <> _} = Link.connect("udpin:127.0.0.1:0", name: "fwd", forward: ["serial:x:1"])
+    assert {:error, "udpin:127.0.0.1:0: cannot open: can only forward to udpout endpoints, not udpin:127.0.0.1:9"} =
+             Link.connect("udpin:127.0.0.1:0", name: "fwd", forward: ["udpin:127.0.0.1:9"])
     # The setup's link holds `port`.
     assert {:error, message} = Link.connect("udpin:127.0.0.1:#{port}", name: "busy")
-    assert message == "udpin:127.0.0.1:#{port}: cannot open the socket: address already in use"
+    assert message == "udpin:127.0.0.1:#{port}: cannot open: address already in use"
   end
 
   defp wait_for(fun, tries \\ 100) do

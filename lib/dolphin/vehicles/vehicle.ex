@@ -8,7 +8,7 @@ defmodule Dolphin.Vehicles.Vehicle do
   use GenServer, restart: :permanent
 
   alias Dolphin.{Clock, PubSub}
-  alias Dolphin.Link.UDP
+  alias Dolphin.Link.Connection
   alias Dolphin.MAVLink.Ardupilotmega, as: M
   alias Dolphin.Vehicles.{CommandProtocol, MissionProtocol, State}
 
@@ -74,7 +74,7 @@ defmodule Dolphin.Vehicles.Vehicle do
   end
 
   def handle_cast({:send, message}, s) do
-    UDP.send_message(s.link, s.sysid, message)
+    Connection.send_message(s.link, s.sysid, message)
     {:noreply, s}
   end
 
@@ -158,7 +158,7 @@ defmodule Dolphin.Vehicles.Vehicle do
   defp start_op(s, key, module, request, opts) do
     link = s.link
     sysid = s.sysid
-    request = Map.put(request, :send, fn message -> UDP.send_message(link, sysid, message) end)
+    request = Map.put(request, :send, fn message -> Connection.send_message(link, sysid, message) end)
     {:ok, pid} = module.start_link(request, opts)
     %{s | ops: Map.put(s.ops, key, {pid, request.reply_to})}
   end
@@ -180,10 +180,10 @@ defmodule Dolphin.Vehicles.Vehicle do
 
   defp request_telemetry(s) do
     # MAV_DATA_STREAM_ALL at 4 Hz, then the messages that matter at their own rates.
-    UDP.send_message(s.link, s.sysid, %M.RequestDataStream{target_system: s.sysid, target_component: 0, req_stream_id: 0, req_message_rate: 4, start_stop: 1})
+    Connection.send_message(s.link, s.sysid, %M.RequestDataStream{target_system: s.sysid, target_component: 0, req_stream_id: 0, req_message_rate: 4, start_stop: 1})
 
     for {msgid, interval_us} <- @intervals do
-      UDP.send_message(s.link, s.sysid, %M.CommandLong{target_system: s.sysid, target_component: 0, command: 511, param1: msgid * 1.0, param2: interval_us * 1.0})
+      Connection.send_message(s.link, s.sysid, %M.CommandLong{target_system: s.sysid, target_component: 0, command: 511, param1: msgid * 1.0, param2: interval_us * 1.0})
     end
   end
 end

@@ -4,7 +4,7 @@ defmodule Dolphin.Vehicles.CommandProtocolTest do
   use ExUnit.Case, async: false
 
   alias Dolphin.{Clock, CommandError, Link, Vehicles}
-  alias Dolphin.Link.UDP
+  alias Dolphin.Link.Connection
   alias Dolphin.MAVLink.Ardupilotmega, as: M
   alias Dolphin.Test.UDPPeer
 
@@ -13,7 +13,7 @@ defmodule Dolphin.Vehicles.CommandProtocolTest do
   setup do
     name = "cmd-#{System.unique_integer([:positive])}"
     {:ok, link} = Link.connect("udpin:127.0.0.1:0", name: name)
-    port = UDP.port(name)
+    port = Connection.port(name)
     peer = UDPPeer.open()
     sysid = 20 + rem(System.unique_integer([:positive]), 200)
     # ack timeouts of 1.5 s of clock time become 15 ms of real time.

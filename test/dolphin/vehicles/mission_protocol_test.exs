@@ -8,7 +8,7 @@ defmodule Dolphin.Vehicles.MissionProtocolTest do
 
   alias :proper_types, as: T
   alias Dolphin.{Clock, Link, MissionError, Vehicles}
-  alias Dolphin.Link.UDP
+  alias Dolphin.Link.Connection
   alias Dolphin.MAVLink.Ardupilotmega, as: M
   alias Dolphin.Test.MissionVehicle
 
@@ -26,7 +26,7 @@ defmodule Dolphin.Vehicles.MissionProtocolTest do
       DynamicSupervisor.terminate_child(Dolphin.Link.Supervisor, link)
     end)
 
-    %{port: UDP.port(name)}
+    %{port: Connection.port(name)}
   end
 
   defp vehicle(port, opts) do

@@ -1,0 +1,297 @@
+defmodule Dolphin.Link.Connection do
+  @moduledoc """
+  A link: the process that owns one socket — `udpin`, `udpout` or `tcp` (see
+  `Dolphin.Link.Endpoint`).
+
+  It decodes what it receives (a UDP datagram holds whole frames, several are
+  fine; a TCP stream splits frames anywhere) and hands each frame to
+  `Dolphin.Vehicles.route/2`, which casts it to the vehicle's process: the link
+  never waits on a vehicle. With `udpin` it remembers the source address of
+  every system id, so that each vehicle is answered where it sends from and
+  many vehicles share one port. A `tcp` link connects, and reconnects with
+  backoff (0.5 s doubling to 5 s) whenever the connection is lost.
+
+  It also sends the ground station's own HEARTBEAT (type GCS, autopilot
+  INVALID) every second of `Dolphin.Clock` time to every known peer; can record
+  every frame in and out to a `.tlog`; can forward all traffic, both ways, to
+  other endpoints (so QGroundControl can watch the fleet); and can sign what it
+  sends and check what it receives (MAVLink 2 signing).
+
+  Options of `start_link/1`:
+
+    * `:endpoint` — a `Dolphin.Link.Endpoint` (required);
+    * `:name` — the registry key (default: the endpoint string);
+    * `:gcs_sysid`, `:gcs_compid` — our identity (default 255, 190);
+    * `:tlog` — a path to append every frame to;
+    * `:forward` — endpoints (`udpout` ones) that get a copy of all traffic;
+    * `:signing` — `[key: KEY, link_id: N, require: boolean]`: outgoing frames
+      are signed; incoming signed frames are verified; with `require: true`
+      unsigned ones are dropped;
+    * `:router` — a 2-arity function given each frame and the link name
+      (default `Dolphin.Vehicles.route/2`).
+  """
+
+  use GenServer
+
+  require Logger
+
+  alias Dolphin.Clock
+  alias Dolphin.Link.Endpoint
+  alias Dolphin.MAVLink.{Frame, Parser, Signing, Tlog}
+  alias Dolphin.MAVLink.Ardupilotmega.Heartbeat
+
+  @heartbeat_ms 1_000
+  @backoff_min 500
+  @backoff_max 5_000
+
+  @doc false
+  def child_spec(opts) do
+    %{id: {__MODULE__, name(opts)}, start: {__MODULE__, :start_link, [opts]}, restart: :permanent}
+  end
+
+  @doc "Starts a link; see the module doc for options."
+  @spec start_link(keyword()) :: GenServer.on_start()
+  def start_link(opts), do: GenServer.start_link(__MODULE__, opts, name: via(name(opts)))
+
+  @doc "Sends a message to system `sysid` (0: every known peer) through the link named `name`."
+  @spec send_message(term(), byte(), struct()) :: :ok
+  def send_message(name, sysid, message), do: GenServer.cast(via(name), {:send, sysid, message})
+
+  @doc "The local port of the link's socket (useful with port 0)."
+  @spec port(term()) :: :inet.port_number()
+  def port(name), do: GenServer.call(via(name), :port)
+
+  @doc "Decoding counters of the link (`Dolphin.MAVLink.Parser.Stats`), known peers, whether connected."
+  @spec info(term()) :: map()
+  def info(name), do: GenServer.call(via(name), :info)
+
+  defp name(opts), do: Keyword.get_lazy(opts, :name, fn -> Endpoint.to_string(Keyword.fetch!(opts, :endpoint)) end)
+  defp via(name), do: {:via, Registry, {Dolphin.Registry, {:link, name}}}
+
+  @impl true
+  def init(opts) do
+    %Endpoint{} = endpoint = Keyword.fetch!(opts, :endpoint)
+    # Trapping exits makes a supervisor's shutdown run terminate/2, which
+    # flushes the tlog; a crash loses at most its last 200 ms.
+    Process.flag(:trap_exit, true)
+
+    with {:ok, socket} <- open(endpoint),
+         {:ok, forward} <- open_forward(Keyword.get(opts, :forward, [])) do
+      tlog = with path when is_binary(path) <- opts[:tlog], do: File.open!(path, [:append, :binary, :raw, {:delayed_write, 65_536, 200}])
+      if endpoint.kind == :tcp, do: send(self(), :connect)
+      send(self(), :heartbeat)
+
+      {:ok,
+       %{
+         name: name(opts),
+         endpoint: endpoint,
+         socket: socket,
+         backoff: @backoff_min,
+         peers: %{},
+         seq: 0,
+         gcs: {Keyword.get(opts, :gcs_sysid, 255), Keyword.get(opts, :gcs_compid, 190)},
+         router: Keyword.get(opts, :router, &Dolphin.Vehicles.route/2),
+         stats: Parser.stats(Parser.new()),
+         stream: nil,
+         signing: signing(opts[:signing]),
+         forward: forward,
+         tlog: tlog
+       }}
+    else
+      {:error, reason} -> {:stop, {:cannot_open, Endpoint.to_string(endpoint), reason}}
+    end
+  end
+
+  defp open(%Endpoint{kind: :tcp}), do: {:ok, nil}
+
+  defp open(%Endpoint{kind: kind, address: address, port: port}) do
+    {port, ip} = if kind == :udpin, do: {port, [ip: address]}, else: {0, []}
+    family = if tuple_size(address) == 8, do: [:inet6], else: []
+
+    case :gen_udp.open(port, [:binary, active: 100] ++ ip ++ family) do
+      {:ok, socket} -> {:ok, socket}
+      {:error, reason} -> {:error, :inet.format_error(reason) |> List.to_string()}
+    end
+  end
+
+  defp open_forward([]), do: {:ok, nil}
+
+  defp open_forward(endpoints) do
+    case Enum.reject(endpoints, &match?(%Endpoint{kind: :udpout}, &1)) do
+      [] ->
+        {:ok, socket} = :gen_udp.open(0, [:binary, active: false])
+        {:ok, {socket, Enum.map(endpoints, &{&1.address, &1.port})}}
+
+      [other | _] ->
+        {:error, "can only forward to udpout endpoints, not #{Endpoint.to_string(other)}"}
+    end
+  end
+
+  defp signing(nil), do: nil
+
+  defp signing(opts) do
+    unsigned = if Keyword.get(opts, :require, false), do: :reject, else: :accept
+    Signing.new(key: Keyword.fetch!(opts, :key), link_id: Keyword.get(opts, :link_id, 0), unsigned: unsigned)
+  end
+
+  @impl true
+  def handle_info({:udp, socket, ip, port, datagram}, %{socket: socket} = state) do
+    forward(state, datagram)
+    # A datagram is whole frames: decode it on its own, then end it.
+    {frames, parser} = Parser.feed(Parser.new(signing: state.signing), datagram)
+    {last, parser} = Parser.finish(parser)
+    state = %{state | stats: add_stats(state.stats, Parser.stats(parser)), signing: parser.signing}
+    {:noreply, deliver(state, frames ++ last, {ip, port})}
+  end
+
+  def handle_info({:udp_passive, socket}, %{socket: socket} = state) do
+    :ok = :inet.setopts(socket, active: 100)
+    {:noreply, state}
+  end
+
+  def handle_info({:tcp, socket, data}, %{socket: socket} = state) do
+    forward(state, data)
+    # A stream: the parser keeps what a frame split across reads left over.
+    before = Parser.stats(state.stream)
+    {frames, parser} = Parser.feed(state.stream, data)
+    state = %{state | stream: parser, stats: add_stats(state.stats, diff_stats(Parser.stats(parser), before)), signing: parser.signing}
+    {:noreply, deliver(state, frames, :tcp)}
+  end
+
+  def handle_info({:tcp_passive, socket}, %{socket: socket} = state) do
+    :ok = :inet.setopts(socket, active: 100)
+    {:noreply, state}
+  end
+
+  def handle_info({closed, socket}, %{socket: socket} = state) when closed in [:tcp_closed, :tcp_error] do
+    Logger.warning("link #{state.name}: connection closed; reconnecting")
+    {:noreply, reconnect(%{state | socket: nil})}
+  end
+
+  def handle_info({:tcp_error, socket, reason}, %{socket: socket} = state) do
+    Logger.warning("link #{state.name}: #{:inet.format_error(reason)}; reconnecting")
+    :gen_tcp.close(socket)
+    {:noreply, reconnect(%{state | socket: nil})}
+  end
+
+  def handle_info(:connect, %{endpoint: ep} = state) do
+    case :gen_tcp.connect(ep.address, ep.port, [:binary, active: 100, nodelay: true], 2_000) do
+      {:ok, socket} ->
+        Logger.info("link #{state.name}: connected")
+        {:noreply, %{state | socket: socket, backoff: @backoff_min, stream: Parser.new(signing: state.signing)}}
+
+      {:error, reason} ->
+        Logger.debug("link #{state.name}: cannot connect: #{:inet.format_error(reason)}")
+        {:noreply, reconnect(state)}
+    end
+  end
+
+  def handle_info(:heartbeat, state) do
+    Clock.send_after(self(), :heartbeat, @heartbeat_ms)
+    heartbeat = %Heartbeat{type: 6, autopilot: 8, base_mode: 0, custom_mode: 0, system_status: 4}
+    {:noreply, transmit(state, 0, heartbeat)}
+  end
+
+  # Exits of linked sockets (a closed TCP connection) are handled above by
+  # their own messages; the parent's exit is handled by GenServer itself.
+  def handle_info({:EXIT, _port, _reason}, state), do: {:noreply, state}
+  def handle_info(_other, state), do: {:noreply, state}
+
+  @impl true
+  def handle_cast({:send, sysid, message}, state), do: {:noreply, transmit(state, sysid, message)}
+
+  @impl true
+  def handle_call(:port, _from, %{socket: nil} = state), do: {:reply, nil, state}
+
+  def handle_call(:port, _from, state) do
+    {:ok, port} = :inet.port(state.socket)
+    {:reply, port, state}
+  end
+
+  def handle_call(:info, _from, state),
+    do: {:reply, %{stats: state.stats, peers: state.peers, connected: state.socket != nil}, state}
+
+  @impl true
+  def terminate(_reason, %{tlog: tlog}) when tlog != nil, do: File.close(tlog)
+  def terminate(_reason, _state), do: :ok
+
+  # Reconnection is in real time, not clock time: it is about the network.
+  defp reconnect(state) do
+    Process.send_after(self(), :connect, state.backoff)
+    %{state | backoff: min(state.backoff * 2, @backoff_max)}
+  end
+
+  defp deliver(state, frames, from) do
+    Enum.reduce(frames, state, fn frame, state ->
+      record(state, frame.raw)
+      state.router.(frame, state.name)
+      if from == :tcp, do: state, else: %{state | peers: Map.put(state.peers, frame.sysid, from)}
+    end)
+  end
+
+  defp transmit(state, sysid, message) do
+    {gcs_sysid, gcs_compid} = state.gcs
+    header = [sysid: gcs_sysid, compid: gcs_compid, seq: state.seq]
+
+    {bytes, state} =
+      case state.signing do
+        nil ->
+          {Frame.encode(message, header), state}
+
+        signing ->
+          {bytes, signing} = Signing.encode(signing, message, header)
+          {bytes, %{state | signing: signing}}
+      end
+
+    deliver_out(state, sysid, bytes)
+    forward(state, bytes)
+    record(state, bytes)
+    %{state | seq: rem(state.seq + 1, 256)}
+  end
+
+  defp deliver_out(%{endpoint: %{kind: :tcp}, socket: nil}, _sysid, _bytes), do: :ok
+
+  defp deliver_out(%{endpoint: %{kind: :tcp}, socket: socket} = state, _sysid, bytes) do
+    case :gen_tcp.send(socket, bytes) do
+      :ok -> :ok
+      {:error, reason} -> Logger.debug("link #{state.name}: send failed: #{inspect(reason)}")
+    end
+  end
+
+  defp deliver_out(state, sysid, bytes) do
+    for address <- destinations(state, sysid) do
+      case :gen_udp.send(state.socket, address, bytes) do
+        :ok -> :ok
+        {:error, reason} -> Logger.warning("link #{state.name}: cannot send to #{inspect(address)}: #{:inet.format_error(reason)}")
+      end
+    end
+
+    :ok
+  end
+
+  defp destinations(%{endpoint: %{kind: :udpout} = ep}, _sysid), do: [{ep.address, ep.port}]
+  defp destinations(%{peers: peers}, 0), do: peers |> Map.values() |> Enum.uniq()
+
+  defp destinations(%{peers: peers}, sysid) do
+    case Map.fetch(peers, sysid) do
+      {:ok, address} -> [address]
+      :error -> []
+    end
+  end
+
+  defp forward(%{forward: nil}, _bytes), do: :ok
+  defp forward(%{forward: {socket, targets}}, bytes), do: Enum.each(targets, fn {ip, port} -> :gen_udp.send(socket, ip, port, bytes) end)
+
+  defp record(%{tlog: nil}, _bytes), do: :ok
+  defp record(%{tlog: io}, bytes), do: IO.binwrite(io, Tlog.record(System.os_time(:microsecond), bytes))
+
+  defp add_stats(total, more), do: merge_stats(total, more, &+/2)
+  defp diff_stats(now, before), do: merge_stats(now, before, &-/2)
+
+  defp merge_stats(a, b, op) do
+    Map.merge(a, b, fn
+      :__struct__, v, _ -> v
+      _key, x, y -> op.(x, y)
+    end)
+  end
+end

@@ -1,0 +1,88 @@
+defmodule Dolphin.Link.ConnectionTest do
+  # Real sockets on 127.0.0.1: a TCP "vehicle" server, a QGroundControl stand-in
+  # for forwarding, a signing peer. Shares the vehicle registry: not async.
+  use ExUnit.Case, async: false
+
+  alias Dolphin.{Link, Vehicles}
+  alias Dolphin.Link.Connection
+  alias Dolphin.MAVLink.{Frame, Parser, Signing}
+  alias Dolphin.MAVLink.Ardupilotmega, as: M
+  alias Dolphin.Test.UDPPeer
+
+  defp copter, do: %M.Heartbeat{type: 2, autopilot: 3, custom_mode: 4, base_mode: 0x81}
+
+  defp cleanup(link, sysids) do
+    on_exit(fn ->
+      DynamicSupervisor.terminate_child(Dolphin.Link.Supervisor, link)
+      for s <- sysids, pid = Vehicles.whereis(s), pid != nil, do: DynamicSupervisor.terminate_child(Dolphin.Vehicles.Supervisor, pid)
+    end)
+  end
+
+  test "tcp: frames split anywhere are reassembled, and the link reconnects when the server drops it" do
+    {:ok, listen} = :gen_tcp.listen(0, [:binary, active: false, ip: {127, 0, 0, 1}, reuseaddr: true])
+    {:ok, port} = :inet.port(listen)
+    {:ok, link} = Link.connect("tcp:127.0.0.1:#{port}", name: "tcp-test")
+    cleanup(link, [41])
+
+    {:ok, conn} = :gen_tcp.accept(listen, 2_000)
+    bytes = Frame.encode(copter(), sysid: 41, compid: 1) <> Frame.encode(%M.SysStatus{battery_remaining: 66}, sysid: 41, compid: 1, seq: 1)
+    # Three writes that cut both frames in the middle.
+    for part <- [binary_part(bytes, 0, 7), binary_part(bytes, 7, 20), binary_part(bytes, 27, byte_size(bytes) - 27)] do
+      :ok = :gen_tcp.send(conn, part)
+      Process.sleep(5)
+    end
+
+    wait_for(fn -> match?({:ok, %{battery: 0.66, mode: :guided}}, Vehicles.state(41)) end)
+    # The ground station answers over the same connection (its heartbeat, telemetry requests).
+    assert {:ok, data} = :gen_tcp.recv(conn, 0, 3_000)
+    {frames, _} = Parser.feed(Parser.new(), data)
+    assert Enum.any?(frames, &(&1.sysid == 255))
+
+    :gen_tcp.close(conn)
+    # Backoff starts at 0.5 s: the link is back within a few seconds.
+    {:ok, conn2} = :gen_tcp.accept(listen, 5_000)
+    assert Connection.info("tcp-test").connected
+    :gen_tcp.close(conn2)
+    :gen_tcp.close(listen)
+  end
+
+  test "forwarding: a watcher gets all traffic, both ways" do
+    watcher = UDPPeer.open()
+    {:ok, watcher_port} = :inet.port(watcher)
+    {:ok, link} = Link.connect("udpin:127.0.0.1:0", name: "fwd-test", forward: ["udpout:127.0.0.1:#{watcher_port}"])
+    cleanup(link, [42])
+    peer = UDPPeer.open()
+    UDPPeer.send_message(peer, Connection.port("fwd-test"), copter(), sysid: 42)
+
+    assert %Frame{sysid: 42} = UDPPeer.receive_until(watcher, &(&1.sysid == 42))
+    assert %Frame{sysid: 255} = UDPPeer.receive_until(watcher, &(&1.sysid == 255))
+  end
+
+  test "signing: with require, unsigned frames are dropped; what the link sends is signed" do
+    key = :crypto.hash(:sha256, "fleet key")
+    {:ok, link} = Link.connect("udpin:127.0.0.1:0", name: "sign-test", signing: [key: key, link_id: 7, require: true])
+    cleanup(link, [43, 44])
+    port = Connection.port("sign-test")
+    peer = UDPPeer.open()
+
+    UDPPeer.send_message(peer, port, copter(), sysid: 43)
+    wait_for(fn -> Connection.info("sign-test").stats.unsigned == 1 end)
+    assert Vehicles.whereis(43) == nil
+
+    {bytes, _} = Signing.encode(Signing.new(key: key, link_id: 3), copter(), sysid: 44, compid: 1)
+    :ok = :gen_udp.send(peer, {127, 0, 0, 1}, port, bytes)
+    wait_for(fn -> Vehicles.whereis(44) end)
+
+    heartbeat = UDPPeer.receive_until(peer, &match?(%M.Heartbeat{type: 6}, &1.message))
+    assert %{link_id: 7} = heartbeat.signature
+    assert {:ok, _} = Signing.verify(Signing.new(key: key), heartbeat)
+  end
+
+  defp wait_for(fun, tries \\ 150) do
+    cond do
+      fun.() -> :ok
+      tries == 0 -> flunk("condition not met in time")
+      true -> Process.sleep(20) && wait_for(fun, tries - 1)
+    end
+  end
+end
