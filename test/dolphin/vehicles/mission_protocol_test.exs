@@ -77,10 +77,15 @@ defmodule Dolphin.Vehicles.MissionProtocolTest do
     assert {:error, %MissionError{result: :no_space} = e} = Vehicles.upload_mission(sysid, items(11))
     assert Exception.message(e) == "vehicle #{sysid} refused the mission upload: MAV_MISSION_NO_SPACE"
 
-    t1 = Task.async(fn -> Vehicles.upload_mission(sysid, items(8)) end)
-    t2 = Task.async(fn -> Vehicles.download_mission(sysid) end)
-    assert :ok = Task.await(t1)
-    assert {:ok, got} = Task.await(t2)
+    # Both requests from this process, so the vehicle gets them in this order
+    # (what Vehicles.upload_mission/3 and download_mission/2 send): the
+    # download must wait for the upload to end.
+    pid = Vehicles.whereis(sysid)
+    upload = %{operation: :upload, items: items(8), mission_type: :mission, progress_to: nil}
+    r1 = :gen_server.send_request(pid, {:mission, upload, []})
+    r2 = :gen_server.send_request(pid, {:mission, %{operation: :download, mission_type: :mission, progress_to: nil}, []})
+    assert {:reply, :ok} = :gen_server.wait_response(r1, 5_000)
+    assert {:reply, {:ok, got}} = :gen_server.wait_response(r2, 5_000)
     assert length(got) == 8
   end
 
