@@ -18,6 +18,7 @@ run: bootstrap
 
 bench: bootstrap
 	MIX_ENV=prod ERL_FLAGS="+S 1:1" mix bench
+	MIX_ENV=prod mix run bench/mission_upload.exs
 
 dialyzer: bootstrap
 	scripts/dialyzer

@@ -108,7 +108,9 @@ defmodule Dolphin.Link.Connection do
     {port, ip} = if kind == :udpin, do: {port, [ip: address]}, else: {0, []}
     family = if tuple_size(address) == 8, do: [:inet6], else: []
 
-    case :gen_udp.open(port, [:binary, active: 100] ++ ip ++ family) do
+    # A fleet's telemetry comes in bursts; a small kernel buffer drops them
+    # before we read (the kernel caps this at net.core.rmem_max).
+    case :gen_udp.open(port, [:binary, active: 100, recbuf: 4 * 1024 * 1024] ++ ip ++ family) do
       {:ok, socket} -> {:ok, socket}
       {:error, reason} -> {:error, :inet.format_error(reason) |> List.to_string()}
     end
