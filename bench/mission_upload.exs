@@ -1,7 +1,7 @@
 # The ground station's mission upload and telemetry intake over loopback.
 #
 #   1. Upload time of a 100-item and a 700-item mission to a scripted
-#      ArduCopter-like vehicle (test/support/mission_vehicle.ex: items asked
+#      ArduCopter-like vehicle (test/support/scripted_vehicle.ex: items asked
 #      for one by one with MISSION_REQUEST), at 0 % and 20 % loss each way.
 #      Lossy runs use Dolphin.Clock speed-up 10 (the vehicle's timers too):
 #      retries wait for timeouts, which the speed-up shortens; the clock time
@@ -13,12 +13,12 @@
 #      ground station's own.
 #
 #   make bench        (or: mix run bench/mission_upload.exs)
-Code.require_file("../test/support/mission_vehicle.ex", __DIR__)
+Code.require_file("../test/support/scripted_vehicle.ex", __DIR__)
 
 alias Dolphin.{Clock, Link, Vehicles}
 alias Dolphin.Link.Connection
 alias Dolphin.MAVLink.Ardupilotmega, as: M
-alias Dolphin.Test.MissionVehicle
+alias Dolphin.Test.ScriptedVehicle
 
 items = fn n ->
   for i <- 0..(n - 1), do: %M.MissionItemInt{frame: 6, command: 16, autocontinue: 1, x: 411_780_000 + i, y: -85_960_000, z: 20.0}
@@ -32,7 +32,7 @@ IO.puts("mission upload over loopback (#{System.schedulers_online()} schedulers,
 for {loss, speedup} <- [{0.0, 1}, {0.2, 10}], n <- [100, 700] do
   Clock.set_speedup(speedup)
   sysid = if loss == 0.0, do: 100 + div(n, 100), else: 120 + div(n, 100)
-  {:ok, vehicle} = MissionVehicle.start_link(port: port, sysid: sysid, speedup: speedup, loss: loss, seed: n)
+  {:ok, vehicle} = ScriptedVehicle.start_link(port: port, sysid: sysid, speedup: speedup, loss: loss, seed: n)
   Enum.find_value(1..200, fn _ -> Vehicles.whereis(sysid) || (Process.sleep(20) && nil) end)
 
   runs =

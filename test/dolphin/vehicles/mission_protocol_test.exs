@@ -1,6 +1,6 @@
 defmodule Dolphin.Vehicles.MissionProtocolTest do
   # The ground station's mission protocol against a scripted ArduCopter-like
-  # vehicle (test/support/mission_vehicle.ex) over UDP on 127.0.0.1, clean and
+  # vehicle (test/support/scripted_vehicle.ex) over UDP on 127.0.0.1, clean and
   # lossy. Changes the clock speed-up: not async.
   use ExUnit.Case, async: false
 
@@ -10,7 +10,7 @@ defmodule Dolphin.Vehicles.MissionProtocolTest do
   alias Dolphin.{Clock, Link, MissionError, Vehicles}
   alias Dolphin.Link.Connection
   alias Dolphin.MAVLink.Ardupilotmega, as: M
-  alias Dolphin.Test.MissionVehicle
+  alias Dolphin.Test.ScriptedVehicle
 
   doctest Dolphin.MissionError
 
@@ -31,7 +31,7 @@ defmodule Dolphin.Vehicles.MissionProtocolTest do
 
   defp vehicle(port, opts) do
     sysid = 30 + rem(System.unique_integer([:positive]), 200)
-    {:ok, pid} = MissionVehicle.start_link([port: port, sysid: sysid, speedup: @speedup] ++ opts)
+    {:ok, pid} = ScriptedVehicle.start_link([port: port, sysid: sysid, speedup: @speedup] ++ opts)
     wait_for(fn -> Vehicles.whereis(sysid) end)
 
     on_exit(fn ->
@@ -62,7 +62,7 @@ defmodule Dolphin.Vehicles.MissionProtocolTest do
     mission = items(6)
     assert :ok = Vehicles.upload_mission(sysid, mission, progress_to: self())
     for i <- 1..6, do: assert_received({:mission_progress, :upload, ^i, 6})
-    assert same_mission?(MissionVehicle.mission(vehicle), mission)
+    assert same_mission?(ScriptedVehicle.mission(vehicle), mission)
 
     assert {:ok, downloaded} = Vehicles.download_mission(sysid)
     assert Enum.map(downloaded, & &1.seq) == Enum.to_list(0..5)
@@ -91,7 +91,7 @@ defmodule Dolphin.Vehicles.MissionProtocolTest do
 
   test "a vehicle that stops answering: a timeout error within the time limit", %{port: port} do
     {sysid, vehicle} = vehicle(port, [])
-    MissionVehicle.set_faults(vehicle, loss: 1.0)
+    ScriptedVehicle.set_faults(vehicle, loss: 1.0)
     assert {:error, %MissionError{result: :timeout, operation: :download}} = Vehicles.download_mission(sysid, attempts: 3)
     assert {:error, %MissionError{result: :timeout, operation: :upload}} = Vehicles.upload_mission(sysid, items(3), attempts: 3)
   end
@@ -105,18 +105,18 @@ defmodule Dolphin.Vehicles.MissionProtocolTest do
 
     check(
       forall({T.integer(1, 120), T.integer(0, 40), T.integer(0, 20), T.integer(0, 20)}, fn {n, loss, dup, reorder} ->
-        MissionVehicle.set_faults(vehicle, loss: loss / 100, duplicate: dup / 100, reorder: reorder / 100)
+        ScriptedVehicle.set_faults(vehicle, loss: loss / 100, duplicate: dup / 100, reorder: reorder / 100)
         mission = items(n)
 
         case Vehicles.upload_mission(sysid, mission, attempts: 8) do
           :ok ->
-            assert same_mission?(MissionVehicle.mission(vehicle), mission), "accepted, but the vehicle holds another mission"
+            assert same_mission?(ScriptedVehicle.mission(vehicle), mission), "accepted, but the vehicle holds another mission"
             if loss + dup + reorder > 0, do: Process.put(:faulty_ok, Process.get(:faulty_ok, 0) + 1)
 
           {:error, %MissionError{result: result}} -> assert result in [:timeout, :operation_cancelled]
         end
 
-        MissionVehicle.set_faults(vehicle, [])
+        ScriptedVehicle.set_faults(vehicle, [])
         true
       end),
       numtests: 25
@@ -126,9 +126,9 @@ defmodule Dolphin.Vehicles.MissionProtocolTest do
     assert Process.get(:faulty_ok, 0) > 0
 
     # And on a clean link it always works.
-    MissionVehicle.set_faults(vehicle, [])
+    ScriptedVehicle.set_faults(vehicle, [])
     assert :ok = Vehicles.upload_mission(sysid, items(700))
-    assert length(MissionVehicle.mission(vehicle)) == 700
+    assert length(ScriptedVehicle.mission(vehicle)) == 700
   end
 
   defp wait_for(fun, tries \\ 100) do

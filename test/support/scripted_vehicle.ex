@@ -1,7 +1,9 @@
-defmodule Dolphin.Test.MissionVehicle do
+defmodule Dolphin.Test.ScriptedVehicle do
   @moduledoc """
-  A scripted vehicle for tests: the vehicle side of the MAVLink mission
-  protocol as ArduCopter plays it (items asked for with MISSION_REQUEST,
+  A scripted vehicle for tests and benchmarks. It answers COMMAND_LONG
+  (accepting a command whose param1 is even, denying one whose param1 is odd,
+  and recording every command it receives), and plays the vehicle side of the
+  MAVLink mission protocol as ArduCopter does (items asked for with MISSION_REQUEST,
   INVALID_SEQUENCE for an unexpected item while it goes on asking, a re-request
   every second of silence and OPERATION_CANCELLED after 8, NO_SPACE over a
   limit), over UDP on 127.0.0.1, behind a link that can drop, duplicate and
@@ -22,6 +24,9 @@ defmodule Dolphin.Test.MissionVehicle do
   @doc "The items the vehicle holds now."
   def mission(pid), do: GenServer.call(pid, :mission)
 
+  @doc "The commands received so far, oldest first, as `{command, param1}` (repeats included)."
+  def commands(pid), do: GenServer.call(pid, :commands)
+
   @doc "Changes the link's faults."
   def set_faults(pid, faults), do: GenServer.call(pid, {:faults, faults})
 
@@ -38,6 +43,7 @@ defmodule Dolphin.Test.MissionVehicle do
       faults: Map.new(Keyword.take(opts, [:loss, :duplicate, :reorder])),
       speedup: Keyword.get(opts, :speedup, 1),
       mission: [],
+      commands: [],
       upload: nil,
       held: nil,
       seq: 0
@@ -49,6 +55,7 @@ defmodule Dolphin.Test.MissionVehicle do
 
   @impl true
   def handle_call(:mission, _from, s), do: {:reply, s.mission, s}
+  def handle_call(:commands, _from, s), do: {:reply, Enum.reverse(s.commands), s}
   def handle_call({:faults, faults}, _from, s), do: {:reply, :ok, %{s | faults: Map.new(faults)}}
 
   @impl true
@@ -119,6 +126,12 @@ defmodule Dolphin.Test.MissionVehicle do
       true ->
         request_next(%{s | upload: %{up | items: [normalise(item) | up.items], tries: 0}})
     end
+  end
+
+  defp handle_frame(%M.CommandLong{command: command, param1: p1}, s) do
+    result = if rem(trunc(p1), 2) == 0, do: 0, else: 2
+    s = %{s | commands: [{command, p1} | s.commands]}
+    transmit(s, %M.CommandAck{command: command, result: result, target_system: 255, target_component: 190})
   end
 
   defp handle_frame(%M.MissionRequestList{mission_type: 0}, s),

@@ -1,0 +1,74 @@
+defmodule Dolphin.Vehicles.CommandLossyTest do
+  # Commands to a scripted vehicle (test/support/scripted_vehicle.ex) over a
+  # link that drops, duplicates and reorders frames both ways. Changes the
+  # clock speed-up: not async.
+  use ExUnit.Case, async: false
+
+  import Dolphin.Property
+
+  alias :proper_types, as: T
+  alias Dolphin.{Clock, CommandError, Link, Vehicles}
+  alias Dolphin.Link.Connection
+  alias Dolphin.Test.ScriptedVehicle
+
+  @speedup 50
+  # Commands the scripted vehicle answers; ids alternate (see below).
+  @commands [183, 184, 185, 186, 187, 188]
+
+  setup do
+    {:ok, link} = Link.connect("udpin:127.0.0.1:0", name: "cmd-lossy")
+    Clock.set_speedup(@speedup)
+    sysid = 230
+    {:ok, vehicle} = ScriptedVehicle.start_link(port: Connection.port("cmd-lossy"), sysid: sysid, speedup: @speedup, seed: 7)
+
+    on_exit(fn ->
+      Clock.set_speedup(1)
+      DynamicSupervisor.terminate_child(Dolphin.Link.Supervisor, link)
+      if pid = Vehicles.whereis(sysid), do: DynamicSupervisor.terminate_child(Dolphin.Vehicles.Supervisor, pid)
+    end)
+
+    Enum.find_value(1..200, fn _ -> Vehicles.whereis(sysid) || (Process.sleep(20) && nil) end)
+    %{vehicle: vehicle, sysid: sysid}
+  end
+
+  # Either the vehicle accepted the command and the caller hears :ok, or it
+  # refused it and the caller hears so, or the caller hears that nothing came
+  # back; never :ok for a refused or unseen command.
+  #
+  # COMMAND_ACK carries no sequence number: a late duplicate of the ack of an
+  # earlier command with the same id cannot be told from the answer to a new
+  # one (a limit of the protocol, for every ground station). So consecutive
+  # commands here never share an id.
+  @tag timeout: 120_000
+  test "a lossy link never turns a refused or lost command into success", %{vehicle: vehicle, sysid: sysid} do
+    check(
+      forall({T.integer(0, 40), T.integer(0, 20), T.integer(0, 20), T.non_empty(T.list({T.integer(0, 5), T.integer(0, 9)}))}, fn {loss, dup, reorder, plan} ->
+        ScriptedVehicle.set_faults(vehicle, loss: loss / 100, duplicate: dup / 100, reorder: reorder / 100)
+        # Consecutive commands with different ids.
+        plan = Enum.with_index(plan, fn {i, p1}, n -> {Enum.at(@commands, rem(i + n, 2) + 2 * rem(n, 3)), p1} end)
+
+        for {command, p1} <- plan do
+          before = length(ScriptedVehicle.commands(vehicle))
+
+          case Vehicles.command(sysid, command, [p1], attempts: 6) do
+            {:ok, :accepted} ->
+              assert rem(p1, 2) == 0, "command #{command} with param1 #{p1} was refused, yet reported accepted"
+              assert Enum.drop(ScriptedVehicle.commands(vehicle), before) |> Enum.any?(&(&1 == {command, p1 * 1.0}))
+
+            {:error, %CommandError{result: :denied}} ->
+              assert rem(p1, 2) == 1
+
+            {:error, %CommandError{result: :timeout}} ->
+              assert loss > 0
+          end
+        end
+
+        ScriptedVehicle.set_faults(vehicle, [])
+        # Let late duplicates of this run's acks drain before the next run.
+        Process.sleep(30)
+        true
+      end),
+      numtests: 40
+    )
+  end
+end
