@@ -11,7 +11,10 @@ defmodule Dolphin.Application do
       Dolphin.PubSub,
       # Vehicles before links: a link routes frames to vehicles from its first datagram.
       {DynamicSupervisor, name: Dolphin.Vehicles.Supervisor, strategy: :one_for_one},
-      {DynamicSupervisor, name: Dolphin.Link.Supervisor, strategy: :one_for_one}
+      {DynamicSupervisor, name: Dolphin.Link.Supervisor, strategy: :one_for_one},
+      # The configured links, once the tree they live in is up; a bad endpoint
+      # in the configuration stops the start with the reason.
+      %{id: :configured_links, start: {Task, :start_link, [&Dolphin.Link.connect_configured/0]}, restart: :temporary}
     ]
 
     # one_for_one: a crashed link or vehicle supervisor is restarted alone; the

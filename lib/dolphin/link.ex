@@ -7,9 +7,42 @@ defmodule Dolphin.Link do
       {:ok, _pid} = Dolphin.Link.connect("udpin:0.0.0.0:14550", tlog: "flight.tlog")
 
   Every kind of endpoint (`udpin`, `udpout`, `tcp`) is served by `Dolphin.Link.Connection`.
+
+  Links can also come from the configuration, connected when the application
+  starts (several at once), with their options:
+
+      config :dolphin,
+        links: ["udpin:0.0.0.0:14550", {"tcp:127.0.0.1:5760", tlog: "sitl.tlog"}],
+        forward: ["udpout:127.0.0.1:14551"],   # given to every configured link
+        gcs_sysid: 255                          # our system id on every link
+
+  With no endpoint given anywhere, the ground station listens on
+  `default_endpoint/0`, as QGroundControl and MAVProxy do.
   """
 
   alias Dolphin.Link.Endpoint
+
+  @doc "Where a ground station listens when told nothing else: `udpin:0.0.0.0:14550`."
+  @spec default_endpoint() :: String.t()
+  def default_endpoint, do: "udpin:0.0.0.0:14550"
+
+  @doc false
+  # Connects the links of `config :dolphin, links:`; run once at application start.
+  @spec connect_configured() :: :ok
+  def connect_configured do
+    forward = Application.get_env(:dolphin, :forward, [])
+
+    for link <- Application.get_env(:dolphin, :links, []) do
+      {endpoint, opts} = if is_tuple(link), do: link, else: {link, []}
+
+      case connect(endpoint, Keyword.put_new(opts, :forward, forward)) do
+        {:ok, _} -> :ok
+        {:error, why} -> raise ArgumentError, "config :dolphin, links: #{why}"
+      end
+    end
+
+    :ok
+  end
 
   @doc """
   Starts a link. Options as for `Dolphin.Link.Connection.start_link/1` (but

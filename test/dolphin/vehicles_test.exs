@@ -110,6 +110,25 @@ defmodule Dolphin.VehiclesTest do
     senders = records |> Enum.map(fn {_t, f} -> f.sysid end) |> Enum.uniq() |> Enum.sort()
     assert senders == [15, 255]
     assert Enum.any?(records, fn {_t, f} -> match?(%M.RequestDataStream{}, f.message) end)
+
+    # And the reference implementation reads it the same.
+    python = Path.expand("../../.venv/bin/python", __DIR__)
+    assert File.exists?(python), "#{python} is missing: run scripts/bootstrap (make test does)"
+
+    script = """
+    import sys
+    from pymavlink import mavutil
+    m = mavutil.mavlink_connection(sys.argv[1], dialect="ardupilotmega")
+    while True:
+        msg = m.recv_match(blocking=False)
+        if msg is None:
+            break
+        print(msg.get_srcSystem(), msg.get_type())
+    """
+
+    {out, 0} = System.cmd(python, ["-c", script, tlog])
+    expected = Enum.map(records, fn {_t, f} -> "#{f.sysid} #{Dolphin.MAVLink.Message.name(f.message)}" end)
+    assert String.split(out, "\n", trim: true) == expected
   end
 
   test "connect reports bad endpoints and busy ports clearly", %{port: port} do

@@ -21,7 +21,8 @@ defmodule Dolphin.Link.Connection do
 
     * `:endpoint` — a `Dolphin.Link.Endpoint` (required);
     * `:name` — the registry key (default: the endpoint string);
-    * `:gcs_sysid`, `:gcs_compid` — our identity (default 255, 190);
+    * `:gcs_sysid`, `:gcs_compid` — our identity (default `config :dolphin,
+      gcs_sysid:` or 255, and 190);
     * `:tlog` — a path to append every frame to;
     * `:forward` — endpoints (`udpout` ones) that get a copy of all traffic;
     * `:signing` — `[key: KEY, link_id: N, require: boolean]`: outgoing frames
@@ -89,7 +90,7 @@ defmodule Dolphin.Link.Connection do
          backoff: @backoff_min,
          peers: %{},
          seq: 0,
-         gcs: {Keyword.get(opts, :gcs_sysid, 255), Keyword.get(opts, :gcs_compid, 190)},
+         gcs: {Keyword.get_lazy(opts, :gcs_sysid, fn -> Application.get_env(:dolphin, :gcs_sysid, 255) end), Keyword.get(opts, :gcs_compid, 190)},
          router: Keyword.get(opts, :router, &Dolphin.Vehicles.route/2),
          stats: Parser.stats(Parser.new()),
          stream: nil,
