@@ -3,6 +3,8 @@ defmodule Dolphin.VehiclesTest do
   # global clock speed-up and shares the vehicle registry: not async.
   use ExUnit.Case, async: false
 
+  alias Dolphin.Test.Wait
+
   alias Dolphin.{Clock, Link, Vehicles}
   alias Dolphin.Link.Connection
   alias Dolphin.MAVLink.{Frame, Tlog}
@@ -51,7 +53,7 @@ defmodule Dolphin.VehiclesTest do
 
   test "state changes are published to subscribers", %{port: port, peer: peer} do
     UDPPeer.send_message(peer, port, copter(), sysid: 12)
-    wait_for(fn -> Vehicles.whereis(12) end)
+    Wait.until(fn -> Vehicles.whereis(12) end)
     Vehicles.subscribe(12)
 
     UDPPeer.send_message(peer, port, %M.SysStatus{battery_remaining: 55}, sysid: 12, seq: 1)
@@ -63,7 +65,7 @@ defmodule Dolphin.VehiclesTest do
     # A GCS's heartbeat (another ground station on the link) is not a vehicle.
     UDPPeer.send_message(peer, port, %M.Heartbeat{type: 6, autopilot: 8}, sysid: 250)
     UDPPeer.send_message(peer, port, copter(), sysid: 12, seq: 3)
-    wait_for(fn -> match?({:ok, %{link: %{received: 4}}}, Vehicles.state(12)) end)
+    Wait.until(fn -> match?({:ok, %{link: %{received: 4}}}, Vehicles.state(12)) end)
     refute 250 in Vehicles.list()
     assert {:error, :unknown_vehicle} = Vehicles.state(250)
   end
@@ -85,16 +87,16 @@ defmodule Dolphin.VehiclesTest do
   test "a crashed vehicle process is restarted and rebuilt from the next telemetry; a crashed link loses no vehicle",
        %{name: name, port: port, peer: peer} do
     UDPPeer.send_message(peer, port, copter(), sysid: 14)
-    pid = wait_for(fn -> Vehicles.whereis(14) end)
+    pid = Wait.until(fn -> Vehicles.whereis(14) end)
     Process.exit(pid, :kill)
-    new_pid = wait_for(fn -> (p = Vehicles.whereis(14)) != pid && p end)
+    new_pid = Wait.until(fn -> (p = Vehicles.whereis(14)) != pid && p end)
     assert is_pid(new_pid)
     UDPPeer.send_message(peer, port, copter(17), sysid: 14, seq: 1)
-    wait_for(fn -> match?({:ok, %{mode: :brake}}, Vehicles.state(14)) end)
+    Wait.until(fn -> match?({:ok, %{mode: :brake}}, Vehicles.state(14)) end)
 
     [{link, _}] = Registry.lookup(Dolphin.Registry, {:link, name})
     Process.exit(link, :kill)
-    wait_for(fn -> match?([{p, _}] when p != link, Registry.lookup(Dolphin.Registry, {:link, name})) end)
+    Wait.until(fn -> match?([{p, _}] when p != link, Registry.lookup(Dolphin.Registry, {:link, name})) end)
     assert 14 in Vehicles.list()
   end
 
@@ -112,23 +114,8 @@ defmodule Dolphin.VehiclesTest do
     assert Enum.any?(records, fn {_t, f} -> match?(%M.RequestDataStream{}, f.message) end)
 
     # And the reference implementation reads it the same.
-    python = Path.expand("../../.venv/bin/python", __DIR__)
-    assert File.exists?(python), "#{python} is missing: run scripts/bootstrap (make test does)"
-
-    script = """
-    import sys
-    from pymavlink import mavutil
-    m = mavutil.mavlink_connection(sys.argv[1], dialect="ardupilotmega")
-    while True:
-        msg = m.recv_match(blocking=False)
-        if msg is None:
-            break
-        print(msg.get_srcSystem(), msg.get_type())
-    """
-
-    {out, 0} = System.cmd(python, ["-c", script, tlog])
-    expected = Enum.map(records, fn {_t, f} -> "#{f.sysid} #{Dolphin.MAVLink.Message.name(f.message)}" end)
-    assert String.split(out, "\n", trim: true) == expected
+    expected = Enum.map(records, fn {_t, f} -> {f.sysid, Dolphin.MAVLink.Message.name(f.message)} end)
+    assert Enum.map(Dolphin.Test.Pymavlink.read_tlog(tlog), fn {sysid, type, _ts, _fields} -> {sysid, type} end) == expected
   end
 
   test "connect reports bad endpoints and busy ports clearly", %{port: port} do
@@ -141,13 +128,4 @@ defmodule Dolphin.VehiclesTest do
     assert message == "udpin:127.0.0.1:#{port}: cannot open: address already in use"
   end
 
-  defp wait_for(fun, tries \\ 100) do
-    case fun.() do
-      result when result in [nil, false] ->
-        if tries == 0, do: flunk("condition not met in time"), else: (Process.sleep(20); wait_for(fun, tries - 1))
-
-      result ->
-        result
-    end
-  end
 end

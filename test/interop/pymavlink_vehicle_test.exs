@@ -4,6 +4,8 @@ defmodule Dolphin.Interop.PymavlinkVehicleTest do
   # a mission upload, each checked from both sides.
   use ExUnit.Case, async: false
 
+  alias Dolphin.Test.Wait
+
   @moduletag :interop
 
   alias Dolphin.{Link, Vehicles}
@@ -11,13 +13,12 @@ defmodule Dolphin.Interop.PymavlinkVehicleTest do
   alias Dolphin.MAVLink.{JSON}
   alias Dolphin.MAVLink.Ardupilotmega, as: M
 
-  @python Path.expand("../../.venv/bin/python", __DIR__)
   @script Path.expand("pymavlink_vehicle.py", __DIR__)
   @sysid 61
 
   @tag timeout: 60_000
   test "a pymavlink vehicle is discovered, reports telemetry, takes a command and a mission" do
-    assert File.exists?(@python), "#{@python} is missing: run scripts/bootstrap (make test does)"
+    python = Dolphin.Test.Pymavlink.python()
     {:ok, link} = Link.connect("udpin:127.0.0.1:0", name: "pymavlink-vehicle")
 
     on_exit(fn ->
@@ -26,9 +27,13 @@ defmodule Dolphin.Interop.PymavlinkVehicleTest do
     end)
 
     port = Connection.port("pymavlink-vehicle")
-    vehicle = Port.open({:spawn_executable, @python}, [:binary, :exit_status, {:line, 65_536}, args: [@script, "#{port}", "#{@sysid}", "4"]])
+    vehicle = Port.open({:spawn_executable, python}, [:binary, :exit_status, {:line, 65_536}, args: [@script, "#{port}", "#{@sysid}", "4"]])
 
-    wait_for(fn -> match?({:ok, %{battery: 0.77, mode: :guided, armed: true, position: %{lat: 41.178}}}, Vehicles.state(@sysid)) end)
+    Wait.until(
+      fn -> match?({:ok, %{battery: 0.77, mode: :guided, armed: true, position: %{lat: 41.178}}}, Vehicles.state(@sysid)) end,
+      250,
+      fn -> inspect(Vehicles.state(@sysid)) end
+    )
 
     assert {:ok, :accepted} = Vehicles.set_mode(@sysid, :brake)
 
@@ -61,11 +66,4 @@ defmodule Dolphin.Interop.PymavlinkVehicleTest do
     end
   end
 
-  defp wait_for(fun, tries \\ 250) do
-    cond do
-      fun.() -> :ok
-      tries == 0 -> flunk("condition not met in time: #{inspect(Vehicles.state(@sysid))}")
-      true -> Process.sleep(20) && wait_for(fun, tries - 1)
-    end
-  end
 end

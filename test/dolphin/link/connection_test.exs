@@ -3,6 +3,11 @@ defmodule Dolphin.Link.ConnectionTest do
   # for forwarding, a signing peer. Shares the vehicle registry: not async.
   use ExUnit.Case, async: false
 
+  # The TCP test drops the connection on purpose: its warnings are expected.
+  @moduletag :capture_log
+
+  alias Dolphin.Test.Wait
+
   alias Dolphin.{Link, Vehicles}
   alias Dolphin.Link.Connection
   alias Dolphin.MAVLink.{Frame, Parser, Signing}
@@ -32,7 +37,7 @@ defmodule Dolphin.Link.ConnectionTest do
       Process.sleep(5)
     end
 
-    wait_for(fn -> match?({:ok, %{battery: 0.66, mode: :guided}}, Vehicles.state(41)) end)
+    Wait.until(fn -> match?({:ok, %{battery: 0.66, mode: :guided}}, Vehicles.state(41)) end)
     # The ground station answers over the same connection (its heartbeat, telemetry requests).
     assert {:ok, data} = :gen_tcp.recv(conn, 0, 3_000)
     {frames, _} = Parser.feed(Parser.new(), data)
@@ -66,23 +71,16 @@ defmodule Dolphin.Link.ConnectionTest do
     peer = UDPPeer.open()
 
     UDPPeer.send_message(peer, port, copter(), sysid: 43)
-    wait_for(fn -> Connection.info("sign-test").stats.unsigned == 1 end)
+    Wait.until(fn -> Connection.info("sign-test").stats.unsigned == 1 end)
     assert Vehicles.whereis(43) == nil
 
     {bytes, _} = Signing.encode(Signing.new(key: key, link_id: 3), copter(), sysid: 44, compid: 1)
     :ok = :gen_udp.send(peer, {127, 0, 0, 1}, port, bytes)
-    wait_for(fn -> Vehicles.whereis(44) end)
+    Wait.until(fn -> Vehicles.whereis(44) end)
 
     heartbeat = UDPPeer.receive_until(peer, &match?(%M.Heartbeat{type: 6}, &1.message))
     assert %{link_id: 7} = heartbeat.signature
     assert {:ok, _} = Signing.verify(Signing.new(key: key), heartbeat)
   end
 
-  defp wait_for(fun, tries \\ 150) do
-    cond do
-      fun.() -> :ok
-      tries == 0 -> flunk("condition not met in time")
-      true -> Process.sleep(20) && wait_for(fun, tries - 1)
-    end
-  end
 end

@@ -3,6 +3,8 @@ defmodule Dolphin.Vehicles.CommandProtocolTest do
   # UDP on 127.0.0.1. Changes the clock speed-up: not async.
   use ExUnit.Case, async: false
 
+  alias Dolphin.Test.Wait
+
   alias Dolphin.{Clock, CommandError, Link, Vehicles}
   alias Dolphin.Link.Connection
   alias Dolphin.MAVLink.Ardupilotmega, as: M
@@ -26,7 +28,7 @@ defmodule Dolphin.Vehicles.CommandProtocolTest do
     end)
 
     UDPPeer.send_message(peer, port, %M.Heartbeat{type: 2, autopilot: 3, custom_mode: 0}, sysid: sysid)
-    wait_for(fn -> match?({:ok, %{autopilot: :ardupilot}}, Vehicles.state(sysid)) end)
+    Wait.until(fn -> match?({:ok, %{autopilot: :ardupilot}}, Vehicles.state(sysid)) end)
     %{peer: peer, port: port, sysid: sysid}
   end
 
@@ -113,11 +115,4 @@ defmodule Dolphin.Vehicles.CommandProtocolTest do
     assert_raise ExUnit.AssertionError, fn -> next_command(peer, command, 100) end
   end
 
-  defp wait_for(fun, tries \\ 100) do
-    cond do
-      fun.() -> :ok
-      tries == 0 -> flunk("condition not met in time")
-      true -> Process.sleep(20) && wait_for(fun, tries - 1)
-    end
-  end
 end

@@ -4,6 +4,8 @@ defmodule Dolphin.Vehicles.MissionProtocolTest do
   # lossy. Changes the clock speed-up: not async.
   use ExUnit.Case, async: false
 
+  alias Dolphin.Test.Wait
+
   import Dolphin.Property
 
   alias :proper_types, as: T
@@ -32,7 +34,7 @@ defmodule Dolphin.Vehicles.MissionProtocolTest do
   defp vehicle(port, opts) do
     sysid = 30 + rem(System.unique_integer([:positive]), 200)
     {:ok, pid} = ScriptedVehicle.start_link([port: port, sysid: sysid, speedup: @speedup] ++ opts)
-    wait_for(fn -> Vehicles.whereis(sysid) end)
+    Wait.until(fn -> Vehicles.whereis(sysid) end)
 
     on_exit(fn ->
       if v = Vehicles.whereis(sysid), do: DynamicSupervisor.terminate_child(Dolphin.Vehicles.Supervisor, v)
@@ -131,11 +133,4 @@ defmodule Dolphin.Vehicles.MissionProtocolTest do
     assert length(ScriptedVehicle.mission(vehicle)) == 700
   end
 
-  defp wait_for(fun, tries \\ 100) do
-    cond do
-      fun.() -> :ok
-      tries == 0 -> flunk("condition not met in time")
-      true -> Process.sleep(20) && wait_for(fun, tries - 1)
-    end
-  end
 end
