@@ -21,8 +21,8 @@ defmodule Dolphin.Test.ScriptedVehicle do
 
   def start_link(opts), do: GenServer.start_link(__MODULE__, opts)
 
-  @doc "The items the vehicle holds now."
-  def mission(pid), do: GenServer.call(pid, :mission)
+  @doc "The items the vehicle holds now (mission type 0 mission, 1 fence, 2 rally)."
+  def mission(pid, type \\ 0), do: GenServer.call(pid, {:mission, type})
 
   @doc "The commands received so far, oldest first, as `{command, param1}` (repeats included)."
   def commands(pid), do: GenServer.call(pid, :commands)
@@ -42,7 +42,8 @@ defmodule Dolphin.Test.ScriptedVehicle do
       limit: Keyword.get(opts, :limit, 700),
       faults: Map.new(Keyword.take(opts, [:loss, :duplicate, :reorder])),
       speedup: Keyword.get(opts, :speedup, 1),
-      mission: [],
+      # mission type => items
+      lists: %{},
       commands: [],
       upload: nil,
       held: nil,
@@ -54,7 +55,7 @@ defmodule Dolphin.Test.ScriptedVehicle do
   end
 
   @impl true
-  def handle_call(:mission, _from, s), do: {:reply, s.mission, s}
+  def handle_call({:mission, type}, _from, s), do: {:reply, Map.get(s.lists, type, []), s}
   def handle_call(:commands, _from, s), do: {:reply, Enum.reverse(s.commands), s}
   def handle_call({:faults, faults}, _from, s), do: {:reply, :ok, %{s | faults: Map.new(faults)}}
 
@@ -88,7 +89,7 @@ defmodule Dolphin.Test.ScriptedVehicle do
   # ArduPilot re-asks every second of its time, 8 times, then gives up.
   def handle_info({:rerequest, ref}, %{upload: %{ref: ref} = up} = s) do
     if up.tries >= 8 do
-      s = transmit(%{s | upload: nil}, ack(s, 15))
+      s = transmit(%{s | upload: nil}, ack(up.type, 15))
       {:noreply, s}
     else
       s = %{s | upload: %{up | tries: up.tries + 1}}
@@ -104,24 +105,24 @@ defmodule Dolphin.Test.ScriptedVehicle do
     Enum.reduce(frames, s, &handle_frame(&1.message, &2))
   end
 
-  defp handle_frame(%M.MissionCount{count: count, mission_type: 0}, s) do
+  defp handle_frame(%M.MissionCount{count: count, mission_type: type}, s) do
     cond do
-      count > s.limit -> transmit(s, ack(s, 4))
-      count == 0 -> transmit(%{s | mission: [], upload: nil}, ack(s, 0))
-      true -> request_next(%{s | upload: %{count: count, items: [], tries: 0, ref: nil}})
+      count > s.limit -> transmit(s, ack(type, 4))
+      count == 0 -> transmit(%{s | lists: Map.put(s.lists, type, []), upload: nil}, ack(type, 0))
+      true -> request_next(%{s | upload: %{type: type, count: count, items: [], tries: 0, ref: nil}})
     end
   end
 
-  defp handle_frame(%M.MissionItemInt{seq: seq, mission_type: 0} = item, %{upload: %{} = up} = s) do
+  defp handle_frame(%M.MissionItemInt{seq: seq, mission_type: type} = item, %{upload: %{type: type} = up} = s) do
     expected = length(up.items)
 
     cond do
       seq != expected ->
-        transmit(s, ack(s, 13)) |> request_next()
+        transmit(s, ack(type, 13)) |> request_next()
 
       expected + 1 == up.count ->
-        mission = Enum.reverse([normalise(item) | up.items])
-        transmit(%{s | mission: mission, upload: nil}, ack(s, 0))
+        list = Enum.reverse([normalise(item) | up.items])
+        transmit(%{s | lists: Map.put(s.lists, type, list), upload: nil}, ack(type, 0))
 
       true ->
         request_next(%{s | upload: %{up | items: [normalise(item) | up.items], tries: 0}})
@@ -134,23 +135,29 @@ defmodule Dolphin.Test.ScriptedVehicle do
     transmit(s, %M.CommandAck{command: command, result: result, target_system: 255, target_component: 190})
   end
 
-  defp handle_frame(%M.MissionRequestList{mission_type: 0}, s),
-    do: transmit(s, %M.MissionCount{target_system: 255, target_component: 190, count: length(s.mission), mission_type: 0})
+  defp handle_frame(%M.MissionRequestList{mission_type: type}, s),
+    do: transmit(s, %M.MissionCount{target_system: 255, target_component: 190, count: length(Map.get(s.lists, type, [])), mission_type: type})
 
-  defp handle_frame(%M.MissionRequestInt{seq: seq, mission_type: 0}, s) when seq < length(s.mission),
-    do: transmit(s, %{Enum.at(s.mission, seq) | target_system: 255, target_component: 190})
+  defp handle_frame(%M.MissionRequestInt{seq: seq, mission_type: type}, s) do
+    case Enum.at(Map.get(s.lists, type, []), seq) do
+      nil -> s
+      item -> transmit(s, %{item | target_system: 255, target_component: 190})
+    end
+  end
 
-  defp handle_frame(%M.MissionClearAll{mission_type: 0}, s), do: transmit(%{s | mission: [], upload: nil}, ack(s, 0))
+  defp handle_frame(%M.MissionClearAll{mission_type: type}, s),
+    do: transmit(%{s | lists: Map.put(s.lists, type, []), upload: nil}, ack(type, 0))
+
   defp handle_frame(_other, s), do: s
 
   defp request_next(%{upload: up} = s) do
     ref = make_ref()
     Process.send_after(self(), {:rerequest, ref}, max(1, div(1_000, s.speedup)))
     s = %{s | upload: %{up | ref: ref}}
-    transmit(s, %M.MissionRequest{target_system: 255, target_component: 190, seq: length(up.items), mission_type: 0})
+    transmit(s, %M.MissionRequest{target_system: 255, target_component: 190, seq: length(up.items), mission_type: up.type})
   end
 
-  defp ack(_s, type), do: %M.MissionAck{target_system: 255, target_component: 190, type: type, mission_type: 0}
+  defp ack(mission_type, result), do: %M.MissionAck{target_system: 255, target_component: 190, type: result, mission_type: mission_type}
 
   # What the vehicle keeps of an item (targets are the sender's business).
   defp normalise(item), do: %{item | target_system: 0, target_component: 0}
