@@ -5,6 +5,9 @@ defmodule Dolphin.Application do
 
   @impl true
   def start(_type, _args) do
+    # Per-vehicle settings (timeouts) outlive the vehicles' processes.
+    :ets.new(Dolphin.Vehicles.Settings, [:named_table, :public, :set])
+
     children = [
       # Vehicles and links by name ({:vehicle, sysid}, {:link, name}).
       {Registry, keys: :unique, name: Dolphin.Registry},
@@ -14,11 +17,13 @@ defmodule Dolphin.Application do
       {DynamicSupervisor, name: Dolphin.Link.Supervisor, strategy: :one_for_one},
       # The configured links, once the tree they live in is up; a bad endpoint
       # in the configuration stops the start with the reason.
-      %{id: :configured_links, start: {Task, :start_link, [&Dolphin.Link.connect_configured/0]}, restart: :temporary}
+      %{id: :configured_links, start: {Dolphin.Link, :start_configured, []}, restart: :transient}
     ]
 
-    # one_for_one: a crashed link or vehicle supervisor is restarted alone; the
-    # registries outlive them, so a vehicle keeps its name across a link restart.
-    Supervisor.start_link(children, strategy: :one_for_one, name: Dolphin.Supervisor)
+    # rest_for_one: everything after a crashed child depends on it. A crashed
+    # registry takes down (and restarts) the processes registered in it rather
+    # than leaving them running nameless; a crashed link supervisor leaves the
+    # vehicles alone.
+    Supervisor.start_link(children, strategy: :rest_for_one, name: Dolphin.Supervisor)
   end
 end

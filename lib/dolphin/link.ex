@@ -16,8 +16,9 @@ defmodule Dolphin.Link do
         forward: ["udpout:127.0.0.1:14551"],   # given to every configured link
         gcs_sysid: 255                          # our system id on every link
 
-  With no endpoint given anywhere, the ground station listens on
-  `default_endpoint/0`, as QGroundControl and MAVProxy do.
+  Nothing is connected unless configured or asked for; `default_endpoint/0` is
+  where a ground station listens when told nothing else (QGroundControl's and
+  MAVProxy's port), for tools such as `mix dolphin.run` to use.
   """
 
   alias Dolphin.Link.Endpoint
@@ -27,7 +28,17 @@ defmodule Dolphin.Link do
   def default_endpoint, do: "udpin:0.0.0.0:14550"
 
   @doc false
-  # Connects the links of `config :dolphin, links:`; run once at application start.
+  # The application's child that connects the configured links: :ignore once
+  # they are up, or the reason the application cannot start.
+  def start_configured do
+    connect_configured()
+    :ignore
+  rescue
+    e in ArgumentError -> {:error, Exception.message(e)}
+  end
+
+  @doc false
+  # Connects the links of `config :dolphin, links:`.
   @spec connect_configured() :: :ok
   def connect_configured do
     forward = Application.get_env(:dolphin, :forward, [])

@@ -45,10 +45,19 @@ defmodule Dolphin.Vehicles do
   @doc "The state of a vehicle, plus `lost: boolean`."
   @spec state(byte()) :: {:ok, Dolphin.Vehicles.State.t()} | {:error, :unknown_vehicle}
   def state(sysid) do
-    case whereis(sysid) do
-      nil -> {:error, :unknown_vehicle}
-      pid -> {:ok, GenServer.call(pid, :state)}
+    with pid when pid != nil <- whereis(sysid),
+         {:ok, state} <- safe_call(pid, :state) do
+      {:ok, state}
+    else
+      _ -> {:error, :unknown_vehicle}
     end
+  end
+
+  # A vehicle's process may go away between look-up and call.
+  defp safe_call(pid, request) do
+    {:ok, GenServer.call(pid, request)}
+  catch
+    :exit, _ -> :error
   end
 
   @doc "Sends a message to a vehicle through the link it was last heard on."
@@ -63,9 +72,14 @@ defmodule Dolphin.Vehicles do
   @doc "Sets after how much clock time without a frame a vehicle is lost."
   @spec set_timeout(byte(), pos_integer()) :: :ok | {:error, :unknown_vehicle}
   def set_timeout(sysid, ms) when is_integer(ms) and ms > 0 do
-    case whereis(sysid) do
-      nil -> {:error, :unknown_vehicle}
-      pid -> GenServer.call(pid, {:set_timeout, ms})
+    # Kept outside the process: a restarted vehicle process keeps it.
+    :ets.insert(Dolphin.Vehicles.Settings, {{:timeout, sysid}, ms})
+
+    with pid when pid != nil <- whereis(sysid),
+         {:ok, :ok} <- safe_call(pid, {:set_timeout, ms}) do
+      :ok
+    else
+      _ -> {:error, :unknown_vehicle}
     end
   end
 
@@ -92,7 +106,7 @@ defmodule Dolphin.Vehicles do
   """
   @spec command(byte(), atom() | non_neg_integer(), [number()], command_opts()) :: {:ok, :accepted} | {:error, CommandError.t()}
   def command(sysid, command, params \\ [], opts \\ []) when length(params) <= 7 do
-    params = Enum.map(params, &(&1 * 1.0)) ++ List.duplicate(0.0, 7 - length(params))
+    params = Enum.map(params, &param!/1) ++ List.duplicate(0.0, 7 - length(params))
     run(sysid, command, %{params: params, int: false, frame: 0}, opts)
   end
 
@@ -104,7 +118,11 @@ defmodule Dolphin.Vehicles do
   @spec command_int(byte(), atom() | non_neg_integer(), [number()], {number(), number(), number()}, command_opts()) ::
           {:ok, :accepted} | {:error, CommandError.t()}
   def command_int(sysid, command, params, {lat, lon, alt}, opts \\ []) when length(params) <= 4 do
-    params = Enum.map(params, &(&1 * 1.0)) ++ List.duplicate(0.0, 4 - length(params))
+    params = Enum.map(params, &param!/1) ++ List.duplicate(0.0, 4 - length(params))
+
+    unless is_number(lat) and is_number(lon) and abs(lat) <= 90 and abs(lon) <= 180 and is_number(alt),
+      do: raise(ArgumentError, "command_int position must be {lat, lon, alt} in degrees and metres, got: #{inspect({lat, lon, alt})}")
+
     position = [round(lat * 1.0e7), round(lon * 1.0e7), alt * 1.0]
     run(sysid, command, %{params: params ++ position, int: true, frame: Keyword.get(opts, :frame, 6)}, opts)
   end
@@ -133,7 +151,13 @@ defmodule Dolphin.Vehicles do
     end
   end
 
-  defp command_id(n) when is_integer(n), do: {:ok, n}
+  # Caller mistakes are raised here, before anything reaches a vehicle's process.
+  defp param!(p) when is_number(p), do: p * 1.0
+  defp param!(p) when p in [:nan, :infinity, :neg_infinity], do: p
+  defp param!(p), do: raise(ArgumentError, "command parameters must be numbers, got: #{inspect(p)}")
+
+  defp command_id(n) when is_integer(n) and n in 0..65_535, do: {:ok, n}
+  defp command_id(n) when is_integer(n), do: raise(ArgumentError, "a MAV_CMD is 0..65535, got: #{n}")
 
   defp command_id(name) when is_atom(name) do
     case M.enum_value(:mav_cmd, name) do
@@ -230,6 +254,11 @@ defmodule Dolphin.Vehicles do
 
   defp transfer(sysid, operation, request, opts) do
     type = Keyword.get(opts, :mission_type, :mission)
+
+    unless type in [:mission, :fence, :rally],
+      do: raise(ArgumentError, "mission_type must be :mission, :fence or :rally, got: #{inspect(type)}")
+
+    if operation == :upload, do: check_items!(request.items)
     request = Map.merge(request, %{operation: operation, mission_type: type, progress_to: Keyword.get(opts, :progress_to)})
     gone = %Dolphin.MissionError{operation: operation, vehicle: sysid, mission_type: type, result: :vehicle_gone}
 
@@ -245,6 +274,26 @@ defmodule Dolphin.Vehicles do
         end
     end
   end
+
+  # Every item must be a MISSION_ITEM_INT that encodes (a float in x or y, an
+  # out-of-range value...): said here, naming the item, not on the wire.
+  defp check_items!(items) when is_list(items) do
+    items
+    |> Enum.with_index()
+    |> Enum.each(fn
+      {%M.MissionItemInt{} = item, i} ->
+        try do
+          Frame.encode(item)
+        rescue
+          e in ArgumentError -> reraise ArgumentError, "mission item #{i}: #{Exception.message(e)}", __STACKTRACE__
+        end
+
+      {other, i} ->
+        raise ArgumentError, "mission item #{i} must be a %Dolphin.MAVLink.Ardupilotmega.MissionItemInt{}, got: #{inspect(other)}"
+    end)
+  end
+
+  defp check_items!(other), do: raise(ArgumentError, "a mission is a list of items, got: #{inspect(other)}")
 
   @doc false
   # Called by links for every frame: cast it to its vehicle, discovering the
@@ -266,7 +315,13 @@ defmodule Dolphin.Vehicles do
 
       {:error, {:already_started, pid}} ->
         GenServer.cast(pid, {:frame, frame, link})
+
+      # Not now (the supervisor is restarting): the next heartbeat will do.
+      _error ->
+        :ok
     end
+  catch
+    :exit, _ -> :ok
   end
 
   defp discover(_frame, _link), do: :ok

@@ -25,6 +25,8 @@ defmodule Dolphin.LinkTest do
   test "a bad configured endpoint says which and why" do
     Application.put_env(:dolphin, :links, ["udpin:127.0.0.1"])
     assert_raise ArgumentError, ~r/config :dolphin, links: endpoint "udpin:127.0.0.1": expected KIND:HOST:PORT/, fn -> Link.connect_configured() end
+    # As the application's child: the start fails with the reason.
+    assert {:error, "config :dolphin, links: endpoint" <> _} = Link.start_configured()
     assert Link.default_endpoint() == "udpin:0.0.0.0:14550"
   end
 end

@@ -41,8 +41,17 @@ defmodule Dolphin.VehiclesTest do
     assert %Frame{sysid: 255, message: %M.RequestDataStream{target_system: 11, start_stop: 1}} =
              UDPPeer.receive_until(peer, &match?(%M.RequestDataStream{}, &1.message))
 
-    assert %Frame{message: %M.CommandLong{command: 511, param1: 245.0}} =
-             UDPPeer.receive_until(peer, &match?(%M.CommandLong{command: 511, param1: 245.0}, &1.message))
+    # The message intervals come one at a time, each once the previous one is
+    # answered (as ArduPilot does, with COMMAND_ACK accepted).
+    asked =
+      Enum.map(1..6, fn _ ->
+        %Frame{message: %M.CommandLong{param1: msgid}} = UDPPeer.receive_until(peer, &match?(%M.CommandLong{command: 511}, &1.message))
+        UDPPeer.send_message(peer, port, %M.CommandAck{command: 511, result: 0, target_system: 255}, sysid: 11)
+        trunc(msgid)
+      end)
+
+    # GLOBAL_POSITION_INT, SYS_STATUS, BATTERY_STATUS, MISSION_CURRENT, EXTENDED_SYS_STATE, HOME_POSITION
+    assert asked == [33, 1, 147, 42, 245, 242]
 
     assert %Frame{sysid: 255, compid: 190, message: %M.Heartbeat{type: 6, autopilot: 8}} =
              UDPPeer.receive_until(peer, &match?(%M.Heartbeat{}, &1.message))
@@ -82,6 +91,16 @@ defmodule Dolphin.VehiclesTest do
     UDPPeer.send_message(peer, port, copter(5), sysid: 13, seq: 1)
     assert_receive {:dolphin, :vehicles, {:vehicle_reconnected, 13}}, 2_000
     assert {:ok, %{lost: false, mode: :loiter}} = Vehicles.state(13)
+  end
+
+  test "a restarted vehicle process is lost when silent, and keeps the timeout set for it", %{port: port, peer: peer} do
+    Vehicles.subscribe(:all)
+    UDPPeer.send_message(peer, port, copter(), sysid: 16)
+    pid = Wait.until(fn -> Vehicles.whereis(16) end)
+    :ok = Vehicles.set_timeout(16, 1_000)
+    Process.exit(pid, :kill)
+    Wait.until(fn -> (p = Vehicles.whereis(16)) != pid && p end)
+    assert_receive {:dolphin, :vehicles, {:vehicle_lost, 16}}, 3_000
   end
 
   test "a crashed vehicle process is restarted and rebuilt from the next telemetry; a crashed link loses no vehicle",

@@ -225,14 +225,30 @@ defmodule Dolphin.Link.Connection do
   end
 
   defp deliver(state, frames, from) do
+    {gcs_sysid, _} = state.gcs
+
     Enum.reduce(frames, state, fn frame, state ->
       record(state, frame.raw)
-      state.router.(frame, state.name)
+      # A reply addressed to another ground station on the link is not ours.
+      if for_us?(frame.message, gcs_sysid), do: state.router.(frame, state.name)
       if from == :tcp, do: state, else: %{state | peers: Map.put(state.peers, frame.sysid, from)}
     end)
   end
 
+  defp for_us?(%{target_system: target}, gcs_sysid), do: target in [0, gcs_sysid]
+  defp for_us?(_message, _gcs_sysid), do: true
+
+  # What cannot be encoded is a caller's mistake that got this far: it is
+  # logged and dropped, never allowed to crash the link (and its vehicles' traffic).
   defp transmit(state, sysid, message) do
+    transmit!(state, sysid, message)
+  rescue
+    e in ArgumentError ->
+      Logger.error("link #{state.name}: not sent to #{sysid}: #{Exception.message(e)}")
+      state
+  end
+
+  defp transmit!(state, sysid, message) do
     {gcs_sysid, gcs_compid} = state.gcs
     header = [sysid: gcs_sysid, compid: gcs_compid, seq: state.seq]
 

@@ -92,6 +92,13 @@ defmodule Dolphin.Vehicles.CommandProtocol do
   def handle_event(:state_timeout, :gave_up, :in_progress, data),
     do: finish(data, {:error, error(data, :timeout, "no final answer after IN_PROGRESS")})
 
+  # An answer from another component than the one asked is not this command's.
+  def handle_event(:info, {:ack, _ack, compid}, _state, %{target_component: target})
+      when target != 0 and compid != target,
+      do: :keep_state_and_data
+
+  def handle_event(:info, {:ack, ack, _compid}, state, data), do: handle_event(:info, {:ack, ack}, state, data)
+
   def handle_event(:info, {:ack, %M.CommandAck{result: 5, progress: progress}}, state, data) do
     if data[:progress_to], do: send(data.progress_to, {:command_progress, data.command, progress})
     # Each IN_PROGRESS restarts the wait.
@@ -105,10 +112,8 @@ defmodule Dolphin.Vehicles.CommandProtocol do
     finish(data, {:error, error(data, result(n), detail)})
   end
 
-  def handle_event(:info, :vehicle_gone, _state, data), do: finish(data, {:error, error(data, :vehicle_gone, nil)})
-
   defp finish(data, reply) do
-    :gen_statem.reply(data.reply_to, reply)
+    if data.reply_to, do: :gen_statem.reply(data.reply_to, reply)
     {:stop, :normal, data}
   end
 

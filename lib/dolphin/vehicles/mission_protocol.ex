@@ -78,6 +78,7 @@ defmodule Dolphin.Vehicles.MissionProtocol do
       })
 
     total = Keyword.get(opts, :total_timeout_ms, 10_000 + 1_000 * count)
+    data = Map.put(data, :fixed_total, Keyword.has_key?(opts, :total_timeout_ms))
     # The limit of the whole transfer, whatever the retries.
     actions = [{{:timeout, :total}, Clock.to_real_ms(total), :give_up}]
 
@@ -90,7 +91,6 @@ defmodule Dolphin.Vehicles.MissionProtocol do
 
   @impl true
   def handle_event({:timeout, :total}, :give_up, _state, data), do: fail(data, :timeout, "time limit reached")
-  def handle_event(:info, :vehicle_gone, _state, data), do: fail(data, :vehicle_gone, nil)
 
   ## Upload
 
@@ -157,7 +157,9 @@ defmodule Dolphin.Vehicles.MissionProtocol do
   def handle_event(:info, {:mission, %M.MissionCount{count: count, mission_type: type}}, {:list, _}, %{operation: :download} = data)
       when type == data.type do
     data = %{data | count: count}
-    if count == 0, do: finish_download(data), else: {:next_state, {:item, 0, 1}, data}
+    # The limit grows with the items the vehicle announced (unless set by the caller).
+    limit = if data.fixed_total, do: [], else: [{{:timeout, :total}, Clock.to_real_ms(10_000 + 1_000 * count), :give_up}]
+    if count == 0, do: finish_download(data), else: {:next_state, {:item, 0, 1}, data, limit}
   end
 
   def handle_event(:enter, _old, {:item, seq, _n}, data) do
@@ -237,8 +239,9 @@ defmodule Dolphin.Vehicles.MissionProtocol do
   defp to_int_item(%M.MissionItemInt{} = item), do: item
 
   defp to_int_item(%M.MissionItem{} = i) do
-    global? = i.frame in [0, 3, 5, 6, 10, 11]
-    {x, y} = if global?, do: {round(i.x * 1.0e7), round(i.y * 1.0e7)}, else: {round(i.x * 1.0e4), round(i.y * 1.0e4)}
+    scale = if i.frame in [0, 3, 5, 6, 10, 11], do: 1.0e7, else: 1.0e4
+    # An integer field cannot hold NaN or an infinity: those become 0.
+    {x, y} = {scaled(i.x, scale), scaled(i.y, scale)}
 
     %M.MissionItemInt{
       target_system: i.target_system,
@@ -258,4 +261,7 @@ defmodule Dolphin.Vehicles.MissionProtocol do
       mission_type: i.mission_type
     }
   end
+
+  defp scaled(v, scale) when is_number(v), do: round(v * scale)
+  defp scaled(_special, _scale), do: 0
 end

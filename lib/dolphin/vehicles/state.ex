@@ -43,6 +43,7 @@ defmodule Dolphin.Vehicles.State do
             status_texts: [],
             components: MapSet.new(),
             link: %{received: 0, lost: 0, last_seen_ms: nil},
+            autopilot_compid: nil,
             seqs: %{}
 
   @type t :: %__MODULE__{}
@@ -84,7 +85,14 @@ defmodule Dolphin.Vehicles.State do
   # A GCS or another non-vehicle component on the same system says nothing of the vehicle.
   defp message(state, _compid, %M.Heartbeat{autopilot: 8}), do: state
 
-  defp message(state, _compid, %M.Heartbeat{} = hb) do
+  # The vehicle's identity comes from its autopilot: component 1 (MAV_COMP_ID_AUTOPILOT1)
+  # when there is one, else the first component heard with an autopilot; other
+  # components (an ADS-B receiver, a companion computer) say nothing of it.
+  defp message(%{autopilot_compid: known} = state, compid, %M.Heartbeat{})
+       when known != nil and compid != known and compid != 1,
+       do: state
+
+  defp message(state, compid, %M.Heartbeat{} = hb) do
     autopilot =
       case hb.autopilot do
         3 -> :ardupilot
@@ -94,7 +102,8 @@ defmodule Dolphin.Vehicles.State do
 
     %{
       state
-      | type: hb.type,
+      | autopilot_compid: compid,
+        type: hb.type,
         autopilot: autopilot,
         mode: Modes.name(autopilot, hb.type, hb.custom_mode),
         armed: (hb.base_mode &&& 128) != 0,

@@ -36,7 +36,13 @@ defmodule Dolphin.Vehicles.Vehicle do
   def init({sysid, link, opts}) do
     # Command protocols are linked to this process: their exits come as messages.
     Process.flag(:trap_exit, true)
-    timeout = Keyword.get(opts, :timeout_ms, Application.get_env(:dolphin, :vehicle_timeout_ms, 20_000))
+    # A timeout set for this vehicle (Dolphin.Vehicles.set_timeout/2) survives restarts.
+    timeout =
+      case :ets.lookup(Dolphin.Vehicles.Settings, {:timeout, sysid}) do
+        [{_, ms}] -> ms
+        [] -> Keyword.get(opts, :timeout_ms, Application.get_env(:dolphin, :vehicle_timeout_ms, 20_000))
+      end
+
     send(self(), :request_telemetry)
     Clock.send_after(self(), :check_link, check_period(timeout))
 
@@ -44,13 +50,15 @@ defmodule Dolphin.Vehicles.Vehicle do
      %{
        sysid: sysid,
        link: link,
-       state: State.new(sysid),
+       # Seen now (it was just heard, or its process restarted): silence from
+       # here on makes it lost.
+       state: put_in(State.new(sysid).link.last_seen_ms, Clock.now_ms()),
        timeout_ms: timeout,
        lost: false,
        requests_left: @request_tries,
-       # Operations under way: a command id, or :mission (one transfer at a
-       # time), => {protocol pid, caller}; and what waits for each: a queue of
-       # {module, request, opts}.
+       # Operations under way, by key (a command id, or :mission: one transfer
+       # at a time): %{pid, from, monitor, what}; and what waits for each key:
+       # a queue of {module, request, opts, monitor}.
        ops: %{},
        queued: %{}
      }}
@@ -66,7 +74,7 @@ defmodule Dolphin.Vehicles.Vehicle do
       changes -> PubSub.publish({:vehicle, s.sysid}, {:state, s.sysid, changes})
     end
 
-    route_to_op(s, frame.message)
+    route_to_op(s, frame)
 
     # Position telemetry flowing means the requests were heard.
     requests_left = if match?(%M.GlobalPositionInt{}, frame.message), do: 0, else: s.requests_left
@@ -93,21 +101,30 @@ defmodule Dolphin.Vehicles.Vehicle do
   def handle_info(:request_telemetry, %{requests_left: 0} = s), do: {:noreply, s}
 
   def handle_info(:request_telemetry, s) do
-    request_telemetry(s)
+    s = request_telemetry(s)
     Clock.send_after(self(), :request_telemetry, @request_every_ms)
     {:noreply, %{s | requests_left: s.requests_left - 1}}
   end
 
   def handle_info({:EXIT, pid, reason}, s) do
-    case Enum.find(s.ops, fn {_key, {p, _from}} -> p == pid end) do
-      {key, {_pid, from}} ->
-        # A protocol that crashed did not answer its caller.
-        if reason != :normal, do: GenServer.reply(from, {:error, crashed(s, key, reason)})
+    case Enum.find(s.ops, fn {_key, op} -> op.pid == pid end) do
+      {key, op} ->
+        # A protocol that crashed (or was stopped) did not answer its caller.
+        if reason != :normal and op.from, do: GenServer.reply(op.from, {:error, crashed(s, op.what, reason)})
+        if op.monitor, do: Process.demonitor(op.monitor, [:flush])
         {:noreply, next_op(%{s | ops: Map.delete(s.ops, key)}, key)}
 
       nil ->
         {:noreply, s}
     end
+  end
+
+  # A caller that went away: what it queued is dropped, what runs for it is stopped.
+  def handle_info({:DOWN, monitor, :process, _pid, _reason}, s) do
+    queued = Map.new(s.queued, fn {key, queue} -> {key, :queue.filter(fn {_m, _r, _o, mon} -> mon != monitor end, queue)} end)
+
+    for {_key, %{monitor: ^monitor, pid: pid}} <- s.ops, do: Process.exit(pid, :caller_gone)
+    {:noreply, %{s | queued: queued}}
   end
 
   def handle_info(:check_link, s) do
@@ -136,54 +153,71 @@ defmodule Dolphin.Vehicles.Vehicle do
 
   @mission_messages [M.MissionRequest, M.MissionRequestInt, M.MissionAck, M.MissionCount, M.MissionItemInt, M.MissionItem]
 
-  defp route_to_op(s, %M.CommandAck{command: command} = ack), do: notify_op(s, command, {:ack, ack})
-  defp route_to_op(s, %m{} = message) when m in @mission_messages, do: notify_op(s, :mission, {:mission, message})
-  defp route_to_op(_s, _message), do: :ok
+  defp route_to_op(s, %{message: %M.CommandAck{command: command} = ack, compid: compid}),
+    do: notify_op(s, command, {:ack, ack, compid})
+
+  defp route_to_op(s, %{message: %m{} = message}) when m in @mission_messages, do: notify_op(s, :mission, {:mission, message})
+  defp route_to_op(_s, _frame), do: :ok
 
   defp notify_op(s, key, event) do
-    with {:ok, {pid, _from}} <- Map.fetch(s.ops, key), do: send(pid, event)
+    with {:ok, %{pid: pid}} <- Map.fetch(s.ops, key), do: send(pid, event)
   end
 
+  # `from` is nil for the vehicle process's own requests (nobody to answer).
   defp run_op(s, key, module, request, opts, from) do
     request = Map.merge(request, %{sysid: s.sysid, reply_to: from})
+    monitor = if from, do: Process.monitor(elem(from, 0))
 
     if Map.has_key?(s.ops, key) do
       queue = Map.get(s.queued, key, :queue.new())
-      %{s | queued: Map.put(s.queued, key, :queue.in({module, request, opts}, queue))}
+      %{s | queued: Map.put(s.queued, key, :queue.in({module, request, opts, monitor}, queue))}
     else
-      start_op(s, key, module, request, opts)
+      start_op(s, key, module, request, opts, monitor)
     end
   end
 
-  defp start_op(s, key, module, request, opts) do
+  defp start_op(s, key, module, request, opts, monitor) do
     link = s.link
     sysid = s.sysid
     request = Map.put(request, :send, fn message -> Connection.send_message(link, sysid, message) end)
-    {:ok, pid} = module.start_link(request, opts)
-    %{s | ops: Map.put(s.ops, key, {pid, request.reply_to})}
+    what = if module == MissionProtocol, do: {:mission, request.operation, request.mission_type}, else: {:command, key}
+
+    case module.start_link(request, opts) do
+      {:ok, pid} ->
+        %{s | ops: Map.put(s.ops, key, %{pid: pid, from: request.reply_to, monitor: monitor, what: what})}
+
+      {:error, reason} ->
+        if request.reply_to, do: GenServer.reply(request.reply_to, {:error, crashed(s, what, reason)})
+        if monitor, do: Process.demonitor(monitor, [:flush])
+        next_op(s, key)
+    end
   end
 
   defp next_op(s, key) do
     with {:ok, queue} <- Map.fetch(s.queued, key),
-         {{:value, {module, request, opts}}, rest} <- :queue.out(queue) do
-      start_op(%{s | queued: Map.put(s.queued, key, rest)}, key, module, request, opts)
+         {{:value, {module, request, opts, monitor}}, rest} <- :queue.out(queue) do
+      start_op(%{s | queued: Map.put(s.queued, key, rest)}, key, module, request, opts, monitor)
     else
       _ -> %{s | queued: Map.delete(s.queued, key)}
     end
   end
 
-  defp crashed(s, :mission, reason),
-    do: %Dolphin.MissionError{operation: :upload, vehicle: s.sysid, mission_type: :mission, result: :error, detail: "protocol crashed: #{inspect(reason)}"}
+  defp crashed(s, {:mission, operation, type}, reason),
+    do: %Dolphin.MissionError{operation: operation, vehicle: s.sysid, mission_type: type, result: :error, detail: "stopped: #{inspect(reason)}"}
 
-  defp crashed(s, command, reason),
-    do: %Dolphin.CommandError{command: command, vehicle: s.sysid, result: :failed, attempts: 0, detail: "protocol crashed: #{inspect(reason)}"}
+  defp crashed(s, {:command, command}, reason),
+    do: %Dolphin.CommandError{command: command, vehicle: s.sysid, result: :failed, attempts: 0, detail: "stopped: #{inspect(reason)}"}
 
+  # The data streams (no answer expected), then each message interval as a
+  # command of our own through the command protocol, so that its
+  # COMMAND_ACKs never settle a caller's command of the same id.
   defp request_telemetry(s) do
-    # MAV_DATA_STREAM_ALL at 4 Hz, then the messages that matter at their own rates.
     Connection.send_message(s.link, s.sysid, %M.RequestDataStream{target_system: s.sysid, target_component: 0, req_stream_id: 0, req_message_rate: 4, start_stop: 1})
 
-    for {msgid, interval_us} <- @intervals do
-      Connection.send_message(s.link, s.sysid, %M.CommandLong{target_system: s.sysid, target_component: 0, command: 511, param1: msgid * 1.0, param2: interval_us * 1.0})
-    end
+    Enum.reduce(@intervals, s, fn {msgid, interval_us}, s ->
+      params = [msgid * 1.0, interval_us * 1.0, 0.0, 0.0, 0.0, 0.0, 0.0]
+      request = %{command: 511, params: params, int: false, frame: 0, target_component: 1, progress_to: nil}
+      run_op(s, 511, CommandProtocol, request, [attempts: 1], nil)
+    end)
   end
 end

@@ -29,6 +29,10 @@ defmodule Dolphin.Vehicles.CommandProtocolTest do
 
     UDPPeer.send_message(peer, port, %M.Heartbeat{type: 2, autopilot: 3, custom_mode: 0}, sysid: sysid)
     Wait.until(fn -> match?({:ok, %{autopilot: :ardupilot}}, Vehicles.state(sysid)) end)
+    # Position telemetry: the vehicle process stops asking for telemetry; its
+    # own message-interval commands (unanswered here) are let run out first.
+    UDPPeer.send_message(peer, port, %M.GlobalPositionInt{}, sysid: sysid, seq: 1)
+    Wait.until(fn -> :sys.get_state(Vehicles.whereis(sysid)).ops == %{} end)
     %{peer: peer, port: port, sysid: sysid}
   end
 
@@ -104,6 +108,37 @@ defmodule Dolphin.Vehicles.CommandProtocolTest do
 
     ack(peer, port, sysid, 192, 0)
     assert Task.await(task) == {:ok, :accepted}
+  end
+
+  test "an answer meant for another ground station, or from another component, is not ours", %{peer: peer, port: port, sysid: sysid} do
+    task = Task.async(fn -> Vehicles.arm(sysid, attempts: 2) end)
+    next_command(peer, 400)
+    UDPPeer.send_message(peer, port, %M.CommandAck{command: 400, result: 0, target_system: 254}, sysid: sysid)
+    UDPPeer.send_message(peer, port, %M.CommandAck{command: 400, result: 0, target_system: 255}, sysid: sysid, compid: 100)
+    assert {:error, %CommandError{result: :timeout}} = Task.await(task)
+  end
+
+  test "caller mistakes are raised at the call, before anything is sent", %{sysid: sysid} do
+    assert_raise ArgumentError, ~r/a MAV_CMD is 0..65535/, fn -> Vehicles.command(sysid, 70_000) end
+    assert_raise ArgumentError, ~r/command parameters must be numbers/, fn -> Vehicles.command(sysid, 400, ["1"]) end
+    assert_raise ArgumentError, ~r/position must be/, fn -> Vehicles.command_int(sysid, 192, [], {95.0, 0, 0}) end
+    assert_raise ArgumentError, ~r/mission_type must be/, fn -> Vehicles.clear_mission(sysid, mission_type: :bogus) end
+    bad = %M.MissionItemInt{command: 16, x: 47.39}
+    assert_raise ArgumentError, ~r/mission item 1: cannot encode MISSION_ITEM_INT.x = 47.39/, fn -> Vehicles.upload_mission(sysid, [%M.MissionItemInt{}, bad]) end
+    assert Vehicles.whereis(sysid) != nil
+  end
+
+  test "a command queued by a caller that went away is never sent", %{peer: peer, port: port, sysid: sysid} do
+    t1 = Task.async(fn -> Vehicles.arm(sysid) end)
+    next_command(peer, 400)
+    {pid, ref} = spawn_monitor(fn -> Vehicles.command(sysid, 400, [4]) end)
+    Wait.until(fn -> :queue.len(Map.get(:sys.get_state(Vehicles.whereis(sysid)).queued, 400, :queue.new())) == 1 end)
+    Process.exit(pid, :kill)
+    assert_receive {:DOWN, ^ref, :process, ^pid, :killed}
+    Wait.until(fn -> :queue.is_empty(Map.get(:sys.get_state(Vehicles.whereis(sysid)).queued, 400, :queue.new())) end)
+    ack(peer, port, sysid, 400, 0)
+    assert Task.await(t1) == {:ok, :accepted}
+    assert_raise ExUnit.AssertionError, fn -> UDPPeer.receive_until(peer, &match?(%M.CommandLong{command: 400, param1: 4.0}, &1.message), 200) end
   end
 
   test "an unknown vehicle is an error, not a crash" do

@@ -34,6 +34,10 @@ defmodule Dolphin.Vehicles.StateTest do
 
     assert s.mode == :guided and s.type == 2
     assert MapSet.member?(s.components, :camera)
+
+    # An ADS-B receiver (its own component, autopilot GENERIC) is not the vehicle.
+    adsb = State.apply(s, frame(%M.Heartbeat{type: 27, autopilot: 0}, compid: 156), 200)
+    assert {adsb.type, adsb.mode, adsb.autopilot} == {2, :guided, :ardupilot}
   end
 
   test "battery is unknown until reported; -1 stays unknown" do
