@@ -108,6 +108,13 @@ defmodule Dolphin.Vehicles.CommandProtocolTest do
 
     ack(peer, port, sysid, 192, 0)
     assert Task.await(task) == {:ok, :accepted}
+
+    home = Task.async(fn -> Vehicles.set_home(sysid, {41.1780001, -8.5960001, 110.5}) end)
+    %M.CommandInt{command: 179, frame: 0, x: 411_780_001, y: -85_960_001, z: 110.5} =
+      UDPPeer.receive_until(peer, &match?(%M.CommandInt{command: 179}, &1.message)).message
+
+    ack(peer, port, sysid, 179, 0)
+    assert Task.await(home) == {:ok, :accepted}
   end
 
   test "an answer meant for another ground station, or from another component, is not ours", %{peer: peer, port: port, sysid: sysid} do
