@@ -149,7 +149,8 @@ defmodule Dolphin.MAVLink.Signing do
   @doc false
   # verify/2 for a reader that keeps its signing state in a `signing` field
   # (Dolphin.MAVLink.Parser, Dolphin.MAVLink.Tlog): the reader comes back updated.
-  @spec verify_for(holder, Frame.t()) :: {:ok, holder} | {:error, reject_reason(), holder} when holder: %{signing: t() | nil}
+  @spec verify_for(holder, Frame.t()) :: {:ok, holder} | {:error, reject_reason(), holder}
+        when holder: %{:signing => t() | nil, optional(atom()) => term()}
   def verify_for(%{signing: signing} = holder, frame) do
     case verify(signing, frame) do
       {:ok, signing} -> {:ok, %{holder | signing: signing}}
