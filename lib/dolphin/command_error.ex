@@ -4,7 +4,8 @@ defmodule Dolphin.CommandError do
   why (`result`: the vehicle's `MAV_RESULT` as an atom — `:denied`,
   `:temporarily_rejected`, `:unsupported`, `:failed`, `:cancelled`, ... — or
   `:timeout` when no answer came within the retries, `:vehicle_gone` when the
-  vehicle's process went away).
+  vehicle's process went away, `:not_sent` when the ground station itself
+  declined, e.g. a mode the vehicle does not have).
 
       iex> e = %Dolphin.CommandError{command: :mav_cmd_component_arm_disarm, vehicle: 3, result: :denied, attempts: 1}
       iex> Exception.message(e)
@@ -29,6 +30,7 @@ defmodule Dolphin.CommandError do
       case result do
         :timeout -> "vehicle #{vehicle} did not answer #{name} (#{e.attempts} attempts)"
         :vehicle_gone -> "vehicle #{vehicle} went away while running #{name}"
+        :not_sent -> "#{name} not sent to vehicle #{vehicle}"
         result -> "vehicle #{vehicle} refused #{name}: MAV_RESULT_#{result |> Atom.to_string() |> String.upcase()}"
       end
 

@@ -187,7 +187,7 @@ defmodule Dolphin.Vehicles do
         {:error, %CommandError{command: :mav_cmd_do_set_mode, vehicle: sysid, result: :vehicle_gone, attempts: 0, detail: "no such vehicle"}}
 
       {:error, detail} ->
-        {:error, %CommandError{command: :mav_cmd_do_set_mode, vehicle: sysid, result: :unsupported, attempts: 0, detail: detail}}
+        {:error, %CommandError{command: :mav_cmd_do_set_mode, vehicle: sysid, result: :not_sent, attempts: 0, detail: detail}}
     end
   end
 

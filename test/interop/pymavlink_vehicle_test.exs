@@ -13,7 +13,7 @@ defmodule Dolphin.Interop.PymavlinkVehicleTest do
   alias Dolphin.MAVLink.{JSON}
   alias Dolphin.MAVLink.Ardupilotmega, as: M
 
-  @script Path.expand("pymavlink_vehicle.py", __DIR__)
+  @script Path.expand("../../scripts/pymavlink_vehicle.py", __DIR__)
   @sysid 61
 
   @tag timeout: 60_000

@@ -97,8 +97,8 @@ defmodule Dolphin.Vehicles.CommandProtocolTest do
     ack(peer, port, sysid, 176, 0)
     assert Task.await(task) == {:ok, :accepted}
 
-    assert {:error, %CommandError{result: :unsupported, detail: detail}} = Vehicles.set_mode(sysid, :warp)
-    assert detail =~ "no mode :warp on this vehicle"
+    assert {:error, %CommandError{result: :not_sent} = e} = Vehicles.set_mode(sysid, :warp)
+    assert Exception.message(e) =~ "MAV_CMD_DO_SET_MODE not sent to vehicle #{sysid} (no mode :warp on this vehicle"
   end
 
   test "COMMAND_INT carries the position as integers", %{peer: peer, port: port, sysid: sysid} do

@@ -1,5 +1,5 @@
 """A small vehicle made with pymavlink, the reference MAVLink implementation,
-for Dolphin's interop tests: it talks to a ground station listening on
+for Dolphin's interop tests and demo: it talks to a ground station listening on
 127.0.0.1:PORT as ArduCopter does (heartbeat, telemetry, COMMAND_ACK, the
 mission upload asked for item by item with MISSION_REQUEST), and prints on
 stdout, as JSON lines, what it received: commands and the uploaded mission.
