@@ -52,7 +52,8 @@ defmodule Dolphin.Vehicles.CommandProtocolTest do
   end
 
   test "a refusal names the command, the vehicle and the result", %{peer: peer, port: port, sysid: sysid} do
-    task = Task.async(fn -> Vehicles.arm(sysid) end)
+    # A long ack timeout: one attempt, however busy the machine.
+    task = Task.async(fn -> Vehicles.arm(sysid, ack_timeout_ms: 100_000) end)
     next_command(peer, 400)
     ack(peer, port, sysid, 400, 4)
     assert {:error, %CommandError{result: :failed, attempts: 1} = e} = Task.await(task)
@@ -61,12 +62,16 @@ defmodule Dolphin.Vehicles.CommandProtocolTest do
 
   test "IN_PROGRESS stops retransmission and reports progress until the final answer", %{peer: peer, port: port, sysid: sysid} do
     me = self()
-    task = Task.async(fn -> Vehicles.command(sysid, :mav_cmd_preflight_calibration, [1], progress_to: me) end)
+    # The wait after IN_PROGRESS (3 s of real time here) outlasts this test's pauses.
+    task = Task.async(fn -> Vehicles.command(sysid, :mav_cmd_preflight_calibration, [1], progress_to: me, progress_timeout_ms: 300_000) end)
     next_command(peer, 241)
     ack(peer, port, sysid, 241, 5, progress: 40)
     assert_receive {:command_progress, 241, 40}, 2_000
-    # Longer than the ack timeouts: no retransmission while in progress.
+    # Retransmissions sent before IN_PROGRESS arrived (a busy machine) are
+    # drained; from here on, several ack timeouts pass with none.
+    drain(peer)
     Process.sleep(100)
+    refute_command(peer, 241)
     ack(peer, port, sysid, 241, 5, progress: 90)
     assert_receive {:command_progress, 241, 90}, 2_000
     ack(peer, port, sysid, 241, 0)
@@ -151,6 +156,13 @@ defmodule Dolphin.Vehicles.CommandProtocolTest do
   test "an unknown vehicle is an error, not a crash" do
     assert {:error, %CommandError{result: :vehicle_gone, detail: "no such vehicle"}} = Vehicles.takeoff(254, 10)
     assert_raise ArgumentError, ~r/unknown MAV_CMD :mav_cmd_warp/, fn -> Vehicles.command(1, :mav_cmd_warp) end
+  end
+
+  defp drain(peer) do
+    case :gen_udp.recv(peer, 0, 20) do
+      {:ok, _} -> drain(peer)
+      {:error, :timeout} -> :ok
+    end
   end
 
   defp refute_command(peer, command) do
