@@ -45,19 +45,21 @@ defmodule Dolphin.Vehicles do
   @doc "The state of a vehicle, plus `lost: boolean`."
   @spec state(byte()) :: {:ok, Dolphin.Vehicles.State.t()} | {:error, :unknown_vehicle}
   def state(sysid) do
-    with pid when pid != nil <- whereis(sysid),
-         {:ok, state} <- safe_call(pid, :state) do
-      {:ok, state}
-    else
+    case call_vehicle(sysid, :state) do
+      {:ok, state} -> {:ok, state}
       _ -> {:error, :unknown_vehicle}
     end
   end
 
-  # A vehicle's process may go away between look-up and call.
-  defp safe_call(pid, request) do
-    {:ok, GenServer.call(pid, request)}
+  # Calls a vehicle's process: `:no_vehicle` if there is none, `:gone` if it
+  # went away before answering (it may between look-up and call).
+  defp call_vehicle(sysid, request, timeout \\ 5_000) do
+    case whereis(sysid) do
+      nil -> :no_vehicle
+      pid -> {:ok, GenServer.call(pid, request, timeout)}
+    end
   catch
-    :exit, _ -> :error
+    :exit, _ -> :gone
   end
 
   @doc "Sends a message to a vehicle through the link it was last heard on."
@@ -75,10 +77,8 @@ defmodule Dolphin.Vehicles do
     # Kept outside the process: a restarted vehicle process keeps it.
     :ets.insert(Dolphin.Vehicles.Settings, {{:timeout, sysid}, ms})
 
-    with pid when pid != nil <- whereis(sysid),
-         {:ok, :ok} <- safe_call(pid, {:set_timeout, ms}) do
-      :ok
-    else
+    case call_vehicle(sysid, {:set_timeout, ms}) do
+      {:ok, :ok} -> :ok
       _ -> {:error, :unknown_vehicle}
     end
   end
@@ -138,16 +138,12 @@ defmodule Dolphin.Vehicles do
         progress_to: Keyword.get(opts, :progress_to)
       })
 
-    case whereis(sysid) do
-      nil ->
-        {:error, %CommandError{command: name, vehicle: sysid, result: :vehicle_gone, attempts: 0, detail: "no such vehicle"}}
+    gone = %CommandError{command: name, vehicle: sysid, result: :vehicle_gone, attempts: 0}
 
-      pid ->
-        try do
-          GenServer.call(pid, {:command, request, opts}, :infinity)
-        catch
-          :exit, _ -> {:error, %CommandError{command: name, vehicle: sysid, result: :vehicle_gone, attempts: 0}}
-        end
+    case call_vehicle(sysid, {:command, request, opts}, :infinity) do
+      {:ok, reply} -> reply
+      :no_vehicle -> {:error, %{gone | detail: "no such vehicle"}}
+      :gone -> {:error, gone}
     end
   end
 
@@ -264,16 +260,10 @@ defmodule Dolphin.Vehicles do
     request = Map.merge(request, %{operation: operation, mission_type: type, progress_to: Keyword.get(opts, :progress_to)})
     gone = %Dolphin.MissionError{operation: operation, vehicle: sysid, mission_type: type, result: :vehicle_gone}
 
-    case whereis(sysid) do
-      nil ->
-        {:error, %{gone | detail: "no such vehicle"}}
-
-      pid ->
-        try do
-          GenServer.call(pid, {:mission, request, opts}, :infinity)
-        catch
-          :exit, _ -> {:error, gone}
-        end
+    case call_vehicle(sysid, {:mission, request, opts}, :infinity) do
+      {:ok, reply} -> reply
+      :no_vehicle -> {:error, %{gone | detail: "no such vehicle"}}
+      :gone -> {:error, gone}
     end
   end
 

@@ -105,9 +105,9 @@ defmodule Dolphin.MAVLink.Record do
 
   defp signing(true, %{"secret_key" => hex, "link_id" => link_id, "timestamp" => ts})
        when is_binary(hex) and is_integer(link_id) and link_id in 0..255 and is_integer(ts) and ts >= 0 and ts < 0x1000000000000 do
-    case Base.decode16(hex, case: :mixed) do
-      {:ok, <<_::binary-32>> = key} -> {:ok, signing: %{key: key, link_id: link_id, timestamp: ts}}
-      _ -> {:error, "signing.secret_key must be 64 hex digits"}
+    case Dolphin.MAVLink.Signing.decode_key(hex) do
+      {:ok, key} -> {:ok, signing: %{key: key, link_id: link_id, timestamp: ts}}
+      :error -> {:error, "signing.secret_key must be 64 hex digits"}
     end
   end
 

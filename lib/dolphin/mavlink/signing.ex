@@ -71,10 +71,21 @@ defmodule Dolphin.MAVLink.Signing do
     }
   end
 
+  @doc "A 32-byte signing key from its 64 hex digits (either case)."
+  @spec decode_key(String.t()) :: {:ok, <<_::256>>} | :error
+  def decode_key(hex) when is_binary(hex) and byte_size(hex) == 64 do
+    case Base.decode16(hex, case: :mixed) do
+      {:ok, key} -> {:ok, key}
+      :error -> :error
+    end
+  end
+
+  def decode_key(_other), do: :error
+
   defp key!(<<_::binary-32>> = key), do: key
 
   defp key!(hex) when is_binary(hex) and byte_size(hex) == 64 do
-    case Base.decode16(hex, case: :mixed) do
+    case decode_key(hex) do
       {:ok, key} -> key
       :error -> raise ArgumentError, "signing key is not hexadecimal: #{inspect(hex)}"
     end

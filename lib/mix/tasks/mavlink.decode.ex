@@ -61,9 +61,9 @@ defmodule Mix.Tasks.Mavlink.Decode do
   # A recording's timestamps are in the past: the replay window starts at 0,
   # and only the order of each stream's timestamps is checked.
   defp new_signing(hex, unsigned) do
-    case Base.decode16(hex, case: :mixed) do
-      {:ok, <<_::binary-32>> = key} -> Signing.new(key: key, unsigned: unsigned, timestamp: 0)
-      _ -> Mix.raise("mavlink.decode: --key must be 64 hex digits (a 32-byte key), got #{inspect(hex)}")
+    case Signing.decode_key(hex) do
+      {:ok, key} -> Signing.new(key: key, unsigned: unsigned, timestamp: 0)
+      :error -> Mix.raise("mavlink.decode: --key must be 64 hex digits (a 32-byte key), got #{inspect(hex)}")
     end
   end
 
