@@ -37,9 +37,6 @@ defmodule Dolphin.Vehicles.MissionProtocol do
 
   @types %{mission: 0, fence: 1, rally: 2}
 
-  @doc false
-  def mission_type_number(type), do: Map.fetch!(@types, type)
-
   @doc """
   Starts a transfer, linked to the caller (the vehicle process). `request`:
   `%{operation, sysid, mission_type, items (upload), send, reply_to, progress_to}`.
