@@ -1,0 +1,296 @@
+defmodule Dolphin.Sim do
+  @moduledoc """
+  A built-in fleet of simulated ArduCopters that speak real MAVLink 2 over UDP,
+  so that every script runs with no hardware and no external simulator, faster
+  than real time.
+
+      {:ok, link} = Dolphin.Link.connect("udpin:127.0.0.1:0")
+      {:ok, [1, 2, 3]} = Dolphin.Sim.start(count: 3, gcs: Dolphin.Link.Connection.port(link), speedup: 20)
+
+  Each vehicle is its own process with its own UDP socket, sending to the
+  ground station as ArduPilot SITL's `--serial0 udpclient:HOST:PORT` does, and
+  answering at whatever address writes to it. On the protocol surface a ground
+  station uses, it behaves as ArduCopter was seen to (see ARDUPILOT.md in the
+  project's shared notes):
+
+    * HEARTBEAT at 1 Hz with ArduCopter's custom modes and the armed flag; a
+      camera component (compid 100) with its own heartbeat when it has one;
+    * nothing else until streams are asked for (REQUEST_DATA_STREAM,
+      MAV_CMD_SET_MESSAGE_INTERVAL, MAV_CMD_REQUEST_MESSAGE): SYS_STATUS,
+      BATTERY_STATUS, GLOBAL_POSITION_INT, GPS_RAW_INT, ATTITUDE, VFR_HUD,
+      MISSION_CURRENT, EXTENDED_SYS_STATE, HOME_POSITION, AUTOPILOT_VERSION;
+    * COMMAND_ACK for every command; modes by number (STABILIZE 0, AUTO 3,
+      GUIDED 4, LOITER 5, RTL 6, LAND 9, BRAKE 17 and the rest); arming refused
+      in AUTO, until the position estimate is ready (`:ekf_ready_ms` after
+      boot, 15 s by default) and on a low battery, each with ArduPilot's
+      STATUSTEXT; auto-disarm 10 s after arming on the ground;
+    * the mission protocol's vehicle side (items asked for with MISSION_REQUEST,
+      item 0 is home, retries and timeouts, fence and rally lists);
+    * flight: take-off, waypoints with acceptance radius and hold time, loiters
+      (unlimited, turns, time: circles of the given radius), RTL (the item is
+      reached only after landing), LAND, delays, speed and altitude changes,
+      DO_SET_HOME, DO_JUMP, camera commands (photos counted and reported with
+      CAMERA_IMAGE_CAPTURED); GUIDED holds and flies to DO_REPOSITION targets,
+      BRAKE stops and holds, LOITER and the other pilot modes sink without RC
+      throttle, land and disarm; cruise 10 m/s, climb 2.5 m/s, descent 1.5 m/s;
+    * a battery that drains while armed in proportion to effort (a 3300 mAh
+      pack at ~30 A: ~0.25 % a second in flight) and charges while disarmed
+      on the ground at home; warnings at 20 % and 10 %, and ArduPilot's battery
+      failsafe when asked for (`battery_failsafe: :rtl | :land`).
+
+  Time is `Dolphin.Clock` time: with a speed-up of K, flight, telemetry rates
+  and the vehicles' protocol timers all run K times faster.
+
+  Faults can be put on any vehicle's link at any time (`set_faults/2`, see
+  `Dolphin.Sim.Faults`), and a vehicle can be made to vanish (`crash/2`).
+  """
+
+  alias Dolphin.Sim.Copter
+
+  @default_home %{lat: 40.444233, lon: -7.375234, alt: 820.0}
+  @spacing 30.0
+  @per_row 10
+
+  @typedoc "Where a vehicle boots: `%{lat, lon, alt}` (degrees, metres above mean sea level)."
+  @type location :: %{lat: float(), lon: float(), alt: float()}
+
+  @doc """
+  Starts simulated vehicles. Options:
+
+    * `:gcs` (required) — where they send: a port on 127.0.0.1, `{address, port}`,
+      or an endpoint string `"udpout:HOST:PORT"`;
+    * `:count` — how many (default 1), with system ids from `:first_sysid`
+      (default 1), or `:sysids` — the exact ids;
+    * `:home` — the location they are spread around, `#{@spacing |> round()}` m
+      apart in rows of #{@per_row} (default: the report's, 40.444233, -7.375234,
+      820 m); or `:homes` — one location per vehicle;
+    * `:camera` — `true` (every vehicle), or a list of system ids, that carry a camera;
+    * `:speedup` — sets `Dolphin.Clock`'s speed-up factor;
+    * `:seed` — seeds the faults' randomness (default 1);
+    * `:faults` — faults on every vehicle's link from the start;
+    * any vehicle setting: `:battery` (initial fraction, default 1.0),
+      `:ekf_ready_ms`, `:charge_rate` (fraction per second, default 0.005),
+      `:capacity_mah`, `:hover_current`, `:cruise_speed`, `:climb_speed`,
+      `:descent_speed`, `:wp_radius`, `:rtl_alt`, `:disarm_delay_ms`,
+      `:arm_min_battery`, `:battery_low`, `:battery_critical`,
+      `:battery_failsafe` (`:none`, `:rtl`, `:land`), `:gcs_failsafe`,
+      `:gcs_sysid`, `:request_int` (ask for items with MISSION_REQUEST_INT).
+
+  Returns the system ids started, or an error that says what was wrong.
+  """
+  @spec start(keyword()) :: {:ok, [byte()]} | {:error, String.t()}
+  def start(opts) do
+    with {:ok, gcs} <- gcs(Keyword.get(opts, :gcs)),
+         {:ok, sysids} <- sysids(opts),
+         {:ok, config} <- config(opts),
+         :ok <- free(sysids),
+         :ok <- speedup(opts[:speedup]),
+         {:ok, _} <- ensure_supervisor() do
+      homes = homes(opts, length(sysids))
+      cameras = cameras(opts[:camera], sysids)
+
+      Enum.zip(sysids, homes)
+      |> Enum.reduce_while({:ok, []}, fn {sysid, home}, {:ok, started} ->
+        child =
+          {Dolphin.Sim.Vehicle,
+           sysid: sysid,
+           gcs: gcs,
+           home: home,
+           seed: Keyword.get(opts, :seed, 1),
+           faults: Keyword.get(opts, :faults, %{}),
+           config: Map.put(config, :camera, sysid in cameras)}
+
+        case DynamicSupervisor.start_child(Dolphin.Sim.Supervisor, child) do
+          {:ok, _pid} -> {:cont, {:ok, [sysid | started]}}
+          {:error, why} -> {:halt, {:error, "simulated vehicle #{sysid}: #{inspect(why)}"}}
+        end
+      end)
+      |> case do
+        {:ok, started} -> {:ok, Enum.reverse(started)}
+        error -> error
+      end
+    end
+  end
+
+  @doc "Like `start/1`, raising `ArgumentError` on a bad option."
+  @spec start!(keyword()) :: [byte()]
+  def start!(opts) do
+    case start(opts) do
+      {:ok, sysids} -> sysids
+      {:error, why} -> raise ArgumentError, why
+    end
+  end
+
+  @doc "Stops every simulated vehicle (or one)."
+  @spec stop(byte() | :all) :: :ok
+  def stop(sysid \\ :all)
+
+  def stop(:all) do
+    for sysid <- vehicles(), do: stop(sysid)
+    :ok
+  end
+
+  def stop(sysid) do
+    case whereis(sysid) do
+      nil -> :ok
+      pid -> DynamicSupervisor.terminate_child(Dolphin.Sim.Supervisor, pid) |> then(fn _ -> :ok end)
+    end
+  end
+
+  @doc "The system ids of the simulated vehicles running now."
+  @spec vehicles() :: [byte()]
+  def vehicles do
+    Registry.select(Dolphin.Registry, [{{{:sim, :"$1"}, :_, :_}, [], [:"$1"]}]) |> Enum.sort()
+  end
+
+  @doc """
+  What a simulated vehicle is doing, as the simulator sees it (the truth, not
+  the telemetry): `mode`, `armed`, `landed`, `position` (`%{lat, lon, alt,
+  relative_alt}`), `velocity`, `home`, `battery`, `mission` (its items,
+  home excluded), `current`, `mission_state`, `photos`, `faults`, its UDP
+  `port`, `time_ms` (vehicle time since boot) and `lag_ms` (how far it is
+  behind the clock).
+  """
+  @spec info(byte()) :: {:ok, map()} | {:error, :unknown_vehicle}
+  def info(sysid), do: call(sysid, :info)
+
+  @doc "Changes the faults of a vehicle's link (see `Dolphin.Sim.Faults`); `%{}` keeps them."
+  @spec set_faults(byte(), map() | keyword()) :: :ok | {:error, :unknown_vehicle | String.t()}
+  def set_faults(sysid, faults), do: call(sysid, {:faults, faults})
+
+  @doc "Sets a vehicle's battery charge (a fraction of full): for tests and demonstrations."
+  @spec set_battery(byte(), number()) :: :ok | {:error, :unknown_vehicle}
+  def set_battery(sysid, fraction) when is_number(fraction) and fraction >= 0 and fraction <= 1, do: call(sysid, {:set, :battery, fraction})
+
+  @doc """
+  Kills a vehicle's process, as if it had been destroyed: the ground station
+  stops hearing it. With `reboot: true` it comes back at once as a freshly
+  booted autopilot where it stood (missions kept, flight state lost).
+  """
+  @spec crash(byte(), keyword()) :: :ok | {:error, :unknown_vehicle}
+  def crash(sysid, opts \\ []) do
+    case whereis(sysid) do
+      nil ->
+        {:error, :unknown_vehicle}
+
+      pid ->
+        if Keyword.get(opts, :reboot, false) do
+          # An abnormal exit: the supervisor restarts the (transient) vehicle.
+          Process.exit(pid, :kill)
+        else
+          DynamicSupervisor.terminate_child(Dolphin.Sim.Supervisor, pid)
+        end
+
+        :ok
+    end
+  end
+
+  defp call(sysid, request) do
+    case whereis(sysid) do
+      nil -> {:error, :unknown_vehicle}
+      pid -> GenServer.call(pid, request)
+    end
+  catch
+    :exit, {:noproc, _} -> {:error, :unknown_vehicle}
+  end
+
+  defp whereis(sysid) do
+    case Registry.lookup(Dolphin.Registry, {:sim, sysid}) do
+      [{pid, _}] -> pid
+      [] -> nil
+    end
+  end
+
+  # --- options ----------------------------------------------------------------
+
+  defp gcs(port) when is_integer(port) and port in 1..65_535, do: {:ok, {{127, 0, 0, 1}, port}}
+  defp gcs({address, port} = gcs) when is_tuple(address) and is_integer(port), do: {:ok, gcs}
+
+  defp gcs(endpoint) when is_binary(endpoint) do
+    case Dolphin.Link.Endpoint.parse(endpoint) do
+      {:ok, %{kind: :udpout, address: address, port: port}} -> {:ok, {address, port}}
+      {:ok, _} -> {:error, "the simulator sends to a ground station: give it udpout:HOST:PORT, not #{endpoint}"}
+      error -> error
+    end
+  end
+
+  defp gcs(nil), do: {:error, "the simulator needs :gcs, where the ground station listens (a port, {address, port} or \"udpout:HOST:PORT\")"}
+  defp gcs(other), do: {:error, "bad :gcs #{inspect(other)}: a port, {address, port} or \"udpout:HOST:PORT\""}
+
+  defp sysids(opts) do
+    case Keyword.fetch(opts, :sysids) do
+      {:ok, ids} when is_list(ids) and ids != [] ->
+        if Enum.all?(ids, &(is_integer(&1) and &1 in 1..254)) and length(Enum.uniq(ids)) == length(ids),
+          do: {:ok, ids},
+          else: {:error, "bad :sysids #{inspect(ids)}: distinct system ids in 1..254"}
+
+      {:ok, other} ->
+        {:error, "bad :sysids #{inspect(other)}: a list of system ids"}
+
+      :error ->
+        count = Keyword.get(opts, :count, 1)
+        first = Keyword.get(opts, :first_sysid, 1)
+
+        cond do
+          not is_integer(count) or count < 1 -> {:error, "bad :count #{inspect(count)}: at least 1 vehicle"}
+          not is_integer(first) or first < 1 or first + count - 1 > 254 -> {:error, "system ids #{first}..#{first + count - 1} do not fit in 1..254"}
+          true -> {:ok, Enum.to_list(first..(first + count - 1))}
+        end
+    end
+  end
+
+  defp config(opts) do
+    known = Map.keys(Copter.defaults()) -- [:camera]
+    config = opts |> Keyword.take(known) |> Map.new()
+
+    case Enum.find(config, fn {_k, v} -> not (is_number(v) or is_boolean(v) or is_atom(v)) end) do
+      nil -> {:ok, config}
+      {k, v} -> {:error, "bad #{inspect(k)}: #{inspect(v)}"}
+    end
+  end
+
+  defp free(sysids) do
+    case Enum.filter(sysids, &whereis/1) do
+      [] -> :ok
+      taken -> {:error, "simulated vehicles #{inspect(taken)} are already running"}
+    end
+  end
+
+  defp speedup(nil), do: :ok
+  defp speedup(k) when is_number(k) and k > 0, do: Dolphin.Clock.set_speedup(k)
+  defp speedup(k), do: {:error, "bad :speedup #{inspect(k)}: a positive number"}
+
+  defp homes(opts, count) do
+    case Keyword.fetch(opts, :homes) do
+      {:ok, homes} when length(homes) == count ->
+        Enum.map(homes, &location/1)
+
+      _ ->
+        center = location(Keyword.get(opts, :home, @default_home))
+        columns = min(count, @per_row)
+
+        for i <- 0..(count - 1) do
+          row = div(i, @per_row)
+          column = rem(i, @per_row)
+          Copter.offset(center, -row * @spacing, (column - (columns - 1) / 2) * @spacing)
+        end
+    end
+  end
+
+  defp location(%{lat: lat, lon: lon} = l), do: %{lat: lat * 1.0, lon: lon * 1.0, alt: Map.get(l, :alt, 0) * 1.0}
+  defp location({lat, lon, alt}), do: %{lat: lat * 1.0, lon: lon * 1.0, alt: alt * 1.0}
+  defp location(other), do: raise(ArgumentError, "bad home #{inspect(other)}: %{lat: ..., lon: ..., alt: ...} or {lat, lon, alt}")
+
+  defp cameras(true, sysids), do: sysids
+  defp cameras(list, _sysids) when is_list(list), do: list
+  defp cameras(_, _sysids), do: []
+
+  defp ensure_supervisor do
+    case Supervisor.start_child(Dolphin.Supervisor, Dolphin.Sim.Supervisor) do
+      {:ok, pid} -> {:ok, pid}
+      {:error, {:already_started, pid}} -> {:ok, pid}
+      {:error, :already_present} -> Supervisor.restart_child(Dolphin.Supervisor, Dolphin.Sim.Supervisor)
+      {:error, why} -> {:error, "cannot start the simulator: #{inspect(why)}"}
+    end
+  end
+end

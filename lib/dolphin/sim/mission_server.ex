@@ -1,0 +1,195 @@
+defmodule Dolphin.Sim.MissionServer do
+  @moduledoc false
+  # The vehicle side of the MAVLink mission protocol, as ArduCopter plays it
+  # (see ARDUPILOT.md), as a pure state machine: `handle/4` takes one message
+  # from a ground station and returns the replies; `timeout/2` runs the upload's
+  # re-request timer, due at `deadline/1`.
+  #
+  # - Uploads are asked for item by item with MISSION_REQUEST (ArduPilot's
+  #   choice), or MISSION_REQUEST_INT when `request_int: true`; MISSION_ITEM_INT
+  #   and the float MISSION_ITEM are both accepted (the latter with ArduPilot's
+  #   complaint). A wrong seq draws INVALID_SEQUENCE and the expected one is asked
+  #   for again; silence draws a re-request every second, 8 times, then
+  #   OPERATION_CANCELLED; more than `limit` items, NO_SPACE; an unknown command,
+  #   UNSUPPORTED; a second uploader while one is busy, DENIED.
+  # - For the mission (type 0) item 0 is home: an uploaded item 0 is ignored and
+  #   a downloaded item 0 is the current home. Frames are normalised on the way
+  #   back (the `_INT` frames read back as their float twins), as ArduPilot does.
+  # - Fence (1) and rally (2) lists are kept as uploaded.
+
+  alias Dolphin.MAVLink.Ardupilotmega, as: M
+
+  @rerequest_ms 1_000
+  @rerequest_tries 8
+
+  # MAV_MISSION_RESULT values.
+  @accepted 0
+  @unsupported 3
+  @no_space 4
+  @invalid_sequence 13
+  @denied 14
+  @cancelled 15
+
+  # Mission commands the simulated copter knows how to fly or perform.
+  @supported [16, 17, 18, 19, 20, 21, 22, 93, 112, 113, 114, 115, 177, 178, 179, 181, 183, 186, 189, 201, 203, 205, 206, 2000, 2001, 5000, 5001, 5002, 5003, 5004]
+
+  # ArduPilot reads every `_INT` frame back as the float frame it stands for.
+  @normalised_frames %{5 => 0, 6 => 3, 11 => 10}
+
+  defstruct lists: %{0 => [], 1 => [], 2 => []},
+            upload: nil,
+            request_int: false,
+            limit: 650
+
+  @type t :: %__MODULE__{}
+  @type peer :: {byte(), byte()}
+  @type reply :: {:send, struct()} | {:text, 0..7, String.t()} | {:changed, 0..2}
+
+  @spec new(keyword()) :: t()
+  def new(opts \\ []), do: %__MODULE__{request_int: Keyword.get(opts, :request_int, false), limit: Keyword.get(opts, :limit, 650)}
+
+  @doc false
+  @spec supported?(non_neg_integer()) :: boolean()
+  def supported?(command), do: command in @supported
+
+  @doc "The items of a list (for the mission: item 1 onwards, home not included)."
+  @spec items(t(), 0..2) :: [struct()]
+  def items(%__MODULE__{lists: lists}, type \\ 0), do: Map.get(lists, type, [])
+
+  @doc "When the upload's re-request timer is due (vehicle ms), or nil."
+  @spec deadline(t()) :: integer() | nil
+  def deadline(%__MODULE__{upload: nil}), do: nil
+  def deadline(%__MODULE__{upload: up}), do: up.deadline
+
+  @doc """
+  One message from the ground station `peer`. `home` is the item 0 to hand out
+  on a download of the mission. Returns the new state and what to do.
+  """
+  @spec handle(t(), struct(), peer(), %{now: integer(), home: struct() | nil}) :: {t(), [reply()]}
+  def handle(server, message, peer, ctx)
+
+  def handle(%__MODULE__{upload: %{peer: other}} = s, %M.MissionCount{mission_type: type}, peer, _ctx) when other != peer,
+    do: {s, [{:send, ack(peer, type, @denied)}]}
+
+  def handle(%__MODULE__{} = s, %M.MissionCount{count: count, mission_type: type}, peer, ctx) do
+    cond do
+      type not in 0..2 ->
+        {s, [{:send, ack(peer, type, @unsupported)}]}
+
+      count > s.limit ->
+        {%{s | upload: nil}, [{:send, ack(peer, type, @no_space)}, {:text, 3, "Only #{s.limit} items are supported"}]}
+
+      count == 0 ->
+        {%{s | upload: nil, lists: Map.put(s.lists, type, [])}, [{:send, ack(peer, type, @accepted)}, {:changed, type}]}
+
+      true ->
+        up = %{peer: peer, type: type, count: count, items: [], tries: 0, deadline: ctx.now + @rerequest_ms}
+        s = %{s | upload: up}
+        {s, [request(s, 0)]}
+    end
+  end
+
+  def handle(%__MODULE__{upload: %{peer: peer, type: type} = up} = s, %item_type{mission_type: type, seq: seq} = item, peer, ctx)
+      when item_type in [M.MissionItemInt, M.MissionItem] do
+    expected = length(up.items)
+    complaint = if item_type == M.MissionItem, do: [{:text, 4, "GCS should send MISSION_ITEM_INT"}], else: []
+
+    cond do
+      seq != expected ->
+        # The spec's answer to an unexpected item; ArduPilot then goes on asking.
+        {s, [{:send, ack(peer, type, @invalid_sequence)}, request(s, expected)]}
+
+      type == 0 and seq > 0 and not supported?(item.command) ->
+        {%{s | upload: nil}, complaint ++ [{:send, ack(peer, type, @unsupported)}, {:text, 6, "Mission: unsupported command #{item.command}"}]}
+
+      seq + 1 == up.count ->
+        list = Enum.reverse([to_int_item(item) | up.items])
+        # Item 0 of the mission is home: accepted and ignored.
+        list = if type == 0, do: tl(list), else: list
+        lists = Map.put(s.lists, type, list)
+        done = [{:send, ack(peer, type, @accepted)}, {:changed, type}] ++ if(type == 0, do: [{:text, 6, "Flight plan received"}], else: [])
+        {%{s | upload: nil, lists: lists}, complaint ++ done}
+
+      true ->
+        s = %{s | upload: %{up | items: [to_int_item(item) | up.items], tries: 0, deadline: ctx.now + @rerequest_ms}}
+        {s, complaint ++ [request(s, seq + 1)]}
+    end
+  end
+
+  def handle(%__MODULE__{} = s, %M.MissionRequestList{mission_type: type}, peer, ctx) do
+    count = length(download_list(s, type, ctx.home))
+    {s, [{:send, %M.MissionCount{target_system: elem(peer, 0), target_component: elem(peer, 1), count: count, mission_type: type}}]}
+  end
+
+  def handle(%__MODULE__{} = s, %request{seq: seq, mission_type: type}, peer, ctx) when request in [M.MissionRequestInt, M.MissionRequest] do
+    case Enum.at(download_list(s, type, ctx.home), seq) do
+      nil ->
+        {s, [{:send, ack(peer, type, 1)}]}
+
+      item ->
+        item = %{item | seq: seq, target_system: elem(peer, 0), target_component: elem(peer, 1), mission_type: type}
+        {s, [{:send, if(request == M.MissionRequestInt, do: item, else: to_float_item(item))}]}
+    end
+  end
+
+  def handle(%__MODULE__{} = s, %M.MissionClearAll{mission_type: type}, peer, _ctx) when type in 0..2,
+    do: {%{s | lists: Map.put(s.lists, type, []), upload: nil}, [{:send, ack(peer, type, @accepted)}, {:changed, type}]}
+
+  def handle(%__MODULE__{} = s, %M.MissionClearAll{mission_type: type}, peer, _ctx), do: {s, [{:send, ack(peer, type, @unsupported)}]}
+
+  # A ground station's acknowledgement of a download, or a cancellation of our upload.
+  def handle(%__MODULE__{upload: %{peer: peer}} = s, %M.MissionAck{}, peer, _ctx), do: {%{s | upload: nil}, []}
+  def handle(%__MODULE__{} = s, _other, _peer, _ctx), do: {s, []}
+
+  @doc "The re-request timer: ask again, or give up after 8 silent seconds."
+  @spec timeout(t(), integer()) :: {t(), [reply()]}
+  def timeout(%__MODULE__{upload: nil} = s, _now), do: {s, []}
+
+  def timeout(%__MODULE__{upload: up} = s, now) do
+    cond do
+      now < up.deadline ->
+        {s, []}
+
+      up.tries >= @rerequest_tries ->
+        {%{s | upload: nil}, [{:send, ack(up.peer, up.type, @cancelled)}, {:text, 3, "Mission upload timeout"}]}
+
+      true ->
+        s = %{s | upload: %{up | tries: up.tries + 1, deadline: now + @rerequest_ms}}
+        {s, [request(s, length(up.items))]}
+    end
+  end
+
+  defp download_list(s, 0, home), do: [home || %M.MissionItemInt{command: 16, frame: 0}] ++ Enum.map(items(s, 0), &normalise/1)
+  defp download_list(s, type, _home), do: items(s, type)
+
+  defp normalise(item), do: %{item | frame: Map.get(@normalised_frames, item.frame, item.frame)}
+
+  defp request(%{upload: up, request_int: int?}, seq) do
+    {sysid, compid} = up.peer
+    module = if int?, do: M.MissionRequestInt, else: M.MissionRequest
+    {:send, struct(module, target_system: sysid, target_component: compid, seq: seq, mission_type: up.type)}
+  end
+
+  defp ack({sysid, compid}, type, result), do: %M.MissionAck{target_system: sysid, target_component: compid, type: result, mission_type: type}
+
+  # Items are kept as MISSION_ITEM_INT: a float item's degrees become degE7.
+  defp to_int_item(%M.MissionItemInt{} = item), do: item
+
+  defp to_int_item(%M.MissionItem{} = item) do
+    fields = item |> Map.from_struct() |> Map.merge(%{x: degrees_to_int(item.frame, item.x), y: degrees_to_int(item.frame, item.y)})
+    struct(M.MissionItemInt, fields)
+  end
+
+  defp to_float_item(%M.MissionItemInt{} = item) do
+    fields = item |> Map.from_struct() |> Map.merge(%{x: int_to_degrees(item.frame, item.x), y: int_to_degrees(item.frame, item.y)})
+    struct(M.MissionItem, fields)
+  end
+
+  # Local frames (1, 4, 7-9, 12-...) carry metres, not degrees, in x and y.
+  @global_frames [0, 3, 5, 6, 10, 11]
+  defp degrees_to_int(frame, v) when frame in @global_frames and is_float(v), do: round(v * 1.0e7)
+  defp degrees_to_int(_frame, v) when is_float(v), do: round(v)
+  defp degrees_to_int(_frame, v), do: v
+  defp int_to_degrees(frame, v) when frame in @global_frames, do: v / 1.0e7
+  defp int_to_degrees(_frame, v), do: v * 1.0
+end

@@ -1,0 +1,197 @@
+defmodule Dolphin.Sim.Vehicle do
+  @moduledoc false
+  # One simulated vehicle's process: its own UDP socket, sending to the ground
+  # station as ArduPilot SITL's `--serial0 udpclient:HOST:PORT` does, and
+  # answering whoever writes to it. It moves bytes (through the link's faults)
+  # and time; the vehicle itself is the pure Dolphin.Sim.Copter.
+  #
+  # Time: the model is stepped in fixed steps of @step_ms of vehicle time,
+  # kept in line with Dolphin.Clock: at each tick the model catches up with
+  # the clock (at most @max_catch_up steps at once, so an overloaded host
+  # makes the vehicle fall behind rather than freeze its mailbox). `lag_ms`
+  # says how far behind the clock the vehicle is.
+
+  use GenServer, restart: :transient
+
+  import Bitwise, only: [<<<: 2]
+
+  alias Dolphin.Clock
+  alias Dolphin.MAVLink.{Frame, Parser}
+  alias Dolphin.Sim.{Copter, Faults}
+
+  @step_ms 50
+  @max_catch_up 40
+
+  def child_spec(opts), do: %{id: {__MODULE__, Keyword.fetch!(opts, :sysid)}, start: {__MODULE__, :start_link, [opts]}, restart: :transient}
+
+  def start_link(opts) do
+    sysid = Keyword.fetch!(opts, :sysid)
+    GenServer.start_link(__MODULE__, opts, name: {:via, Registry, {Dolphin.Registry, {:sim, sysid}}})
+  end
+
+  @impl true
+  def init(opts) do
+    sysid = Keyword.fetch!(opts, :sysid)
+    {address, port} = Keyword.fetch!(opts, :gcs)
+    bind = if loopback?(address), do: {127, 0, 0, 1}, else: {0, 0, 0, 0}
+
+    case :gen_udp.open(0, [:binary, active: 100, ip: bind, recbuf: 1 <<< 20]) do
+      {:ok, socket} ->
+        seed = Keyword.get(opts, :seed, 1)
+        model = Copter.new(sysid, Keyword.fetch!(opts, :home), Map.new(Keyword.get(opts, :config, %{})))
+        faults = Faults.new(Keyword.get(opts, :faults, %{}), {seed, sysid})
+
+        s = %{
+          sysid: sysid,
+          socket: socket,
+          gcs: {address, port},
+          model: model,
+          faults_out: faults,
+          faults_in: Faults.new(Faults.to_map(faults), {seed, sysid, :in}),
+          seqs: %{},
+          clock_origin: Clock.now_ms(),
+          lag_ms: 0,
+          sent: 0,
+          received: 0
+        }
+
+        # The first heartbeat at once: a booting vehicle is heard at once.
+        s = s |> update_model(&Copter.say(&1, Dolphin.Sim.Streams.heartbeat(&1))) |> transmit()
+        send(self(), :tick)
+        {:ok, s}
+
+      {:error, why} ->
+        {:stop, {:cannot_open, "simulated vehicle #{sysid}", :inet.format_error(why)}}
+    end
+  end
+
+  defp loopback?({127, _, _, _}), do: true
+  defp loopback?(_), do: false
+
+  @impl true
+  def handle_call(:info, _from, s) do
+    m = s.model
+
+    info = %{
+      sysid: s.sysid,
+      port: elem(:inet.sockname(s.socket), 1) |> elem(1),
+      time_ms: m.time_ms,
+      lag_ms: s.lag_ms,
+      mode: m.mode,
+      armed: m.armed,
+      landed: m.landed,
+      position: Copter.position(m),
+      velocity: %{north: m.vn, east: m.ve, up: m.vz},
+      home: m.home,
+      battery: m.battery,
+      mission: Dolphin.Sim.MissionServer.items(m.missions),
+      current: m.current,
+      mission_state: m.mission_state,
+      photos: m.photos,
+      speed: m.speed,
+      faults: Faults.to_map(s.faults_out),
+      sent: s.sent,
+      received: s.received
+    }
+
+    {:reply, {:ok, info}, s}
+  end
+
+  def handle_call({:faults, changes}, _from, s) do
+    {:reply, :ok, %{s | faults_out: Faults.update(s.faults_out, changes), faults_in: Faults.update(s.faults_in, changes)}}
+  rescue
+    e in ArgumentError -> {:reply, {:error, Exception.message(e)}, s}
+  end
+
+  def handle_call({:set, :battery, fraction}, _from, s), do: {:reply, :ok, update_model(s, &%{&1 | battery: fraction * 1.0})}
+
+  @impl true
+  def handle_info(:tick, s) do
+    target = Clock.now_ms() - s.clock_origin
+    {model, steps} = catch_up(s.model, target, 0)
+    lag = max(target - model.time_ms - @step_ms, 0)
+    s = transmit(%{s | model: model, lag_ms: lag})
+
+    if steps == 0 or lag > 0 do
+      # Wait for the clock to move on by the rest of a step.
+      Clock.send_after(self(), :tick, max(@step_ms - (target - model.time_ms), 1))
+    else
+      Clock.send_after(self(), :tick, @step_ms)
+    end
+
+    {:noreply, s}
+  end
+
+  def handle_info({:udp, socket, _ip, _port, datagram}, %{socket: socket} = s) do
+    {deliveries, faults} = Faults.apply(s.faults_in, datagram)
+    s = %{s | faults_in: faults}
+
+    s =
+      Enum.reduce(deliveries, s, fn
+        {0, bytes}, s -> receive_datagram(s, bytes)
+        {delay, bytes}, s -> tap(s, fn _ -> Clock.send_after(self(), {:late_in, bytes}, delay) end)
+      end)
+
+    {:noreply, transmit(s)}
+  end
+
+  def handle_info({:udp_passive, socket}, %{socket: socket} = s) do
+    :ok = :inet.setopts(socket, active: 100)
+    {:noreply, s}
+  end
+
+  def handle_info({:late_in, bytes}, s), do: {:noreply, s |> receive_datagram(bytes) |> transmit()}
+
+  def handle_info({:late_out, bytes}, s) do
+    send_bytes(s, bytes)
+    {:noreply, s}
+  end
+
+  defp catch_up(model, target, steps) when steps < @max_catch_up and model.time_ms + @step_ms <= target,
+    do: catch_up(Copter.step(model, @step_ms), target, steps + 1)
+
+  defp catch_up(model, _target, steps), do: {model, steps}
+
+  defp receive_datagram(s, bytes) do
+    {frames, _parser} = Parser.feed(Parser.new(), bytes)
+    s = %{s | received: s.received + 1}
+
+    Enum.reduce(frames, s, fn frame, s ->
+      if for_us?(frame.message, s.sysid),
+        do: update_model(s, &Copter.handle(&1, frame.message, {frame.sysid, frame.compid})),
+        else: s
+    end)
+  end
+
+  # Vehicles ignore what is addressed to another system (0 is everyone).
+  defp for_us?(%{target_system: target}, sysid), do: target == 0 or target == sysid
+  defp for_us?(_message, _sysid), do: true
+
+  defp update_model(s, fun), do: %{s | model: fun.(s.model)}
+
+  defp transmit(s) do
+    {outputs, model} = Copter.flush(s.model)
+    Enum.reduce(outputs, %{s | model: model}, &transmit_one/2)
+  end
+
+  defp transmit_one({:reboot, nil}, s), do: %{s | model: Copter.reboot(s.model), clock_origin: Clock.now_ms()}
+
+  defp transmit_one({compid, message}, s) do
+    seq = Map.get(s.seqs, compid, 0)
+    bytes = Frame.encode(message, sysid: s.sysid, compid: compid, seq: seq)
+    {deliveries, faults} = Faults.apply(s.faults_out, bytes)
+
+    Enum.each(deliveries, fn
+      {0, bytes} -> send_bytes(s, bytes)
+      {delay, bytes} -> Clock.send_after(self(), {:late_out, bytes}, delay)
+    end)
+
+    %{s | seqs: Map.put(s.seqs, compid, rem(seq + 1, 256)), faults_out: faults, sent: s.sent + 1}
+  end
+
+  defp send_bytes(%{socket: socket, gcs: {address, port}}, bytes) do
+    # A full socket buffer or an unreachable ground station loses the datagram, as a radio would.
+    _ = :gen_udp.send(socket, address, port, bytes)
+    :ok
+  end
+end
