@@ -1,0 +1,172 @@
+defmodule Dolphin.SimTest do
+  # Simulated vehicles against the real ground-station stack (link, vehicles,
+  # command and mission protocols), over UDP on 127.0.0.1. Changes the global
+  # clock speed-up and shares the vehicle registry: not async.
+  use ExUnit.Case, async: false
+
+  alias Dolphin.{Clock, Link, Sim, Vehicles}
+  alias Dolphin.Link.Connection
+  alias Dolphin.MAVLink.Ardupilotmega, as: M
+  alias Dolphin.Test.Wait
+
+  setup do
+    name = "sim-test-#{System.unique_integer([:positive])}"
+    {:ok, link} = Link.connect("udpin:127.0.0.1:0", name: name)
+
+    on_exit(fn ->
+      Sim.stop()
+      Clock.set_speedup(1)
+      DynamicSupervisor.terminate_child(Dolphin.Link.Supervisor, link)
+      for sysid <- Vehicles.list(), pid = Vehicles.whereis(sysid), pid != nil, do: DynamicSupervisor.terminate_child(Dolphin.Vehicles.Supervisor, pid)
+    end)
+
+    %{port: Connection.port(name)}
+  end
+
+  # What the ground station knows (a blank state before discovery).
+  defp state(sysid) do
+    case Vehicles.state(sysid) do
+      {:ok, s} -> s
+      {:error, :unknown_vehicle} -> Dolphin.Vehicles.State.new(sysid)
+    end
+  end
+
+  # Haversine on a sphere of the mean radius: good to a few centimetres over these distances.
+  defp distance({lat1, lon1}, {lat2, lon2}) do
+    r = :math.pi() / 180
+    a = :math.pow(:math.sin((lat2 - lat1) * r / 2), 2) + :math.cos(lat1 * r) * :math.cos(lat2 * r) * :math.pow(:math.sin((lon2 - lon1) * r / 2), 2)
+    2 * 6_371_008.8 * :math.asin(:math.sqrt(a))
+  end
+
+  defp wait(fun, seconds, what), do: Wait.until(fun, seconds * 50, fn -> what end)
+
+  defp item(seq, command, {lat, lon, alt}, extra \\ %{}) do
+    struct(M.MissionItemInt, Map.merge(%{seq: seq, command: command, frame: 6, x: round(lat * 1.0e7), y: round(lon * 1.0e7), z: alt * 1.0, autocontinue: 1}, extra))
+  end
+
+  # Arms in GUIDED, retrying while the autopilot is not ready, as an operator would.
+  defp arm(sysid, tries \\ 50) do
+    case Vehicles.arm(sysid) do
+      {:ok, :accepted} -> :ok
+      {:error, _} when tries > 0 -> Clock.sleep(1_000) && arm(sysid, tries - 1)
+      {:error, e} -> flunk("arming refused: #{Exception.message(e)}")
+    end
+  end
+
+  test "vehicles are discovered with distinct ids, homes a few tens of metres apart, and a camera", %{port: port} do
+    Vehicles.subscribe(:all)
+    {:ok, [1, 2, 3]} = Sim.start(count: 3, gcs: port, speedup: 10, camera: [3], ekf_ready_ms: 1_000)
+
+    for id <- [1, 2, 3], do: assert_receive({:dolphin, :vehicles, {:vehicle_discovered, ^id}}, 3_000)
+
+    homes = wait(fn -> homes = Enum.map([1, 2, 3], &state(&1).home); Enum.all?(homes) && homes end, 10, "homes reported")
+    [a, b, c] = Enum.map(homes, fn h -> {h.lat, h.lon} end)
+    assert a != b and b != c
+    assert_in_delta distance(a, b), 30, 0.5
+    assert_in_delta distance(a, c), 60, 0.5
+
+    assert state(1).type == 2 and state(1).autopilot == :ardupilot
+    wait(fn -> MapSet.member?(state(3).components, :camera) end, 5, "a camera component")
+    refute MapSet.member?(state(1).components, :camera)
+
+    # Each sends from its own port.
+    ports = for id <- [1, 2, 3], do: elem(Sim.info(id), 1).port
+    assert length(Enum.uniq(ports)) == 3
+  end
+
+  test "a mission uploaded by the ground station is verified, flown and ends landed at home", %{port: port} do
+    {:ok, [1]} = Sim.start(count: 1, gcs: port, speedup: 50, ekf_ready_ms: 5_000)
+    home = wait(fn -> state(1).home end, 10, "home position")
+    north = Dolphin.Sim.Copter.offset(%{lat: home.lat, lon: home.lon, alt: 0}, 80, 0)
+
+    items = [
+      item(0, 16, {home.lat, home.lon, 0}),
+      item(1, 22, {0, 0, 20}),
+      item(2, 16, {north.lat, north.lon, 25}),
+      item(3, 20, {0, 0, 0})
+    ]
+
+    assert :ok = Vehicles.upload_mission(1, items)
+    {:ok, back} = Vehicles.download_mission(1)
+    assert length(back) == 4
+    assert Enum.map(tl(back), & &1.command) == [22, 16, 20]
+    # Frames are normalised on the way back (6 -> 3), as ArduPilot does.
+    assert Enum.at(back, 2).frame == 3 and Enum.at(back, 2).x == Enum.at(items, 2).x
+
+    {:ok, :accepted} = Vehicles.set_mode(1, :guided)
+    arm(1)
+    {:ok, :accepted} = Vehicles.start_mission(1)
+
+    wait(fn -> state(1).mission.reached == 2 end, 30, "waypoint 2 reached")
+    {:ok, info} = Sim.info(1)
+    assert distance({info.position.lat, info.position.lon}, {north.lat, north.lon}) < 3
+
+    wait(fn -> s = state(1); s.mission.state == :complete and not s.armed and s.landed == :on_ground end, 60, "mission complete, landed, disarmed")
+    s = state(1)
+    assert s.mode == :auto
+    assert distance({s.position.lat, s.position.lon}, {home.lat, home.lon}) < 3
+    assert Enum.any?(s.status_texts, &(&1 == {6, "Disarming motors"}))
+  end
+
+  test "arming refused before the position estimate, with the autopilot's reason", %{port: port} do
+    {:ok, [7]} = Sim.start(sysids: [7], gcs: port, speedup: 5, ekf_ready_ms: 600_000)
+    wait(fn -> Vehicles.whereis(7) end, 5, "discovery")
+    {:ok, :accepted} = Vehicles.set_mode(7, :stabilize)
+    assert {:error, %Dolphin.CommandError{result: :failed}} = Vehicles.arm(7)
+    wait(fn -> {2, "Arm: Need Position Estimate"} in state(7).status_texts end, 5, "the refusal's STATUSTEXT")
+  end
+
+  test "modes set by command show in the heartbeat; BRAKE and GUIDED hold, LOITER sinks", %{port: port} do
+    {:ok, [1]} = Sim.start(count: 1, gcs: port, speedup: 30, ekf_ready_ms: 1_000)
+    wait(fn -> state(1).home end, 10, "home position")
+    {:ok, :accepted} = Vehicles.set_mode(1, :guided)
+    arm(1)
+    {:ok, :accepted} = Vehicles.takeoff(1, 20)
+    wait(fn -> s = state(1); s.position && s.position.relative_alt > 19.5 end, 30, "take-off to 20 m")
+
+    for mode <- [:brake, :guided] do
+      {:ok, :accepted} = Vehicles.set_mode(1, mode)
+      wait(fn -> state(1).mode == mode end, 5, "mode #{mode}")
+      Clock.sleep(5_000)
+      assert state(1).position.relative_alt > 19
+    end
+
+    {:ok, :accepted} = Vehicles.set_mode(1, :loiter)
+    wait(fn -> not state(1).armed end, 60, "LOITER without throttle lands and disarms")
+  end
+
+  test "faults: a lossy link still carries a mission; silence loses the vehicle until it returns; a crash loses it", %{port: port} do
+    Vehicles.subscribe(:all)
+    {:ok, [1, 2]} = Sim.start(count: 2, gcs: port, speedup: 20, ekf_ready_ms: 1_000, seed: 42)
+    wait(fn -> state(1).home && state(2).home end, 10, "both ready")
+    home = state(1).home
+
+    :ok = Sim.set_faults(1, loss: 0.25, duplicate: 0.1, reorder: 0.1)
+    items = [item(0, 16, {home.lat, home.lon, 0}), item(1, 22, {0, 0, 10})] ++ for(s <- 2..20, do: item(s, 16, {home.lat + s * 1.0e-5, home.lon, 10}))
+    assert :ok = Vehicles.upload_mission(1, items)
+    {:ok, info} = Sim.info(1)
+    assert length(info.mission) == 20
+    :ok = Sim.set_faults(1, loss: 0, duplicate: 0, reorder: 0)
+
+    Vehicles.set_timeout(2, 3_000)
+    :ok = Sim.set_faults(2, silence: true)
+    assert_receive {:dolphin, :vehicles, {:vehicle_lost, 2}}, 5_000
+    :ok = Sim.set_faults(2, silence: false)
+    assert_receive {:dolphin, :vehicles, {:vehicle_reconnected, 2}}, 5_000
+
+    :ok = Sim.crash(2, reboot: true)
+    wait(fn -> match?({:ok, %{time_ms: t}} when t < 20_000, Sim.info(2)) end, 5, "vehicle 2 rebooted")
+
+    :ok = Sim.crash(2)
+    assert_receive {:dolphin, :vehicles, {:vehicle_lost, 2}}, 5_000
+    assert Sim.info(2) == {:error, :unknown_vehicle}
+    assert Sim.vehicles() == [1]
+  end
+
+  test "bad options are refused with what was wrong" do
+    assert {:error, "the simulator needs :gcs" <> _} = Sim.start(count: 1)
+    assert {:error, "bad :count 0" <> _} = Sim.start(count: 0, gcs: 14_550)
+    assert {:error, "the simulator sends to a ground station" <> _} = Sim.start(gcs: "udpin:0.0.0.0:14550")
+    assert {:error, "system ids 250..259" <> _} = Sim.start(count: 10, first_sysid: 250, gcs: 14_550)
+  end
+end
