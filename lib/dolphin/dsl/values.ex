@@ -1,0 +1,94 @@
+defmodule Dolphin.DSL.Values do
+  @moduledoc """
+  The values of the script language (DSL.md, "Values"): positions, areas,
+  units, distances. Scripts import this module.
+
+  | Dolphin (Groovy) | here |
+  |---|---|
+  | `location(lat, lon, h)` | `location(lat, lon, h \\\\ 0)`: a `Dolphin.Geo.Location`, `h` metres above mean sea level |
+  | `pos ^ r`, `area(pos, r)` | `area(center, radius)`: a `Dolphin.Geo.Area` |
+  | `10.minutes`, `30.seconds`, `2.km` | `minutes(10)`, `seconds(30)`, `hours/1`, `days/1`: durations in milliseconds (integers); `km(2)`, `meters/1`: metres |
+  | | `percent(30)` is `0.3`; `degrees(15)` is `15.0` (angles are degrees throughout) |
+  | `p.distanceTo(q)`, `near`, `contains` | `distance(p, q)` (metres, geodesic on WGS84, heights aside), `near?(p, q, r)`, `contains?(area, p)` |
+
+      iex> import Dolphin.DSL.Values
+      iex> minutes(10)
+      600000
+      iex> seconds(1.5)
+      1500
+      iex> km(2)
+      2000
+      iex> percent(30)
+      0.3
+      iex> comporta = area(location(38.43462, -8.86118), km(2))
+      iex> contains?(comporta, location(38.44, -8.86))
+      true
+      iex> near?(location(38.43462, -8.86118), location(38.44, -8.86), 500)
+      false
+
+  The mission commands take seconds, as in the report (`delay 30`), not
+  these millisecond durations.
+  """
+
+  alias Dolphin.Geo
+
+  @doc "A WGS84 position: degrees, degrees, metres above mean sea level (default 0)."
+  @spec location(number(), number(), number()) :: Geo.Location.t()
+  def location(lat, lon, h \\ 0), do: Geo.location(lat, lon, h)
+
+  @doc "A circular area of `radius` metres around `center`."
+  @spec area(Geo.Location.t(), number()) :: Geo.Area.t()
+  def area(center, radius), do: Geo.area(center, radius)
+
+  @doc "`n` days, in milliseconds."
+  @spec days(number()) :: integer()
+  def days(n), do: ms(n, 86_400_000, :days)
+
+  @doc "`n` hours, in milliseconds."
+  @spec hours(number()) :: integer()
+  def hours(n), do: ms(n, 3_600_000, :hours)
+
+  @doc "`n` minutes, in milliseconds."
+  @spec minutes(number()) :: integer()
+  def minutes(n), do: ms(n, 60_000, :minutes)
+
+  @doc "`n` seconds, in milliseconds (rounded to the millisecond)."
+  @spec seconds(number()) :: integer()
+  def seconds(n), do: ms(n, 1000, :seconds)
+
+  defp ms(n, scale, _unit) when is_integer(n), do: n * scale
+  defp ms(n, scale, _unit) when is_float(n), do: round(n * scale)
+  defp ms(other, _scale, unit), do: raise(ArgumentError, "#{unit}/1 takes a number, got: #{inspect(other)}")
+
+  @doc "`n` kilometres, in metres."
+  @spec km(number()) :: number()
+  def km(n) when is_number(n), do: n * 1000
+  def km(other), do: raise(ArgumentError, "km/1 takes a number, got: #{inspect(other)}")
+
+  @doc "`n` metres."
+  @spec meters(number()) :: number()
+  def meters(n) when is_number(n), do: n
+  def meters(other), do: raise(ArgumentError, "meters/1 takes a number, got: #{inspect(other)}")
+
+  @doc "`n` percent, as a fraction: `percent(30)` is `0.3`."
+  @spec percent(number()) :: float()
+  def percent(n) when is_number(n), do: n / 100
+  def percent(other), do: raise(ArgumentError, "percent/1 takes a number, got: #{inspect(other)}")
+
+  @doc "`n` degrees: angles (yaw, pitch, headings) are degrees throughout."
+  @spec degrees(number()) :: float()
+  def degrees(n) when is_number(n), do: n / 1
+  def degrees(other), do: raise(ArgumentError, "degrees/1 takes a number, got: #{inspect(other)}")
+
+  @doc "The geodesic distance in metres between two locations (see `Dolphin.Geo.distance/2`)."
+  @spec distance(Geo.Location.t(), Geo.Location.t()) :: float()
+  def distance(p, q), do: Geo.distance(p, q)
+
+  @doc "Whether `q` is within `radius` metres of `p`."
+  @spec near?(Geo.Location.t(), Geo.Location.t(), number()) :: boolean()
+  def near?(p, q, radius), do: Geo.near?(p, q, radius)
+
+  @doc "Whether location `p` lies within `area`."
+  @spec contains?(Geo.Area.t(), Geo.Location.t()) :: boolean()
+  def contains?(area, p), do: Geo.contains?(area, p)
+end

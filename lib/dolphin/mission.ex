@@ -1,0 +1,254 @@
+defmodule Dolphin.Mission do
+  @moduledoc """
+  A MAVLink mission as plain data: a name, a home position and the commands
+  of the report's Table 2 (`Dolphin.Mission.Command`), in order. Nothing flies
+  here: `to_items/1` gives the exact `MISSION_ITEM_INT` list a vehicle is sent,
+  `to_plan/1` and `from_plan/1` read and write QGroundControl plan files, and
+  a mission can be inspected, stored and reused — with another home, even.
+
+  Built by the `mission "name" do ... end` block of scripts
+  (`Dolphin.DSL.Mission`) or by functions:
+
+      iex> alias Dolphin.Mission
+      iex> alias Dolphin.Mission.Command, as: C
+      iex> home = Dolphin.Geo.location(40.444233, -7.375234, 820)
+      iex> m =
+      ...>   Mission.new("Survey Area")
+      ...>   |> Mission.add(C.home(home))
+      ...>   |> Mission.add(C.take_off(40.444233, -7.375234, 1200))
+      ...>   |> Mission.add([C.move(100, 200, 100), C.move_and_loiter_pos(200, 100, -20, 50)])
+      iex> [home_item, take_off, _move, loiter] = Mission.to_items(m)
+      iex> {home_item.seq, home_item.command, home_item.z}
+      {0, 16, 820.0}
+      iex> {take_off.seq, take_off.command, take_off.frame, take_off.x, take_off.y, take_off.z, take_off.param1}
+      {1, 22, 5, 404442330, -73752340, 1200.0, 15.0}
+      iex> {loiter.command, loiter.param3, loiter.z}
+      {17, 50.0, 1280.0}
+
+  ## From the report's Table 2 to MAVLink
+
+  Every item has `autocontinue` 1, `current` 0 and `mission_type` 0 (the
+  mission list); seq runs from 0. Positions use frame `MAV_FRAME_GLOBAL_INT`
+  (5): latitude and longitude in degrees × 10⁷, `z` in metres above mean sea
+  level — the report's heights, never relative to home. (Recent `common.xml`
+  marks frame 5 as superseded by `MAV_FRAME_GLOBAL` (0), its synonym; ArduPilot
+  takes both and reports 0 on download.) Items without a position use
+  `MAV_FRAME_MISSION` (2) with x = y = 0 and z = 0. Each command is one item
+  except `survey_area` (two per pass); commands that are not navigation
+  (speed, camera, jump) keep their place in the sequence, where ArduPilot runs
+  them on its way to the next navigation item.
+
+  | Table 2 (Groovy) | here | item: MAV_CMD (number) | params 1–4 |
+  |---|---|---|---|
+  | `name(String)` | `name "x"` (or `mission "x" do`) | — | — |
+  | `home(lat, lon, hae)`, `home(Position)` | `home loc` | item 0: NAV_WAYPOINT (16) at home | 0, 0, 0, 0 |
+  | `goPos(lat, lon, hae)` | `go_pos loc` | NAV_WAYPOINT (16) | hold 0, 0, 0, yaw NaN |
+  | `takeOff(Position p, pitch = 15)` | `take_off loc, pitch \\\\ 15` | NAV_TAKEOFF (22) at `p` | pitch, 0, 0, yaw NaN |
+  | `takeOffWithYaw(p, pitch, yaw = NaN)` | `take_off_with_yaw loc, pitch, yaw \\\\ :nan` | NAV_TAKEOFF (22) | pitch, 0, 0, yaw |
+  | `move(north, east, up)` | `move n, e, up` | NAV_WAYPOINT, previous point + offset | 0, 0, 0, NaN |
+  | `moveFromHome(north, east, up)` | `move_from_home n, e, up` | NAV_WAYPOINT, home + offset | 0, 0, 0, NaN |
+  | `moveAndLoiterPos(n, e, up, radius = 15)` | `move_and_loiter_pos n, e, up, r \\\\ 15` | NAV_LOITER_UNLIM (17) | 0, 0, radius, 0 |
+  | `moveAndLoiterTurns(n, e, up, turns, radius = 15)` | `move_and_loiter_turns n, e, up, turns, r \\\\ 15` | NAV_LOITER_TURNS (18) | turns, 0, radius, 0 |
+  | `moveAndLoiterTime(n, e, up, time, radius = 15)` | `move_and_loiter_time n, e, up, s, r \\\\ 15` | NAV_LOITER_TIME (19) | seconds, 0, radius, 0 |
+  | `moveAndLoiter[Turns\\|Time]FromHome(...)` | `move_and_loiter[_turns\\|_time]_from_home ...` | as above, from home | as above |
+  | `loiterPos(pos, radius = 15)` | `loiter_pos loc, r \\\\ 15` | NAV_LOITER_UNLIM (17) | 0, 0, radius, 0 |
+  | `loiterTurns(lat, lon, h, turns, radius = 15)` | `loiter_turns loc, turns, r \\\\ 15` | NAV_LOITER_TURNS (18) | turns, 0, radius, 0 |
+  | `loiterTime(lat, lon, h, time, radius = 15)` | `loiter_time loc, s, r \\\\ 15` | NAV_LOITER_TIME (19) | seconds, 0, radius, 0 |
+  | `landingPoint(lat, lon, h, yaw = NaN, landMode = 0)` | `landing_point loc, yaw \\\\ :nan, mode \\\\ 0` | NAV_LAND (21) | 0, land mode, 0, yaw |
+  | `returnHome()` | `return_home()` | NAV_WAYPOINT over home, previous height | 0, 0, 0, NaN |
+  | `returnHomeAndLoiter(radius = 15)` | `return_home_and_loiter r \\\\ 15` | NAV_LOITER_UNLIM over home, previous height | 0, 0, radius, 0 |
+  | `returnHomeAndLand(yaw = NaN, landMode = 0)` | `return_home_and_land yaw \\\\ :nan, mode \\\\ 0` | NAV_LAND (21) at home | 0, land mode, 0, yaw |
+  | `speed(newSpeed, speedType = 0)` | `speed m_s, type \\\\ 0` | DO_CHANGE_SPEED (178) | type, speed, −1 (throttle unchanged), 0 |
+  | `altitude(newAltitude)` | `altitude h` | NAV_WAYPOINT over the previous point at `h` | 0, 0, 0, NaN |
+  | `delay(seconds)` | `delay s` | NAV_DELAY (93) | seconds, −1, −1, −1 |
+  | `surveyArea(length, width, spacing = 50, dir = NORTH_WEST)` | `survey_area l, w, s \\\\ 50, dir \\\\ :north_west` | 2 NAV_WAYPOINTs per pass (`Dolphin.Mission.Survey`) | 0, 0, 0, NaN |
+  | `surveyArea(Position p, length, width, ...)` | `survey_area loc, l, w, ...` | same, from `p` | same |
+  | `capturePhoto()` | `capture_photo()` | IMAGE_START_CAPTURE (2000) | camera 0 (all), interval 0, 1 image, capture number 1, 2, ... |
+  | `captureSeveralPhotos(count, interval = 2)` | `capture_several_photos n, s \\\\ 2` | IMAGE_START_CAPTURE (2000) | 0, interval, count, 0 |
+  | `captureUntilStop(interval = 2)` | `capture_until_stop s \\\\ 2` | IMAGE_START_CAPTURE (2000) | 0, interval, 0 (until stopped), 0 |
+  | `stopCapturing()` | `stop_capturing()` | IMAGE_STOP_CAPTURE (2001) | 0, 0, 0, 0 |
+  | `jumpToItem(item, repetitions = 1)` | `jump_to_item seq, repeat \\\\ 1` | DO_JUMP (177) | seq, repeat (−1 for ever), 0, 0 |
+  | — | `item cmd, params: [...], position: loc` | any other MAV_CMD, as given | as given |
+
+  Why these items, for ArduCopter (4.5 and later):
+
+    * Relative moves are azimuthal equidistant offsets on WGS84
+      (`Dolphin.Geo.offset/4`) from the previous point (the last position of
+      the mission so far: home at first, then each waypoint, loiter,
+      take-off, landing, the end of a survey) or from home.
+    * `return_home` and `return_home_and_loiter` fly over home at the height
+      of the previous point: NAV_RETURN_TO_LAUNCH would land on a Copter
+      (RTL_ALT_FINAL 0), which is `return_home_and_land`'s job.
+      `return_home_and_land` is a NAV_LAND at home, as in the original plugin.
+    * `altitude` is a waypoint straight above (or below) the previous point:
+      ArduPilot does not take DO_CHANGE_ALTITUDE (the original's choice) in a
+      mission, and Copter does not fly NAV_CONTINUE_AND_CHANGE_ALT.
+    * The camera commands are the MAVLink camera protocol's
+      IMAGE_START_CAPTURE / IMAGE_STOP_CAPTURE, which ArduPilot runs as mission
+      items since 4.5 (DO_DIGICAM_CONTROL only takes single pictures).
+    * NaN appears only where ArduPilot accepts it (param 4 of WAYPOINT,
+      TAKEOFF and LAND); elsewhere reserved or unused params are 0.
+    * Copter hovers on LOITER_UNLIM and LOITER_TIME (the radius matters to
+      fixed wing only) and circles on LOITER_TURNS; it stores a LOITER_TURNS
+      radius of at most 255 m and at most 255 turns.
+
+  Durations in the commands are seconds, as in the report: `delay 30`. The
+  script language's duration values are milliseconds (`seconds(30)` is
+  30000); `Dolphin.DSL.Mission` refuses them where seconds are expected.
+
+  A mission without `home` takes the first absolute position among its
+  commands, like the original plugin; `to_items(mission, home: location)`
+  supplies or overrides it.
+  """
+
+  alias Dolphin.Geo.Location
+  alias Dolphin.Mission.{Command, Items, Plan}
+
+  defstruct name: "mission", home: nil, commands: []
+
+  @type t :: %__MODULE__{name: String.t(), home: Location.t() | nil, commands: [Command.t()]}
+
+  @typedoc "What `new/2` and `add/2` take: commands, lists of them (nested), `nil`s (skipped), or missions (their commands)."
+  @type commands :: Command.t() | t() | nil | [commands()]
+
+  @doc """
+  A mission named `name` with `commands`. `name` and `home` commands set the
+  mission's name and home rather than adding to its commands.
+  """
+  @spec new(String.t(), commands()) :: t()
+  def new(name \\ "mission", commands \\ [])
+
+  def new(name, commands) when is_binary(name), do: add(%__MODULE__{name: name}, commands)
+  def new(name, _commands), do: raise(ArgumentError, "a mission's name is a string, got: #{inspect(name)}")
+
+  @doc """
+  Appends commands (see `t:commands/0`). Another mission's commands are
+  appended as they are written: its relative moves start from this mission's
+  previous point. Setting the home twice is a mistake (`put_home/2` replaces it).
+  """
+  @spec add(t(), commands()) :: t()
+  def add(%__MODULE__{} = mission, commands), do: do_add(mission, commands)
+
+  defp do_add(mission, nil), do: mission
+  defp do_add(mission, list) when is_list(list), do: Enum.reduce(list, mission, &do_add(&2, &1))
+  defp do_add(mission, %__MODULE__{commands: commands}), do: %{mission | commands: mission.commands ++ commands}
+  defp do_add(mission, %Command{kind: :name, args: [name: name]}), do: %{mission | name: name}
+
+  defp do_add(%__MODULE__{home: nil} = mission, %Command{kind: :home, args: [position: p]}), do: %{mission | home: p}
+
+  defp do_add(mission, %Command{kind: :home} = command),
+    do: raise(ArgumentError, "mission #{inspect(mission.name)} already has a home (#{inspect(mission.home)}); got another: #{inspect(command)}")
+
+  defp do_add(mission, %Command{} = command), do: %{mission | commands: mission.commands ++ [command]}
+
+  defp do_add(mission, other),
+    do: raise(ArgumentError, "mission #{inspect(mission.name)}: not a mission command: #{inspect(other)}")
+
+  @doc "Sets or replaces the home position."
+  @spec put_home(t(), Location.t()) :: t()
+  def put_home(%__MODULE__{} = mission, %Location{} = home), do: %{mission | home: home}
+  def put_home(%__MODULE__{}, other), do: raise(ArgumentError, "a home is a location, got: #{inspect(other)}")
+
+  @doc "Renames the mission."
+  @spec put_name(t(), String.t()) :: t()
+  def put_name(%__MODULE__{} = mission, name) when is_binary(name), do: %{mission | name: name}
+  def put_name(%__MODULE__{}, other), do: raise(ArgumentError, "a mission's name is a string, got: #{inspect(other)}")
+
+  @doc """
+  The `MISSION_ITEM_INT` structs (`Dolphin.MAVLink.Ardupilotmega.MissionItemInt`)
+  to upload, seq 0 (home) first. See the module doc for what each command
+  becomes. Option `home:` supplies (or overrides) the home position.
+
+  Raises `ArgumentError` when the mission has no home and no absolute position
+  to take it from, or when a jump targets an item that does not exist.
+  """
+  @spec to_items(t(), keyword()) :: [struct()]
+  def to_items(mission, opts \\ [])
+
+  def to_items(%__MODULE__{} = mission, opts) do
+    mission = if home = Keyword.get(opts, :home), do: put_home(mission, home), else: mission
+    Items.to_items(mission)
+  end
+
+  @doc "The number of items `to_items/1` gives, home included."
+  @spec item_count(t()) :: pos_integer()
+  def item_count(%__MODULE__{} = mission), do: length(to_items(mission))
+
+  @doc """
+  The mission as a QGroundControl plan file (JSON text, see
+  `Dolphin.Mission.Plan`). Options: `:cruise_speed` (default 15 m/s),
+  `:hover_speed` (5 m/s), `:vehicle_type` (`MAV_TYPE`, 2 quadrotor),
+  `:home` as for `to_items/2`.
+  """
+  @spec to_plan(t(), keyword()) :: binary()
+  def to_plan(%__MODULE__{} = mission, opts \\ []), do: Plan.encode(mission, opts)
+
+  @doc """
+  A mission from a QGroundControl plan (JSON text, or the decoded map): its
+  items become the commands that give them back exactly (`go_pos`,
+  `take_off`, `loiter_*`, `landing_point`, `speed`, `delay`, the camera
+  commands, `jump_to_item`, else `item`), its planned home the home. Option
+  `:name` (default `"plan"`).
+  """
+  @spec from_plan(binary() | map(), keyword()) :: {:ok, t()} | {:error, Dolphin.Mission.PlanError.t()}
+  def from_plan(plan, opts \\ []), do: Plan.decode(plan, opts)
+
+  @doc "Like `from_plan/2`, raising `Dolphin.Mission.PlanError`."
+  @spec from_plan!(binary() | map(), keyword()) :: t()
+  def from_plan!(plan, opts \\ []) do
+    case from_plan(plan, opts) do
+      {:ok, mission} -> mission
+      {:error, error} -> raise error
+    end
+  end
+
+  defimpl Inspect do
+    alias Dolphin.MAVLink.Ardupilotmega, as: M
+
+    def inspect(%{name: name} = mission, opts) do
+      try do
+        Dolphin.Mission.to_items(mission)
+      rescue
+        e in ArgumentError -> {:error, e}
+      else
+        items ->
+          lines = Enum.map(items, &item_line/1)
+          "#Dolphin.Mission<#{Kernel.inspect(name)}, #{length(items)} items:\n" <> Enum.join(lines, "\n") <> "\n>"
+      end
+      |> case do
+        {:error, e} ->
+          commands = Enum.map_join(mission.commands, ", ", &Inspect.inspect(&1, opts))
+          "#Dolphin.Mission<#{Kernel.inspect(name)}, #{Exception.message(e)}; commands: [#{commands}]>"
+
+        text ->
+          text
+      end
+    end
+
+    defp item_line(item) do
+      name =
+        case {item.seq, M.enum_name(:mav_cmd, item.command)} do
+          {0, _} -> "home"
+          {_, {:ok, atom}} -> atom |> Atom.to_string() |> String.replace_prefix("mav_cmd_", "") |> String.upcase()
+          _ -> "MAV_CMD #{item.command}"
+        end
+
+      where =
+        cond do
+          item.frame == 2 -> ""
+          item.frame == 5 -> "#{fmt_deg(item.x)}, #{fmt_deg(item.y)}, #{fmt(item.z)} m  "
+          true -> "x #{item.x}, y #{item.y}, z #{fmt(item.z)}, frame #{item.frame}  "
+        end
+
+      params = Enum.map_join([item.param1, item.param2, item.param3, item.param4], ", ", &fmt/1)
+      String.pad_leading(Integer.to_string(item.seq), 4) <> " " <> String.pad_trailing(name, 20) <> " " <> where <> "[" <> params <> "]"
+    end
+
+    defp fmt_deg(e7), do: :erlang.float_to_binary(e7 / 1.0e7, decimals: 7)
+
+    defp fmt(:nan), do: "NaN"
+    defp fmt(f) when is_float(f) and f == trunc(f) and abs(f) < 1.0e15, do: Integer.to_string(trunc(f))
+    defp fmt(f) when is_float(f), do: Dolphin.Geo.Location.format(f, 6)
+    defp fmt(other), do: Kernel.inspect(other)
+  end
+end

@@ -1,0 +1,307 @@
+defmodule Dolphin.Mission.Plan do
+  @moduledoc """
+  QGroundControl plan files (`.plan`, JSON) to and from missions; used by
+  `Dolphin.Mission.to_plan/2` and `Dolphin.Mission.from_plan/2`.
+
+  The format is QGroundControl's (its developer guide, "Plan File Format"):
+
+      {"fileType": "Plan", "version": 1, "groundStation": "Dolphin",
+       "mission": {"version": 2, "firmwareType": 3, "vehicleType": 2,
+                   "cruiseSpeed": 15, "hoverSpeed": 5, "globalPlanAltitudeMode": 2,
+                   "plannedHomePosition": [lat, lon, alt_amsl],
+                   "items": [{"type": "SimpleItem", "autoContinue": true, "command": 22,
+                              "doJumpId": 1, "frame": 0,
+                              "params": [15, 0, 0, null, lat, lon, alt],
+                              "AltitudeMode": 2, "Altitude": alt, "AMSLAltAboveTerrain": null}, ...]},
+       "geoFence": {"circles": [], "polygons": [], "version": 2},
+       "rallyPoints": {"points": [], "version": 2}}
+
+  One `SimpleItem` per mission item after home (home is
+  `plannedHomePosition`); `doJumpId` is the item's seq; `params` are the
+  seven MAVLink params, latitude and longitude in degrees, NaN as `null`.
+  QGroundControl writes the non-`_INT` frames (0 absolute, 3 relative to home,
+  10 above terrain) and marks items with a position with their
+  `AltitudeMode` (2 absolute, 1 relative, 4 terrain frame); the `_INT` frames
+  of our items (5, 6, 11) are written as those, and read back as the `_INT`
+  frames, so a mission's items survive a round trip exactly. Items keep their
+  altitude frame: a plan made relative to home stays relative to home.
+
+  Complex items (QGroundControl's own surveys, corridor scans...) are not read:
+  `{:error, %PlanError{reason: :unsupported_item}}`.
+  """
+
+  alias Dolphin.Geo.Location
+  alias Dolphin.MAVLink.Ardupilotmega, as: M
+  alias Dolphin.Mission
+  alias Dolphin.Mission.{Command, Items, PlanError}
+
+  # Our (_INT) frame -> the plan's frame, and the QGroundControl AltitudeMode of each.
+  @to_plan_frame %{5 => 0, 6 => 3, 11 => 10}
+  @from_plan_frame %{0 => 5, 3 => 6, 10 => 11}
+  @altitude_mode %{0 => 2, 3 => 1, 10 => 4}
+  @global_frames [0, 3, 5, 6, 10, 11]
+
+  @doc "The plan as JSON text (pretty-printed)."
+  @spec encode(Mission.t(), keyword()) :: binary()
+  def encode(%Mission{} = mission, opts \\ []) do
+    json = mission |> to_map(opts) |> ordered() |> :jiffy.encode([:pretty]) |> IO.iodata_to_binary()
+    # jiffy spreads an empty array over lines.
+    String.replace(json, ~r/\[\s+\]/, "[]")
+  end
+
+  # Keys in sorted order, as QGroundControl writes them (jiffy keeps the order of a proplist).
+  defp ordered(%{} = map), do: {map |> Enum.sort() |> Enum.map(fn {k, v} -> {k, ordered(v)} end)}
+  defp ordered(list) when is_list(list), do: Enum.map(list, &ordered/1)
+  defp ordered(other), do: other
+
+  @doc "The plan as a JSON-able map (for `:jiffy.encode/1`)."
+  @spec to_map(Mission.t(), keyword()) :: map()
+  def to_map(%Mission{} = mission, opts \\ []) do
+    [home | items] = Mission.to_items(mission, Keyword.take(opts, [:home]))
+    plan_items = Enum.map(items, &plan_item/1)
+
+    modes = for %{"AltitudeMode" => mode} <- plan_items, uniq: true, do: mode
+
+    %{
+      "fileType" => "Plan",
+      "version" => 1,
+      "groundStation" => "Dolphin",
+      "mission" => %{
+        "version" => 2,
+        "firmwareType" => 3,
+        "vehicleType" => Keyword.get(opts, :vehicle_type, 2),
+        "cruiseSpeed" => Keyword.get(opts, :cruise_speed, 15),
+        "hoverSpeed" => Keyword.get(opts, :hover_speed, 5),
+        "globalPlanAltitudeMode" =>
+          case modes do
+            [] -> 2
+            [mode] -> mode
+            _mixed -> 0
+          end,
+        "plannedHomePosition" => [home.x / 1.0e7, home.y / 1.0e7, home.z],
+        "items" => plan_items
+      },
+      "geoFence" => %{"circles" => [], "polygons" => [], "version" => 2},
+      "rallyPoints" => %{"points" => [], "version" => 2}
+    }
+  end
+
+  defp plan_item(item) do
+    frame = Map.get(@to_plan_frame, item.frame, item.frame)
+    global? = item.frame in @global_frames
+    {x, y} = if global?, do: {item.x / 1.0e7, item.y / 1.0e7}, else: {item.x, item.y}
+
+    base = %{
+      "type" => "SimpleItem",
+      "autoContinue" => item.autocontinue == 1,
+      "command" => item.command,
+      "doJumpId" => item.seq,
+      "frame" => frame,
+      "params" => Enum.map([item.param1, item.param2, item.param3, item.param4, x, y, item.z], &json_number/1)
+    }
+
+    if global?,
+      do: Map.merge(base, %{"AltitudeMode" => Map.fetch!(@altitude_mode, frame), "Altitude" => json_number(item.z), "AMSLAltAboveTerrain" => :null}),
+      else: base
+  end
+
+  defp json_number(:nan), do: :null
+  defp json_number(n) when is_number(n), do: n
+  # An infinity or other NaN has no JSON form either.
+  defp json_number(_other), do: :null
+
+  @doc "A mission from a plan (JSON text or decoded map); see `Dolphin.Mission.from_plan/2`."
+  @spec decode(binary() | map(), keyword()) :: {:ok, Mission.t()} | {:error, PlanError.t()}
+  def decode(plan, opts \\ [])
+
+  def decode(json, opts) when is_binary(json) do
+    case parse_json(json) do
+      {:ok, map} -> decode(map, opts)
+      {:error, detail} -> {:error, %PlanError{reason: :invalid_json, detail: detail}}
+    end
+  end
+
+  def decode(%{} = plan, opts) do
+    with :ok <- check(plan["fileType"] == "Plan", :not_a_plan, "fileType is #{inspect(plan["fileType"])}"),
+         :ok <- check(plan["version"] == 1, :unsupported_version, "plan version #{inspect(plan["version"])}"),
+         %{} = mission <- plan["mission"] || {:error, %PlanError{reason: :not_a_plan, detail: "no mission"}},
+         :ok <- check(mission["version"] == 2, :unsupported_version, "mission version #{inspect(mission["version"])}"),
+         {:ok, home} <- home(mission["plannedHomePosition"]),
+         {:ok, items} <- items(mission["items"]) do
+      name = Keyword.get(opts, :name, "plan")
+      {:ok, mission_from_items(name, home, items)}
+    else
+      {:error, %PlanError{}} = error -> error
+      other -> {:error, %PlanError{reason: :not_a_plan, detail: "mission is #{inspect(other)}"}}
+    end
+  end
+
+  def decode(other, _opts), do: {:error, %PlanError{reason: :not_a_plan, detail: "expected JSON text or a map, got: #{inspect(other)}"}}
+
+  defp parse_json(json) do
+    {:ok, :jiffy.decode(json, [:return_maps])}
+  catch
+    # jiffy throws {:error, {position, reason}} on malformed JSON.
+    :throw, {:error, reason} -> {:error, inspect(reason)}
+    :error, reason -> {:error, inspect(reason)}
+  end
+
+  defp check(true, _reason, _detail), do: :ok
+  defp check(false, reason, detail), do: {:error, %PlanError{reason: reason, detail: detail}}
+
+  defp home([lat, lon, alt]) when is_number(lat) and is_number(lon) and is_number(alt) and lat >= -90 and lat <= 90 and lon >= -180 and lon <= 180,
+    do: {:ok, Location.new(lat, lon, alt)}
+
+  defp home(other), do: {:error, %PlanError{reason: :invalid_home, detail: "plannedHomePosition is #{inspect(other)}"}}
+
+  defp items(list) when is_list(list) do
+    jump_ids = list |> Enum.with_index(1) |> Map.new(fn {item, seq} -> {is_map(item) && item["doJumpId"], seq} end)
+
+    list
+    |> Enum.with_index(1)
+    |> Enum.reduce_while({:ok, []}, fn {json, seq}, {:ok, acc} ->
+      case item(json, seq, jump_ids) do
+        {:ok, item} -> {:cont, {:ok, [item | acc]}}
+        {:error, _} = error -> {:halt, error}
+      end
+    end)
+    |> case do
+      {:ok, items} -> {:ok, Enum.reverse(items)}
+      error -> error
+    end
+  end
+
+  defp items(other), do: {:error, %PlanError{reason: :not_a_plan, detail: "mission items are #{inspect(other)}"}}
+
+  @jump Items.command_number(:mav_cmd_do_jump)
+
+  defp item(%{"type" => "SimpleItem", "command" => command, "frame" => frame, "params" => params} = json, seq, jump_ids)
+       when is_integer(command) and command >= 0 and command <= 0xFFFF and is_integer(frame) and frame >= 0 and frame <= 255 do
+    with {:ok, [p1, p2, p3, p4, p5, p6, p7]} <- params(params, seq),
+         frame = Map.get(@from_plan_frame, frame, frame),
+         {:ok, x, y} <- xy(frame, p5, p6, seq) do
+      # DO_JUMP's param 1 names the target by doJumpId; the vehicle wants its seq.
+      p1 = if command == @jump and is_float(p1), do: Map.get(jump_ids, trunc(p1), p1) / 1, else: p1
+
+      {:ok,
+       %M.MissionItemInt{
+         seq: seq,
+         command: command,
+         frame: frame,
+         param1: p1,
+         param2: p2,
+         param3: p3,
+         param4: p4,
+         x: x,
+         y: y,
+         z: p7,
+         autocontinue: if(Map.get(json, "autoContinue", true) == false, do: 0, else: 1),
+         current: 0,
+         mission_type: 0
+       }}
+    end
+  end
+
+  defp item(%{"type" => type}, seq, _) when type != "SimpleItem",
+    do: {:error, %PlanError{reason: :unsupported_item, detail: "item #{seq} is a #{inspect(type)}; only SimpleItem items are read"}}
+
+  defp item(other, seq, _), do: {:error, %PlanError{reason: :invalid_item, detail: "item #{seq}: #{inspect(other)}"}}
+
+  defp params(params, seq) when is_list(params) and length(params) == 7 do
+    if Enum.all?(params, &(is_number(&1) or &1 == :null)),
+      do: {:ok, Enum.map(params, fn :null -> :nan; n -> n / 1 end)},
+      else: {:error, %PlanError{reason: :invalid_item, detail: "item #{seq}: params #{inspect(params)}"}}
+  end
+
+  defp params(params, seq), do: {:error, %PlanError{reason: :invalid_item, detail: "item #{seq}: params must be 7 numbers or nulls, got: #{inspect(params)}"}}
+
+  defp xy(frame, lat, lon, seq) when frame in @global_frames do
+    if is_float(lat) and is_float(lon) and lat >= -90 and lat <= 90 and lon >= -180 and lon <= 180,
+      do: {:ok, round(lat * 1.0e7), round(lon * 1.0e7)},
+      else: {:error, %PlanError{reason: :invalid_item, detail: "item #{seq}: latitude, longitude #{inspect({lat, lon})}"}}
+  end
+
+  defp xy(_frame, x, y, seq) do
+    if is_float(x) and is_float(y) and x == trunc(x) and y == trunc(y),
+      do: {:ok, trunc(x), trunc(y)},
+      else: {:error, %PlanError{reason: :invalid_item, detail: "item #{seq}: x, y #{inspect({x, y})} are not integers"}}
+  end
+
+  # Each item becomes the command that gives it back exactly; an item no
+  # command reproduces (checked by generating the items) stays a raw `item`.
+  defp mission_from_items(name, home, items) do
+    commands = Enum.map(items, &guess/1)
+    settle(Mission.new(name) |> Mission.put_home(home), commands, items)
+  end
+
+  defp settle(base, commands, items) do
+    generated = base |> Mission.add(commands) |> Mission.to_items() |> tl()
+
+    wrong =
+      for {{made, wanted}, i} <- Enum.with_index(Enum.zip(generated, items)), not same?(made, wanted), into: MapSet.new(), do: i
+
+    if MapSet.size(wrong) == 0 and length(generated) == length(items) do
+      Mission.add(base, commands)
+    else
+      commands = for {{command, item}, i} <- Enum.with_index(Enum.zip(commands, items)), do: if(i in wrong, do: raw(item), else: command)
+      settle(base, commands, items)
+    end
+  end
+
+  defp same?(a, b) do
+    Map.take(a, [:command, :frame, :param1, :param2, :param3, :param4, :x, :y, :z, :autocontinue]) ==
+      Map.take(b, [:command, :frame, :param1, :param2, :param3, :param4, :x, :y, :z, :autocontinue])
+  end
+
+  defp raw(item) do
+    Command.item(item.command,
+      params: [item.param1, item.param2, item.param3, item.param4],
+      frame: item.frame,
+      x: item.x,
+      y: item.y,
+      z: item.z,
+      autocontinue: item.autocontinue
+    )
+  end
+
+  @waypoint Items.command_number(:mav_cmd_nav_waypoint)
+  @takeoff Items.command_number(:mav_cmd_nav_takeoff)
+  @unlim Items.command_number(:mav_cmd_nav_loiter_unlim)
+  @turns Items.command_number(:mav_cmd_nav_loiter_turns)
+  @time Items.command_number(:mav_cmd_nav_loiter_time)
+  @land Items.command_number(:mav_cmd_nav_land)
+  @speed Items.command_number(:mav_cmd_do_change_speed)
+  @delay Items.command_number(:mav_cmd_nav_delay)
+  @start_capture Items.command_number(:mav_cmd_image_start_capture)
+  @stop_capture Items.command_number(:mav_cmd_image_stop_capture)
+
+  defp guess(%{frame: 5, z: z} = i) when is_float(z) do
+    p = Location.new(i.x / 1.0e7, i.y / 1.0e7, z)
+
+    case {i.command, i.param1, i.param2, i.param3, i.param4} do
+      {@waypoint, _, _, _, _} -> Command.go_pos(p)
+      {@takeoff, pitch, _, _, :nan} when is_float(pitch) -> Command.take_off(p, pitch)
+      {@takeoff, pitch, _, _, yaw} when is_float(pitch) -> Command.take_off_with_yaw(p, pitch, yaw)
+      {@unlim, _, _, radius, _} when is_float(radius) -> Command.loiter_pos(p, radius)
+      {@turns, turns, _, radius, _} when is_float(turns) and turns >= 0 and is_float(radius) -> Command.loiter_turns(p, turns, radius)
+      {@time, time, _, radius, _} when is_float(time) and time >= 0 and is_float(radius) -> Command.loiter_time(p, time, radius)
+      {@land, _, mode, _, yaw} when mode in [0.0, 1.0, 2.0] -> Command.landing_point(p, yaw, trunc(mode))
+      _ -> raw(i)
+    end
+  end
+
+  defp guess(%{frame: 2} = i) do
+    case {i.command, i.param1, i.param2, i.param3} do
+      {@speed, type, speed, _} when type in [0.0, 1.0, 2.0, 3.0] and is_float(speed) -> Command.speed(speed, trunc(type))
+      {@delay, seconds, _, _} when is_float(seconds) and seconds >= 0 -> Command.delay(seconds)
+      {@start_capture, _, _, 1.0} -> Command.capture_photo()
+      {@start_capture, _, interval, 0.0} when is_float(interval) and interval > 0 -> Command.capture_until_stop(interval)
+      {@start_capture, _, interval, n} when is_float(interval) and interval > 0 and is_float(n) and n > 1 and n == trunc(n) -> Command.capture_several_photos(trunc(n), interval)
+      {@stop_capture, _, _, _} -> Command.stop_capturing()
+      {@jump, item, repeat, _} when is_float(item) and item >= 1 and item == trunc(item) and is_float(repeat) and repeat >= -1 and repeat == trunc(repeat) -> Command.jump_to_item(trunc(item), trunc(repeat))
+      _ -> raw(i)
+    end
+  end
+
+  defp guess(i), do: raw(i)
+end
