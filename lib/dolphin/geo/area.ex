@@ -23,6 +23,6 @@ defmodule Dolphin.Geo.Area do
   def new(center, _radius), do: raise(ArgumentError, "an area's center must be a location, got: #{inspect(center)}")
 
   defimpl Inspect do
-    def inspect(%{center: center, radius: radius}, opts), do: "#Area<#{Inspect.inspect(center, opts)}, #{radius} m>"
+    def inspect(%{center: center, radius: radius}, opts), do: "#Area<#{Inspect.inspect(center, opts)}, #{Location.format(radius, 3)} m>"
   end
 end

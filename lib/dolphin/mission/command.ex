@@ -472,13 +472,13 @@ defmodule Dolphin.Mission.Command do
   defp direction!(d) when d in @directions, do: d
 
   defp direction!(d) when is_binary(d) do
-    case Enum.find(@directions, &(Atom.to_string(&1) == String.downcase(d))) do
-      nil -> direction!(:error)
-      atom -> atom
-    end
+    Enum.find(@directions, &(Atom.to_string(&1) == String.downcase(d))) || direction!({:string, d})
   end
 
-  defp direction!(other),
+  defp direction!({:string, d}), do: direction_error(d)
+  defp direction!(other), do: direction_error(other)
+
+  defp direction_error(other),
     do: raise(ArgumentError, "survey_area: the direction is :north_west, :north_east, :south_west or :south_east, got: #{inspect(other)}")
 
   defimpl Inspect do
