@@ -89,8 +89,12 @@ defmodule Dolphin.Mission do
     * NaN appears only where ArduPilot accepts it (param 4 of WAYPOINT,
       TAKEOFF and LAND); elsewhere reserved or unused params are 0.
     * Copter hovers on LOITER_UNLIM and LOITER_TIME (the radius matters to
-      fixed wing only) and circles on LOITER_TURNS; it stores a LOITER_TURNS
-      radius of at most 255 m and at most 255 turns.
+      fixed wing only) and circles on LOITER_TURNS; ArduPilot keeps at most
+      255 whole turns, radii above 255 m in steps of 10 m, and loiter times
+      in whole seconds up to 65535.
+    * Every Table 2 command is a mission item: nothing has to be sent to the
+      vehicle while it flies (the original plugin sent its camera and some
+      other commands when items were reached).
 
   Durations in the commands are seconds, as in the report: `delay 30`. The
   script language's duration values are milliseconds (`seconds(30)` is
@@ -173,6 +177,105 @@ defmodule Dolphin.Mission do
   @doc "The number of items `to_items/1` gives, home included."
   @spec item_count(t()) :: pos_integer()
   def item_count(%__MODULE__{} = mission), do: length(to_items(mission))
+
+  @typedoc "How a mission ends (see `ending/1`)."
+  @type ending ::
+          {:landing, non_neg_integer()} | {:loiter_forever, non_neg_integer()} | {:loops_forever, non_neg_integer()} | {:reached, non_neg_integer()}
+
+  @doc """
+  How a mission (or a list of its items) ends, with the seq of the item that
+  decides it:
+
+    * `{:loops_forever, seq}` — a DO_JUMP repeating for ever (`seq` is the jump);
+    * `{:landing, seq}` — its last navigation item lands (NAV_LAND, or
+      NAV_RETURN_TO_LAUNCH, which lands on a Copter): done when landed and
+      disarmed;
+    * `{:loiter_forever, seq}` — its last navigation item is NAV_LOITER_UNLIM:
+      it never completes by itself;
+    * `{:reached, seq}` — done when navigation item `seq` is reached (0 when
+      there is none).
+
+  Navigation items (NAV_*, MAV_CMD up to 95 as ArduPilot counts them) are the
+  ones a mission waits for; ArduPilot ends a mission when no navigation item
+  is left, so the commands after the last one (speed, camera) are not waited
+  for, and may not all run.
+
+      iex> alias Dolphin.Mission.Command, as: C
+      iex> home = Dolphin.Geo.location(40.444233, -7.375234, 820)
+      iex> Dolphin.Mission.ending(Dolphin.Mission.new("r", [C.home(home), C.return_home_and_land()]))
+      {:landing, 1}
+      iex> Dolphin.Mission.ending(Dolphin.Mission.new("s", [C.home(home), C.move_and_loiter_pos(1, 1, 50), C.capture_photo()]))
+      {:loiter_forever, 1}
+  """
+  @spec ending(t() | [struct()]) :: ending()
+  def ending(%__MODULE__{} = mission), do: mission |> to_items() |> ending()
+
+  def ending(items) when is_list(items) do
+    jump = Items.command_number(:mav_cmd_do_jump)
+
+    forever = Enum.find(items, &(&1.command == jump and &1.param2 == -1.0))
+    last_nav = items |> Enum.filter(&(&1.seq > 0 and &1.command <= 95)) |> List.last()
+
+    cond do
+      forever -> {:loops_forever, forever.seq}
+      last_nav == nil -> {:reached, 0}
+      last_nav.command in [Items.command_number(:mav_cmd_nav_land), 20] -> {:landing, last_nav.seq}
+      last_nav.command == Items.command_number(:mav_cmd_nav_loiter_unlim) -> {:loiter_forever, last_nav.seq}
+      true -> {:reached, last_nav.seq}
+    end
+  end
+
+  @doc """
+  Compares a mission downloaded from a vehicle with the items uploaded, by
+  meaning: `:ok`, or `{:error, reason}` naming the first difference.
+
+  What ArduPilot gives back differs from what it was sent in ways that do not
+  change the mission, and those are ignored: item 0 is the vehicle's own home;
+  frames come back as their non-`_INT` synonyms (5 as 0, 6 as 3, 11 as 10) and
+  items without a position in any frame; heights are stored in centimetres;
+  and many params are stored in narrower forms or dropped (WAYPOINT, TAKEOFF
+  and LAND yaw, the LOITER_TIME radius, integer seconds and turns), so params
+  are not compared. What is compared: the number of items, each item's
+  command, and for items with a position its latitude and longitude (exactly,
+  degrees × 10⁷), its altitude reference and its height (within 1 cm).
+  """
+  @spec compare_download([struct()], [struct()]) :: :ok | {:error, String.t()}
+  def compare_download(uploaded, downloaded) when is_list(uploaded) and is_list(downloaded) do
+    if length(uploaded) != length(downloaded) do
+      {:error, "the vehicle has #{length(downloaded)} items, #{length(uploaded)} were uploaded"}
+    else
+      uploaded
+      |> Enum.zip(downloaded)
+      |> Enum.drop(1)
+      |> Enum.find_value(:ok, fn {up, down} -> item_difference(up, down) end)
+    end
+  end
+
+  @altitude_reference %{0 => :amsl, 5 => :amsl, 3 => :home, 6 => :home, 10 => :terrain, 11 => :terrain}
+
+  defp item_difference(up, down) do
+    reference = Map.get(@altitude_reference, up.frame)
+
+    cond do
+      up.command != down.command ->
+        {:error, "item #{up.seq} is command #{down.command} on the vehicle, #{up.command} was uploaded"}
+
+      reference == nil ->
+        nil
+
+      Map.get(@altitude_reference, down.frame) != reference ->
+        {:error, "item #{up.seq} has frame #{down.frame} on the vehicle, #{up.frame} was uploaded"}
+
+      {up.x, up.y} != {down.x, down.y} ->
+        {:error, "item #{up.seq} is at #{inspect({down.x, down.y})} on the vehicle, #{inspect({up.x, up.y})} was uploaded"}
+
+      not (is_number(down.z) and abs(down.z - up.z) <= 0.01) ->
+        {:error, "item #{up.seq} is at height #{inspect(down.z)} on the vehicle, #{up.z} was uploaded"}
+
+      true ->
+        nil
+    end
+  end
 
   @doc """
   The mission as a QGroundControl plan file (JSON text, see

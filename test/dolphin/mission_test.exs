@@ -411,6 +411,51 @@ defmodule Dolphin.MissionTest do
     end
   end
 
+  describe "ending" do
+    test "landing, loitering for ever, looping for ever, or reaching the last navigation item" do
+      base = [C.home(@home), C.take_off(@up)]
+      assert Mission.ending(Mission.new("a", base ++ [C.move(1, 1, 1), C.return_home_and_land(), C.capture_photo()])) == {:landing, 3}
+      assert Mission.ending(Mission.new("b", base ++ [C.landing_point(@p)])) == {:landing, 2}
+      assert Mission.ending(Mission.new("c", base ++ [C.item(:mav_cmd_nav_return_to_launch)])) == {:landing, 2}
+      assert Mission.ending(Mission.new("d", base ++ [C.loiter_pos(@p), C.speed(3)])) == {:loiter_forever, 2}
+      assert Mission.ending(Mission.new("e", base ++ [C.move(1, 1, 1), C.jump_to_item(2, :forever), C.landing_point(@p)])) == {:loops_forever, 3}
+      assert Mission.ending(Mission.new("f", base ++ [C.move(1, 1, 1), C.jump_to_item(2, 3)])) == {:reached, 2}
+      assert Mission.ending(Mission.new("g", base ++ [C.loiter_time(@p, 10), C.delay(4), C.stop_capturing()])) == {:reached, 3}
+      assert Mission.ending(Mission.new("h", [C.home(@home), C.speed(3)])) == {:reached, 0}
+    end
+  end
+
+  describe "compare_download" do
+    setup do
+      m = Mission.new("m", [C.home(@home), C.take_off(@up), C.speed(5), C.move(100, 200, 100), C.move_and_loiter_time(10, 0, 0, 30, 40)])
+      %{up: Mission.to_items(m)}
+    end
+
+    # What ArduPilot sends back: its own home, non-_INT frames, items without a
+    # position in frame 0, heights from centimetres in float32, params dropped.
+    defp as_downloaded(items) do
+      Enum.map(items, fn item ->
+        <<z::float-32>> = <<item.z::float-32>>
+        %{item | frame: 0, z: z, param4: 0.0, param3: if(item.command == 19, do: 1.0, else: item.param3)}
+      end)
+      |> List.replace_at(0, %M.MissionItemInt{seq: 0, command: 16, x: 404_442_331, y: -73_752_339, z: 821.5})
+    end
+
+    test "what ArduPilot gives back matches", %{up: up} do
+      assert Mission.compare_download(up, as_downloaded(up)) == :ok
+      assert Mission.compare_download(up, up) == :ok
+    end
+
+    test "a missing item, another command, another position, height or altitude reference do not", %{up: up} do
+      down = as_downloaded(up)
+      assert {:error, "the vehicle has 4 items, 5 were uploaded"} = Mission.compare_download(up, Enum.drop(down, -1))
+      assert {:error, "item 2 is command 177 on the vehicle, 178 was uploaded"} = Mission.compare_download(up, List.update_at(down, 2, &%{&1 | command: 177}))
+      assert {:error, "item 3 is at " <> _} = Mission.compare_download(up, List.update_at(down, 3, &%{&1 | x: &1.x + 1}))
+      assert {:error, "item 4 is at height " <> _} = Mission.compare_download(up, List.update_at(down, 4, &%{&1 | z: &1.z + 0.5}))
+      assert {:error, "item 1 has frame 3 on the vehicle, 5 was uploaded"} = Mission.compare_download(up, List.update_at(down, 1, &%{&1 | frame: 3}))
+    end
+  end
+
   describe "inspect" do
     test "a mission shows its name and one line per item" do
       m = Mission.new("Survey Area", [C.home(@home), C.take_off(@up), C.speed(12), C.move(100, 200, 100)])
