@@ -181,6 +181,19 @@ defmodule Dolphin.DSL.Mission do
     end
   end
 
+  # `position |> go_pos()`: the piped value is the first argument.
+  defp rewrite({:|>, meta, [lhs, {name, m, args}]}, words, caller) when is_atom(name) and is_list(args) do
+    lhs = rewrite(lhs, words, caller)
+    args = Enum.map(args, &rewrite(&1, words, caller))
+
+    if Map.has_key?(words, name) do
+      check_arity!(name, length(args) + 1, words, m, caller)
+      {:|>, meta, [lhs, {{:., m, [Command, name]}, m, args}]}
+    else
+      {:|>, meta, [lhs, {name, m, args}]}
+    end
+  end
+
   defp rewrite({name, meta, args}, words, caller) when is_atom(name) and is_list(args) do
     args = Enum.map(args, &rewrite(&1, words, caller))
 

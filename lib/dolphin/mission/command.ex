@@ -472,10 +472,9 @@ defmodule Dolphin.Mission.Command do
   defp direction!(d) when d in @directions, do: d
 
   defp direction!(d) when is_binary(d) do
-    Enum.find(@directions, &(Atom.to_string(&1) == String.downcase(d))) || direction!({:string, d})
+    Enum.find(@directions, &(Atom.to_string(&1) == String.downcase(d))) || direction_error(d)
   end
 
-  defp direction!({:string, d}), do: direction_error(d)
   defp direction!(other), do: direction_error(other)
 
   defp direction_error(other),

@@ -232,6 +232,12 @@ defmodule Dolphin.DSL.MissionTest do
     assert e.description =~ "loiter_time takes seconds"
   end
 
+  test "pipes into a command word" do
+    p = location(40.45, -7.37, 1100)
+    m = mission(do: p |> loiter_pos(20))
+    assert m.commands == [C.loiter_pos(p, 20)]
+  end
+
   test "a capture of a command word is the command function" do
     m = mission(do: Enum.map([3, 4], &delay/1))
     assert m.commands == [C.delay(3), C.delay(4)]
