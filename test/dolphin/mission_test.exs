@@ -411,6 +411,58 @@ defmodule Dolphin.MissionTest do
     end
   end
 
+  describe "property" do
+    import Dolphin.Property
+
+    # float32 rounding, as the wire carries params and z
+    defp f32(:nan), do: :nan
+
+    defp f32(x) do
+      <<y::float-32>> = <<x::float-32>>
+      y
+    end
+
+    test "any mission of relative moves, loiters, surveys and settings gives contiguous items that go over the wire unchanged" do
+      coord = :proper_types.float(-20_000.0, 20_000.0)
+
+      command =
+        :proper_types.oneof([
+          :proper_types.tuple([:move, coord, coord, :proper_types.float(-300.0, 300.0)]),
+          :proper_types.tuple([:from_home, coord, coord, :proper_types.float(-300.0, 300.0)]),
+          :proper_types.tuple([:turns, coord, coord, :proper_types.integer(0, 255), :proper_types.float(-255.0, 255.0)]),
+          :proper_types.tuple([:survey, :proper_types.float(1.0, 5000.0), :proper_types.float(1.0, 5000.0), :proper_types.float(50.0, 1000.0)]),
+          :proper_types.tuple([:speed, :proper_types.float(0.1, 40.0)]),
+          :proper_types.tuple([:altitude, :proper_types.float(0.0, 4000.0)]),
+          :proper_types.tuple([:home_and_land])
+        ])
+
+      check(
+        forall(:proper_types.list(command), fn spec ->
+          commands =
+            Enum.map(spec, fn
+              {:move, n, e, u} -> C.move(n, e, u)
+              {:from_home, n, e, u} -> C.move_from_home(n, e, u)
+              {:turns, n, e, t, r} -> C.move_and_loiter_turns(n, e, 0, t, r)
+              {:survey, l, w, s} -> C.survey_area(l, w, s, :north_west)
+              {:speed, v} -> C.speed(v, 1)
+              {:altitude, h} -> C.altitude(h)
+              {:home_and_land} -> C.return_home_and_land()
+            end)
+
+          items = Mission.to_items(Mission.new("p", [C.home(@home) | commands]))
+          assert Enum.map(items, & &1.seq) == Enum.to_list(0..(length(items) - 1))
+
+          for item <- items do
+            {:ok, %{message: back}, ""} = item |> Frame.encode() |> Frame.decode(M)
+            assert Map.take(back, [:seq, :command, :frame, :x, :y, :autocontinue]) == Map.take(item, [:seq, :command, :frame, :x, :y, :autocontinue])
+            assert [back.param1, back.param2, back.param3, back.param4, back.z] == Enum.map([item.param1, item.param2, item.param3, item.param4, item.z], &f32/1)
+          end
+        end),
+        numtests: 100
+      )
+    end
+  end
+
   describe "ending" do
     test "landing, loitering for ever, looping for ever, or reaching the last navigation item" do
       base = [C.home(@home), C.take_off(@up)]
