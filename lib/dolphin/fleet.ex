@@ -1,0 +1,504 @@
+defmodule Dolphin.Fleet do
+  @moduledoc """
+  The fleet: which vehicles exist, which are available, which a script has
+  picked, which are busy running a task — and the allocation of a run's
+  platform tasks to them.
+
+  Vehicles come from a `Dolphin.Fleet.Source` (by default the MAVLink vehicles
+  of `Dolphin.Vehicles`; `config :dolphin, vehicle_source: {module, arg}` or
+  the `:source` option change it). The fleet follows the source's events, so
+  it knows every vehicle's type, payloads, position and whether it is
+  connected, and it turns them into `Dolphin.Telemetry` events
+  (`vehicle_discovered`, `vehicle_lost`, `vehicle_reconnected`, `mode_changed`,
+  `armed`, `disarmed`, `mission_item_reached`).
+
+  ## Picking
+
+      {:ok, set} = Dolphin.Fleet.pick(Dolphin.Fleet, self(), count: 2, type: :uav, timeout: 30_000)
+      :ok = Dolphin.Fleet.release(Dolphin.Fleet, self(), set)
+
+  A pick waits until `count` *available* vehicles (connected, picked by
+  nobody, not busy) match every filter — `type` (a class or a list),
+  `payload` (one or a list, all required), `region` (a `Dolphin.Geo.Area` the
+  vehicle's position must be in), `id` (a system id or a list) — then marks
+  them picked by `owner` and returns them. Waiting picks are served first
+  come, first served: vehicles matching an earlier waiting pick are kept for
+  it, so a large pick is not starved by a stream of small ones, while a pick
+  that nobody earlier can use is served at once. After `timeout` (clock ms,
+  default `:infinity`) it fails with a `Dolphin.Fleet.PickError` naming the
+  requirement. The owner (a script's process) is monitored: when it ends, its
+  vehicles are released.
+
+  A vehicle lost while picked stays picked (it may come back); it is not
+  given to new tasks while lost, and the task running on it fails.
+
+  ## Allocation
+
+  `reserve/5` (called by the engine when a run starts) gives each platform
+  task of the run a vehicle among those the owner picked and that are not
+  busy, using `Dolphin.Engine.Allocation`, and marks them busy until
+  `unreserve/2`.
+  """
+
+  use GenServer
+
+  require Logger
+
+  alias Dolphin.{Geo, PubSub, Telemetry}
+  alias Dolphin.Geo.Area
+  alias Dolphin.Engine.{Allocation, Cond, Context}
+  alias Dolphin.Fleet.{PickError, Source, Vehicle, VehicleSet}
+
+  @types [:uav, :ugv, :usv, :uuv, :other]
+  @pick_keys [:count, :type, :payload, :region, :id, :timeout]
+  # How often picks waiting on a region are checked again (clock ms), besides events.
+  @region_tick 1_000
+
+  @type fleet :: GenServer.server()
+
+  # --- API ---
+
+  @doc """
+  Starts a fleet. Options: `:name` (default `Dolphin.Fleet`), `:source`
+  (default `config :dolphin, vehicle_source:` or `{Dolphin.Fleet.MAVLinkSource, nil}`),
+  `:events` (emit vehicle events, default true).
+  """
+  @spec start_link(keyword()) :: GenServer.on_start()
+  def start_link(opts \\ []) do
+    name = Keyword.get(opts, :name, __MODULE__)
+    GenServer.start_link(__MODULE__, Keyword.put(opts, :name, name), name: name)
+  end
+
+  @doc false
+  def child_spec(opts), do: %{id: Keyword.get(opts, :name, __MODULE__), start: {__MODULE__, :start_link, [opts]}}
+
+  @doc "The fleet's vehicle source."
+  @spec source(fleet()) :: Source.t()
+  def source(fleet \\ __MODULE__) do
+    case is_atom(fleet) && :persistent_term.get({__MODULE__, fleet}, nil) do
+      source when is_tuple(source) -> source
+      _ -> GenServer.call(fleet, :source)
+    end
+  end
+
+  @doc "Changes the vehicle source (forgetting the vehicles of the old one); used by `mix dolphin.run --fake`."
+  @spec set_source(fleet(), Source.t()) :: :ok
+  def set_source(fleet \\ __MODULE__, {m, _} = source) when is_atom(m), do: GenServer.call(fleet, {:set_source, source})
+
+  @doc "Every known vehicle with its status: `%{vehicle: Vehicle.t(), picked_by: pid | nil, busy: run_id | nil}`."
+  @spec vehicles(fleet()) :: [%{vehicle: Vehicle.t(), picked_by: pid() | nil, busy: integer() | nil}]
+  def vehicles(fleet \\ __MODULE__), do: GenServer.call(fleet, :vehicles)
+
+  @doc "Picks vehicles for `owner` (see the module doc). Raises `ArgumentError` for an unknown or malformed option."
+  @spec pick(fleet(), pid(), keyword()) :: {:ok, VehicleSet.t()} | {:error, PickError.t()}
+  def pick(fleet, owner, opts) do
+    req = requirement!(opts)
+    GenServer.call(fleet, {:pick, owner, req}, :infinity)
+  end
+
+  @doc "Releases vehicles picked by `owner` (vehicles it did not pick are left alone)."
+  @spec release(fleet(), pid(), VehicleSet.t() | [VehicleSet.t()]) :: :ok
+  def release(fleet, owner, sets), do: GenServer.call(fleet, {:release, owner, VehicleSet.new(List.wrap(sets))})
+
+  @doc "The vehicles `owner` has picked."
+  @spec picked(fleet(), pid()) :: VehicleSet.t()
+  def picked(fleet, owner), do: GenServer.call(fleet, {:picked, owner})
+
+  @doc "Sets the connection timeout (clock ms) of the vehicles `owner` picked and will pick."
+  @spec set_connection_timeout(fleet(), pid(), pos_integer()) :: :ok
+  def set_connection_timeout(fleet, owner, ms) when is_integer(ms) and ms > 0, do: GenServer.call(fleet, {:timeout, owner, ms})
+
+  def set_connection_timeout(_fleet, _owner, ms),
+    do: raise(ArgumentError, "a connection timeout is a positive number of milliseconds, got: #{inspect(ms)}")
+
+  @doc false
+  # Allocates vehicles to a run's platform tasks (Dolphin.Engine.Allocation leaves)
+  # and marks them busy for it. `inherit`: vehicles the run already holds.
+  @spec reserve(fleet(), %{id: integer(), pid: pid()}, pid(), [Allocation.leaf()], [non_neg_integer()]) ::
+          {:ok, %{integer() => non_neg_integer()}} | {:error, Dolphin.Engine.AllocationError.t()}
+  def reserve(fleet, run, owner, leaves, inherit), do: GenServer.call(fleet, {:reserve, run, owner, leaves, inherit}, 60_000)
+
+  @doc false
+  @spec unreserve(fleet(), integer()) :: :ok
+  def unreserve(fleet, run_id), do: GenServer.call(fleet, {:unreserve, run_id})
+
+  @doc """
+  The live state of one vehicle (a one-vehicle set or a system id), from the
+  context's source. Inside a condition being evaluated, the state comes from
+  a cache in the evaluating process, kept up to date by the vehicle's events,
+  and the read is recorded so the condition is evaluated again when the
+  vehicle changes.
+  """
+  @spec state(VehicleSet.t() | non_neg_integer(), atom()) :: Vehicle.t()
+  def state(ref, function \\ :state) do
+    id = VehicleSet.one!(ref, function)
+
+    if Cond.track({:vehicle, id}) do
+      case Process.get({:"$dolphin_vehicle", id}) do
+        nil ->
+          # Subscribed before reading: no change is missed in between.
+          subscribe_vehicle(id)
+          v = fetch!(id)
+          Process.put({:"$dolphin_vehicle", id}, v)
+          v
+
+        v ->
+          v
+      end
+    else
+      fetch!(id)
+    end
+  end
+
+  defp fetch!(id) do
+    case Source.vehicle(Context.source(Context.current()), id) do
+      {:ok, v} -> v
+      {:error, :unknown_vehicle} -> raise ArgumentError, "unknown vehicle #{inspect(id)}"
+    end
+  end
+
+  @doc false
+  # Subscribes the calling process to a vehicle's events, once.
+  def subscribe_vehicle(id) do
+    unless Process.get({:"$dolphin_subscribed", id}) do
+      PubSub.subscribe({:vehicle, id})
+      Process.put({:"$dolphin_subscribed", id}, true)
+    end
+
+    :ok
+  end
+
+  @doc false
+  # Checks and normalises pick options (caller mistakes raise here, in the caller).
+  def requirement!(opts) when is_list(opts) do
+    Enum.each(opts, fn
+      {k, _} when k in @pick_keys -> :ok
+      other -> raise ArgumentError, "unknown pick option #{inspect(other)}; options are #{inspect(@pick_keys)}"
+    end)
+
+    count = Keyword.get(opts, :count, 1)
+    unless is_integer(count) and count > 0, do: raise(ArgumentError, "pick count must be a positive integer, got: #{inspect(count)}")
+
+    type = Keyword.get(opts, :type)
+
+    unless type == nil or Enum.all?(List.wrap(type), &(&1 in @types)),
+      do: raise(ArgumentError, "pick type must be one of #{inspect(@types)} (or a list of them), got: #{inspect(type)}")
+
+    payload = List.wrap(Keyword.get(opts, :payload))
+    unless Enum.all?(payload, &is_atom/1), do: raise(ArgumentError, "pick payload must be an atom or a list of atoms, got: #{inspect(payload)}")
+
+    region = Keyword.get(opts, :region)
+    unless region == nil or is_struct(region, Area), do: raise(ArgumentError, "pick region must be an area (area/2), got: #{inspect(region)}")
+
+    id = Keyword.get(opts, :id)
+
+    unless id == nil or Enum.all?(List.wrap(id), &(is_integer(&1) and &1 >= 0)),
+      do: raise(ArgumentError, "pick id must be a system id or a list of them, got: #{inspect(id)}")
+
+    timeout = Keyword.get(opts, :timeout, :infinity)
+
+    unless timeout == :infinity or (is_integer(timeout) and timeout >= 0),
+      do: raise(ArgumentError, "pick timeout must be milliseconds or :infinity, got: #{inspect(timeout)}")
+
+    %{count: count, type: type, payload: payload, region: region, id: id && List.wrap(id), timeout: timeout}
+  end
+
+  def requirement!(other), do: raise(ArgumentError, "pick options must be a keyword list, got: #{inspect(other)}")
+
+  @doc false
+  def describe(req) do
+    [
+      "#{req.count} vehicle#{if req.count > 1, do: "s"}",
+      req.type && "type #{inspect(req.type)}",
+      req.payload != [] && "payload #{inspect(req.payload)}",
+      req.region && "in #{inspect(req.region)}",
+      req.id && "id #{inspect(req.id)}"
+    ]
+    |> Enum.filter(& &1)
+    |> Enum.join(", ")
+  end
+
+  # --- server ---
+
+  @impl true
+  def init(opts) do
+    name = Keyword.fetch!(opts, :name)
+    source = Keyword.get_lazy(opts, :source, fn -> Application.get_env(:dolphin, :vehicle_source, {Dolphin.Fleet.MAVLinkSource, nil}) end)
+    PubSub.subscribe(:vehicles)
+
+    s = %{
+      name: name,
+      source: nil,
+      events: Keyword.get(opts, :events, true),
+      # id => %{vehicle: Vehicle.t(), announced: boolean}
+      vehicles: %{},
+      picked: %{},
+      # pid => monitor ref (owners, waiting callers, runs)
+      monitors: %{},
+      timeouts: %{},
+      # vehicle id => run id; run id => run pid
+      busy: %{},
+      runs: %{},
+      waiters: [],
+      region_tick: false
+    }
+
+    {:ok, use_source(s, source)}
+  end
+
+  defp use_source(s, source) do
+    if is_atom(s.name), do: :persistent_term.put({__MODULE__, s.name}, source)
+    for id <- Map.keys(s.vehicles), do: PubSub.unsubscribe({:vehicle, id})
+    s = %{s | source: source, vehicles: %{}}
+    Enum.reduce(Source.list(source), s, &add_vehicle(&2, &1))
+  end
+
+  @impl true
+  def terminate(_reason, s), do: if(is_atom(s.name), do: :persistent_term.erase({__MODULE__, s.name}))
+
+  @impl true
+  def handle_call(:source, _from, s), do: {:reply, s.source, s}
+  def handle_call({:set_source, source}, _from, s), do: {:reply, :ok, s |> use_source(source) |> serve()}
+
+  def handle_call(:vehicles, _from, s) do
+    list =
+      s.vehicles
+      |> Enum.sort()
+      |> Enum.map(fn {id, %{vehicle: v}} -> %{vehicle: v, picked_by: s.picked[id], busy: s.busy[id]} end)
+
+    {:reply, list, s}
+  end
+
+  def handle_call({:pick, owner, req}, {caller, _} = from, s) do
+    s = s |> monitor(owner) |> monitor(caller)
+    ref = make_ref()
+    timer = if req.timeout != :infinity, do: Dolphin.Clock.send_after(self(), {:pick_timeout, ref}, req.timeout)
+    waiter = %{ref: ref, from: from, caller: caller, owner: owner, req: req, timer: timer}
+    {:noreply, serve(%{s | waiters: s.waiters ++ [waiter]})}
+  end
+
+  def handle_call({:release, owner, set}, _from, s), do: {:reply, :ok, s |> release_vehicles(owner, set.ids) |> serve()}
+  def handle_call({:picked, owner}, _from, s), do: {:reply, VehicleSet.new(picked_by(s, owner)), s}
+
+  def handle_call({:timeout, owner, ms}, _from, s) do
+    for id <- picked_by(s, owner), do: Source.set_timeout(s.source, id, ms)
+    {:reply, :ok, %{monitor(s, owner) | timeouts: Map.put(s.timeouts, owner, ms)}}
+  end
+
+  def handle_call({:reserve, run, owner, leaves, inherit}, _from, s) do
+    # The owner's vehicles that are free, plus those the run already holds
+    # (a watch handler's task reuses its failed task's vehicles); those first.
+    usable = fn id ->
+      entry = s.vehicles[id]
+      entry != nil and entry.vehicle.connected? and (s.busy[id] in [nil, run.id])
+    end
+
+    pool = Enum.uniq(Enum.filter(inherit, usable) ++ Enum.filter(Enum.sort(picked_by(s, owner)), &(usable.(&1) and s.busy[&1] == nil)))
+
+    case Allocation.solve(leaves, Enum.map(pool, &s.vehicles[&1].vehicle)) do
+      {:ok, assignment} ->
+        busy = Enum.reduce(Map.values(assignment), s.busy, &Map.put(&2, &1, run.id))
+        {:reply, {:ok, assignment}, %{monitor(s, run.pid) | busy: busy, runs: Map.put(s.runs, run.id, run.pid)}}
+
+      {:error, _} = error ->
+        {:reply, error, s}
+    end
+  end
+
+  def handle_call({:unreserve, run_id}, _from, s), do: {:reply, :ok, s |> unreserve_run(run_id) |> serve()}
+
+  @impl true
+  def handle_info({:dolphin, :vehicles, {:vehicle_discovered, id}}, s) do
+    case s.vehicles do
+      %{^id => _} -> {:noreply, s |> connected(id, true, false) |> serve()}
+      _ -> {:noreply, s |> add_vehicle(id) |> serve()}
+    end
+  end
+
+  def handle_info({:dolphin, :vehicles, {:vehicle_lost, id}}, s), do: {:noreply, connected(s, id, false, true)}
+  def handle_info({:dolphin, :vehicles, {:vehicle_reconnected, id}}, s), do: {:noreply, s |> connected(id, true, true) |> serve()}
+
+  def handle_info({:dolphin, {:vehicle, id}, {:state, id, changes}}, s) do
+    case s.vehicles do
+      %{^id => %{vehicle: old} = entry} ->
+        new = Source.apply_changes(s.source, old, changes)
+        entry = announce(s, %{entry | vehicle: new})
+        if s.events and entry.announced, do: changed(old, new)
+        s = put_in(s.vehicles[id], entry)
+        relevant = old.type != new.type or old.payloads != new.payloads or old.position != new.position
+        {:noreply, if(relevant and s.waiters != [], do: serve(s), else: s)}
+
+      _ ->
+        {:noreply, s}
+    end
+  end
+
+  def handle_info({:pick_timeout, ref}, s) do
+    case Enum.split_with(s.waiters, &(&1.ref == ref)) do
+      {[w], rest} ->
+        error = pick_error(s, w.req)
+        if s.events, do: Telemetry.emit(:pick_failed, %{requirement: describe(w.req), reason: error.message})
+        GenServer.reply(w.from, {:error, error})
+        {:noreply, serve(%{s | waiters: rest})}
+
+      {[], _} ->
+        {:noreply, s}
+    end
+  end
+
+  def handle_info(:region_tick, s) do
+    s = serve(%{s | region_tick: false})
+    {:noreply, s}
+  end
+
+  def handle_info({:DOWN, _ref, :process, pid, _reason}, s) do
+    s = %{s | monitors: Map.delete(s.monitors, pid), timeouts: Map.delete(s.timeouts, pid)}
+
+    # A waiting caller or owner that died: its picks are dropped.
+    {gone, waiters} = Enum.split_with(s.waiters, &(&1.caller == pid or &1.owner == pid))
+    for %{timer: timer} <- gone, timer != nil, do: Process.cancel_timer(timer)
+    s = %{s | waiters: waiters}
+
+    # An owner: its vehicles are released. A run: its vehicles are no longer busy.
+    s = release_vehicles(s, pid, picked_by(s, pid))
+    s = Enum.reduce(for({run_id, ^pid} <- s.runs, do: run_id), s, &unreserve_run(&2, &1))
+    {:noreply, serve(s)}
+  end
+
+  def handle_info(_other, s), do: {:noreply, s}
+
+  # --- vehicles ---
+
+  defp add_vehicle(s, id) do
+    case Source.vehicle(s.source, id) do
+      {:ok, v} ->
+        PubSub.subscribe({:vehicle, id})
+        entry = announce(s, %{vehicle: v, announced: false})
+        put_in(s.vehicles[id], entry)
+
+      {:error, :unknown_vehicle} ->
+        # Another source's vehicle (tests run several fleets), or gone already.
+        s
+    end
+  end
+
+  # vehicle_discovered once its type is known (the first heartbeat).
+  defp announce(s, %{announced: false, vehicle: %Vehicle{type: type} = v} = entry) when type != nil do
+    if s.events, do: Telemetry.emit(:vehicle_discovered, %{vehicle: v.id, type: type})
+    %{entry | announced: true}
+  end
+
+  defp announce(_s, entry), do: entry
+
+  defp connected(s, id, connected?, emit?) do
+    case s.vehicles do
+      %{^id => entry} ->
+        if s.events and emit?, do: Telemetry.emit(if(connected?, do: :vehicle_reconnected, else: :vehicle_lost), %{vehicle: id})
+        put_in(s.vehicles[id], %{entry | vehicle: %{entry.vehicle | connected?: connected?}})
+
+      _ ->
+        s
+    end
+  end
+
+  defp changed(old, new) do
+    if old.mode != new.mode and new.mode != nil, do: Telemetry.emit(:mode_changed, %{vehicle: new.id, mode: new.mode})
+    if old.armed? != new.armed?, do: Telemetry.emit(if(new.armed?, do: :armed, else: :disarmed), %{vehicle: new.id})
+
+    case {old.mission_progress, new.mission_progress} do
+      {{reached, _}, {reached, _}} -> :ok
+      {_, {reached, _}} when reached > 0 -> Telemetry.emit(:mission_item_reached, %{vehicle: new.id, seq: reached})
+      _ -> :ok
+    end
+  end
+
+  # --- picks ---
+
+  defp picked_by(s, owner), do: for({id, ^owner} <- s.picked, do: id)
+
+  defp release_vehicles(s, _owner, []), do: s
+
+  defp release_vehicles(s, owner, ids) do
+    mine = Enum.filter(ids, &(s.picked[&1] == owner))
+    if s.events and mine != [], do: Telemetry.emit(:released, %{vehicles: Enum.sort(mine)})
+    %{s | picked: Map.drop(s.picked, mine)}
+  end
+
+  defp unreserve_run(s, run_id) do
+    busy = for {id, r} <- s.busy, r != run_id, into: %{}, do: {id, r}
+    %{s | busy: busy, runs: Map.delete(s.runs, run_id)}
+  end
+
+  # Serves waiting picks in order; vehicles an earlier waiter could use are
+  # kept for it (first come, first served).
+  defp serve(s) do
+    available = for {id, %{vehicle: v}} <- Enum.sort(s.vehicles), v.connected?, s.picked[id] == nil, s.busy[id] == nil, do: v
+
+    {s, waiters, _claimed} =
+      Enum.reduce(s.waiters, {s, [], MapSet.new()}, fn w, {s, kept, claimed} ->
+        matching = Enum.filter(available, &(matches?(w.req, &1) and not MapSet.member?(claimed, &1.id) and s.picked[&1.id] == nil))
+
+        if length(matching) >= w.req.count do
+          ids = matching |> Enum.take(w.req.count) |> Enum.map(& &1.id)
+          {give(s, w, ids), kept, claimed}
+        else
+          {s, [w | kept], Enum.reduce(matching, claimed, &MapSet.put(&2, &1.id))}
+        end
+      end)
+
+    s = %{s | waiters: Enum.reverse(waiters)}
+
+    if not s.region_tick and Enum.any?(s.waiters, & &1.req.region) do
+      Dolphin.Clock.send_after(self(), :region_tick, @region_tick)
+      %{s | region_tick: true}
+    else
+      s
+    end
+  end
+
+  defp give(s, w, ids) do
+    if w.timer, do: Process.cancel_timer(w.timer)
+    if ms = s.timeouts[w.owner], do: Enum.each(ids, &Source.set_timeout(s.source, &1, ms))
+    if s.events, do: Telemetry.emit(:picked, %{vehicles: ids, requirement: describe(w.req)})
+    GenServer.reply(w.from, {:ok, VehicleSet.new(ids)})
+    %{s | picked: Enum.reduce(ids, s.picked, &Map.put(&2, &1, w.owner))}
+  end
+
+  defp matches?(req, %Vehicle{} = v) do
+    (req.type == nil or v.type in List.wrap(req.type)) and Enum.all?(req.payload, &(&1 in v.payloads)) and
+      (req.region == nil or (v.position != nil and Geo.contains?(req.region, v.position))) and (req.id == nil or v.id in req.id)
+  end
+
+  defp pick_error(s, req) do
+    known =
+      s.vehicles
+      |> Enum.sort()
+      |> Enum.map_join(", ", fn {id, %{vehicle: v}} ->
+        status =
+          cond do
+            not v.connected? -> "lost"
+            s.busy[id] -> "busy"
+            s.picked[id] -> "picked"
+            true -> "available"
+          end
+
+        "#{id} (#{v.type || "type unknown"}#{if v.payloads != [], do: " " <> inspect(v.payloads), else: ""}, #{status})"
+      end)
+
+    n = Enum.count(s.vehicles, fn {id, %{vehicle: v}} -> v.connected? and s.picked[id] == nil and s.busy[id] == nil and matches?(req, v) end)
+
+    %PickError{
+      requirement: describe(req),
+      message:
+        "pick timed out after #{req.timeout} ms: wanted #{describe(req)}; #{n} available match; " <>
+          "known vehicles: #{if known == "", do: "none", else: known}"
+    }
+  end
+
+  defp monitor(s, pid) do
+    case s.monitors do
+      %{^pid => _} -> s
+      _ -> %{s | monitors: Map.put(s.monitors, pid, Process.monitor(pid))}
+    end
+  end
+end

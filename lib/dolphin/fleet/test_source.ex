@@ -1,0 +1,150 @@
+defmodule Dolphin.Fleet.TestSource do
+  @moduledoc """
+  Fake vehicles for tests, benchmarks and dry runs (`mix dolphin.run --fake N`):
+  a `Dolphin.Fleet.Source` whose vehicles' state the caller sets, publishing
+  the same `Dolphin.PubSub` events as real vehicles do, so conditions react to
+  them exactly as they react to telemetry.
+
+      {:ok, _} = Dolphin.Fleet.TestSource.start_link(name: :fakes)
+      :ok = Dolphin.Fleet.TestSource.add(:fakes, 1, type: :uav, payloads: [:camera])
+      {:ok, fleet} = Dolphin.Fleet.start_link(name: :test_fleet, source: Dolphin.Fleet.TestSource.source(:fakes))
+      :ok = Dolphin.Fleet.TestSource.set(:fakes, 1, battery: 0.25)   # {:state, 1, [battery: 0.25]}
+      :ok = Dolphin.Fleet.TestSource.lose(:fakes, 1)                 # {:vehicle_lost, 1}
+
+  A vehicle's attributes are the fields of `Dolphin.Fleet.Vehicle` (`type`
+  defaults to `:uav`, `battery` to 1.0, `position` to a point near Porto); a
+  change is a keyword list of those fields. The state lives in a public ETS
+  table named after the source, so `set/3` publishes from the caller with no
+  process in between. Vehicle ids are system ids: tests running at the same
+  time should use different ones, as the pub/sub topics are shared.
+  """
+
+  use GenServer
+
+  @behaviour Dolphin.Fleet.Source
+
+  alias Dolphin.Fleet.Vehicle
+  alias Dolphin.PubSub
+
+  @fields Vehicle.__struct__() |> Map.from_struct() |> Map.keys()
+
+  @doc "Starts a source; options: `:name` (an atom, default `#{inspect(__MODULE__)}`), `:vehicles` (`[{id, attrs}]`)."
+  @spec start_link(keyword()) :: GenServer.on_start()
+  def start_link(opts \\ []) do
+    name = Keyword.get(opts, :name, __MODULE__)
+    GenServer.start_link(__MODULE__, {name, Keyword.get(opts, :vehicles, [])}, name: name)
+  end
+
+  @doc false
+  def child_spec(opts), do: %{id: Keyword.get(opts, :name, __MODULE__), start: {__MODULE__, :start_link, [opts]}}
+
+  @doc "The `{module, arg}` pair to give `Dolphin.Fleet`."
+  @spec source(atom()) :: Dolphin.Fleet.Source.t()
+  def source(name \\ __MODULE__), do: {__MODULE__, name}
+
+  @doc "Adds a vehicle and publishes its discovery."
+  @spec add(atom(), non_neg_integer(), keyword()) :: :ok
+  def add(name, id, attrs \\ []) when is_integer(id) and id >= 0 do
+    vehicle = struct!(%Vehicle{id: id, type: :uav, battery: 1.0, position: Dolphin.Geo.Location.new(41.1780, -8.5980, 100)}, check!(attrs))
+    :ets.insert(name, {id, %{vehicle | id: id, payloads: Enum.sort(vehicle.payloads)}})
+    PubSub.publish(:vehicles, {:vehicle_discovered, id})
+  end
+
+  @doc "Changes a vehicle's state and publishes `{:state, id, changes}`."
+  @spec set(atom(), non_neg_integer(), keyword()) :: :ok
+  def set(name, id, changes) do
+    changes = check!(changes)
+    :ets.insert(name, {id, apply_changes(name, fetch!(name, id), changes)})
+    PubSub.publish({:vehicle, id}, {:state, id, changes})
+  end
+
+  @doc "Makes a vehicle silent: it is lost (`{:vehicle_lost, id}` on both topics)."
+  @spec lose(atom(), non_neg_integer()) :: :ok
+  def lose(name, id) do
+    :ets.insert(name, {id, %{fetch!(name, id) | connected?: false}})
+    PubSub.publish(:vehicles, {:vehicle_lost, id})
+    PubSub.publish({:vehicle, id}, {:vehicle_lost, id})
+  end
+
+  @doc "Brings a lost vehicle back (`{:vehicle_reconnected, id}` on both topics)."
+  @spec reconnect(atom(), non_neg_integer()) :: :ok
+  def reconnect(name, id) do
+    :ets.insert(name, {id, %{fetch!(name, id) | connected?: true}})
+    PubSub.publish(:vehicles, {:vehicle_reconnected, id})
+    PubSub.publish({:vehicle, id}, {:vehicle_reconnected, id})
+  end
+
+  @doc "The messages sent to a vehicle with `send_message`, oldest first."
+  @spec messages(atom(), non_neg_integer()) :: [term()]
+  def messages(name, id), do: for({{:sent, ^id, n}, m} <- :ets.tab2list(name), do: {n, m}) |> Enum.sort() |> Enum.map(&elem(&1, 1))
+
+  @doc "The connection timeout last set for a vehicle, or nil."
+  @spec timeout(atom(), non_neg_integer()) :: pos_integer() | nil
+  def timeout(name, id) do
+    case :ets.lookup(name, {:timeout, id}) do
+      [{_, ms}] -> ms
+      [] -> nil
+    end
+  end
+
+  defp fetch!(name, id) do
+    case :ets.lookup(name, id) do
+      [{^id, v}] -> v
+      [] -> raise ArgumentError, "no fake vehicle #{inspect(id)} in #{inspect(name)}"
+    end
+  end
+
+  defp check!(attrs) do
+    Enum.each(attrs, fn
+      {field, _} when field in @fields and field != :id -> :ok
+      other -> raise ArgumentError, "not a vehicle field: #{inspect(other)} (fields: #{inspect(@fields -- [:id])})"
+    end)
+
+    attrs
+  end
+
+  # Source callbacks
+
+  @impl Dolphin.Fleet.Source
+  def list(name), do: for({id, %Vehicle{}} when is_integer(id) <- :ets.tab2list(name), do: id) |> Enum.sort()
+
+  @impl Dolphin.Fleet.Source
+  def vehicle(name, id) do
+    case :ets.lookup(name, id) do
+      [{^id, v}] -> {:ok, v}
+      [] -> {:error, :unknown_vehicle}
+    end
+  end
+
+  @impl Dolphin.Fleet.Source
+  def apply_changes(_name, %Vehicle{} = v, changes) do
+    Enum.reduce(changes, v, fn
+      {:payloads, p}, v -> %{v | payloads: Enum.sort(p)}
+      {field, value}, v when field in @fields and field != :id -> Map.put(v, field, value)
+      _, v -> v
+    end)
+  end
+
+  @impl Dolphin.Fleet.Source
+  def set_timeout(name, id, ms) do
+    case :ets.lookup(name, id) do
+      [_] -> :ets.insert(name, {{:timeout, id}, ms}) && :ok
+      [] -> {:error, :unknown_vehicle}
+    end
+  end
+
+  @impl Dolphin.Fleet.Source
+  def send_message(name, id, message) do
+    case :ets.lookup(name, id) do
+      [_] -> :ets.insert(name, {{:sent, id, System.unique_integer([:monotonic])}, message}) && :ok
+      [] -> {:error, :unknown_vehicle}
+    end
+  end
+
+  @impl GenServer
+  def init({name, vehicles}) do
+    :ets.new(name, [:named_table, :public, :set, read_concurrency: true])
+    Enum.each(vehicles, fn {id, attrs} -> add(name, id, attrs) end)
+    {:ok, name}
+  end
+end

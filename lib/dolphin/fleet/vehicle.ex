@@ -1,0 +1,66 @@
+defmodule Dolphin.Fleet.Vehicle do
+  @moduledoc """
+  What the engine knows of one vehicle, whatever its source (see
+  `Dolphin.Fleet.Source`): identity, class, payloads and the live state that
+  conditions read.
+
+  | field | meaning |
+  | --- | --- |
+  | `id` | system id |
+  | `type` | `:uav`, `:ugv`, `:usv`, `:uuv`, `:other`, or `nil` while unknown |
+  | `payloads` | sorted list of atoms, e.g. `[:camera]` |
+  | `battery` | remaining fraction 0.0..1.0, `nil` until reported |
+  | `position` | `Dolphin.Geo.Location` (height above mean sea level) or `nil` |
+  | `relative_altitude` | metres above home, or `nil` |
+  | `mode` | flight mode name (`:guided`, `:auto`, ...) or `nil` |
+  | `armed?`, `connected?` | booleans |
+  | `mission_progress` | `{reached, total}`: last mission item reached and items in the mission |
+  | `landed` | `:on_ground`, `:in_air`, `:takeoff`, `:landing` or `nil` |
+  """
+
+  defstruct id: nil,
+            type: nil,
+            payloads: [],
+            battery: nil,
+            position: nil,
+            relative_altitude: nil,
+            mode: nil,
+            armed?: false,
+            connected?: true,
+            mission_progress: {0, 0},
+            landed: nil
+
+  @type class :: :uav | :ugv | :usv | :uuv | :other
+  @type t :: %__MODULE__{
+          id: non_neg_integer(),
+          type: class() | nil,
+          payloads: [atom()],
+          battery: float() | nil,
+          position: Dolphin.Geo.Location.t() | nil,
+          relative_altitude: float() | nil,
+          mode: atom() | nil,
+          armed?: boolean(),
+          connected?: boolean(),
+          mission_progress: {non_neg_integer(), non_neg_integer()},
+          landed: atom() | nil
+        }
+
+  @uav [1, 2, 3, 4, 7, 8, 13, 14, 15, 16, 17, 19, 20, 21, 22, 23, 24, 25, 28, 29, 35, 43, 47]
+
+  @doc """
+  The class of a MAV_TYPE number: multirotors, fixed wing, VTOL, helicopters,
+  airships are `:uav`; ground rovers `:ugv`; surface boats `:usv`; submarines `:uuv`.
+
+      iex> Dolphin.Fleet.Vehicle.class(2)
+      :uav
+      iex> Dolphin.Fleet.Vehicle.class(11)
+      :usv
+  """
+  @spec class(non_neg_integer() | nil) :: class() | nil
+  def class(nil), do: nil
+  def class(type) when type in @uav, do: :uav
+  def class(type) when type in [10, 46], do: :ugv
+  def class(11), do: :usv
+  def class(12), do: :uuv
+  def class(_), do: :other
+end

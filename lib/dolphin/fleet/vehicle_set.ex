@@ -1,0 +1,87 @@
+defmodule Dolphin.Fleet.VehicleSet do
+  @moduledoc """
+  A set of vehicles, named by system id: what `pick` returns and `release`,
+  `on` and `execute` take.
+
+      iex> a = Dolphin.Fleet.VehicleSet.new([3, 1])
+      #Vehicles<[1, 3]>
+      iex> Dolphin.Fleet.VehicleSet.union(a, Dolphin.Fleet.VehicleSet.new([2]))
+      #Vehicles<[1, 2, 3]>
+      iex> Enum.map(a, & &1)
+      [#Vehicles<[1]>, #Vehicles<[3]>]
+
+  It is `Enumerable`, one one-vehicle set at a time, so `for v <- set` and
+  `Enum.filter/2` work as Dolphin's `ns | {pred}` does.
+  """
+
+  defstruct ids: []
+
+  @type id :: non_neg_integer()
+  @type t :: %__MODULE__{ids: [id()]}
+
+  @doc "A set of the given system ids (or of the vehicles of other sets)."
+  @spec new([id() | t()] | id() | t()) :: t()
+  def new(%__MODULE__{} = set), do: set
+  def new(id) when is_integer(id), do: new([id])
+
+  def new(ids) when is_list(ids) do
+    ids =
+      Enum.flat_map(ids, fn
+        id when is_integer(id) and id >= 0 -> [id]
+        %__MODULE__{ids: ids} -> ids
+        other -> raise ArgumentError, "a vehicle is a system id (a non-negative integer), got: #{inspect(other)}"
+      end)
+
+    %__MODULE__{ids: ids |> Enum.uniq() |> Enum.sort()}
+  end
+
+  def new(other), do: raise(ArgumentError, "expected vehicle ids or a vehicle set, got: #{inspect(other)}")
+
+  @doc "The system ids, ascending."
+  @spec ids(t()) :: [id()]
+  def ids(%__MODULE__{ids: ids}), do: ids
+
+  @doc "Vehicles in either set."
+  @spec union(t(), t()) :: t()
+  def union(a, b), do: new([new(a), new(b)])
+
+  @doc "Vehicles of `a` that are not in `b`."
+  @spec difference(t(), t()) :: t()
+  def difference(a, b), do: %__MODULE__{ids: new(a).ids -- new(b).ids}
+
+  @doc "Vehicles in both sets."
+  @spec intersection(t(), t()) :: t()
+  def intersection(a, b), do: %__MODULE__{ids: Enum.filter(new(a).ids, &(&1 in new(b).ids))}
+
+  @doc "The vehicles `fun` keeps; it is given one-vehicle sets."
+  @spec filter(t(), (t() -> as_boolean(term()))) :: t()
+  def filter(set, fun) when is_function(fun, 1), do: %__MODULE__{ids: Enum.filter(new(set).ids, &fun.(%__MODULE__{ids: [&1]}))}
+
+  @doc "The number of vehicles."
+  @spec size(t()) :: non_neg_integer()
+  def size(%__MODULE__{ids: ids}), do: length(ids)
+
+  @doc "The one vehicle of a one-vehicle set (or a bare system id); raises `ArgumentError` otherwise."
+  @spec one!(t() | id(), atom()) :: id()
+  def one!(set, function \\ :vehicle)
+  def one!(%__MODULE__{ids: [id]}, _function), do: id
+  def one!(id, _function) when is_integer(id) and id >= 0, do: id
+
+  def one!(other, function),
+    do: raise(ArgumentError, "#{function} needs a one-vehicle set, got: #{inspect(other)}")
+
+  defimpl Enumerable do
+    def count(%{ids: ids}), do: {:ok, length(ids)}
+    def member?(%{ids: ids}, %Dolphin.Fleet.VehicleSet{ids: [id]}), do: {:ok, id in ids}
+    def member?(%{ids: ids}, id) when is_integer(id), do: {:ok, id in ids}
+    def member?(_set, _other), do: {:ok, false}
+    def slice(_set), do: {:error, __MODULE__}
+
+    def reduce(%{ids: ids}, acc, fun),
+      do: Enumerable.List.reduce(Enum.map(ids, &%Dolphin.Fleet.VehicleSet{ids: [&1]}), acc, fun)
+  end
+
+  defimpl Inspect do
+    def inspect(%{ids: ids}, _opts), do: "#Vehicles<#{inspect(ids)}>"
+  end
+end

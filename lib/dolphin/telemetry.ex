@@ -1,0 +1,182 @@
+defmodule Dolphin.Telemetry do
+  # The catalogue: {name, fields, meaning}. The moduledoc and emit/3 both read it.
+  @events [
+    {:vehicle_discovered, [:vehicle, :type], "a vehicle was heard for the first time; `type` is `uav`, `ugv`, `usv`, `uuv`, `other` or null while unknown"},
+    {:vehicle_lost, [:vehicle], "a vehicle was silent for longer than its connection timeout"},
+    {:vehicle_reconnected, [:vehicle], "a lost vehicle was heard again"},
+    {:mode_changed, [:vehicle, :mode], "the vehicle reported another flight mode"},
+    {:armed, [:vehicle], "the vehicle reported it is armed"},
+    {:disarmed, [:vehicle], "the vehicle reported it is disarmed"},
+    {:mission_item_reached, [:vehicle, :seq], "the vehicle reported mission item `seq` reached"},
+    {:mission_uploaded, [:vehicle, :name, :items, :duration_ms, :retransmissions], "a mission was uploaded to a vehicle (emitted by the mission platform)"},
+    {:picked, [:vehicles, :requirement], "a `pick` was served: the vehicles (a list of ids) and what was asked (text)"},
+    {:pick_failed, [:requirement, :reason], "a `pick` timed out"},
+    {:released, [:vehicles], "vehicles became available again"},
+    {:allocated, [:run, :allocation], "the platform tasks of a run got their vehicles: `allocation` maps task ids (as strings) to vehicles"},
+    {:task_started, [:run, :task_id, :parent_id, :kind, :name, :vehicle], "a task started; `vehicle` for platform tasks only (else null)"},
+    {:task_progress, [:run, :task_id, :vehicle, :progress], "a platform task reported progress (an object)"},
+    {:task_finished, [:run, :task_id, :parent_id, :kind, :name, :vehicle, :result, :reason],
+     "a task ended: `result` is `done`, `stopped` or `failed`; `reason` says why (null when done)"},
+    {:condition_met, [:run, :task_id, :condition, :branch],
+     "the condition of an until, wait_for, condition, one_of or all_of held; `condition` is its source text, `branch` the index in one_of/all_of (else null)"},
+    {:message, [:text], "a script's `message`"},
+    {:signal_posted, [:key, :value], "a script's `post`"},
+    {:signal_consumed, [:key, :value], "a successful `consume`"},
+    {:script_started, [:script], "a script began to run"},
+    {:script_finished, [:script, :result, :reason], "a script ended: `result` is `done`, `stopped`, `halted` or `failed`; `reason` says why"}
+  ]
+
+  @moduledoc """
+  The one catalogue of Dolphin's events: what happens to vehicles, picks, tasks
+  and scripts, as plain maps published on `Dolphin.PubSub` topic `:events`.
+
+      Dolphin.Telemetry.subscribe()
+      # {:dolphin, :events, %{event: :task_started, at_ms: 81_234, task_id: 3, ...}}
+
+  Every event is a map with `:event` (its name), `:at_ms` (the clock time of
+  the process that emitted it: `Dolphin.Clock.now_ms/0`, or a run's own time
+  source) and exactly the fields listed below. `emit/3` refuses a name that is
+  not in the catalogue or fields that differ from it.
+
+  `mix dolphin.run --events FILE` writes them one JSON object per line with
+  `Dolphin.Telemetry.Writer`: `{"t_ms": ..., "event": NAME, ...fields}`, where
+  `t_ms` is clock milliseconds since the writer started. In JSON, vehicles are
+  system ids (integers), names and atoms are strings, absent values `null`.
+
+  #{Enum.map_join(@events, "\n  ", fn {name, fields, doc} -> "* `#{name}` (#{Enum.join(fields, ", ")}) — #{doc}" end)}
+
+  Kinds of task (`kind`): `idle`, `action`, `condition`, `sequence`,
+  `concurrent`, `until`, `during`, `wait_for`, `one_of`, `all_of`, `watch`, and
+  for platform tasks the platform's kind (`mission`, `test`, ...).
+  """
+
+  alias Dolphin.PubSub
+
+  @catalogue Map.new(@events, fn {name, fields, _} -> {name, fields} end)
+
+  @type name :: atom()
+  @type event :: %{required(:event) => name(), required(:at_ms) => integer(), optional(atom()) => term()}
+
+  @doc "The catalogue: event names and their fields."
+  @spec catalogue() :: %{name() => [atom()]}
+  def catalogue, do: @catalogue
+
+  @doc """
+  Publishes an event. `fields` must be exactly the event's fields (a map or
+  keyword list); `at_ms` defaults to `Dolphin.Clock.now_ms/0`.
+  """
+  @spec emit(name(), map() | keyword(), integer()) :: :ok
+  def emit(name, fields, at_ms \\ Dolphin.Clock.now_ms()) do
+    fields = Map.new(fields)
+
+    case Map.fetch(@catalogue, name) do
+      {:ok, keys} ->
+        if Enum.sort(Map.keys(fields)) != Enum.sort(keys),
+          do: raise(ArgumentError, "event #{inspect(name)} has fields #{inspect(keys)}, got: #{inspect(Map.keys(fields))}")
+
+      :error ->
+        raise ArgumentError, "unknown event #{inspect(name)}; the catalogue has #{inspect(Map.keys(@catalogue))}"
+    end
+
+    PubSub.publish(:events, Map.merge(fields, %{event: name, at_ms: at_ms}))
+  end
+
+  @doc "Subscribes the caller to every event: `{:dolphin, :events, event}` messages."
+  @spec subscribe() :: :ok
+  def subscribe, do: PubSub.subscribe(:events)
+
+  @doc "Unsubscribes the caller."
+  @spec unsubscribe() :: :ok
+  def unsubscribe, do: PubSub.unsubscribe(:events)
+
+  @doc """
+  One event as a JSON line (no newline), `t_ms` counted from `origin_ms`.
+
+      iex> Dolphin.Telemetry.to_json(%{event: :armed, at_ms: 1500, vehicle: 2}, 1000)
+      ~s({"t_ms":500,"event":"armed","vehicle":2})
+  """
+  @spec to_json(event(), integer()) :: String.t()
+  def to_json(%{event: name, at_ms: at} = event, origin_ms) do
+    fields = event |> Map.drop([:event, :at_ms]) |> Enum.sort() |> Enum.map(fn {k, v} -> {Atom.to_string(k), json(v)} end)
+    IO.iodata_to_binary(:jiffy.encode({[{"t_ms", at - origin_ms}, {"event", Atom.to_string(name)} | fields]}))
+  end
+
+  defp json(nil), do: :null
+  defp json(v) when is_boolean(v) or is_number(v), do: v
+  defp json(v) when is_atom(v), do: Atom.to_string(v)
+  defp json(v) when is_binary(v), do: if(String.valid?(v), do: v, else: inspect(v))
+  defp json(%Dolphin.Geo.Location{lat: lat, lon: lon, h: h}), do: {[{"lat", lat}, {"lon", lon}, {"h", h}]}
+  defp json(%Dolphin.Fleet.VehicleSet{ids: ids}), do: ids
+  defp json(%_{} = v), do: inspect(v)
+  defp json(v) when is_list(v), do: if(Keyword.keyword?(v) and v != [], do: json(Map.new(v)), else: Enum.map(v, &json/1))
+  defp json(v) when is_tuple(v), do: v |> Tuple.to_list() |> Enum.map(&json/1)
+  defp json(v) when is_map(v), do: {Enum.map(Enum.sort(v), fn {k, x} -> {key(k), json(x)} end)}
+  defp json(v), do: inspect(v)
+
+  defp key(k) when is_binary(k), do: k
+  defp key(k) when is_atom(k), do: Atom.to_string(k)
+  defp key(k), do: inspect(k)
+end
+
+defmodule Dolphin.Telemetry.Writer do
+  @moduledoc """
+  Writes every event (see `Dolphin.Telemetry`) to a file, one JSON object per
+  line, `t_ms` counted from when the writer started. `stop/1` writes what is
+  still queued and closes the file.
+
+      {:ok, w} = Dolphin.Telemetry.Writer.start_link(path: "run.jsonl")
+      ...
+      :ok = Dolphin.Telemetry.Writer.stop(w)
+  """
+
+  use GenServer
+
+  @doc "Starts a writer; options `:path` (required), `:origin_ms` (default: now on `Dolphin.Clock`)."
+  @spec start_link(keyword()) :: GenServer.on_start()
+  def start_link(opts), do: GenServer.start_link(__MODULE__, opts)
+
+  @doc "Writes the events received so far, closes the file and stops."
+  @spec stop(GenServer.server()) :: :ok
+  def stop(writer), do: GenServer.stop(writer, :normal, 30_000)
+
+  @impl true
+  def init(opts) do
+    path = Keyword.fetch!(opts, :path)
+
+    case File.open(path, [:write, :binary]) do
+      {:ok, io} ->
+        Dolphin.Telemetry.subscribe()
+        # Written on stop, whatever the reason, so no event already received is lost.
+        Process.flag(:trap_exit, true)
+        {:ok, %{io: io, origin: Keyword.get_lazy(opts, :origin_ms, &Dolphin.Clock.now_ms/0)}}
+
+      {:error, why} ->
+        {:stop, "cannot write #{path}: #{:file.format_error(why)}"}
+    end
+  end
+
+  @impl true
+  def handle_info({:dolphin, :events, event}, s) do
+    IO.binwrite(s.io, [Dolphin.Telemetry.to_json(event, s.origin), ?\n])
+    {:noreply, s}
+  end
+
+  def handle_info(_other, s), do: {:noreply, s}
+
+  @impl true
+  def terminate(_reason, s) do
+    Dolphin.Telemetry.unsubscribe()
+    drain(s)
+    File.close(s.io)
+  end
+
+  defp drain(s) do
+    receive do
+      {:dolphin, :events, event} ->
+        IO.binwrite(s.io, [Dolphin.Telemetry.to_json(event, s.origin), ?\n])
+        drain(s)
+    after
+      0 -> :ok
+    end
+  end
+end
