@@ -1,0 +1,162 @@
+defmodule Dolphin.Engine.Allocation do
+  @moduledoc """
+  Which vehicle runs each platform task of a run: a pure function, called by
+  the fleet (which knows the vehicles) when a run starts.
+
+  Constraints:
+
+    * a task's requirements (type, payloads, id: see `Dolphin.Engine.Platform`)
+      and its enclosing `on(t, set)` restrictions are honoured;
+    * tasks that may run at the same time get distinct vehicles: two tasks may
+      run at the same time when their closest common ancestor is `|||`
+      (concurrent) or `all_of`; in a sequence, `one_of`, `until` and the like
+      they may share one.
+
+  This is a real search (backtracking, most constrained task first, vehicles
+  already given to a task that cannot run at the same time preferred — so a
+  sequence keeps its vehicle), not a greedy first fit: it finds an allocation
+  whenever one exists. When none does, the error names the task that cannot be
+  served: the first task, in the script's order, that no allocation of it and
+  the tasks before it can satisfy.
+
+      iex> alias Dolphin.Engine.Allocation
+      iex> a = %{id: 1, name: "north", requirements: %{type: :uav}, allowed: nil, path: [{0, :concurrent, 0}]}
+      iex> b = %{id: 2, name: "south", requirements: %{}, allowed: nil, path: [{0, :concurrent, 1}]}
+      iex> vehicles = [%Dolphin.Fleet.Vehicle{id: 1, type: :ugv}, %Dolphin.Fleet.Vehicle{id: 2, type: :uav}]
+      iex> Allocation.solve([a, b], vehicles)
+      {:ok, %{1 => 2, 2 => 1}}
+  """
+
+  alias Dolphin.Engine.{AllocationError, On, PlatformTask, Task}
+  alias Dolphin.Fleet.Vehicle
+
+  @typedoc "A platform task to place: `path` lists `{node id, kind, child index}` from the root."
+  @type leaf :: %{id: integer(), name: String.t(), requirements: map(), allowed: [non_neg_integer()] | nil, path: [{integer(), atom(), non_neg_integer()}]}
+
+  @budget 200_000
+
+  @doc "The platform tasks of a numbered tree, in order, with what constrains them."
+  @spec leaves(Task.t()) :: [leaf()]
+  def leaves(tree), do: leaves(tree, [], nil)
+
+  defp leaves(%PlatformTask{} = t, path, allowed),
+    do: [%{id: t.id, name: Task.label(t), requirements: PlatformTask.requirements(t), allowed: allowed, path: Enum.reverse(path)}]
+
+  defp leaves(%On{task: t, vehicles: set} = on, path, allowed) do
+    ids = Dolphin.Fleet.VehicleSet.ids(set)
+    allowed = if allowed, do: Enum.filter(allowed, &(&1 in ids)), else: ids
+    leaves(t, [{on.id, :on, 0} | path], allowed)
+  end
+
+  defp leaves(task, path, allowed) do
+    kind = Task.kind(task)
+
+    task
+    |> Task.children()
+    |> Enum.with_index()
+    |> Enum.flat_map(fn {child, i} -> leaves(child, [{task.id, kind, i} | path], allowed) end)
+  end
+
+  @doc "Whether two tasks may run at the same time (see the module doc)."
+  @spec concurrent?(leaf(), leaf()) :: boolean()
+  def concurrent?(%{path: a}, %{path: b}), do: diverge(a, b)
+
+  defp diverge([{id, kind, i} | a], [{id, kind, i} | b]), do: diverge(a, b)
+  defp diverge([{id, kind, _} | _], [{id, kind, _} | _]), do: kind in [:concurrent, :all_of]
+  defp diverge(_, _), do: false
+
+  @doc "Whether a vehicle satisfies a task's requirements and restrictions."
+  @spec matches?(leaf(), Vehicle.t()) :: boolean()
+  def matches?(%{requirements: req, allowed: allowed}, %Vehicle{} = v) do
+    (allowed == nil or v.id in allowed) and type_ok?(req[:type], v.type) and
+      Enum.all?(List.wrap(req[:payloads]), &(&1 in v.payloads)) and (req[:id] in [nil, v.id])
+  end
+
+  defp type_ok?(nil, _), do: true
+  defp type_ok?(types, type), do: type in List.wrap(types)
+
+  @doc """
+  An allocation of `vehicles` (in order of preference) to `leaves`:
+  `{:ok, %{task_id => vehicle_id}}` or `{:error, %AllocationError{}}`.
+  """
+  @spec solve([leaf()], [Vehicle.t()]) :: {:ok, %{integer() => non_neg_integer()}} | {:error, AllocationError.t()}
+  def solve([], _vehicles), do: {:ok, %{}}
+
+  def solve(leaves, vehicles) do
+    candidates = Map.new(leaves, fn l -> {l.id, for(v <- vehicles, matches?(l, v), do: v.id)} end)
+
+    case Enum.find(leaves, &(candidates[&1.id] == [])) do
+      nil ->
+        case search(leaves, candidates) do
+          {:ok, assignment} -> {:ok, assignment}
+          :none -> {:error, culprit(leaves, candidates, vehicles)}
+          :budget -> {:error, error(hd(leaves), "the allocation search gave up after #{@budget} steps (too many tasks and vehicles)")}
+        end
+
+      leaf ->
+        {:error, error(leaf, "no vehicle matches #{describe(leaf)}; the vehicles at hand: #{describe_vehicles(vehicles)}")}
+    end
+  end
+
+  defp search(leaves, candidates) do
+    ordered = Enum.sort_by(Enum.with_index(leaves), fn {l, i} -> {length(candidates[l.id]), i} end) |> Enum.map(&elem(&1, 0))
+
+    case assign(ordered, candidates, %{}, %{}, @budget) do
+      {:ok, assignment, _} -> {:ok, assignment}
+      {:none, 0} -> :budget
+      {:none, _} -> :none
+    end
+  end
+
+  # by_vehicle: vehicle => leaves given to it. Returns {:ok, assignment, budget} | {:none, budget}.
+  defp assign([], _cands, assignment, _by_vehicle, budget), do: {:ok, assignment, budget}
+  defp assign(_leaves, _cands, _assignment, _by_vehicle, 0), do: {:none, 0}
+
+  defp assign([leaf | rest], cands, assignment, by_vehicle, budget) do
+    {shared, fresh} = Enum.split_with(cands[leaf.id], &Map.has_key?(by_vehicle, &1))
+
+    Enum.reduce_while(shared ++ fresh, {:none, budget - 1}, fn v, {:none, budget} ->
+      if budget > 0 and Enum.all?(Map.get(by_vehicle, v, []), &(not concurrent?(&1, leaf))) do
+        case assign(rest, cands, Map.put(assignment, leaf.id, v), Map.update(by_vehicle, v, [leaf], &[leaf | &1]), budget) do
+          {:ok, _, _} = ok -> {:halt, ok}
+          {:none, budget} -> {:cont, {:none, budget}}
+        end
+      else
+        {:cont, {:none, budget}}
+      end
+    end)
+  end
+
+  # The first leaf (in script order) whose prefix cannot be allocated.
+  defp culprit(leaves, candidates, vehicles) do
+    n = Enum.find(1..length(leaves), fn n -> not match?({:ok, _}, search(Enum.take(leaves, n), candidates)) end)
+    {before, [leaf | _]} = Enum.split(leaves, n - 1)
+    rivals = Enum.filter(before, fn l -> concurrent?(l, leaf) and Enum.any?(candidates[l.id], &(&1 in candidates[leaf.id])) end)
+
+    error(
+      leaf,
+      "#{describe(leaf)} could use vehicle(s) #{inspect(candidates[leaf.id])}, but they are needed at the same time by " <>
+        Enum.map_join(rivals, ", ", &"#{inspect(&1.name)} (task #{&1.id})") <>
+        "; the vehicles at hand: #{describe_vehicles(vehicles)}"
+    )
+  end
+
+  defp error(leaf, why),
+    do: %AllocationError{task_id: leaf.id, task_name: leaf.name, message: "cannot allocate a vehicle to #{inspect(leaf.name)} (task #{leaf.id}): #{why}"}
+
+  defp describe(%{requirements: req, allowed: allowed}) do
+    parts =
+      [
+        req[:type] && "type #{inspect(req[:type])}",
+        req[:payloads] not in [nil, []] && "payload #{inspect(req[:payloads])}",
+        req[:id] && "id #{req[:id]}",
+        allowed && "one of #{inspect(allowed)} (on)"
+      ]
+      |> Enum.filter(& &1)
+
+    if parts == [], do: "(any vehicle)", else: Enum.join(parts, ", ")
+  end
+
+  defp describe_vehicles([]), do: "none (pick vehicles first; busy or lost ones do not count)"
+  defp describe_vehicles(vs), do: Enum.map_join(vs, ", ", fn v -> "#{v.id} (#{v.type}#{if v.payloads != [], do: " " <> inspect(v.payloads), else: ""})" end)
+end

@@ -1,0 +1,78 @@
+defmodule Dolphin.Engine.Failure do
+  @moduledoc """
+  Why a task failed: which task (`task_id`, `kind`, `name`, and `meta` with
+  the script `line`), on which vehicle (platform tasks), and the `reason`.
+  A failure travels up unchanged, so the failure of a whole run names the task
+  where it began.
+
+      iex> f = %Dolphin.Engine.Failure{task_id: 7, kind: :mission, name: "Survey", vehicle: 2, reason: {:vehicle_lost, 2}, meta: %{line: 12}}
+      iex> Dolphin.Engine.Failure.message(f)
+      ~s(mission "Survey" (task 7, line 12) on vehicle 2 failed: vehicle 2 lost)
+
+  Reasons the engine gives: `{:exception, exception, stacktrace}`,
+  `{:exit, reason}`, `{:throw, value}` (code that raised, exited or threw),
+  `{:condition_error, source, exception}`, `{:vehicle_lost, id}`,
+  `{:platform_exited, reason}`, `{:stop_timeout, ms}`, `{:stop_failed, reason}`,
+  `{:handler_failed, reason}`, `{:crashed, reason}`, a
+  `Dolphin.Engine.AllocationError`; platforms give their own.
+  """
+
+  defstruct task_id: nil, kind: nil, name: nil, vehicle: nil, meta: %{}, reason: nil
+
+  @type t :: %__MODULE__{task_id: integer() | nil, kind: atom(), name: String.t() | nil, vehicle: non_neg_integer() | nil, meta: map(), reason: term()}
+
+  @doc "A one-line explanation."
+  @spec message(t()) :: String.t()
+  def message(%__MODULE__{} = f) do
+    where = Enum.join(Enum.reject(["task #{f.task_id}", f.meta[:line] && "line #{f.meta[:line]}"], &(&1 in [nil, false])), ", ")
+    name = if f.name, do: " #{inspect(f.name)}", else: ""
+    vehicle = if f.vehicle, do: " on vehicle #{f.vehicle}", else: ""
+    "#{f.kind}#{name} (#{where})#{vehicle} failed: #{format_reason(f.reason)}"
+  end
+
+  @doc "A reason (of a failure or of a stop) as text."
+  @spec format_reason(term()) :: String.t()
+  def format_reason({:exception, e, _stack}), do: format_exception(e)
+  def format_reason({:exit, reason}), do: "exited: #{inspect(reason)}"
+  def format_reason({:throw, value}), do: "threw #{inspect(value)}"
+  def format_reason({:condition_error, source, e}), do: "condition `#{source}` raised #{format_exception(e)}"
+  def format_reason({:vehicle_lost, id}), do: "vehicle #{id} lost"
+  def format_reason({:platform_exited, reason}), do: "its process exited without reporting (#{inspect(reason)})"
+  def format_reason({:stop_timeout, ms}), do: "did not stop within #{ms} ms of clock time (killed)"
+  def format_reason({:stop_failed, reason}), do: "could not be stopped: #{format_reason(reason)}"
+  def format_reason({:handler_failed, reason}), do: "the on_error handler failed: #{format_reason(reason)}"
+  def format_reason({:crashed, reason}), do: "engine process crashed: #{inspect(reason)}"
+  def format_reason({:condition_met, id}), do: "stopped: the condition of task #{id} held"
+  def format_reason({:time_limit, id}), do: "stopped: time limit of task #{id}"
+  def format_reason({:sibling_failed, _}), do: "stopped: a concurrent task failed"
+  def format_reason({:parent_exit, reason}), do: "stopped: its parent went away (#{inspect(reason)})"
+  def format_reason(:operator), do: "stopped by the operator"
+  def format_reason(:shutdown), do: "stopped: shutting down"
+  def format_reason(:deadline), do: "stopped: the run's time (--for) is over"
+  def format_reason(%__MODULE__{} = f), do: message(f)
+  def format_reason(%_{__exception__: true} = e), do: format_exception(e)
+  def format_reason(text) when is_binary(text), do: text
+  def format_reason(other), do: inspect(other)
+
+  defp format_exception(%_{__exception__: true} = e), do: "#{inspect(e.__struct__)}: #{Exception.message(e)}"
+  defp format_exception(other), do: inspect(other)
+end
+
+defmodule Dolphin.Engine.TaskError do
+  @moduledoc "Raised by `Dolphin.Engine.execute!/2` (and the script's `execute`) when the task fails."
+  defexception [:failure]
+
+  @impl true
+  def message(%{failure: f}), do: Dolphin.Engine.Failure.message(f)
+end
+
+defmodule Dolphin.Engine.AllocationError do
+  @moduledoc """
+  No allocation of vehicles to the platform tasks of a run exists. `task` is
+  the platform task that cannot be served (with the others that need the
+  vehicles it could use, if any), `message` says why.
+  """
+  defexception [:task_id, :task_name, :message]
+
+  @type t :: %__MODULE__{task_id: integer() | nil, task_name: String.t() | nil, message: String.t()}
+end

@@ -1,0 +1,41 @@
+defmodule Dolphin.Engine.Node do
+  @moduledoc false
+  # The behaviour of a combinator's semantics, as a pure state machine run by
+  # Dolphin.Engine.Runner (the process shell: one process per task).
+  #
+  # init(task) and handle(event, state) return {effects, state}. Effects, done in
+  # order by the runner (events they cause are handled at once, depth first;
+  # once the node has finished the rest is dropped):
+  #
+  #   {:start, key, task}        start a child (its whole initial subtree starts before the next effect)
+  #   {:start_new, key, task}    same for a task made at run time (numbered and allocated first)
+  #   {:stop, [key], reason}     stop children: all at once, then their results in this order
+  #   {:check, key, cond}        evaluate now -> {:checked, key, boolean}
+  #   {:watch, key, cond}        evaluate on every change -> {:condition, key} once it holds
+  #   {:unwatch, key}
+  #   {:timer, key, clock_ms}    -> {:timeout, key}
+  #   {:cancel_timer, key}
+  #   {:run_code, key, fun}      user code in a helper process, started on the next clock tick
+  #                              -> {:code_result, key, {:ok, value} | {:error, reason}}
+  #   :platform_start            (platform tasks) -> {:platform, msg}, {:platform_exit, reason},
+  #                              {:platform_start_failed, reason}, {:vehicle_lost, id}
+  #   {:platform_stop, reason}   (platform tasks) bounded stop callback
+  #   {:emit, event, fields}     a Dolphin.Telemetry event (run and task_id added)
+  #   {:finish, result}          :done | {:failed, reason}
+  #
+  # Events: {:finished, key, result}, {:checked, ...}, {:condition, key},
+  # {:timeout, key}, {:code_result, ...}, and the platform ones above.
+
+  @type effect :: tuple() | atom()
+  @callback kind() :: atom()
+  @callback init(task :: struct()) :: {[effect()], term()}
+  @callback handle(event :: term(), state :: term()) :: {[effect()], term()}
+
+  @doc false
+  # A child's result as its parent continues with it: stopped counts as completed.
+  def completed({:failed, _} = failed), do: failed
+  def completed(_done_or_stopped), do: :done
+
+  @doc false
+  def cond_met(cond, branch \\ nil), do: {:emit, :condition_met, %{condition: cond.source, branch: branch}}
+end

@@ -1,0 +1,79 @@
+defmodule Dolphin.Engine.Platform do
+  @moduledoc """
+  The behaviour of a platform: what runs one-vehicle tasks (MAVLink missions,
+  the test platform), as Dolphin's plugins do. The engine knows nothing else
+  of vehicles.
+
+  A platform task is `%Dolphin.Engine.PlatformTask{platform: module, spec: term}`
+  (see `Dolphin.Engine.platform_task/3`); `spec` is the platform's own value
+  (a `%Dolphin.Mission{}`), usually made usable in scripts by implementing
+  `Dolphin.Engine.Taskable` for it.
+
+  ## Life of a platform task
+
+  1. Before a run, `c:requirements/1` tells the allocation what vehicle the
+     task needs; the engine picks one (see `Dolphin.Engine` on allocation).
+  2. `c:start/3` is called in the engine's leaf process with the spec, the
+     vehicle's system id and options (`:owner` — the leaf's pid, `:run`,
+     `:task_id`, `:clock` — the `Dolphin.Engine.TimeSource` to use for
+     timers, `:source` — the `Dolphin.Fleet.Source`). It returns promptly
+     with `{:ok, pid}`: a process **linked to the caller** (start it with
+     `start_link`) that does the work — upload, arm, fly.
+  3. The process reports to `owner` with `done/1`, `failed/2` and any number
+     of `progress/2` before that, then exits (normally). A process that exits
+     without reporting fails the task with its exit reason.
+  4. To stop it (`until`, `during`, `one_of`, a failed sibling, the operator,
+     the vehicle lost), the engine calls `c:stop/2` from the leaf process and
+     waits for it to return, at most the run's stop timeout (15 s of clock
+     time by default; then the process is killed and the task fails). `stop`
+     returns once the vehicle is safe — for a mission: holding position — and
+     the process is gone or going. Reasons: `{:condition_met, task_id}`,
+     `{:time_limit, task_id}`, `{:sibling_failed, key}`, `{:vehicle_lost, id}`,
+     `:operator`, `{:parent_exit, reason}`, `:shutdown`, ...
+  5. If the engine's leaf dies without calling `stop` (killed), the link
+     delivers an exit signal: a platform whose vehicle must not fly on blind
+     traps exits and makes it safe on `{:EXIT, owner, reason}`.
+
+  A vehicle lost while its task runs fails the task: the engine calls `stop`
+  with `{:vehicle_lost, id}` (a platform may return at once) and reports the
+  failure.
+
+  ## Example
+
+  `Dolphin.Engine.TestPlatform` is a complete, small platform.
+  """
+
+  @type spec :: term()
+  @type vehicle_type :: :uav | :ugv | :usv | :uuv | :other
+  @typedoc "`type` (one class or a list), `payloads` (all required), `id` (one system id)."
+  @type requirements :: %{optional(:type) => vehicle_type() | [vehicle_type()] | nil, optional(:payloads) => [atom()], optional(:id) => non_neg_integer() | nil}
+
+  @doc "The task's name in events, errors and the console (a mission's name)."
+  @callback name(spec()) :: String.t()
+
+  @doc "The kind of task in events (`:mission`); default `:platform`."
+  @callback kind(spec()) :: atom()
+
+  @doc "What vehicle the task needs."
+  @callback requirements(spec()) :: requirements()
+
+  @doc "Starts the task on a vehicle: a process linked to the caller. See the module doc."
+  @callback start(spec(), vehicle :: non_neg_integer(), opts :: keyword()) :: {:ok, pid()} | {:error, term()}
+
+  @doc "Stops the task's process; returns when its vehicle is safe. See the module doc."
+  @callback stop(pid(), reason :: term()) :: :ok | {:error, term()}
+
+  @optional_callbacks kind: 1
+
+  @doc "Reports progress (a map, shown in `task_progress` events) to the engine."
+  @spec progress(pid(), map()) :: :ok
+  def progress(owner, info) when is_map(info), do: send(owner, {:dolphin_platform, self(), {:progress, info}}) && :ok
+
+  @doc "Reports the task done; the process then exits."
+  @spec done(pid()) :: :ok
+  def done(owner), do: send(owner, {:dolphin_platform, self(), :done}) && :ok
+
+  @doc "Reports the task failed, with a reason (a term or an exception); the process then exits."
+  @spec failed(pid(), term()) :: :ok
+  def failed(owner, reason), do: send(owner, {:dolphin_platform, self(), {:failed, reason}}) && :ok
+end

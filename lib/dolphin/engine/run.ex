@@ -1,0 +1,150 @@
+defmodule Dolphin.Engine.Run do
+  @moduledoc false
+  # One process per run (one `execute`): allocates the vehicles, is the parent
+  # of the root task node, and answers the caller. It lives under
+  # Dolphin.Engine.Runs and is linked to its caller: when the caller dies (a
+  # script stopped, killed) the run stops its tree — every platform task gets
+  # its stop callback — before it exits.
+
+  alias Dolphin.Engine.{Allocation, Context, On, PlatformTask, Runner, Task}
+
+  @doc false
+  def child_spec(args),
+    do: %{id: __MODULE__, start: {__MODULE__, :start_link, [args]}, restart: :temporary, shutdown: 120_000}
+
+  @doc false
+  def start_link(args), do: :proc_lib.start_link(__MODULE__, :init, [args])
+
+  @doc false
+  # Numbers a tree with fresh ids, allocates its platform tasks (vehicles of
+  # `inherit` may be reused: they belong to this run already) and removes the
+  # `on` nodes, which only constrain the allocation.
+  def prepare(task, ctx, run, inherit) do
+    {tree, _} = Task.number(task, Dolphin.Engine.next_ids(Task.count(task)))
+
+    case Allocation.leaves(tree) do
+      [] ->
+        {:ok, strip(tree, %{})}
+
+      leaves ->
+        case Dolphin.Fleet.reserve(ctx.fleet, run, ctx.owner, leaves, inherit) do
+          {:ok, assignment} ->
+            allocation = Map.new(assignment, fn {id, v} -> {Integer.to_string(id), v} end)
+            Dolphin.Telemetry.emit(:allocated, %{run: run.id, allocation: allocation}, ctx.clock.now_ms())
+            {:ok, strip(tree, assignment)}
+
+          {:error, error} ->
+            {:error, error}
+        end
+    end
+  end
+
+  defp strip(tree, assignment) do
+    Task.postwalk(tree, fn
+      %On{task: t} -> t
+      %PlatformTask{id: id} = t -> %{t | vehicle: Map.get(assignment, id)}
+      t -> t
+    end)
+  end
+
+  @doc false
+  # Waits (bounded, real ms) until the runs started by `caller` have ended.
+  def await_runs_of(caller, bound) do
+    runs = for {pid, %{caller: ^caller}} <- Registry.select(Dolphin.Engine.Registry, [{{{:run, :_}, :"$1", :"$2"}, [], [{{:"$1", :"$2"}}]}]), do: pid
+    await(runs, bound)
+  end
+
+  @doc false
+  def await(pids, bound) do
+    refs = Enum.map(pids, &Process.monitor/1)
+    deadline = System.monotonic_time(:millisecond) + bound
+
+    Enum.each(refs, fn ref ->
+      receive do
+        {:DOWN, ^ref, :process, _, _} -> :ok
+      after
+        max(deadline - System.monotonic_time(:millisecond), 0) -> Process.demonitor(ref, [:flush])
+      end
+    end)
+  end
+
+  @doc false
+  def init({task, ctx, caller, run_id}) do
+    Process.flag(:trap_exit, true)
+    Context.put(ctx)
+    Process.link(caller)
+    [sup | _] = Process.get(:"$ancestors")
+    sup = if is_atom(sup), do: Process.whereis(sup), else: sup
+    run = %{id: run_id, pid: self()}
+    Registry.register(Dolphin.Engine.Registry, {:run, run_id}, %{caller: caller, owner: ctx.owner, task: task})
+    :proc_lib.init_ack({:ok, self()})
+
+    case prepare(task, ctx, run, []) do
+      {:ok, tree} ->
+        case Runner.start_node(tree, ctx, run, nil) do
+          {:ok, root} -> loop(%{run: run, ctx: ctx, caller: caller, sup: sup, root: root, tree: tree})
+          {:error, reason} -> done(%{run: run, ctx: ctx, caller: caller}, {:failed, Runner.failure(tree, reason)})
+        end
+
+      {:error, error} ->
+        done(%{run: run, ctx: ctx, caller: caller}, {:error, error})
+    end
+  end
+
+  defp loop(%{root: root, caller: caller, sup: sup} = s) do
+    receive do
+      {:"$dolphin_result", ^root, result} ->
+        done(s, result)
+
+      {:"$dolphin_run_stop", reason} ->
+        done(s, stop_root(s, reason))
+
+      {:EXIT, ^root, reason} ->
+        done(s, {:failed, Runner.failure(s.tree, {:crashed, reason})})
+
+      {:EXIT, ^caller, reason} ->
+        stop_root(s, {:parent_exit, reason})
+        release(s)
+        exit(:normal)
+
+      {:EXIT, ^sup, reason} ->
+        stop_root(s, :shutdown)
+        release(s)
+        exit(reason)
+
+      _other ->
+        loop(s)
+    end
+  end
+
+  defp stop_root(s, reason) do
+    Runner.stop_node(s.root, reason)
+
+    case Runner.collect(s.root, s.ctx) do
+      {:ok, result} -> result
+      {:error, why} -> {:failed, Runner.failure(s.tree, why)}
+    end
+  end
+
+  defp done(s, result) do
+    release(s)
+
+    reply =
+      case result do
+        :done -> {:ok, :done}
+        :stopped -> {:ok, :stopped}
+        {:failed, failure} -> {:error, failure}
+        {:error, error} -> {:error, error}
+      end
+
+    send(s.caller, {Dolphin.Engine, s.run.id, reply})
+    exit(:normal)
+  end
+
+  defp release(s) do
+    Dolphin.Fleet.unreserve(s.ctx.fleet, s.run.id)
+  catch
+    # No fleet (a run without platform tasks in a bare test): nothing was reserved.
+    :exit, _ -> :ok
+  end
+end

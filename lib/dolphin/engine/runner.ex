@@ -1,0 +1,524 @@
+defmodule Dolphin.Engine.Runner do
+  @moduledoc false
+  # The process shell of a task node: one process per combinator node, running
+  # the node's pure semantics (Dolphin.Engine.Node) and doing their effects.
+  # Exit semantics and the start/stop protocol are documented in Dolphin.Engine.
+  #
+  # Messages (parent -> child): {:"$dolphin_stop", reason} (phase 1: stop what
+  # runs under you), {:"$dolphin_report", parent} (phase 2: finish and report),
+  # {:"$dolphin_operator_stop", reason} (stop and report at once).
+  # Child -> parent: {:"$dolphin_started", pid} once its initial subtree runs,
+  # {:"$dolphin_result", pid, result} as it ends.
+
+  alias Dolphin.Engine.{Cond, Context, Failure, PlatformTask, Task}
+  alias Dolphin.Fleet
+
+  # Real time a parent waits for a child's initial subtree to start.
+  @start_timeout 30_000
+
+  # --- used by parents (nodes and Dolphin.Engine.Run) ---
+
+  @doc false
+  # Starts a node (linked to the caller) and waits until its initial subtree has started.
+  def start_node(task, ctx, run, parent_id) do
+    pid = :proc_lib.spawn_link(__MODULE__, :init_node, [task, self(), ctx, run, parent_id])
+
+    receive do
+      {:"$dolphin_started", ^pid} ->
+        {:ok, pid}
+
+      {:EXIT, ^pid, reason} ->
+        {:error, {:crashed, reason}}
+    after
+      @start_timeout ->
+        Process.exit(pid, :kill)
+        receive do: ({:EXIT, ^pid, _} -> :ok)
+        {:error, {:crashed, :start_timeout}}
+    end
+  end
+
+  @doc false
+  def stop_node(pid, reason), do: send(pid, {:"$dolphin_stop", reason})
+
+  @doc false
+  # Phase 2: asks a (stopped) node for its result and waits, bounded; returns
+  # {:ok, result} | {:error, raw_reason} (crashed or timed out and killed).
+  def collect(pid, ctx) do
+    send(pid, {:"$dolphin_report", self()})
+    # Its subtree stops in parallel with this wait; the slowest platform stop
+    # is bounded by stop_timeout_ms, so allow that and more.
+    bound = ctx.clock.real_ms(ctx.stop_timeout_ms * 2)
+
+    receive do
+      {:"$dolphin_result", ^pid, result} ->
+        {:ok, result}
+
+      {:EXIT, ^pid, reason} ->
+        {:error, {:crashed, reason}}
+    after
+      bound ->
+        Process.exit(pid, :kill)
+        receive do: ({:EXIT, ^pid, _} -> :ok)
+        {:error, {:stop_timeout, ctx.stop_timeout_ms * 2}}
+    end
+  end
+
+  @doc false
+  def failure(task, reason) do
+    %Failure{
+      task_id: task.id,
+      kind: Task.kind(task),
+      name: Task.label(task),
+      vehicle: vehicle_of(task),
+      meta: task.meta,
+      reason: reason
+    }
+  end
+
+  defp vehicle_of(%PlatformTask{vehicle: v}), do: v
+  defp vehicle_of(_task), do: nil
+
+  # --- the node process ---
+
+  @doc false
+  def init_node(task, parent, ctx, run, parent_id) do
+    Process.flag(:trap_exit, true)
+    Context.put(ctx)
+
+    s = %{
+      task: task,
+      id: task.id,
+      mod: task.__struct__,
+      kind: Task.kind(task),
+      name: Task.label(task),
+      vehicle: vehicle_of(task),
+      parent: parent,
+      parent_id: parent_id,
+      ctx: ctx,
+      run: run,
+      cstate: nil,
+      # key => %{pid, task}; order: keys in start order
+      children: %{},
+      order: [],
+      # [{key, cond}] in watch order
+      watches: [],
+      # key => {ref, token}
+      timers: %{},
+      # key => {:pending, ref, token, fun} | {:running, pid}
+      code: %{},
+      platform: nil,
+      tick: nil,
+      acked: false,
+      # outcome of the platform stop in phase 1
+      halted: :ok
+    }
+
+    Registry.register(Dolphin.Engine.Registry, {:task, s.id}, %{run: run.id, parent_id: parent_id, kind: s.kind, name: s.name, vehicle: s.vehicle})
+    emit(s, :task_started, %{parent_id: parent_id, kind: s.kind, name: s.name, vehicle: s.vehicle})
+
+    {effects, cstate} = s.mod.init(task)
+    s = run_effects(effects, %{s | cstate: cstate})
+    loop(ack(s))
+  end
+
+  defp ack(%{acked: true} = s), do: s
+
+  defp ack(s) do
+    send(s.parent, {:"$dolphin_started", self()})
+    %{s | acked: true}
+  end
+
+  defp loop(s) do
+    parent = s.parent
+    platform = s.platform
+
+    receive do
+      {:"$dolphin_result", pid, result} ->
+        case child_key(s, pid) do
+          nil -> loop(s)
+          key -> s |> drop_child(key) |> feed({:finished, key, result}) |> loop()
+        end
+
+      {:"$dolphin_timer", key, token} ->
+        case s.timers do
+          %{^key => {_ref, ^token}} -> %{s | timers: Map.delete(s.timers, key)} |> feed({:timeout, key}) |> loop()
+          _ -> loop(s)
+        end
+
+      {:"$dolphin_code_start", key, token} ->
+        case s.code do
+          %{^key => {:pending, _ref, ^token, fun}} -> loop(%{s | code: Map.put(s.code, key, {:running, spawn_code(s, key, fun)})})
+          _ -> loop(s)
+        end
+
+      {:"$dolphin_code", key, pid, result} ->
+        case s.code do
+          %{^key => {:running, ^pid}} -> %{s | code: Map.delete(s.code, key)} |> feed({:code_result, key, result}) |> loop()
+          _ -> loop(s)
+        end
+
+      {:"$dolphin_tick", token} ->
+        case s.tick do
+          {_ref, ^token} -> %{s | tick: nil} |> reevaluate() |> ensure_tick() |> loop()
+          _ -> loop(s)
+        end
+
+      {:dolphin, {:vehicle, id}, event} ->
+        update_cache(s, id, event)
+
+        s =
+          if s.platform != nil and s.vehicle == id and match?({:vehicle_lost, _}, event),
+            do: feed(s, {:vehicle_lost, id}),
+            else: s
+
+        loop(reevaluate(s))
+
+      {:dolphin, {:dolphin_signals, _}, _} ->
+        loop(reevaluate(s))
+
+      {:dolphin_platform, ^platform, msg} when platform != nil ->
+        # Once it reported its end, the platform's process is going: nothing to stop.
+        s = if msg == :done or match?({:failed, _}, msg), do: %{s | platform: nil}, else: s
+        loop(feed(s, {:platform, msg}))
+
+      {:"$dolphin_stop", reason} ->
+        s = halt(s, reason)
+
+        receive do
+          {:"$dolphin_report", _} -> finish_stopped(s, reason, true)
+          {:EXIT, ^parent, why} -> finish_stopped(s, {:parent_exit, why}, false)
+        end
+
+      {:"$dolphin_report", _} ->
+        s |> halt(:stopped) |> finish_stopped(:stopped, true)
+
+      {:"$dolphin_operator_stop", reason} ->
+        s |> halt(reason) |> finish_stopped(reason, true)
+
+      {:EXIT, ^parent, reason} ->
+        s |> halt({:parent_exit, reason}) |> finish_stopped({:parent_exit, reason}, false)
+
+      {:EXIT, pid, reason} ->
+        loop(exited(s, pid, reason))
+
+      _other ->
+        loop(s)
+    end
+  end
+
+  defp exited(s, pid, reason) do
+    cond do
+      key = child_key(s, pid) ->
+        # A child that died without reporting: an engine crash, a failure of that task.
+        child = s.children[key]
+        s |> drop_child(key) |> feed({:finished, key, {:failed, failure(child.task, {:crashed, reason})}})
+
+      key = Enum.find_value(s.code, fn {k, v} -> if v == {:running, pid}, do: k end) ->
+        %{s | code: Map.delete(s.code, key)} |> feed({:code_result, key, {:error, {:exit, reason}}})
+
+      pid == s.platform ->
+        %{s | platform: nil} |> feed({:platform_exit, reason})
+
+      true ->
+        s
+    end
+  end
+
+  defp child_key(s, pid), do: Enum.find_value(s.children, fn {k, c} -> if c.pid == pid, do: k end)
+  defp drop_child(s, key), do: %{s | children: Map.delete(s.children, key), order: List.delete(s.order, key)}
+
+  # --- effects ---
+
+  defp feed(s, event) do
+    {effects, cstate} = s.mod.handle(event, s.cstate)
+    run_effects(effects, %{s | cstate: cstate})
+  end
+
+  defp run_effects(effects, s), do: Enum.reduce(effects, s, &effect/2)
+
+  defp effect({:start, key, task}, s) do
+    case start_node(task, s.ctx, s.run, s.id) do
+      {:ok, pid} -> %{s | children: Map.put(s.children, key, %{pid: pid, task: task}), order: s.order ++ [key]}
+      {:error, reason} -> feed(s, {:finished, key, {:failed, failure(task, reason)}})
+    end
+  end
+
+  defp effect({:start_new, key, value}, s) do
+    task = Task.new!(value)
+
+    case Dolphin.Engine.Run.prepare(task, s.ctx, s.run, vehicles_in(s.task)) do
+      {:ok, task} -> effect({:start, key, task}, s)
+      {:error, reason} -> feed(s, {:finished, key, {:failed, failure(task, reason)}})
+    end
+  end
+
+  defp effect({:stop, keys, reason}, s) do
+    running = Enum.filter(keys, &Map.has_key?(s.children, &1))
+    Enum.each(running, &stop_node(s.children[&1].pid, reason))
+
+    Enum.reduce(running, s, fn key, s ->
+      case Map.fetch(s.children, key) do
+        {:ok, child} -> s |> drop_child(key) |> feed({:finished, key, collected(s, child)})
+        :error -> s
+      end
+    end)
+  end
+
+  defp effect({:check, key, cond}, s) do
+    case Cond.evaluate(cond) do
+      {:ok, holds} -> feed(s, {:checked, key, holds})
+      {:error, e, _} -> finish(s, {:failed, {:condition_error, cond.source, e}})
+    end
+  end
+
+  defp effect({:watch, key, cond}, s), do: ensure_tick(%{s | watches: s.watches ++ [{key, cond}]})
+  defp effect({:unwatch, key}, s), do: %{s | watches: List.keydelete(s.watches, key, 0)}
+
+  defp effect({:timer, key, ms}, s) do
+    token = make_ref()
+    ref = s.ctx.clock.send_after(self(), {:"$dolphin_timer", key, token}, ms)
+    %{s | timers: Map.put(s.timers, key, {ref, token})}
+  end
+
+  defp effect({:cancel_timer, key}, s) do
+    case Map.pop(s.timers, key) do
+      {{ref, _}, timers} ->
+        s.ctx.clock.cancel(ref)
+        %{s | timers: timers}
+
+      {nil, _} ->
+        s
+    end
+  end
+
+  # User code starts on the next clock tick, in its own process: the parent
+  # has finished starting this node's siblings by then (deterministic order),
+  # and the node stays free to be stopped while the code runs.
+  defp effect({:run_code, key, fun}, s) do
+    token = make_ref()
+    ref = s.ctx.clock.send_after(self(), {:"$dolphin_code_start", key, token}, 0)
+    %{s | code: Map.put(s.code, key, {:pending, ref, token, fun})}
+  end
+
+  defp effect(:platform_start, s) do
+    %PlatformTask{platform: platform, spec: spec, vehicle: vehicle} = s.task
+    Fleet.subscribe_vehicle(vehicle)
+
+    opts = [owner: self(), run: s.run.id, task_id: s.id, clock: s.ctx.clock, source: Context.source(s.ctx), vehicle: vehicle]
+
+    case Dolphin.Fleet.Source.vehicle(Context.source(s.ctx), vehicle) do
+      {:ok, %{connected?: false}} ->
+        feed(s, {:platform_start_failed, {:vehicle_lost, vehicle}})
+
+      {:error, :unknown_vehicle} ->
+        feed(s, {:platform_start_failed, "vehicle #{vehicle} is unknown"})
+
+      {:ok, _} ->
+        try do
+          platform.start(spec, vehicle, opts)
+        rescue
+          e -> {:error, {:exception, e, __STACKTRACE__}}
+        end
+        |> case do
+          {:ok, pid} when is_pid(pid) -> %{s | platform: pid}
+          {:error, reason} -> feed(s, {:platform_start_failed, reason})
+          other -> feed(s, {:platform_start_failed, "#{inspect(platform)}.start/3 returned #{inspect(other)}"})
+        end
+    end
+  end
+
+  defp effect({:platform_stop, reason}, s), do: elem(platform_stop(s, reason), 1)
+
+  defp effect({:emit, event, fields}, s) do
+    emit(s, event, fields)
+    s
+  end
+
+  defp effect({:finish, result}, s), do: finish(s, result)
+
+  # --- conditions ---
+
+  defp reevaluate(%{watches: []} = s), do: s
+
+  defp reevaluate(s) do
+    Enum.reduce(Enum.map(s.watches, &elem(&1, 0)), s, fn key, s ->
+      case List.keyfind(s.watches, key, 0) do
+        nil ->
+          s
+
+        {^key, cond} ->
+          case Cond.evaluate(cond) do
+            {:ok, true} -> feed(%{s | watches: List.keydelete(s.watches, key, 0)}, {:condition, key})
+            {:ok, false} -> s
+            {:error, e, _} -> finish(s, {:failed, {:condition_error, cond.source, e}})
+          end
+      end
+    end)
+  end
+
+  defp ensure_tick(%{watches: [_ | _], tick: nil} = s) do
+    token = make_ref()
+    ref = s.ctx.clock.send_after(self(), {:"$dolphin_tick", token}, s.ctx.tick_ms)
+    %{s | tick: {ref, token}}
+  end
+
+  defp ensure_tick(s), do: s
+
+  defp update_cache(s, id, event) do
+    case Process.get({:"$dolphin_vehicle", id}) do
+      nil ->
+        :ok
+
+      v ->
+        v =
+          case event do
+            {:state, ^id, changes} -> Dolphin.Fleet.Source.apply_changes(Context.source(s.ctx), v, changes)
+            {:vehicle_lost, ^id} -> %{v | connected?: false}
+            {:vehicle_reconnected, ^id} -> %{v | connected?: true}
+            _ -> v
+          end
+
+        Process.put({:"$dolphin_vehicle", id}, v)
+    end
+  end
+
+  # --- user code ---
+
+  defp spawn_code(s, key, fun) do
+    node = self()
+    ctx = s.ctx
+
+    :proc_lib.spawn_link(fn ->
+      Context.put(ctx)
+
+      result =
+        try do
+          {:ok, fun.()}
+        rescue
+          e -> {:error, {:exception, e, __STACKTRACE__}}
+        catch
+          :exit, reason -> {:error, {:exit, reason}}
+          :throw, value -> {:error, {:throw, value}}
+        end
+
+      send(node, {:"$dolphin_code", key, self(), result})
+    end)
+  end
+
+  # --- stopping and finishing ---
+
+  # Phase 1 of a stop: nothing more starts; children are told to stop (they
+  # all stop at once), user code is killed, the platform task is stopped.
+  defp halt(s, reason) do
+    Enum.each(s.timers, fn {_, {ref, _}} -> s.ctx.clock.cancel(ref) end)
+    if s.tick, do: s.ctx.clock.cancel(elem(s.tick, 0))
+    kill_code(s)
+    Enum.each(s.order, &stop_node(s.children[&1].pid, reason))
+    {outcome, s} = platform_stop(s, reason)
+    %{s | timers: %{}, tick: nil, watches: [], code: %{}, halted: outcome}
+  end
+
+  defp kill_code(s) do
+    for {_key, {:pending, ref, _, _}} <- s.code, do: s.ctx.clock.cancel(ref)
+
+    for {_key, {:running, pid}} <- s.code do
+      Process.exit(pid, :kill)
+      # Runs the code started (a nested execute) stop their own platform
+      # tasks when it dies; wait for them, so nothing outlives this node.
+      Dolphin.Engine.Run.await_runs_of(pid, s.ctx.clock.real_ms(s.ctx.stop_timeout_ms * 2))
+    end
+  end
+
+  # Phase 2: children's results in start order, then this node's.
+  defp finish_stopped(s, reason, report?) do
+    results = Enum.map(s.order, fn key -> collected(s, s.children[key]) end)
+    platform = if match?({:error, _}, s.halted), do: [{:failed, elem(s.halted, 1)}], else: []
+
+    result =
+      Enum.find(platform ++ results, :stopped, &match?({:failed, _}, &1))
+      |> wrap(s)
+
+    emit_finished(s, result, reason)
+    if report?, do: send(s.parent, {:"$dolphin_result", self(), result})
+    exit(:normal)
+  end
+
+  defp collected(s, %{pid: pid, task: task}) do
+    case collect(pid, s.ctx) do
+      {:ok, result} -> result
+      {:error, reason} -> {:failed, failure(task, reason)}
+    end
+  end
+
+  defp finish(s, result) do
+    # Whatever still runs under this node stops first (a condition error, a
+    # platform task done while ... ): nothing outlives its parent.
+    s = if s.children != %{} or s.code != %{} or s.platform != nil, do: halt(s, :stopped), else: s
+    Enum.each(s.order, &collected(s, s.children[&1]))
+    result = wrap(result, s)
+    emit_finished(s, result, nil)
+    ack(s)
+    send(s.parent, {:"$dolphin_result", self(), result})
+    exit(:normal)
+  end
+
+  defp wrap({:failed, %Failure{}} = failed, _s), do: failed
+  defp wrap({:failed, reason}, s), do: {:failed, failure(s.task, reason)}
+  defp wrap(result, _s), do: result
+
+  defp emit_finished(s, result, stop_reason) do
+    {name, reason} =
+      case result do
+        :done -> {:done, nil}
+        :stopped -> {:stopped, Failure.format_reason(stop_reason)}
+        {:failed, f} -> {:failed, Failure.message(f)}
+      end
+
+    emit(s, :task_finished, %{parent_id: s.parent_id, kind: s.kind, name: s.name, vehicle: s.vehicle, result: name, reason: reason})
+  end
+
+  # Stops the platform task (if it runs), bounded; {:ok | {:error, reason}, s}.
+  defp platform_stop(%{platform: nil} = s, _reason), do: {:ok, s}
+
+  defp platform_stop(%{platform: pid, task: %PlatformTask{platform: platform}} = s, reason) do
+    me = self()
+
+    {helper, mon} =
+      :proc_lib.spawn_opt(
+        fn ->
+          result =
+            try do
+              platform.stop(pid, reason)
+            rescue
+              e -> {:error, {:exception, e, __STACKTRACE__}}
+            catch
+              kind, why -> {:error, {kind, why}}
+            end
+
+          send(me, {:"$dolphin_stopped", self(), result})
+        end,
+        [:monitor]
+      )
+
+    outcome =
+      receive do
+        {:"$dolphin_stopped", ^helper, :ok} -> :ok
+        {:"$dolphin_stopped", ^helper, {:error, why}} -> {:error, {:stop_failed, why}}
+        {:"$dolphin_stopped", ^helper, other} -> {:error, {:stop_failed, other}}
+        {:DOWN, ^mon, :process, ^helper, why} -> {:error, {:stop_failed, {:exit, why}}}
+      after
+        s.ctx.clock.real_ms(s.ctx.stop_timeout_ms) ->
+          Process.exit(helper, :kill)
+          Process.exit(pid, :kill)
+          {:error, {:stop_timeout, s.ctx.stop_timeout_ms}}
+      end
+
+    Process.demonitor(mon, [:flush])
+    {outcome, %{s | platform: nil}}
+  end
+
+  defp emit(s, event, fields),
+    do: Dolphin.Telemetry.emit(event, Map.merge(fields, %{run: s.run.id, task_id: s.id}), s.ctx.clock.now_ms())
+
+  defp vehicles_in(task), do: for(%PlatformTask{vehicle: v} when v != nil <- Task.flatten(task), do: v) |> Enum.uniq()
+end
