@@ -1,0 +1,186 @@
+defmodule Dolphin.DSL do
+  @moduledoc """
+  The vocabulary of scripts (`../shared/DSL.md`), imported by
+  `use Dolphin.Script` together with `Dolphin.DSL.Values` (locations, areas,
+  units) and the `mission` block of `Dolphin.DSL.Mission`.
+
+  Every word is sugar: functions delegate to `Dolphin.Engine` (tasks),
+  `Dolphin.Fleet` (vehicles) and `Dolphin.Script` (statements); the macros
+  only turn expressions into closures (conditions, `action` bodies, loop
+  bodies) and record the script line.
+
+  | word | plain function |
+  | --- | --- |
+  | `pick(opts)`, `release(set)` | `Dolphin.Script.pick/1`, `Dolphin.Script.release/1` |
+  | `union/2`, `difference/2`, `intersection/2`, `filter/2` | `Dolphin.Fleet.VehicleSet` |
+  | `battery(v)`, `position(v)`, `altitude(v)`, `relative_altitude(v)`, `mode(v)`, `armed?(v)`, `connected?(v)`, `mission_progress(v)` | `Dolphin.Fleet.state/2` |
+  | `set_connection_timeout(t)`, `set_connection_timeout(set, t)` | `Dolphin.Script.set_connection_timeout/1,2` |
+  | `idle(d)`, `on(t, set)`, `during(d, t)`, `watch(t, on_error: h)`, `named(t, name)`, `t1 >>> t2`, `t1 \\|\\|\\| t2` | `Dolphin.Engine` |
+  | `action do ... end`, `condition(c)`, `until(t, c)`, `wait_for(c)`, `wait_for(c, then: t)`, `one_of do c -> t ... end`, `all_of do ... end` | `Dolphin.Engine` with a `Dolphin.Engine.Cond` |
+  | `execute(t)`, `execute(%{v1 => t1, _: t2})`, `execute action do ... end` | `Dolphin.Script.execute/1` |
+  | `forever do ... end`, `forever(state, fn s -> ... end)`, `repeat(n) do ... end` | `Dolphin.Script.forever/1,2`, `Dolphin.Script.repeat/2` |
+  | `message`, `post`, `consume`, `poll`, `pause`, `halt`, `ask`, `send_message` | `Dolphin.Script` |
+
+  Conditions are ordinary expressions — `battery(v1) < 0.3`, `poll(:go)`,
+  `connected?(v) and mode(v) == :guided` — re-evaluated whenever what they
+  read changes.
+
+  `>>>` binds tighter than `|||`, as `>>` and `|` do in Dolphin:
+  `a >>> b ||| c` is `(a >>> b) ||| c`.
+  """
+
+  alias Dolphin.Engine
+  alias Dolphin.Fleet
+  alias Dolphin.Fleet.VehicleSet
+
+  # --- vehicles ---
+
+  @doc "Picks vehicles (blocks; see `Dolphin.Fleet`): `count`, `type`, `payload`, `region`, `id`, `timeout`."
+  defdelegate pick(opts \\ []), to: Dolphin.Script
+  @doc "Makes vehicles available again: a set or a list of sets."
+  defdelegate release(sets), to: Dolphin.Script
+  @doc "Vehicles in either set."
+  defdelegate union(a, b), to: VehicleSet
+  @doc "Vehicles of `a` not in `b`."
+  defdelegate difference(a, b), to: VehicleSet
+  @doc "Vehicles in both sets."
+  defdelegate intersection(a, b), to: VehicleSet
+  @doc "Vehicles of `set` for which `fun` (given a one-vehicle set) is truthy."
+  defdelegate filter(set, fun), to: VehicleSet
+  @doc "A vehicle silent for longer than `ms` is lost (its task fails); for the vehicles picked now and later."
+  defdelegate set_connection_timeout(ms), to: Dolphin.Script
+  @doc "The connection timeout of the vehicles of `set`."
+  defdelegate set_connection_timeout(set, ms), to: Dolphin.Script
+
+  @doc "Remaining battery, 0.0..1.0 (nil until reported), of a one-vehicle set."
+  def battery(v), do: Fleet.state(v, :battery).battery
+  @doc "Position (a `Dolphin.Geo.Location`, height above mean sea level) or nil."
+  def position(v), do: Fleet.state(v, :position).position
+  @doc "Height above mean sea level in metres, or nil."
+  def altitude(v), do: with(%{h: h} <- Fleet.state(v, :altitude).position, do: h)
+  @doc "Height above home in metres, or nil."
+  def relative_altitude(v), do: Fleet.state(v, :relative_altitude).relative_altitude
+  @doc "Flight mode (`:guided`, `:auto`, ...) or nil."
+  def mode(v), do: Fleet.state(v, :mode).mode
+  @doc "Whether the vehicle is armed."
+  def armed?(v), do: Fleet.state(v, :armed?).armed?
+  @doc "Whether the vehicle is heard (not lost)."
+  def connected?(v), do: Fleet.state(v, :connected?).connected?
+  @doc "`{reached, total}`: the last mission item reached and the items of its mission."
+  def mission_progress(v), do: Fleet.state(v, :mission_progress).mission_progress
+
+  # --- tasks ---
+
+  @doc "A task that completes after `d` ms."
+  defdelegate idle(d), to: Engine
+  @doc "`t` restricted to the vehicles of `set`."
+  defdelegate on(t, set), to: Engine
+  @doc "`t` for at most `d` ms."
+  defdelegate during(d, t), to: Engine
+  @doc "`t` with an error handler: `on_error: :ignore | :propagate | fn failure -> ... end`."
+  defdelegate watch(t, opts), to: Engine
+  @doc "A task with a name."
+  defdelegate named(t, name), to: Engine
+
+  @doc "Sequence: `t1` then `t2`."
+  def t1 >>> t2, do: Engine.sequence([t1, t2])
+  @doc "Concurrency: `t1` and `t2` at the same time."
+  def t1 ||| t2, do: Engine.concurrent([t1, t2])
+
+  @doc "A task running the block once (in its own process)."
+  defmacro action(do: block), do: action_ast(nil, block, __CALLER__)
+  @doc "A named `action`."
+  defmacro action(name, do: block), do: action_ast(name, block, __CALLER__)
+
+  @doc "A task that completes when `c` holds."
+  defmacro condition(c), do: quote(do: Dolphin.Engine.condition(unquote(cond_ast(c, __CALLER__)), meta: unquote(meta(__CALLER__))))
+
+  @doc "`t` until `c` holds."
+  defmacro until(t, c), do: quote(do: Dolphin.Engine.until(unquote(t), unquote(cond_ast(c, __CALLER__)), meta: unquote(meta(__CALLER__))))
+
+  @doc "Waits until `c` holds (`wait_for(c)`), then runs `then:` (`wait_for(c, then: t)`)."
+  defmacro wait_for(c), do: quote(do: Dolphin.Engine.wait_for(unquote(cond_ast(c, __CALLER__)), nil, meta: unquote(meta(__CALLER__))))
+
+  defmacro wait_for(c, opts) do
+    case opts do
+      [then: t] -> quote(do: Dolphin.Engine.wait_for(unquote(cond_ast(c, __CALLER__)), unquote(t), meta: unquote(meta(__CALLER__))))
+      _ -> raise ArgumentError, "wait_for/2 takes `then: task`, got: #{Macro.to_string(opts)}"
+    end
+  end
+
+  @doc "The first branch whose condition holds runs: `one_of do c1 -> t1; c2 -> t2 end`."
+  defmacro one_of(do: clauses), do: quote(do: Dolphin.Engine.one_of(unquote(branches(clauses, :one_of, __CALLER__)), meta: unquote(meta(__CALLER__))))
+
+  @doc "Every branch runs once its condition holds: `all_of do c1 -> t1; c2 -> t2 end`."
+  defmacro all_of(do: clauses), do: quote(do: Dolphin.Engine.all_of(unquote(branches(clauses, :all_of, __CALLER__)), meta: unquote(meta(__CALLER__))))
+
+  # --- running ---
+
+  @doc """
+  Runs a task (or a map `%{set => task, _: task}`: each on its set, all at
+  the same time) and returns when it is done; a failure stops the script.
+  `execute action do ... end` means `execute(action do ... end)`.
+  """
+  defmacro execute(task), do: quote(do: Dolphin.Script.execute(unquote(task)))
+
+  defmacro execute({name, meta, args}, do: block) when is_atom(name) and (is_atom(args) or args == []),
+    do: quote(do: Dolphin.Script.execute(unquote({name, meta, [[do: block]]})))
+
+  defmacro execute(other, do: _block),
+    do: raise(ArgumentError, "execute with a do block takes a word such as `action`, got: #{Macro.to_string(other)}")
+
+  @doc "Runs the block for ever."
+  defmacro forever(do: block), do: quote(do: Dolphin.Script.forever(fn -> unquote(block) end))
+  @doc "Runs `fun` for ever, each round given what the previous one returned (starting with `state`)."
+  defdelegate forever(state, fun), to: Dolphin.Script
+  @doc "Runs the block `n` times."
+  defmacro repeat(n, do: block), do: quote(do: Dolphin.Script.repeat(unquote(n), fn -> unquote(block) end))
+
+  @doc "An operator log line."
+  defdelegate message(text), to: Dolphin.Script
+  @doc "Posts `value` to signal `key`."
+  defdelegate post(key, value), to: Dolphin.Script
+  @doc "Consumes `value` from signal `key`; true if it was there."
+  defdelegate consume(key, value), to: Dolphin.Script
+  @doc "Whether signal `key` has a value."
+  defdelegate poll(key), to: Dolphin.Script
+  @doc "Whether signal `key` has a value satisfying `fun`."
+  defdelegate poll(key, fun), to: Dolphin.Script
+  @doc "Pauses the script for `d` ms."
+  defdelegate pause(d), to: Dolphin.Script
+  @doc "Stops the script with a message."
+  defdelegate halt(text), to: Dolphin.Script
+  @doc "Asks the operator; returns the line typed."
+  defdelegate ask(prompt), to: Dolphin.Script
+  @doc "Sends a raw (MAVLink) message to the vehicles of a set."
+  defdelegate send_message(set, message), to: Dolphin.Script
+
+  # --- macro helpers ---
+
+  defp meta(caller), do: Macro.escape(%{line: caller.line, file: caller.file})
+
+  defp cond_ast(c, caller) do
+    quote do
+      Dolphin.Engine.Cond.new(fn -> unquote(c) end, source: unquote(Macro.to_string(c)), meta: unquote(meta(caller)))
+    end
+  end
+
+  defp action_ast(name, block, caller) do
+    quote do
+      Dolphin.Engine.action(fn -> unquote(block) end, name: unquote(name), meta: unquote(meta(caller)))
+    end
+  end
+
+  defp branches(clauses, what, caller) when is_list(clauses) do
+    Enum.map(clauses, fn
+      {:->, _, [[c], t]} ->
+        quote(do: {unquote(cond_ast(c, caller)), unquote(t)})
+
+      other ->
+        raise ArgumentError, "#{what} takes clauses `condition -> task`, got: #{Macro.to_string(other)}"
+    end)
+  end
+
+  defp branches(other, what, _caller),
+    do: raise(ArgumentError, "#{what} takes clauses `condition -> task` in its do block, got: #{Macro.to_string(other)}")
+end

@@ -1,0 +1,338 @@
+defmodule Dolphin.Script do
+  @moduledoc """
+  Dolphin scripts: `.exs` files that start with `use Dolphin.Script` and are
+  run with `mix dolphin.run script.exs` (or `compile/2` and `run/2`).
+
+      use Dolphin.Script
+
+      v = pick(type: :uav, timeout: seconds(30))
+      execute %{v => wait_for(battery(v) >= 0.9, then: until(survey, battery(v) < 0.3) >>> return_home)}
+      release(v)
+      message("Done!")
+
+  `use Dolphin.Script` imports the vocabulary of `../shared/DSL.md`:
+  `Dolphin.DSL` (vehicles, tasks, running), `Dolphin.DSL.Values` (locations,
+  areas, units) and the `mission` block of `Dolphin.DSL.Mission`.
+
+  ## Compiling
+
+  `compile/2` reads a script and compiles it as the body of a function of a
+  fresh module — so a syntax error, an unknown word (`pik(type: :uav)`) or an
+  unbound variable is reported with file and line (`Dolphin.Script.Error`)
+  before anything runs or is sent to a vehicle.
+
+  ## Running
+
+  `run/2` runs a compiled script in its own process, which owns its picks
+  (released when it ends) and its signals, and returns a summary or an error
+  saying what failed, where (the script line) and why. Options:
+
+    * `:fleet` — the `Dolphin.Fleet` (default: the application's);
+    * `:clock` — a `Dolphin.Engine.TimeSource` (default `Dolphin.Clock`);
+    * `:for` — stop the script after this much clock time (ms): running tasks
+      are stopped (vehicles hold), and the result is `:stopped`;
+    * `:ask` — a function from prompt to answer for `ask/1` (default: a line
+      of standard input);
+    * `:output` — a function given each `message/1` text (default: none; the
+      `message` event is emitted either way).
+
+  The functions below are the statements of the language, usable from any
+  process (they act for the script that the calling process works for).
+  """
+
+  alias Dolphin.Engine
+  alias Dolphin.Engine.{Context, Signals}
+  alias Dolphin.Fleet
+  alias Dolphin.Fleet.VehicleSet
+
+  defstruct [:file, :module, :source]
+
+  @type t :: %__MODULE__{file: String.t(), module: module(), source: String.t()}
+  @type summary :: %{result: :done | :stopped, duration_ms: non_neg_integer(), file: String.t()}
+
+  defmodule Error do
+    @moduledoc """
+    Why a script could not be compiled or did not complete: `kind` is
+    `:syntax`, `:compile`, `:failed` (a task or the code failed), `:halted`
+    (the script called `halt/1`); `file` and `line` say where in the script.
+    """
+    defexception [:kind, :file, :line, :message, :reason]
+
+    @type t :: %__MODULE__{kind: :syntax | :compile | :failed | :halted, file: String.t() | nil, line: pos_integer() | nil, message: String.t(), reason: term()}
+
+    @doc "`file:line: message`"
+    def format(%__MODULE__{file: file, line: line, message: message}) do
+      where = Enum.reject([file && Path.relative_to_cwd(file), line], &is_nil/1) |> Enum.join(":")
+      if where == "", do: message, else: "#{where}: #{message}"
+    end
+  end
+
+  defmodule Halt do
+    @moduledoc "Raised by `Dolphin.Script.halt/1` to stop the script."
+    defexception message: "halted"
+  end
+
+  @doc false
+  defmacro __using__(_opts) do
+    mission =
+      if Code.ensure_loaded?(Dolphin.DSL.Mission),
+        do: quote(do: import(Dolphin.DSL.Mission, only: [mission: 1, mission: 2])),
+        else: nil
+
+    quote do
+      import Dolphin.DSL
+      import Dolphin.DSL.Values
+      unquote(mission)
+    end
+  end
+
+  # --- compiling ---
+
+  @doc "Reads and compiles a script file (see the module doc)."
+  @spec compile(Path.t()) :: {:ok, t()} | {:error, Error.t()}
+  def compile(path) do
+    case File.read(path) do
+      {:ok, source} -> compile_string(source, path)
+      {:error, why} -> {:error, %Error{kind: :compile, file: path, message: "cannot read the script: #{:file.format_error(why)}"}}
+    end
+  end
+
+  @doc "Compiles a script given as a string; `file` is the name errors give."
+  @spec compile_string(String.t(), String.t()) :: {:ok, t()} | {:error, Error.t()}
+  def compile_string(source, file \\ "nofile") do
+    with {:ok, ast} <- parse(source, file) do
+      module = Module.concat(Dolphin.Script.Compiled, "S#{System.unique_integer([:positive])}")
+
+      wrapped =
+        quote do
+          defmodule unquote(module) do
+            @moduledoc false
+            def __script__, do: unquote(ast)
+          end
+        end
+
+      try do
+        Code.compile_quoted(wrapped, file)
+        {:ok, %__MODULE__{file: file, module: module, source: source}}
+      rescue
+        e in [CompileError, SyntaxError, TokenMissingError] ->
+          {:error, %Error{kind: :compile, file: file, line: e.line, message: compile_message(e.description, ast)}}
+
+        e in ArgumentError ->
+          {:error, %Error{kind: :compile, file: file, line: nil, message: Exception.message(e)}}
+      end
+    end
+  end
+
+  defp parse(source, file) do
+    case Code.string_to_quoted(source, file: file, columns: true) do
+      {:ok, ast} ->
+        {:ok, ast}
+
+      {:error, {meta, message, token}} ->
+        {message, token} = if is_tuple(message), do: {elem(message, 0) <> elem(message, 1), token}, else: {message, token}
+        line = if is_list(meta), do: meta[:line], else: meta
+        {:error, %Error{kind: :syntax, file: file, line: line, message: "syntax error: #{message}#{token}"}}
+    end
+  end
+
+  defp compile_message(description, ast) do
+    if String.starts_with?(description, "undefined function") and not uses_script?(ast),
+      do: description <> " (does the script start with `use Dolphin.Script`?)",
+      else: description
+  end
+
+  defp uses_script?(ast) do
+    {_, found} = Macro.prewalk(ast, false, fn
+      {:use, _, [{:__aliases__, _, [:Dolphin, :Script]} | _]} = node, _ -> {node, true}
+      node, acc -> {node, acc}
+    end)
+
+    found
+  end
+
+  @doc "Forgets a compiled script's module."
+  @spec purge(t()) :: :ok
+  def purge(%__MODULE__{module: module}) do
+    :code.purge(module)
+    :code.delete(module)
+    :ok
+  end
+
+  # --- running ---
+
+  @doc "Runs a compiled script and waits for its end (see the module doc)."
+  @spec run(t(), keyword()) :: {:ok, summary()} | {:error, Error.t()}
+  def run(%__MODULE__{} = script, opts \\ []) do
+    {:ok, pid} = start(script, opts)
+    await(pid)
+  end
+
+  @doc "Starts a script (linked to the caller); see `await/2` and `stop/2`."
+  @spec start(t(), keyword()) :: {:ok, pid()}
+  def start(%__MODULE__{} = script, opts \\ []), do: Dolphin.Script.Runner.start_link(script, opts, self())
+
+  @doc "Waits for the end of a script started by the caller."
+  @spec await(pid(), timeout()) :: {:ok, summary()} | {:error, Error.t()} | {:error, :timeout}
+  def await(pid, timeout \\ :infinity) do
+    receive do
+      {Dolphin.Script, ^pid, result} -> result
+    after
+      timeout -> {:error, :timeout}
+    end
+  end
+
+  @doc "Stops a running script: its tasks stop (vehicles hold), its result is `:stopped`."
+  @spec stop(pid(), term()) :: :ok
+  def stop(pid, reason \\ :operator), do: send(pid, {:"$dolphin_script_stop", reason}) && :ok
+
+  # --- statements ---
+
+  @doc "Picks vehicles for the script (see `Dolphin.Fleet`); raises `Dolphin.Fleet.PickError` on timeout."
+  @spec pick(keyword()) :: VehicleSet.t()
+  def pick(opts \\ []) do
+    ctx = Context.current()
+
+    case Fleet.pick(ctx.fleet, ctx.owner, opts) do
+      {:ok, set} -> set
+      {:error, error} -> raise error
+    end
+  end
+
+  @doc "Releases vehicles the script picked."
+  @spec release(VehicleSet.t() | [VehicleSet.t()]) :: :ok
+  def release(sets) do
+    ctx = Context.current()
+    Fleet.release(ctx.fleet, ctx.owner, sets)
+  end
+
+  @doc "Sets the connection timeout (ms) of the vehicles the script picked and will pick."
+  @spec set_connection_timeout(pos_integer()) :: :ok
+  def set_connection_timeout(ms) do
+    ctx = Context.current()
+    Fleet.set_connection_timeout(ctx.fleet, ctx.owner, ms)
+  end
+
+  @doc "Sets the connection timeout (ms) of the vehicles of `set`."
+  @spec set_connection_timeout(VehicleSet.t(), pos_integer()) :: :ok
+  def set_connection_timeout(set, ms) when is_integer(ms) and ms > 0 do
+    source = Context.source(Context.current())
+    Enum.each(VehicleSet.ids(VehicleSet.new(set)), &Dolphin.Fleet.Source.set_timeout(source, &1, ms))
+  end
+
+  def set_connection_timeout(_set, ms), do: raise(ArgumentError, "a connection timeout is a positive number of milliseconds, got: #{inspect(ms)}")
+
+  @doc """
+  Runs a task and returns `:ok` when it is done; a failure raises
+  (`Dolphin.Engine.TaskError`, `Dolphin.Engine.AllocationError`) and stops the
+  script unless a `watch` handles it. A map `%{set => task, _: task}` runs each
+  task on its own set (`_`: any picked vehicle), all at the same time.
+  """
+  @spec execute(term()) :: :ok | :stopped
+  def execute(tasks) when is_map(tasks) and not is_struct(tasks), do: execute(Map.to_list(tasks))
+
+  def execute([{_, _} | _] = pairs) do
+    {wild, bound} = Enum.split_with(pairs, fn {k, _} -> k == :_ end)
+
+    tasks =
+      Enum.map(Enum.sort_by(bound, fn {set, _} -> VehicleSet.ids(VehicleSet.new(set)) end), fn {set, t} -> Engine.on(t, set) end) ++
+        Enum.map(wild, &elem(&1, 1))
+
+    case tasks do
+      [one] -> execute(one)
+      many -> execute(Engine.concurrent(many))
+    end
+  end
+
+  def execute(task) do
+    ctx = Context.current()
+    Engine.execute!(task, fleet: ctx.fleet, clock: ctx.clock, owner: ctx.owner)
+  end
+
+  @doc "Runs `fun` for ever."
+  @spec forever((() -> term())) :: no_return()
+  def forever(fun) when is_function(fun, 0) do
+    fun.()
+    forever(fun)
+  end
+
+  @doc "Runs `fun` for ever, each round given what the previous one returned (first: `state`)."
+  @spec forever(term(), (term() -> term())) :: no_return()
+  def forever(state, fun) when is_function(fun, 1), do: forever(fun.(state), fun)
+
+  @doc "Runs `fun` `n` times."
+  @spec repeat(non_neg_integer(), (() -> term())) :: :ok
+  def repeat(n, fun) when is_integer(n) and n >= 0 and is_function(fun, 0), do: Enum.each(1..n//1, fn _ -> fun.() end)
+  def repeat(n, _fun), do: raise(ArgumentError, "repeat takes a number of times, got: #{inspect(n)}")
+
+  @doc "An operator log line (a `message` event; printed by `mix dolphin.run`)."
+  @spec message(term()) :: :ok
+  def message(text) do
+    text = if is_binary(text), do: text, else: inspect(text)
+    ctx = Context.current()
+    Dolphin.Telemetry.emit(:message, %{text: text}, ctx.clock.now_ms())
+    if ctx.output, do: ctx.output.(text)
+    :ok
+  end
+
+  @doc "Posts `value` to the script's signal `key`."
+  @spec post(term(), term()) :: :ok
+  def post(key, value) do
+    ctx = Context.current()
+    Dolphin.Telemetry.emit(:signal_posted, %{key: key, value: value}, ctx.clock.now_ms())
+    Signals.post(ctx.signals, key, value)
+  end
+
+  @doc "Consumes `value` from signal `key`: true if it was there."
+  @spec consume(term(), term()) :: boolean()
+  def consume(key, value) do
+    ctx = Context.current()
+    consumed = Signals.consume(ctx.signals, key, value)
+    if consumed, do: Dolphin.Telemetry.emit(:signal_consumed, %{key: key, value: value}, ctx.clock.now_ms())
+    consumed
+  end
+
+  @doc "Whether signal `key` has a value."
+  @spec poll(term()) :: boolean()
+  def poll(key), do: Signals.poll(Context.current().signals, key)
+
+  @doc "Whether signal `key` has a value for which `fun` is truthy."
+  @spec poll(term(), (term() -> term())) :: boolean()
+  def poll(key, fun), do: Signals.poll(Context.current().signals, key, fun)
+
+  @doc "Pauses for `ms` of clock time."
+  @spec pause(non_neg_integer()) :: :ok
+  def pause(ms) when is_number(ms) and ms >= 0, do: Context.current().clock.sleep(round(ms))
+  def pause(ms), do: raise(ArgumentError, "pause takes milliseconds, got: #{inspect(ms)}")
+
+  @doc "Stops the script (all its tasks) with a message; the script's result is `:halted`."
+  @spec halt(term()) :: no_return()
+  def halt(text \\ "halted") do
+    text = if is_binary(text), do: text, else: inspect(text)
+    ctx = Context.current()
+    if ctx.script && ctx.owner != self(), do: send(ctx.script, {:"$dolphin_halt", text})
+    raise Halt, message: text
+  end
+
+  @doc "Asks the operator: prints `prompt`, returns the line typed (without its newline; nil at end of input)."
+  @spec ask(String.t()) :: String.t() | nil
+  def ask(prompt) do
+    case Context.current().ask do
+      nil ->
+        case IO.gets(prompt <> " ") do
+          line when is_binary(line) -> String.trim_trailing(line, "\n")
+          _ -> nil
+        end
+
+      fun ->
+        fun.(prompt)
+    end
+  end
+
+  @doc "Sends a raw message (a MAVLink message struct) to every vehicle of `set`."
+  @spec send_message(VehicleSet.t(), term()) :: :ok
+  def send_message(set, message) do
+    source = Context.source(Context.current())
+    Enum.each(VehicleSet.ids(VehicleSet.new(set)), &Dolphin.Fleet.Source.send_message(source, &1, message))
+  end
+end

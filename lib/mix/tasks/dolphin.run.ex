@@ -1,0 +1,382 @@
+defmodule Mix.Tasks.Dolphin.Run do
+  @shortdoc "Runs a Dolphin script against real, simulated or fake vehicles"
+
+  @moduledoc """
+  Runs a Dolphin script (see `Dolphin.Script`).
+
+      mix dolphin.run examples/single_vehicle.exs --sim 1 --speedup 50
+      mix dolphin.run survey.exs --connect udpin:0.0.0.0:14550 --events run.jsonl --tlog run.tlog
+      mix dolphin.run logic.exs --fake 3 --for 10m
+
+  The script is read and compiled first: a syntax error or an unknown word is
+  reported with file and line before anything is sent to a vehicle.
+
+  ## Options
+
+    * `--connect ENDPOINT` — a link to vehicles (`udpin:0.0.0.0:14550`,
+      `udpout:HOST:PORT`, `tcp:HOST:PORT`); repeatable
+    * `--sim N` — start N simulated vehicles (`Dolphin.Sim`) on a local link
+    * `--fake N` — N fake vehicles of the test platform
+      (`Dolphin.Fleet.TestSource`, no MAVLink): to try a script's logic with
+      `Dolphin.Engine.TestPlatform` tasks
+    * `--seed N` — the simulator's seed
+    * `--speedup K` — run K times faster than real time (`Dolphin.Clock`)
+    * `--for DURATION` — stop the script after that much clock time (`90s`,
+      `10m`, `1h`, `500ms`; a bare number is seconds): running tasks are
+      stopped, vehicles hold, exit status 0 with a summary
+    * `--events FILE` — write every event as a JSON line (schema: `Dolphin.Telemetry`)
+    * `--tlog FILE` — record every MAVLink frame of the links to a telemetry log
+    * `--forward ENDPOINT` — copy all traffic to a `udpout` endpoint (QGroundControl); repeatable
+    * `--quiet` — print only the script's messages, errors and the summary
+
+  With none of `--connect`, `--sim`, `--fake`, the links of the configuration
+  are used (`config :dolphin, links: [...]`), if any.
+
+  ## Exit status
+
+  0 — the script completed (or `--for` ended it); 1 — the script failed
+  (could not compile, a task failed, `halt`, a pick timed out: the message
+  says what, where and why); 2 — bad usage.
+  """
+
+  use Mix.Task
+
+  alias Dolphin.Fleet.TestSource
+
+  @switches [
+    connect: :keep,
+    sim: :integer,
+    fake: :integer,
+    seed: :integer,
+    speedup: :float,
+    for: :string,
+    events: :string,
+    tlog: :string,
+    forward: :keep,
+    quiet: :boolean
+  ]
+
+  @usage "usage: mix dolphin.run SCRIPT [--connect ENDPOINT]... [--sim N | --fake N] [--speedup K] [--for DURATION] [--events FILE] [--tlog FILE] [--forward ENDPOINT]... [--quiet]"
+
+  @impl Mix.Task
+  def run(argv) do
+    case main(argv) do
+      0 -> :ok
+      code -> exit({:shutdown, code})
+    end
+  end
+
+  @doc """
+  Does the work of the task and returns the exit status. `io` options:
+  `:out` and `:err` (devices, default `:stdio` and `:stderr`).
+  """
+  @spec main([String.t()], keyword()) :: 0 | 1 | 2
+  def main(argv, io \\ []) do
+    out = Keyword.get(io, :out, :stdio)
+    err = Keyword.get(io, :err, :stderr)
+
+    case parse(argv) do
+      {:ok, file, opts} ->
+        Mix.Task.run("app.config")
+
+        case Dolphin.Script.compile(file) do
+          {:ok, script} ->
+            try do
+              Mix.Task.run("app.start")
+              run_script(script, opts, out, err)
+            after
+              Dolphin.Script.purge(script)
+            end
+
+          {:error, e} ->
+            IO.puts(err, Dolphin.Script.Error.format(e))
+            1
+        end
+
+      {:error, message} ->
+        IO.puts(err, "mix dolphin.run: #{message}\n#{@usage}")
+        2
+    end
+  end
+
+  @doc false
+  # {:ok, script, opts} | {:error, message}
+  def parse(argv) do
+    case OptionParser.parse(argv, strict: @switches) do
+      {opts, [file], []} ->
+        with :ok <- positive(opts, :sim),
+             :ok <- positive(opts, :fake),
+             :ok <- exclusive(opts),
+             :ok <- speedup(opts[:speedup]),
+             {:ok, for_ms} <- duration(opts[:for]),
+             :ok <- readable(file) do
+          {:ok, file, Keyword.put(opts, :for_ms, for_ms)}
+        end
+
+      {_, [], []} ->
+        {:error, "no script given"}
+
+      {_, [_, extra | _], []} ->
+        {:error, "one script at a time (unexpected #{inspect(extra)})"}
+
+      {_, _, [{switch, value} | _]} ->
+        {:error, "bad option #{switch}#{if value, do: " " <> value, else: ""}"}
+    end
+  end
+
+  defp positive(opts, key) do
+    case opts[key] do
+      nil -> :ok
+      n when n > 0 -> :ok
+      n -> {:error, "--#{key} must be a positive number of vehicles, got #{n}"}
+    end
+  end
+
+  defp exclusive(opts), do: if(opts[:sim] && opts[:fake], do: {:error, "--sim and --fake do not go together"}, else: :ok)
+
+  defp speedup(nil), do: :ok
+  defp speedup(k) when k > 0, do: :ok
+  defp speedup(k), do: {:error, "--speedup must be positive, got #{k}"}
+
+  defp readable(file) do
+    if File.regular?(file), do: :ok, else: {:error, "no such script: #{file}"}
+  end
+
+  @doc """
+  A duration in clock milliseconds: `500ms`, `90s`, `10m`, `1h`, `1.5h`; a bare number is seconds.
+
+      iex> Mix.Tasks.Dolphin.Run.duration("10m")
+      {:ok, 600000}
+      iex> Mix.Tasks.Dolphin.Run.duration("2.5")
+      {:ok, 2500}
+  """
+  @spec duration(String.t() | nil) :: {:ok, non_neg_integer() | nil} | {:error, String.t()}
+  def duration(nil), do: {:ok, nil}
+
+  def duration(text) do
+    case Float.parse(text) do
+      {n, unit} when n >= 0 and unit in ["", "s", "ms", "m", "min", "h"] ->
+        {:ok, round(n * %{"" => 1000, "s" => 1000, "ms" => 1, "m" => 60_000, "min" => 60_000, "h" => 3_600_000}[unit])}
+
+      _ ->
+        {:error, "--for takes a duration such as 90s, 10m, 1h or 500ms, got #{inspect(text)}"}
+    end
+  end
+
+  # --- running ---
+
+  defp run_script(script, opts, out, err) do
+    previous_speedup = Dolphin.Clock.speedup()
+    if k = opts[:speedup], do: Dolphin.Clock.set_speedup(k)
+    origin = Dolphin.Clock.now_ms()
+    Process.put(:dolphin_run_cleanup, [])
+
+    try do
+      start_outputs(opts, origin, out)
+
+      case start_vehicles(opts, out) do
+        :ok ->
+          result = Dolphin.Script.run(script, for: opts[:for_ms])
+          report(result, opts, out, err)
+
+        {:error, message} ->
+          IO.puts(err, "mix dolphin.run: #{message}")
+          2
+      end
+    after
+      # Last started, first stopped: the simulator before its link, the printer last.
+      Enum.each(Process.delete(:dolphin_run_cleanup), & &1.())
+      Dolphin.Clock.set_speedup(previous_speedup)
+    end
+  end
+
+  # Something to undo when the run ends.
+  defp defer(fun), do: Process.put(:dolphin_run_cleanup, [fun | Process.get(:dolphin_run_cleanup)])
+
+  defp start_outputs(opts, origin, out) do
+    parent = self()
+
+    printer =
+      spawn_link(fn ->
+        Dolphin.Telemetry.subscribe()
+        send(parent, {:printer_ready, self()})
+        print_loop(out, origin, opts[:quiet])
+      end)
+
+    receive do: ({:printer_ready, ^printer} -> :ok)
+    defer(fn -> stop_printer(printer) end)
+
+    if path = opts[:events] do
+      case Dolphin.Telemetry.Writer.start_link(path: path, origin_ms: origin) do
+        {:ok, w} -> defer(fn -> Dolphin.Telemetry.Writer.stop(w) end)
+        {:error, why} -> raise Mix.Error, message: "--events: #{why}"
+      end
+    end
+  end
+
+  # The printer prints what it was sent before it was told to stop.
+  defp stop_printer(printer) do
+    ref = Process.monitor(printer)
+    send(printer, :stop)
+
+    receive do
+      {:DOWN, ^ref, _, _, _} -> :ok
+    after
+      2_000 -> Process.exit(printer, :kill)
+    end
+  end
+
+  defp start_vehicles(opts, out) do
+    link_opts = Enum.reject([tlog: opts[:tlog], forward: Keyword.get_values(opts, :forward)], fn {_, v} -> v in [nil, []] end)
+
+    with :ok <- connect_all(Keyword.get_values(opts, :connect), link_opts) do
+      cond do
+        n = opts[:sim] -> start_sim(n, opts, link_opts, out)
+        n = opts[:fake] -> start_fake(n, out, "")
+        true -> :ok
+      end
+    end
+  end
+
+  defp connect_all(endpoints, link_opts) do
+    Enum.reduce_while(endpoints, :ok, fn ep, :ok ->
+      case Dolphin.Link.connect(ep, link_opts) do
+        {:ok, pid} ->
+          defer(fn -> DynamicSupervisor.terminate_child(Dolphin.Link.Supervisor, pid) end)
+          {:cont, :ok}
+
+        {:error, why} ->
+          {:halt, {:error, "--connect #{ep}: #{why}"}}
+      end
+    end)
+  end
+
+  defp start_sim(n, opts, link_opts, out) do
+    if Code.ensure_loaded?(Dolphin.Sim) do
+      name = {:dolphin_run_sim, System.unique_integer([:positive])}
+
+      case Dolphin.Link.connect("udpin:127.0.0.1:0", [name: name] ++ link_opts) do
+        {:ok, link} ->
+          defer(fn -> DynamicSupervisor.terminate_child(Dolphin.Link.Supervisor, link) end)
+          port = Dolphin.Link.Connection.port(name)
+          sim_opts = [count: n, gcs: {{127, 0, 0, 1}, port}, speedup: Dolphin.Clock.speedup(), seed: Keyword.get(opts, :seed, 1)]
+
+          # apply/3: this task compiles whether or not the simulator is part of the build.
+          case apply(Dolphin.Sim, :start, [sim_opts]) do
+            {:ok, sysids} ->
+              defer(fn -> apply(Dolphin.Sim, :stop, []) end)
+              await_vehicles(sysids)
+              IO.puts(out, "#{n} simulated vehicle(s) #{inspect(sysids)} on 127.0.0.1:#{port}")
+              :ok
+
+            {:error, why} ->
+              {:error, "--sim: #{why}"}
+          end
+
+        {:error, why} ->
+          {:error, "--sim: cannot open a local link: #{why}"}
+      end
+    else
+      start_fake(n, out, "Dolphin.Sim is not available: ")
+    end
+  end
+
+  defp start_fake(n, out, why) do
+    name = :"dolphin_run_fakes_#{System.unique_integer([:positive])}"
+    {:ok, source} = TestSource.start_link(name: name)
+    Process.unlink(source)
+    defer(fn -> GenServer.stop(source) end)
+    previous = Dolphin.Fleet.source()
+    :ok = Dolphin.Fleet.set_source(TestSource.source(name))
+    defer(fn -> Dolphin.Fleet.set_source(previous) end)
+    for id <- 1..n, do: TestSource.add(name, id, type: :uav)
+    IO.puts(out, "#{why}#{n} fake vehicle(s) [1..#{n}] of the test platform (no MAVLink: missions cannot fly on them)")
+    :ok
+  end
+
+  # Simulated vehicles announce themselves within a heartbeat; the script
+  # starts once the fleet knows them all (or after 10 s of real time).
+  defp await_vehicles(sysids, tries \\ 200) do
+    known = for %{vehicle: v} <- Dolphin.Fleet.vehicles(), v.type != nil, do: v.id
+
+    if tries > 0 and not Enum.all?(sysids, &(&1 in known)) do
+      Process.sleep(50)
+      await_vehicles(sysids, tries - 1)
+    end
+  end
+
+  defp report({:ok, %{result: :done, duration_ms: ms}}, _opts, out, _err) do
+    IO.puts(out, "script completed in #{seconds(ms)} of clock time")
+    0
+  end
+
+  defp report({:ok, %{result: :stopped, duration_ms: ms}}, opts, out, _err) do
+    why = if opts[:for_ms], do: "--for #{opts[:for]} is over", else: "stopped"
+    IO.puts(out, "script stopped after #{seconds(ms)} of clock time (#{why}): running tasks were stopped, vehicles hold")
+    0
+  end
+
+  defp report({:error, %Dolphin.Script.Error{} = e}, _opts, _out, err) do
+    IO.puts(err, Dolphin.Script.Error.format(e))
+    1
+  end
+
+  defp seconds(ms), do: :erlang.float_to_binary(ms / 1000, decimals: 1) <> " s"
+
+  # --- live output: one line per event worth an operator's eye ---
+
+  defp print_loop(out, origin, quiet) do
+    receive do
+      :ready ->
+        print_loop(out, origin, quiet)
+
+      :stop ->
+        drain(out, origin, quiet)
+
+      {:dolphin, :events, event} ->
+        print(out, origin, quiet, event)
+        print_loop(out, origin, quiet)
+    end
+  end
+
+  defp drain(out, origin, quiet) do
+    receive do
+      {:dolphin, :events, event} ->
+        print(out, origin, quiet, event)
+        drain(out, origin, quiet)
+    after
+      0 -> :ok
+    end
+  end
+
+  defp print(out, origin, quiet, event) do
+    case line(event, quiet) do
+      nil -> :ok
+      text -> IO.puts(out, "[#{String.pad_leading(seconds(event.at_ms - origin), 9)}] #{text}")
+    end
+  end
+
+  defp line(%{event: :message, text: text}, _quiet), do: "message: #{text}"
+  defp line(_event, true), do: nil
+  defp line(%{event: :vehicle_discovered} = e, _), do: "vehicle #{e.vehicle} discovered (#{e.type})"
+  defp line(%{event: :vehicle_lost} = e, _), do: "vehicle #{e.vehicle} lost"
+  defp line(%{event: :vehicle_reconnected} = e, _), do: "vehicle #{e.vehicle} reconnected"
+  defp line(%{event: :picked} = e, _), do: "picked #{inspect(e.vehicles)} (#{e.requirement})"
+  defp line(%{event: :released} = e, _), do: "released #{inspect(e.vehicles)}"
+  defp line(%{event: :pick_failed} = e, _), do: "pick failed: #{e.reason}"
+  defp line(%{event: :mode_changed} = e, _), do: "vehicle #{e.vehicle} mode #{e.mode}"
+  defp line(%{event: :armed} = e, _), do: "vehicle #{e.vehicle} armed"
+  defp line(%{event: :disarmed} = e, _), do: "vehicle #{e.vehicle} disarmed"
+  defp line(%{event: :mission_uploaded} = e, _), do: "vehicle #{e.vehicle}: mission #{inspect(e.name)} uploaded (#{e.items} items)"
+  defp line(%{event: :mission_item_reached} = e, _), do: "vehicle #{e.vehicle} reached item #{e.seq}"
+  defp line(%{event: :condition_met} = e, _), do: "task #{e.task_id}: #{e.condition} holds"
+
+  defp line(%{event: :task_started, vehicle: v} = e, _) when v != nil, do: "task #{e.task_id} #{e.kind} #{inspect(e.name)} started on vehicle #{v}"
+
+  defp line(%{event: :task_finished, result: :failed} = e, _), do: "task #{e.task_id} #{e.kind} failed: #{e.reason}"
+
+  defp line(%{event: :task_finished, vehicle: v} = e, _) when v != nil,
+    do: "task #{e.task_id} #{e.kind} #{inspect(e.name)} on vehicle #{v}: #{e.result}#{if e.reason, do: " (#{e.reason})", else: ""}"
+
+  defp line(_event, _quiet), do: nil
+end
