@@ -17,7 +17,10 @@ defmodule Dolphin.Application do
       {DynamicSupervisor, name: Dolphin.Link.Supervisor, strategy: :one_for_one},
       # The configured links, once the tree they live in is up; a bad endpoint
       # in the configuration stops the start with the reason.
-      %{id: :configured_links, start: {Dolphin.Link, :start_configured, []}, restart: :transient}
+      %{id: :configured_links, start: {Dolphin.Link, :start_configured, []}, restart: :transient},
+      # Who is available, picked, busy; then the runs of task trees, which use it.
+      Dolphin.Fleet,
+      Dolphin.Engine.Supervisor
     ]
 
     # rest_for_one: everything after a crashed child depends on it. A crashed
