@@ -53,6 +53,22 @@ defmodule Dolphin.Clock do
   def to_real_ms(clock_ms, _k) when clock_ms <= 0, do: 0
   def to_real_ms(clock_ms, k), do: max(1, round(clock_ms / k))
 
+  @retry_floor_ms 20
+
+  @doc """
+  The real milliseconds to wait for an answer before retrying, for a wait of
+  `clock_ms` in clock time: never under #{@retry_floor_ms} ms, because a round
+  trip through the network and the host's scheduler does not get faster with
+  the speed-up.
+
+      iex> Dolphin.Clock.retry_real_ms(1_500, 1)
+      1500
+      iex> Dolphin.Clock.retry_real_ms(1_500, 200)
+      20
+  """
+  @spec retry_real_ms(number(), number()) :: pos_integer()
+  def retry_real_ms(clock_ms, k \\ speedup()), do: max(to_real_ms(clock_ms, k), @retry_floor_ms)
+
   @doc "Sends `msg` to `dest` after `clock_ms` of clock time; like `Process.send_after/3`."
   @spec send_after(pid() | atom(), term(), number()) :: reference()
   def send_after(dest, msg, clock_ms), do: Process.send_after(dest, msg, to_real_ms(clock_ms))

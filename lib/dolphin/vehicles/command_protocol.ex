@@ -76,7 +76,7 @@ defmodule Dolphin.Vehicles.CommandProtocol do
   # of a retransmission) and waits for the COMMAND_ACK.
   def handle_event(:enter, _old, {:waiting, n}, data) do
     data.send.(message(data, n - 1))
-    {:keep_state, %{data | sent: n}, [{:state_timeout, Clock.to_real_ms(data.ack_timeout_ms), :resend}]}
+    {:keep_state, %{data | sent: n}, [{:state_timeout, Clock.retry_real_ms(data.ack_timeout_ms), :resend}]}
   end
 
   def handle_event(:state_timeout, :resend, {:waiting, n}, data) when n < data.attempts,

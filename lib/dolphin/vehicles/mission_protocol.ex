@@ -204,7 +204,7 @@ defmodule Dolphin.Vehicles.MissionProtocol do
   ## Helpers
 
   defp wait(data), do: {:keep_state, data, [timeout(data)]}
-  defp timeout(data), do: {:state_timeout, Clock.to_real_ms(data.item_timeout_ms), :retry}
+  defp timeout(data), do: {:state_timeout, Clock.retry_real_ms(data.item_timeout_ms), :retry}
 
   defp send_item(data, seq, attempt) do
     item = %{elem(data.items, seq) | seq: seq, target_system: data.sysid, target_component: data.component, mission_type: data.type}

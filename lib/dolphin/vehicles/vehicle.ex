@@ -212,7 +212,10 @@ defmodule Dolphin.Vehicles.Vehicle do
   # command of our own through the command protocol, so that its
   # COMMAND_ACKs never settle a caller's command of the same id.
   defp request_telemetry(s) do
-    Connection.send_message(s.link, s.sysid, %M.RequestDataStream{target_system: s.sysid, target_component: 0, req_stream_id: 0, req_message_rate: 4, start_stop: 1})
+    # Every stream at 2 Hz for autopilots that ignore message intervals; the
+    # intervals below are what ArduPilot really follows. (Rates are in vehicle
+    # time: at a speed-up of 100 this is already 200 frames a second per stream.)
+    Connection.send_message(s.link, s.sysid, %M.RequestDataStream{target_system: s.sysid, target_component: 0, req_stream_id: 0, req_message_rate: 2, start_stop: 1})
 
     Enum.reduce(@intervals, s, fn {msgid, interval_us}, s ->
       params = [msgid * 1.0, interval_us * 1.0, 0.0, 0.0, 0.0, 0.0, 0.0]
