@@ -613,6 +613,8 @@ defmodule Dolphin.Sim.Copter do
   end
 
   defp begin_item(c, item) do
+    # NaN (MAVLink's "unset", e.g. a waypoint's yaw) and other non-numbers count as 0 here.
+    item = Enum.reduce([:param1, :param2, :param3, :param4], item, fn k, i -> if is_number(Map.fetch!(i, k)), do: i, else: Map.put(i, k, 0.0) end)
     c = text(c, 6, "Mission: #{c.current} #{Map.get(@item_names, item.command, "Cmd#{item.command}")}")
     c = mission_current(c)
     c = %{c | item: %{seq: c.current, command: item.command, started_ms: c.time_ms, arrived_ms: nil, item: item}}
@@ -843,9 +845,9 @@ defmodule Dolphin.Sim.Copter do
 
   defp boot_events(c, was_ready) do
     cond do
-      not was_ready and ready?(c) ->
-        c = text(c, 6, "EKF3 IMU0 is using GPS")
-        if c.home == nil, do: set_home(c, %{lat: c.origin.lat, lon: c.origin.lon, alt: c.origin.alt}), else: c
+      ready?(c) and c.home == nil ->
+        c = if was_ready, do: c, else: text(c, 6, "EKF3 IMU0 is using GPS")
+        set_home(c, %{lat: c.origin.lat, lon: c.origin.lon, alt: c.origin.alt})
 
       not ready?(c) and (c.prearm_text_ms == nil or c.time_ms - c.prearm_text_ms >= 30_000) ->
         %{text(c, 2, "PreArm: Need Position Estimate") | prearm_text_ms: c.time_ms}

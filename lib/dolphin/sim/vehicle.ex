@@ -24,9 +24,14 @@ defmodule Dolphin.Sim.Vehicle do
 
   def child_spec(opts), do: %{id: {__MODULE__, Keyword.fetch!(opts, :sysid)}, start: {__MODULE__, :start_link, [opts]}, restart: :transient}
 
+  # `register: false` leaves the process unnamed (benchmarks run several
+  # fleets whose system ids repeat, each sending to its own ground station).
   def start_link(opts) do
     sysid = Keyword.fetch!(opts, :sysid)
-    GenServer.start_link(__MODULE__, opts, name: {:via, Registry, {Dolphin.Registry, {:sim, sysid}}})
+
+    if Keyword.get(opts, :register, true),
+      do: GenServer.start_link(__MODULE__, opts, name: {:via, Registry, {Dolphin.Registry, {:sim, sysid}}}),
+      else: GenServer.start_link(__MODULE__, opts)
   end
 
   @impl true
