@@ -83,6 +83,7 @@ defmodule Dolphin.Engine.Run do
       {:ok, tree} ->
         case Runner.start_node(tree, ctx, run, nil) do
           {:ok, root} -> loop(%{run: run, ctx: ctx, caller: caller, sup: sup, root: root, tree: tree})
+          {:finished, result} -> done(%{run: run, ctx: ctx, caller: caller}, result)
           {:error, reason} -> done(%{run: run, ctx: ctx, caller: caller}, {:failed, Runner.failure(tree, reason)})
         end
 

@@ -7,7 +7,8 @@ defmodule Dolphin.Engine.Runner do
   # Messages (parent -> child): {:"$dolphin_stop", reason} (phase 1: stop what
   # runs under you), {:"$dolphin_report", parent} (phase 2: finish and report),
   # {:"$dolphin_operator_stop", reason} (stop and report at once).
-  # Child -> parent: {:"$dolphin_started", pid} once its initial subtree runs,
+  # Child -> parent: {:"$dolphin_started", pid, nil} once its initial subtree
+  # runs (or {:"$dolphin_started", pid, {:finished, result}} if it ended at once),
   # {:"$dolphin_result", pid, result} as it ends.
 
   alias Dolphin.Engine.{Cond, Context, Failure, PlatformTask, Task}
@@ -19,13 +20,19 @@ defmodule Dolphin.Engine.Runner do
   # --- used by parents (nodes and Dolphin.Engine.Run) ---
 
   @doc false
-  # Starts a node (linked to the caller) and waits until its initial subtree has started.
+  # Starts a node (linked to the caller) and waits until its initial subtree
+  # has started: {:ok, pid}, or {:finished, result} if it ended at once (its
+  # result comes with the acknowledgement, so that the parent handles it before
+  # anything else: the order of events stays deterministic), or {:error, reason}.
   def start_node(task, ctx, run, parent_id) do
     pid = :proc_lib.spawn_link(__MODULE__, :init_node, [task, self(), ctx, run, parent_id])
 
     receive do
-      {:"$dolphin_started", ^pid} ->
+      {:"$dolphin_started", ^pid, nil} ->
         {:ok, pid}
+
+      {:"$dolphin_started", ^pid, {:finished, result}} ->
+        {:finished, result}
 
       {:EXIT, ^pid, reason} ->
         {:error, {:crashed, reason}}
@@ -45,9 +52,9 @@ defmodule Dolphin.Engine.Runner do
   # {:ok, result} | {:error, raw_reason} (crashed or timed out and killed).
   def collect(pid, ctx) do
     send(pid, {:"$dolphin_report", self()})
-    # Its subtree stops in parallel with this wait; the slowest platform stop
-    # is bounded by stop_timeout_ms, so allow that and more.
-    bound = ctx.clock.real_ms(ctx.stop_timeout_ms * 2)
+    # Its subtree stops in parallel with this wait, each platform stop bounded
+    # by stop_timeout_ms: wait for longer than that.
+    bound = 2 * ctx.clock.real_ms(ctx.stop_timeout_ms) + 1_000
 
     receive do
       {:"$dolphin_result", ^pid, result} ->
@@ -59,7 +66,7 @@ defmodule Dolphin.Engine.Runner do
       bound ->
         Process.exit(pid, :kill)
         receive do: ({:EXIT, ^pid, _} -> :ok)
-        {:error, {:stop_timeout, ctx.stop_timeout_ms * 2}}
+        {:error, {:crashed, :no_report_after_stop}}
     end
   end
 
@@ -124,7 +131,7 @@ defmodule Dolphin.Engine.Runner do
   defp ack(%{acked: true} = s), do: s
 
   defp ack(s) do
-    send(s.parent, {:"$dolphin_started", self()})
+    send(s.parent, {:"$dolphin_started", self(), nil})
     %{s | acked: true}
   end
 
@@ -239,6 +246,7 @@ defmodule Dolphin.Engine.Runner do
   defp effect({:start, key, task}, s) do
     case start_node(task, s.ctx, s.run, s.id) do
       {:ok, pid} -> %{s | children: Map.put(s.children, key, %{pid: pid, task: task}), order: s.order ++ [key]}
+      {:finished, result} -> feed(s, {:finished, key, result})
       {:error, reason} -> feed(s, {:finished, key, {:failed, failure(task, reason)}})
     end
   end
@@ -457,8 +465,11 @@ defmodule Dolphin.Engine.Runner do
     Enum.each(s.order, &collected(s, s.children[&1]))
     result = wrap(result, s)
     emit_finished(s, result, nil)
-    ack(s)
-    send(s.parent, {:"$dolphin_result", self(), result})
+
+    if s.acked,
+      do: send(s.parent, {:"$dolphin_result", self(), result}),
+      else: send(s.parent, {:"$dolphin_started", self(), {:finished, result}})
+
     exit(:normal)
   end
 

@@ -1,0 +1,181 @@
+defmodule Dolphin.Test.ManualClock do
+  @moduledoc """
+  A `Dolphin.Engine.TimeSource` that only moves when told: the engine's
+  timers queue here, ordered by due time and then by the order they were set,
+  and `step/0` fires the next one after the engine has settled (every engine
+  process idle). So a run's whole sequence of events is reproducible — what the
+  property tests compare with the reference interpreter.
+
+      {:ok, _} = Dolphin.Test.ManualClock.start_link()
+      {:ok, run} = Dolphin.Engine.start(task, clock: Dolphin.Test.ManualClock)
+      result = Dolphin.Test.ManualClock.run_until(fn -> ... end)
+
+  One at a time (a named process): tests that use it are not async.
+  """
+
+  @behaviour Dolphin.Engine.TimeSource
+
+  use GenServer
+
+  @table __MODULE__
+
+  def start_link(_opts \\ []), do: GenServer.start_link(__MODULE__, :ok, name: __MODULE__)
+
+  def child_spec(opts), do: %{id: __MODULE__, start: {__MODULE__, :start_link, [opts]}}
+
+  # --- time source ---
+
+  @impl Dolphin.Engine.TimeSource
+  def now_ms, do: :ets.lookup_element(@table, :now, 2)
+
+  @impl Dolphin.Engine.TimeSource
+  def send_after(pid, msg, ms), do: GenServer.call(__MODULE__, {:after, {:send, pid, msg}, ms})
+
+  @impl Dolphin.Engine.TimeSource
+  def cancel(ref), do: GenServer.call(__MODULE__, {:cancel, ref})
+
+  @impl Dolphin.Engine.TimeSource
+  def sleep(ms) do
+    ref = make_ref()
+    send_after(self(), {__MODULE__, ref}, ms)
+    receive do: ({__MODULE__, ^ref} -> :ok)
+  end
+
+  # Bounds in real time: the manual clock does not move while the engine stops things.
+  @impl Dolphin.Engine.TimeSource
+  def real_ms(_ms), do: 10_000
+
+  # --- driving it ---
+
+  @doc "Runs `fun` (in the driving process) when the clock reaches `at_ms`; set before the run, such timers come first at equal times."
+  def at(at_ms, fun), do: GenServer.call(__MODULE__, {:at, {:call, fun}, at_ms})
+
+  @doc "Waits until the engine settles, then fires the next timer; `:empty` when none is left."
+  def step do
+    settle()
+
+    case GenServer.call(__MODULE__, :pop) do
+      :empty -> :empty
+      {:send, pid, msg} -> send(pid, msg) && :ok
+      {:call, fun} -> fun.() && :ok
+    end
+  end
+
+  @doc """
+  Steps until `done` (a function returning `{:ok, value}` or nil, checked
+  after each settle) gives a value; fails after `max` steps or if no timer
+  is left.
+  """
+  def run_until(done, max \\ 10_000) do
+    settle()
+
+    case done.() do
+      {:ok, value} ->
+        value
+
+      nil when max == 0 ->
+        raise "ManualClock: still not done after the step limit"
+
+      nil ->
+        case step() do
+          :empty ->
+            settle()
+
+            case done.() do
+              {:ok, value} -> value
+              nil -> raise "ManualClock: no timer left and not done (deadlock?)"
+            end
+
+          :ok ->
+            run_until(done, max - 1)
+        end
+    end
+  end
+
+  @doc """
+  Waits until every engine process (node, run, user code, test platform task,
+  fleet, fake source, this clock) is idle with an empty mailbox, three checks
+  in a row.
+  """
+  def settle(tries \\ 5_000), do: settle(tries, 0)
+
+  defp settle(0, _quiet), do: raise("ManualClock: the engine never settled: #{inspect(busy())}")
+  defp settle(_tries, 3), do: :ok
+
+  defp settle(tries, quiet) do
+    if busy() == [] do
+      :erlang.yield()
+      settle(tries - 1, quiet + 1)
+    else
+      Process.sleep(1)
+      settle(tries - 1, 0)
+    end
+  end
+
+  # Engine processes that are running or have messages to handle.
+  defp busy do
+    me = self()
+
+    for pid <- Process.list(),
+        pid != me,
+        Process.info(pid, [:status, :message_queue_len]) not in [nil, [status: :waiting, message_queue_len: 0]],
+        relevant?(pid),
+        do: pid
+  end
+
+  # A process that works for runs on this clock.
+  defp relevant?(pid) do
+    case Process.info(pid, :dictionary) do
+      {:dictionary, dict} ->
+        case List.keyfind(dict, :"$dolphin_context", 0) do
+          {_, %{clock: __MODULE__}} ->
+            true
+
+          _ ->
+            case List.keyfind(dict, :"$initial_call", 0) do
+              {_, {m, _, _}} -> m in [Dolphin.Engine.Runner, Dolphin.Engine.Run, Dolphin.Engine.TestPlatform, Dolphin.Fleet, Dolphin.Fleet.TestSource, __MODULE__]
+              _ -> false
+            end
+        end
+
+      nil ->
+        false
+    end
+  end
+
+  # --- server ---
+
+  @impl GenServer
+  def init(:ok) do
+    :ets.new(@table, [:named_table, :public, read_concurrency: true])
+    :ets.insert(@table, {:now, 0})
+    {:ok, %{seq: 0, timers: :gb_trees.empty(), refs: %{}}}
+  end
+
+  @impl GenServer
+  def handle_call({:after, action, ms}, _from, s), do: add(s, now_ms() + max(ms, 0), action)
+  def handle_call({:at, action, at}, _from, s), do: add(s, max(at, now_ms()), action)
+
+  def handle_call({:cancel, ref}, _from, s) do
+    case Map.pop(s.refs, ref) do
+      {nil, _} -> {:reply, :ok, s}
+      {key, refs} -> {:reply, :ok, %{s | refs: refs, timers: :gb_trees.delete_any(key, s.timers)}}
+    end
+  end
+
+  def handle_call(:pop, _from, s) do
+    if :gb_trees.is_empty(s.timers) do
+      {:reply, :empty, s}
+    else
+      {{due, _seq}, {ref, action}, timers} = :gb_trees.take_smallest(s.timers)
+      :ets.insert(@table, {:now, due})
+      {:reply, action, %{s | timers: timers, refs: Map.delete(s.refs, ref)}}
+    end
+  end
+
+  defp add(s, due, action) do
+    ref = make_ref()
+    key = {due, s.seq}
+    {:reply, ref, %{s | seq: s.seq + 1, timers: :gb_trees.insert(key, {ref, action}, s.timers), refs: Map.put(s.refs, ref, key)}}
+  end
+end
