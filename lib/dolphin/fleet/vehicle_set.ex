@@ -7,8 +7,8 @@ defmodule Dolphin.Fleet.VehicleSet do
       #Vehicles<[1, 3]>
       iex> Dolphin.Fleet.VehicleSet.union(a, Dolphin.Fleet.VehicleSet.new([2]))
       #Vehicles<[1, 2, 3]>
-      iex> Enum.map(a, & &1)
-      [#Vehicles<[1]>, #Vehicles<[3]>]
+      iex> Enum.map(a, &Dolphin.Fleet.VehicleSet.ids/1)
+      [[1], [3]]
 
   It is `Enumerable`, one one-vehicle set at a time, so `for v <- set` and
   `Enum.filter/2` work as Dolphin's `ns | {pred}` does.
