@@ -29,8 +29,10 @@ defmodule Dolphin.Sim.Copter do
   @pilot_modes [:stabilize, :acro, :alt_hold, :loiter, :drift, :sport, :flip, :autotune, :poshold, :throw,
                 :guided_nogps, :flowhold, :zigzag, :systemid, :autorotate, :turtle, :circle, :follow, :avoid_adsb,
                 :smart_rtl, :auto_rtl]
+  # GUIDED is entered before the position estimate is ready (ARDUPILOT.md:
+  # arming in GUIDED is what is refused until then).
   @not_armable [:auto, :rtl, :land, :brake, :circle, :smart_rtl, :auto_rtl, :follow, :avoid_adsb, :throw, :autorotate]
-  @needs_position [:auto, :guided, :loiter, :rtl, :circle, :poshold, :brake, :follow, :smart_rtl, :zigzag, :auto_rtl]
+  @needs_position [:auto, :loiter, :rtl, :circle, :poshold, :brake, :follow, :smart_rtl, :zigzag, :auto_rtl]
 
   # Mission item names as ArduPilot announces them ("Mission: 2 WP").
   @item_names %{

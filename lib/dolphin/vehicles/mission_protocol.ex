@@ -27,7 +27,9 @@ defmodule Dolphin.Vehicles.MissionProtocol do
   `:attempts` times (default 5); the whole transfer is bounded by
   `:total_timeout_ms` (default 10 s + 1 s per item). The result goes to the
   caller: `:ok`, `{:ok, items}` (download), or `{:error, %Dolphin.MissionError{}}`;
-  progress, if asked for, as `{:mission_progress, operation, done, total}`.
+  progress, if asked for, as `{:mission_progress, operation, done, total}`,
+  and at the end `{:mission_done, operation, %{retransmissions: n}}` (items and
+  MISSION_COUNTs sent again).
   """
 
   @behaviour :gen_statem
@@ -67,6 +69,7 @@ defmodule Dolphin.Vehicles.MissionProtocol do
         items: items,
         count: count,
         sent: MapSet.new(),
+        retransmissions: 0,
         last: nil,
         received: %{},
         attempts: Keyword.get(opts, :attempts, 5),
@@ -91,7 +94,8 @@ defmodule Dolphin.Vehicles.MissionProtocol do
 
   ## Upload
 
-  def handle_event(:enter, _old, {:count, _n}, data) do
+  def handle_event(:enter, _old, {:count, n}, data) do
+    data = if n > 1, do: %{data | retransmissions: data.retransmissions + 1}, else: data
     data.send.(%M.MissionCount{target_system: data.sysid, target_component: data.component, count: data.count, mission_type: data.type})
     wait(data)
   end
@@ -210,8 +214,9 @@ defmodule Dolphin.Vehicles.MissionProtocol do
     item = %{elem(data.items, seq) | seq: seq, target_system: data.sysid, target_component: data.component, mission_type: data.type}
     data.send.(item)
     sent = MapSet.put(data.sent, seq)
-    if MapSet.size(sent) > MapSet.size(data.sent), do: progress(data, MapSet.size(sent))
-    %{data | sent: sent, last: {seq, attempt}}
+    again = if MapSet.member?(data.sent, seq), do: 1, else: 0
+    if again == 0, do: progress(data, MapSet.size(sent))
+    %{data | sent: sent, last: {seq, attempt}, retransmissions: data.retransmissions + again}
   end
 
   defp finish_download(data) do
@@ -223,6 +228,7 @@ defmodule Dolphin.Vehicles.MissionProtocol do
   defp progress(_data, _done), do: :ok
 
   defp finish(data, reply) do
+    if is_pid(data[:progress_to]), do: send(data.progress_to, {:mission_done, data.operation, %{retransmissions: data.retransmissions}})
     :gen_statem.reply(data.reply_to, reply)
     {:stop, :normal, data}
   end

@@ -1,0 +1,354 @@
+defmodule Dolphin.Mission.Executor do
+  @moduledoc false
+  # One running mission on one vehicle (the MAVLink platform's process; see
+  # Dolphin.Mission.Platform for its contract with the engine).
+  #
+  # Start, as ArduCopter needs it (ARDUPILOT.md): hold the vehicle if it is
+  # flying another mission; clear; upload; download it back and compare by
+  # meaning (never start an unverified mission); GUIDED; arm, retried while the
+  # autopilot is not ready, for at most `:arm_timeout_ms`; MISSION_START at once
+  # (a copter armed on the ground disarms itself after ~10 s).
+  #
+  # Then it follows the vehicle's state: progress from MISSION_CURRENT /
+  # MISSION_ITEM_REACHED, completion by how the mission ends (last item
+  # reached; for a landing, landed and disarmed; never for an endless loiter),
+  # and failure when the vehicle leaves AUTO or disarms before the end.
+  #
+  # Blocking steps (the mission and command protocols) run in a linked task so
+  # that a stop is served at any moment. Stopping makes the vehicle hold
+  # position: BRAKE, else GUIDED (never LOITER, which sinks without RC input),
+  # or disarm when it is still on the ground.
+
+  use GenServer, restart: :temporary
+
+  alias Dolphin.{Mission, PubSub, Telemetry, Vehicles}
+  alias Dolphin.Engine.Platform
+
+  @arm_timeout_ms 120_000
+  @arm_retry_ms 1_000
+  @hold_timeout_ms 10_000
+
+  def start_link(mission, vehicle, opts), do: GenServer.start_link(__MODULE__, {mission, vehicle, Map.new(opts)})
+
+  @doc false
+  def stop(pid, reason), do: GenServer.call(pid, {:stop, reason}, :infinity)
+
+  @impl true
+  def init({%Mission{} = mission, vehicle, opts}) do
+    # Linked to the engine's leaf: its exit means it died without stopping us.
+    Process.flag(:trap_exit, true)
+    PubSub.subscribe({:vehicle, vehicle})
+
+    s = %{
+      mission: mission,
+      name: mission.name,
+      vehicle: vehicle,
+      owner: opts.owner,
+      clock: Map.get(opts, :clock, Dolphin.Engine.TimeSource.Clock),
+      arm_timeout_ms: Map.get(opts, :arm_timeout_ms, @arm_timeout_ms),
+      items: nil,
+      ending: nil,
+      step: nil,
+      task: nil,
+      retransmissions: 0,
+      started: false,
+      active: false,
+      reached: nil,
+      progress: nil
+    }
+
+    {:ok, s, {:continue, :start}}
+  end
+
+  @impl true
+  def handle_continue(:start, s) do
+    case items(s) do
+      {:ok, items} -> {:noreply, run_step(%{s | items: items, ending: Mission.ending(items)}, :hold_if_flying)}
+      {:error, why} -> fail(s, why)
+    end
+  end
+
+  # The steps before the flight, in order; each runs in a task.
+  @steps [:hold_if_flying, :clear, :upload, :verify, :guided, :arm, :start]
+
+  defp run_step(s, step) do
+    me = self()
+    task = Task.async(fn -> step(step, s, me) end)
+    %{s | step: step, task: task}
+  end
+
+  # The next step, or the flight once MISSION_START is accepted; a GenServer reply.
+  defp next_step(s) do
+    case Enum.drop_while(@steps, &(&1 != s.step)) do
+      [_, next | _] -> {:noreply, run_step(s, next)}
+      _ -> follow(%{s | step: :flying, task: nil, started: true})
+    end
+  end
+
+  @impl true
+  def handle_info({ref, result}, %{task: %Task{ref: ref}} = s) do
+    Process.demonitor(ref, [:flush])
+    s = %{s | task: nil}
+
+    case result do
+      :ok ->
+        next_step(s)
+
+      {:uploaded, duration_ms} ->
+        Telemetry.emit(:mission_uploaded, %{vehicle: s.vehicle, name: s.name, items: length(s.items), duration_ms: duration_ms, retransmissions: s.retransmissions})
+        next_step(s)
+
+      {:error, why} ->
+        fail(s, why)
+    end
+  end
+
+  def handle_info({:DOWN, ref, :process, _, reason}, %{task: %Task{ref: ref}} = s),
+    do: fail(%{s | task: nil}, "#{s.step} crashed: #{Exception.format_exit(reason)}")
+
+  def handle_info({:mission_done, :upload, %{retransmissions: n}}, s), do: {:noreply, %{s | retransmissions: n}}
+  def handle_info({:mission_done, _, _}, s), do: {:noreply, s}
+  def handle_info({:mission_progress, _, _, _}, s), do: {:noreply, s}
+
+  def handle_info({:dolphin, {:vehicle, id}, {:state, id, _changes}}, %{step: :flying} = s), do: follow(s)
+  def handle_info({:dolphin, _topic, _event}, s), do: {:noreply, s}
+
+  def handle_info({:EXIT, owner, _reason}, %{owner: owner} = s) do
+    # The engine's leaf is gone without stopping us: make the vehicle safe, then go.
+    cancel_task(s)
+    _ = hold(s.vehicle)
+    {:stop, :normal, s}
+  end
+
+  def handle_info({:EXIT, _pid, _reason}, s), do: {:noreply, s}
+  def handle_info({:DOWN, _, :process, _, _}, s), do: {:noreply, s}
+
+  @impl true
+  def handle_call({:stop, {:vehicle_lost, _}}, _from, s) do
+    # Nothing can be asked of a vehicle we cannot hear.
+    cancel_task(s)
+    {:stop, :normal, :ok, s}
+  end
+
+  def handle_call({:stop, _reason}, _from, s) do
+    cancel_task(s)
+    {:stop, :normal, hold(s.vehicle), s}
+  end
+
+  # --- steps ------------------------------------------------------------------
+
+  defp step(:hold_if_flying, s, _me) do
+    case Vehicles.state(s.vehicle) do
+      {:ok, %{armed: true, mode: :auto} = st} when st.landed != :on_ground -> hold(s.vehicle)
+      {:ok, _} -> :ok
+      {:error, :unknown_vehicle} -> {:error, "vehicle #{s.vehicle} is not connected"}
+    end
+  end
+
+  defp step(:clear, s, _me), do: mission_op(Vehicles.clear_mission(s.vehicle))
+
+  defp step(:upload, s, me) do
+    started = Dolphin.Clock.now_ms()
+
+    # The protocol's counts ({:mission_done, ...}) go to the executor itself.
+    with :ok <- mission_op(Vehicles.upload_mission(s.vehicle, s.items, progress_to: me)),
+         do: {:uploaded, Dolphin.Clock.now_ms() - started}
+  end
+
+  defp step(:verify, s, _me) do
+    with {:ok, back} <- mission_op(Vehicles.download_mission(s.vehicle)),
+         :ok <- Mission.compare_download(s.items, back) do
+      :ok
+    else
+      {:error, why} when is_binary(why) -> {:error, "the mission read back differs from the one uploaded: #{why}"}
+      error -> error
+    end
+  end
+
+  defp step(:guided, s, _me) do
+    case Vehicles.state(s.vehicle) do
+      {:ok, %{mode: :guided}} -> :ok
+      _ -> command(Vehicles.set_mode(s.vehicle, :guided), "switching to GUIDED", s.vehicle)
+    end
+  end
+
+  defp step(:arm, s, _me), do: arm(s, Dolphin.Clock.now_ms() + s.arm_timeout_ms)
+  defp step(:start, s, _me), do: command(Vehicles.start_mission(s.vehicle), "MISSION_START", s.vehicle)
+
+  defp arm(s, deadline) do
+    case Vehicles.state(s.vehicle) do
+      {:ok, %{armed: true}} ->
+        :ok
+
+      _ ->
+        case Vehicles.arm(s.vehicle) do
+          {:ok, :accepted} ->
+            :ok
+
+          {:error, %{result: result}} when result in [:failed, :temporarily_rejected, :denied, :timeout] ->
+            if Dolphin.Clock.now_ms() >= deadline do
+              {:error, "arming refused for #{div(s.arm_timeout_ms, 1000)} s#{autopilot_says(s.vehicle, ["Arm", "PreArm"])}"}
+            else
+              Dolphin.Clock.sleep(@arm_retry_ms)
+              arm(s, deadline)
+            end
+
+          {:error, e} ->
+            {:error, "arming: #{Exception.message(e)}"}
+        end
+    end
+  end
+
+  defp items(%{mission: mission, vehicle: vehicle}) do
+    home =
+      case {mission.home, Vehicles.state(vehicle)} do
+        {nil, {:ok, %{home: %{lat: lat, lon: lon, alt: alt}}}} -> [home: Dolphin.Geo.location(lat, lon, alt)]
+        _ -> []
+      end
+
+    {:ok, Mission.to_items(mission, home)}
+  rescue
+    e in ArgumentError -> {:error, "mission #{inspect(mission.name)} cannot be turned into items: #{Exception.message(e)}"}
+  end
+
+  defp mission_op(:ok), do: :ok
+  defp mission_op({:ok, _} = ok), do: ok
+  defp mission_op({:error, e}), do: {:error, Exception.message(e)}
+
+  defp command({:ok, _}, _what, _vehicle), do: :ok
+  defp command({:error, e}, what, vehicle), do: {:error, "#{what} refused: #{Exception.message(e)}#{autopilot_says(vehicle, [])}"}
+
+  # The autopilot's latest explanation (a STATUSTEXT of warning or worse, or one with a prefix).
+  defp autopilot_says(vehicle, prefixes) do
+    texts =
+      case Vehicles.state(vehicle) do
+        {:ok, st} -> st.status_texts
+        _ -> []
+      end
+
+    found =
+      Enum.find(texts, fn {severity, text} ->
+        Enum.any?(prefixes, &String.starts_with?(text, &1 <> ":")) or (prefixes == [] and severity <= 4)
+      end)
+
+    case found do
+      {_, text} -> ": the autopilot says \"#{text}\""
+      nil -> ""
+    end
+  end
+
+  # --- flying -----------------------------------------------------------------
+
+  defp follow(s) do
+    case Vehicles.state(s.vehicle) do
+      {:ok, st} -> judge(s, st)
+      # Lost: the engine stops us with {:vehicle_lost, id}.
+      {:error, _} -> {:noreply, s}
+    end
+  end
+
+  defp judge(s, st) do
+    mission = st.mission
+    # The mission counts as running once the vehicle reports it active in AUTO;
+    # before that, the state still describes the previous mission.
+    active = s.active or (st.mode == :auto and mission.state == :active)
+    s = %{s | active: active}
+    s = report_progress(s, mission)
+
+    cond do
+      not active ->
+        {:noreply, s}
+
+      complete?(s, st) ->
+        Platform.done(s.owner)
+        {:stop, :normal, s}
+
+      st.mode != :auto ->
+        fail(s, "the vehicle left AUTO for #{mode_name(st.mode)} before the mission ended#{autopilot_says(s.vehicle, [])}")
+
+      not st.armed and not landing_end?(s) ->
+        fail(s, "the vehicle disarmed before the mission ended#{autopilot_says(s.vehicle, [])}")
+
+      true ->
+        {:noreply, s}
+    end
+  end
+
+  defp landing_end?(%{ending: {:landing, _}}), do: true
+  defp landing_end?(_), do: false
+
+  defp complete?(%{ending: {:landing, seq}}, st),
+    do: not st.armed and st.landed in [:on_ground, nil] and (st.mission.reached == seq or st.mission.state == :complete)
+
+  defp complete?(%{ending: {:reached, seq}}, st), do: st.mission.reached == seq or st.mission.state == :complete
+  defp complete?(_forever, _st), do: false
+
+  defp report_progress(s, mission) do
+    progress = %{reached: mission.reached, current: mission.current, total: mission.total}
+
+    if s.active and progress != s.progress do
+      Platform.progress(s.owner, progress)
+      %{s | progress: progress}
+    else
+      s
+    end
+  end
+
+  defp mode_name({:custom, n}), do: "mode #{n}"
+  defp mode_name(mode), do: mode |> to_string() |> String.upcase()
+
+  # --- stopping -----------------------------------------------------------------
+
+  @doc false
+  # Makes a vehicle safe: holding position in the air (BRAKE, else GUIDED), disarmed on the ground.
+  def hold(vehicle) do
+    case Vehicles.state(vehicle) do
+      {:ok, %{armed: false}} ->
+        :ok
+
+      {:ok, %{landed: :on_ground}} ->
+        command(Vehicles.disarm(vehicle), "disarming on the ground", vehicle)
+
+      {:ok, %{mode: mode}} when mode in [:brake, :guided] ->
+        :ok
+
+      {:ok, _} ->
+        with {:error, _} <- command(Vehicles.set_mode(vehicle, :brake), "BRAKE", vehicle),
+             {:error, why} <- command(Vehicles.set_mode(vehicle, :guided), "GUIDED", vehicle) do
+          {:error, "the vehicle could not be made to hold position: #{why}"}
+        else
+          :ok -> await_hold(vehicle, Dolphin.Clock.now_ms() + @hold_timeout_ms)
+        end
+
+      {:error, :unknown_vehicle} ->
+        :ok
+    end
+  end
+
+  # The mode is ours once the vehicle's heartbeat says so.
+  defp await_hold(vehicle, deadline) do
+    case Vehicles.state(vehicle) do
+      {:ok, %{mode: mode}} when mode in [:brake, :guided] ->
+        :ok
+
+      _ ->
+        if Dolphin.Clock.now_ms() >= deadline do
+          {:error, "the vehicle accepted the hold but its heartbeat never showed it"}
+        else
+          Dolphin.Clock.sleep(200)
+          await_hold(vehicle, deadline)
+        end
+    end
+  end
+
+  defp cancel_task(%{task: nil}), do: :ok
+  defp cancel_task(%{task: task}), do: Task.shutdown(task, :brutal_kill) && :ok
+
+  defp fail(s, why) do
+    # The engine says which task and which vehicle; the reason says what happened.
+    Platform.failed(s.owner, why)
+    # A failed mission leaves the vehicle holding, not flying on.
+    _ = if s.started, do: hold(s.vehicle)
+    {:stop, :normal, s}
+  end
+end

@@ -1,0 +1,132 @@
+defmodule Dolphin.Mission.PlatformTest do
+  # Missions as engine tasks flown by simulated copters over UDP on 127.0.0.1.
+  # Changes the clock speed-up and uses the global fleet: not async.
+  use ExUnit.Case, async: false
+
+  alias Dolphin.{Clock, Engine, Link, Mission, Sim, Telemetry, Vehicles}
+  alias Dolphin.Link.Connection
+  alias Dolphin.Mission.Command, as: C
+  alias Dolphin.Test.Wait
+
+  @speedup 50
+
+  setup do
+    name = "platform-test-#{System.unique_integer([:positive])}"
+    {:ok, link} = Link.connect("udpin:127.0.0.1:0", name: name)
+    Dolphin.Fleet.set_source({Dolphin.Fleet.MAVLinkSource, nil})
+
+    on_exit(fn ->
+      Sim.stop()
+      Clock.set_speedup(1)
+      DynamicSupervisor.terminate_child(Dolphin.Link.Supervisor, link)
+      for sysid <- Vehicles.list(), pid = Vehicles.whereis(sysid), pid != nil, do: DynamicSupervisor.terminate_child(Dolphin.Vehicles.Supervisor, pid)
+    end)
+
+    %{port: Connection.port(name)}
+  end
+
+  defp start_fleet(port, opts) do
+    {:ok, ids} = Sim.start(Keyword.merge([gcs: port, speedup: @speedup, ekf_ready_ms: 20_000], opts))
+    Wait.until(fn -> Enum.all?(ids, &match?({:ok, %{home: %{}}}, Vehicles.state(&1))) end, 500, fn -> "homes of #{inspect(ids)}" end)
+
+    # Missions run on picked vehicles.
+    for id <- ids, do: {:ok, _} = Dolphin.Fleet.pick(Dolphin.Fleet, self(), id: id)
+
+    for id <- ids do
+      {:ok, %{home: h}} = Vehicles.state(id)
+      {id, Dolphin.Geo.location(h.lat, h.lon, h.alt)}
+    end
+  end
+
+  defp out_and_back(home) do
+    Mission.new("out and back")
+    |> Mission.add(C.home(home))
+    |> Mission.add(C.take_off(%{home | h: home.h + 20}))
+    |> Mission.add(C.move(80, 0, 0))
+    |> Mission.add(C.return_home_and_land())
+  end
+
+  test "a mission is uploaded, verified, flown and completes when the vehicle has landed and disarmed", %{port: port} do
+    [{1, home}] = start_fleet(port, count: 1)
+    Telemetry.subscribe()
+
+    assert {:ok, :done} = Engine.run(Engine.on(out_and_back(home), [1]))
+
+    assert_received {:dolphin, :events, %{event: :mission_uploaded, vehicle: 1, name: "out and back", items: 4, retransmissions: 0}}
+    {:ok, st} = Vehicles.state(1)
+    refute st.armed
+    assert st.landed == :on_ground
+    {:ok, info} = Sim.info(1)
+    assert Dolphin.Geo.distance(Dolphin.Geo.location(info.position.lat, info.position.lon), home) < 3
+    # Progress reached the engine: one event per item reached.
+    progress = for {:dolphin, :events, %{event: :task_progress, progress: p}} <- flush(), do: p.reached
+    assert Enum.uniq(progress) |> Enum.reject(&is_nil/1) |> Enum.take(-3) == [1, 2, 3]
+  end
+
+  test "stopped by until, the vehicle holds position in BRAKE and is free for the next mission", %{port: port} do
+    [{1, home}] = start_fleet(port, count: 1)
+
+    endless =
+      Mission.new("endless loiter")
+      |> Mission.add(C.home(home))
+      |> Mission.add(C.take_off(%{home | h: home.h + 15}))
+      |> Mission.add(C.move_and_loiter_pos(40, 0, 0, 10))
+
+    reached_loiter = fn -> match?({:ok, %{mission: %{current: 2}, mode: :auto}}, Vehicles.state(1)) end
+    stopped_at = fn -> Clock.now_ms() end
+    _ = stopped_at
+
+    assert {:ok, :done} = Engine.run(Engine.on(Engine.until(endless, reached_loiter), [1]))
+    {:ok, st} = Vehicles.state(1)
+    assert st.mode == :brake and st.armed
+    {:ok, a} = Sim.info(1)
+    Clock.sleep(10_000)
+    {:ok, b} = Sim.info(1)
+    assert b.mode == :brake
+    assert Dolphin.Geo.distance(Dolphin.Geo.location(a.position.lat, a.position.lon), Dolphin.Geo.location(b.position.lat, b.position.lon)) < 8
+    assert_in_delta b.position.relative_alt, a.position.relative_alt, 1.0
+
+    # The next mission takes the vehicle from where it holds, home to land.
+    back = Mission.new("back") |> Mission.add(C.home(home)) |> Mission.add(C.take_off(%{home | h: home.h + 15})) |> Mission.add(C.return_home_and_land())
+    assert {:ok, :done} = Engine.run(Engine.on(back, [1]))
+    {:ok, st} = Vehicles.state(1)
+    refute st.armed
+  end
+
+  test "arming refused for longer than the bound fails the task with the autopilot's reason", %{port: port} do
+    {:ok, [4]} = Sim.start(sysids: [4], gcs: port, speedup: @speedup, ekf_ready_ms: 3_600_000)
+    Wait.until(fn -> match?({:ok, _}, Vehicles.state(4)) end, 200)
+    {:ok, _} = Dolphin.Fleet.pick(Dolphin.Fleet, self(), id: 4)
+    home = Dolphin.Geo.location(40.444233, -7.375234, 820)
+    mission = out_and_back(home)
+
+    {:ok, run} = Engine.start(Engine.on(mission, [4]), [])
+    assert {:error, failure} = Engine.await(run, 30_000)
+    message = Exception.message(Dolphin.Engine.TaskError.exception(failure: failure))
+    assert message =~ "arming refused for 120 s"
+    assert message =~ "Need Position Estimate"
+  end
+
+  test "a vehicle that leaves AUTO (a battery failsafe) fails its mission with the reason", %{port: port} do
+    [{2, home}] = start_fleet(port, sysids: [2], battery_failsafe: :rtl, battery: 0.26)
+    long = Mission.new("long") |> Mission.add(C.home(home)) |> Mission.add(C.take_off(%{home | h: home.h + 20})) |> Mission.add(C.move_and_loiter_time(0, 0, 0, 600))
+    assert {:error, failure} = Engine.run(Engine.on(long, [2]))
+    message = Exception.message(Dolphin.Engine.TaskError.exception(failure: failure))
+    assert message =~ "left AUTO for RTL"
+  end
+
+  test "requirements: a mission that takes photos needs a camera" do
+    home = Dolphin.Geo.location(40.444233, -7.375234, 820)
+    photo = Mission.new("photo") |> Mission.add(C.home(home)) |> Mission.add(C.take_off(home)) |> Mission.add(C.capture_photo())
+    assert Dolphin.Mission.Platform.requirements(photo) == %{type: :uav, payloads: [:camera]}
+    assert Dolphin.Mission.Platform.requirements(Mission.new("x")) == %{type: nil, payloads: []}
+  end
+
+  defp flush do
+    receive do
+      m -> [m | flush()]
+    after
+      0 -> []
+    end
+  end
+end
