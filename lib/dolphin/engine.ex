@@ -57,9 +57,11 @@ defmodule Dolphin.Engine do
   Events (`Dolphin.Telemetry`: `task_started`, `task_finished`,
   `condition_met`, ...) follow the tree deterministically: a node's
   `task_started` precedes its children's; a node's initial subtree has fully
-  started before its next sibling starts (a handshake); a node's
-  `task_finished` follows all of its children's; stopped children finish in
-  start order; user code starts on the next clock tick. With a deterministic
+  started before its next sibling starts (a handshake; a child that ends as
+  it starts hands its result back with the handshake and its parent deals
+  with it at once); a node's `task_finished` follows all of its children's;
+  stopped children finish in start order; user code starts on the next clock
+  tick; timers due at the same time fire in the order they were set. With a deterministic
   time source (`:clock` option) the whole event sequence is reproducible —
   the property tests compare it with a reference interpreter.
 

@@ -47,6 +47,9 @@ defmodule Dolphin.Test.ManualClock do
 
   # --- driving it ---
 
+  @doc "Back to time 0 with no timer."
+  def reset, do: GenServer.call(__MODULE__, :reset)
+
   @doc "Runs `fun` (in the driving process) when the clock reaches `at_ms`; set before the run, such timers come first at equal times."
   def at(at_ms, fun), do: GenServer.call(__MODULE__, {:at, {:call, fun}, at_ms})
 
@@ -63,31 +66,27 @@ defmodule Dolphin.Test.ManualClock do
 
   @doc """
   Steps until `done` (a function returning `{:ok, value}` or nil, checked
-  after each settle) gives a value; fails after `max` steps or if no timer
-  is left.
+  after each settle) gives a value, and returns `{:ok, value}`; returns
+  `:stuck` when no timer is left before `horizon` (clock ms) and not done.
   """
-  def run_until(done, max \\ 10_000) do
+  def run_until(done, horizon \\ :infinity, max \\ 100_000) do
     settle()
 
     case done.() do
       {:ok, value} ->
-        value
+        {:ok, value}
 
       nil when max == 0 ->
         raise "ManualClock: still not done after the step limit"
 
       nil ->
-        case step() do
-          :empty ->
-            settle()
+        case GenServer.call(__MODULE__, :next_due) do
+          due when due == nil or (horizon != :infinity and due > horizon) ->
+            :stuck
 
-            case done.() do
-              {:ok, value} -> value
-              nil -> raise "ManualClock: no timer left and not done (deadlock?)"
-            end
-
-          :ok ->
-            run_until(done, max - 1)
+          _ ->
+            step()
+            run_until(done, horizon, max - 1)
         end
     end
   end
@@ -112,16 +111,21 @@ defmodule Dolphin.Test.ManualClock do
     end
   end
 
-  # Engine processes that are running or have messages to handle.
+  # Engine processes that are running, have messages to handle, or wait for
+  # the code server (loading a module: not idle, though blocked).
   defp busy do
     me = self()
 
     for pid <- Process.list(),
         pid != me,
-        Process.info(pid, [:status, :message_queue_len]) not in [nil, [status: :waiting, message_queue_len: 0]],
+        not idle?(Process.info(pid, [:status, :message_queue_len, :current_function])),
         relevant?(pid),
         do: pid
   end
+
+  defp idle?(nil), do: true
+  defp idle?(status: :waiting, message_queue_len: 0, current_function: {m, _, _}), do: m != :code_server
+  defp idle?(_), do: false
 
   # A process that works for runs on this clock.
   defp relevant?(pid) do
@@ -153,6 +157,11 @@ defmodule Dolphin.Test.ManualClock do
   end
 
   @impl GenServer
+  def handle_call(:reset, _from, _s) do
+    :ets.insert(@table, {:now, 0})
+    {:reply, :ok, %{seq: 0, timers: :gb_trees.empty(), refs: %{}}}
+  end
+
   def handle_call({:after, action, ms}, _from, s), do: add(s, now_ms() + max(ms, 0), action)
   def handle_call({:at, action, at}, _from, s), do: add(s, max(at, now_ms()), action)
 
@@ -161,6 +170,12 @@ defmodule Dolphin.Test.ManualClock do
       {nil, _} -> {:reply, :ok, s}
       {key, refs} -> {:reply, :ok, %{s | refs: refs, timers: :gb_trees.delete_any(key, s.timers)}}
     end
+  end
+
+  def handle_call(:next_due, _from, s) do
+    if :gb_trees.is_empty(s.timers),
+      do: {:reply, nil, s},
+      else: {:reply, s.timers |> :gb_trees.smallest() |> elem(0) |> elem(0), s}
   end
 
   def handle_call(:pop, _from, s) do

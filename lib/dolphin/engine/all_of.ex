@@ -23,6 +23,9 @@ defmodule Dolphin.Engine.AllOf do
     do: {[{:check, 0, elem(hd(bs), 0)}], %{id: task.id, branches: List.to_tuple(bs), waiting: [], running: [], left: length(bs), failure: nil}}
 
   @impl true
+  # A branch failed while the others were being checked: nothing more starts.
+  def handle({:checked, _i, _holds}, %{failure: f} = s) when f != nil, do: {[], s}
+
   def handle({:checked, i, holds}, s) do
     {c, _} = elem(s.branches, i)
     {now, s} = if holds, do: run(s, i), else: {[{:watch, i, c}], %{s | waiting: s.waiting ++ [i]}}

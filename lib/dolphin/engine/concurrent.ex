@@ -2,8 +2,8 @@ defmodule Dolphin.Engine.Concurrent do
   @moduledoc """
   `t1 ||| t2 ||| ...`: runs the tasks at the same time, each on its own
   vehicles; completes when all have. When one fails the others are stopped
-  (their platform tasks hold their vehicles) and the whole fails with that
-  first failure.
+  (their platform tasks hold their vehicles), those not started yet never
+  start, and the whole fails with that first failure.
   """
   use Dolphin.Engine.Task.Struct, tasks: []
   @behaviour Dolphin.Engine.Node
@@ -15,20 +15,24 @@ defmodule Dolphin.Engine.Concurrent do
 
   @impl true
   def init(%{tasks: []}), do: {[{:finish, :done}], nil}
+  def init(%{tasks: tasks}), do: start_next(%{tasks: List.to_tuple(tasks), next: 0, running: [], failure: nil})
 
-  def init(%{tasks: tasks}) do
-    starts = tasks |> Enum.with_index() |> Enum.map(fn {t, i} -> {:start, i, t} end)
-    {starts, %{running: Enum.to_list(0..(length(tasks) - 1)), failure: nil}}
-  end
+  # One start at a time, so that a failure while starting stops the rest.
+  defp start_next(%{next: i} = s),
+    do: {[{:start, i, elem(s.tasks, i)}, :continue], %{s | next: i + 1, running: s.running ++ [i]}}
 
   @impl true
-  def handle({:finished, i, result}, %{running: running, failure: failure} = s) do
-    s = %{s | running: List.delete(running, i)}
+  def handle(:continue, %{failure: nil, next: next, tasks: tasks} = s) when next < tuple_size(tasks), do: start_next(s)
+  def handle(:continue, s), do: {[], s}
 
-    case {result, failure, s.running} do
+  def handle({:finished, i, result}, s) do
+    s = %{s | running: List.delete(s.running, i)}
+    all_started = s.next == tuple_size(s.tasks)
+
+    case {result, s.failure, s.running} do
       {{:failed, f}, nil, []} -> {[{:finish, {:failed, f}}], s}
       {{:failed, f}, nil, others} -> {[{:stop, others, {:sibling_failed, i}}], %{s | failure: f}}
-      {_, nil, []} -> {[{:finish, :done}], s}
+      {_, nil, []} when all_started -> {[{:finish, :done}], s}
       {_, nil, _} -> {[], s}
       {_, f, []} -> {[{:finish, {:failed, f}}], s}
       {_, _f, _} -> {[], s}

@@ -21,6 +21,7 @@ defmodule Dolphin.Engine.Node do
   #                              {:platform_start_failed, reason}, {:vehicle_lost, id}
   #   {:platform_stop, reason}   (platform tasks) bounded stop callback
   #   {:emit, event, fields}     a Dolphin.Telemetry event (run and task_id added)
+  #   :continue                  -> :continue at once (to do things one at a time)
   #   {:finish, result}          :done | {:failed, reason}
   #
   # Events: {:finished, key, result}, {:checked, ...}, {:condition, key},

@@ -342,6 +342,7 @@ defmodule Dolphin.Engine.Runner do
     s
   end
 
+  defp effect(:continue, s), do: feed(s, :continue)
   defp effect({:finish, result}, s), do: finish(s, result)
 
   # --- conditions ---
@@ -459,9 +460,9 @@ defmodule Dolphin.Engine.Runner do
   end
 
   defp finish(s, result) do
-    # Whatever still runs under this node stops first (a condition error, a
-    # platform task done while ... ): nothing outlives its parent.
-    s = if s.children != %{} or s.code != %{} or s.platform != nil, do: halt(s, :stopped), else: s
+    # Whatever still runs under this node stops first (after a condition
+    # error, say): nothing outlives its parent. No timer outlives it either.
+    s = halt(s, :stopped)
     Enum.each(s.order, &collected(s, s.children[&1]))
     result = wrap(result, s)
     emit_finished(s, result, nil)

@@ -69,9 +69,9 @@ defmodule Dolphin.Engine.TestPlatform do
     # Linked to the engine's leaf: an exit from it means the leaf died without stopping us.
     Process.flag(:trap_exit, true)
     clock = Map.get(opts, :clock, Dolphin.Engine.TimeSource.Clock)
-    if t.duration != :infinity, do: clock.send_after(self(), :finish, t.duration)
-    for {after_ms, info} <- t.progress, do: clock.send_after(self(), {:progress, info}, after_ms)
-    s = %{t: t, vehicle: vehicle, owner: opts.owner, clock: clock, task_id: Map.get(opts, :task_id)}
+    timers = for {after_ms, info} <- t.progress, do: clock.send_after(self(), {:progress, info}, after_ms)
+    timers = if t.duration != :infinity, do: [clock.send_after(self(), :finish, t.duration) | timers], else: timers
+    s = %{t: t, vehicle: vehicle, owner: opts.owner, clock: clock, task_id: Map.get(opts, :task_id), timers: timers}
     notify(s, :started, nil)
     {:ok, s}
   end
@@ -107,6 +107,7 @@ defmodule Dolphin.Engine.TestPlatform do
   @impl GenServer
   def handle_call({:stop, reason}, from, s) do
     notify(s, :stopped, reason)
+    Enum.each(s.timers, &s.clock.cancel/1)
 
     if s.t.stop_ms > 0 do
       s.clock.send_after(self(), {:reply_stop, from}, s.t.stop_ms)
