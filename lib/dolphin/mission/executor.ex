@@ -26,7 +26,6 @@ defmodule Dolphin.Mission.Executor do
 
   @arm_timeout_ms 120_000
   @arm_retry_ms 1_000
-  @hold_timeout_ms 10_000
 
   def start_link(mission, vehicle, opts), do: GenServer.start_link(__MODULE__, {mission, vehicle, Map.new(opts)})
 
@@ -53,6 +52,7 @@ defmodule Dolphin.Mission.Executor do
       retransmissions: 0,
       started: false,
       active: false,
+      armed_seen: false,
       reached: nil,
       progress: nil
     }
@@ -252,7 +252,10 @@ defmodule Dolphin.Mission.Executor do
     # The mission counts as running once the vehicle reports it active in AUTO;
     # before that, the state still describes the previous mission.
     active = s.active or (st.mode == :auto and mission.state == :active)
-    s = %{s | active: active}
+    # Reports travel separately (the armed bit with the 1 Hz heartbeat, the
+    # mission state with MISSION_CURRENT): a disarm counts only once the
+    # heartbeat has shown the vehicle armed during this mission.
+    s = %{s | active: active, armed_seen: s.armed_seen or (active and st.armed)}
     s = report_progress(s, mission)
 
     cond do
@@ -266,7 +269,7 @@ defmodule Dolphin.Mission.Executor do
       st.mode != :auto ->
         fail(s, "the vehicle left AUTO for #{mode_name(st.mode)} before the mission ended#{autopilot_says(s.vehicle, [])}")
 
-      not st.armed and not landing_end?(s) ->
+      s.armed_seen and not st.armed and not match?({:landing, _}, s.ending) ->
         fail(s, "the vehicle disarmed before the mission ended#{autopilot_says(s.vehicle, [])}")
 
       true ->
@@ -274,13 +277,13 @@ defmodule Dolphin.Mission.Executor do
     end
   end
 
-  defp landing_end?(%{ending: {:landing, _}}), do: true
-  defp landing_end?(_), do: false
+  # ArduPilot reports the end with MISSION_CURRENT state COMPLETE (after the
+  # landing and disarm when the mission lands); `reached` of the last item
+  # counts too, for autopilots without mission states.
+  defp complete?(%{ending: {:landing, seq}} = s, st),
+    do: s.armed_seen and not st.armed and (st.mission.state == :complete or st.mission.reached == seq)
 
-  defp complete?(%{ending: {:landing, seq}}, st),
-    do: not st.armed and st.landed in [:on_ground, nil] and (st.mission.reached == seq or st.mission.state == :complete)
-
-  defp complete?(%{ending: {:reached, seq}}, st), do: st.mission.reached == seq or st.mission.state == :complete
+  defp complete?(%{ending: {:reached, seq}}, st), do: st.mission.state == :complete or (st.mission.state == nil and st.mission.reached == seq)
   defp complete?(_forever, _st), do: false
 
   defp report_progress(s, mission) do
@@ -313,31 +316,15 @@ defmodule Dolphin.Mission.Executor do
         :ok
 
       {:ok, _} ->
+        # An accepted DO_SET_MODE means the mode has changed (ArduPilot acks
+        # after the switch); the heartbeat shows it within a second.
         with {:error, _} <- command(Vehicles.set_mode(vehicle, :brake), "BRAKE", vehicle),
              {:error, why} <- command(Vehicles.set_mode(vehicle, :guided), "GUIDED", vehicle) do
           {:error, "the vehicle could not be made to hold position: #{why}"}
-        else
-          :ok -> await_hold(vehicle, Dolphin.Clock.now_ms() + @hold_timeout_ms)
         end
 
       {:error, :unknown_vehicle} ->
         :ok
-    end
-  end
-
-  # The mode is ours once the vehicle's heartbeat says so.
-  defp await_hold(vehicle, deadline) do
-    case Vehicles.state(vehicle) do
-      {:ok, %{mode: mode}} when mode in [:brake, :guided] ->
-        :ok
-
-      _ ->
-        if Dolphin.Clock.now_ms() >= deadline do
-          {:error, "the vehicle accepted the hold but its heartbeat never showed it"}
-        else
-          Dolphin.Clock.sleep(200)
-          await_hold(vehicle, deadline)
-        end
     end
   end
 

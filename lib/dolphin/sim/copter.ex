@@ -1038,12 +1038,9 @@ defmodule Dolphin.Sim.Copter do
   end
 
   defp battery_levels(c) do
+    # An empty pack does not stop the simulated motors (as in SITL with the
+    # failsafes off): only the failsafe, when enabled, acts.
     cond do
-      c.battery <= 0.0 and in_air?(c) and c.mode != :land ->
-        c = text(c, 0, "Battery 1 is empty")
-        {_, c} = set_mode_named(c, :land)
-        %{c | arm_blocked: true}
-
       c.battery <= c.config.battery_critical and c.battery_warned != :critical ->
         c = %{text(c, 2, "Battery 1 is critical #{volts(c)}V used #{round(c.consumed_mah)} mAh") | battery_warned: :critical, arm_blocked: true}
         battery_failsafe(c, :land)

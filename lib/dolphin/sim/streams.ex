@@ -265,7 +265,8 @@ defmodule Dolphin.Sim.Streams do
   @doc "Pack voltage in mV: a 3S LiPo sagging with charge and load."
   def voltage(c), do: round((10.5 + 2.1 * c.battery - 0.01 * c.current_a) * 1000)
 
-  defp remaining(c), do: round(c.battery * 100)
+  # Whole percent, rounded down as ArduPilot does: 29.9 % is reported as 29.
+  defp remaining(c), do: trunc(c.battery * 100)
   defp ground_speed(c), do: :math.sqrt(c.vn * c.vn + c.ve * c.ve)
   defp yaw(c), do: (if c.heading > 180, do: c.heading - 360, else: c.heading) * :math.pi() / 180
 
