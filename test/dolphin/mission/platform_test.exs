@@ -55,7 +55,8 @@ defmodule Dolphin.Mission.PlatformTest do
     assert_received {:dolphin, :events, %{event: :mission_uploaded, vehicle: 1, name: "out and back", items: 4, retransmissions: 0}}
     {:ok, st} = Vehicles.state(1)
     refute st.armed
-    assert st.landed == :on_ground
+    # EXTENDED_SYS_STATE comes once a second (of clock time).
+    Wait.until(fn -> match?({:ok, %{landed: :on_ground}}, Vehicles.state(1)) end, 200)
     {:ok, info} = Sim.info(1)
     assert Dolphin.Geo.distance(Dolphin.Geo.location(info.position.lat, info.position.lon), home) < 3
     # Progress reached the engine: one event per item reached.
@@ -77,8 +78,8 @@ defmodule Dolphin.Mission.PlatformTest do
     _ = stopped_at
 
     assert {:ok, :done} = Engine.run(Engine.on(Engine.until(endless, reached_loiter), [1]))
-    {:ok, st} = Vehicles.state(1)
-    assert st.mode == :brake and st.armed
+    # Held (the heartbeat shows it within a second of clock time).
+    Wait.until(fn -> match?({:ok, %{mode: :brake, armed: true}}, Vehicles.state(1)) end, 200)
     {:ok, a} = Sim.info(1)
     Clock.sleep(10_000)
     {:ok, b} = Sim.info(1)
