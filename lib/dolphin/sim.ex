@@ -35,8 +35,10 @@ defmodule Dolphin.Sim do
       throttle, land and disarm; cruise 10 m/s, climb 2.5 m/s, descent 1.5 m/s;
     * a battery that drains while armed in proportion to effort (a 3300 mAh
       pack at ~30 A: ~0.25 % a second in flight) and charges while disarmed
-      on the ground at home; warnings at 20 % and 10 %, and ArduPilot's battery
-      failsafe when asked for (`battery_failsafe: :rtl | :land`).
+      on the ground at home or at the fleet's charging station (the `:home`
+      they are spread around); warnings at 20 % and 10 %, and ArduPilot's
+      battery failsafe when asked for (`battery_failsafe: :rtl | :land`);
+      as in SITL with the failsafes off, an empty pack does not stop the motors.
 
   Time is `Dolphin.Clock` time: with a speed-up of K, flight, telemetry rates
   and the vehicles' protocol timers all run K times faster.
@@ -70,6 +72,8 @@ defmodule Dolphin.Sim do
     * `:faults` — faults on every vehicle's link from the start;
     * any vehicle setting: `:battery` (initial fraction, default 1.0),
       `:ekf_ready_ms`, `:charge_rate` (fraction per second, default 0.005),
+      `:charger` (where a landed vehicle charges besides its own home:
+      default the fleet's `:home`),
       `:capacity_mah`, `:hover_current`, `:cruise_speed`, `:climb_speed`,
       `:descent_speed`, `:wp_radius`, `:rtl_alt`, `:disarm_delay_ms`,
       `:arm_min_battery`, `:battery_low`, `:battery_critical`,
@@ -88,6 +92,8 @@ defmodule Dolphin.Sim do
          {:ok, _} <- ensure_supervisor() do
       homes = homes(opts, length(sysids))
       cameras = cameras(opts[:camera], sysids)
+      charger = opts[:charger] || opts[:home] || if(opts[:homes], do: hd(homes), else: @default_home)
+      config = Map.put(config, :charger, location(charger))
 
       Enum.zip(sysids, homes)
       |> Enum.reduce_while({:ok, []}, fn {sysid, home}, {:ok, started} ->
@@ -240,7 +246,7 @@ defmodule Dolphin.Sim do
   end
 
   defp config(opts) do
-    known = Map.keys(Copter.defaults()) -- [:camera]
+    known = Map.keys(Copter.defaults()) -- [:camera, :charger]
     config = opts |> Keyword.take(known) |> Map.new()
 
     case Enum.find(config, fn {_k, v} -> not (is_number(v) or is_boolean(v) or is_atom(v)) end) do

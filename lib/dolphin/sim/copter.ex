@@ -57,6 +57,7 @@ defmodule Dolphin.Sim.Copter do
     hover_current: 30.0,
     battery: 1.0,
     charge_rate: 0.005,
+    charger: nil,
     arm_min_battery: 0.2,
     battery_low: 0.2,
     battery_critical: 0.1,
@@ -1032,9 +1033,13 @@ defmodule Dolphin.Sim.Copter do
 
   defp at_home?(%{home: nil}), do: false
 
+  # On the ground at its home, or at the fleet's charging station (where
+  # missions written for the whole fleet bring every vehicle back).
   defp at_home?(c) do
     {hn, he} = home_ne(c)
-    c.landed == :on_ground and :math.sqrt((c.n - hn) ** 2 + (c.e - he) ** 2) <= 10
+    near? = fn {n, e}, r -> :math.sqrt((c.n - n) ** 2 + (c.e - e) ** 2) <= r end
+    charger = c.config.charger
+    c.landed == :on_ground and (near?.({hn, he}, 10) or (charger != nil and near?.(ne(c, charger.lat, charger.lon), 15)))
   end
 
   defp battery_levels(c) do
