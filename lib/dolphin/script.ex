@@ -107,7 +107,11 @@ defmodule Dolphin.Script do
         quote do
           defmodule unquote(module) do
             @moduledoc false
-            def __script__, do: unquote(ast)
+            # Not a tail call: the script's own frame stays in stack traces.
+            def __script__ do
+              _ = unquote(ast)
+              :ok
+            end
           end
         end
 
@@ -170,7 +174,11 @@ defmodule Dolphin.Script do
 
   @doc "Starts a script (linked to the caller); see `await/2` and `stop/2`."
   @spec start(t(), keyword()) :: {:ok, pid()}
-  def start(%__MODULE__{} = script, opts \\ []), do: Dolphin.Script.Runner.start_link(script, opts, self())
+  def start(%__MODULE__{} = script, opts \\ []) do
+    # The caller's context (its fleet, clock) is the script's, unless the options say otherwise.
+    ctx = Context.new(Keyword.take(opts, [:fleet, :clock, :tick_ms, :stop_timeout_ms, :ask, :output]))
+    Dolphin.Script.Runner.start_link(script, ctx, opts, self())
+  end
 
   @doc "Waits for the end of a script started by the caller."
   @spec await(pid(), timeout()) :: {:ok, summary()} | {:error, Error.t()} | {:error, :timeout}
@@ -187,6 +195,11 @@ defmodule Dolphin.Script do
   def stop(pid, reason \\ :operator), do: send(pid, {:"$dolphin_script_stop", reason}) && :ok
 
   # --- statements ---
+
+  @doc false
+  # The script line of the statement about to run (set by the DSL's
+  # `execute`, `pick` and `halt`), for errors whose stack has lost it.
+  def __line__(line), do: Process.put(:"$dolphin_line", line)
 
   @doc "Picks vehicles for the script (see `Dolphin.Fleet`); raises `Dolphin.Fleet.PickError` on timeout."
   @spec pick(keyword()) :: VehicleSet.t()

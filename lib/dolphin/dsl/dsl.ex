@@ -36,7 +36,7 @@ defmodule Dolphin.DSL do
   # --- vehicles ---
 
   @doc "Picks vehicles (blocks; see `Dolphin.Fleet`): `count`, `type`, `payload`, `region`, `id`, `timeout`."
-  defdelegate pick(opts \\ []), to: Dolphin.Script
+  defmacro pick(opts \\ []), do: at_line(quote(do: Dolphin.Script.pick(unquote(opts))), __CALLER__)
   @doc "Makes vehicles available again: a set or a list of sets."
   defdelegate release(sets), to: Dolphin.Script
   @doc "Vehicles in either set."
@@ -121,10 +121,10 @@ defmodule Dolphin.DSL do
   the same time) and returns when it is done; a failure stops the script.
   `execute action do ... end` means `execute(action do ... end)`.
   """
-  defmacro execute(task), do: quote(do: Dolphin.Script.execute(unquote(task)))
+  defmacro execute(task), do: at_line(quote(do: Dolphin.Script.execute(unquote(task))), __CALLER__)
 
   defmacro execute({name, meta, args}, do: block) when is_atom(name) and (is_atom(args) or args == []),
-    do: quote(do: Dolphin.Script.execute(unquote({name, meta, [[do: block]]})))
+    do: at_line(quote(do: Dolphin.Script.execute(unquote({name, meta, [[do: block]]}))), __CALLER__)
 
   defmacro execute(other, do: _block),
     do: raise(ArgumentError, "execute with a do block takes a word such as `action`, got: #{Macro.to_string(other)}")
@@ -149,13 +149,20 @@ defmodule Dolphin.DSL do
   @doc "Pauses the script for `d` ms."
   defdelegate pause(d), to: Dolphin.Script
   @doc "Stops the script with a message."
-  defdelegate halt(text), to: Dolphin.Script
+  defmacro halt(text), do: at_line(quote(do: Dolphin.Script.halt(unquote(text))), __CALLER__)
   @doc "Asks the operator; returns the line typed."
   defdelegate ask(prompt), to: Dolphin.Script
   @doc "Sends a raw (MAVLink) message to the vehicles of a set."
   defdelegate send_message(set, message), to: Dolphin.Script
 
   # --- macro helpers ---
+
+  defp at_line(call, caller) do
+    quote do
+      Dolphin.Script.__line__(unquote(caller.line))
+      unquote(call)
+    end
+  end
 
   defp meta(caller), do: Macro.escape(%{line: caller.line, file: caller.file})
 

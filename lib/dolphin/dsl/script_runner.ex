@@ -11,15 +11,14 @@ defmodule Dolphin.Script.Runner do
   alias Dolphin.Engine.{Context, Signals}
   alias Dolphin.Script.Error
 
-  def start_link(script, opts, caller) do
-    pid = :proc_lib.spawn_link(__MODULE__, :init, [script, opts, caller])
+  def start_link(script, ctx, opts, caller) do
+    pid = :proc_lib.spawn_link(__MODULE__, :init, [script, ctx, opts, caller])
     {:ok, pid}
   end
 
-  def init(script, opts, caller) do
+  def init(script, base, opts, caller) do
     Process.flag(:trap_exit, true)
     signals = Signals.new()
-    base = Context.new(Keyword.take(opts, [:fleet, :clock, :tick_ms, :stop_timeout_ms, :ask, :output]))
     ctx = %{base | signals: signals, script: self(), owner: nil}
     me = self()
     started = ctx.clock.now_ms()
@@ -39,9 +38,9 @@ defmodule Dolphin.Script.Runner do
     script.module.__script__()
     :ok
   rescue
-    e -> {:error, :error, e, __STACKTRACE__}
+    e -> {:error, :error, e, __STACKTRACE__, Process.get(:"$dolphin_line")}
   catch
-    kind, reason -> {:error, kind, reason, __STACKTRACE__}
+    kind, reason -> {:error, kind, reason, __STACKTRACE__, Process.get(:"$dolphin_line")}
   end
 
   defp loop(%{code: code, caller: caller} = s) do
@@ -49,8 +48,8 @@ defmodule Dolphin.Script.Runner do
       {:script_done, ^code, :ok} ->
         finish(s, {:ok, :done})
 
-      {:script_done, ^code, {:error, kind, reason, stack}} ->
-        finish(s, {:error, error(s.script, kind, reason, stack)})
+      {:script_done, ^code, {:error, kind, reason, stack, line}} ->
+        finish(s, {:error, error(s.script, kind, reason, stack, line)})
 
       :deadline ->
         stop_code(s)
@@ -105,8 +104,8 @@ defmodule Dolphin.Script.Runner do
   end
 
   # What failed, where (the script line), why.
-  defp error(script, kind, reason, stack) do
-    line = script_line(script.file, stack)
+  defp error(script, kind, reason, stack, last_line) do
+    line = script_line(script.file, stack) || last_line
 
     case {kind, reason} do
       {:error, %Dolphin.Script.Halt{message: m}} ->
