@@ -258,7 +258,9 @@ defmodule Dolphin.Fleet do
 
   @impl true
   def handle_call(:source, _from, s), do: {:reply, s.source, s}
-  def handle_call({:set_source, source}, _from, s), do: {:reply, :ok, s |> use_source(source) |> serve()}
+  # The vehicles of the new source were discovered before: no event for them.
+  def handle_call({:set_source, source}, _from, s),
+    do: {:reply, :ok, %{s | events: false} |> use_source(source) |> Map.put(:events, s.events) |> serve()}
 
   def handle_call(:vehicles, _from, s) do
     list =

@@ -184,14 +184,16 @@ defmodule Mix.Tasks.Dolphin.Run do
           2
       end
     after
-      # Last started, first stopped: the simulator before its link, the printer last.
-      Enum.each(Process.delete(:dolphin_run_cleanup), & &1.())
+      # The outputs stop first (they show the run, not its teardown); then
+      # the last started is the first stopped: the simulator before its link.
+      {outputs, others} = Enum.split_with(Process.delete(:dolphin_run_cleanup), &match?({:output, _}, &1))
+      Enum.each(outputs ++ others, fn {_, fun} -> fun.() end)
       Dolphin.Clock.set_speedup(previous_speedup)
     end
   end
 
   # Something to undo when the run ends.
-  defp defer(fun), do: Process.put(:dolphin_run_cleanup, [fun | Process.get(:dolphin_run_cleanup)])
+  defp defer(fun, kind \\ :vehicles), do: Process.put(:dolphin_run_cleanup, [{kind, fun} | Process.get(:dolphin_run_cleanup)])
 
   defp start_outputs(opts, origin, out) do
     parent = self()
@@ -204,11 +206,11 @@ defmodule Mix.Tasks.Dolphin.Run do
       end)
 
     receive do: ({:printer_ready, ^printer} -> :ok)
-    defer(fn -> stop_printer(printer) end)
+    defer(fn -> stop_printer(printer) end, :output)
 
     if path = opts[:events] do
       case Dolphin.Telemetry.Writer.start_link(path: path, origin_ms: origin) do
-        {:ok, w} -> defer(fn -> Dolphin.Telemetry.Writer.stop(w) end)
+        {:ok, w} -> defer(fn -> Dolphin.Telemetry.Writer.stop(w) end, :output)
         {:error, why} -> raise Mix.Error, message: "--events: #{why}"
       end
     end

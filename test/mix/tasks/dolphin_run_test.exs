@@ -1,0 +1,162 @@
+defmodule Mix.Tasks.Dolphin.RunTest do
+  # Changes the application's fleet source and the clock's speed-up: not async.
+  use ExUnit.Case, async: false
+
+  alias Mix.Tasks.Dolphin.Run
+
+  doctest Mix.Tasks.Dolphin.Run
+
+  @moduletag :tmp_dir
+
+  defp script(dir, name, source) do
+    path = Path.join(dir, name)
+    File.write!(path, source)
+    path
+  end
+
+  defp main(argv) do
+    {:ok, out} = StringIO.open("")
+    {:ok, err} = StringIO.open("")
+    code = Run.main(argv, out: out, err: err)
+    {code, elem(StringIO.contents(out), 1), elem(StringIO.contents(err), 1)}
+  end
+
+  describe "bad usage is exit status 2" do
+    test "no script, an unknown option, a bad duration, --sim with --fake, a missing file", %{tmp_dir: dir} do
+      ok = script(dir, "ok.exs", "use Dolphin.Script\n")
+      assert {2, _, err} = main([])
+      assert err =~ "no script given"
+      assert err =~ "usage: mix dolphin.run SCRIPT"
+      assert {2, _, err} = main([ok, "--bogus"])
+      assert err =~ "bad option --bogus"
+      assert {2, _, err} = main([ok, "--for", "soon"])
+      assert err =~ "--for takes a duration"
+      assert {2, _, err} = main([ok, "--sim", "1", "--fake", "1"])
+      assert err =~ "do not go together"
+      assert {2, _, err} = main([Path.join(dir, "nope.exs")])
+      assert err =~ "no such script"
+      assert {2, _, _} = main([ok, "--speedup", "0"])
+      assert {2, _, err} = main([ok, "--connect", "carrier-pigeon:1"])
+      assert err =~ "--connect carrier-pigeon:1"
+    end
+  end
+
+  describe "scripts" do
+    test "a syntax error or an unknown word: file and line, status 1, nothing run", %{tmp_dir: dir} do
+      Dolphin.Telemetry.subscribe()
+      bad = script(dir, "bad.exs", "use Dolphin.Script\nmessage(\"hi\")\nexecute %{v1 => \n")
+      assert {1, "", err} = main([bad, "--fake", "1"])
+      assert err =~ ~r/bad.exs:\d+: syntax error/
+
+      typo = script(dir, "typo.exs", "use Dolphin.Script\nmessage(\"hi\")\nv = pik(type: :uav)\n_ = v\n")
+      assert {1, "", err} = main([typo, "--fake", "1"])
+      assert err =~ "typo.exs:3: undefined function pik/1"
+      refute_received {:dolphin, :events, %{event: :message}}
+      refute_received {:dolphin, :events, %{event: :vehicle_discovered}}
+      refute_received {:dolphin, :events, %{event: :script_started}}
+    end
+
+    test "a script that completes: status 0, live output, and the events file", %{tmp_dir: dir} do
+      path =
+        script(dir, "survey.exs", """
+        use Dolphin.Script
+        alias Dolphin.Engine.TestPlatform
+
+        v = pick(type: :uav, timeout: seconds(5))
+        execute %{v => wait_for(battery(v) >= 0.9, then: during(seconds(2), TestPlatform.task("survey", duration: :infinity)))}
+        release(v)
+        message("Done!")
+        """)
+
+      events = Path.join(dir, "events.jsonl")
+      assert {0, out, ""} = main([path, "--fake", "2", "--speedup", "20", "--events", events])
+      assert out =~ "2 fake vehicle(s)"
+      assert out =~ "message: Done!"
+      assert out =~ ~s(test "survey" started on vehicle)
+      assert out =~ "script completed in"
+
+      lines = events |> File.read!() |> String.split("\n", trim: true) |> Enum.map(&:jiffy.decode(&1, [:return_maps, null_term: nil]))
+      names = Enum.map(lines, & &1["event"])
+
+      for name <- ~w(vehicle_discovered picked allocated task_started condition_met task_finished released message script_started script_finished),
+          do: assert(name in names, "no #{name} event")
+
+      # Every line follows the catalogue: t_ms, event and exactly its fields.
+      catalogue = Dolphin.Telemetry.catalogue()
+
+      for line <- lines do
+        fields = catalogue[String.to_existing_atom(line["event"])] |> Enum.map(&Atom.to_string/1)
+        assert Enum.sort(Map.keys(line)) == Enum.sort(["t_ms", "event" | fields])
+        assert is_integer(line["t_ms"]) and line["t_ms"] >= 0
+      end
+
+      finished = Enum.find(lines, &(&1["event"] == "task_finished" and &1["kind"] == "test"))
+      assert %{"name" => "survey", "result" => "stopped", "vehicle" => v} = finished
+      assert is_integer(v)
+      assert %{"result" => "done", "reason" => nil} = List.last(lines)
+      # The task stopped after 2 s of clock time (at speed-up 20: 0.1 s of real time).
+      started = Enum.find(lines, &(&1["event"] == "task_started" and &1["kind"] == "test"))
+      assert finished["t_ms"] - started["t_ms"] >= 2_000
+      assert Dolphin.Clock.speedup() == 1
+    end
+
+    test "--for stops a script that runs for ever: status 0, vehicles hold", %{tmp_dir: dir} do
+      path =
+        script(dir, "patrol.exs", """
+        use Dolphin.Script
+        v = pick()
+        forever do
+          execute %{v => Dolphin.Engine.TestPlatform.task("patrol", duration: minutes(5))}
+        end
+        """)
+
+      assert {0, out, ""} = main([path, "--fake", "1", "--for", "2s", "--speedup", "10"])
+      assert out =~ "task 3 test \"patrol\"" or out =~ ~s(test "patrol" started)
+      assert out =~ ~s(test "patrol" on vehicle 1: stopped)
+      assert out =~ "script stopped after"
+      assert out =~ "--for 2s is over"
+    end
+
+    test "a failing script: status 1, what, where, why", %{tmp_dir: dir} do
+      path =
+        script(dir, "fails.exs", """
+        use Dolphin.Script
+        v = pick()
+
+        execute %{v => Dolphin.Engine.TestPlatform.task("survey", duration: 10, result: {:fail, "motor failure"})}
+        """)
+
+      assert {1, _out, err} = main([path, "--fake", "1", "--quiet"])
+      assert err =~ "fails.exs:4: execute failed: test \"survey\""
+      assert err =~ "on vehicle 1 failed: motor failure"
+    end
+
+    test "--quiet prints only messages, errors and the summary", %{tmp_dir: dir} do
+      path = script(dir, "quiet.exs", "use Dolphin.Script\nv = pick()\nmessage(\"hello\")\nrelease(v)\n")
+      assert {0, out, ""} = main([path, "--fake", "1", "--quiet"])
+      refute out =~ "picked"
+      assert out =~ "message: hello"
+      assert out =~ "script completed"
+    end
+  end
+
+  if Code.ensure_loaded?(Dolphin.Sim) do
+    @tag timeout: 120_000
+    test "--sim N runs the script against simulated vehicles over UDP", %{tmp_dir: dir} do
+      path =
+        script(dir, "sim.exs", """
+        use Dolphin.Script
+        vs = pick(count: 2, type: :uav, timeout: seconds(30))
+        for v <- vs, do: message("vehicle \#{inspect(v)} battery \#{battery(v)}")
+        release(vs)
+        """)
+
+      tlog = Path.join(dir, "run.tlog")
+      assert {0, out, ""} = main([path, "--sim", "2", "--speedup", "10", "--tlog", tlog])
+      assert out =~ "2 simulated vehicle(s) [1, 2]"
+      assert out =~ "vehicle 1 discovered (uav)"
+      assert out =~ ~r/message: vehicle #Vehicles<\[1\]> battery (1\.0|0\.\d+|nil)/
+      assert File.stat!(tlog).size > 0
+    end
+  end
+end
