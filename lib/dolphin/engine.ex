@@ -8,7 +8,8 @@ defmodule Dolphin.Engine do
   platform tasks of a task, then runs it: one process per node of the tree.
 
       import Dolphin.Engine
-      t = until(TestPlatform.task("survey", duration: :infinity), fn -> battery(v) < 0.3 end) >>> idle(5_000)
+      survey = Dolphin.Engine.TestPlatform.task("survey", duration: :infinity)
+      t = sequence([until(survey, fn -> Dolphin.Fleet.state(v).battery < 0.3 end), idle(5_000)])
       {:ok, :done} = Dolphin.Engine.run(t)
 
   ## Results

@@ -52,21 +52,32 @@ defmodule Dolphin.DSL do
   @doc "The connection timeout of the vehicles of `set`."
   defdelegate set_connection_timeout(set, ms), to: Dolphin.Script
 
+  @typedoc "A one-vehicle set (or a system id)."
+  @type vehicle :: VehicleSet.t() | non_neg_integer()
+
   @doc "Remaining battery, 0.0..1.0 (nil until reported), of a one-vehicle set."
+  @spec battery(vehicle()) :: float() | nil
   def battery(v), do: Fleet.state(v, :battery).battery
   @doc "Position (a `Dolphin.Geo.Location`, height above mean sea level) or nil."
+  @spec position(vehicle()) :: Dolphin.Geo.Location.t() | nil
   def position(v), do: Fleet.state(v, :position).position
   @doc "Height above mean sea level in metres, or nil."
+  @spec altitude(vehicle()) :: float() | nil
   def altitude(v), do: with(%{h: h} <- Fleet.state(v, :altitude).position, do: h)
   @doc "Height above home in metres, or nil."
+  @spec relative_altitude(vehicle()) :: float() | nil
   def relative_altitude(v), do: Fleet.state(v, :relative_altitude).relative_altitude
   @doc "Flight mode (`:guided`, `:auto`, ...) or nil."
+  @spec mode(vehicle()) :: atom() | nil
   def mode(v), do: Fleet.state(v, :mode).mode
   @doc "Whether the vehicle is armed."
+  @spec armed?(vehicle()) :: boolean()
   def armed?(v), do: Fleet.state(v, :armed?).armed?
   @doc "Whether the vehicle is heard (not lost)."
+  @spec connected?(vehicle()) :: boolean()
   def connected?(v), do: Fleet.state(v, :connected?).connected?
   @doc "`{reached, total}`: the last mission item reached and the items of its mission."
+  @spec mission_progress(vehicle()) :: {non_neg_integer(), non_neg_integer()}
   def mission_progress(v), do: Fleet.state(v, :mission_progress).mission_progress
 
   # --- tasks ---
@@ -83,8 +94,10 @@ defmodule Dolphin.DSL do
   defdelegate named(t, name), to: Engine
 
   @doc "Sequence: `t1` then `t2`."
+  @spec term() >>> term() :: Dolphin.Engine.Sequence.t()
   def t1 >>> t2, do: Engine.sequence([t1, t2])
   @doc "Concurrency: `t1` and `t2` at the same time."
+  @spec term() ||| term() :: Dolphin.Engine.Concurrent.t()
   def t1 ||| t2, do: Engine.concurrent([t1, t2])
 
   @doc "A task running the block once (in its own process)."
@@ -149,7 +162,7 @@ defmodule Dolphin.DSL do
   @doc "Pauses the script for `d` ms."
   defdelegate pause(d), to: Dolphin.Script
   @doc "Stops the script with a message."
-  defmacro halt(text), do: at_line(quote(do: Dolphin.Script.halt(unquote(text))), __CALLER__)
+  defmacro halt(text \\ "halted"), do: at_line(quote(do: Dolphin.Script.halt(unquote(text))), __CALLER__)
   @doc "Asks the operator; returns the line typed."
   defdelegate ask(prompt), to: Dolphin.Script
   @doc "Sends a raw (MAVLink) message to the vehicles of a set."

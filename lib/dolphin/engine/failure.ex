@@ -7,7 +7,7 @@ defmodule Dolphin.Engine.Failure do
 
       iex> f = %Dolphin.Engine.Failure{task_id: 7, kind: :mission, name: "Survey", vehicle: 2, reason: {:vehicle_lost, 2}, meta: %{line: 12}}
       iex> Dolphin.Engine.Failure.message(f)
-      ~s(mission "Survey" (task 7, line 12) on vehicle 2 failed: vehicle 2 lost)
+      ~s[mission "Survey" (task 7, line 12) on vehicle 2 failed: vehicle 2 lost]
 
   Reasons the engine gives: `{:exception, exception, stacktrace}`,
   `{:exit, reason}`, `{:throw, value}` (code that raised, exited or threw),

@@ -6,6 +6,12 @@ defmodule Dolphin.Engine.CombinatorsTest do
 
   alias Dolphin.Engine.{AllocationError, Cond}
 
+  doctest Dolphin.Engine.Task
+  doctest Dolphin.Engine.Cond
+  doctest Dolphin.Engine.Signals
+  doctest Dolphin.Engine.Failure
+  doctest Dolphin.Telemetry
+
   defp never, do: Cond.new(fn -> false end, source: "never")
   defp low_battery(v), do: Cond.new(fn -> Dolphin.Fleet.state(v).battery < 0.3 end, source: "battery < 0.3")
   defp tp(name, opts \\ []), do: TestPlatform.task(name, Keyword.put_new(opts, :notify, self()))
