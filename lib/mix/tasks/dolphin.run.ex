@@ -30,7 +30,8 @@ defmodule Mix.Tasks.Dolphin.Run do
     * `--quiet` — print only the script's messages, errors and the summary
 
   With none of `--connect`, `--sim`, `--fake`, the links of the configuration
-  are used (`config :dolphin, links: [...]`), if any.
+  are used (`config :dolphin, links: [...]`), or if there are none the ground
+  station listens on `Dolphin.Link.default_endpoint/0` (`udpin:0.0.0.0:14550`).
 
   ## Exit status
 
@@ -235,8 +236,18 @@ defmodule Mix.Tasks.Dolphin.Run do
       cond do
         n = opts[:sim] -> start_sim(n, opts, link_opts, out)
         n = opts[:fake] -> start_fake(n, out, "")
-        true -> :ok
+        opts[:connect] != nil or Application.get_env(:dolphin, :links, []) != [] -> :ok
+        true -> listen_default(link_opts, out)
       end
+    end
+  end
+
+  # Told nothing: listen where vehicles and simulators send by default.
+  defp listen_default(link_opts, out) do
+    endpoint = Dolphin.Link.default_endpoint()
+
+    with :ok <- connect_all([endpoint], link_opts) do
+      IO.puts(out, "listening on #{endpoint} (no --connect, --sim or --fake given)")
     end
   end
 
