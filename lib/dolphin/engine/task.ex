@@ -113,7 +113,10 @@ defmodule Dolphin.Engine.Task do
   @spec label(t()) :: String.t()
   def label(%{name: name}) when is_binary(name), do: name
   def label(%PlatformTask{} = t), do: PlatformTask.label(t)
-  def label(task), do: task |> format() |> String.slice(0, 80)
+  def label(task) do
+    text = format(task)
+    if String.length(text) > 80, do: String.slice(text, 0, 79) <> "…", else: text
+  end
 
   @doc "A task as a script would write it."
   @spec format(t()) :: String.t()
