@@ -319,6 +319,7 @@ defmodule Dolphin.Script do
   def pause(ms), do: raise(ArgumentError, "pause takes milliseconds, got: #{inspect(ms)}")
 
   @doc "Stops the script (all its tasks) with a message; the script's result is `:halted`."
+  @dialyzer {:nowarn_function, halt: 0}
   @spec halt(term()) :: no_return()
   def halt(text \\ "halted") do
     text = if is_binary(text), do: text, else: inspect(text)

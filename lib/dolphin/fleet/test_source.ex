@@ -128,7 +128,7 @@ defmodule Dolphin.Fleet.TestSource do
   @impl Dolphin.Fleet.Source
   def set_timeout(name, id, ms) do
     case :ets.lookup(name, id) do
-      [_] -> :ets.insert(name, {{:timeout, id}, ms}) && :ok
+      [_] -> ok(:ets.insert(name, {{:timeout, id}, ms}))
       [] -> {:error, :unknown_vehicle}
     end
   end
@@ -136,10 +136,12 @@ defmodule Dolphin.Fleet.TestSource do
   @impl Dolphin.Fleet.Source
   def send_message(name, id, message) do
     case :ets.lookup(name, id) do
-      [_] -> :ets.insert(name, {{:sent, id, System.unique_integer([:monotonic])}, message}) && :ok
+      [_] -> ok(:ets.insert(name, {{:sent, id, System.unique_integer([:monotonic])}, message}))
       [] -> {:error, :unknown_vehicle}
     end
   end
+
+  defp ok(true), do: :ok
 
   @impl GenServer
   def init({name, vehicles}) do
