@@ -10,13 +10,13 @@
 use Dolphin.Script
 
 base = location(40.444233, -7.375234, 820)
-field = location(40.4460, -7.3740, 820)
+field = location(40.4460, -7.3740, 860)
 
 patrol =
   mission "Field patrol" do
     home base
     take_off location(40.444233, -7.375234, 860)
-    go_pos location(field.lat, field.lon, 860)
+    go_pos field
     capture_until_stop 3
     survey_area field, 300, 200, 50, :north_east
     stop_capturing()

@@ -25,6 +25,10 @@ defmodule Dolphin.Mission.Executor do
   alias Dolphin.Engine.Platform
 
   @arm_timeout_ms 120_000
+  @takeoff 22
+  @land 21
+  # A landed vehicle this close to a mission's landing point is there.
+  @here_m 5
   @arm_retry_ms 1_000
 
   def start_link(mission, vehicle, opts), do: GenServer.start_link(__MODULE__, {mission, vehicle, Map.new(opts)})
@@ -94,6 +98,10 @@ defmodule Dolphin.Mission.Executor do
       :ok ->
         next_step(s)
 
+      :already_there ->
+        Platform.done(s.owner)
+        {:stop, :normal, s}
+
       {:uploaded, duration_ms} ->
         Telemetry.emit(:mission_uploaded, %{vehicle: s.vehicle, name: s.name, items: length(s.items), duration_ms: duration_ms, retransmissions: s.retransmissions})
         next_step(s)
@@ -140,7 +148,7 @@ defmodule Dolphin.Mission.Executor do
   defp step(:hold_if_flying, s, _me) do
     case Vehicles.state(s.vehicle) do
       {:ok, %{armed: true, mode: :auto} = st} when st.landed != :on_ground -> hold(s.vehicle)
-      {:ok, _} -> :ok
+      {:ok, st} -> on_the_ground(s, st)
       {:error, :unknown_vehicle} -> {:error, "vehicle #{s.vehicle} is not connected"}
     end
   end
@@ -174,6 +182,32 @@ defmodule Dolphin.Mission.Executor do
 
   defp step(:arm, s, _me), do: arm(s, Dolphin.Clock.now_ms() + s.arm_timeout_ms)
   defp step(:start, s, _me), do: command(Vehicles.start_mission(s.vehicle), "MISSION_START", s.vehicle)
+
+  # A copter on the ground can only start a mission that takes off (ArduCopter
+  # refuses the others: "Auto: Missing Takeoff Cmd"). One that only comes back
+  # and lands is already done when the vehicle stands at its landing point.
+  defp on_the_ground(s, st) do
+    takes_off? = Enum.any?(s.items, &(&1.command == @takeoff))
+    grounded? = not st.armed and st.landed in [:on_ground, nil]
+
+    cond do
+      takes_off? or not grounded? -> :ok
+      landing_here?(s, st) -> :already_there
+      true -> {:error, "vehicle #{s.vehicle} is on the ground and the mission has no take-off"}
+    end
+  end
+
+  defp landing_here?(%{ending: {:landing, seq}} = s, %{position: %{lat: lat, lon: lon}}) do
+    item = Enum.at(s.items, seq)
+    at = Dolphin.Geo.location(lat, lon)
+
+    cond do
+      item.command == @land and item.x != 0 -> Dolphin.Geo.distance(at, Dolphin.Geo.location(item.x / 1.0e7, item.y / 1.0e7)) <= @here_m
+      true -> false
+    end
+  end
+
+  defp landing_here?(_s, _st), do: false
 
   defp arm(s, deadline) do
     case Vehicles.state(s.vehicle) do

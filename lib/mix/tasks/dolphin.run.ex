@@ -15,7 +15,8 @@ defmodule Mix.Tasks.Dolphin.Run do
 
     * `--connect ENDPOINT` — a link to vehicles (`udpin:0.0.0.0:14550`,
       `udpout:HOST:PORT`, `tcp:HOST:PORT`); repeatable
-    * `--sim N` — start N simulated vehicles (`Dolphin.Sim`) on a local link
+    * `--sim N` — start N simulated vehicles (`Dolphin.Sim`: ArduCopters with a
+      camera) on a local link
     * `--fake N` — N fake vehicles of the test platform
       (`Dolphin.Fleet.TestSource`, no MAVLink): to try a script's logic with
       `Dolphin.Engine.TestPlatform` tasks
@@ -272,7 +273,8 @@ defmodule Mix.Tasks.Dolphin.Run do
         {:ok, link} ->
           defer(fn -> DynamicSupervisor.terminate_child(Dolphin.Link.Supervisor, link) end)
           port = Dolphin.Link.Connection.port(name)
-          sim_opts = [count: n, gcs: {{127, 0, 0, 1}, port}, speedup: Dolphin.Clock.speedup(), seed: Keyword.get(opts, :seed, 1)]
+          # Camera drones: every simulated vehicle carries a camera (component 100).
+          sim_opts = [count: n, gcs: {{127, 0, 0, 1}, port}, speedup: Dolphin.Clock.speedup(), seed: Keyword.get(opts, :seed, 1), camera: true]
 
           # apply/3: this task compiles whether or not the simulator is part of the build.
           case apply(Dolphin.Sim, :start, [sim_opts]) do
