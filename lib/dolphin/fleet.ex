@@ -295,7 +295,11 @@ defmodule Dolphin.Fleet do
       entry != nil and entry.vehicle.connected? and (s.busy[id] in [nil, run.id])
     end
 
-    pool = Enum.uniq(Enum.filter(inherit, usable) ++ Enum.filter(Enum.sort(picked_by(s, owner)), &(usable.(&1) and s.busy[&1] == nil)))
+    pool =
+      (Enum.filter(inherit, usable) ++ Enum.filter(Enum.sort(picked_by(s, owner)), &(usable.(&1) and s.busy[&1] == nil)))
+      |> Enum.uniq()
+      # Vehicles the source no longer knows cannot run anything.
+      |> Enum.filter(&match?({:ok, _}, Source.vehicle(s.source, &1)))
 
     case Allocation.solve(leaves, Enum.map(pool, &s.vehicles[&1].vehicle)) do
       {:ok, assignment} ->
@@ -434,17 +438,29 @@ defmodule Dolphin.Fleet do
   # Serves waiting picks in order; vehicles an earlier waiter could use are
   # kept for it (first come, first served).
   defp serve(s) do
+    {s, retry} = serve_waiters(s)
+    if retry, do: serve(s), else: s
+  end
+
+  # {s, retry?}: retry when vehicles about to be given turned out to be gone.
+  defp serve_waiters(s) do
     available = for {id, %{vehicle: v}} <- Enum.sort(s.vehicles), v.connected?, s.picked[id] == nil, s.busy[id] == nil, do: v
 
-    {s, waiters, _claimed} =
-      Enum.reduce(s.waiters, {s, [], MapSet.new()}, fn w, {s, kept, claimed} ->
-        matching = Enum.filter(available, &(matches?(w.req, &1) and not MapSet.member?(claimed, &1.id) and s.picked[&1.id] == nil))
+    {s, waiters, _claimed, retry} =
+      Enum.reduce(s.waiters, {s, [], MapSet.new(), false}, fn w, {s, kept, claimed, retry} ->
+        matching = Enum.filter(available, &(Map.has_key?(s.vehicles, &1.id) and matches?(w.req, &1) and not MapSet.member?(claimed, &1.id) and s.picked[&1.id] == nil))
 
         if length(matching) >= w.req.count do
           ids = matching |> Enum.take(w.req.count) |> Enum.map(& &1.id)
-          {give(s, w, ids), kept, claimed}
+
+          # A vehicle the source no longer knows (its process stopped for good
+          # without a loss first) is dropped, not given.
+          case Enum.filter(ids, &(Source.vehicle(s.source, &1) == {:error, :unknown_vehicle})) do
+            [] -> {give(s, w, ids), kept, claimed, retry}
+            gone -> {forget(s, gone), [w | kept], claimed, true}
+          end
         else
-          {s, [w | kept], Enum.reduce(matching, claimed, &MapSet.put(&2, &1.id))}
+          {s, [w | kept], Enum.reduce(matching, claimed, &MapSet.put(&2, &1.id)), retry}
         end
       end)
 
@@ -452,10 +468,15 @@ defmodule Dolphin.Fleet do
 
     if not s.region_tick and Enum.any?(s.waiters, & &1.req.region) do
       Dolphin.Clock.send_after(self(), :region_tick, @region_tick)
-      %{s | region_tick: true}
+      {%{s | region_tick: true}, retry}
     else
-      s
+      {s, retry}
     end
+  end
+
+  defp forget(s, ids) do
+    Enum.each(ids, &PubSub.unsubscribe({:vehicle, &1}))
+    %{s | vehicles: Map.drop(s.vehicles, ids)}
   end
 
   defp give(s, w, ids) do

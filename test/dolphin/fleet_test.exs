@@ -82,6 +82,13 @@ defmodule Dolphin.FleetTest do
       assert {:ok, %VehicleSet{ids: [^a]}} = pick(ctx, timeout: 1_000)
     end
 
+    test "a vehicle its source no longer knows is not given", ctx do
+      [a, b] = fake_vehicles(ctx, 2)
+      TestSource.remove(ctx.source, a)
+      assert {:ok, %VehicleSet{ids: [^b]}} = pick(ctx, timeout: 1_000)
+      refute Enum.any?(Fleet.vehicles(ctx.fleet), &(&1.vehicle.id == a))
+    end
+
     test "caller mistakes raise ArgumentError", ctx do
       assert_raise ArgumentError, ~r/unknown pick option {:kind, :uav}/, fn -> pick(ctx, kind: :uav) end
       assert_raise ArgumentError, ~r/count must be a positive integer, got: 0/, fn -> pick(ctx, count: 0) end

@@ -74,6 +74,13 @@ defmodule Dolphin.Fleet.TestSource do
     PubSub.publish({:vehicle, id}, {:vehicle_reconnected, id})
   end
 
+  @doc "Forgets a vehicle without any event (as a vehicle process that was stopped for good)."
+  @spec remove(atom(), non_neg_integer()) :: :ok
+  def remove(name, id) do
+    :ets.delete(name, id)
+    :ok
+  end
+
   @doc "The messages sent to a vehicle with `send_message`, oldest first."
   @spec messages(atom(), non_neg_integer()) :: [term()]
   def messages(name, id), do: for({{:sent, ^id, n}, m} <- :ets.tab2list(name), do: {n, m}) |> Enum.sort() |> Enum.map(&elem(&1, 1))
