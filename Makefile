@@ -19,6 +19,7 @@ run: bootstrap
 bench: bootstrap
 	MIX_ENV=prod ERL_FLAGS="+S 1:1" mix bench
 	MIX_ENV=prod mix run bench/mission_upload.exs
+	MIX_ENV=prod mix run bench/sim.exs
 
 dialyzer: bootstrap
 	scripts/dialyzer
