@@ -4,23 +4,12 @@ defmodule Dolphin.SimTest do
   # clock speed-up and shares the vehicle registry: not async.
   use ExUnit.Case, async: false
 
-  alias Dolphin.{Clock, Link, Sim, Vehicles}
-  alias Dolphin.Link.Connection
+  alias Dolphin.{Clock, Sim, Vehicles}
   alias Dolphin.MAVLink.Ardupilotmega, as: M
   alias Dolphin.Test.Wait
 
   setup do
-    name = "sim-test-#{System.unique_integer([:positive])}"
-    {:ok, link} = Link.connect("udpin:127.0.0.1:0", name: name)
-
-    on_exit(fn ->
-      Sim.stop()
-      Clock.set_speedup(1)
-      DynamicSupervisor.terminate_child(Dolphin.Link.Supervisor, link)
-      for sysid <- Vehicles.list(), pid = Vehicles.whereis(sysid), pid != nil, do: DynamicSupervisor.terminate_child(Dolphin.Vehicles.Supervisor, pid)
-    end)
-
-    %{port: Connection.port(name)}
+    %{port: Dolphin.Test.GroundStation.open()}
   end
 
   # What the ground station knows (a blank state before discovery).

@@ -6,6 +6,7 @@ defmodule Dolphin.Examples.ScenariosTest do
   use ExUnit.Case, async: false
 
   alias Dolphin.MAVLink.JSON
+  alias Dolphin.Test.GroundStation
   alias Mix.Tasks.Dolphin.Run
 
   @moduletag :scenario
@@ -21,7 +22,7 @@ defmodule Dolphin.Examples.ScenariosTest do
     {:ok, err} = StringIO.open("")
     argv = [Path.join(@examples, "#{name}.exs"), "--sim", "#{sim}", "--speedup", "50", "--events", events, "--quiet"] ++ extra
     code = Run.main(argv, out: out, err: err)
-    forget_vehicles()
+    GroundStation.forget_vehicles()
     output = elem(StringIO.contents(out), 1) <> elem(StringIO.contents(err), 1)
 
     parsed =
@@ -35,17 +36,8 @@ defmodule Dolphin.Examples.ScenariosTest do
 
   # The simulated vehicles of one run are not those of the next (whose system
   # ids start at 1 again): the ground station forgets them.
-  defp forget_vehicles do
-    Dolphin.Sim.stop()
-
-    for id <- Dolphin.Vehicles.list(), pid = Dolphin.Vehicles.whereis(id),
-        do: DynamicSupervisor.terminate_child(Dolphin.Vehicles.Supervisor, pid)
-
-    Dolphin.Clock.set_speedup(1)
-  end
-
   setup do
-    on_exit(&forget_vehicles/0)
+    on_exit(&GroundStation.forget_vehicles/0)
   end
 
   defp events(all, name), do: Enum.filter(all, &(&1["event"] == name))

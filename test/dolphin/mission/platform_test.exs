@@ -3,26 +3,15 @@ defmodule Dolphin.Mission.PlatformTest do
   # Changes the clock speed-up and uses the global fleet: not async.
   use ExUnit.Case, async: false
 
-  alias Dolphin.{Clock, Engine, Link, Mission, Sim, Telemetry, Vehicles}
-  alias Dolphin.Link.Connection
+  alias Dolphin.{Clock, Engine, Mission, Sim, Telemetry, Vehicles}
   alias Dolphin.Mission.Command, as: C
   alias Dolphin.Test.Wait
 
   @speedup 50
 
   setup do
-    name = "platform-test-#{System.unique_integer([:positive])}"
-    {:ok, link} = Link.connect("udpin:127.0.0.1:0", name: name)
     Dolphin.Fleet.set_source({Dolphin.Fleet.MAVLinkSource, nil})
-
-    on_exit(fn ->
-      Sim.stop()
-      Clock.set_speedup(1)
-      DynamicSupervisor.terminate_child(Dolphin.Link.Supervisor, link)
-      for sysid <- Vehicles.list(), pid = Vehicles.whereis(sysid), pid != nil, do: DynamicSupervisor.terminate_child(Dolphin.Vehicles.Supervisor, pid)
-    end)
-
-    %{port: Connection.port(name)}
+    %{port: Dolphin.Test.GroundStation.open()}
   end
 
   defp start_fleet(port, opts) do

@@ -1,0 +1,32 @@
+defmodule Dolphin.Test.GroundStation do
+  @moduledoc """
+  A ground-station link on 127.0.0.1 for tests that fly simulated vehicles,
+  and the clean-up after them: simulated vehicles stopped, the ground station's
+  vehicles forgotten (the next test's start at system id 1 again), the link
+  closed, the clock back to real time.
+  """
+
+  import ExUnit.Callbacks, only: [on_exit: 1]
+
+  alias Dolphin.{Link, Vehicles}
+
+  @doc "Opens a link (closed when the test ends) and returns the port simulated vehicles send to."
+  def open do
+    name = "test-gcs-#{System.unique_integer([:positive])}"
+    {:ok, link} = Link.connect("udpin:127.0.0.1:0", name: name)
+
+    on_exit(fn ->
+      forget_vehicles()
+      DynamicSupervisor.terminate_child(Dolphin.Link.Supervisor, link)
+    end)
+
+    Dolphin.Link.Connection.port(name)
+  end
+
+  @doc "Stops the simulated vehicles and forgets every vehicle the ground station knew."
+  def forget_vehicles do
+    Dolphin.Sim.stop()
+    for id <- Vehicles.list(), pid = Vehicles.whereis(id), do: DynamicSupervisor.terminate_child(Dolphin.Vehicles.Supervisor, pid)
+    Dolphin.Clock.set_speedup(1)
+  end
+end
