@@ -146,7 +146,11 @@ defmodule Dolphin.Sim do
   @doc "The system ids of the simulated vehicles running now."
   @spec vehicles() :: [byte()]
   def vehicles do
-    Registry.select(Dolphin.Registry, [{{{:sim, :"$1"}, :_, :_}, [], [:"$1"]}]) |> Enum.sort()
+    # The registry forgets a dead process a moment after it dies: ask the process.
+    Registry.select(Dolphin.Registry, [{{{:sim, :"$1"}, :"$2", :_}, [], [{{:"$1", :"$2"}}]}])
+    |> Enum.filter(fn {_id, pid} -> Process.alive?(pid) end)
+    |> Enum.map(&elem(&1, 0))
+    |> Enum.sort()
   end
 
   @doc """
@@ -202,7 +206,7 @@ defmodule Dolphin.Sim do
 
   defp whereis(sysid) do
     case Registry.lookup(Dolphin.Registry, {:sim, sysid}) do
-      [{pid, _}] -> pid
+      [{pid, _}] -> if Process.alive?(pid), do: pid
       [] -> nil
     end
   end

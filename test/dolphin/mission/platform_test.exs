@@ -53,6 +53,15 @@ defmodule Dolphin.Mission.PlatformTest do
     assert Enum.uniq(progress) |> Enum.reject(&is_nil/1) |> Enum.take(-3) == [1, 2, 3]
   end
 
+  test "a mission flies to its end over a link that loses, duplicates and reorders datagrams", %{port: port} do
+    [{3, home}] = start_fleet(port, sysids: [3])
+    :ok = Sim.set_faults(3, loss: 0.2, duplicate: 0.05, reorder: 0.05)
+    assert {:ok, :done} = Engine.run(Engine.on(out_and_back(home), [3]))
+    {:ok, info} = Sim.info(3)
+    refute info.armed
+    assert Dolphin.Geo.distance(Dolphin.Geo.location(info.position.lat, info.position.lon), home) < 3
+  end
+
   test "stopped by until, the vehicle holds position in BRAKE and is free for the next mission", %{port: port} do
     [{1, home}] = start_fleet(port, count: 1)
 
