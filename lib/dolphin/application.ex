@@ -20,7 +20,9 @@ defmodule Dolphin.Application do
       %{id: :configured_links, start: {Dolphin.Link, :start_configured, []}, restart: :transient},
       # Who is available, picked, busy; then the runs of task trees, which use it.
       Dolphin.Fleet,
-      Dolphin.Engine.Supervisor
+      Dolphin.Engine.Supervisor,
+      # The IEx console's event store and background runs (Dolphin.Console).
+      Dolphin.Console.Supervisor
     ]
 
     # rest_for_one: everything after a crashed child depends on it. A crashed

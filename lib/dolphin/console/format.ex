@@ -1,0 +1,373 @@
+defmodule Dolphin.Console.Format do
+  @moduledoc false
+  # Pure text of the console (Dolphin.Console): tables, the task tree, event
+  # lines, the watch ticker. Every function takes plain data and returns a
+  # string (no trailing newline), so all of it is tested without IEx.
+
+  alias Dolphin.Geo.Location
+
+  # --- generic -----------------------------------------------------------------
+
+  @doc false
+  # A table: a header row, then one row per entry; columns padded to their
+  # widest cell, those listed in `right` aligned right.
+  @spec table([String.t()], [[String.t()]], [non_neg_integer()]) :: String.t()
+  def table(headers, rows, right \\ []) do
+    all = [headers | rows]
+    widths = for i <- 0..(length(headers) - 1), do: all |> Enum.map(&String.length(Enum.at(&1, i, ""))) |> Enum.max()
+
+    all
+    |> Enum.map(fn row ->
+      row
+      |> Enum.zip(widths)
+      |> Enum.with_index()
+      |> Enum.map_join("  ", fn {{cell, w}, i} -> if i in right, do: String.pad_leading(cell, w), else: String.pad_trailing(cell, w) end)
+      |> String.trim_trailing()
+    end)
+    |> Enum.join("\n")
+  end
+
+  @doc false
+  # A tree of nodes %{text, state, children} as lines with branch glyphs; the
+  # states line up in one column after the widest text.
+  @spec tree([map()]) :: String.t()
+  def tree(nodes) do
+    lines = flatten(nodes, "", true)
+    width = lines |> Enum.map(fn {prefix, text, _} -> String.length(prefix <> text) end) |> Enum.max(fn -> 0 end)
+
+    Enum.map_join(lines, "\n", fn
+      {prefix, text, nil} -> prefix <> text
+      {prefix, text, state} -> String.pad_trailing(prefix <> text, width) <> "  " <> state
+    end)
+  end
+
+  defp flatten(nodes, indent, top?) do
+    count = length(nodes)
+
+    nodes
+    |> Enum.with_index(1)
+    |> Enum.flat_map(fn {node, i} ->
+      last? = i == count
+      {branch, further} = cond do
+        top? -> {"", ""}
+        last? -> {"└─ ", "   "}
+        true -> {"├─ ", "│  "}
+      end
+
+      [{indent <> branch, node.text, Map.get(node, :state)} | flatten(Map.get(node, :children, []), indent <> further, false)]
+    end)
+  end
+
+  @doc false
+  # Seconds with one decimal: "12.3 s".
+  @spec seconds(number()) :: String.t()
+  def seconds(ms), do: :erlang.float_to_binary(ms / 1000, decimals: 1) <> " s"
+
+  @doc false
+  # A duration for humans: "850 ms", "12.3 s", "4m 05s", "1h 02m".
+  @spec duration(number()) :: String.t()
+  def duration(ms) when ms < 1_000, do: "#{round(ms)} ms"
+  def duration(ms) when ms < 60_000, do: seconds(ms)
+
+  def duration(ms) when ms < 3_600_000 do
+    s = div(round(ms), 1000)
+    "#{div(s, 60)}m #{String.pad_leading(Integer.to_string(rem(s, 60)), 2, "0")}s"
+  end
+
+  def duration(ms) do
+    m = div(round(ms), 60_000)
+    "#{div(m, 60)}h #{String.pad_leading(Integer.to_string(rem(m, 60)), 2, "0")}m"
+  end
+
+  @doc false
+  # A mode as ArduPilot writes it: GUIDED, ALT_HOLD; "-" when unknown.
+  @spec mode(term()) :: String.t()
+  def mode(nil), do: "-"
+  def mode({:custom, n}), do: "custom #{n}"
+  def mode(mode) when is_atom(mode), do: mode |> Atom.to_string() |> String.upcase()
+  def mode(other), do: to_string(other)
+
+  @doc false
+  @spec battery(number() | nil) :: String.t()
+  def battery(nil), do: "-"
+  def battery(fraction), do: "#{round(fraction * 100)} %"
+
+  @doc false
+  # A ten-cell bar of a fraction: "[#######   ]".
+  @spec bar(number() | nil) :: String.t()
+  def bar(nil), do: "[          ]"
+
+  def bar(fraction) do
+    n = fraction |> max(0) |> min(1) |> Kernel.*(10) |> round()
+    "[" <> String.duplicate("#", n) <> String.duplicate(" ", 10 - n) <> "]"
+  end
+
+  @doc false
+  @spec position(number() | nil, number() | nil) :: String.t()
+  def position(lat, lon) when is_number(lat) and is_number(lon), do: "#{deg(lat)}, #{deg(lon)}"
+  def position(_, _), do: "-"
+
+  defp deg(x), do: :erlang.float_to_binary(x / 1, decimals: 6)
+
+  @doc false
+  @spec metres(number() | nil) :: String.t()
+  def metres(nil), do: "-"
+  def metres(m), do: :erlang.float_to_binary(m / 1, decimals: 1) <> " m"
+
+  # --- vehicles ------------------------------------------------------------------
+
+  @doc false
+  # The vehicles() table. Each row: %{id, type, mode, armed, battery, lat, lon,
+  # alt (above home), link: nil | %{received, lost}, seen_ms (since the last
+  # frame, or nil), lost?, activity}.
+  @spec vehicles([map()]) :: String.t()
+  def vehicles([]), do: "no vehicles known yet (a link may still be waiting for their first heartbeat)"
+
+  def vehicles(rows) do
+    table(
+      ["ID", "TYPE", "MODE", "ARMED", "BATTERY", "POSITION", "ALT", "LINK", "SEEN", "TASK"],
+      Enum.map(rows, fn r ->
+        [
+          Integer.to_string(r.id),
+          r.type || "-",
+          mode(r.mode),
+          if(r.armed, do: "yes", else: "no"),
+          battery(r.battery),
+          position(r.lat, r.lon),
+          metres(r.alt),
+          link(r.link),
+          seen(r.seen_ms, r.lost?),
+          r.activity || "-"
+        ]
+      end),
+      [0, 4, 6]
+    )
+  end
+
+  @doc false
+  # Link quality: the share of frames that arrived (sequence gaps are losses).
+  @spec link(map() | nil) :: String.t()
+  def link(nil), do: "-"
+  def link(%{received: 0}), do: "-"
+
+  def link(%{received: r, lost: l}) do
+    pct = floor(r * 100 / (r + l))
+    if l == 0, do: "100 %", else: "#{pct} % (#{l} lost)"
+  end
+
+  @doc false
+  @spec seen(number() | nil, boolean()) :: String.t()
+  def seen(nil, _lost?), do: "never"
+  def seen(ms, true), do: "LOST " <> duration(ms)
+  def seen(ms, false), do: duration(max(ms, 0)) <> " ago"
+
+  @doc false
+  # A MAV_TYPE name as words: :mav_type_quadrotor -> "quadrotor".
+  @spec type_name(non_neg_integer() | nil) :: String.t() | nil
+  def type_name(nil), do: nil
+
+  def type_name(n) do
+    case Dolphin.MAVLink.Ardupilotmega.enum_name(:mav_type, n) do
+      {:ok, atom} -> atom |> Atom.to_string() |> String.replace_prefix("mav_type_", "") |> String.replace("_", " ")
+      _ -> "type #{n}"
+    end
+  end
+
+  @doc false
+  # A task in one line: `17 mission "Survey Area"`.
+  @spec task_label(map()) :: String.t()
+  def task_label(%{task_id: id, kind: kind, name: name}), do: "#{id} #{kind} #{inspect(cut(name, 40))}"
+
+  defp cut(nil, _n), do: ""
+  defp cut(text, n), do: if(String.length(text) > n, do: String.slice(text, 0, n - 1) <> "…", else: text)
+
+  # --- tasks -----------------------------------------------------------------------
+
+  @doc false
+  # The tasks() tree. `groups`: the scripts and task runs of the console and
+  # the others found running, each %{text, state, runs: [run_id]}, plus
+  # `runs` (%{run, text}), `tasks` (Dolphin.Engine.tasks/0 entries) and
+  # task `states` (task_id => text). Runs of no group come last, alone.
+  @spec task_tree([map()], [map()], [map()], %{integer() => String.t()}) :: String.t()
+  def task_tree([], [], _tasks, _states), do: "no tasks running"
+
+  def task_tree(groups, runs, tasks, states) do
+    children = Enum.group_by(tasks, & &1.parent_id)
+    roots = Enum.group_by(Map.get(children, nil, []), & &1.run)
+    grouped = groups |> Enum.flat_map(& &1.runs) |> MapSet.new()
+
+    run_node = fn run ->
+      %{text: run.text, state: nil, children: Enum.map(Map.get(roots, run.run, []), &task_node(&1, children, states))}
+    end
+
+    by_id = Map.new(runs, &{&1.run, &1})
+
+    group_nodes =
+      Enum.map(groups, fn g ->
+        %{text: g.text, state: g.state, children: for(id <- g.runs, run = by_id[id], do: run_node.(run))}
+      end)
+
+    loose = for run <- runs, not MapSet.member?(grouped, run.run), do: run_node.(run)
+    tree(group_nodes ++ loose)
+  end
+
+  defp task_node(task, children, states) do
+    vehicle = if task.vehicle, do: "  vehicle #{task.vehicle}", else: ""
+
+    %{
+      text: task_label(task) <> vehicle,
+      state: Map.get(states, task.task_id, "running"),
+      children: children |> Map.get(task.task_id, []) |> Enum.sort_by(& &1.task_id) |> Enum.map(&task_node(&1, children, states))
+    }
+  end
+
+  @doc false
+  # What a task is doing, from the events about it (the console's event
+  # store keeps these per running task).
+  @spec task_state(String.t() | nil, map()) :: String.t()
+  def task_state(_old, %{event: :task_started, kind: kind}) when kind in [:wait_for, :condition], do: "waiting"
+  def task_state(_old, %{event: :task_started, vehicle: v}) when v != nil, do: "starting"
+  def task_state(_old, %{event: :task_started}), do: "running"
+  def task_state(_old, %{event: :condition_met, branch: b}) when is_integer(b), do: "branch #{b} chosen"
+  def task_state(_old, %{event: :condition_met}), do: "condition met"
+
+  def task_state(_old, %{event: :task_progress, progress: %{current: c, total: t} = p}) when is_integer(t) and t > 0,
+    do: "item #{c || 0}/#{t}" <> if(is_integer(p[:reached]) and p[:reached] > 0, do: ", reached #{p.reached}", else: "")
+
+  def task_state(_old, %{event: :task_progress, progress: p}) when is_map(p),
+    do: p |> Enum.sort() |> Enum.map_join(", ", fn {k, v} -> "#{k} #{inspect(v)}" end)
+
+  def task_state(old, _event), do: old || "running"
+
+  # --- events ----------------------------------------------------------------------
+
+  @doc false
+  # One event for an operator: "[   81.2 s] vehicle 1 armed"; `origin_ms` is
+  # the clock time shown as zero.
+  @spec event(map(), integer()) :: String.t()
+  def event(%{at_ms: at} = e, origin_ms), do: "[#{String.pad_leading(seconds(at - origin_ms), 9)}] " <> event_text(e)
+
+  @doc false
+  @spec event_text(map()) :: String.t()
+  def event_text(%{event: :message, text: text}), do: "message: #{text}"
+  def event_text(%{event: :vehicle_discovered} = e), do: "vehicle #{e.vehicle} discovered (#{e.type || "type unknown"})"
+  def event_text(%{event: :vehicle_lost} = e), do: "vehicle #{e.vehicle} lost"
+  def event_text(%{event: :vehicle_reconnected} = e), do: "vehicle #{e.vehicle} reconnected"
+  def event_text(%{event: :mode_changed} = e), do: "vehicle #{e.vehicle} mode #{mode(e.mode)}"
+  def event_text(%{event: :armed} = e), do: "vehicle #{e.vehicle} armed"
+  def event_text(%{event: :disarmed} = e), do: "vehicle #{e.vehicle} disarmed"
+  def event_text(%{event: :mission_item_reached} = e), do: "vehicle #{e.vehicle} reached item #{e.seq}"
+
+  def event_text(%{event: :mission_uploaded} = e),
+    do: "vehicle #{e.vehicle}: mission #{inspect(e.name)} uploaded (#{e.items} items, #{e.duration_ms} ms, #{e.retransmissions} retransmissions)"
+
+  def event_text(%{event: :picked} = e), do: "picked #{inspect(e.vehicles)} (#{e.requirement})"
+  def event_text(%{event: :pick_failed} = e), do: "pick failed: #{e.reason}"
+  def event_text(%{event: :released} = e), do: "released #{inspect(e.vehicles)}"
+  def event_text(%{event: :allocated} = e), do: "run #{e.run}: " <> Enum.map_join(Enum.sort(e.allocation), ", ", fn {t, v} -> "task #{t} on vehicle #{v}" end)
+
+  def event_text(%{event: :task_started} = e),
+    do: "task #{e.task_id} #{e.kind} #{inspect(cut(e.name, 60))} started" <> if(e.vehicle, do: " on vehicle #{e.vehicle}", else: "")
+
+  def event_text(%{event: :task_progress} = e), do: "task #{e.task_id} on vehicle #{e.vehicle}: " <> task_state(nil, e)
+
+  def event_text(%{event: :task_finished} = e),
+    do: "task #{e.task_id} #{e.kind} #{inspect(cut(e.name, 60))}: #{e.result}" <> if(e.reason, do: " (#{e.reason})", else: "")
+
+  def event_text(%{event: :condition_met} = e),
+    do: "task #{e.task_id}: #{e.condition} holds" <> if(e.branch, do: " (branch #{e.branch})", else: "")
+
+  def event_text(%{event: :signal_posted} = e), do: "signal #{inspect(e.key)} posted: #{inspect(e.value)}"
+  def event_text(%{event: :signal_consumed} = e), do: "signal #{inspect(e.key)} consumed: #{inspect(e.value)}"
+  def event_text(%{event: :script_started} = e), do: "script #{e.script} started"
+
+  def event_text(%{event: :script_finished} = e),
+    do: "script #{e.script}: #{e.result}" <> if(e.reason, do: " (#{e.reason})", else: "")
+
+  def event_text(%{event: name} = e), do: "#{name} " <> inspect(Map.drop(e, [:event, :at_ms]))
+
+  # --- one vehicle -------------------------------------------------------------------
+
+  @doc false
+  # STATUSTEXTs (newest first, as the vehicle state keeps them) oldest first,
+  # with their MAV_SEVERITY.
+  @spec messages([{integer(), String.t()}]) :: String.t()
+  def messages([]), do: "no messages"
+  def messages(texts), do: texts |> Enum.reverse() |> Enum.map_join("\n", fn {sev, text} -> String.pad_trailing(severity(sev), 9) <> " " <> text end)
+
+  @doc false
+  # The STATUSTEXTs of `now` that `before` did not have (both newest first,
+  # as a vehicle state keeps its last 20): the longest prefix of `now` whose
+  # rest is what `before` began with.
+  @spec new_texts(list(), list()) :: list()
+  def new_texts(before, now) do
+    k = Enum.find(0..length(now), fn k -> Enum.drop(now, k) == Enum.take(before, length(now) - k) end)
+    Enum.take(now, k)
+  end
+
+  @doc false
+  @spec severity(integer()) :: String.t()
+  def severity(n), do: Enum.at(~w(EMERGENCY ALERT CRITICAL ERROR WARNING NOTICE INFO DEBUG), n, "#{n}")
+
+  @doc false
+  # One line of the watch ticker, from a vehicle state (Dolphin.Vehicles.State
+  # plus :lost); `t_ms` is the real time since the watch began.
+  @spec ticker(map(), integer()) :: String.t()
+  def ticker(state, t_ms) do
+    pos = state.position || %{}
+    mission = state.mission || %{}
+
+    [
+      String.pad_leading(seconds(t_ms), 7),
+      String.pad_trailing(mode(state.mode), 9),
+      if(state.armed, do: "ARMED   ", else: "disarmed"),
+      bar(state.battery) <> " " <> String.pad_leading(battery(state.battery), 5),
+      position(pos[:lat], pos[:lon]),
+      "alt " <> String.pad_leading(metres(pos[:relative_alt]), 8),
+      "hdg " <> if(pos[:heading], do: String.pad_leading("#{round(pos[:heading])}", 3), else: "  -"),
+      "mission " <> mission_progress(mission),
+      to_string(state.landed || ""),
+      if(state.lost, do: "LOST", else: "")
+    ]
+    |> Enum.join("  ")
+    |> String.trim_trailing()
+  end
+
+  defp mission_progress(%{current: c, total: t}) when is_integer(t) and t > 0, do: "#{c || 0}/#{t}"
+  defp mission_progress(_), do: "-"
+
+  @doc false
+  # Mission items (MISSION_ITEM_INT structs) as the table Dolphin.Mission's
+  # inspect prints: seq, command, where, params.
+  @spec items([struct()]) :: String.t()
+  def items([]), do: "no mission items"
+
+  def items(items) do
+    Enum.map_join(items, "\n", fn item ->
+      name =
+        case {item.seq, Dolphin.MAVLink.Ardupilotmega.enum_name(:mav_cmd, item.command)} do
+          {0, _} -> "home"
+          {_, {:ok, atom}} -> atom |> Atom.to_string() |> String.replace_prefix("mav_cmd_", "") |> String.upcase()
+          _ -> "MAV_CMD #{item.command}"
+        end
+
+      where =
+        cond do
+          item.frame == 2 -> ""
+          item.frame in [0, 5] -> "#{deg(item.x / 1.0e7)}, #{deg(item.y / 1.0e7)}, #{num(item.z)} m AMSL  "
+          item.frame in [3, 6] -> "#{deg(item.x / 1.0e7)}, #{deg(item.y / 1.0e7)}, #{num(item.z)} m above home  "
+          true -> "x #{item.x}, y #{item.y}, z #{num(item.z)}, frame #{item.frame}  "
+        end
+
+      params = Enum.map_join([item.param1, item.param2, item.param3, item.param4], ", ", &num/1)
+      String.pad_leading(Integer.to_string(item.seq), 4) <> " " <> String.pad_trailing(name, 20) <> " " <> where <> "[" <> params <> "]"
+    end)
+  end
+
+  @doc false
+  @spec num(term()) :: String.t()
+  def num(:nan), do: "NaN"
+  def num(f) when is_float(f) and f == trunc(f) and abs(f) < 1.0e15, do: Integer.to_string(trunc(f))
+  def num(f) when is_float(f), do: Location.format(f, 6)
+  def num(other), do: to_string(other)
+end

@@ -1,0 +1,163 @@
+defmodule Mix.Tasks.Dolphin.Console do
+  @shortdoc "Starts Dolphin with no script, for an IEx console (iex -S mix dolphin.console)"
+
+  @moduledoc """
+  Starts the ground station with no script, for the IEx console helpers of
+  `Dolphin.Console`:
+
+      iex -S mix dolphin.console --sim 2 --speedup 20
+      iex -S mix dolphin.console --connect udpin:0.0.0.0:14550
+      iex -S mix dolphin.console --connect tcp:127.0.0.1:5760 --forward udpout:127.0.0.1:14551
+
+  It opens the links (or starts simulated vehicles on a local link), waits
+  until the simulated vehicles are known, prints a short banner and returns:
+  IEx takes over, with the helpers imported by the project's `.iex.exs`
+  (`vehicles()`, `tasks()`, `run("script.exs")`, `takeoff(1, 20)`, ... —
+  `h Dolphin.Console` lists them). The links and vehicles live until IEx
+  ends.
+
+  Run without IEx (`mix dolphin.console`), it starts nothing and says to use
+  `iex -S mix dolphin.console`.
+
+  ## Options
+
+    * `--connect ENDPOINT` — a link to vehicles (`udpin:0.0.0.0:14550`,
+      `udpout:HOST:PORT`, `tcp:HOST:PORT`); repeatable
+    * `--sim N` — start N simulated vehicles (`Dolphin.Sim`: ArduCopters with
+      a camera) on a local link (127.0.0.1)
+    * `--seed N` — the simulator's seed
+    * `--speedup K` — run K times faster than real time (`Dolphin.Clock`)
+    * `--tlog FILE` — record every MAVLink frame of the links to a telemetry log
+    * `--forward ENDPOINT` — copy all traffic to a `udpout` endpoint
+      (QGroundControl); repeatable
+
+  With neither `--connect` nor `--sim`, the links of the configuration are
+  used (`config :dolphin, links: [...]`), or if there are none the ground
+  station listens on `Dolphin.Link.default_endpoint/0` (`udpin:0.0.0.0:14550`).
+  """
+
+  use Mix.Task
+
+  @switches [connect: :keep, sim: :integer, seed: :integer, speedup: :float, tlog: :string, forward: :keep]
+
+  @usage "usage: iex -S mix dolphin.console [--connect ENDPOINT]... [--sim N] [--speedup K] [--seed N] [--tlog FILE] [--forward ENDPOINT]..."
+
+  @impl Mix.Task
+  def run(argv) do
+    opts =
+      case parse(argv) do
+        {:ok, opts} -> opts
+        {:error, message} -> Mix.raise("mix dolphin.console: #{message}\n#{@usage}")
+      end
+
+    unless iex?(), do: Mix.raise("mix dolphin.console starts a console for IEx: run it as `iex -S mix dolphin.console #{Enum.join(argv, " ")}`")
+
+    Mix.Task.run("app.start")
+
+    case start(opts) do
+      {:ok, banner} -> Mix.shell().info(banner)
+      {:error, message} -> Mix.raise("mix dolphin.console: #{message}")
+    end
+  end
+
+  defp iex?, do: Code.ensure_loaded?(IEx) and IEx.started?()
+
+  @doc false
+  # {:ok, opts} | {:error, message}
+  @spec parse([String.t()]) :: {:ok, keyword()} | {:error, String.t()}
+  def parse(argv) do
+    case OptionParser.parse(argv, strict: @switches) do
+      {opts, [], []} ->
+        cond do
+          opts[:sim] != nil and opts[:sim] < 1 -> {:error, "--sim must be a positive number of vehicles, got #{opts[:sim]}"}
+          opts[:speedup] != nil and opts[:speedup] <= 0 -> {:error, "--speedup must be positive, got #{opts[:speedup]}"}
+          true -> {:ok, opts}
+        end
+
+      {_, [arg | _], []} ->
+        {:error, "unexpected argument #{inspect(arg)} (the console runs no script: run(\"script.exs\") in it does)"}
+
+      {_, _, [{switch, value} | _]} ->
+        {:error, "bad option #{switch}#{if value, do: " " <> value, else: ""}"}
+    end
+  end
+
+  @doc """
+  Opens the links and starts the simulated vehicles of `opts` (parsed
+  options) in the running application; returns the banner to print.
+  """
+  @spec start(keyword()) :: {:ok, String.t()} | {:error, String.t()}
+  def start(opts) do
+    if k = opts[:speedup], do: Dolphin.Clock.set_speedup(k)
+    link_opts = Enum.reject([tlog: opts[:tlog], forward: Keyword.get_values(opts, :forward)], fn {_, v} -> v in [nil, []] end)
+    endpoints = Keyword.get_values(opts, :connect)
+
+    with {:ok, lines} <- connect_all(endpoints, link_opts),
+         {:ok, more} <- vehicles(opts, endpoints, link_opts) do
+      {:ok, banner(lines ++ more)}
+    end
+  end
+
+  defp vehicles(opts, endpoints, link_opts) do
+    cond do
+      n = opts[:sim] -> start_sim(n, opts, link_opts)
+      endpoints != [] or Application.get_env(:dolphin, :links, []) != [] -> {:ok, []}
+      true -> connect_all([Dolphin.Link.default_endpoint()], link_opts)
+    end
+  end
+
+  defp connect_all(endpoints, link_opts) do
+    Enum.reduce_while(endpoints, {:ok, []}, fn ep, {:ok, lines} ->
+      case Dolphin.Link.connect(ep, link_opts) do
+        {:ok, _pid} -> {:cont, {:ok, lines ++ ["link #{ep}"]}}
+        {:error, why} -> {:halt, {:error, "--connect #{ep}: #{why}"}}
+      end
+    end)
+  end
+
+  defp start_sim(n, opts, link_opts) do
+    name = {:dolphin_console_sim, System.unique_integer([:positive])}
+
+    case Dolphin.Link.connect("udpin:127.0.0.1:0", [name: name] ++ link_opts) do
+      {:ok, _link} ->
+        port = Dolphin.Link.Connection.port(name)
+        sim_opts = [count: n, gcs: {{127, 0, 0, 1}, port}, speedup: Dolphin.Clock.speedup(), seed: Keyword.get(opts, :seed, 1), camera: true]
+
+        case Dolphin.Sim.start(sim_opts) do
+          {:ok, sysids} ->
+            await_vehicles(sysids)
+            {:ok, ["#{n} simulated vehicle(s) #{inspect(sysids)} on 127.0.0.1:#{port}"]}
+
+          {:error, why} ->
+            {:error, "--sim: #{why}"}
+        end
+
+      {:error, why} ->
+        {:error, "--sim: cannot open a local link: #{why}"}
+    end
+  end
+
+  # The console opens once the fleet knows every simulated vehicle (or after 10 s).
+  defp await_vehicles(sysids, tries \\ 200) do
+    known = for %{vehicle: v} <- Dolphin.Fleet.vehicles(), v.type != nil, do: v.id
+
+    if tries > 0 and not Enum.all?(sysids, &(&1 in known)) do
+      Process.sleep(50)
+      await_vehicles(sysids, tries - 1)
+    end
+  end
+
+  defp banner(lines) do
+    k = Dolphin.Clock.speedup()
+    speed = if k == 1, do: "real time", else: "speed-up #{Dolphin.Console.Format.num(k / 1)}x"
+
+    Enum.join(
+      ["Dolphin console (#{speed})" | Enum.map(lines, &("  " <> &1))] ++
+        [
+          "Helpers (imported by .iex.exs; h Dolphin.Console for all): vehicles() tasks() run(\"script.exs\") stop(id) stop_all()",
+          "  arm(id) takeoff(id, alt) goto(id, lat, lon, alt) hold(id) land(id) rtl(id) mode(id, :guided) watch(id) messages(id) events(20)"
+        ],
+      "\n"
+    )
+  end
+end
