@@ -20,6 +20,7 @@ bench: bootstrap
 	MIX_ENV=prod ERL_FLAGS="+S 1:1" mix bench
 	MIX_ENV=prod mix run bench/mission_upload.exs
 	MIX_ENV=prod mix run bench/sim.exs
+	MIX_ENV=prod mix run bench/reaction.exs
 
 dialyzer: bootstrap
 	scripts/dialyzer
