@@ -32,7 +32,8 @@ defmodule Dolphin.Console.Events do
 
   @impl true
   def init(opts) do
-    Dolphin.Telemetry.subscribe()
+    # subscribe: false (tests) — the events are sent by hand.
+    if Keyword.get(opts, :subscribe, true), do: Dolphin.Telemetry.subscribe()
     {:ok, %{max: Keyword.get(opts, :max, @default_max), size: 0, buffer: :queue.new(), tasks: %{}, origin: Dolphin.Clock.now_ms()}}
   end
 

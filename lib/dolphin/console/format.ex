@@ -354,8 +354,8 @@ defmodule Dolphin.Console.Format do
       where =
         cond do
           item.frame == 2 -> ""
-          item.frame in [0, 5] -> "#{deg(item.x / 1.0e7)}, #{deg(item.y / 1.0e7)}, #{num(item.z)} m AMSL  "
-          item.frame in [3, 6] -> "#{deg(item.x / 1.0e7)}, #{deg(item.y / 1.0e7)}, #{num(item.z)} m above home  "
+          item.frame in [0, 5] -> "#{e7(item.x)}, #{e7(item.y)}, #{num(item.z)} m AMSL  "
+          item.frame in [3, 6] -> "#{e7(item.x)}, #{e7(item.y)}, #{num(item.z)} m above home  "
           true -> "x #{item.x}, y #{item.y}, z #{num(item.z)}, frame #{item.frame}  "
         end
 
@@ -363,6 +363,8 @@ defmodule Dolphin.Console.Format do
       String.pad_leading(Integer.to_string(item.seq), 4) <> " " <> String.pad_trailing(name, 20) <> " " <> where <> "[" <> params <> "]"
     end)
   end
+
+  defp e7(n), do: :erlang.float_to_binary(n / 1.0e7, decimals: 7)
 
   @doc false
   @spec num(term()) :: String.t()

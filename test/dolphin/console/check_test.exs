@@ -1,0 +1,87 @@
+defmodule Dolphin.Console.CheckTest do
+  use ExUnit.Case, async: true
+
+  alias Dolphin.Console.Check
+
+  @task %{task_id: 17, kind: :mission, name: "Survey Area", run: 14, vehicle: 1, parent_id: 15}
+
+  @known %{
+    1 => %{mavlink?: true, lost?: false, silent_ms: 100, task: @task},
+    2 => %{mavlink?: true, lost?: false, silent_ms: 100, task: nil},
+    3 => %{mavlink?: true, lost?: true, silent_ms: 23_400, task: nil},
+    7 => %{mavlink?: false, lost?: false, silent_ms: nil, task: nil}
+  }
+
+  describe "vehicle ids" do
+    test "a free vehicle may be told anything" do
+      for needs <- [:control, :link, :any], do: assert(Check.vehicle(2, @known, needs) == {:ok, :free})
+    end
+
+    test "not an id, an unknown id, no vehicles at all" do
+      assert {:error, "a vehicle is given by its system id" <> _ = why} = Check.vehicle("1", @known, :control)
+      assert why =~ ~s(got: "1")
+      assert Check.vehicle(-1, @known, :any) |> elem(0) == :error
+      assert {:error, "no vehicle 9: the known vehicles are 1, 2, 3, 7 (see vehicles())"} = Check.vehicle(9, @known, :any)
+      assert {:error, "no vehicle 9: no vehicle is known yet" <> _} = Check.vehicle(9, %{}, :control)
+    end
+
+    test "a lost vehicle is sent nothing, but what the ground station has of it can be read" do
+      assert {:error, why} = Check.vehicle(3, @known, :control)
+      assert why =~ "vehicle 3 is lost (nothing heard for 23.4 s): nothing sent"
+      assert {:error, _} = Check.vehicle(3, @known, :link)
+      assert {:ok, :free} = Check.vehicle(3, @known, :any)
+    end
+
+    test "a fake vehicle takes no MAVLink" do
+      assert {:error, "vehicle 7 is a fake vehicle of the test platform" <> _} = Check.vehicle(7, @known, :control)
+      assert {:ok, :free} = Check.vehicle(7, @known, :any)
+    end
+
+    test "a vehicle flying a task: commands say they would stop it, and with force they do" do
+      assert {:error, why} = Check.vehicle(1, @known, :control)
+      assert why =~ ~s[vehicle 1 is flying task 17 mission "Survey Area" (run 14): nothing sent]
+      assert why =~ "force: true to stop that task first"
+      assert Check.vehicle(1, @known, :control, true) == {:ok, {:stop_first, @task}}
+      # Reading from it disturbs nothing.
+      assert Check.vehicle(1, @known, :link) == {:ok, :free}
+      # A lost vehicle is refused even with force.
+      assert {:error, _} = Check.vehicle(3, @known, :control, true)
+    end
+  end
+
+  test "modes by any spelling" do
+    assert Check.mode(:guided) == {:ok, :guided}
+    assert Check.mode("BRAKE") == {:ok, :brake}
+    assert Check.mode(:ALT_HOLD) == {:ok, :alt_hold}
+    assert {:error, "a mode is a name" <> _} = Check.mode(4)
+    assert {:error, _} = Check.mode("not a mode!")
+    assert {:error, _} = Check.mode(nil)
+  end
+
+  test "pilot modes are refused in the air unless forced" do
+    assert {:error, why} = Check.pilot_mode(:loiter, true, false)
+    assert why =~ "LOITER is flown by a pilot's sticks"
+    assert why =~ "hold/1"
+    assert Check.pilot_mode(:loiter, true, true) == :ok
+    assert Check.pilot_mode(:loiter, false, false) == :ok
+    assert Check.pilot_mode(:brake, true, false) == :ok
+  end
+
+  test "numbers" do
+    assert Check.altitude(20) == {:ok, 20}
+    assert {:error, "an altitude is a number of metres above home" <> _} = Check.altitude(0)
+    assert {:error, _} = Check.altitude("20")
+    assert Check.position(40.1, -7.2, 30) == {:ok, {40.1, -7.2, 30}}
+    assert {:error, "latitude must be degrees in -90..90, got: 91"} = Check.position(91, 0, 0)
+    assert {:error, "longitude" <> _} = Check.position(0, -181, 0)
+    assert {:error, "altitude" <> _} = Check.position(0, 0, :high)
+    assert Check.count(5) == {:ok, 5}
+    assert {:error, _} = Check.count(0)
+  end
+
+  test "options" do
+    assert Check.options([force: true], [:force]) == {:ok, [force: true]}
+    assert {:error, "unknown option :forse; options are :force"} = Check.options([forse: true], [:force])
+    assert {:error, "options are a keyword list" <> _} = Check.options(:force, [:force])
+  end
+end

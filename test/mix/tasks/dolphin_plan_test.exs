@@ -1,0 +1,133 @@
+defmodule Mix.Tasks.Dolphin.PlanTest do
+  # One test sets the Mix shell (global): not async.
+  use ExUnit.Case, async: false
+
+  alias Dolphin.Mission
+  alias Mix.Tasks.Dolphin.Plan
+
+  doctest Mix.Tasks.Dolphin.Plan
+
+  @moduletag :tmp_dir
+  @fixtures Path.expand("../../fixtures/console", __DIR__)
+  @example Path.expand("../../../examples/single_vehicle.exs", __DIR__)
+
+  defp eval_source(source) do
+    {mission, _} = Code.eval_string("import Dolphin.DSL.Mission; import Dolphin.DSL.Values\n" <> source)
+    mission
+  end
+
+  describe "export" do
+    test "a script's mission, by name or by variable, as a plan QGroundControl reads", %{tmp_dir: dir} do
+      out = Path.join(dir, "survey.plan")
+      assert {:ok, text} = Plan.main(["export", @example, "Survey Area", out])
+      assert text == "wrote #{out}: mission \"Survey Area\" (simple_mission), 3 items after home (QGroundControl: Plan, Open)"
+
+      plan = :jiffy.decode(File.read!(out), [:return_maps])
+      assert plan["fileType"] == "Plan"
+      assert plan["mission"]["plannedHomePosition"] == [40.444233, -7.375234, 820.0]
+      assert Enum.map(plan["mission"]["items"], & &1["command"]) == [22, 16, 17]
+
+      by_var = Path.join(dir, "by_var.plan")
+      assert {:ok, _} = Plan.main(["export", @example, "simple_mission", by_var])
+      assert File.read!(by_var) == File.read!(out)
+    end
+
+    test "a file of missions; the plan's speeds", %{tmp_dir: dir} do
+      out = Path.join(dir, "hop.plan")
+      assert {:ok, _} = Plan.main(["export", Path.join(@fixtures, "missions.exs"), "Hop", out, "--cruise-speed", "12", "--hover-speed", "3"])
+      plan = :jiffy.decode(File.read!(out), [:return_maps])
+      assert {plan["mission"]["cruiseSpeed"], plan["mission"]["hoverSpeed"]} == {12.0, 3.0}
+    end
+
+    test "a mission without a home takes --home", %{tmp_dir: dir} do
+      file = Path.join(dir, "nohome.exs")
+      File.write!(file, "m = mission \"Away\" do\n  move 10, 0, 0\nend\n")
+      out = Path.join(dir, "away.plan")
+      assert {:error, why} = Plan.main(["export", file, "Away", out])
+      assert why =~ "--home supplies a home"
+      assert {:ok, _} = Plan.main(["export", file, "Away", out, "--home", "40.444233,-7.375234,820"])
+      assert {:ok, m} = Mission.from_plan(File.read!(out))
+      assert m.home == Dolphin.Geo.location(40.444233, -7.375234, 820.0)
+    end
+
+    test "no such mission: what the file defines, and what was skipped", %{tmp_dir: dir} do
+      assert {:error, why} = Plan.main(["export", @example, "Nope", Path.join(dir, "x.plan")])
+      assert why =~ ~s{no mission "Nope"; the file defines: "Return to base" (return_home), "Survey Area" (simple_mission)}
+      assert why =~ "single_vehicle.exs:27: skipped (not a definition)"
+      refute File.exists?(Path.join(dir, "x.plan"))
+    end
+  end
+
+  describe "import" do
+    test "as mission source that gives the plan's mission back" do
+      file = Path.join(@fixtures, "relative.plan")
+      assert {:ok, text} = Plan.main(["import", file])
+      assert text =~ ~r/^# relative.plan: 5 commands\nmission "relative" do\n  home location\(40.444233, -7.375234, 820.0\)\n/
+      assert text =~ "\n  speed 8.0, 1\n"
+      {:ok, expected} = Mission.from_plan(File.read!(file), name: "relative")
+      assert eval_source(text) == expected
+      assert {:ok, named} = Plan.main(["import", file, "--name", "Hill"])
+      assert named =~ ~s(mission "Hill" do)
+    end
+
+    test "QGroundControl's own plan, round trip through source" do
+      file = Path.expand("../../fixtures/plans/serra_da_estrela.plan", __DIR__)
+      assert {:ok, text} = Plan.main(["import", file])
+      {:ok, expected} = Mission.from_plan(File.read!(file), name: "serra_da_estrela")
+      assert Mission.to_items(eval_source(text)) == Mission.to_items(expected)
+    end
+
+    test "as items" do
+      assert {:ok, text} = Plan.main(["import", Path.join(@fixtures, "relative.plan"), "--items"])
+      lines = String.split(text, "\n")
+      assert length(lines) == 6
+      assert hd(lines) =~ ~r/^\s+0 home\s+40\.4442330, -7\.3752340, 820 m AMSL/
+      assert Enum.at(lines, 1) =~ ~r/^\s+1 NAV_TAKEOFF\s+40\.4442330, -7\.3752340, 20 m above home/
+      assert List.last(lines) =~ ~r/^\s+5 NAV_RETURN_TO_LAUNCH/
+    end
+
+    test "plans that cannot be read say why", %{tmp_dir: dir} do
+      assert {:error, why} = Plan.main(["import", Path.join(@fixtures, "complex.plan")])
+      assert why =~ ~s(only SimpleItem items are read)
+      garbage = Path.join(dir, "garbage.plan")
+      File.write!(garbage, "{not json")
+      assert {:error, why} = Plan.main(["import", garbage])
+      assert why =~ "garbage.plan: "
+      assert {:error, why} = Plan.main(["import", Path.join(dir, "none.plan")])
+      assert why =~ "cannot read"
+    end
+  end
+
+  test "list" do
+    assert {:ok, text} = Plan.main(["list", Path.join(@fixtures, "missions.exs")])
+
+    assert text ==
+             Enum.join(
+               [
+                 ~s|"Inspection" (inspection): 4 items after home|,
+                 ~s|"Leg 30-0" (tour[0]): 1 item after home|,
+                 ~s|"Leg 0-30" (tour[1]): 1 item after home|,
+                 ~s|"Hop" (line 13): 2 items after home|
+               ],
+               "\n"
+             )
+  end
+
+  test "bad usage" do
+    assert {:error, "no command given\nusage: mix dolphin.plan export" <> _} = Plan.main([])
+    assert {:error, "unknown command \"frob\"" <> _} = Plan.main(["frob"])
+    assert {:error, "export: wrong arguments" <> _} = Plan.main(["export", "a.exs"])
+    assert {:error, "bad option --bogus" <> _} = Plan.main(["import", "a.plan", "--bogus"])
+    assert {:error, "--home is no option of import" <> _} = Plan.main(["import", "a.plan", "--home", "1,2,3"])
+    assert {:error, "--home takes LAT,LON,ALT" <> _} = Plan.main(["export", @example, "x", "o.plan", "--home", "north"])
+    assert {:error, "speeds must be positive"} = Plan.main(["export", @example, "x", "o.plan", "--cruise-speed", "0"])
+  end
+
+  test "the task raises on errors and prints on success", %{tmp_dir: dir} do
+    assert_raise Mix.Error, ~r/mix dolphin.plan: no command given/, fn -> Plan.run([]) end
+    Mix.shell(Mix.Shell.Process)
+    on_exit(fn -> Mix.shell(Mix.Shell.IO) end)
+    Plan.run(["export", @example, "Return to base", Path.join(dir, "r.plan")])
+    assert_received {:mix_shell, :info, ["wrote " <> _]}
+  end
+end
