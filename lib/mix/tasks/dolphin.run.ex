@@ -26,9 +26,30 @@ defmodule Mix.Tasks.Dolphin.Run do
       `10m`, `1h`, `500ms`; a bare number is seconds): running tasks are
       stopped, vehicles hold, exit status 0 with a summary
     * `--events FILE` — write every event as a JSON line (schema: `Dolphin.Telemetry`)
-    * `--tlog FILE` — record every MAVLink frame of the links to a telemetry log
+    * `--tlog FILE` — where to record every MAVLink frame of the links (a
+      telemetry log); by default a run that talks MAVLink writes one to
+      `logs/DATE_TIME-SCRIPT.tlog`
+    * `--no-tlog` — no telemetry log
     * `--forward ENDPOINT` — copy all traffic to a `udpout` endpoint (QGroundControl); repeatable
     * `--quiet` — print only the script's messages, errors and the summary
+
+  ## Output
+
+  On a terminal, the events scroll above a status block redrawn twice a
+  second: one line per vehicle with its mode, armed state, battery bar,
+  height, mission progress and the task it flies (`Dolphin.Run.StatusBlock`).
+  Elsewhere (a pipe, a file, CI) the events are plain timestamped lines.
+
+  ## Watching a run in QGroundControl
+
+  QGroundControl listens on UDP 14550; give Dolphin another port and forward
+  to QGroundControl's:
+
+      mix dolphin.run examples/two_vehicles.exs --sim 2 --speedup 5 --forward udpout:127.0.0.1:14550
+
+  QGroundControl then sees every vehicle (and Dolphin's own heartbeat, system
+  255) and shows them on its map while the script flies them; keep the
+  speed-up low so that its displays keep up.
 
   With none of `--connect`, `--sim`, `--fake`, the links of the configuration
   are used (`config :dolphin, links: [...]`), or if there are none the ground
@@ -44,6 +65,10 @@ defmodule Mix.Tasks.Dolphin.Run do
   use Mix.Task
 
   alias Dolphin.Fleet.TestSource
+  alias Dolphin.Run.StatusBlock
+
+  # How often the status block is redrawn on a terminal (real time).
+  @redraw_ms 500
 
   @switches [
     connect: :keep,
@@ -54,11 +79,12 @@ defmodule Mix.Tasks.Dolphin.Run do
     for: :string,
     events: :string,
     tlog: :string,
+    no_tlog: :boolean,
     forward: :keep,
     quiet: :boolean
   ]
 
-  @usage "usage: mix dolphin.run SCRIPT [--connect ENDPOINT]... [--sim N | --fake N] [--speedup K] [--for DURATION] [--events FILE] [--tlog FILE] [--forward ENDPOINT]... [--quiet]"
+  @usage "usage: mix dolphin.run SCRIPT [--connect ENDPOINT]... [--sim N | --fake N] [--speedup K] [--for DURATION] [--events FILE] [--tlog FILE | --no-tlog] [--forward ENDPOINT]... [--quiet]"
 
   @impl Mix.Task
   def run(argv) do
@@ -174,11 +200,15 @@ defmodule Mix.Tasks.Dolphin.Run do
     Process.put(:dolphin_run_cleanup, [])
 
     try do
+      opts = Keyword.put(opts, :tlog, tlog_path(opts, script.file))
       start_outputs(opts, origin, out)
+      if opts[:tlog] && !opts[:quiet], do: IO.puts(out, "telemetry log: #{opts[:tlog]}")
 
       case start_vehicles(opts, out) do
         :ok ->
           result = Dolphin.Script.run(script, for: opts[:for_ms])
+          # The log and the status block end before the summary is printed below them.
+          stop_outputs()
           report(result, opts, out, err)
 
         {:error, message} ->
@@ -188,10 +218,35 @@ defmodule Mix.Tasks.Dolphin.Run do
     after
       # The outputs stop first (they show the run, not its teardown); then
       # the last started is the first stopped: the simulator before its link.
-      {outputs, others} = Enum.split_with(Process.delete(:dolphin_run_cleanup), &match?({:output, _}, &1))
-      Enum.each(outputs ++ others, fn {_, fun} -> fun.() end)
+      stop_outputs()
+      Enum.each(Process.delete(:dolphin_run_cleanup), fn {_, fun} -> fun.() end)
       Dolphin.Clock.set_speedup(previous_speedup)
     end
+  end
+
+  # Every run that talks MAVLink keeps a telemetry log unless told not to:
+  # logs/<date>-<time>-<script>.tlog, readable by pymavlink, MAVExplorer and
+  # `mix mavlink.decode --tlog`.
+  defp tlog_path(opts, file) do
+    cond do
+      opts[:no_tlog] || opts[:fake] ->
+        nil
+
+      path = opts[:tlog] ->
+        path
+
+      true ->
+        {{y, mo, d}, {h, mi, sec}} = :calendar.local_time()
+        stamp = :io_lib.format("~4..0B-~2..0B-~2..0B_~2..0B-~2..0B-~2..0B", [y, mo, d, h, mi, sec]) |> IO.iodata_to_binary()
+        File.mkdir_p!("logs")
+        Path.join("logs", "#{stamp}-#{Path.basename(file, ".exs")}.tlog")
+    end
+  end
+
+  defp stop_outputs do
+    {outputs, others} = Enum.split_with(Process.get(:dolphin_run_cleanup), &match?({:output, _}, &1))
+    Process.put(:dolphin_run_cleanup, others)
+    Enum.each(outputs, fn {_, fun} -> fun.() end)
   end
 
   # Something to undo when the run ends.
@@ -200,11 +255,16 @@ defmodule Mix.Tasks.Dolphin.Run do
   defp start_outputs(opts, origin, out) do
     parent = self()
 
+    # On a terminal the log scrolls above a status block redrawn in place;
+    # elsewhere (pipes, CI, files) it is plain timestamped lines.
+    live = !opts[:quiet] && terminal?(out)
+
     printer =
       spawn_link(fn ->
         Dolphin.Telemetry.subscribe()
         send(parent, {:printer_ready, self()})
-        print_loop(out, origin, opts[:quiet])
+        if live, do: Process.send_after(self(), :redraw, @redraw_ms)
+        print_loop(%{out: out, origin: origin, quiet: opts[:quiet], live: live, block: 0, tasks: %{}})
       end)
 
     receive do: ({:printer_ready, ^printer} -> :ok)
@@ -236,7 +296,7 @@ defmodule Mix.Tasks.Dolphin.Run do
     with :ok <- connect_all(Keyword.get_values(opts, :connect), link_opts) do
       cond do
         n = opts[:sim] -> start_sim(n, opts, link_opts, out)
-        n = opts[:fake] -> start_fake(n, out, "")
+        n = opts[:fake] -> start_fake(n, out)
         opts[:connect] != nil or Application.get_env(:dolphin, :links, []) != [] -> :ok
         true -> listen_default(link_opts, out)
       end
@@ -266,37 +326,32 @@ defmodule Mix.Tasks.Dolphin.Run do
   end
 
   defp start_sim(n, opts, link_opts, out) do
-    if Code.ensure_loaded?(Dolphin.Sim) do
-      name = {:dolphin_run_sim, System.unique_integer([:positive])}
+    name = {:dolphin_run_sim, System.unique_integer([:positive])}
 
-      case Dolphin.Link.connect("udpin:127.0.0.1:0", [name: name] ++ link_opts) do
-        {:ok, link} ->
-          defer(fn -> DynamicSupervisor.terminate_child(Dolphin.Link.Supervisor, link) end)
-          port = Dolphin.Link.Connection.port(name)
-          # Camera drones: every simulated vehicle carries a camera (component 100).
-          sim_opts = [count: n, gcs: {{127, 0, 0, 1}, port}, speedup: Dolphin.Clock.speedup(), seed: Keyword.get(opts, :seed, 1), camera: true]
+    case Dolphin.Link.connect("udpin:127.0.0.1:0", [name: name] ++ link_opts) do
+      {:ok, link} ->
+        defer(fn -> DynamicSupervisor.terminate_child(Dolphin.Link.Supervisor, link) end)
+        port = Dolphin.Link.Connection.port(name)
+        # Camera drones: every simulated vehicle carries a camera (component 100).
+        sim_opts = [count: n, gcs: {{127, 0, 0, 1}, port}, speedup: Dolphin.Clock.speedup(), seed: Keyword.get(opts, :seed, 1), camera: true]
 
-          # apply/3: this task compiles whether or not the simulator is part of the build.
-          case apply(Dolphin.Sim, :start, [sim_opts]) do
-            {:ok, sysids} ->
-              defer(fn -> apply(Dolphin.Sim, :stop, []) end)
-              await_vehicles(sysids)
-              IO.puts(out, "#{n} simulated vehicle(s) #{inspect(sysids)} on 127.0.0.1:#{port}")
-              :ok
+        case Dolphin.Sim.start(sim_opts) do
+          {:ok, sysids} ->
+            defer(fn -> stop_sim(sysids) end)
+            await_vehicles(sysids)
+            IO.puts(out, "#{n} simulated vehicle(s) #{inspect(sysids)} on 127.0.0.1:#{port}")
+            :ok
 
-            {:error, why} ->
-              {:error, "--sim: #{why}"}
-          end
+          {:error, why} ->
+            {:error, "--sim: #{why}"}
+        end
 
-        {:error, why} ->
-          {:error, "--sim: cannot open a local link: #{why}"}
-      end
-    else
-      start_fake(n, out, "Dolphin.Sim is not available: ")
+      {:error, why} ->
+        {:error, "--sim: cannot open a local link: #{why}"}
     end
   end
 
-  defp start_fake(n, out, why) do
+  defp start_fake(n, out) do
     name = :"dolphin_run_fakes_#{System.unique_integer([:positive])}"
     {:ok, source} = TestSource.start_link(name: name)
     Process.unlink(source)
@@ -305,8 +360,17 @@ defmodule Mix.Tasks.Dolphin.Run do
     :ok = Dolphin.Fleet.set_source(TestSource.source(name))
     defer(fn -> Dolphin.Fleet.set_source(previous) end)
     for id <- 1..n, do: TestSource.add(name, id, type: :uav)
-    IO.puts(out, "#{why}#{n} fake vehicle(s) [1..#{n}] of the test platform (no MAVLink: missions cannot fly on them)")
+    IO.puts(out, "#{n} fake vehicle(s) [1..#{n}] of the test platform (no MAVLink: missions cannot fly on them)")
     :ok
+  end
+
+  # The simulated vehicles end with the run: the ground station forgets them
+  # too (a later run in the same VM starts its own from system id 1 again).
+  defp stop_sim(sysids) do
+    Dolphin.Sim.stop()
+
+    for id <- sysids, pid = Dolphin.Vehicles.whereis(id),
+        do: DynamicSupervisor.terminate_child(Dolphin.Vehicles.Supervisor, pid)
   end
 
   # Simulated vehicles announce themselves within a heartbeat; the script
@@ -340,35 +404,76 @@ defmodule Mix.Tasks.Dolphin.Run do
 
   # --- live output: one line per event worth an operator's eye ---
 
-  defp print_loop(out, origin, quiet) do
+  # (`mix` runs without a shell, where OTP 25 cannot ask the terminal itself:
+  # what our standard output is connected to tells.)
+  defp terminal?(:stdio) do
+    tty? =
+      case File.read_link("/proc/self/fd/1") do
+        {:ok, "/dev/pts/" <> _} -> true
+        {:ok, "/dev/tty" <> _} -> true
+        _ -> false
+      end
+
+    tty? and System.get_env("TERM") not in [nil, "", "dumb"]
+  end
+
+  defp terminal?(_device), do: false
+
+  defp print_loop(p) do
     receive do
       :ready ->
-        print_loop(out, origin, quiet)
+        print_loop(p)
+
+      :redraw ->
+        Process.send_after(self(), :redraw, @redraw_ms)
+        print_loop(draw_block(p))
 
       :stop ->
-        drain(out, origin, quiet)
+        drain(p)
 
       {:dolphin, :events, event} ->
-        print(out, origin, quiet, event)
-        print_loop(out, origin, quiet)
+        print_loop(print(track(p, event), event))
     end
   end
 
-  defp drain(out, origin, quiet) do
+  defp drain(p) do
     receive do
-      {:dolphin, :events, event} ->
-        print(out, origin, quiet, event)
-        drain(out, origin, quiet)
+      {:dolphin, :events, event} -> drain(print(track(p, event), event))
     after
-      0 -> :ok
+      0 -> p
     end
   end
 
-  defp print(out, origin, quiet, event) do
-    case line(event, quiet) do
-      nil -> :ok
-      text -> IO.puts(out, "[#{String.pad_leading(seconds(event.at_ms - origin), 9)}] #{text}")
+  defp print(p, event) do
+    case line(event, p.quiet) do
+      nil ->
+        p
+
+      text ->
+        log = "[#{String.pad_leading(seconds(event.at_ms - p.origin), 9)}] #{text}\n"
+        # The block is erased, the line written where it was, and the block drawn again below.
+        if p.live, do: draw_block(%{p | block: 0}, [StatusBlock.erase(p.block), log]), else: IO.write(p.out, log) && p
     end
+  end
+
+  # Which task each vehicle flies, for the status block.
+  defp track(p, %{event: :task_started, vehicle: v, task_id: id, name: name}) when v != nil, do: put_in(p.tasks[v], {id, name})
+
+  defp track(p, %{event: :task_finished, vehicle: v, task_id: id}) when v != nil do
+    case p.tasks do
+      %{^v => {^id, _}} -> %{p | tasks: Map.delete(p.tasks, v)}
+      _ -> p
+    end
+  end
+
+  defp track(p, _event), do: p
+
+  defp draw_block(p, before \\ []) do
+    vehicles = for %{vehicle: v} <- Dolphin.Fleet.vehicles(), do: v
+    tasks = Map.new(p.tasks, fn {v, {_id, name}} -> {v, name} end)
+    lines = StatusBlock.render(vehicles, tasks, Dolphin.Clock.now_ms() - p.origin)
+    IO.write(p.out, [before, StatusBlock.redraw(p.block, lines)])
+    %{p | block: length(lines)}
   end
 
   defp line(%{event: :message, text: text}, _quiet), do: "message: #{text}"

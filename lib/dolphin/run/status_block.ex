@@ -1,0 +1,69 @@
+defmodule Dolphin.Run.StatusBlock do
+  @moduledoc """
+  The live status block of `mix dolphin.run` on a terminal: one line per
+  vehicle — mode, armed, battery bar, mission progress and the task it flies —
+  redrawn in place under the scrolling log of events.
+
+      iex> v = %Dolphin.Fleet.Vehicle{id: 2, mode: :auto, armed?: true, battery: 0.72, mission_progress: {3, 42}, relative_altitude: 380.4}
+      iex> Dolphin.Run.StatusBlock.vehicle_line(v, "Survey Area 1")
+      "  2  AUTO      armed     [#######---]  72 %  alt  380 m  item  3/42    Survey Area 1"
+
+  `render/3` draws the block (a header and the lines) and `redraw/2` gives the
+  ANSI sequence that replaces a block of `n` lines with a new one.
+  """
+
+  alias Dolphin.Fleet.Vehicle
+
+  @bar 10
+
+  @doc "The block's lines for these vehicles; `tasks` maps a vehicle id to the name of the task it flies; `clock_ms` is the run's clock time."
+  @spec render([Vehicle.t()], %{optional(non_neg_integer()) => String.t()}, non_neg_integer()) :: [String.t()]
+  def render(vehicles, tasks, clock_ms) do
+    header = "── #{clock(clock_ms)} ── #{length(vehicles)} vehicle(s) " <> String.duplicate("─", 40)
+    [header | Enum.map(Enum.sort_by(vehicles, & &1.id), &vehicle_line(&1, Map.get(tasks, &1.id)))]
+  end
+
+  @doc "One vehicle's line."
+  @spec vehicle_line(Vehicle.t(), String.t() | nil) :: String.t()
+  def vehicle_line(%Vehicle{} = v, task) do
+    mode = v.mode |> mode_name() |> String.pad_trailing(9)
+    state = if(not v.connected?, do: "LOST", else: if(v.armed?, do: "armed", else: "disarmed")) |> String.pad_trailing(9)
+    {reached, total} = v.mission_progress
+    item = if total > 0, do: "item #{String.pad_leading(Integer.to_string(reached), 2)}/#{total}", else: "no mission"
+    alt = if v.relative_altitude, do: "alt #{String.pad_leading(Integer.to_string(round(v.relative_altitude)), 4)} m", else: "alt    ? m"
+
+    line = "#{String.pad_leading(Integer.to_string(v.id), 3)}  #{mode} #{state} #{battery(v.battery)}  #{alt}  #{String.pad_trailing(item, 10)}"
+    if task, do: line <> "  " <> task, else: String.trim_trailing(line)
+  end
+
+  @doc "The ANSI text that erases the last `previous` lines and writes `lines` in their place."
+  @spec redraw(non_neg_integer(), [String.t()]) :: iodata()
+  def redraw(previous, lines) do
+    up = if previous > 0, do: "\e[#{previous}A", else: ""
+    [up, "\r\e[J", Enum.map(lines, &[&1, ?\n])]
+  end
+
+  @doc "The ANSI text that erases the last `n` lines (before the log goes on)."
+  @spec erase(non_neg_integer()) :: iodata()
+  def erase(0), do: []
+  def erase(n), do: ["\e[#{n}A", "\r\e[J"]
+
+  defp battery(nil), do: "[" <> String.duplicate("?", @bar) <> "]    ?  "
+
+  defp battery(fraction) do
+    full = fraction |> Kernel.*(@bar) |> round() |> max(0) |> min(@bar)
+    percent = fraction |> Kernel.*(100) |> round() |> Integer.to_string() |> String.pad_leading(3)
+    "[" <> String.duplicate("#", full) <> String.duplicate("-", @bar - full) <> "] #{percent} %"
+  end
+
+  defp mode_name(nil), do: "?"
+  defp mode_name({:custom, n}), do: "mode #{n}"
+  defp mode_name(mode), do: mode |> Atom.to_string() |> String.upcase()
+
+  defp clock(ms) do
+    s = div(ms, 1000)
+    "#{div(s, 3600)}:#{pad(rem(div(s, 60), 60))}:#{pad(rem(s, 60))}"
+  end
+
+  defp pad(n), do: n |> Integer.to_string() |> String.pad_leading(2, "0")
+end
