@@ -6,7 +6,7 @@ defmodule Dolphin.Run.StatusBlock do
 
       iex> v = %Dolphin.Fleet.Vehicle{id: 2, mode: :auto, armed?: true, battery: 0.72, mission_progress: {3, 42}, relative_altitude: 380.4}
       iex> Dolphin.Run.StatusBlock.vehicle_line(v, "Survey Area 1")
-      "  2  AUTO      armed     [#######---]  72 %  alt  380 m  item  3/42    Survey Area 1"
+      "  2  AUTO      armed     [#######---]  72 %  alt  380 m  item  3/42  Survey Area 1"
 
   `render/3` draws the block (a header and the lines) and `redraw/2` gives the
   ANSI sequence that replaces a block of `n` lines with a new one.

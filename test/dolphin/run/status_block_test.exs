@@ -1,0 +1,30 @@
+defmodule Dolphin.Run.StatusBlockTest do
+  use ExUnit.Case, async: true
+
+  alias Dolphin.Fleet.Vehicle
+  alias Dolphin.Run.StatusBlock
+
+  doctest StatusBlock
+
+  test "a header with the clock and one line per vehicle, by id; unknowns shown as such" do
+    vehicles = [
+      %Vehicle{id: 3, mode: :brake, armed?: true, battery: 0.05, mission_progress: {0, 0}, relative_altitude: 12.0},
+      %Vehicle{id: 1, connected?: false}
+    ]
+
+    [header, one, three] = StatusBlock.render(vehicles, %{3 => "Return to base"}, 3_723_000)
+    assert header =~ "1:02:03"
+    assert header =~ "2 vehicle(s)"
+    assert one =~ ~r/^  1  \?\s+LOST\s+\[\?{10}\]/
+    assert three =~ "BRAKE"
+    assert three =~ "[#---------]   5 %"
+    assert three =~ "no mission"
+    assert String.ends_with?(three, "Return to base")
+  end
+
+  test "redraw goes up over the old block and clears it" do
+    assert IO.iodata_to_binary(StatusBlock.redraw(3, ["a", "b"])) == "\e[3A\r\e[Ja\nb\n"
+    assert IO.iodata_to_binary(StatusBlock.redraw(0, ["a"])) == "\r\e[Ja\n"
+    assert StatusBlock.erase(0) == []
+  end
+end
