@@ -258,7 +258,10 @@ defmodule Dolphin.Console.Runs do
   defp task_worker(server, task, opts) do
     fleet = Keyword.get(opts, :fleet, Fleet)
 
-    case choose(fleet, opts[:on]) do
+    case if(vehicles?(task), do: choose(fleet, opts[:on]), else: {:ok, []}) do
+      {:ok, []} ->
+        start_run(server, fleet, task)
+
       {:ok, ids} ->
         case Fleet.pick(fleet, self(), id: ids, count: length(ids), timeout: 0) do
           {:ok, _set} -> start_run(server, fleet, task)
@@ -309,6 +312,12 @@ defmodule Dolphin.Console.Runs do
     after
       0 -> :ok
     end
+  end
+
+  # Whether a task has platform tasks (that need vehicles).
+  defp vehicles?(task) do
+    t = Dolphin.Engine.Task.new!(task)
+    match?(%Dolphin.Engine.PlatformTask{}, t) or Enum.any?(Dolphin.Engine.Task.children(t), &vehicles?/1)
   end
 
   # The vehicles a task may use: those asked for, if they are free, else every free one.
