@@ -182,7 +182,7 @@ defmodule Dolphin.Console do
   def stop_all do
     work = Snapshot.work()
     console = for run <- work.console, match?({:ok, _}, Runs.stop(run.id)), do: "run #{run.id} (#{run.label})"
-    scripts = for runner <- work.scripts, do: Dolphin.Script.stop(runner, :operator) && "script #{inspect(runner)}"
+    scripts = for runner <- work.scripts, :ok == Dolphin.Script.stop(runner, :operator), do: "script #{inspect(runner)}"
     loose = for run <- work.loose, Engine.stop(run, :operator) == :ok, do: "run #{run}"
 
     case console ++ scripts ++ loose do
@@ -229,6 +229,12 @@ defmodule Dolphin.Console do
         true -> arm_with_retries(id, Keyword.get(opts, :wait, 30_000))
       end
     end)
+  end
+
+  defp arm_with_retries(id, wait_ms) when not is_integer(wait_ms) or wait_ms < 0 do
+    {:error, why} = Check.ms(wait_ms, :wait)
+    say("vehicle #{id}: " <> why)
+    :error
   end
 
   defp arm_with_retries(id, wait_ms) do
@@ -515,18 +521,15 @@ defmodule Dolphin.Console do
   end
 
   defp tick(id, texts, reader, start, deadline, every) do
-    now = System.monotonic_time(:millisecond)
-
     case Vehicles.state(id) do
       {:ok, state} ->
         for {_sev, text} <- Enum.reverse(Format.new_texts(texts, state.status_texts)), do: say("        >> " <> text)
-        say(Format.ticker(state, now - start))
+        say(Format.ticker(state, System.monotonic_time(:millisecond) - start))
+        next = min(System.monotonic_time(:millisecond) + every, deadline)
 
-        receive do
-          {:watch_key, ^reader, _line} -> "key pressed"
-        after
-          max(min(every, deadline - now), 0) ->
-            if System.monotonic_time(:millisecond) >= deadline, do: "timeout", else: tick(id, state.status_texts, reader, start, deadline, every)
+        case pause(reader, next) do
+          :key -> "key pressed"
+          {:continue, reader} -> if next >= deadline, do: "timeout", else: tick(id, state.status_texts, reader, start, deadline, every)
         end
 
       {:error, _} ->
@@ -534,11 +537,23 @@ defmodule Dolphin.Console do
     end
   end
 
+  # Waits until `until` (monotonic ms) or a line typed on the console.
+  defp pause(reader, until) do
+    receive do
+      {:watch_key, ^reader, line} when is_binary(line) -> :key
+      # No keyboard (input closed): only the timeout ends the watch.
+      {:watch_key, ^reader, _eof} -> pause(nil, until)
+    after
+      max(until - System.monotonic_time(:millisecond), 0) -> {:continue, reader}
+    end
+  end
+
   @doc "The vehicle's last STATUSTEXT messages (at most 20), oldest first, with their severity."
   @spec messages(vehicle_id()) :: printed()
   def messages(id) do
     command(id, :any, [], [], fn state, _ ->
-      if state.lost, do: say("vehicle #{id} is lost; its last messages:")
+      # Dolphin.Vehicles.state/1 adds :lost to the state struct.
+      if Map.get(state, :lost), do: say("vehicle #{id} is lost; its last messages:")
       say(Format.messages(state.status_texts))
     end)
   end
@@ -605,7 +620,7 @@ defmodule Dolphin.Console do
     cond do
       not Enum.any?(Engine.tasks(), &(&1.task_id == task_id)) -> :ok
       System.monotonic_time(:millisecond) > deadline -> {:error, "task #{task_id} did not stop in time: nothing sent"}
-      true -> Process.sleep(20) && await_gone(task_id, deadline)
+      true -> Process.sleep(20) == :ok and await_gone(task_id, deadline)
     end
   end
 

@@ -113,6 +113,12 @@ defmodule Dolphin.ConsoleTest do
     assert out(io) =~ "mode: a mode is a name"
     arm(1, wiat: 0)
     assert out(io) =~ "unknown option :wiat; options are :force, :wait"
+    arm(1, wait: :forever)
+    assert out(io) =~ "vehicle 1: wait: takes milliseconds"
+    mode(1, "HOVER_LIKE_A_BEE")
+    assert out(io) =~ ~s(mode: no flight mode is called "HOVER_LIKE_A_BEE")
+    mode(1, :manual)
+    assert out(io) =~ ~r/vehicle 1: mode MANUAL refused: .*no mode :manual on this vehicle/
 
     :ok = Sim.stop(2)
     Wait.until(fn -> match?({:ok, %{lost: true}}, Vehicles.state(2)) end, 500)

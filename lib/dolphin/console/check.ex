@@ -66,9 +66,16 @@ defmodule Dolphin.Console.Check do
   def mode(mode) when is_binary(mode) do
     name = mode |> String.trim() |> String.downcase()
 
-    if name =~ ~r/^[a-z][a-z0-9_]*$/,
-      do: {:ok, String.to_atom(name)},
-      else: {:error, "a mode is a name such as :guided or \"BRAKE\", got: #{inspect(mode)}"}
+    # Every mode's atom exists once the mode tables (Dolphin.Vehicles.Modes) are loaded.
+    Code.ensure_loaded(Dolphin.Vehicles.Modes)
+
+    if name =~ ~r/^[a-z][a-z0-9_]*$/ do
+      {:ok, String.to_existing_atom(name)}
+    else
+      {:error, "a mode is a name such as :guided or \"BRAKE\", got: #{inspect(mode)}"}
+    end
+  rescue
+    ArgumentError -> {:error, "no flight mode is called #{inspect(mode)}"}
   end
 
   def mode(other), do: {:error, "a mode is a name such as :guided or \"BRAKE\", got: #{inspect(other)}"}
@@ -104,6 +111,12 @@ defmodule Dolphin.Console.Check do
       true -> {:ok, {lat, lon, alt}}
     end
   end
+
+  @doc false
+  # A wait or a period in milliseconds.
+  @spec ms(term(), atom()) :: {:ok, non_neg_integer()} | {:error, String.t()}
+  def ms(n, _what) when is_integer(n) and n >= 0, do: {:ok, n}
+  def ms(n, what), do: {:error, "#{what}: takes milliseconds (an integer, 0 or more), got: #{inspect(n)}"}
 
   @doc false
   @spec count(term()) :: {:ok, pos_integer()} | {:error, String.t()}

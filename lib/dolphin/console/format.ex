@@ -327,7 +327,7 @@ defmodule Dolphin.Console.Format do
       "hdg " <> if(pos[:heading], do: String.pad_leading("#{round(pos[:heading])}", 3), else: "  -"),
       "mission " <> mission_progress(mission),
       to_string(state.landed || ""),
-      if(state.lost, do: "LOST", else: "")
+      if(Map.get(state, :lost), do: "LOST", else: "")
     ]
     |> Enum.join("  ")
     |> String.trim_trailing()

@@ -36,7 +36,7 @@ defmodule Dolphin.Console.Snapshot do
   def known(vehicles \\ vehicles(), now_ms \\ Clock.now_ms()) do
     Map.new(vehicles, fn v ->
       silent = if v.state && v.state.link.last_seen_ms, do: now_ms - v.state.link.last_seen_ms
-      lost? = if v.state, do: v.state.lost == true, else: v.fleet != nil and not v.fleet.connected?
+      lost? = if v.state, do: Map.get(v.state, :lost) == true, else: v.fleet != nil and not v.fleet.connected?
       {v.id, %{mavlink?: v.state != nil, lost?: lost?, silent_ms: silent, task: v.task}}
     end)
   end
@@ -62,7 +62,7 @@ defmodule Dolphin.Console.Snapshot do
       alt: pos[:relative_alt],
       link: s.link,
       seen_ms: s.link.last_seen_ms && now_ms - s.link.last_seen_ms,
-      lost?: s.lost == true,
+      lost?: Map.get(s, :lost) == true,
       activity: activity(v, console_runs)
     }
   end

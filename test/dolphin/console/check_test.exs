@@ -55,6 +55,7 @@ defmodule Dolphin.Console.CheckTest do
     assert Check.mode(:ALT_HOLD) == {:ok, :alt_hold}
     assert {:error, "a mode is a name" <> _} = Check.mode(4)
     assert {:error, _} = Check.mode("not a mode!")
+    assert {:error, "no flight mode is called \"warp_drive_xyz\""} = Check.mode("warp_drive_xyz")
     assert {:error, _} = Check.mode(nil)
   end
 
@@ -75,6 +76,8 @@ defmodule Dolphin.Console.CheckTest do
     assert {:error, "latitude must be degrees in -90..90, got: 91"} = Check.position(91, 0, 0)
     assert {:error, "longitude" <> _} = Check.position(0, -181, 0)
     assert {:error, "altitude" <> _} = Check.position(0, 0, :high)
+    assert Check.ms(0, :wait) == {:ok, 0}
+    assert {:error, "wait: takes milliseconds" <> _} = Check.ms(-1, :wait)
     assert Check.count(5) == {:ok, 5}
     assert {:error, _} = Check.count(0)
   end
