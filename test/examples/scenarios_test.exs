@@ -20,7 +20,8 @@ defmodule Dolphin.Examples.ScenariosTest do
     events = Path.join(dir, "#{name}.jsonl")
     {:ok, out} = StringIO.open("")
     {:ok, err} = StringIO.open("")
-    argv = [Path.join(@examples, "#{name}.exs"), "--sim", "#{sim}", "--speedup", "50", "--events", events, "--quiet"] ++ extra
+    tlog = Path.join(dir, "#{name}.tlog")
+    argv = [Path.join(@examples, "#{name}.exs"), "--sim", "#{sim}", "--speedup", "50", "--events", events, "--tlog", tlog, "--quiet"] ++ extra
     code = Run.main(argv, out: out, err: err)
     GroundStation.forget_vehicles()
     output = elem(StringIO.contents(out), 1) <> elem(StringIO.contents(err), 1)
