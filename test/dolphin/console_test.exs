@@ -172,7 +172,7 @@ defmodule Dolphin.ConsoleTest do
     assert out(io) =~ ~r/INFO\s+Arming motors/
     events(50, vehicle: 1)
     text = out(io)
-    assert text =~ ~r/\[\s+\d+\.\d s\] vehicle 1 armed/
+    assert text =~ ~r/\[\s*\d+\.\d s\] vehicle 1 armed/
     assert text =~ "vehicle 1 mode LAND"
     refute text =~ "vehicle 2"
     events(2, event: [:armed, :disarmed])
