@@ -3,12 +3,21 @@ defmodule Dolphin.Console do
   Helpers to watch and steer a fleet from IEx.
 
       $ iex -S mix dolphin.console --sim 2 --speedup 20
-      iex> vehicles()
-      iex> takeoff(1, 20)
-      iex> goto(1, 40.4447, -7.3752, 30)
-      iex> run("examples/single_vehicle.exs")
-      iex> tasks()
-      iex> stop(12)
+      iex(1)> run("examples/single_vehicle.exs")
+      run 1 started: script examples/single_vehicle.exs (tasks() shows it, stop(1) stops it)
+      iex(2)> takeoff(2, 20)
+      vehicle 2: mode GUIDED accepted
+      vehicle 2: arm accepted
+      vehicle 2: take-off to 20.0 m above home accepted
+      iex(3)> vehicles()
+      ID  TYPE       MODE    ARMED  BATTERY  POSITION                  ALT  LINK   SEEN        TASK
+       1  quadrotor  AUTO    yes       52 %  40.444436, -7.374839  394.4 m  100 %  149 ms ago  7 mission "Survey Area" (run 2)
+       2  quadrotor  GUIDED  yes       84 %  40.444233, -7.375057   20.0 m  100 %  110 ms ago  -
+      iex(4)> land(1)
+      vehicle 1 is flying task 7 mission "Survey Area" (run 2): nothing sent. Add force: true to stop that task first (...)
+      iex(5)> stop(1)
+      stopping run 1 (script examples/single_vehicle.exs): its tasks stop and their vehicles hold; its end is printed when it comes
+      run 1 script examples/single_vehicle.exs: stopped: its tasks were stopped, vehicles hold (after 3m 39s of clock time)
 
   The project's `.iex.exs` imports this module into every `iex -S mix`
   session; elsewhere, `import Dolphin.Console`. `h vehicles` (or any helper)
