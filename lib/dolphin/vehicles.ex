@@ -104,7 +104,10 @@ defmodule Dolphin.Vehicles do
   Sends a COMMAND_LONG (`MAV_CMD` number or name, e.g. `:mav_cmd_do_set_mode`)
   with up to 7 parameters and waits for the vehicle's answer.
   """
-  @spec command(byte(), atom() | non_neg_integer(), [number()], command_opts()) :: {:ok, :accepted} | {:error, CommandError.t()}
+  @typedoc "A command parameter: a number, or `:nan`, `:infinity`, `:neg_infinity` (NaN is MAVLink's \"unset\", e.g. keep the current yaw)."
+  @type param :: number() | :nan | :infinity | :neg_infinity
+
+  @spec command(byte(), atom() | non_neg_integer(), [param()], command_opts()) :: {:ok, :accepted} | {:error, CommandError.t()}
   def command(sysid, command, params \\ [], opts \\ []) when length(params) <= 7 do
     params = Enum.map(params, &param!/1) ++ List.duplicate(0.0, 7 - length(params))
     run(sysid, command, %{params: params, int: false, frame: 0}, opts)
@@ -115,7 +118,7 @@ defmodule Dolphin.Vehicles do
   degrees, `alt` in metres) in `frame` (default
   MAV_FRAME_GLOBAL_RELATIVE_ALT_INT, 6).
   """
-  @spec command_int(byte(), atom() | non_neg_integer(), [number()], {number(), number(), number()}, command_opts()) ::
+  @spec command_int(byte(), atom() | non_neg_integer(), [param()], {number(), number(), number()}, command_opts()) ::
           {:ok, :accepted} | {:error, CommandError.t()}
   def command_int(sysid, command, params, {lat, lon, alt}, opts \\ []) when length(params) <= 4 do
     params = Enum.map(params, &param!/1) ++ List.duplicate(0.0, 4 - length(params))

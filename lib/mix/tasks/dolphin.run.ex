@@ -11,6 +11,10 @@ defmodule Mix.Tasks.Dolphin.Run do
   The script is read and compiled first: a syntax error or an unknown word is
   reported with file and line before anything is sent to a vehicle.
 
+  Under IEx (`iex -S mix dolphin.run SCRIPT ...`) the script runs in the
+  background and the console stays usable: `Dolphin.Console`'s `vehicles()`,
+  `tasks()`, `stop/1`, and `answer/1` for the script's `ask`.
+
   ## Options
 
     * `--connect ENDPOINT` — a link to vehicles (`udpin:0.0.0.0:14550`,
@@ -88,15 +92,27 @@ defmodule Mix.Tasks.Dolphin.Run do
 
   @impl Mix.Task
   def run(argv) do
-    case main(argv) do
-      0 -> :ok
-      code -> exit({:shutdown, code})
+    if iex?() do
+      # `iex -S mix dolphin.run ...`: the script runs in the background and the
+      # console stays usable (`import Dolphin.Console`: vehicles(), tasks(),
+      # stop/1, answer/1 for the script's `ask`). Plain log lines: a status
+      # block redrawn in place would fight the prompt.
+      {:ok, _} = Task.start(fn -> main(argv, plain: true, ask: &Dolphin.Console.Runs.ask/1) end)
+      :ok
+    else
+      case main(argv) do
+        0 -> :ok
+        code -> exit({:shutdown, code})
+      end
     end
   end
 
+  defp iex?, do: Code.ensure_loaded?(IEx) and IEx.started?()
+
   @doc """
   Does the work of the task and returns the exit status. `io` options:
-  `:out` and `:err` (devices, default `:stdio` and `:stderr`).
+  `:out` and `:err` (devices, default `:stdio` and `:stderr`), `:plain`
+  (never the status block) and `:ask` (the script's `ask/1`).
   """
   @spec main([String.t()], keyword()) :: 0 | 1 | 2
   def main(argv, io \\ []) do
@@ -111,7 +127,7 @@ defmodule Mix.Tasks.Dolphin.Run do
           {:ok, script} ->
             try do
               Mix.Task.run("app.start")
-              run_script(script, opts, out, err)
+              run_script(script, opts ++ Keyword.take(io, [:plain, :ask]), out, err)
             after
               Dolphin.Script.purge(script)
             end
@@ -206,7 +222,7 @@ defmodule Mix.Tasks.Dolphin.Run do
 
       case start_vehicles(opts, out) do
         :ok ->
-          result = Dolphin.Script.run(script, for: opts[:for_ms])
+          result = Dolphin.Script.run(script, [for: opts[:for_ms]] ++ Keyword.take(opts, [:ask]))
           # The log and the status block end before the summary is printed below them.
           stop_outputs()
           report(result, opts, out, err)
@@ -257,7 +273,7 @@ defmodule Mix.Tasks.Dolphin.Run do
 
     # On a terminal the log scrolls above a status block redrawn in place;
     # elsewhere (pipes, CI, files) it is plain timestamped lines.
-    live = !opts[:quiet] && terminal?(out)
+    live = !opts[:quiet] && !opts[:plain] && terminal?(out)
 
     printer =
       spawn_link(fn ->
