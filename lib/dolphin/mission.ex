@@ -305,9 +305,22 @@ defmodule Dolphin.Mission do
     end
   end
 
-  defimpl Inspect do
-    alias Dolphin.MAVLink.Ardupilotmega, as: M
+  @doc """
+  How an item is named in listings: `"home"` for item 0, else its MAV_CMD
+  without the prefix (`"NAV_TAKEOFF"`), or its number when the dialect does
+  not know it.
+  """
+  @spec item_name(struct()) :: String.t()
+  def item_name(%{seq: 0}), do: "home"
 
+  def item_name(%{command: command}) do
+    case Dolphin.MAVLink.Ardupilotmega.enum_name(:mav_cmd, command) do
+      {:ok, atom} -> atom |> Atom.to_string() |> String.replace_prefix("mav_cmd_", "") |> String.upcase()
+      _ -> "MAV_CMD #{command}"
+    end
+  end
+
+  defimpl Inspect do
     def inspect(%{name: name} = mission, opts) do
       try do
         Dolphin.Mission.to_items(mission)
@@ -329,12 +342,7 @@ defmodule Dolphin.Mission do
     end
 
     defp item_line(item) do
-      name =
-        case {item.seq, M.enum_name(:mav_cmd, item.command)} do
-          {0, _} -> "home"
-          {_, {:ok, atom}} -> atom |> Atom.to_string() |> String.replace_prefix("mav_cmd_", "") |> String.upcase()
-          _ -> "MAV_CMD #{item.command}"
-        end
+      name = Dolphin.Mission.item_name(item)
 
       where =
         cond do

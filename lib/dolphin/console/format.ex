@@ -344,12 +344,7 @@ defmodule Dolphin.Console.Format do
 
   def items(items) do
     Enum.map_join(items, "\n", fn item ->
-      name =
-        case {item.seq, Dolphin.MAVLink.Ardupilotmega.enum_name(:mav_cmd, item.command)} do
-          {0, _} -> "home"
-          {_, {:ok, atom}} -> atom |> Atom.to_string() |> String.replace_prefix("mav_cmd_", "") |> String.upcase()
-          _ -> "MAV_CMD #{item.command}"
-        end
+      name = Dolphin.Mission.item_name(item)
 
       where =
         cond do

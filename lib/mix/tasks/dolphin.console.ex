@@ -116,34 +116,10 @@ defmodule Mix.Tasks.Dolphin.Console do
   end
 
   defp start_sim(n, opts, link_opts) do
-    name = {:dolphin_console_sim, System.unique_integer([:positive])}
-
-    case Dolphin.Link.connect("udpin:127.0.0.1:0", [name: name] ++ link_opts) do
-      {:ok, _link} ->
-        port = Dolphin.Link.Connection.port(name)
-        sim_opts = [count: n, gcs: {{127, 0, 0, 1}, port}, speedup: Dolphin.Clock.speedup(), seed: Keyword.get(opts, :seed, 1), camera: true]
-
-        case Dolphin.Sim.start(sim_opts) do
-          {:ok, sysids} ->
-            await_vehicles(sysids)
-            {:ok, ["#{n} simulated vehicle(s) #{inspect(sysids)} on 127.0.0.1:#{port}"]}
-
-          {:error, why} ->
-            {:error, "--sim: #{why}"}
-        end
-
-      {:error, why} ->
-        {:error, "--sim: cannot open a local link: #{why}"}
-    end
-  end
-
-  # The console opens once the fleet knows every simulated vehicle (or after 10 s).
-  defp await_vehicles(sysids, tries \\ 200) do
-    known = for %{vehicle: v} <- Dolphin.Fleet.vehicles(), v.type != nil, do: v.id
-
-    if tries > 0 and not Enum.all?(sysids, &(&1 in known)) do
-      Process.sleep(50)
-      await_vehicles(sysids, tries - 1)
+    # The console's simulated fleet lives as long as the VM.
+    case Dolphin.Sim.Local.start(n, [seed: Keyword.get(opts, :seed, 1)] ++ link_opts) do
+      {:ok, sim} -> {:ok, ["#{n} simulated vehicle(s) #{inspect(sim.sysids)} on 127.0.0.1:#{sim.port}"]}
+      error -> error
     end
   end
 

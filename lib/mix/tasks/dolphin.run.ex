@@ -342,28 +342,14 @@ defmodule Mix.Tasks.Dolphin.Run do
   end
 
   defp start_sim(n, opts, link_opts, out) do
-    name = {:dolphin_run_sim, System.unique_integer([:positive])}
+    case Dolphin.Sim.Local.start(n, [seed: Keyword.get(opts, :seed, 1)] ++ link_opts) do
+      {:ok, sim} ->
+        defer(fn -> Dolphin.Sim.Local.stop(sim) end)
+        IO.puts(out, "#{n} simulated vehicle(s) #{inspect(sim.sysids)} on 127.0.0.1:#{sim.port}")
+        :ok
 
-    case Dolphin.Link.connect("udpin:127.0.0.1:0", [name: name] ++ link_opts) do
-      {:ok, link} ->
-        defer(fn -> DynamicSupervisor.terminate_child(Dolphin.Link.Supervisor, link) end)
-        port = Dolphin.Link.Connection.port(name)
-        # Camera drones: every simulated vehicle carries a camera (component 100).
-        sim_opts = [count: n, gcs: {{127, 0, 0, 1}, port}, speedup: Dolphin.Clock.speedup(), seed: Keyword.get(opts, :seed, 1), camera: true]
-
-        case Dolphin.Sim.start(sim_opts) do
-          {:ok, sysids} ->
-            defer(fn -> stop_sim(sysids) end)
-            await_vehicles(sysids)
-            IO.puts(out, "#{n} simulated vehicle(s) #{inspect(sysids)} on 127.0.0.1:#{port}")
-            :ok
-
-          {:error, why} ->
-            {:error, "--sim: #{why}"}
-        end
-
-      {:error, why} ->
-        {:error, "--sim: cannot open a local link: #{why}"}
+      error ->
+        error
     end
   end
 
@@ -378,26 +364,6 @@ defmodule Mix.Tasks.Dolphin.Run do
     for id <- 1..n, do: TestSource.add(name, id, type: :uav)
     IO.puts(out, "#{n} fake vehicle(s) [1..#{n}] of the test platform (no MAVLink: missions cannot fly on them)")
     :ok
-  end
-
-  # The simulated vehicles end with the run: the ground station forgets them
-  # too (a later run in the same VM starts its own from system id 1 again).
-  defp stop_sim(sysids) do
-    Dolphin.Sim.stop()
-
-    for id <- sysids, pid = Dolphin.Vehicles.whereis(id),
-        do: DynamicSupervisor.terminate_child(Dolphin.Vehicles.Supervisor, pid)
-  end
-
-  # Simulated vehicles announce themselves within a heartbeat; the script
-  # starts once the fleet knows them all (or after 10 s of real time).
-  defp await_vehicles(sysids, tries \\ 200) do
-    known = for %{vehicle: v} <- Dolphin.Fleet.vehicles(), v.type != nil, do: v.id
-
-    if tries > 0 and not Enum.all?(sysids, &(&1 in known)) do
-      Process.sleep(50)
-      await_vehicles(sysids, tries - 1)
-    end
   end
 
   defp report({:ok, %{result: :done, duration_ms: ms}}, _opts, out, _err) do

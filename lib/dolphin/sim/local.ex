@@ -1,0 +1,67 @@
+defmodule Dolphin.Sim.Local do
+  @moduledoc """
+  A simulated fleet on a local link, as the command-line tools start it
+  (`mix dolphin.run --sim N`, `mix dolphin.console --sim N`): a ground-station
+  link on 127.0.0.1, N simulated ArduCopters with cameras sending to it at the
+  clock's speed-up, and a wait until the fleet knows them all.
+  """
+
+  @typedoc "What `start/2` started: the link, its port and the simulated system ids."
+  @type t :: %{link: pid(), port: :inet.port_number(), sysids: [byte()]}
+
+  @doc """
+  Starts `count` simulated vehicles on a new local link. Options: `:seed`, and
+  the link's options (`:tlog`, `:forward`). Returns once the fleet knows every
+  vehicle (or after 10 s of real time), or an error saying what failed.
+  """
+  @spec start(pos_integer(), keyword()) :: {:ok, t()} | {:error, String.t()}
+  def start(count, opts \\ []) do
+    name = {:dolphin_local_sim, System.unique_integer([:positive])}
+    {seed, link_opts} = Keyword.pop(opts, :seed, 1)
+
+    case Dolphin.Link.connect("udpin:127.0.0.1:0", [name: name] ++ link_opts) do
+      {:ok, link} ->
+        port = Dolphin.Link.Connection.port(name)
+        # Camera drones: every simulated vehicle carries a camera (component 100).
+        sim_opts = [count: count, gcs: {{127, 0, 0, 1}, port}, speedup: Dolphin.Clock.speedup(), seed: seed, camera: true]
+
+        case Dolphin.Sim.start(sim_opts) do
+          {:ok, sysids} ->
+            await_fleet(sysids)
+            {:ok, %{link: link, port: port, sysids: sysids}}
+
+          {:error, why} ->
+            DynamicSupervisor.terminate_child(Dolphin.Link.Supervisor, link)
+            {:error, "--sim: #{why}"}
+        end
+
+      {:error, why} ->
+        {:error, "--sim: cannot open a local link: #{why}"}
+    end
+  end
+
+  @doc """
+  Stops what `start/2` started; the ground station forgets the vehicles too (a
+  later fleet in the same VM starts from system id 1 again).
+  """
+  @spec stop(t()) :: :ok
+  def stop(%{link: link, sysids: sysids}) do
+    Dolphin.Sim.stop()
+
+    for id <- sysids, pid = Dolphin.Vehicles.whereis(id),
+        do: DynamicSupervisor.terminate_child(Dolphin.Vehicles.Supervisor, pid)
+
+    DynamicSupervisor.terminate_child(Dolphin.Link.Supervisor, link)
+    :ok
+  end
+
+  # Simulated vehicles announce themselves within a heartbeat.
+  defp await_fleet(sysids, tries \\ 200) do
+    known = for %{vehicle: v} <- Dolphin.Fleet.vehicles(), v.type != nil, do: v.id
+
+    if tries > 0 and not Enum.all?(sysids, &(&1 in known)) do
+      Process.sleep(50)
+      await_fleet(sysids, tries - 1)
+    end
+  end
+end
