@@ -97,6 +97,8 @@ defmodule Mix.Tasks.Dolphin.Run do
       # console stays usable (`import Dolphin.Console`: vehicles(), tasks(),
       # stop/1, answer/1 for the script's `ask`). Plain log lines: a status
       # block redrawn in place would fight the prompt.
+      # The application is up before the prompt comes, so that the console's helpers work at once.
+      Mix.Task.run("app.start")
       {:ok, _} = Task.start(fn -> main(argv, plain: true, ask: &Dolphin.Console.Runs.ask/1) end)
       :ok
     else

@@ -112,9 +112,39 @@ defmodule Mix.Tasks.Dolphin.ConsoleTest do
     assert_receive {^port, {:exit_status, 0}}, 30_000
   end
 
-  defp open_session do
+  # `iex -S mix dolphin.run`: the script runs in the background, the console stays usable.
+  @tag :iex_session
+  @tag timeout: 300_000
+  test "iex -S mix dolphin.run: the console works while the script runs, and answers its ask", %{tmp_dir: dir} do
+    script = Path.join(dir, "hop.exs")
+
+    File.write!(script, """
+    use Dolphin.Script
+    v = pick(timeout: seconds(30))
+    message("going " <> ask("Which way?"))
+    execute %{v => mission "Hop" do
+      take_off location(40.444233, -7.375234, 840)
+      move 40, 0, 0
+      return_home_and_land()
+    end}
+    message("hop done")
+    """)
+
+    port = open_session("iex -S mix dolphin.run #{script} --sim 1 --speedup 20 --no-tlog")
+    wait_for(port, ~r/iex\(1\)> /, 120_000)
+    poll(port, "vehicles()", &(&1 =~ ~r/^ 1  quadrotor /m))
+    # The script's question waits in tasks() until answered; then it flies and ends.
+    poll(port, "tasks()", &(&1 =~ "Which way?"))
+    answered = ieval(port, ~s|answer("north")|)
+    seen_or_wait(port, answered, ~r/message: going north/)
+    poll(port, "tasks()", &(&1 =~ ~r/mission "Hop"  vehicle 1/))
+    poll(port, "tasks()", &(&1 =~ "no tasks running"), 1_000)
+    Port.command(port, "System.halt()\n")
+    assert_receive {^port, {:exit_status, 0}}, 30_000
+  end
+
+  defp open_session(command \\ "iex -S mix dolphin.console --sim 2 --speedup 20") do
     root = File.cwd!()
-    command = "iex -S mix dolphin.console --sim 2 --speedup 20"
     env = [{~c"MIX_ENV", ~c"test"}, {~c"LANG", ~c"C.UTF-8"}]
 
     {exe, args} =
