@@ -89,11 +89,10 @@ defmodule Dolphin.Sim do
          {:ok, config} <- config(opts),
          :ok <- free(sysids),
          :ok <- speedup(opts[:speedup]),
+         {:ok, homes, charger} <- places(opts, length(sysids)),
          {:ok, _} <- ensure_supervisor() do
-      homes = homes(opts, length(sysids))
       cameras = cameras(opts[:camera], sysids)
-      charger = opts[:charger] || opts[:home] || if(opts[:homes], do: hd(homes), else: @default_home)
-      config = Map.put(config, :charger, location(charger))
+      config = Map.put(config, :charger, charger)
 
       Enum.zip(sysids, homes)
       |> Enum.reduce_while({:ok, []}, fn {sysid, home}, {:ok, started} ->
@@ -175,7 +174,8 @@ defmodule Dolphin.Sim do
   @doc """
   Kills a vehicle's process, as if it had been destroyed: the ground station
   stops hearing it. With `reboot: true` it comes back at once as a freshly
-  booted autopilot where it stood (missions kept, flight state lost).
+  booted autopilot at its first boot position, with a full battery and no
+  mission (what a crashed process held is lost).
   """
   @spec crash(byte(), keyword()) :: :ok | {:error, :unknown_vehicle}
   def crash(sysid, opts \\ []) do
@@ -270,12 +270,22 @@ defmodule Dolphin.Sim do
   defp speedup(k) when is_number(k) and k > 0, do: Dolphin.Clock.set_speedup(k)
   defp speedup(k), do: {:error, "bad :speedup #{inspect(k)}: a positive number"}
 
+  # Where the vehicles boot and where they charge, or what is wrong with them.
+  defp places(opts, count) do
+    homes = homes(opts, count)
+    charger = opts[:charger] || opts[:home] || if(opts[:homes], do: hd(homes), else: @default_home)
+    {:ok, homes, location(charger)}
+  rescue
+    e in ArgumentError -> {:error, Exception.message(e)}
+  end
+
   defp homes(opts, count) do
     case Keyword.fetch(opts, :homes) do
-      {:ok, homes} when length(homes) == count ->
+      {:ok, homes} when is_list(homes) ->
+        if length(homes) != count, do: raise(ArgumentError, "bad :homes: #{length(homes)} locations for #{count} vehicles")
         Enum.map(homes, &location/1)
 
-      _ ->
+      :error ->
         center = location(Keyword.get(opts, :home, @default_home))
         columns = min(count, @per_row)
 

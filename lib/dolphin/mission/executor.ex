@@ -25,6 +25,8 @@ defmodule Dolphin.Mission.Executor do
   alias Dolphin.Engine.Platform
 
   @arm_timeout_ms 120_000
+  @landing_reports_ms 5_000
+  @landing_modes [:rtl, :land, :smart_rtl, :auto_rtl]
   @takeoff 22
   @land 21
   # A landed vehicle this close to a mission's landing point is there.
@@ -57,6 +59,8 @@ defmodule Dolphin.Mission.Executor do
       started: false,
       active: false,
       armed_seen: false,
+      auto_seen: false,
+      landing_check: false,
       reached: nil,
       progress: nil
     }
@@ -118,18 +122,39 @@ defmodule Dolphin.Mission.Executor do
   def handle_info({:mission_done, _, _}, s), do: {:noreply, s}
   def handle_info({:mission_progress, _, _, _}, s), do: {:noreply, s}
 
-  def handle_info({:dolphin, {:vehicle, id}, {:state, id, _changes}}, %{step: :flying} = s), do: follow(s)
-  def handle_info({:dolphin, _topic, _event}, s), do: {:noreply, s}
-
-  def handle_info({:EXIT, owner, _reason}, %{owner: owner} = s) do
-    # The engine's leaf is gone without stopping us: make the vehicle safe, then go.
-    cancel_task(s)
-    _ = hold(s.vehicle)
-    {:stop, :normal, s}
+  # MISSION_CURRENT's ACTIVE may come and go between two reads of the state (a
+  # mission that completes at once): the changes carried by the events count.
+  def handle_info({:dolphin, {:vehicle, id}, {:state, id, changes}}, %{step: step} = s) when step in [:start, :flying] do
+    s = if Enum.any?(changes, &match?({:mission, %{state: :active}}, &1)), do: %{s | active: true}, else: s
+    if step == :flying, do: follow(s), else: {:noreply, s}
   end
 
+  def handle_info({:dolphin, _topic, _event}, s), do: {:noreply, s}
+
+  # A landing mission's disarm comes before its last report (ArduPilot reports
+  # the final item after "Disarming motors"): give the reports their time.
+  def handle_info(:check_landed, %{step: :flying} = s) do
+    case Vehicles.state(s.vehicle) do
+      {:ok, st} -> if complete?(s, st), do: done(s), else: fail(s, "the vehicle landed and disarmed before the mission's end (at item #{st.mission.current} of #{st.mission.total})")
+      _ -> {:noreply, s}
+    end
+  end
+
+  def handle_info(:check_landed, s), do: {:noreply, s}
+
+  # The engine's leaf (our parent) exiting reaches terminate/2, not here.
   def handle_info({:EXIT, _pid, _reason}, s), do: {:noreply, s}
   def handle_info({:DOWN, _, :process, _, _}, s), do: {:noreply, s}
+
+  # The engine's leaf died without stopping us: make the vehicle safe, then go.
+  @impl true
+  def terminate(:normal, _s), do: :ok
+
+  def terminate(_reason, s) do
+    cancel_task(s)
+    _ = hold(s.vehicle, commanded?(s))
+    :ok
+  end
 
   @impl true
   def handle_call({:stop, {:vehicle_lost, _}}, _from, s) do
@@ -140,8 +165,12 @@ defmodule Dolphin.Mission.Executor do
 
   def handle_call({:stop, _reason}, _from, s) do
     cancel_task(s)
-    {:stop, :normal, hold(s.vehicle), s}
+    {:stop, :normal, hold(s.vehicle, commanded?(s)), s}
   end
+
+  # Once arming or MISSION_START may have been accepted, the 1 Hz telemetry can
+  # be older than the vehicle's state: a stop then assumes it may be flying.
+  defp commanded?(s), do: s.started or s.step in [:arm, :start]
 
   # --- steps ------------------------------------------------------------------
 
@@ -156,18 +185,18 @@ defmodule Dolphin.Mission.Executor do
   defp step(:clear, s, _me), do: mission_op(Vehicles.clear_mission(s.vehicle))
 
   defp step(:upload, s, me) do
-    started = Dolphin.Clock.now_ms()
+    started = s.clock.now_ms()
 
     # The protocol's counts ({:mission_done, ...}) go to the executor itself.
     case Vehicles.upload_mission(s.vehicle, s.items, progress_to: me) do
       :ok ->
-        {:uploaded, Dolphin.Clock.now_ms() - started}
+        {:uploaded, s.clock.now_ms() - started}
 
       # Every item went out but the vehicle's final MISSION_ACK was lost (it is
       # never repeated): whether the vehicle has the mission is for the
       # verification, which downloads it, to say.
       {:error, %Dolphin.MissionError{result: :timeout, detail: "the vehicle stopped asking for items"}} ->
-        {:uploaded, Dolphin.Clock.now_ms() - started}
+        {:uploaded, s.clock.now_ms() - started}
 
       error ->
         mission_op(error)
@@ -175,12 +204,15 @@ defmodule Dolphin.Mission.Executor do
   end
 
   defp step(:verify, s, _me) do
-    with {:ok, back} <- mission_op(Vehicles.download_mission(s.vehicle)),
-         :ok <- Mission.compare_download(s.items, back) do
-      :ok
-    else
-      {:error, why} when is_binary(why) -> {:error, "the mission read back differs from the one uploaded: #{why}"}
-      error -> error
+    case Vehicles.download_mission(s.vehicle) do
+      {:ok, back} ->
+        case Mission.compare_download(s.items, back) do
+          :ok -> :ok
+          {:error, why} -> {:error, "the mission read back differs from the one uploaded: #{why}"}
+        end
+
+      {:error, e} ->
+        {:error, "reading the mission back to verify it failed: #{Exception.message(e)}"}
     end
   end
 
@@ -191,7 +223,7 @@ defmodule Dolphin.Mission.Executor do
     end
   end
 
-  defp step(:arm, s, _me), do: arm(s, Dolphin.Clock.now_ms() + s.arm_timeout_ms)
+  defp step(:arm, s, _me), do: arm(s, s.clock.now_ms() + s.arm_timeout_ms)
   defp step(:start, s, _me), do: command(Vehicles.start_mission(s.vehicle), "MISSION_START", s.vehicle)
 
   # A copter on the ground can only start a mission that takes off (ArduCopter
@@ -231,10 +263,10 @@ defmodule Dolphin.Mission.Executor do
             :ok
 
           {:error, %{result: result}} when result in [:failed, :temporarily_rejected, :denied, :timeout] ->
-            if Dolphin.Clock.now_ms() >= deadline do
+            if s.clock.now_ms() >= deadline do
               {:error, "arming refused for #{div(s.arm_timeout_ms, 1000)} s#{autopilot_says(s.vehicle, ["Arm", "PreArm"])}"}
             else
-              Dolphin.Clock.sleep(@arm_retry_ms)
+              s.clock.sleep(@arm_retry_ms)
               arm(s, deadline)
             end
 
@@ -257,7 +289,6 @@ defmodule Dolphin.Mission.Executor do
   end
 
   defp mission_op(:ok), do: :ok
-  defp mission_op({:ok, _} = ok), do: ok
   defp mission_op({:error, e}), do: {:error, Exception.message(e)}
 
   defp command({:ok, _}, _what, _vehicle), do: :ok
@@ -297,10 +328,10 @@ defmodule Dolphin.Mission.Executor do
     # The mission counts as running once the vehicle reports it active in AUTO;
     # before that, the state still describes the previous mission.
     active = s.active or (st.mode == :auto and mission.state == :active)
-    # Reports travel separately (the armed bit with the 1 Hz heartbeat, the
-    # mission state with MISSION_CURRENT): a disarm counts only once the
-    # heartbeat has shown the vehicle armed during this mission.
-    s = %{s | active: active, armed_seen: s.armed_seen or (active and st.armed)}
+    # Reports travel separately (mode and armed bit with the 1 Hz heartbeat,
+    # the mission state with MISSION_CURRENT): leaving AUTO or disarming counts
+    # only once the heartbeat has shown AUTO, or armed, during this mission.
+    s = %{s | active: active, armed_seen: s.armed_seen or (active and st.armed), auto_seen: s.auto_seen or (active and st.mode == :auto)}
     s = report_progress(s, mission)
 
     cond do
@@ -308,14 +339,18 @@ defmodule Dolphin.Mission.Executor do
         {:noreply, s}
 
       complete?(s, st) ->
-        Platform.done(s.owner)
-        {:stop, :normal, s}
+        done(s)
 
-      st.mode != :auto ->
-        fail(s, "the vehicle left AUTO for #{mode_name(st.mode)} before the mission ended#{autopilot_says(s.vehicle, [])}")
+      s.auto_seen and st.mode != :auto ->
+        # Left to what took it (a failsafe's RTL or LAND, the pilot): never overridden.
+        fail(s, "the vehicle left AUTO for #{mode_name(st.mode)} before the mission ended#{autopilot_says(s.vehicle, [])}", hold: false)
 
       s.armed_seen and not st.armed and not match?({:landing, _}, s.ending) ->
-        fail(s, "the vehicle disarmed before the mission ended#{autopilot_says(s.vehicle, [])}")
+        fail(s, "the vehicle disarmed before the mission ended#{autopilot_says(s.vehicle, [])}", hold: false)
+
+      s.armed_seen and not st.armed and not s.landing_check ->
+        s.clock.send_after(self(), :check_landed, @landing_reports_ms)
+        {:noreply, %{s | landing_check: true}}
 
       true ->
         {:noreply, s}
@@ -348,39 +383,53 @@ defmodule Dolphin.Mission.Executor do
   # --- stopping -----------------------------------------------------------------
 
   @doc false
-  # Makes a vehicle safe: holding position in the air (BRAKE, else GUIDED), disarmed on the ground.
-  def hold(vehicle) do
+  # Makes a vehicle safe: holding position in the air (BRAKE, else GUIDED),
+  # disarmed on the ground, and left alone when its autopilot is bringing it
+  # down (RTL, LAND: a failsafe or the pilot decided). `fresh?`: the state may
+  # be older than commands just accepted (arming, MISSION_START), so the
+  # vehicle is held as if flying whatever the telemetry says.
+  @spec hold(byte(), boolean()) :: :ok | {:error, String.t()}
+  def hold(vehicle, fresh? \\ false) do
     case Vehicles.state(vehicle) do
-      {:ok, %{armed: false}} ->
-        :ok
+      {:error, :unknown_vehicle} -> :ok
+      {:ok, %{mode: mode}} when mode in @landing_modes -> :ok
+      {:ok, %{armed: false}} when not fresh? -> :ok
+      {:ok, %{mode: mode}} when mode in [:brake, :guided] and not fresh? -> :ok
+      {:ok, %{landed: :on_ground}} when not fresh? -> disarm_or_brake(vehicle)
+      {:ok, _} -> brake(vehicle)
+    end
+  end
 
-      {:ok, %{landed: :on_ground}} ->
-        command(Vehicles.disarm(vehicle), "disarming on the ground", vehicle)
+  # An accepted DO_SET_MODE means the mode has changed (ArduPilot acks after
+  # the switch); the heartbeat shows it within a second.
+  defp brake(vehicle) do
+    with {:error, _} <- command(Vehicles.set_mode(vehicle, :brake), "BRAKE", vehicle),
+         {:error, why} <- command(Vehicles.set_mode(vehicle, :guided), "GUIDED", vehicle) do
+      {:error, "the vehicle could not be made to hold position: #{why}"}
+    end
+  end
 
-      {:ok, %{mode: mode}} when mode in [:brake, :guided] ->
-        :ok
-
-      {:ok, _} ->
-        # An accepted DO_SET_MODE means the mode has changed (ArduPilot acks
-        # after the switch); the heartbeat shows it within a second.
-        with {:error, _} <- command(Vehicles.set_mode(vehicle, :brake), "BRAKE", vehicle),
-             {:error, why} <- command(Vehicles.set_mode(vehicle, :guided), "GUIDED", vehicle) do
-          {:error, "the vehicle could not be made to hold position: #{why}"}
-        end
-
-      {:error, :unknown_vehicle} ->
-        :ok
+  # "On the ground" may be a second old: a vehicle that refuses the disarm is flying.
+  defp disarm_or_brake(vehicle) do
+    case command(Vehicles.disarm(vehicle), "disarming on the ground", vehicle) do
+      :ok -> :ok
+      {:error, _} -> brake(vehicle)
     end
   end
 
   defp cancel_task(%{task: nil}), do: :ok
   defp cancel_task(%{task: task}), do: Task.shutdown(task, :brutal_kill) && :ok
 
-  defp fail(s, why) do
+  defp done(s) do
+    Platform.done(s.owner)
+    {:stop, :normal, s}
+  end
+
+  defp fail(s, why, opts \\ []) do
     # The engine says which task and which vehicle; the reason says what happened.
     Platform.failed(s.owner, why)
     # A failed mission leaves the vehicle holding, not flying on.
-    _ = if s.started, do: hold(s.vehicle)
+    _ = if Keyword.get(opts, :hold, true) and commanded?(s), do: hold(s.vehicle, true)
     {:stop, :normal, s}
   end
 end

@@ -91,6 +91,7 @@ defmodule Dolphin.Sim.Copter do
             mission_state: 1,
             item: nil,
             jumps: %{},
+            burst: 0,
             battery: 1.0,
             consumed_mah: 0.0,
             current_a: 0.0,
@@ -265,7 +266,7 @@ defmodule Dolphin.Sim.Copter do
 
     c =
       cond do
-        c.mode == :auto and n > 0 -> %{c | current: min(max(c.current, 1), n)}
+        c.mode == :auto and n > 0 and c.mission_state == 3 -> %{c | current: min(max(c.current, 1), n)}
         true -> %{c | current: 0, resume: nil, jumps: %{}, mission_state: if(n == 0, do: 1, else: 2)}
       end
 
@@ -578,9 +579,11 @@ defmodule Dolphin.Sim.Copter do
   # ---------------------------------------------------------------------------
   # Missions (AUTO).
 
+  # As ArduPilot's starts_with_takeoff_cmd: DO commands and NAV_DELAY before
+  # the first navigation command do not count.
   defp starts_with_takeoff?(c) do
-    case MissionServer.items(c.missions) do
-      [%{command: 22} | _] -> true
+    case Enum.find(MissionServer.items(c.missions), &(&1.command < 93)) do
+      %{command: 22} -> true
       _ -> false
     end
   end
@@ -598,11 +601,22 @@ defmodule Dolphin.Sim.Copter do
 
   defp mission_current(c), do: say(c, Streams.message(c, 42))
 
+  # Items that complete at once (DO commands, jumps) are run in a row; a loop
+  # of nothing else is cut, as ArduPilot bounds its search for the next command.
+  @max_items_at_once 64
+
+  defp start_item(%{burst: burst} = c, _seq) when burst >= @max_items_at_once do
+    c = text(%{c | burst: 0}, 3, "Mission: too many commands without navigation")
+    complete_mission(c)
+  end
+
   defp start_item(c, seq) do
     items = MissionServer.items(c.missions)
+    c = %{c | burst: c.burst + 1}
 
     case Enum.at(items, seq - 1) do
       nil when seq > 1 -> complete_mission(c)
+      _ when seq < 1 -> c
       nil -> c
       item -> c |> Map.merge(%{current: seq, mission_state: 3}) |> begin_item(item)
     end
@@ -831,7 +845,7 @@ defmodule Dolphin.Sim.Copter do
   @spec step(t(), pos_integer()) :: t()
   def step(%__MODULE__{} = c, dt_ms) do
     was_ready = ready?(c)
-    c = %{c | time_ms: c.time_ms + dt_ms}
+    c = %{c | time_ms: c.time_ms + dt_ms, burst: 0}
 
     c
     |> boot_events(was_ready)

@@ -46,7 +46,7 @@ defmodule Dolphin.Sim.Local do
   """
   @spec stop(t()) :: :ok
   def stop(%{link: link, sysids: sysids}) do
-    Dolphin.Sim.stop()
+    Enum.each(sysids, &Dolphin.Sim.stop/1)
 
     for id <- sysids, pid = Dolphin.Vehicles.whereis(id),
         do: DynamicSupervisor.terminate_child(Dolphin.Vehicles.Supervisor, pid)

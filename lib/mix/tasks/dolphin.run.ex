@@ -257,7 +257,9 @@ defmodule Mix.Tasks.Dolphin.Run do
         {{y, mo, d}, {h, mi, sec}} = :calendar.local_time()
         stamp = :io_lib.format("~4..0B-~2..0B-~2..0B_~2..0B-~2..0B-~2..0B", [y, mo, d, h, mi, sec]) |> IO.iodata_to_binary()
         File.mkdir_p!("logs")
-        Path.join("logs", "#{stamp}-#{Path.basename(file, ".exs")}.tlog")
+        base = Path.join("logs", "#{stamp}-#{Path.basename(file, ".exs")}")
+        # Two runs of one script in the same second get two logs.
+        Enum.find(Stream.map(Stream.iterate(1, &(&1 + 1)), &"#{base}#{if &1 > 1, do: "-#{&1}"}.tlog"), &(not File.exists?(&1)))
     end
   end
 
@@ -282,7 +284,7 @@ defmodule Mix.Tasks.Dolphin.Run do
         Dolphin.Telemetry.subscribe()
         send(parent, {:printer_ready, self()})
         if live, do: Process.send_after(self(), :redraw, @redraw_ms)
-        print_loop(%{out: out, origin: origin, quiet: opts[:quiet], live: live, block: 0, tasks: %{}})
+        print_loop(%{out: out, origin: origin, quiet: opts[:quiet], live: live, block: 0, tasks: %{}, columns: if(live, do: columns(), else: 80)})
       end)
 
     receive do: ({:printer_ready, ^printer} -> :ok)
@@ -390,6 +392,18 @@ defmodule Mix.Tasks.Dolphin.Run do
 
   # (`mix` runs without a shell, where OTP 25 cannot ask the terminal itself:
   # what our standard output is connected to tells.)
+  # The terminal's width: `mix` has no shell to ask, and the BEAM's child
+  # processes no controlling terminal, so the device our output goes to is asked.
+  defp columns do
+    with {:ok, "/dev/" <> _ = device} <- File.read_link("/proc/self/fd/1"),
+         [_rows, cols] <- :os.cmd(String.to_charlist("stty size < #{device} 2>/dev/null")) |> to_string() |> String.split(),
+         {n, ""} when n > 20 <- Integer.parse(cols) do
+      n
+    else
+      _ -> 80
+    end
+  end
+
   defp terminal?(:stdio) do
     tty? =
       case File.read_link("/proc/self/fd/1") do
@@ -453,9 +467,17 @@ defmodule Mix.Tasks.Dolphin.Run do
   defp track(p, _event), do: p
 
   defp draw_block(p, before \\ []) do
-    vehicles = for %{vehicle: v} <- Dolphin.Fleet.vehicles(), do: v
+    # A fleet busy or restarting leaves the block empty for a moment, not the run broken.
+    vehicles =
+      try do
+        for %{vehicle: v} <- Dolphin.Fleet.vehicles(), do: v
+      catch
+        :exit, _ -> []
+      end
+
     tasks = Map.new(p.tasks, fn {v, {_id, name}} -> {v, name} end)
-    lines = StatusBlock.render(vehicles, tasks, Dolphin.Clock.now_ms() - p.origin)
+    # A line wider than the terminal would wrap, and the block's redraw would miss its rows.
+    lines = StatusBlock.render(vehicles, tasks, Dolphin.Clock.now_ms() - p.origin) |> Enum.map(&String.slice(&1, 0, p.columns - 1))
     IO.write(p.out, [before, StatusBlock.redraw(p.block, lines)])
     %{p | block: length(lines)}
   end

@@ -112,6 +112,50 @@ defmodule Dolphin.Mission.PlatformTest do
     assert {:error, failure} = Engine.run(Engine.on(long, [2]))
     message = Exception.message(Dolphin.Engine.TaskError.exception(failure: failure))
     assert message =~ "left AUTO for RTL"
+    # The failsafe's RTL is left alone: the vehicle comes home.
+    Clock.sleep(5_000)
+    assert {:ok, %{mode: :rtl}} = Sim.info(2)
+  end
+
+  test "the engine's leaf killed: the mission's process makes the vehicle hold", %{port: port} do
+    [{1, home}] = start_fleet(port, count: 1)
+    test = self()
+
+    leaf =
+      spawn(fn ->
+        {:ok, pid} = Dolphin.Mission.Executor.start_link(out_and_back(home), 1, owner: self())
+        send(test, {:executor, pid})
+        Process.sleep(:infinity)
+      end)
+
+    assert_receive {:executor, executor}, 5_000
+    Wait.until(fn -> match?({:ok, %{mode: :auto, position: %{relative_alt: alt}}} when alt > 5, Sim.info(1)) end, 1_000)
+    ref = Process.monitor(executor)
+    Process.exit(leaf, :kill)
+    assert_receive {:DOWN, ^ref, :process, _, _}, 10_000
+    assert {:ok, %{mode: :brake, armed: true}} = Sim.info(1)
+  end
+
+  test "stopped right after MISSION_START, before telemetry shows it, the vehicle still holds", %{port: port} do
+    [{1, home}] = start_fleet(port, count: 1)
+    {:ok, run} = Engine.start(Engine.on(out_and_back(home), [1]))
+    # As soon as the vehicle itself is in AUTO (the ground station's view lags up to a second).
+    Wait.until(fn -> match?({:ok, %{mode: :auto}}, Sim.info(1)) end, 1_000)
+    :ok = Engine.stop(run)
+    assert {:ok, :stopped} = Engine.await(run, 30_000)
+    {:ok, info} = Sim.info(1)
+    assert info.mode in [:brake, :guided] or not info.armed
+  end
+
+  test "a mission the vehicle completes at once (already at height, then a photo) is done", %{port: port} do
+    [{1, home}] = start_fleet(port, count: 1, camera: true)
+    up = Mission.new("up") |> Mission.add(C.home(home)) |> Mission.add(C.take_off(%{home | h: home.h + 20})) |> Mission.add(C.move_and_loiter_pos(0, 0, 0, 10))
+    reached_loiter = fn -> match?({:ok, %{mission: %{current: 2}, mode: :auto}}, Vehicles.state(1)) end
+    assert {:ok, :done} = Engine.run(Engine.on(Engine.until(up, reached_loiter), [1]))
+
+    photo = Mission.new("photo") |> Mission.add(C.home(home)) |> Mission.add(C.take_off(%{home | h: home.h + 20})) |> Mission.add(C.capture_photo())
+    assert {:ok, :done} = Engine.run(Engine.on(photo, [1]))
+    assert {:ok, %{photos: 1}} = Sim.info(1)
   end
 
   test "requirements: a mission that takes photos needs a camera" do

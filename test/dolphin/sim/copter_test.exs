@@ -273,6 +273,23 @@ defmodule Dolphin.Sim.CopterTest do
     assert seqs == [1, 2, 3, 4, 3, 4, 3, 4, 6]
   end
 
+  test "a loop of commands that complete at once is cut; DO commands before the take-off do not hide it" do
+    items = [
+      item(0, 16, {@home.lat, @home.lon, 0}),
+      item(1, 178, {0, 0, 0}, %{param1: 1.0, param2: 5.0, frame: 2}),
+      item(2, 22, {0, 0, 10}),
+      item(3, 178, {0, 0, 0}, %{param1: 1.0, param2: 6.0, frame: 2}),
+      item(4, 177, {0, 0, 0}, %{param1: 3.0, param2: -1.0, frame: 2})
+    ]
+
+    # CHANGE_SPEED first, then the take-off: ArduCopter starts it (starts_with_takeoff_cmd skips DO commands).
+    c = flying_mission(items)
+    assert c.mode == :auto
+    {c, said} = run_until(c, &(&1.mission_state == 5), 60_000)
+    assert "Mission: too many commands without navigation" in texts(said)
+    assert c.armed and c.landed == :in_air
+  end
+
   # --- modes --------------------------------------------------------------------
 
   defp airborne(alt \\ 20) do
