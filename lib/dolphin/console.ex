@@ -89,7 +89,7 @@ defmodule Dolphin.Console do
     work = Snapshot.work()
     say(Format.task_tree(work.groups, work.runs, work.tasks, work.states))
 
-    for q <- safe(fn -> Runs.questions() end, []),
+    for q <- Snapshot.safe(fn -> Runs.questions() end, []),
         do: say("waiting for an answer: #{if q.run, do: "run #{q.run}", else: "a script"} asks #{inspect(q.prompt)} (answer/1)")
 
     done()
@@ -652,11 +652,5 @@ defmodule Dolphin.Console do
     state.armed and
       (state.landed in [:in_air, :takeoff, :landing] or
          (state.landed == nil and is_map(state.position) and (state.position[:relative_alt] || 0) > 1))
-  end
-
-  defp safe(fun, default) do
-    fun.()
-  catch
-    :exit, _ -> default
   end
 end

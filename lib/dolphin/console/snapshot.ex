@@ -176,8 +176,9 @@ defmodule Dolphin.Console.Snapshot do
   defp status(%{status: :stopping}, _now), do: "stopping"
   defp status(c, now), do: "running for #{Format.duration(now - c.started_ms)}"
 
+  @doc false
   # The console's own servers may be restarting: show what there is.
-  defp safe(fun, default) do
+  def safe(fun, default) do
     fun.()
   catch
     :exit, _ -> default
