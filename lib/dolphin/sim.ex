@@ -15,7 +15,7 @@ defmodule Dolphin.Sim do
 
     * HEARTBEAT at 1 Hz with ArduCopter's custom modes and the armed flag; a
       camera component (compid 100) with its own heartbeat when it has one;
-    * nothing else until streams are asked for (REQUEST_DATA_STREAM,
+    * nothing else but STATUSTEXT and TIMESYNC until streams are asked for (REQUEST_DATA_STREAM,
       MAV_CMD_SET_MESSAGE_INTERVAL, MAV_CMD_REQUEST_MESSAGE): SYS_STATUS,
       BATTERY_STATUS, GLOBAL_POSITION_INT, GPS_RAW_INT, ATTITUDE, VFR_HUD,
       MISSION_CURRENT, EXTENDED_SYS_STATE, HOME_POSITION, AUTOPILOT_VERSION;

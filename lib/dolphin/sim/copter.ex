@@ -100,9 +100,9 @@ defmodule Dolphin.Sim.Copter do
             ground_since: nil,
             photos: 0,
             capture: nil,
-            # The heartbeat is the one message sent unasked, at 1 Hz.
-            streams: %{0 => 1000},
-            due: %{0 => 1000},
+            # Sent unasked: the heartbeat at 1 Hz, TIMESYNC every 10 s.
+            streams: %{0 => 1000, 111 => 10_000},
+            due: %{0 => 1000, 111 => 10_000},
             gcs_heard_ms: nil,
             failsafe: nil,
             prearm_text_ms: nil,
@@ -234,6 +234,10 @@ defmodule Dolphin.Sim.Copter do
       c
     end
   end
+
+  # A ground station's TIMESYNC request is answered with our time (tc1).
+  def handle(c, %M.Timesync{tc1: 0, ts1: ts1}, _from), do: say(c, %M.Timesync{tc1: c.time_ms * 1_000_000, ts1: ts1})
+  def handle(c, %M.Timesync{}, _from), do: c
 
   def handle(c, %M.ParamRequestList{}, _from), do: Streams.send_params(c)
   def handle(c, %M.ParamRequestRead{} = r, _from), do: Streams.send_param(c, r.param_id, r.param_index)

@@ -4,7 +4,7 @@ defmodule Dolphin.Sim.Streams do
   # built from its state, the streams a ground station turned on
   # (REQUEST_DATA_STREAM, SET_MESSAGE_INTERVAL), one-off requests, and its few
   # parameters. Like ArduCopter, a vehicle sends only HEARTBEAT and STATUSTEXT
-  # until a stream is asked for (the heartbeat is the process's own timer).
+  # until a stream is asked for (and TIMESYNC, every 10 s, as ArduPilot does).
 
   import Bitwise
 
@@ -25,7 +25,7 @@ defmodule Dolphin.Sim.Streams do
   @all_streams [1, 24, 42, 33, 30, 74, 147]
 
   # Messages that can be streamed or requested once.
-  @known [1, 24, 30, 33, 42, 74, 147, 148, 242, 245]
+  @known [1, 24, 30, 33, 42, 74, 111, 147, 148, 242, 245]
 
   # Parameters a ground station may read (names as ArduPilot 4.5/4.6 and 4.7).
   @doc false
@@ -95,6 +95,9 @@ defmodule Dolphin.Sim.Streams do
   def message(c, msgid)
 
   def message(c, 0), do: heartbeat(c)
+
+  # TIMESYNC, ArduPilot's own request (tc1 = 0; ts1 its time in ns).
+  def message(c, 111), do: %M.Timesync{tc1: 0, ts1: c.time_ms * 1_000_000}
 
   def message(c, 1) do
     ready? = c.time_ms >= c.config.ekf_ready_ms

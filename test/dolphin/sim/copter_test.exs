@@ -100,10 +100,13 @@ defmodule Dolphin.Sim.CopterTest do
 
   # --- telemetry ---------------------------------------------------------------
 
-  test "sends only heartbeats and statustexts until streams are asked for" do
+  test "sends only heartbeats, statustexts and TIMESYNC until streams are asked for" do
     {c, said} = boot() |> run(10_000)
     kinds = said |> Enum.map(fn {_, _, %m{}} -> m end) |> Enum.uniq() |> Enum.sort()
-    assert kinds == [M.HomePosition, M.Heartbeat, M.Statustext] |> Enum.sort()
+    # (HOME_POSITION once, when home is set.)
+    assert kinds == [M.HomePosition, M.Heartbeat, M.Statustext, M.Timesync] |> Enum.sort()
+    {_, [%M.Timesync{tc1: tc1, ts1: 42}]} = tell(c, %M.Timesync{tc1: 0, ts1: 42})
+    assert tc1 > 0
     assert length(messages(said, M.Heartbeat)) in 9..11
 
     {c, []} = tell(c, %M.RequestDataStream{target_system: 1, target_component: 1, req_stream_id: 0, req_message_rate: 4, start_stop: 1})
