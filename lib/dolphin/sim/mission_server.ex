@@ -18,6 +18,7 @@ defmodule Dolphin.Sim.MissionServer do
   # - Fence (1) and rally (2) lists are kept as uploaded.
 
   alias Dolphin.MAVLink.Ardupilotmega, as: M
+  alias Dolphin.MAVLink.MissionItems
 
   @rerequest_ms 1_000
   @rerequest_tries 8
@@ -103,7 +104,7 @@ defmodule Dolphin.Sim.MissionServer do
         {%{s | upload: nil}, complaint ++ [{:send, ack(peer, type, @unsupported)}, {:text, 6, "Mission: unsupported command #{item.command}"}]}
 
       seq + 1 == up.count ->
-        list = Enum.reverse([to_int_item(item) | up.items])
+        list = Enum.reverse([MissionItems.to_int(item) | up.items])
         # Item 0 of the mission is home: accepted and ignored.
         list = if type == 0, do: tl(list), else: list
         lists = Map.put(s.lists, type, list)
@@ -111,7 +112,7 @@ defmodule Dolphin.Sim.MissionServer do
         {%{s | upload: nil, lists: lists}, complaint ++ done}
 
       true ->
-        s = %{s | upload: %{up | items: [to_int_item(item) | up.items], tries: 0, deadline: ctx.now + @rerequest_ms}}
+        s = %{s | upload: %{up | items: [MissionItems.to_int(item) | up.items], tries: 0, deadline: ctx.now + @rerequest_ms}}
         {s, complaint ++ [request(s, seq + 1)]}
     end
   end
@@ -128,7 +129,7 @@ defmodule Dolphin.Sim.MissionServer do
 
       item ->
         item = %{item | seq: seq, target_system: elem(peer, 0), target_component: elem(peer, 1), mission_type: type}
-        {s, [{:send, if(request == M.MissionRequestInt, do: item, else: to_float_item(item))}]}
+        {s, [{:send, if(request == M.MissionRequestInt, do: item, else: MissionItems.to_float(item))}]}
     end
   end
 
@@ -171,25 +172,4 @@ defmodule Dolphin.Sim.MissionServer do
   end
 
   defp ack({sysid, compid}, type, result), do: %M.MissionAck{target_system: sysid, target_component: compid, type: result, mission_type: type}
-
-  # Items are kept as MISSION_ITEM_INT: a float item's degrees become degE7.
-  defp to_int_item(%M.MissionItemInt{} = item), do: item
-
-  defp to_int_item(%M.MissionItem{} = item) do
-    fields = item |> Map.from_struct() |> Map.merge(%{x: degrees_to_int(item.frame, item.x), y: degrees_to_int(item.frame, item.y)})
-    struct(M.MissionItemInt, fields)
-  end
-
-  defp to_float_item(%M.MissionItemInt{} = item) do
-    fields = item |> Map.from_struct() |> Map.merge(%{x: int_to_degrees(item.frame, item.x), y: int_to_degrees(item.frame, item.y)})
-    struct(M.MissionItem, fields)
-  end
-
-  # Local frames (1, 4, 7-9, 12-...) carry metres, not degrees, in x and y.
-  @global_frames [0, 3, 5, 6, 10, 11]
-  defp degrees_to_int(frame, v) when frame in @global_frames and is_float(v), do: round(v * 1.0e7)
-  defp degrees_to_int(_frame, v) when is_float(v), do: round(v)
-  defp degrees_to_int(_frame, v), do: v
-  defp int_to_degrees(frame, v) when frame in @global_frames, do: v / 1.0e7
-  defp int_to_degrees(_frame, v), do: v * 1.0
 end

@@ -36,6 +36,7 @@ defmodule Dolphin.Vehicles.MissionProtocol do
 
   alias Dolphin.{Clock, MissionError}
   alias Dolphin.MAVLink.Ardupilotmega, as: M
+  alias Dolphin.MAVLink.MissionItems
 
   @types %{mission: 0, fence: 1, rally: 2}
 
@@ -175,7 +176,7 @@ defmodule Dolphin.Vehicles.MissionProtocol do
 
   def handle_event(:info, {:mission, %m{seq: seq, mission_type: type} = item}, {:item, seq, _n}, %{operation: :download} = data)
       when m in [M.MissionItemInt, M.MissionItem] and type == data.type do
-    data = %{data | received: Map.put(data.received, seq, to_int_item(item))}
+    data = %{data | received: Map.put(data.received, seq, MissionItems.to_int(item))}
     progress(data, seq + 1)
     if seq + 1 == data.count, do: finish_download(data), else: {:next_state, {:item, seq + 1, 1}, data}
   end
@@ -237,34 +238,4 @@ defmodule Dolphin.Vehicles.MissionProtocol do
     error = %MissionError{operation: data.operation, vehicle: data.sysid, mission_type: data.mission_type, result: result, detail: detail}
     finish(data, {:error, error})
   end
-
-  # The older float form, as the integer one (degrees * 1e7 for global frames).
-  defp to_int_item(%M.MissionItemInt{} = item), do: item
-
-  defp to_int_item(%M.MissionItem{} = i) do
-    scale = if i.frame in [0, 3, 5, 6, 10, 11], do: 1.0e7, else: 1.0e4
-    # An integer field cannot hold NaN or an infinity: those become 0.
-    {x, y} = {scaled(i.x, scale), scaled(i.y, scale)}
-
-    %M.MissionItemInt{
-      target_system: i.target_system,
-      target_component: i.target_component,
-      seq: i.seq,
-      frame: i.frame,
-      command: i.command,
-      current: i.current,
-      autocontinue: i.autocontinue,
-      param1: i.param1,
-      param2: i.param2,
-      param3: i.param3,
-      param4: i.param4,
-      x: x,
-      y: y,
-      z: i.z,
-      mission_type: i.mission_type
-    }
-  end
-
-  defp scaled(v, scale) when is_number(v), do: round(v * scale)
-  defp scaled(_special, _scale), do: 0
 end
