@@ -97,6 +97,17 @@ defmodule Dolphin.Vehicles do
     end
   end
 
+  @doc """
+  Forgets a vehicle: its process stops (no "lost" event); it is discovered
+  anew if it speaks again. For vehicles known to be gone for good, such as a
+  finished simulation's.
+  """
+  @spec forget(byte()) :: :ok
+  def forget(sysid) do
+    if pid = whereis(sysid), do: DynamicSupervisor.terminate_child(Dolphin.Vehicles.Supervisor, pid)
+    :ok
+  end
+
   @typedoc "Options of a command: `:attempts`, `:ack_timeout_ms`, `:progress_timeout_ms`, `:progress_to`, `:target_component`."
   @type command_opts :: keyword()
 

@@ -20,12 +20,8 @@ defmodule Dolphin.SimTest do
     end
   end
 
-  # Haversine on a sphere of the mean radius: good to a few centimetres over these distances.
-  defp distance({lat1, lon1}, {lat2, lon2}) do
-    r = :math.pi() / 180
-    a = :math.pow(:math.sin((lat2 - lat1) * r / 2), 2) + :math.cos(lat1 * r) * :math.cos(lat2 * r) * :math.pow(:math.sin((lon2 - lon1) * r / 2), 2)
-    2 * 6_371_008.8 * :math.asin(:math.sqrt(a))
-  end
+  # Metres between two {lat, lon} (WGS84, Dolphin.Geo).
+  defp distance({lat1, lon1}, {lat2, lon2}), do: Dolphin.Geo.distance(Dolphin.Geo.location(lat1, lon1), Dolphin.Geo.location(lat2, lon2))
 
   defp wait(fun, seconds, what), do: Wait.until(fun, seconds * 50, fn -> what end)
 

@@ -23,7 +23,7 @@ defmodule Dolphin.VehiclesTest do
     on_exit(fn ->
       Clock.set_speedup(1)
       DynamicSupervisor.terminate_child(Dolphin.Link.Supervisor, link)
-      for sysid <- Vehicles.list(), pid = Vehicles.whereis(sysid), pid != nil, do: DynamicSupervisor.terminate_child(Dolphin.Vehicles.Supervisor, pid)
+      Enum.each(Vehicles.list(), &Vehicles.forget/1)
     end)
 
     %{name: name, port: port, peer: peer, tlog: tlog}

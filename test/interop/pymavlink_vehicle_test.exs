@@ -23,7 +23,7 @@ defmodule Dolphin.Interop.PymavlinkVehicleTest do
 
     on_exit(fn ->
       DynamicSupervisor.terminate_child(Dolphin.Link.Supervisor, link)
-      if pid = Vehicles.whereis(@sysid), do: DynamicSupervisor.terminate_child(Dolphin.Vehicles.Supervisor, pid)
+      Vehicles.forget(@sysid)
     end)
 
     port = Connection.port("pymavlink-vehicle")

@@ -26,7 +26,7 @@ defmodule Dolphin.Test.GroundStation do
   @doc "Stops the simulated vehicles and forgets every vehicle the ground station knew."
   def forget_vehicles do
     Dolphin.Sim.stop()
-    for id <- Vehicles.list(), pid = Vehicles.whereis(id), do: DynamicSupervisor.terminate_child(Dolphin.Vehicles.Supervisor, pid)
+    Enum.each(Vehicles.list(), &Vehicles.forget/1)
     Dolphin.Clock.set_speedup(1)
   end
 end

@@ -48,8 +48,7 @@ defmodule Dolphin.Sim.Local do
   def stop(%{link: link, sysids: sysids}) do
     Enum.each(sysids, &Dolphin.Sim.stop/1)
 
-    for id <- sysids, pid = Dolphin.Vehicles.whereis(id),
-        do: DynamicSupervisor.terminate_child(Dolphin.Vehicles.Supervisor, pid)
+    Enum.each(sysids, &Dolphin.Vehicles.forget/1)
 
     DynamicSupervisor.terminate_child(Dolphin.Link.Supervisor, link)
     :ok

@@ -19,7 +19,7 @@ defmodule Dolphin.Link.ConnectionTest do
   defp cleanup(link, sysids) do
     on_exit(fn ->
       DynamicSupervisor.terminate_child(Dolphin.Link.Supervisor, link)
-      for s <- sysids, pid = Vehicles.whereis(s), pid != nil, do: DynamicSupervisor.terminate_child(Dolphin.Vehicles.Supervisor, pid)
+      Enum.each(sysids, &Vehicles.forget/1)
     end)
   end
 

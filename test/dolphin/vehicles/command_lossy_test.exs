@@ -25,7 +25,7 @@ defmodule Dolphin.Vehicles.CommandLossyTest do
     on_exit(fn ->
       Clock.set_speedup(1)
       DynamicSupervisor.terminate_child(Dolphin.Link.Supervisor, link)
-      if pid = Vehicles.whereis(sysid), do: DynamicSupervisor.terminate_child(Dolphin.Vehicles.Supervisor, pid)
+      Vehicles.forget(sysid)
     end)
 
     Enum.find_value(1..200, fn _ -> Vehicles.whereis(sysid) || (Process.sleep(20) && nil) end)

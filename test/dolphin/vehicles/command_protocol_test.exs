@@ -24,7 +24,7 @@ defmodule Dolphin.Vehicles.CommandProtocolTest do
     on_exit(fn ->
       Clock.set_speedup(1)
       DynamicSupervisor.terminate_child(Dolphin.Link.Supervisor, link)
-      if pid = Vehicles.whereis(sysid), do: DynamicSupervisor.terminate_child(Dolphin.Vehicles.Supervisor, pid)
+      Vehicles.forget(sysid)
     end)
 
     UDPPeer.send_message(peer, port, %M.Heartbeat{type: 2, autopilot: 3, custom_mode: 0}, sysid: sysid)
