@@ -139,19 +139,8 @@ defmodule Dolphin.Sim.Streams do
   def message(c, 30), do: %M.Attitude{time_boot_ms: c.time_ms, yaw: yaw(c)}
 
   def message(c, 33) do
-    p = Copter.position(c)
-
-    %M.GlobalPositionInt{
-      time_boot_ms: c.time_ms,
-      lat: round(p.lat * 1.0e7),
-      lon: round(p.lon * 1.0e7),
-      alt: round(p.alt * 1000),
-      relative_alt: round(p.relative_alt * 1000),
-      vx: round(c.vn * 100),
-      vy: round(c.ve * 100),
-      vz: round(-c.vz * 100),
-      hdg: round(c.heading * 100) |> rem(36_000)
-    }
+    fields = %{time_boot_ms: c.time_ms, vx: round(c.vn * 100), vy: round(c.ve * 100), vz: round(-c.vz * 100), hdg: rem(round(c.heading * 100), 36_000)}
+    struct(M.GlobalPositionInt, Map.merge(position_fields(c), fields))
   end
 
   def message(c, 42) do
@@ -250,19 +239,14 @@ defmodule Dolphin.Sim.Streams do
 
   @doc "CAMERA_IMAGE_CAPTURED for the photo just taken."
   def image_captured(c) do
-    p = Copter.position(c)
+    fields = %{time_boot_ms: c.time_ms, q: [1.0, 0.0, 0.0, 0.0], image_index: c.photos - 1, capture_result: 1, camera_id: 0}
+    struct(M.CameraImageCaptured, Map.merge(position_fields(c), fields))
+  end
 
-    %M.CameraImageCaptured{
-      time_boot_ms: c.time_ms,
-      lat: round(p.lat * 1.0e7),
-      lon: round(p.lon * 1.0e7),
-      alt: round(p.alt * 1000),
-      relative_alt: round(p.relative_alt * 1000),
-      q: [1.0, 0.0, 0.0, 0.0],
-      image_index: c.photos - 1,
-      capture_result: 1,
-      camera_id: 0
-    }
+  # Where the vehicle is, in MAVLink's integer fields: degE7 and millimetres.
+  defp position_fields(c) do
+    p = Copter.position(c)
+    %{lat: round(p.lat * 1.0e7), lon: round(p.lon * 1.0e7), alt: round(p.alt * 1000), relative_alt: round(p.relative_alt * 1000)}
   end
 
   @doc "Pack voltage in mV: a 3S LiPo sagging with charge and load."
