@@ -424,10 +424,7 @@ defmodule Dolphin.Sim.Copter do
 
   # A COMMAND_INT carries its point in x/y/z (degE7, metres in its frame);
   # a COMMAND_LONG in p5..p7 (degrees, metres AMSL).
-  defp command_point(params, {frame, x, y, z}) do
-    _ = params
-    %{lat: x / 1.0e7, lon: y / 1.0e7, alt: {frame, z}}
-  end
+  defp command_point(_params, {frame, x, y, z}), do: %{lat: x / 1.0e7, lon: y / 1.0e7, alt: {frame, z}}
 
   defp command_point([_, _, _, _, lat, lon, alt], nil), do: %{lat: lat, lon: lon, alt: {0, alt}}
 

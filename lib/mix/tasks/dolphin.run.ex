@@ -277,14 +277,15 @@ defmodule Mix.Tasks.Dolphin.Run do
 
     # On a terminal the log scrolls above a status block redrawn in place;
     # elsewhere (pipes, CI, files) it is plain timestamped lines.
-    live = !opts[:quiet] && !opts[:plain] && terminal?(out)
+    tty = if !opts[:quiet] && !opts[:plain], do: terminal(out)
+    live = tty != nil
 
     printer =
       spawn_link(fn ->
         Dolphin.Telemetry.subscribe()
         send(parent, {:printer_ready, self()})
         if live, do: Process.send_after(self(), :redraw, @redraw_ms)
-        print_loop(%{out: out, origin: origin, quiet: opts[:quiet], live: live, block: 0, tasks: %{}, columns: if(live, do: columns(), else: 80)})
+        print_loop(%{out: out, origin: origin, quiet: opts[:quiet], live: live, block: 0, tasks: %{}, columns: if(live, do: columns(tty), else: 80)})
       end)
 
     receive do: ({:printer_ready, ^printer} -> :ok)
@@ -390,32 +391,31 @@ defmodule Mix.Tasks.Dolphin.Run do
 
   # --- live output: one line per event worth an operator's eye ---
 
-  # (`mix` runs without a shell, where OTP 25 cannot ask the terminal itself:
-  # what our standard output is connected to tells.)
-  # The terminal's width: `mix` has no shell to ask, and the BEAM's child
-  # processes no controlling terminal, so the device our output goes to is asked.
-  defp columns do
-    with {:ok, "/dev/" <> _ = device} <- File.read_link("/proc/self/fd/1"),
-         [_rows, cols] <- :os.cmd(String.to_charlist("stty size < #{device} 2>/dev/null")) |> to_string() |> String.split(),
+  # The terminal our standard output is, if it is one (a device under /dev/pts
+  # or /dev/tty that is not "dumb"), or nil. (`mix` runs without a shell, where
+  # OTP 25 cannot ask the terminal itself: what our output is connected to tells.)
+  defp terminal(:stdio) do
+    case File.read_link("/proc/self/fd/1") do
+      {:ok, "/dev/" <> kind = device} ->
+        if (String.starts_with?(kind, "pts/") or String.starts_with?(kind, "tty")) and System.get_env("TERM") not in [nil, "", "dumb"], do: device
+
+      _ ->
+        nil
+    end
+  end
+
+  defp terminal(_device), do: nil
+
+  # Its width: `mix` has no shell to ask, and the BEAM's child processes no
+  # controlling terminal, so the device itself is asked.
+  defp columns(device) do
+    with [_rows, cols] <- :os.cmd(String.to_charlist("stty size < #{device} 2>/dev/null")) |> to_string() |> String.split(),
          {n, ""} when n > 20 <- Integer.parse(cols) do
       n
     else
       _ -> 80
     end
   end
-
-  defp terminal?(:stdio) do
-    tty? =
-      case File.read_link("/proc/self/fd/1") do
-        {:ok, "/dev/pts/" <> _} -> true
-        {:ok, "/dev/tty" <> _} -> true
-        _ -> false
-      end
-
-    tty? and System.get_env("TERM") not in [nil, "", "dumb"]
-  end
-
-  defp terminal?(_device), do: false
 
   defp print_loop(p) do
     receive do
