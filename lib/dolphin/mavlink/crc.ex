@@ -7,12 +7,13 @@ defmodule Dolphin.MAVLink.CRC do
       iex> Dolphin.MAVLink.CRC.x25("123456789")
       0x6F91
 
-  The hot path consumes two bytes per step through a 65,536-entry table built at
+  `checksum/4` and `frame_checksum/5` run in C when the library built from
+  `c_src/dolphin_crc.c` is loaded (see `implementation/0`). In Erlang, the hot
+  path consumes two bytes per step through a 65,536-entry table built at
   compile time: the register is 16 bits wide, so XOR-ing two data bytes into it
   and shifting 16 times is one table look-up. Sixteen bytes are matched per
   call: the per-call cost of matching the rest of a binary is larger than the
-  look-ups themselves. (A C NIF was measured too: on our machines its call
-  overhead made it slower than this for frame-sized inputs.)
+  look-ups themselves.
   """
 
   import Bitwise
@@ -40,6 +41,69 @@ defmodule Dolphin.MAVLink.CRC do
   @spec checksum(binary(), non_neg_integer(), non_neg_integer(), byte()) :: crc()
   def checksum(binary, offset, length, crc_extra),
     do: accumulate_byte(crc_extra, accumulate(binary_part(binary, offset, length), 0xFFFF))
+
+  @doc """
+  Which implementation computes `checksum/4` and `frame_checksum/5`:
+  `:native` (the C library built from `c_src/dolphin_crc.c` into `priv/`,
+  several times faster) or `:erlang` (this module's code, used when the
+  library was not built or cannot be loaded).
+  """
+  @spec implementation() :: :native | :erlang
+  def implementation, do: :erlang
+
+  # The C library replaces checksum/4, frame_checksum/5 and implementation/0
+  # when it loads; if it does not, their Erlang definitions stay.
+  @on_load :load_native
+  defp load_native do
+    with dir when is_list(dir) <- :code.priv_dir(:dolphin),
+         {:error, {reason, text}} when reason != :reload <- :erlang.load_nif(:filename.join(dir, ~c"dolphin_crc"), 0) do
+      if reason != :load_failed or File.exists?(Path.join(dir, "dolphin_crc.so")),
+        do: :error_logger.warning_msg(~c"MAVLink checksum in Erlang: ~ts~n", [text])
+    end
+
+    :ok
+  end
+
+  @doc """
+  The checksum of a MAVLink 2 frame from its first seven bytes as one
+  little-endian integer (magic, len, flags, compat, seq, sysid, compid), its
+  message id and the first `len` bytes of `payload`: what `checksum/4` gives
+  over the frame's bytes, without needing them built (an encoder checksums
+  before building the frame once).
+  """
+  @spec frame_checksum(non_neg_integer(), non_neg_integer(), binary(), non_neg_integer(), byte()) :: crc()
+  def frame_checksum(header, msgid, payload, len, crc_extra) do
+    crc = elem(@table16, bxor(0xFFFF, header >>> 8 &&& 0xFFFF))
+    crc = elem(@table16, bxor(crc, header >>> 24 &&& 0xFFFF))
+    crc = elem(@table16, bxor(crc, header >>> 40 &&& 0xFFFF))
+    crc = elem(@table16, bxor(crc, msgid &&& 0xFFFF))
+    accumulate_byte(crc_extra, prefix(payload, len, accumulate_byte(msgid >>> 16, crc)))
+  end
+
+  # accumulate/2 over the first n bytes of a binary.
+  defp prefix(
+         <<w1::little-16, w2::little-16, w3::little-16, w4::little-16, w5::little-16, w6::little-16,
+           w7::little-16, w8::little-16, rest::binary>>,
+         n,
+         crc
+       )
+       when n >= 16 do
+    crc = elem(@table16, bxor(crc, w1))
+    crc = elem(@table16, bxor(crc, w2))
+    crc = elem(@table16, bxor(crc, w3))
+    crc = elem(@table16, bxor(crc, w4))
+    crc = elem(@table16, bxor(crc, w5))
+    crc = elem(@table16, bxor(crc, w6))
+    crc = elem(@table16, bxor(crc, w7))
+    prefix(rest, n - 16, elem(@table16, bxor(crc, w8)))
+  end
+
+  defp prefix(<<w1::little-16, w2::little-16, rest::binary>>, n, crc) when n >= 4,
+    do: prefix(rest, n - 4, elem(@table16, bxor(elem(@table16, bxor(crc, w1)), w2)))
+
+  defp prefix(<<word::little-16, rest::binary>>, n, crc) when n >= 2, do: prefix(rest, n - 2, elem(@table16, bxor(crc, word)))
+  defp prefix(<<byte, _::binary>>, 1, crc), do: accumulate_byte(byte, crc)
+  defp prefix(_bytes, 0, crc), do: crc
 
   @doc "Continues a CRC over `data`."
   @spec accumulate(binary(), crc()) :: crc()

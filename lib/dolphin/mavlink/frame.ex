@@ -36,6 +36,8 @@ defmodule Dolphin.MAVLink.Frame do
   """
 
 
+  import Bitwise, only: [&&&: 2, |||: 2, <<<: 2]
+
   alias Dolphin.MAVLink.{CRC, Message, Value}
 
   @magic_v1 0xFE
@@ -85,77 +87,110 @@ defmodule Dolphin.MAVLink.Frame do
   @doc "Decodes the frame at the start of `buffer`; see the module doc."
   @spec decode(binary(), module(), keyword()) ::
           {:ok, t(), binary()} | {:more, binary()} | {:error, error_reason(), binary()}
-  def decode(buffer, dialect, opts \\ [])
-
-  # One pattern per frame shape, matched in the function head, and one struct
-  # built per frame: the fewer terms made per frame, the faster (bench/codec.exs).
-  def decode(
-        <<@magic_v2, len, 0, compat, seq, sysid, compid, msgid::little-24, payload::binary-size(len), crc::little-16,
-          rest::binary>> = buf,
-        dialect,
-        opts
-      ) do
-    checked(buf, 12 + len, crc, payload, rest, dialect, opts, 2, 0, compat, seq, sysid, compid, msgid, nil)
-  end
-
-  def decode(
-        <<@magic_v2, len, @signed, compat, seq, sysid, compid, msgid::little-24, payload::binary-size(len),
-          crc::little-16, link_id, timestamp::little-48, signature::binary-6, rest::binary>> = buf,
-        dialect,
-        opts
-      ) do
-    signature = %{link_id: link_id, timestamp: timestamp, signature: signature}
-    checked(buf, 25 + len, crc, payload, rest, dialect, opts, 2, @signed, compat, seq, sysid, compid, msgid, signature)
-  end
-
-  def decode(<<@magic_v2, _len, flags, _::binary>> = buf, _dialect, _opts) when flags > @signed,
-    do: {:error, :bad_incompat_flags, binary_part(buf, 1, byte_size(buf) - 1)}
-
-  def decode(<<@magic_v2, _::binary>> = buf, _dialect, _opts), do: {:more, buf}
-
-  def decode(
-        <<@magic_v1, len, seq, sysid, compid, msgid, payload::binary-size(len), crc::little-16, rest::binary>> = buf,
-        dialect,
-        opts
-      ) do
-    checked(buf, 8 + len, crc, payload, rest, dialect, opts, 1, 0, 0, seq, sysid, compid, msgid, nil)
-  end
-
-  def decode(<<@magic_v1, _::binary>> = buf, _dialect, _opts), do: {:more, buf}
-
-  def decode(<<>>, _dialect, _opts), do: {:more, <<>>}
-
-  def decode(buf, _dialect, _opts) do
-    case :binary.match(buf, [<<@magic_v2>>, <<@magic_v1>>]) do
-      {pos, 1} -> {:error, :garbage, binary_part(buf, pos, byte_size(buf) - pos)}
-      :nomatch -> {:error, :garbage, <<>>}
+  def decode(buffer, dialect, opts \\ []) do
+    case decode_at(buffer, 0, decoder(dialect), opts) do
+      {:ok, frame, next} -> {:ok, frame, from(buffer, next)}
+      {:more, _at} -> {:more, buffer}
+      {:error, reason, next} -> {:error, reason, from(buffer, next)}
     end
   end
 
-  # The checksum covers the bytes after the magic through the payload (the
-  # header is 9 bytes in MAVLink 2, 5 in MAVLink 1), then the message's CRC_EXTRA.
-  defp checked(buf, size, crc, payload, rest, dialect, opts, version, flags, compat, seq, sysid, compid, msgid, sig) do
-    len = byte_size(payload)
-    crc_len = if version == 2, do: 9 + len, else: 5 + len
+  defp from(buffer, at), do: binary_part(buffer, at, byte_size(buffer) - at)
 
-    case dialect.message_info(msgid) do
-      {module, crc_extra, _min, max_len} ->
-        if CRC.checksum(buf, 1, crc_len, crc_extra) == crc do
-          message = decode_payload(module, payload, len, max_len)
-          {:ok, new(version, flags, compat, seq, sysid, compid, msgid, message, payload, sig, binary_part(buf, 0, size)), rest}
-        else
-          bad_crc(buf)
+  @doc false
+  # The dialect's look-up of a message id for decoding, as a function value:
+  # calling it costs a local call, where `dialect.frame_decoder(id)` would look
+  # the function up by name every time.
+  @spec decoder(module()) :: (non_neg_integer() -> {byte(), non_neg_integer(), (binary() -> Message.t())} | nil)
+  def decoder(dialect), do: Function.capture(dialect, :frame_decoder, 1)
+
+  @doc false
+  # decode/3 for a parser: looks at `buffer` from byte `at` and answers with
+  # offsets instead of the rest of the buffer (`{:ok, frame, next}`, `{:more,
+  # at}`, `{:error, reason, resume_at}`), since a sub-binary per frame costs as
+  # much as decoding a small message. `decoder` comes from decoder/1.
+  #
+  # One binary match over the frame shapes, one struct per message and one per
+  # frame, the checksum read from the buffer in place:
+  # bench/codec.exs measures every term and binary made here.
+  @spec decode_at(binary(), non_neg_integer(), function(), keyword()) ::
+          {:ok, t(), non_neg_integer()} | {:more, non_neg_integer()} | {:error, error_reason(), non_neg_integer()}
+  def decode_at(buf, at, decoder, opts) do
+    case buf do
+      <<_::binary-size(at), @magic_v2, len, 0, compat, seq, sysid, compid, msgid::little-24, payload::binary-size(len),
+        crc::little-16, _::binary>> ->
+        case decoder.(msgid) do
+          {crc_extra, max_len, decode} ->
+            if CRC.checksum(buf, at + 1, 9 + len, crc_extra) == crc do
+              message = decode_payload(decode, payload, len, max_len)
+              {:ok, new(__MODULE__, 2, 0, compat, seq, sysid, compid, msgid, message, payload, nil, binary_part(buf, at, 12 + len)), at + 12 + len}
+            else
+              {:error, :bad_crc, at + 1}
+            end
+
+          nil ->
+            unknown(buf, at, 12 + len, opts, 2, 0, compat, seq, sysid, compid, msgid, payload, nil)
         end
 
-      nil ->
-        unknown(buf, opts, fn ->
-          {:ok, new(version, flags, compat, seq, sysid, compid, msgid, nil, payload, sig, binary_part(buf, 0, size)), rest}
-        end)
+      <<_::binary-size(at), @magic_v2, len, @signed, compat, seq, sysid, compid, msgid::little-24,
+        payload::binary-size(len), crc::little-16, link_id, timestamp::little-48, signature::binary-6, _::binary>> ->
+        signature = %{link_id: link_id, timestamp: timestamp, signature: signature}
+
+        case decoder.(msgid) do
+          {crc_extra, max_len, decode} ->
+            if CRC.checksum(buf, at + 1, 9 + len, crc_extra) == crc do
+              message = decode_payload(decode, payload, len, max_len)
+              raw = binary_part(buf, at, 25 + len)
+              {:ok, new(__MODULE__, 2, @signed, compat, seq, sysid, compid, msgid, message, payload, signature, raw), at + 25 + len}
+            else
+              {:error, :bad_crc, at + 1}
+            end
+
+          nil ->
+            unknown(buf, at, 25 + len, opts, 2, @signed, compat, seq, sysid, compid, msgid, payload, signature)
+        end
+
+      <<_::binary-size(at), @magic_v2, _len, flags, _::binary>> when flags > @signed ->
+        {:error, :bad_incompat_flags, at + 1}
+
+      <<_::binary-size(at), @magic_v2, _::binary>> ->
+        {:more, at}
+
+      <<_::binary-size(at), @magic_v1, len, seq, sysid, compid, msgid, payload::binary-size(len), crc::little-16, _::binary>> ->
+        case decoder.(msgid) do
+          {crc_extra, max_len, decode} ->
+            if CRC.checksum(buf, at + 1, 5 + len, crc_extra) == crc do
+              message = decode_payload(decode, payload, len, max_len)
+              {:ok, new(__MODULE__, 1, 0, 0, seq, sysid, compid, msgid, message, payload, nil, binary_part(buf, at, 8 + len)), at + 8 + len}
+            else
+              {:error, :bad_crc, at + 1}
+            end
+
+          nil ->
+            unknown(buf, at, 8 + len, opts, 1, 0, 0, seq, sysid, compid, msgid, payload, nil)
+        end
+
+      <<_::binary-size(at), @magic_v1, _::binary>> ->
+        {:more, at}
+
+      _ when at >= byte_size(buf) ->
+        {:more, at}
+
+      _ ->
+        case :binary.match(buf, [<<@magic_v2>>, <<@magic_v1>>], scope: {at, byte_size(buf) - at}) do
+          {pos, 1} -> {:error, :garbage, pos}
+          :nomatch -> {:error, :garbage, byte_size(buf)}
+        end
     end
   end
 
-  defp new(version, flags, compat, seq, sysid, compid, msgid, message, payload, signature, raw) do
-    %__MODULE__{
+  # The struct is passed in, not written as %__MODULE__{}: with a literal
+  # module the compiler folds it into a constant map that every frame then
+  # updates key by key; built from variables, the map takes one allocation
+  # with a shared key table. (The same holds for the generated message structs.)
+  defp new(struct, version, flags, compat, seq, sysid, compid, msgid, message, payload, signature, raw) do
+    %{
+      __struct__: struct,
       version: version,
       sysid: sysid,
       compid: compid,
@@ -170,42 +205,40 @@ defmodule Dolphin.MAVLink.Frame do
     }
   end
 
-  defp bad_crc(buf), do: {:error, :bad_crc, binary_part(buf, 1, byte_size(buf) - 1)}
-
   # Without CRC_EXTRA nothing vouches for an unknown frame but the framing itself:
   # when forwarding, trust it only right after a good frame and when the next
   # frame starts where its length says it ends. Until the byte after it is
   # there, wait (so that the result does not depend on where a stream was cut
   # into chunks), unless the caller says the data ends here.
-  defp unknown(buf, opts, accept) do
+  defp unknown(buf, at, size, opts, version, flags, compat, seq, sysid, compid, msgid, payload, signature) do
+    next = at + size
+    frame = fn -> new(__MODULE__, version, flags, compat, seq, sysid, compid, msgid, nil, payload, signature, binary_part(buf, at, size)) end
+
     case Keyword.get(opts, :unknown, :drop) do
       :accept ->
-        accept.()
+        {:ok, frame.(), next}
 
       :forward ->
-        {:ok, _frame, rest} = result = accept.()
-
         cond do
-          not Keyword.get(opts, :in_sync, true) -> {:error, :unknown_id, binary_part(buf, 1, byte_size(buf) - 1)}
-          rest == <<>> -> if Keyword.get(opts, :at_end, false), do: result, else: {:more, buf}
-          framed?(rest) -> result
-          true -> {:error, :unknown_id, binary_part(buf, 1, byte_size(buf) - 1)}
+          not Keyword.get(opts, :in_sync, true) -> {:error, :unknown_id, at + 1}
+          next == byte_size(buf) -> if Keyword.get(opts, :at_end, false), do: {:ok, frame.(), next}, else: {:more, at}
+          :binary.at(buf, next) in [@magic_v1, @magic_v2] -> {:ok, frame.(), next}
+          true -> {:error, :unknown_id, at + 1}
         end
 
       :drop ->
-        {:error, :unknown_id, binary_part(buf, 1, byte_size(buf) - 1)}
+        {:error, :unknown_id, at + 1}
     end
   end
 
-  defp framed?(<<magic, _::binary>>), do: magic in [@magic_v1, @magic_v2]
+  defp decode_payload(decode, payload, len, max_len) when len == max_len, do: decode.(payload)
 
-  defp decode_payload(module, payload, len, max_len) when len == max_len, do: module.decode(payload)
+  # One construction (the sized first segment keeps it from being an append,
+  # which would allocate a growable binary).
+  defp decode_payload(decode, payload, len, max_len) when len < max_len,
+    do: decode.(<<payload::binary-size(len), Value.zeros(max_len - len)::binary>>)
 
-  # One allocation; `<<payload::binary, ...>>` would be an append (see encode).
-  defp decode_payload(module, payload, len, max_len) when len < max_len,
-    do: module.decode(IO.iodata_to_binary([payload | Value.zeros(max_len - len)]))
-
-  defp decode_payload(module, payload, _len, max_len), do: module.decode(binary_part(payload, 0, max_len))
+  defp decode_payload(decode, payload, _len, max_len), do: decode.(binary_part(payload, 0, max_len))
 
   @doc """
   Encodes a message into a complete frame.
@@ -224,22 +257,24 @@ defmodule Dolphin.MAVLink.Frame do
   # literal: appending to a small binary (`<<bin::binary, ...>>`) would make it
   # a separately allocated writable binary, which costs more than the encoding.
   defp encode([], %module{} = message, version, sysid, compid, seq, compat, signing) do
-    {id, crc_extra, min_len} = module.__mavlink__(:frame)
-    payload = module.encode(message)
+    {id, crc_extra, min_len, payload} = module.__frame__(message)
 
     case version do
       2 ->
-        payload = trim_zeros(payload, byte_size(payload))
+        len = trimmed_size(payload, byte_size(payload))
         flags = if signing, do: @signed, else: 0
-        body = <<byte_size(payload), flags, compat, seq, sysid, compid, id::little-24, payload::binary>>
-        frame = <<@magic_v2, body::binary, CRC.checksum(body, 0, byte_size(body), crc_extra)::little-16>>
+        # The first seven bytes as one integer: each segment of a binary
+        # construction costs more than the shifts.
+        header = @magic_v2 ||| len <<< 8 ||| flags <<< 16 ||| compat <<< 24 ||| seq <<< 32 ||| sysid <<< 40 ||| compid <<< 48
+        crc = CRC.frame_checksum(header, id, payload, len, crc_extra)
+        frame = <<header::little-56, id::little-24, payload::binary-size(len), crc::little-16>>
         if signing, do: sign(frame, signing), else: frame
 
       1 when signing != nil ->
         raise ArgumentError, "MAVLink 1 frames cannot be signed"
 
       1 when id <= 255 ->
-        body = <<min_len, seq, sysid, compid, id, binary_part(payload, 0, min_len)::binary>>
+        body = <<min_len, seq, sysid, compid, id, payload::binary-size(min_len)>>
         <<@magic_v1, body::binary, CRC.checksum(body, 0, byte_size(body), crc_extra)::little-16>>
 
       1 ->
@@ -272,23 +307,27 @@ defmodule Dolphin.MAVLink.Frame do
     IO.iodata_to_binary([unsigned, block, signature])
   end
 
-  # MAVLink 2 drops trailing zero bytes of the payload, keeping at least one;
-  # eight at a time first (extension fields are often all zero).
-  defp trim_zeros(payload, n) when n > 8 do
-    case payload do
-      <<_::binary-size(n - 8), 0::64, _::binary>> -> trim_zeros(payload, n - 8)
-      _ -> trim_ones(payload, n)
+  # MAVLink 2 drops trailing zero bytes of the payload, keeping at least one.
+  # Only the length is found here (the frame takes that many bytes of the
+  # payload as it is built): four bytes per look, the last one first.
+  defp trimmed_size(payload, n) when n >= 4 do
+    <<_::binary-size(n - 4), tail::32, _::binary>> = payload
+
+    cond do
+      tail == 0 -> trimmed_size(payload, n - 4)
+      (tail &&& 0xFF) != 0 -> n
+      (tail &&& 0xFFFF) != 0 -> n - 1
+      (tail &&& 0xFFFFFF) != 0 -> n - 2
+      true -> n - 3
     end
   end
 
-  defp trim_zeros(payload, n), do: trim_ones(payload, n)
+  defp trimmed_size(_payload, n) when n <= 1, do: 1
 
-  defp trim_ones(payload, 1), do: binary_part(payload, 0, 1)
-
-  defp trim_ones(payload, n) do
+  defp trimmed_size(payload, n) do
     case payload do
-      <<_::binary-size(n - 1), 0, _::binary>> -> trim_ones(payload, n - 1)
-      _ -> binary_part(payload, 0, n)
+      <<_::binary-size(n - 1), 0, _::binary>> -> trimmed_size(payload, n - 1)
+      _ -> n
     end
   end
 end

@@ -134,6 +134,11 @@ defmodule Dolphin.MAVLink.Generator do
         def __mavlink__(:fields), do: unquote(Macro.escape(spec.fields))
         def __mavlink__(:wire), do: unquote(Macro.escape(Enum.map(spec.wire, &{&1.name, &1.type, &1.array_length})))
 
+        @doc false
+        # What Dolphin.MAVLink.Frame.encode/2 needs, in one call: `{id,
+        # crc_extra, min_len, payload}`.
+        def __frame__(message), do: {unquote(spec.id), unquote(spec.crc_extra), unquote(spec.min_len), encode(message)}
+
         unquote(decode_clauses(spec))
         unquote(encode_clauses(spec))
       end
@@ -177,22 +182,35 @@ defmodule Dolphin.MAVLink.Generator do
   # The first clause matches floats with float segments, which fail on NaN and
   # infinities; the second (only for messages with scalar floats) takes their
   # bits and converts them, so every payload of the right size is decoded.
+  #
+  # The struct is built by new/N from the module passed as an argument: a
+  # literal %__MODULE__{...} makes the compiler fold the module into a constant
+  # map that each decode then updates key by key, which costs about twice as much.
   defp decode_clauses(spec) do
     fast = decode_clause(spec, false)
+    struct = Macro.var(:struct__, __MODULE__)
+    vars = Enum.map(spec.fields, &var/1)
+
+    new =
+      quote do
+        defp new(unquote(struct), unquote_splicing(vars)) do
+          %{unquote_splicing([{:__struct__, struct} | Enum.map(spec.fields, &{&1.name, var(&1)})])}
+        end
+      end
 
     if Enum.any?(spec.wire, &scalar_float?/1),
-      do: quote(do: (unquote(fast); unquote(decode_clause(spec, true)))),
-      else: fast
+      do: quote(do: (unquote(fast); unquote(decode_clause(spec, true)); unquote(new))),
+      else: quote(do: (unquote(fast); unquote(new)))
   end
 
   defp decode_clause(spec, floats_as_bits?) do
     segments = Enum.map(spec.wire, &decode_segment(&1, floats_as_bits?))
-    values = Enum.map(spec.fields, &{&1.name, decode_value(&1, floats_as_bits?)})
+    values = Enum.map(spec.fields, &decode_value(&1, floats_as_bits?))
 
     quote do
       @doc false
       @impl true
-      def decode(<<unquote_splicing(segments)>>), do: %__MODULE__{unquote_splicing(values)}
+      def decode(<<unquote_splicing(segments)>>), do: new(__MODULE__, unquote_splicing(values))
     end
   end
 
@@ -342,6 +360,13 @@ defmodule Dolphin.MAVLink.Generator do
         end
       end
 
+    decoder_clauses =
+      for s <- specs do
+        quote do
+          def frame_decoder(unquote(s.id)), do: {unquote(s.crc_extra), unquote(s.max_len), &unquote(s.module).decode/1}
+        end
+      end
+
     by_name = Map.new(specs, &{&1.name, &1.module})
     modules = Enum.map(specs, & &1.module)
 
@@ -362,6 +387,12 @@ defmodule Dolphin.MAVLink.Generator do
       @spec message_info(non_neg_integer()) :: {module(), byte(), non_neg_integer(), non_neg_integer()} | nil
       unquote_splicing(info_clauses)
       def message_info(_id), do: nil
+
+      @doc false
+      # What Dolphin.MAVLink.Frame needs to check and decode a frame with this
+      # id: `{crc_extra, max_len, decode_fun}`, or nil.
+      unquote_splicing(decoder_clauses)
+      def frame_decoder(_id), do: nil
 
       @doc "The module of a message by its XML name (`\"HEARTBEAT\"`), or `nil`."
       @spec message_module(String.t()) :: module() | nil

@@ -42,6 +42,7 @@ defmodule Dolphin.MAVLink.Parser do
   alias Dolphin.MAVLink.Parser.Stats
 
   defstruct dialect: Dolphin.MAVLink.Ardupilotmega,
+            decoder: nil,
             signing: nil,
             unknown: :drop,
             buffer: <<>>,
@@ -50,6 +51,7 @@ defmodule Dolphin.MAVLink.Parser do
 
   @type t :: %__MODULE__{
           dialect: module(),
+          decoder: function() | nil,
           signing: Signing.t() | nil,
           unknown: :drop | :forward,
           buffer: binary(),
@@ -60,8 +62,11 @@ defmodule Dolphin.MAVLink.Parser do
   @doc "A parser; see the module doc for options."
   @spec new(keyword()) :: t()
   def new(opts \\ []) do
+    dialect = Keyword.get(opts, :dialect, Dolphin.MAVLink.Ardupilotmega)
+
     %__MODULE__{
-      dialect: Keyword.get(opts, :dialect, Dolphin.MAVLink.Ardupilotmega),
+      dialect: dialect,
+      decoder: Frame.decoder(dialect),
       signing: Keyword.get(opts, :signing),
       unknown: unknown!(Keyword.get(opts, :unknown, :drop))
     }
@@ -75,7 +80,7 @@ defmodule Dolphin.MAVLink.Parser do
   def feed(%__MODULE__{buffer: buffer, stats: stats} = parser, chunk) do
     buf = if buffer == <<>>, do: chunk, else: buffer <> chunk
     parser = %{parser | stats: %{stats | bytes: stats.bytes + byte_size(chunk)}}
-    loop(buf, parser, [])
+    loop(buf, 0, parser, [])
   end
 
   @doc """
@@ -86,53 +91,54 @@ defmodule Dolphin.MAVLink.Parser do
   """
   @spec finish(t()) :: {[Frame.t()], t()}
   def finish(%__MODULE__{buffer: <<>>} = parser), do: {[], parser}
-  def finish(%__MODULE__{buffer: buf} = parser), do: loop(buf, %{parser | buffer: <<>>}, [], 0, 0, :first)
+  def finish(%__MODULE__{buffer: buf} = parser), do: loop(buf, 0, %{parser | buffer: <<>>}, [], 0, 0, :first)
 
   @doc "Counters of what was decoded and dropped."
   @spec stats(t()) :: Stats.t()
   def stats(%__MODULE__{stats: stats}), do: stats
 
+  # The buffer is walked by offset (`at`): a sub-binary per frame for "the rest"
+  # would cost as much as decoding a small message.
   # Good frames are counted in loop arguments and written into the stats once
   # per feed: a struct update per frame costs more than decoding a small message.
   # `at_end` is false while the stream goes on; in finish/1 it is :first until a
   # cut-off candidate has been counted as truncated, then true.
-  defp loop(buf, parser, acc, frames \\ 0, unknown \\ 0, at_end \\ false) do
-    case Frame.decode(buf, parser.dialect, decode_opts(parser.unknown, parser.in_sync, at_end)) do
-      {:ok, %Frame{signature: nil} = frame, rest} when parser.signing == nil ->
-        loop_ok(rest, parser, [frame | acc], frame, frames, unknown, at_end)
+  defp loop(buf, at, parser, acc, frames \\ 0, unknown \\ 0, at_end \\ false) do
+    case Frame.decode_at(buf, at, parser.decoder, decode_opts(parser.unknown, parser.in_sync, at_end)) do
+      {:ok, %Frame{signature: nil} = frame, next} when parser.signing == nil ->
+        loop_ok(buf, next, parser, [frame | acc], frame, frames, unknown, at_end)
 
-      {:ok, frame, rest} ->
+      {:ok, frame, next} ->
         case Signing.verify_for(parser, frame) do
           {:ok, parser} ->
-            loop_ok(rest, parser, [frame | acc], frame, frames, unknown, at_end)
+            loop_ok(buf, next, parser, [frame | acc], frame, frames, unknown, at_end)
 
           # A bad signature may be a frame cut short whose "signature" is the
           # start of the next frame, and an unknown-id frame is vouched for by
           # nothing: look again from the byte after the magic.
           {:error, reason, parser} when reason == :bad_signature or frame.message == nil ->
             parser = %{parser | in_sync: false, stats: Stats.drop(parser.stats, reason, 1)}
-            loop(binary_part(buf, 1, byte_size(buf) - 1), parser, acc, frames, unknown, at_end)
+            loop(buf, at + 1, parser, acc, frames, unknown, at_end)
 
           # A replayed or refused frame is whole: drop all of it.
           {:error, reason, parser} ->
-            parser = %{parser | in_sync: false, stats: Stats.drop(parser.stats, reason, byte_size(frame.raw))}
-            loop(rest, parser, acc, frames, unknown, at_end)
+            parser = %{parser | in_sync: false, stats: Stats.drop(parser.stats, reason, next - at)}
+            loop(buf, next, parser, acc, frames, unknown, at_end)
         end
 
-      {:more, rest} when at_end == false or rest == <<>> ->
+      {:more, at} when at_end == false or at == byte_size(buf) ->
         stats = %{parser.stats | frames: parser.stats.frames + frames, unknown_id: parser.stats.unknown_id + unknown}
         # Keep only the unfinished tail, not the whole chunk it points into.
-        {:lists.reverse(acc), %{parser | buffer: :binary.copy(rest), stats: stats}}
+        {:lists.reverse(acc), %{parser | buffer: :binary.copy(binary_part(buf, at, byte_size(buf) - at)), stats: stats}}
 
       # The stream ended inside this candidate: drop its first byte and look on.
-      {:more, rest} ->
+      {:more, at} ->
         reason = if at_end == :first, do: :truncated, else: :garbage
         parser = %{parser | in_sync: false, stats: Stats.drop(parser.stats, reason, 1)}
-        loop(binary_part(rest, 1, byte_size(rest) - 1), parser, acc, frames, unknown, true)
+        loop(buf, at + 1, parser, acc, frames, unknown, true)
 
-      {:error, reason, rest} ->
-        stats = Stats.drop(parser.stats, reason, byte_size(buf) - byte_size(rest))
-        loop(rest, %{parser | in_sync: false, stats: stats}, acc, frames, unknown, at_end)
+      {:error, reason, next} ->
+        loop(buf, next, %{parser | in_sync: false, stats: Stats.drop(parser.stats, reason, next - at)}, acc, frames, unknown, at_end)
     end
   end
 
@@ -143,12 +149,12 @@ defmodule Dolphin.MAVLink.Parser do
   defp decode_opts(:forward, true, _at_end), do: [unknown: :forward, in_sync: true, at_end: true]
   defp decode_opts(:forward, false, _at_end), do: [unknown: :forward, in_sync: false, at_end: true]
 
-  defp loop_ok(rest, %__MODULE__{in_sync: true} = parser, acc, %Frame{message: nil}, frames, unknown, at_end),
-    do: loop(rest, parser, acc, frames, unknown + 1, at_end)
+  defp loop_ok(buf, next, %__MODULE__{in_sync: true} = parser, acc, %Frame{message: nil}, frames, unknown, at_end),
+    do: loop(buf, next, parser, acc, frames, unknown + 1, at_end)
 
-  defp loop_ok(rest, %__MODULE__{in_sync: true} = parser, acc, _frame, frames, unknown, at_end),
-    do: loop(rest, parser, acc, frames + 1, unknown, at_end)
+  defp loop_ok(buf, next, %__MODULE__{in_sync: true} = parser, acc, _frame, frames, unknown, at_end),
+    do: loop(buf, next, parser, acc, frames + 1, unknown, at_end)
 
-  defp loop_ok(rest, parser, acc, frame, frames, unknown, at_end),
-    do: loop_ok(rest, %{parser | in_sync: true}, acc, frame, frames, unknown, at_end)
+  defp loop_ok(buf, next, parser, acc, frame, frames, unknown, at_end),
+    do: loop_ok(buf, next, %{parser | in_sync: true}, acc, frame, frames, unknown, at_end)
 end
