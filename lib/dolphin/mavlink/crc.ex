@@ -72,38 +72,18 @@ defmodule Dolphin.MAVLink.CRC do
   before building the frame once).
   """
   @spec frame_checksum(non_neg_integer(), non_neg_integer(), binary(), non_neg_integer(), byte()) :: crc()
-  def frame_checksum(header, msgid, payload, len, crc_extra) do
+  def frame_checksum(header, msgid, payload, len, crc_extra), do: frame_checksum_erlang(header, msgid, payload, len, crc_extra)
+
+  @doc false
+  # frame_checksum/5 in Erlang, kept callable when the C library replaces it (for its tests).
+  @spec frame_checksum_erlang(non_neg_integer(), non_neg_integer(), binary(), non_neg_integer(), byte()) :: crc()
+  def frame_checksum_erlang(header, msgid, payload, len, crc_extra) do
     crc = elem(@table16, bxor(0xFFFF, header >>> 8 &&& 0xFFFF))
     crc = elem(@table16, bxor(crc, header >>> 24 &&& 0xFFFF))
     crc = elem(@table16, bxor(crc, header >>> 40 &&& 0xFFFF))
     crc = elem(@table16, bxor(crc, msgid &&& 0xFFFF))
-    accumulate_byte(crc_extra, prefix(payload, len, accumulate_byte(msgid >>> 16, crc)))
+    accumulate_byte(crc_extra, accumulate(binary_part(payload, 0, len), accumulate_byte(msgid >>> 16, crc)))
   end
-
-  # accumulate/2 over the first n bytes of a binary.
-  defp prefix(
-         <<w1::little-16, w2::little-16, w3::little-16, w4::little-16, w5::little-16, w6::little-16,
-           w7::little-16, w8::little-16, rest::binary>>,
-         n,
-         crc
-       )
-       when n >= 16 do
-    crc = elem(@table16, bxor(crc, w1))
-    crc = elem(@table16, bxor(crc, w2))
-    crc = elem(@table16, bxor(crc, w3))
-    crc = elem(@table16, bxor(crc, w4))
-    crc = elem(@table16, bxor(crc, w5))
-    crc = elem(@table16, bxor(crc, w6))
-    crc = elem(@table16, bxor(crc, w7))
-    prefix(rest, n - 16, elem(@table16, bxor(crc, w8)))
-  end
-
-  defp prefix(<<w1::little-16, w2::little-16, rest::binary>>, n, crc) when n >= 4,
-    do: prefix(rest, n - 4, elem(@table16, bxor(elem(@table16, bxor(crc, w1)), w2)))
-
-  defp prefix(<<word::little-16, rest::binary>>, n, crc) when n >= 2, do: prefix(rest, n - 2, elem(@table16, bxor(crc, word)))
-  defp prefix(<<byte, _::binary>>, 1, crc), do: accumulate_byte(byte, crc)
-  defp prefix(_bytes, 0, crc), do: crc
 
   @doc "Continues a CRC over `data`."
   @spec accumulate(binary(), crc()) :: crc()
