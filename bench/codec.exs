@@ -10,7 +10,7 @@
 # process does: the file (a reference-counted binary, outside the heap) to
 # decode, or the decoded frames to encode, copied in the way a link receives
 # the messages it sends and moved to the old generation before the clock
-# starts. Without that, the 100,000 frames the benchmark keeps (about 60 MB of
+# starts. Without that, the 100,000 frames the benchmark keeps (tens of MB of
 # heap) would be copied by the garbage collector during the timed run and
 # scattered in memory, which no link does and which doubled the encode time.
 #
