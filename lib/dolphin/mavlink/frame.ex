@@ -119,36 +119,12 @@ defmodule Dolphin.MAVLink.Frame do
     case buf do
       <<_::binary-size(at), @magic_v2, len, 0, compat, seq, sysid, compid, msgid::little-24, payload::binary-size(len),
         crc::little-16, _::binary>> ->
-        case decoder.(msgid) do
-          {crc_extra, max_len, decode} ->
-            if CRC.checksum(buf, at + 1, 9 + len, crc_extra) == crc do
-              message = decode_payload(decode, payload, len, max_len)
-              {:ok, new(__MODULE__, 2, 0, compat, seq, sysid, compid, msgid, message, payload, nil, binary_part(buf, at, 12 + len)), at + 12 + len}
-            else
-              {:error, :bad_crc, at + 1}
-            end
-
-          nil ->
-            unknown(buf, at, 12 + len, opts, 2, 0, compat, seq, sysid, compid, msgid, payload, nil)
-        end
+        checked(buf, at, 12 + len, crc, payload, decoder, opts, 2, 0, compat, seq, sysid, compid, msgid, nil)
 
       <<_::binary-size(at), @magic_v2, len, @signed, compat, seq, sysid, compid, msgid::little-24,
         payload::binary-size(len), crc::little-16, link_id, timestamp::little-48, signature::binary-6, _::binary>> ->
         signature = %{link_id: link_id, timestamp: timestamp, signature: signature}
-
-        case decoder.(msgid) do
-          {crc_extra, max_len, decode} ->
-            if CRC.checksum(buf, at + 1, 9 + len, crc_extra) == crc do
-              message = decode_payload(decode, payload, len, max_len)
-              raw = binary_part(buf, at, 25 + len)
-              {:ok, new(__MODULE__, 2, @signed, compat, seq, sysid, compid, msgid, message, payload, signature, raw), at + 25 + len}
-            else
-              {:error, :bad_crc, at + 1}
-            end
-
-          nil ->
-            unknown(buf, at, 25 + len, opts, 2, @signed, compat, seq, sysid, compid, msgid, payload, signature)
-        end
+        checked(buf, at, 25 + len, crc, payload, decoder, opts, 2, @signed, compat, seq, sysid, compid, msgid, signature)
 
       <<_::binary-size(at), @magic_v2, _len, flags, _::binary>> when flags > @signed ->
         {:error, :bad_incompat_flags, at + 1}
@@ -157,18 +133,7 @@ defmodule Dolphin.MAVLink.Frame do
         {:more, at}
 
       <<_::binary-size(at), @magic_v1, len, seq, sysid, compid, msgid, payload::binary-size(len), crc::little-16, _::binary>> ->
-        case decoder.(msgid) do
-          {crc_extra, max_len, decode} ->
-            if CRC.checksum(buf, at + 1, 5 + len, crc_extra) == crc do
-              message = decode_payload(decode, payload, len, max_len)
-              {:ok, new(__MODULE__, 1, 0, 0, seq, sysid, compid, msgid, message, payload, nil, binary_part(buf, at, 8 + len)), at + 8 + len}
-            else
-              {:error, :bad_crc, at + 1}
-            end
-
-          nil ->
-            unknown(buf, at, 8 + len, opts, 1, 0, 0, seq, sysid, compid, msgid, payload, nil)
-        end
+        checked(buf, at, 8 + len, crc, payload, decoder, opts, 1, 0, 0, seq, sysid, compid, msgid, nil)
 
       <<_::binary-size(at), @magic_v1, _::binary>> ->
         {:more, at}
@@ -181,6 +146,26 @@ defmodule Dolphin.MAVLink.Frame do
           {pos, 1} -> {:error, :garbage, pos}
           :nomatch -> {:error, :garbage, byte_size(buf)}
         end
+    end
+  end
+
+  # The checksum covers the bytes after the magic through the payload (the
+  # header is 9 bytes in MAVLink 2, 5 in MAVLink 1), then the message's CRC_EXTRA.
+  defp checked(buf, at, size, crc, payload, decoder, opts, version, flags, compat, seq, sysid, compid, msgid, signature) do
+    len = byte_size(payload)
+
+    case decoder.(msgid) do
+      {crc_extra, max_len, decode} ->
+        if CRC.checksum(buf, at + 1, if(version == 2, do: 9, else: 5) + len, crc_extra) == crc do
+          message = decode_payload(decode, payload, len, max_len)
+          raw = binary_part(buf, at, size)
+          {:ok, new(__MODULE__, version, flags, compat, seq, sysid, compid, msgid, message, payload, signature, raw), at + size}
+        else
+          {:error, :bad_crc, at + 1}
+        end
+
+      nil ->
+        unknown(buf, at, size, opts, version, flags, compat, seq, sysid, compid, msgid, payload, signature)
     end
   end
 

@@ -130,7 +130,6 @@ defmodule Dolphin.MAVLink.Generator do
         def __mavlink__(:min_len), do: unquote(spec.min_len)
         def __mavlink__(:max_len), do: unquote(spec.max_len)
         def __mavlink__(:dialect), do: unquote(spec.dialect)
-        def __mavlink__(:frame), do: unquote(Macro.escape({spec.id, spec.crc_extra, spec.min_len}))
         def __mavlink__(:fields), do: unquote(Macro.escape(spec.fields))
         def __mavlink__(:wire), do: unquote(Macro.escape(Enum.map(spec.wire, &{&1.name, &1.type, &1.array_length})))
 

@@ -21,7 +21,7 @@ defmodule Dolphin.MAVLink.Message do
   @typedoc "A message struct of some dialect."
   @type t :: struct()
 
-  @doc "Static facts of the message: `:id`, `:name`, `:crc_extra`, `:min_len`, `:max_len`, `:dialect`, `:fields`, `:wire`, `:frame` (`{id, crc_extra, min_len}`)."
+  @doc "Static facts of the message: `:id`, `:name`, `:crc_extra`, `:min_len`, `:max_len`, `:dialect`, `:fields`, `:wire`."
   @callback __mavlink__(atom()) :: term()
 
   @doc "Decodes a payload of exactly `max_len` bytes."
