@@ -147,7 +147,7 @@ defmodule Mix.Tasks.Dolphin.RunTest do
         script(dir, "sim.exs", """
         use Dolphin.Script
         vs = pick(count: 2, type: :uav, timeout: seconds(30))
-        for v <- vs, do: message("vehicle \#{inspect(v)} battery \#{battery(v)}")
+        for v <- vs, do: message("vehicle \#{inspect(v)} battery \#{inspect(battery(v))}")
         release(vs)
         """)
 
