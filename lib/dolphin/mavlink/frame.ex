@@ -235,15 +235,15 @@ defmodule Dolphin.MAVLink.Frame do
   that does not fit, or a message id above 255 in MAVLink 1.
   """
   @spec encode(Message.t(), [encode_opt()]) :: binary()
-  def encode(%_{} = message, opts \\ []), do: encode(opts, message, 2, 0, 0, 0, 0, nil)
+  def encode(%module{} = message, opts \\ []), do: encode(opts, module.__frame__(message), message, 2, 0, 0, 0, 0, nil)
 
-  # The options are walked into arguments (this is on the hot path of every
-  # frame sent), and the frame is built in one construction that starts with a
-  # literal: appending to a small binary (`<<bin::binary, ...>>`) would make it
-  # a separately allocated writable binary, which costs more than the encoding.
-  defp encode([], %module{} = message, version, sysid, compid, seq, compat, signing) do
-    {id, crc_extra, min_len, payload} = module.__frame__(message)
-
+  # The message module's `__frame__/1` gives `{id, crc_extra, min_len,
+  # payload}` in one call (the struct's module is looked up once). The options
+  # are walked into arguments (this is on the hot path of every frame sent), and
+  # the frame is built in one construction that starts with a literal:
+  # appending to a small binary (`<<bin::binary, ...>>`) would make it a
+  # separately allocated writable binary, which costs more than the encoding.
+  defp encode([], {id, crc_extra, min_len, payload}, message, version, sysid, compid, seq, compat, signing) do
     case version do
       2 ->
         len = trimmed_size(payload, byte_size(payload))
@@ -267,18 +267,18 @@ defmodule Dolphin.MAVLink.Frame do
     end
   end
 
-  defp encode([{:sysid, v} | t], m, ver, _, c, q, f, s) when v in 0..255, do: encode(t, m, ver, v, c, q, f, s)
-  defp encode([{:compid, v} | t], m, ver, y, _, q, f, s) when v in 0..255, do: encode(t, m, ver, y, v, q, f, s)
-  defp encode([{:seq, v} | t], m, ver, y, c, _, f, s) when v in 0..255, do: encode(t, m, ver, y, c, v, f, s)
-  defp encode([{:version, v} | t], m, _, y, c, q, f, s) when v in [1, 2], do: encode(t, m, v, y, c, q, f, s)
-  defp encode([{:compat_flags, v} | t], m, ver, y, c, q, _, s) when v in 0..255, do: encode(t, m, ver, y, c, q, v, s)
-  defp encode([{:signing, nil} | t], m, ver, y, c, q, f, _), do: encode(t, m, ver, y, c, q, f, nil)
+  defp encode([{:sysid, v} | t], p, m, ver, _, c, q, f, s) when v in 0..255, do: encode(t, p, m, ver, v, c, q, f, s)
+  defp encode([{:compid, v} | t], p, m, ver, y, _, q, f, s) when v in 0..255, do: encode(t, p, m, ver, y, v, q, f, s)
+  defp encode([{:seq, v} | t], p, m, ver, y, c, _, f, s) when v in 0..255, do: encode(t, p, m, ver, y, c, v, f, s)
+  defp encode([{:version, v} | t], p, m, _, y, c, q, f, s) when v in [1, 2], do: encode(t, p, m, v, y, c, q, f, s)
+  defp encode([{:compat_flags, v} | t], p, m, ver, y, c, q, _, s) when v in 0..255, do: encode(t, p, m, ver, y, c, q, v, s)
+  defp encode([{:signing, nil} | t], p, m, ver, y, c, q, f, _), do: encode(t, p, m, ver, y, c, q, f, nil)
 
-  defp encode([{:signing, %{key: <<_::binary-32>>, link_id: l, timestamp: ts} = s} | t], m, ver, y, c, q, f, _)
+  defp encode([{:signing, %{key: <<_::binary-32>>, link_id: l, timestamp: ts} = s} | t], p, m, ver, y, c, q, f, _)
        when l in 0..255 and is_integer(ts) and ts >= 0 and ts < 0x1000000000000,
-       do: encode(t, m, ver, y, c, q, f, s)
+       do: encode(t, p, m, ver, y, c, q, f, s)
 
-  defp encode([other | _], _m, _ver, _y, _c, _q, _f, _s), do: raise(ArgumentError, "bad frame option: #{inspect(other)}")
+  defp encode([other | _], _p, _m, _ver, _y, _c, _q, _f, _s), do: raise(ArgumentError, "bad frame option: #{inspect(other)}")
 
   @doc """
   Appends a signature block to an encoded MAVLink 2 frame whose incompat flags

@@ -273,7 +273,7 @@ defmodule Dolphin.MAVLink.Generator do
     bindings = Enum.map(spec.fields, &{&1.name, var(&1)})
     guards = guarded |> Enum.map(&encode_guard/1) |> Enum.reduce(true, &quote(do: unquote(&2) and unquote(&1)))
     bits? = float_bits != []
-    payload = quote(do: <<unquote_splicing(Enum.flat_map(spec.wire, &encode_segments(&1, bits?)))>>)
+    payload = quote(do: <<unquote_splicing(payload_segments(spec.wire, bits?))>>)
 
     # Arrays (and, in the second clause, floats) are converted first; anything
     # that does not convert sends the whole message down the general path.
@@ -322,6 +322,45 @@ defmodule Dolphin.MAVLink.Generator do
     {min, max} = Value.int_range(t)
     v = var(f)
     quote(do: is_integer(unquote(v)) and unquote(v) >= unquote(min) and unquote(v) <= unquote(max))
+  end
+
+  # Adjacent integer fields are written as one segment when together they fit
+  # in 56 bits (a small integer): on OTP 25 each integer segment of a binary
+  # construction is a call into the runtime, which costs more than the shifts.
+  # The clause's guards have checked every value's range; signed values are
+  # masked to their two's complement bits.
+  @packed_bits 56
+
+  defp payload_segments(wire, bits?) do
+    wire
+    |> Enum.reduce([], fn f, acc ->
+      case {packable_bits(f), acc} do
+        {nil, acc} -> [f | acc]
+        {bits, [{:packed, fs, total} | acc]} when total + bits <= @packed_bits -> [{:packed, [f | fs], total + bits} | acc]
+        {bits, acc} -> [{:packed, [f], bits} | acc]
+      end
+    end)
+    |> Enum.reverse()
+    |> Enum.flat_map(fn
+      {:packed, [f], _bits} -> encode_segments(f, bits?)
+      {:packed, fs, total} -> [quote(do: unquote(packed_value(Enum.reverse(fs))) :: little - size(unquote(total)))]
+      f -> encode_segments(f, bits?)
+    end)
+  end
+
+  defp packable_bits(%{type: t, array_length: nil}) when t not in [:char, :float, :double, :uint64, :int64], do: Value.size(t) * 8
+  defp packable_bits(_field), do: nil
+
+  # The first field in the low bits: the segment is little-endian, like the fields.
+  defp packed_value(fields) do
+    {terms, _bits} =
+      Enum.map_reduce(fields, 0, fn f, shift ->
+        bits = Value.size(f.type) * 8
+        v = if f.type in [:int8, :int16, :int32], do: quote(do: :erlang.band(unquote(var(f)), unquote(Bitwise.bsl(1, bits) - 1))), else: var(f)
+        {if(shift == 0, do: v, else: quote(do: :erlang.bsl(unquote(v), unquote(shift)))), shift + bits}
+      end)
+
+    Enum.reduce(tl(terms), hd(terms), &quote(do: :erlang.bor(unquote(&2), unquote(&1))))
   end
 
   defp encode_segments(%{type: t, array_length: nil} = f, true) when t in [:float, :double],
