@@ -28,6 +28,9 @@ defmodule Dolphin.Link.ConnectionTest do
     {:ok, port} = :inet.port(listen)
     {:ok, link} = Link.connect("tcp:127.0.0.1:#{port}", name: "tcp-test")
     cleanup(link, [41])
+    # A read's frames are decoded in a young heap made for them (rounded up to a heap size).
+    {:min_heap_size, words} = Process.info(link, :min_heap_size)
+    assert words >= Connection.spawn_opt()[:min_heap_size]
 
     {:ok, conn} = :gen_tcp.accept(listen, 2_000)
     bytes = Frame.encode(copter(), sysid: 41, compid: 1) <> Frame.encode(%M.SysStatus{battery_remaining: 66}, sysid: 41, compid: 1, seq: 1)

@@ -100,6 +100,19 @@ defmodule Dolphin.MAVLink.DialectTest do
       assert {:ok, %Frame{version: 1, message: ^hb}, <<>>} = Frame.decode(Frame.encode(hb, version: 1), Dialect)
     end
 
+    test "header options: any order gives the same frame; a bad one raises" do
+      hb = %Dialect.Heartbeat{type: 2, custom_mode: 0xDEADBEEF}
+      usual = Frame.encode(hb, sysid: 7, compid: 9, seq: 200)
+      assert Frame.encode(hb, seq: 200, compid: 9, sysid: 7) == usual
+      assert Frame.encode(hb, compid: 9, sysid: 7, seq: 200, compat_flags: 0) == usual
+      assert {:ok, %Frame{sysid: 7, compid: 9, seq: 200, compat_flags: 4}, <<>>} =
+               Frame.decode(Frame.encode(hb, sysid: 7, compid: 9, seq: 200, compat_flags: 4), Dialect)
+
+      for bad <- [[sysid: 256, compid: 9, seq: 200], [sysid: 7, compid: 9, seq: -1], [sysid: 7, compid: 9, seq: 1, speed: 3]] do
+        assert_raise ArgumentError, ~r/bad frame option/, fn -> Frame.encode(hb, bad) end
+      end
+    end
+
     test "generator specs are plain data" do
       defs = XML.load!(Path.join(@fixtures, "test_dialect.xml"))
       [hb, mixed] = Generator.message_specs(defs, Some.Dialect)
