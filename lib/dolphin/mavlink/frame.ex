@@ -267,11 +267,6 @@ defmodule Dolphin.MAVLink.Frame do
     end
   end
 
-  # The header as a sender usually gives it, in one step.
-  defp encode([{:sysid, y}, {:compid, c}, {:seq, q} | t], p, m, ver, _, _, _, f, s)
-       when y in 0..255 and c in 0..255 and q in 0..255,
-       do: encode(t, p, m, ver, y, c, q, f, s)
-
   defp encode([{:sysid, v} | t], p, m, ver, _, c, q, f, s) when v in 0..255, do: encode(t, p, m, ver, v, c, q, f, s)
   defp encode([{:compid, v} | t], p, m, ver, y, _, q, f, s) when v in 0..255, do: encode(t, p, m, ver, y, v, q, f, s)
   defp encode([{:seq, v} | t], p, m, ver, y, c, _, f, s) when v in 0..255, do: encode(t, p, m, ver, y, c, v, f, s)
