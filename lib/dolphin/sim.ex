@@ -272,14 +272,21 @@ defmodule Dolphin.Sim do
 
   # Where the vehicles boot and where they charge, or what is wrong with them.
   defp places(opts, count) do
-    homes = homes(opts, count)
+    homes = homes(count, opts)
     charger = opts[:charger] || opts[:home] || if(opts[:homes], do: hd(homes), else: @default_home)
     {:ok, homes, location(charger)}
   rescue
     e in ArgumentError -> {:error, Exception.message(e)}
   end
 
-  defp homes(opts, count) do
+  @doc """
+  Where `count` vehicles boot, as `start/1` spreads them: `opts[:homes]` (one
+  location per vehicle), else `#{@spacing |> round()}` m apart in rows of
+  #{@per_row} around `opts[:home]` (default the report's home). Raises
+  `ArgumentError` for bad locations. The SITL fleet (`Dolphin.SITL`) uses it too.
+  """
+  @spec homes(pos_integer(), keyword()) :: [location()]
+  def homes(count, opts) do
     case Keyword.fetch(opts, :homes) do
       {:ok, homes} when is_list(homes) ->
         if length(homes) != count, do: raise(ArgumentError, "bad :homes: #{length(homes)} locations for #{count} vehicles")

@@ -360,11 +360,17 @@ defmodule Dolphin.Mission.Executor do
   # ArduPilot reports the end with MISSION_CURRENT state COMPLETE (after the
   # landing and disarm when the mission lands); `reached` of the last item
   # counts too, for autopilots without mission states.
+  # ArduCopter reports a final RETURN_TO_LAUNCH reached after the disarm, but
+  # a final NAV_LAND never: it disarms with the land item still current and
+  # the mission ACTIVE (docs/ardupilot.md), so landed and disarmed at the last
+  # item is the end.
   defp complete?(%{ending: {:landing, seq}} = s, st),
-    do: s.armed_seen and not st.armed and (st.mission.state == :complete or st.mission.reached == seq)
+    do: s.armed_seen and not st.armed and (st.mission.state == :complete or st.mission.reached == seq or landed_at_end?(st, seq))
 
   defp complete?(%{ending: {:reached, seq}}, st), do: st.mission.state == :complete or (st.mission.state == nil and st.mission.reached == seq)
   defp complete?(_forever, _st), do: false
+
+  defp landed_at_end?(st, seq), do: st.mission.current == seq and st.landed in [:on_ground, nil]
 
   defp report_progress(s, mission) do
     progress = %{reached: mission.reached, current: mission.current, total: mission.total}

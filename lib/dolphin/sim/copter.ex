@@ -788,8 +788,24 @@ defmodule Dolphin.Sim.Copter do
   # RTL and LAND items are reached when the vehicle has landed and disarmed.
   defp check_item(c, _command, _item), do: c
 
-  defp finish_landing_item(%{mode: :auto, item: %{command: command}} = c) when command in [20, 21], do: item_reached(c)
+  # ArduCopter reports a final RETURN_TO_LAUNCH reached after the disarm, and
+  # the mission complete; a final NAV_LAND never: the land item stays current
+  # with the mission ACTIVE, announced again (docs/ardupilot.md).
+  defp finish_landing_item(%{mode: :auto, item: %{command: 20}} = c), do: item_reached(c)
+
+  defp finish_landing_item(%{mode: :auto, item: %{command: 21, seq: seq}} = c) do
+    c = %{c | item: %{c.item | arrived_ms: c.time_ms}}
+    c |> text(6, "Mission: #{seq} Land") |> mission_current()
+  end
+
   defp finish_landing_item(c), do: c
+
+  defp takeoff_follows_landing?(%{mode: :auto, item: %{command: 21, seq: seq}} = c) do
+    next_nav = c.missions |> MissionServer.items() |> Enum.drop(seq) |> Enum.find(&(&1.command < 100))
+    match?(%{command: 22}, next_nav)
+  end
+
+  defp takeoff_follows_landing?(_c), do: false
 
   defp dist3(c, n, e, alt), do: :math.sqrt((c.n - n) ** 2 + (c.e - e) ** 2 + (c.alt - alt) ** 2)
 
@@ -1005,8 +1021,15 @@ defmodule Dolphin.Sim.Copter do
 
       c.landed in [:in_air, :landing] and c.alt <= ground(c) + 0.05 and c.vz <= 0 ->
         c = %{c | landed: :on_ground, vz: 0.0, vn: 0.0, ve: 0.0, alt: ground(c), nav: :idle}
-        # The land detector disarms a copter that has landed (LAND, RTL, pilot modes, a mission's landing).
-        if c.armed, do: disarm_now(c), else: c
+
+        # The land detector disarms a copter that has landed (LAND, RTL, pilot
+        # modes, a mission's landing), except on a mission's NAV_LAND followed
+        # by a take-off, from which ArduCopter flies on armed.
+        cond do
+          not c.armed -> c
+          takeoff_follows_landing?(c) -> item_reached(c)
+          true -> disarm_now(c)
+        end
 
       true ->
         c

@@ -21,6 +21,12 @@ defmodule Mix.Tasks.Dolphin.Run do
       `udpout:HOST:PORT`, `tcp:HOST:PORT`); repeatable
     * `--sim N` — start N simulated vehicles (`Dolphin.Sim`: ArduCopters with a
       camera) on a local link
+    * `--sitl N` — start N ArduCopter SITL instances (`Dolphin.SITL`: ArduPilot's
+      own flight code) on a local link, at the run's speed-up
+    * `--sitl-bin PATH` — the SITL binary (else `$ARDUPILOT_SITL`, else
+      `../shared/sitl/arducopter` beside the project)
+    * `--sitl-defaults FILE` — its parameter defaults (else `copter.parm` beside
+      the binary); repeatable, later files win
     * `--fake N` — N fake vehicles of the test platform
       (`Dolphin.Fleet.TestSource`, no MAVLink): to try a script's logic with
       `Dolphin.Engine.TestPlatform` tasks
@@ -77,6 +83,9 @@ defmodule Mix.Tasks.Dolphin.Run do
   @switches [
     connect: :keep,
     sim: :integer,
+    sitl: :integer,
+    sitl_bin: :string,
+    sitl_defaults: :keep,
     fake: :integer,
     seed: :integer,
     speedup: :float,
@@ -88,7 +97,7 @@ defmodule Mix.Tasks.Dolphin.Run do
     quiet: :boolean
   ]
 
-  @usage "usage: mix dolphin.run SCRIPT [--connect ENDPOINT]... [--sim N | --fake N] [--speedup K] [--for DURATION] [--events FILE] [--tlog FILE | --no-tlog] [--forward ENDPOINT]... [--quiet]"
+  @usage "usage: mix dolphin.run SCRIPT [--connect ENDPOINT]... [--sim N | --sitl N | --fake N] [--speedup K] [--for DURATION] [--events FILE] [--tlog FILE | --no-tlog] [--forward ENDPOINT]... [--quiet]"
 
   @impl Mix.Task
   def run(argv) do
@@ -151,6 +160,7 @@ defmodule Mix.Tasks.Dolphin.Run do
     case OptionParser.parse(argv, strict: @switches) do
       {opts, [file], []} ->
         with :ok <- positive(opts, :sim),
+             :ok <- positive(opts, :sitl),
              :ok <- positive(opts, :fake),
              :ok <- exclusive(opts),
              :ok <- speedup(opts[:speedup]),
@@ -178,7 +188,12 @@ defmodule Mix.Tasks.Dolphin.Run do
     end
   end
 
-  defp exclusive(opts), do: if(opts[:sim] && opts[:fake], do: {:error, "--sim and --fake do not go together"}, else: :ok)
+  defp exclusive(opts) do
+    case Enum.filter([:sim, :sitl, :fake], &opts[&1]) do
+      [_, _ | _] = given -> {:error, Enum.map_join(given, " and ", &"--#{&1}") <> " do not go together"}
+      _ -> :ok
+    end
+  end
 
   defp speedup(nil), do: :ok
   defp speedup(k) when k > 0, do: :ok
@@ -317,6 +332,7 @@ defmodule Mix.Tasks.Dolphin.Run do
     with :ok <- connect_all(Keyword.get_values(opts, :connect), link_opts) do
       cond do
         n = opts[:sim] -> start_sim(n, opts, link_opts, out)
+        n = opts[:sitl] -> start_sitl(n, opts, link_opts, out)
         n = opts[:fake] -> start_fake(n, out)
         opts[:connect] != nil or Application.get_env(:dolphin, :links, []) != [] -> :ok
         true -> listen_default(link_opts, out)
@@ -357,6 +373,23 @@ defmodule Mix.Tasks.Dolphin.Run do
         error
     end
   end
+
+  defp start_sitl(n, opts, link_opts, out) do
+    sitl_opts = [bin: opts[:sitl_bin], defaults: nilify(Keyword.get_values(opts, :sitl_defaults))] ++ link_opts
+
+    case Dolphin.SITL.start(n, Enum.reject(sitl_opts, &match?({_, nil}, &1))) do
+      {:ok, fleet} ->
+        defer(fn -> Dolphin.SITL.stop(fleet) end)
+        IO.puts(out, "#{n} ArduCopter SITL instance(s), vehicles #{Enum.join(fleet.sysids, ", ")}, on 127.0.0.1:#{fleet.port} at #{Dolphin.Clock.speedup()}x")
+        :ok
+
+      error ->
+        error
+    end
+  end
+
+  defp nilify([]), do: nil
+  defp nilify(list), do: list
 
   defp start_fake(n, out) do
     name = :"dolphin_run_fakes_#{System.unique_integer([:positive])}"

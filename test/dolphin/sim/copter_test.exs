@@ -270,10 +270,31 @@ defmodule Dolphin.Sim.CopterTest do
     ]
 
     c = flying_mission(items)
-    {c, said} = run_until(c, &(&1.mission_state == 5 and not &1.armed), 300_000)
+    # As ArduCopter: a final NAV_LAND is never reported reached; the vehicle
+    # disarms with the land item current and the mission still ACTIVE.
+    {c, said} = run_until(c, &(&1.landed == :on_ground and not &1.armed), 300_000)
     assert c.speed == 4.0
     seqs = for {_, %{seq: s}} <- messages(said, M.MissionItemReached), do: s
-    assert seqs == [1, 2, 3, 4, 3, 4, 3, 4, 6]
+    assert seqs == [1, 2, 3, 4, 3, 4, 3, 4]
+    assert {c.current, c.mission_state, c.mode} == {6, 3, :auto}
+    assert [{_, %{seq: 6, mission_state: 3}} | _] = Enum.reverse(messages(said, M.MissionCurrent))
+  end
+
+  test "a NAV_LAND followed by a take-off is reached on the ground and flown on from, armed" do
+    items = [
+      item(0, 16, {@home.lat, @home.lon, 0}),
+      item(1, 22, {0, 0, 10}),
+      item(2, 21, {0, 0, 0}),
+      item(3, 22, {0, 0, 10}),
+      item(4, 20, {0, 0, 0})
+    ]
+
+    c = flying_mission(items)
+    {c, said} = run_until(c, &(&1.mission_state == 5 and not &1.armed), 300_000)
+    assert [1, 2, 3, 4] == for({_, %{seq: s}} <- messages(said, M.MissionItemReached), do: s)
+    # One disarm only: at the end, after the RTL's landing.
+    assert 1 == Enum.count(texts(said), &(&1 == "Disarming motors"))
+    assert c.landed == :on_ground
   end
 
   test "a loop of commands that complete at once is cut; DO commands before the take-off do not hide it" do

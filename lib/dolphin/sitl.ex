@@ -1,0 +1,275 @@
+defmodule Dolphin.SITL do
+  @moduledoc """
+  A fleet of real ArduCopters: N instances of ArduPilot's software-in-the-loop
+  build (ArduCopter's own flight code on a physics model) on a local link, as
+  `mix dolphin.run SCRIPT --sitl N` and `mix dolphin.console --sitl N` start
+  them. Everything a script does on `--sim N` it does here against the real
+  autopilot's mission engine, arming checks, EKF and failsafes.
+
+      {:ok, fleet} = Dolphin.SITL.start(2, speedup: 10)
+      fleet.sysids
+      #=> [1, 2]
+      Dolphin.SITL.stop(fleet)
+
+  Each instance gets:
+
+    * its own temporary working directory (SITL writes `eeprom.bin`, logs and
+      terrain there), removed when it stops;
+    * a distinct instance number (`-I`, which shifts SITL's own ports) and
+      system id (`--sysid`, 1..N unless `:first_sysid` says otherwise);
+    * a home spread like the simulator's (`Dolphin.Sim.homes/2`: 30 m apart
+      around the report's home, or `:home` / `:homes`);
+    * `--speedup` equal to the clock's (`Dolphin.Clock.speedup/0`), so that
+      "30 seconds" means the same to the autopilot and to the script;
+    * `--serial0 udpclient:127.0.0.1:PORT` to the link this function opens,
+      `-w` (parameters wiped back to the defaults at every start).
+
+  The instances are stopped by `stop/1`, and with the VM: SITL exits when its
+  parent process dies, and its parent is the port of a process of this VM.
+
+  ## The binary
+
+  `:bin`, else the `ARDUPILOT_SITL` environment variable, else the first of
+  `../shared/sitl/arducopter` (beside the project) that exists. Build your own
+  with ArduPilot's `./waf configure --board sitl && ./waf copter`
+  (`build/sitl/bin/arducopter`). Its parameter defaults: `:defaults` (a list
+  of `.parm` files; later ones win), else `copter.parm` beside the binary
+  (ArduPilot's `Tools/autotest/default_params/copter.parm`). `:params` adds
+  parameters on top (`%{"BATT_CAPACITY" => 500}`).
+
+  ## Charging
+
+  SITL's battery never recharges, while the simulator's does when a vehicle
+  is disarmed on the ground (0.5 % a second of clock time). So that a script
+  that waits for a full battery behaves alike on both, the SITL fleet charges
+  its landed, disarmed vehicles at the same rate, as a charging station would,
+  by resetting the autopilot's remaining charge upwards with
+  MAV_CMD_BATTERY_RESET (`charge_per_s: 0` turns that off).
+  """
+
+  alias Dolphin.SITL.{Charger, Instance}
+
+  @typedoc "What `start/2` started."
+  @type t :: %{
+          link: pid(),
+          port: :inet.port_number(),
+          sysids: [byte()],
+          instances: [pid()],
+          numbers: [non_neg_integer()],
+          charger: pid() | nil
+        }
+
+  # SITL answers within a heartbeat of simulated time once it runs; starting
+  # takes a few seconds of real time (loading, EKF set-up).
+  @ready_timeout_ms 60_000
+  @poll_ms 50
+  # Instance numbers in use in this VM: -I shifts SITL's own ports.
+  @instances_key {__MODULE__, :instances}
+
+  @doc """
+  Starts `count` SITL instances on a new local link and returns once the
+  ground station knows every vehicle, or an error saying what failed (with
+  the last lines of a failing instance's output).
+
+  Options: `:bin`, `:defaults`, `:params` (see above), `:first_sysid` (1),
+  `:home` / `:homes` (as `Dolphin.Sim.start/1`), `:charge_per_s` (charge in
+  percent per second of clock time, default 0.5), `:ready_timeout_ms` (real
+  time, default 60 s), and the link's options (`:tlog`, `:forward`).
+  """
+  @spec start(pos_integer(), keyword()) :: {:ok, t()} | {:error, String.t()}
+  def start(count, opts \\ []) when is_integer(count) and count > 0 do
+    with {:ok, bin} <- find_binary(opts),
+         {:ok, defaults} <- find_defaults(bin, opts),
+         {:ok, homes} <- homes(count, opts) do
+      {link_opts, opts} = Keyword.split(opts, [:tlog, :forward])
+      name = {:dolphin_sitl, System.unique_integer([:positive])}
+
+      case Dolphin.Link.connect("udpin:127.0.0.1:0", [name: name] ++ link_opts) do
+        {:ok, link} ->
+          port = Dolphin.Link.Connection.port(name)
+          first = Keyword.get(opts, :first_sysid, 1)
+          sysids = Enum.to_list(first..(first + count - 1))
+          numbers = take_instances(count)
+          fleet = %{link: link, port: port, sysids: sysids, instances: [], numbers: numbers, charger: nil}
+          root = Path.join(System.tmp_dir!(), "dolphin-sitl-#{System.unique_integer([:positive])}")
+
+          specs =
+            for {{sysid, home}, instance} <- Enum.zip(Enum.zip(sysids, homes), numbers) do
+              %{
+                bin: bin,
+                defaults: defaults,
+                params: Map.new(Keyword.get(opts, :params, %{})),
+                sysid: sysid,
+                instance: instance,
+                home: home,
+                speedup: Dolphin.Clock.speedup(),
+                gcs_port: port,
+                dir: Path.join(root, "vehicle-#{sysid}")
+              }
+            end
+
+          instances = Enum.map(specs, &start_instance/1)
+          fleet = %{fleet | instances: instances}
+          deadline = System.monotonic_time(:millisecond) + Keyword.get(opts, :ready_timeout_ms, @ready_timeout_ms)
+
+          case await_fleet(fleet, deadline) do
+            :ok ->
+              {:ok, %{fleet | charger: start_charger(sysids, Keyword.get(opts, :charge_per_s, 0.5))}}
+
+            {:error, why} ->
+              stop(fleet)
+              File.rm_rf(root)
+              {:error, why}
+          end
+
+        {:error, why} ->
+          {:error, "--sitl: cannot open a local link: #{why}"}
+      end
+    end
+  end
+
+  @doc "Stops what `start/2` started: the instances, their link, and the ground station forgets the vehicles."
+  @spec stop(t()) :: :ok
+  def stop(%{link: link, sysids: sysids, instances: instances, numbers: numbers} = fleet) do
+    if pid = fleet.charger, do: DynamicSupervisor.terminate_child(Dolphin.SITL.Supervisor, pid)
+    Enum.each(instances, &DynamicSupervisor.terminate_child(Dolphin.SITL.Supervisor, &1))
+    release_instances(numbers)
+    Enum.each(sysids, &Dolphin.Vehicles.forget/1)
+    DynamicSupervisor.terminate_child(Dolphin.Link.Supervisor, link)
+    :ok
+  end
+
+  @doc """
+  The SITL binary to run: `:bin`, else `$ARDUPILOT_SITL`, else
+  `../shared/sitl/arducopter` beside the project when it exists.
+  """
+  @spec find_binary(keyword()) :: {:ok, Path.t()} | {:error, String.t()}
+  def find_binary(opts \\ []) do
+    candidates = [{"--sitl-bin", opts[:bin]}, {"ARDUPILOT_SITL", System.get_env("ARDUPILOT_SITL")}, {"beside the project", default_binary()}]
+
+    case Enum.find(candidates, fn {_, path} -> path not in [nil, ""] end) do
+      {from, path} ->
+        cond do
+          not File.regular?(path) -> {:error, "--sitl: no ArduCopter SITL binary at #{path} (#{from})"}
+          not executable?(path) -> {:error, "--sitl: #{path} (#{from}) is not executable"}
+          true -> {:ok, Path.expand(path)}
+        end
+
+      nil ->
+        {:error,
+         "--sitl: no ArduCopter SITL binary found: give --sitl-bin PATH or set ARDUPILOT_SITL " <>
+           "(build one from ArduPilot's source: ./waf configure --board sitl && ./waf copter)"}
+    end
+  end
+
+  @doc "Whether a SITL binary can be found (what the SITL tests check first)."
+  @spec available?() :: boolean()
+  def available?, do: match?({:ok, _}, find_binary())
+
+  @doc false
+  def default_binary do
+    path = Path.expand("../shared/sitl/arducopter", File.cwd!())
+    if File.exists?(path), do: path
+  end
+
+  defp executable?(path) do
+    case File.stat(path) do
+      {:ok, %{mode: mode}} -> Bitwise.band(mode, 0o111) != 0
+      _ -> false
+    end
+  end
+
+  defp find_defaults(bin, opts) do
+    case opts[:defaults] do
+      nil ->
+        beside = Path.join(Path.dirname(bin), "copter.parm")
+
+        if File.regular?(beside),
+          do: {:ok, [beside]},
+          else: {:error, "--sitl: no copter.parm beside #{bin}: give the defaults file (ArduPilot's Tools/autotest/default_params/copter.parm) with --sitl-defaults"}
+
+      files ->
+        files = List.wrap(files) |> Enum.map(&Path.expand/1)
+
+        case Enum.reject(files, &File.regular?/1) do
+          [] -> {:ok, files}
+          missing -> {:error, "--sitl: no such defaults file: #{Enum.join(missing, ", ")}"}
+        end
+    end
+  end
+
+  defp homes(count, opts) do
+    {:ok, Dolphin.Sim.homes(count, opts)}
+  rescue
+    e in ArgumentError -> {:error, "--sitl: #{Exception.message(e)}"}
+  end
+
+  defp start_instance(spec) do
+    {:ok, _} = ensure_supervisor()
+    {:ok, pid} = DynamicSupervisor.start_child(Dolphin.SITL.Supervisor, {Instance, spec})
+    pid
+  end
+
+  defp ensure_supervisor do
+    child = %{id: Dolphin.SITL.Supervisor, start: {DynamicSupervisor, :start_link, [[name: Dolphin.SITL.Supervisor, strategy: :one_for_one]]}, type: :supervisor}
+
+    case Supervisor.start_child(Dolphin.Supervisor, child) do
+      {:ok, pid} -> {:ok, pid}
+      {:error, {:already_started, pid}} -> {:ok, pid}
+      {:error, :already_present} -> Supervisor.restart_child(Dolphin.Supervisor, Dolphin.SITL.Supervisor)
+    end
+  end
+
+  # Every instance answers (its first HEARTBEAT reached the ground station), or
+  # one exited (a bad binary, option or defaults file), or time ran out.
+  defp await_fleet(fleet, deadline) do
+    known = for %{vehicle: v} <- Dolphin.Fleet.vehicles(), v.type != nil, do: v.id
+    logs = Enum.zip(fleet.sysids, Enum.map(fleet.instances, &Instance.log/1))
+
+    cond do
+      Enum.all?(fleet.sysids, &(&1 in known)) ->
+        :ok
+
+      failed = Enum.find(logs, fn {_, log} -> log.exit_status != nil end) ->
+        {sysid, log} = failed
+        {:error, "--sitl: the ArduCopter SITL of vehicle #{sysid} exited with status #{log.exit_status} before it answered#{last_lines(log)}"}
+
+      System.monotonic_time(:millisecond) > deadline ->
+        silent = Enum.reject(fleet.sysids, &(&1 in known))
+        {sysid, log} = List.keyfind(logs, hd(silent), 0)
+        {:error, "--sitl: vehicle #{Enum.join(silent, ", ")} never answered on 127.0.0.1:#{fleet.port} (ArduCopter SITL of vehicle #{sysid}: #{log.cmdline})#{last_lines(log)}"}
+
+      true ->
+        Process.sleep(@poll_ms)
+        await_fleet(fleet, deadline)
+    end
+  end
+
+  defp last_lines(%{lines: []}), do: "; it printed nothing"
+  defp last_lines(%{lines: lines}), do: "; its last lines:\n" <> Enum.map_join(lines, "\n", &("    " <> &1))
+
+  defp start_charger(_sysids, rate) when rate <= 0, do: nil
+
+  defp start_charger(sysids, rate) do
+    {:ok, pid} = DynamicSupervisor.start_child(Dolphin.SITL.Supervisor, {Charger, sysids: sysids, per_s: rate})
+    pid
+  end
+
+  # Instance numbers: the lowest free ones, so that -I stays small (SITL's
+  # ports are 5760 + 10·I and 5501 + 10·I).
+  defp take_instances(count) do
+    :global.trans({@instances_key, self()}, fn ->
+      used = :persistent_term.get(@instances_key, MapSet.new())
+      free = Stream.iterate(0, &(&1 + 1)) |> Stream.reject(&MapSet.member?(used, &1)) |> Enum.take(count)
+      :persistent_term.put(@instances_key, MapSet.union(used, MapSet.new(free)))
+      free
+    end)
+  end
+
+  defp release_instances(numbers) do
+    :global.trans({@instances_key, self()}, fn ->
+      used = :persistent_term.get(@instances_key, MapSet.new())
+      :persistent_term.put(@instances_key, MapSet.difference(used, MapSet.new(numbers)))
+    end)
+  end
+end
