@@ -220,10 +220,11 @@ defmodule Dolphin.SITL do
     end
   end
 
-  # Every instance answers (its first HEARTBEAT reached the ground station), or
-  # one exited (a bad binary, option or defaults file), or time ran out.
+  # Every instance answers and has booted (HEARTBEAT with MAV_STATE past BOOT:
+  # before that ArduCopter refuses missions with NO_SPACE), or one exited (a
+  # bad binary, option or defaults file), or time ran out.
   defp await_fleet(fleet, deadline) do
-    known = for %{vehicle: v} <- Dolphin.Fleet.vehicles(), v.type != nil, do: v.id
+    known = Enum.filter(fleet.sysids, &booted?/1)
     logs = Enum.zip(fleet.sysids, Enum.map(fleet.instances, &Instance.log/1))
 
     cond do
@@ -242,6 +243,13 @@ defmodule Dolphin.SITL do
       true ->
         Process.sleep(@poll_ms)
         await_fleet(fleet, deadline)
+    end
+  end
+
+  defp booted?(sysid) do
+    case Dolphin.Vehicles.state(sysid) do
+      {:ok, %{type: type, system_status: status}} -> type != nil and status not in [nil, 0, 1]
+      _ -> false
     end
   end
 

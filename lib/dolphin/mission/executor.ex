@@ -32,6 +32,10 @@ defmodule Dolphin.Mission.Executor do
   # A landed vehicle this close to a mission's landing point is there.
   @here_m 5
   @arm_retry_ms 1_000
+  # MAV_STATE_UNINIT, MAV_STATE_BOOT.
+  @booting [0, 1]
+  @boot_timeout_ms 60_000
+  @boot_poll_ms 200
 
   def start_link(mission, vehicle, opts), do: GenServer.start_link(__MODULE__, {mission, vehicle, Map.new(opts)})
 
@@ -61,6 +65,7 @@ defmodule Dolphin.Mission.Executor do
       armed_seen: false,
       auto_seen: false,
       landing_check: false,
+      on_land_item: false,
       reached: nil,
       progress: nil
     }
@@ -175,10 +180,10 @@ defmodule Dolphin.Mission.Executor do
   # --- steps ------------------------------------------------------------------
 
   defp step(:hold_if_flying, s, _me) do
-    case Vehicles.state(s.vehicle) do
+    case booted(s, s.clock.now_ms() + @boot_timeout_ms) do
       {:ok, %{armed: true, mode: :auto} = st} when st.landed != :on_ground -> hold(s.vehicle)
       {:ok, st} -> on_the_ground(s, st)
-      {:error, :unknown_vehicle} -> {:error, "vehicle #{s.vehicle} is not connected"}
+      {:error, _} = error -> error
     end
   end
 
@@ -276,6 +281,27 @@ defmodule Dolphin.Mission.Executor do
     end
   end
 
+  # ArduCopter answers the mission protocol while it boots, before its mission
+  # store is set up, refusing any upload with NO_SPACE: a vehicle that reports
+  # MAV_STATE UNINIT or BOOT is waited for.
+  defp booted(s, deadline) do
+    case Vehicles.state(s.vehicle) do
+      {:ok, %{system_status: status}} when status in @booting ->
+        if s.clock.now_ms() >= deadline do
+          {:error, "vehicle #{s.vehicle} was still booting after #{div(@boot_timeout_ms, 1000)} s (MAV_STATE #{if status == 0, do: "UNINIT", else: "BOOT"})"}
+        else
+          s.clock.sleep(@boot_poll_ms)
+          booted(s, deadline)
+        end
+
+      {:ok, st} ->
+        {:ok, st}
+
+      {:error, :unknown_vehicle} ->
+        {:error, "vehicle #{s.vehicle} is not connected"}
+    end
+  end
+
   defp items(%{mission: mission, vehicle: vehicle}) do
     home =
       case {mission.home, Vehicles.state(vehicle)} do
@@ -325,14 +351,20 @@ defmodule Dolphin.Mission.Executor do
 
   defp judge(s, st) do
     mission = st.mission
-    # The mission counts as running once the vehicle reports it active in AUTO;
-    # before that, the state still describes the previous mission.
-    active = s.active or (st.mode == :auto and mission.state == :active)
+    # The mission counts as running once the vehicle reports it active in AUTO,
+    # or reports an item of it reached (progress restarts at every upload): a
+    # mission that ends in the loop that starts it is only ever reported
+    # COMPLETE, as ArduCopter sends the latest MISSION_CURRENT only. Before
+    # that, the state still describes the previous mission.
+    active = s.active or (st.mode == :auto and mission.state == :active) or mission.reached != nil
     # Reports travel separately (mode and armed bit with the 1 Hz heartbeat,
     # the mission state with MISSION_CURRENT): leaving AUTO or disarming counts
     # only once the heartbeat has shown AUTO, or armed, during this mission.
     s = %{s | active: active, armed_seen: s.armed_seen or (active and st.armed), auto_seen: s.auto_seen or (active and st.mode == :auto)}
-    s = report_progress(s, mission)
+    s = %{s | on_land_item: s.on_land_item or (active and st.armed and on_land_item?(s, mission))}
+    # After its final landing ArduCopter resets the mission to item 1, often
+    # before the heartbeat shows the disarm: that is no progress of this mission.
+    s = if s.on_land_item and not on_land_item?(s, mission), do: s, else: report_progress(s, mission)
 
     cond do
       not active ->
@@ -365,12 +397,18 @@ defmodule Dolphin.Mission.Executor do
   # the mission ACTIVE (docs/ardupilot.md), so landed and disarmed at the last
   # item is the end.
   defp complete?(%{ending: {:landing, seq}} = s, st),
-    do: s.armed_seen and not st.armed and (st.mission.state == :complete or st.mission.reached == seq or landed_at_end?(st, seq))
+    do: s.armed_seen and not st.armed and (st.mission.state == :complete or st.mission.reached == seq or landed_at_end?(s, st, seq))
 
   defp complete?(%{ending: {:reached, seq}}, st), do: st.mission.state == :complete or (st.mission.state == nil and st.mission.reached == seq)
   defp complete?(_forever, _st), do: false
 
-  defp landed_at_end?(st, seq), do: st.mission.current == seq and st.landed in [:on_ground, nil]
+  # After that disarm ArduCopter resets its mission to item 1, often reported
+  # before the heartbeat shows the disarm: what counts is that the vehicle
+  # flew the final land item armed, then disarmed on the ground.
+  defp landed_at_end?(s, st, _seq), do: s.on_land_item and st.landed in [:on_ground, nil]
+
+  defp on_land_item?(%{ending: {:landing, seq}}, mission), do: mission.current == seq
+  defp on_land_item?(_s, _mission), do: false
 
   defp report_progress(s, mission) do
     progress = %{reached: mission.reached, current: mission.current, total: mission.total}

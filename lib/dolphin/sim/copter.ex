@@ -47,7 +47,10 @@ defmodule Dolphin.Sim.Copter do
     cruise_speed: 10.0,
     climb_speed: 2.5,
     descent_speed: 1.5,
-    accel: 8.0,
+    # WPNAV_ACCEL, WPNAV_ACCEL_Z (m/s²) and CIRCLE_RATE (°/s), ArduCopter's defaults.
+    accel: 2.5,
+    accel_z: 1.0,
+    circle_rate: 20.0,
     wp_radius: 2.0,
     rtl_alt: 15.0,
     circle_speed: 5.0,
@@ -193,30 +196,33 @@ defmodule Dolphin.Sim.Copter do
 
   @doc "One message from the ground station `{sysid, compid}`."
   @spec handle(t(), struct(), {byte(), byte()}) :: t()
-  def handle(c, message, from)
+  def handle(c, message, from) do
+    before = length(c.out)
+    c |> handle_message(message, from) |> latest_mission_reports(before)
+  end
 
-  def handle(c, %M.Heartbeat{}, {sysid, _}) do
+  defp handle_message(c, %M.Heartbeat{}, {sysid, _}) do
     if sysid == c.config.gcs_sysid, do: %{c | gcs_heard_ms: c.time_ms}, else: c
   end
 
-  def handle(c, %M.CommandLong{} = cmd, from) do
+  defp handle_message(c, %M.CommandLong{} = cmd, from) do
     params = [cmd.param1, cmd.param2, cmd.param3, cmd.param4, cmd.param5, cmd.param6, cmd.param7]
     command(c, cmd.command, params, nil, cmd.target_component, from)
   end
 
-  def handle(c, %M.CommandInt{} = cmd, from) do
+  defp handle_message(c, %M.CommandInt{} = cmd, from) do
     params = [cmd.param1, cmd.param2, cmd.param3, cmd.param4]
     command(c, cmd.command, params, {cmd.frame, cmd.x, cmd.y, cmd.z}, cmd.target_component, from)
   end
 
-  def handle(c, %M.SetMode{custom_mode: mode}, _from), do: elem(set_mode(c, mode), 1)
+  defp handle_message(c, %M.SetMode{custom_mode: mode}, _from), do: elem(set_mode(c, mode), 1)
 
-  def handle(c, %M.RequestDataStream{} = r, _from), do: Streams.request_stream(c, r.req_stream_id, r.req_message_rate, r.start_stop)
+  defp handle_message(c, %M.RequestDataStream{} = r, _from), do: Streams.request_stream(c, r.req_stream_id, r.req_message_rate, r.start_stop)
 
-  def handle(c, %M.MissionSetCurrent{seq: seq}, _from), do: set_current(c, seq)
+  defp handle_message(c, %M.MissionSetCurrent{seq: seq}, _from), do: set_current(c, seq)
 
   # A guided-mode target sent as a mission item (ArduPilot's "current = 2" convention).
-  def handle(c, %item{current: 2} = i, {sysid, compid}) when item in [M.MissionItemInt, M.MissionItem] do
+  defp handle_message(c, %item{current: 2} = i, {sysid, compid}) when item in [M.MissionItemInt, M.MissionItem] do
     {lat, lon} = item_latlon(i)
     ack = %M.MissionAck{target_system: sysid, target_component: compid, type: 0, mission_type: 0}
 
@@ -226,7 +232,7 @@ defmodule Dolphin.Sim.Copter do
     end
   end
 
-  def handle(c, %M.SetPositionTargetGlobalInt{} = t, _from) do
+  defp handle_message(c, %M.SetPositionTargetGlobalInt{} = t, _from) do
     if c.mode == :guided do
       {_, c} = guided_goto(c, t.lat_int / 1.0e7, t.lon_int / 1.0e7, target_alt(c, t.coordinate_frame, t.alt))
       c
@@ -236,14 +242,14 @@ defmodule Dolphin.Sim.Copter do
   end
 
   # A ground station's TIMESYNC request is answered with our time (tc1).
-  def handle(c, %M.Timesync{tc1: 0, ts1: ts1}, _from), do: say(c, %M.Timesync{tc1: c.time_ms * 1_000_000, ts1: ts1})
-  def handle(c, %M.Timesync{}, _from), do: c
+  defp handle_message(c, %M.Timesync{tc1: 0, ts1: ts1}, _from), do: say(c, %M.Timesync{tc1: c.time_ms * 1_000_000, ts1: ts1})
+  defp handle_message(c, %M.Timesync{}, _from), do: c
 
-  def handle(c, %M.ParamRequestList{}, _from), do: Streams.send_params(c)
-  def handle(c, %M.ParamRequestRead{} = r, _from), do: Streams.send_param(c, r.param_id, r.param_index)
-  def handle(c, %M.ParamSet{} = p, _from), do: Streams.set_param(c, p.param_id, p.param_value)
+  defp handle_message(c, %M.ParamRequestList{}, _from), do: Streams.send_params(c)
+  defp handle_message(c, %M.ParamRequestRead{} = r, _from), do: Streams.send_param(c, r.param_id, r.param_index)
+  defp handle_message(c, %M.ParamSet{} = p, _from), do: Streams.set_param(c, p.param_id, p.param_value)
 
-  def handle(c, message, from) do
+  defp handle_message(c, message, from) do
     {missions, replies} = MissionServer.handle(c.missions, message, from, %{now: c.time_ms, home: home_item(c)})
     mission_replies(%{c | missions: missions}, replies)
   end
@@ -264,17 +270,15 @@ defmodule Dolphin.Sim.Copter do
     end)
   end
 
-  # A new mission: the old progress means nothing any more.
+  # A new mission: the old progress means nothing any more. ArduCopter does
+  # not report it at once: MISSION_CURRENT tells at its next period.
   defp mission_changed(c) do
     n = length(MissionServer.items(c.missions))
 
-    c =
-      cond do
-        c.mode == :auto and n > 0 and c.mission_state == 3 -> %{c | current: min(max(c.current, 1), n)}
-        true -> %{c | current: 0, resume: nil, jumps: %{}, mission_state: if(n == 0, do: 1, else: 2)}
-      end
-
-    mission_current(c)
+    cond do
+      c.mode == :auto and n > 0 and c.mission_state == 3 -> %{c | current: min(max(c.current, 1), n)}
+      true -> %{c | current: 0, resume: nil, jumps: %{}, mission_state: if(n == 0, do: 1, else: 2)}
+    end
   end
 
   defp home_item(%{home: nil}), do: nil
@@ -723,8 +727,10 @@ defmodule Dolphin.Sim.Copter do
 
   defp hold_nav(c), do: if(in_air?(c), do: {:hold, c.n, c.e, c.alt}, else: :idle)
 
-  defp item_reached(%{item: %{seq: seq}} = c) do
-    c = c |> say(%M.MissionItemReached{seq: seq}) |> text(6, "Reached command ##{seq}")
+  defp item_reached(%{item: %{seq: seq, command: command}} = c) do
+    c = say(c, %M.MissionItemReached{seq: seq})
+    # ArduCopter says so only for waypoints and timed loiters.
+    c = if command in [16, 19], do: text(c, 6, "Reached command ##{seq}"), else: c
     start_item(%{c | item: nil}, seq + 1)
   end
 
@@ -752,14 +758,19 @@ defmodule Dolphin.Sim.Copter do
     end
   end
 
+  # A copter circles only for LOITER_TURNS; LOITER_UNLIM and LOITER_TIME hold
+  # at the point, whatever radius they were given (ArduCopter ignores it).
   defp check_item(c, command, %{item: i} = item) when command in [17, 18, 19] do
     case c.nav do
       {:goto, n, e, alt} ->
-        if dist3(c, n, e, alt) <= max(c.config.wp_radius, 1.0) do
-          %{c | nav: {:circle, n, e, alt, i.param3, 0.0, nil}, item: %{item | arrived_ms: c.time_ms}}
-        else
-          c
+        cond do
+          dist3(c, n, e, alt) > max(c.config.wp_radius, 1.0) -> c
+          command == 18 -> %{c | nav: {:circle, n, e, alt, i.param3, 0.0, nil}, item: %{item | arrived_ms: c.time_ms}}
+          true -> %{c | nav: {:hold, n, e, alt}, item: %{item | arrived_ms: c.time_ms}}
         end
+
+      {:hold, _, _, _} ->
+        if command == 19 and c.time_ms - item.arrived_ms >= i.param1 * 1000, do: item_reached(c), else: c
 
       {:circle, _, _, _, radius, turned, _} ->
         cond do
@@ -793,10 +804,10 @@ defmodule Dolphin.Sim.Copter do
   # with the mission ACTIVE, announced again (docs/ardupilot.md).
   defp finish_landing_item(%{mode: :auto, item: %{command: 20}} = c), do: item_reached(c)
 
-  defp finish_landing_item(%{mode: :auto, item: %{command: 21, seq: seq}} = c) do
-    c = %{c | item: %{c.item | arrived_ms: c.time_ms}}
-    c |> text(6, "Mission: #{seq} Land") |> mission_current()
-  end
+  # After that disarm ArduCopter resets its mission: item 1 current again, the
+  # mission still ACTIVE, "Mission: 1 Takeoff" said (nothing flies: AUTO
+  # cannot be armed).
+  defp finish_landing_item(%{mode: :auto, item: %{command: 21}} = c), do: start_item(%{c | item: nil}, 1)
 
   defp finish_landing_item(c), do: c
 
@@ -863,6 +874,7 @@ defmodule Dolphin.Sim.Copter do
   def step(%__MODULE__{} = c, dt_ms) do
     was_ready = ready?(c)
     c = %{c | time_ms: c.time_ms + dt_ms, burst: 0}
+    before = length(c.out)
 
     c
     |> boot_events(was_ready)
@@ -874,7 +886,20 @@ defmodule Dolphin.Sim.Copter do
     |> battery(dt_ms / 1000)
     |> gcs_failsafe()
     |> mission_timeout()
+    |> latest_mission_reports(before)
     |> Streams.due()
+  end
+
+  # ArduCopter sends MISSION_CURRENT and MISSION_ITEM_REACHED as deferred
+  # messages holding only the latest value: items that end in one loop (a
+  # take-off and the DO commands flown along with it) are reported once, by
+  # the last of them (docs/ardupilot.md).
+  defp latest_mission_reports(%{out: out} = c, before) do
+    {new, old} = Enum.split(out, length(out) - before)
+    last = fn module -> Enum.find(new, &match?({_, %^module{}}, &1)) end
+    keep = [last.(M.MissionItemReached), last.(M.MissionCurrent)]
+    new = Enum.filter(new, fn {_, m} = msg -> not is_struct(m, M.MissionItemReached) and not is_struct(m, M.MissionCurrent) or msg in keep end)
+    %{c | out: new ++ old}
   end
 
   defp boot_events(c, was_ready) do
@@ -903,8 +928,10 @@ defmodule Dolphin.Sim.Copter do
   defp fly(c, dt) do
     {c, {wn, we, wz}} = desired_velocity(c)
     {vn, ve} = accelerate({c.vn, c.ve}, {wn, we}, c.config.accel * dt)
+    max_dz = c.config.accel_z * dt
+    vz = c.vz + max(-max_dz, min(max_dz, wz - c.vz))
     heading = if vn * vn + ve * ve > 1.0, do: :math.fmod(rad2deg(:math.atan2(ve, vn)) + 360, 360), else: c.heading
-    %{c | vn: vn, ve: ve, vz: wz, n: c.n + vn * dt, e: c.e + ve * dt, alt: max(c.alt + wz * dt, ground(c)), heading: heading}
+    %{c | vn: vn, ve: ve, vz: vz, n: c.n + vn * dt, e: c.e + ve * dt, alt: max(c.alt + vz * dt, ground(c)), heading: heading}
   end
 
   defp accelerate({vn, ve}, {wn, we}, max_dv) do
@@ -973,8 +1000,10 @@ defmodule Dolphin.Sim.Copter do
     d = :math.sqrt(dn * dn + de * de)
     speed = min(c.speed, :math.sqrt(2 * c.config.accel * d) * 0.8)
     {wn, we} = if d < 0.05, do: {0.0, 0.0}, else: {dn / d * speed, de / d * speed}
+    # Slowing down vertically in time to stop at the height.
     dz = alt - c.alt
-    wz = dz |> max(-c.config.descent_speed) |> min(c.config.climb_speed)
+    stop_z = :math.sqrt(2 * c.config.accel_z * abs(dz)) * 0.8
+    wz = dz |> max(-c.config.descent_speed) |> min(c.config.climb_speed) |> max(-stop_z) |> min(stop_z)
     {wn, we, wz}
   end
 
@@ -990,7 +1019,7 @@ defmodule Dolphin.Sim.Copter do
     d = :math.sqrt(dn * dn + de * de)
     angle = :math.atan2(de, dn)
     direction = if radius < 0, do: -1, else: 1
-    speed = min(c.config.circle_speed, c.speed)
+    speed = Enum.min([c.config.circle_speed, c.speed, r * c.config.circle_rate * :math.pi() / 180])
 
     {un, ue} = if d < 0.01, do: {1.0, 0.0}, else: {dn / d, de / d}
     # tangent clockwise (seen from above, north up): rotate the radial vector by +90°

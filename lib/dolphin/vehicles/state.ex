@@ -167,6 +167,14 @@ defmodule Dolphin.Vehicles.State do
   defp message(state, _compid, _other), do: state
 
   @doc """
+  The state when a new mission is uploaded or the mission cleared: nothing is
+  known of its progress yet (the old `current`, `total`, `state` and
+  `reached` described the previous mission) until the vehicle reports it.
+  """
+  @spec new_mission(t()) :: t()
+  def new_mission(%__MODULE__{} = state), do: %{state | mission: %{current: nil, total: nil, state: nil, reached: nil}}
+
+  @doc """
   The public fields that differ between two states, as `{field, new_value}`
   (link counters excepted: they change with every frame).
   """

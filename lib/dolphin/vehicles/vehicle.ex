@@ -164,6 +164,21 @@ defmodule Dolphin.Vehicles.Vehicle do
   end
 
   # `from` is nil for the vehicle process's own requests (nobody to answer).
+  # A new mission (or none) starts its progress from nothing: the reports of
+  # the previous one (reached, current) are not this one's.
+  defp forget_progress(s, %{operation: operation, mission_type: :mission}) when operation in [:upload, :clear] do
+    new = State.new_mission(s.state)
+
+    case State.changes(s.state, new) do
+      [] -> :ok
+      changes -> PubSub.publish({:vehicle, s.sysid}, {:state, s.sysid, changes})
+    end
+
+    %{s | state: new}
+  end
+
+  defp forget_progress(s, _request), do: s
+
   defp run_op(s, key, module, request, opts, from) do
     request = Map.merge(request, %{sysid: s.sysid, reply_to: from})
     monitor = if from, do: Process.monitor(elem(from, 0))
@@ -177,6 +192,7 @@ defmodule Dolphin.Vehicles.Vehicle do
   end
 
   defp start_op(s, key, module, request, opts, monitor) do
+    s = if module == MissionProtocol, do: forget_progress(s, request), else: s
     link = s.link
     sysid = s.sysid
     request = Map.put(request, :send, fn message -> Connection.send_message(link, sysid, message) end)

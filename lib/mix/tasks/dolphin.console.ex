@@ -25,6 +25,9 @@ defmodule Mix.Tasks.Dolphin.Console do
       `udpout:HOST:PORT`, `tcp:HOST:PORT`); repeatable
     * `--sim N` — start N simulated vehicles (`Dolphin.Sim`: ArduCopters with
       a camera) on a local link (127.0.0.1)
+    * `--sitl N` — start N ArduCopter SITL instances (`Dolphin.SITL`) on a
+      local link; `--sitl-bin PATH` and `--sitl-defaults FILE` as for
+      `mix dolphin.run`; they stop with the VM
     * `--seed N` — the simulator's seed
     * `--speedup K` — run K times faster than real time (`Dolphin.Clock`)
     * `--tlog FILE` — record every MAVLink frame of the links to a telemetry log
@@ -38,9 +41,9 @@ defmodule Mix.Tasks.Dolphin.Console do
 
   use Mix.Task
 
-  @switches [connect: :keep, sim: :integer, seed: :integer, speedup: :float, tlog: :string, forward: :keep]
+  @switches [connect: :keep, sim: :integer, sitl: :integer, sitl_bin: :string, sitl_defaults: :keep, seed: :integer, speedup: :float, tlog: :string, forward: :keep]
 
-  @usage "usage: iex -S mix dolphin.console [--connect ENDPOINT]... [--sim N] [--speedup K] [--seed N] [--tlog FILE] [--forward ENDPOINT]..."
+  @usage "usage: iex -S mix dolphin.console [--connect ENDPOINT]... [--sim N | --sitl N] [--speedup K] [--seed N] [--tlog FILE] [--forward ENDPOINT]..."
 
   @impl Mix.Task
   def run(argv) do
@@ -70,6 +73,8 @@ defmodule Mix.Tasks.Dolphin.Console do
       {opts, [], []} ->
         cond do
           opts[:sim] != nil and opts[:sim] < 1 -> {:error, "--sim must be a positive number of vehicles, got #{opts[:sim]}"}
+          opts[:sitl] != nil and opts[:sitl] < 1 -> {:error, "--sitl must be a positive number of vehicles, got #{opts[:sitl]}"}
+          opts[:sim] != nil and opts[:sitl] != nil -> {:error, "--sim and --sitl do not go together"}
           opts[:speedup] != nil and opts[:speedup] <= 0 -> {:error, "--speedup must be positive, got #{opts[:speedup]}"}
           true -> {:ok, opts}
         end
@@ -101,6 +106,7 @@ defmodule Mix.Tasks.Dolphin.Console do
   defp vehicles(opts, endpoints, link_opts) do
     cond do
       n = opts[:sim] -> start_sim(n, opts, link_opts)
+      n = opts[:sitl] -> start_sitl(n, opts, link_opts)
       endpoints != [] or Application.get_env(:dolphin, :links, []) != [] -> {:ok, []}
       true -> connect_all([Dolphin.Link.default_endpoint()], link_opts)
     end
@@ -119,6 +125,16 @@ defmodule Mix.Tasks.Dolphin.Console do
     # The console's simulated fleet lives as long as the VM.
     case Dolphin.Sim.Local.start(n, [seed: Keyword.get(opts, :seed, 1)] ++ link_opts) do
       {:ok, sim} -> {:ok, ["#{n} simulated vehicle(s) #{inspect(sim.sysids)} on 127.0.0.1:#{sim.port}"]}
+      error -> error
+    end
+  end
+
+  defp start_sitl(n, opts, link_opts) do
+    # Like the simulated fleet, the console's SITL instances live as long as the VM.
+    sitl_opts = [bin: opts[:sitl_bin], defaults: Keyword.get_values(opts, :sitl_defaults)] ++ link_opts
+
+    case Dolphin.SITL.start(n, Enum.reject(sitl_opts, fn {_, v} -> v in [nil, []] end)) do
+      {:ok, fleet} -> {:ok, ["#{n} ArduCopter SITL instance(s), vehicles #{Enum.join(fleet.sysids, ", ")}, on 127.0.0.1:#{fleet.port}"]}
       error -> error
     end
   end

@@ -375,9 +375,9 @@ defmodule Mix.Tasks.Dolphin.Run do
   end
 
   defp start_sitl(n, opts, link_opts, out) do
-    sitl_opts = [bin: opts[:sitl_bin], defaults: nilify(Keyword.get_values(opts, :sitl_defaults))] ++ link_opts
+    sitl_opts = [bin: opts[:sitl_bin], defaults: Keyword.get_values(opts, :sitl_defaults)] ++ link_opts
 
-    case Dolphin.SITL.start(n, Enum.reject(sitl_opts, &match?({_, nil}, &1))) do
+    case Dolphin.SITL.start(n, Enum.reject(sitl_opts, fn {_, v} -> v in [nil, []] end)) do
       {:ok, fleet} ->
         defer(fn -> Dolphin.SITL.stop(fleet) end)
         IO.puts(out, "#{n} ArduCopter SITL instance(s), vehicles #{Enum.join(fleet.sysids, ", ")}, on 127.0.0.1:#{fleet.port} at #{Dolphin.Clock.speedup()}x")
@@ -387,9 +387,6 @@ defmodule Mix.Tasks.Dolphin.Run do
         error
     end
   end
-
-  defp nilify([]), do: nil
-  defp nilify(list), do: list
 
   defp start_fake(n, out) do
     name = :"dolphin_run_fakes_#{System.unique_integer([:positive])}"

@@ -56,6 +56,22 @@ defmodule Dolphin.Mission.PlatformTest do
     assert %{current: 3, total: 3} = List.last(progress)
   end
 
+  test "the progress of a mission starts from nothing: the previous mission's items reached are not its own", %{port: port} do
+    [{1, home}] = start_fleet(port, count: 1)
+    first = Mission.new("first") |> Mission.add(C.home(home)) |> Mission.add(C.take_off(%{home | h: home.h + 20})) |> Mission.add(C.move(20, 0, 0)) |> Mission.add(C.move_and_loiter_time(0, 20, 0, 2))
+    assert {:ok, :done} = Engine.run(Engine.on(first, [1]))
+    assert {:ok, %{mission: %{reached: 3}}} = Vehicles.state(1)
+    # An upload forgets the previous mission's progress at once.
+    :ok = Vehicles.upload_mission(1, Mission.to_items(out_and_back(home)))
+    assert {:ok, %{mission: %{reached: nil, current: nil}}} = Vehicles.state(1)
+
+    Telemetry.subscribe()
+    assert {:ok, :done} = Engine.run(Engine.on(out_and_back(home), [1]))
+    reached = for {:dolphin, :events, %{event: :task_progress, progress: p}} <- flush(), do: p.reached
+    # The take-off (the vehicle is already up) is item 1 reached; 3 never came from the previous mission.
+    assert [1, 2] == reached |> Enum.reject(&is_nil/1) |> Enum.dedup()
+  end
+
   test "a mission flies to its end over a link that loses, duplicates and reorders datagrams", %{port: port} do
     [{3, home}] = start_fleet(port, sysids: [3])
     :ok = Sim.set_faults(3, loss: 0.2, duplicate: 0.05, reorder: 0.05)

@@ -1,0 +1,155 @@
+defmodule Dolphin.SITL.DifferentialTest do
+  # The same missions flown by ArduCopter SITL and by the built-in simulator,
+  # compared on what the ground station relies on: MISSION_ITEM_REACHED in
+  # order, MISSION_CURRENT (seq, state) as the mission goes, landed state and
+  # arming after the end, the time to each item (within 25 %, in each
+  # vehicle's own time), and where each item was reached. Where the two
+  # differ, ArduCopter is right (docs/ardupilot.md lists what it was seen doing).
+  use ExUnit.Case, async: false
+
+  alias Dolphin.{Engine, Geo, Mission, Vehicles}
+  alias Dolphin.MAVLink.Ardupilotmega, as: M
+  alias Dolphin.Mission.Command, as: C
+  alias Dolphin.Test.{Backend, FrameRecorder, Wait}
+
+  @moduletag :sitl
+  @moduletag timeout: 300_000
+
+  setup do
+    Dolphin.Fleet.set_source({Dolphin.Fleet.MAVLinkSource, nil})
+    :ok
+  end
+
+  # Every kind of item a ground station sends in flight, in a short mission
+  # that ends on a landing point: take-off, speed change, waypoints, loiter
+  # for turns and for time, a delay, an altitude change, a return over home.
+  defp tour(home) do
+    Mission.new("tour")
+    |> Mission.add(C.home(home))
+    |> Mission.add(C.take_off(%{home | h: home.h + 20}))
+    |> Mission.add(C.speed(6))
+    |> Mission.add(C.move(50, 0, 0))
+    |> Mission.add(C.move_and_loiter_turns(0, 40, 0, 1, 10))
+    |> Mission.add(C.move_and_loiter_time(-40, 0, 0, 8, 10))
+    |> Mission.add(C.delay(4))
+    |> Mission.add(C.altitude(home.h + 30))
+    |> Mission.add(C.return_home())
+    |> Mission.add(C.landing_point(Geo.offset(home, 0, 20)))
+  end
+
+  defp endless(home) do
+    Mission.new("endless")
+    |> Mission.add(C.home(home))
+    |> Mission.add(C.take_off(%{home | h: home.h + 15}))
+    |> Mission.add(C.move_and_loiter_pos(30, 0, 0, 10))
+  end
+
+  defp back(home) do
+    Mission.new("back")
+    |> Mission.add(C.home(home))
+    |> Mission.add(C.take_off(%{home | h: home.h + 15}))
+    |> Mission.add(C.return_home_and_land())
+  end
+
+  # Flies the missions on one vehicle of `backend`; returns the recorded frames.
+  defp fly(backend) do
+    {:ok, recorder} = FrameRecorder.start_link()
+    [id] = Backend.start(backend, 1, forward: [FrameRecorder.endpoint(recorder)])
+    Wait.until(fn -> match?({:ok, %{home: %{}}}, Vehicles.state(id)) end, 2_000, fn -> "home of vehicle #{id}" end)
+    {:ok, _} = Dolphin.Fleet.pick(Dolphin.Fleet, self(), id: id)
+    {:ok, %{home: h}} = Vehicles.state(id)
+    home = Geo.location(h.lat, h.lon, h.alt)
+
+    result = Engine.run(Engine.on(tour(home), [id]))
+    assert match?({:ok, :done}, result), "#{backend}: #{inspect(result)}; the autopilot said: #{inspect(texts(recorder, id))}"
+    settle(id)
+    tour_frames = FrameRecorder.frames(recorder)
+
+    # A mission stopped while it loiters (the vehicle holds), then a new one from there.
+    at_loiter = fn -> match?({:ok, %{mission: %{current: 2}, mode: :auto}}, Vehicles.state(id)) end
+    assert {:ok, :done} = Engine.run(Engine.on(Engine.until(endless(home), at_loiter), [id]))
+    Dolphin.Clock.sleep(10_000)
+    held = Vehicles.state(id)
+    assert {:ok, :done} = Engine.run(Engine.on(back(home), [id]))
+    settle(id)
+
+    all = FrameRecorder.frames(recorder)
+    Backend.stop([id])
+    %{home: home, tour: trace(tour_frames, id, tour(home)), held: held, rest: trace(Enum.drop(all, length(tour_frames)), id, back(home)), id: id}
+  end
+
+  defp texts(recorder, id), do: for({_, ^id, %M.Statustext{text: t}} <- FrameRecorder.frames(recorder), do: t)
+
+  # The reports after a landing (disarm, the final MISSION_CURRENT) come within a
+  # few seconds of clock time.
+  defp settle(id) do
+    Wait.until(fn -> match?({:ok, %{armed: false}}, Vehicles.state(id)) end, 2_000)
+    Dolphin.Clock.sleep(4_000)
+  end
+
+  # What the ground station relies on, from one vehicle's frames.
+  defp trace(frames, id, mission) do
+    own = for {t, ^id, m} <- frames, t != nil, do: {t, m}
+    auto_at = Enum.find_value(own, fn {t, m} -> match?(%M.Heartbeat{custom_mode: 3}, m) && t end)
+    items = Mission.to_items(mission)
+
+    positions = for {t, %M.GlobalPositionInt{} = p} <- own, do: {t, p}
+
+    reached =
+      for {t, %M.MissionItemReached{seq: seq}} <- own do
+        {_, p} = positions |> Enum.take_while(fn {pt, _} -> pt <= t end) |> List.last()
+        item = Enum.at(items, seq)
+        %{seq: seq, after_ms: t - auto_at, miss_m: miss(item, p)}
+      end
+
+    %{
+      reached: reached,
+      current: own |> Enum.flat_map(fn {_, m} -> if match?(%M.MissionCurrent{}, m), do: [{m.seq, m.mission_state}], else: [] end) |> dedup_from_active(),
+      landed: own |> Enum.flat_map(fn {_, m} -> if match?(%M.ExtendedSysState{}, m), do: [m.landed_state], else: [] end) |> Enum.dedup(),
+      last_heartbeat: own |> Enum.filter(&match?({_, %M.Heartbeat{type: 2}}, &1)) |> List.last() |> elem(1) |> then(&{&1.custom_mode, Bitwise.band(&1.base_mode, 128) != 0}),
+      texts: for({_, %M.Statustext{text: text}} <- own, do: text)
+    }
+  end
+
+  # MISSION_CURRENT is sampled (periodic, and only the latest when several
+  # changes come in one loop): the states a mission goes through while ACTIVE,
+  # then the last one.
+  defp dedup_from_active(states) do
+    active = states |> Enum.filter(fn {_, state} -> state == 3 end) |> Enum.dedup()
+    active ++ Enum.take(states, -1)
+  end
+
+  # Horizontal distance from an item's point (nil for items without one).
+  defp miss(%{x: 0}, _p), do: nil
+  defp miss(%{command: command}, _p) when command not in [16, 17, 18, 19, 21], do: nil
+  defp miss(item, p), do: Geo.distance(Geo.location(item.x / 1.0e7, item.y / 1.0e7), Geo.location(p.lat / 1.0e7, p.lon / 1.0e7))
+
+  test "ArduCopter SITL and the simulator fly the same missions alike" do
+    sitl = fly(:sitl)
+    sim = fly(:sim)
+
+    # The same items reached in the same order.
+    assert Enum.map(sim.tour.reached, & &1.seq) == Enum.map(sitl.tour.reached, & &1.seq), inspect({sim.tour, sitl.tour}, pretty: true, limit: :infinity)
+    assert Enum.map(sim.rest.reached, & &1.seq) == Enum.map(sitl.rest.reached, & &1.seq), inspect({sim.rest, sitl.rest}, pretty: true, limit: :infinity)
+
+    # MISSION_CURRENT as the missions go, and the vehicle's state at their end.
+    assert sim.tour.current == sitl.tour.current
+    assert sim.rest.current == sitl.rest.current
+    assert sim.tour.last_heartbeat == sitl.tour.last_heartbeat
+    assert sim.rest.last_heartbeat == sitl.rest.last_heartbeat
+    assert sim.tour.landed == sitl.tour.landed
+
+    # A stopped mission leaves the vehicle holding in BRAKE, armed, in both.
+    assert {:ok, %{mode: :brake, armed: true}} = sitl.held
+    assert {:ok, %{mode: :brake, armed: true}} = sim.held
+
+    # The flight's shape: time to each item within 25 % (and 3 s, for the
+    # items reached at once), each item reached within its acceptance radius.
+    for {a, b} <- Enum.zip(sim.tour.reached, sitl.tour.reached) do
+      assert abs(a.after_ms - b.after_ms) <= max(0.25 * b.after_ms, 3_000),
+             "item #{a.seq}: simulator #{a.after_ms} ms, ArduCopter #{b.after_ms} ms after AUTO"
+
+      if b.miss_m, do: assert(a.miss_m <= 3.0 and b.miss_m <= 3.0, "item #{a.seq} reached #{a.miss_m} m (sim) / #{b.miss_m} m (SITL) from its point")
+    end
+  end
+end
