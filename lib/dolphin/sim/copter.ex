@@ -42,6 +42,8 @@ defmodule Dolphin.Sim.Copter do
     203 => "DigiCamCtrl", 206 => "SetCamTrigDst", 2000 => "ImageStartCapture", 2001 => "ImageStopCapture"
   }
 
+  @spool_up_ms 2_000
+
   @defaults %{
     camera: false,
     cruise_speed: 10.0,
@@ -550,8 +552,10 @@ defmodule Dolphin.Sim.Copter do
   # ---------------------------------------------------------------------------
   # GUIDED.
 
+  # The motors spool up before the copter leaves the ground (about 2 s on
+  # ArduCopter SITL between "Arming motors" and the first metre).
   defp start_takeoff(c, alt) do
-    %{c | nav: {:climb, c.n, c.e, alt}, landed: :takeoff, ground_since: nil}
+    %{c | nav: {:spool_up, c.time_ms + @spool_up_ms, {:climb, c.n, c.e, alt}}, landed: :takeoff, ground_since: nil}
   end
 
   defp guided_goto(c, lat, lon, alt) do
@@ -943,6 +947,9 @@ defmodule Dolphin.Sim.Copter do
 
   defp desired_velocity(c) do
     case c.nav do
+      {:spool_up, until_ms, next} ->
+        if c.time_ms >= until_ms, do: {%{c | nav: next}, {0.0, 0.0, 0.0}}, else: {c, {0.0, 0.0, 0.0}}
+
       {:climb, n, e, alt} ->
         {c, toward(c, n, e, alt)}
 
