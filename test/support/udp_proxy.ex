@@ -223,7 +223,7 @@ defmodule Dolphin.Test.UDPProxy do
 
   # Active a hundred datagrams at a time (re-armed on :udp_passive), as the
   # links do: a burst cannot flood the mailbox faster than we forward.
-  defp socket_opts, do: [:binary, active: 100, ip: @localhost, recbuf: 1_048_576]
+  defp socket_opts, do: [:binary, active: 100, ip: @localhost, recbuf: 4 * 1024 * 1024]
 
   @impl true
   def handle_call(:port, _from, s), do: {:reply, s.port, s}
