@@ -52,11 +52,20 @@ defmodule Dolphin.Test.UDPProxy do
 
   ## Counters
 
-  `stats/1` gives, per direction, `received`, `forwarded` (datagrams sent on,
-  duplicates included), `dropped`, `duplicated`, `reordered`, `pending`
-  (held back or delayed, not yet sent) and `send_errors`; and `vehicles`, the
-  number of vehicle addresses seen. Once nothing is pending,
-  `forwarded + send_errors == received - dropped + duplicated` in each direction.
+  `stats/1` gives, per direction:
+
+    * `received` — datagrams read;
+    * `forwarded` — datagrams sent on, duplicates included;
+    * `dropped` — lost on purpose;
+    * `duplicated` — extra copies made;
+    * `reordered` — held back (most go out after a later one; one with nothing
+      after it within `reorder_ms` goes out late but in place);
+    * `pending` — held back or waiting for their delay, not yet sent;
+    * `send_errors` — sends the socket refused;
+
+  and `vehicles`, the number of vehicle addresses seen, and `impairments`, the
+  current settings. Once nothing is pending, in each direction
+  `forwarded + send_errors == received - dropped + duplicated`.
   """
 
   use GenServer

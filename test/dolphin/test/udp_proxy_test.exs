@@ -29,16 +29,17 @@ defmodule Dolphin.Test.UDPProxyTest do
 
   defp payloads(prefix, n), do: for(i <- 1..n, do: "#{prefix}:#{i}")
 
-  # Sends in batches of 50, each once the proxy has read the last and the
+  # Sends in batches of 25, each once the proxy has read the last and the
   # receiver has read all the proxy forwarded: a burst of thousands would
   # overflow a kernel receive buffer, and that loss is not the one under test.
+  # (Where net.core.rmem_max keeps buffers at 208 KiB, 50 datagrams could.)
   defp send_paced(proxy, dir, {from, to_port}, receiver, payloads) do
     read = fn -> {:ok, [recv_cnt: n]} = :inet.getstat(receiver, [:recv_cnt]); n end
     base = UDPProxy.stats(proxy)[dir]
     read0 = read.()
 
     payloads
-    |> Enum.chunk_every(50)
+    |> Enum.chunk_every(25)
     |> Enum.reduce(base.received, fn batch, before ->
       Enum.each(batch, &(:ok = :gen_udp.send(from, @localhost, to_port, &1)))
       Wait.until(fn -> UDPProxy.stats(proxy)[dir].received >= before + length(batch) end)
@@ -340,11 +341,13 @@ defmodule Dolphin.Test.UDPProxyTest do
       :gen_udp.close(s)
     end
 
-    test "a given port is used; bad options are refused, naming what is wrong" do
+    test "a given port and name are used; bad options are refused, naming what is wrong" do
       {_gcs, gcs_port} = open()
       {free, port} = open()
       :gen_udp.close(free)
-      {_proxy, ^port} = proxy(gcs_port, port: port)
+      name = :"udp_proxy_#{System.unique_integer([:positive])}"
+      {proxy, ^port} = proxy(gcs_port, port: port, name: name)
+      assert Process.whereis(name) == proxy and UDPProxy.port(name) == port
 
       assert_raise ArgumentError, ~r/:gcs option .* is required/, fn -> UDPProxy.start_link([]) end
       assert_raise ArgumentError, ~r/:to_gcs: bad impairment :loss: 1.5/, fn -> UDPProxy.start_link(gcs: gcs_port, to_gcs: [loss: 1.5]) end
