@@ -1,0 +1,78 @@
+defmodule Dolphin.Test.UDPProxySimTest do
+  # A simulated ArduCopter behind the impairment proxy (as SITL would be), and
+  # the ground station's mission protocol through it: 20 % loss each way, 5 %
+  # duplicates, 5 % reordering. Changes the clock speed-up and shares the
+  # vehicle registry: not async.
+  #
+  # Tagged :lossy_transfer and excluded by default (test/test_helper.exs): it
+  # fails on defects of the mission protocol that the lossy mission-transfer
+  # work is to fix (a lost final MISSION_ACK of an upload; a download's item
+  # lost five times in a row). Run it with `mix test --include lossy_transfer`.
+  use ExUnit.Case, async: false
+
+  alias Dolphin.{Sim, Vehicles}
+  alias Dolphin.MAVLink.Ardupilotmega, as: M
+  alias Dolphin.Test.{UDPProxy, Wait}
+
+  # Retries of 1 s of clock time become 100 ms: room for the proxy's holds
+  # (20 ms) and a loaded machine's pauses.
+  @speedup 10
+  # One transfer can pass by luck: a dozen seeds (a dozen different runs of
+  # faults) make a defect that strikes one transfer in five show.
+  @seeds 1..12
+
+  @moduletag :lossy_transfer
+
+  setup do
+    %{gcs_port: Dolphin.Test.GroundStation.open()}
+  end
+
+  defp items(n) do
+    home = %M.MissionItemInt{seq: 0, frame: 0, command: 16, x: 404_442_330, y: -73_752_340, z: 0.0}
+
+    [home | for(i <- 1..n, do: %M.MissionItemInt{seq: i, frame: 6, command: 16, autocontinue: 1, param1: i * 1.0, x: 404_442_330 + i * 100, y: -73_752_340 - i * 10, z: 20.0 + i})]
+  end
+
+  # Item 0 is home: the vehicle ignores an uploaded one and hands out its own.
+  defp meaning(item), do: {item.seq, item.command, item.x, item.y, item.z, item.param1, item.autocontinue}
+
+  # One upload and download through a fresh proxy seeded with `seed`: nil when
+  # both are exact, else what went wrong.
+  defp transfer(gcs_port, seed, uploaded) do
+    proxy = start_supervised!({UDPProxy, gcs: gcs_port, seed: seed}, id: {:proxy, seed})
+    {:ok, [1]} = Sim.start(count: 1, gcs: UDPProxy.port(proxy), speedup: @speedup)
+    # Discovered on a clean link, then impaired.
+    Wait.until(fn -> Vehicles.whereis(1) end, 250, fn -> "(vehicle 1 behind the proxy, seed #{seed})" end)
+    :ok = UDPProxy.set(proxy, both: [loss: 0.2, duplicate: 0.05, reorder: 0.05])
+
+    upload = Vehicles.upload_mission(1, uploaded)
+    {:ok, info} = Sim.info(1)
+    held = Enum.map(info.mission, &meaning/1) == Enum.map(tl(uploaded), &meaning/1)
+    download = Vehicles.download_mission(1)
+    stats = UDPProxy.stats(proxy)
+
+    :ok = stop_supervised({:proxy, seed})
+    Dolphin.Test.GroundStation.forget_vehicles()
+
+    exact_download? =
+      match?({:ok, back} when length(back) == length(uploaded), download) and
+        Enum.map(tl(elem(download, 1)), &meaning/1) == Enum.map(tl(uploaded), &meaning/1) and
+        Enum.all?(tl(elem(download, 1)), &(&1.frame == 3))
+
+    impaired? = stats.to_gcs.dropped > 0 and stats.to_vehicle.dropped > 0
+
+    if upload == :ok and held and exact_download? and impaired? do
+      nil
+    else
+      "seed #{seed}: upload #{inspect(upload)}, the vehicle holds the mission: #{held}, " <>
+        "download #{if exact_download?, do: "exact", else: inspect(download)}, " <>
+        "dropped to the ground station #{stats.to_gcs.dropped}, to the vehicle #{stats.to_vehicle.dropped}"
+    end
+  end
+
+  test "missions go up and come back exactly over 20 % loss each way, 5 % duplicates and 5 % reordering", %{gcs_port: gcs_port} do
+    uploaded = items(30)
+    failures = for seed <- @seeds, failure = transfer(gcs_port, seed, uploaded), do: failure
+    assert failures == [], "#{length(failures)} of #{Enum.count(@seeds)} transfers failed:\n" <> Enum.join(failures, "\n")
+  end
+end
