@@ -8,7 +8,8 @@ defmodule Dolphin.Examples.ScenariosTest do
   # Changes the clock's speed-up and runs simulated fleets: not async.
   use ExUnit.Case, async: false
 
-  alias Dolphin.MAVLink.JSON
+  alias Dolphin.MAVLink.Ardupilotmega.GlobalPositionInt
+  alias Dolphin.MAVLink.{JSON, Tlog}
   alias Dolphin.Test.GroundStation
   alias Mix.Tasks.Dolphin.Run
 
@@ -84,28 +85,87 @@ defmodule Dolphin.Examples.ScenariosTest do
     assert [%{"items" => 42} | _] = events(all, "mission_uploaded") |> Enum.filter(&(&1["name"] == "Survey Area 1"))
   end
 
-  test "the continuous relay keeps two vehicles airborne from the first hand-over on", %{tmp_dir: dir} do
-    {code, output, all} = run_example(dir, "relay_continuous", 6)
+  # The areas of examples/relay_continuous.exs: 300 m north and south of the
+  # base, watched at 870 m (50 m up) circling with a 30 m radius.
+  @relay_areas [
+    north: Dolphin.Geo.location(40.446933, -7.375234, 870),
+    south: Dolphin.Geo.location(40.441533, -7.375234, 870)
+  ]
+  @relay_reach 30 + 20
+
+  test "the continuous relay keeps a vehicle on station over each area every second, from the first arrival to the end", %{tmp_dir: dir} do
+    # 13 minutes: three shifts of about 170 s each after the first arrival,
+    # then the first vehicle, recharged, back on station.
+    {code, output, all} = run_example(dir, "relay_continuous", 6, ["--for", "13m"])
     assert code == 0, output
-    assert %{"result" => "done"} = all |> events("script_finished") |> List.last()
+    assert %{"result" => "stopped"} = all |> events("script_finished") |> List.last()
 
-    # Who is armed, over time.
-    {airborne, timeline} =
-      all
-      |> Enum.filter(&(&1["event"] in ["armed", "disarmed"]))
-      |> Enum.map_reduce(MapSet.new(), fn e, set ->
-        set = if e["event"] == "armed", do: MapSet.put(set, e["vehicle"]), else: MapSet.delete(set, e["vehicle"])
-        {{e["t_ms"], MapSet.size(set)}, set}
-      end)
-      |> then(fn {timeline, set} -> {set, timeline} end)
+    # Positions as the vehicles reported them (GLOBAL_POSITION_INT, 2 Hz of
+    # clock time, stamped with the vehicle's own clock): {sysid, t_ms, location, metres above home}.
+    samples = tlog_positions(Path.join(dir, "relay_continuous.tlog"))
+    by_vehicle = Enum.group_by(samples, &elem(&1, 0))
+    assert map_size(by_vehicle) == 6
+    # The end of the run: the last report every vehicle got to send.
+    run_end = by_vehicle |> Enum.map(fn {_, s} -> s |> Enum.map(&elem(&1, 1)) |> Enum.max() end) |> Enum.min()
 
-    assert MapSet.size(airborne) == 0
-    # The first hand-over: a third vehicle armed. The last shift: the last "Watch" mission stopped.
-    {first_handover, _} = Enum.find(timeline, fn {_, n} -> n >= 3 end)
-    last_watch = all |> Enum.filter(&(&1["event"] == "task_finished" and &1["kind"] == "mission" and &1["name"] =~ "Watch")) |> List.last()
-    window = Enum.filter(timeline, fn {t, _} -> t >= first_handover and t < last_watch["t_ms"] end)
-    assert window != []
-    assert Enum.all?(window, fn {_, n} -> n >= 2 end), inspect(window)
+    watchers =
+      for {name, point} <- @relay_areas do
+        on_station? = fn {_, _, at, _} -> Dolphin.Geo.distance(at, point) <= @relay_reach and at.h >= point.h - 5 end
+
+        # Each vehicle's time on station: from one report to the next when both
+        # find it there (reports at most 2 s apart: one may be lost on the way).
+        spans =
+          for {_, reports} <- by_vehicle, [a, b] <- Enum.chunk_every(Enum.sort_by(reports, &elem(&1, 1)), 2, 1, :discard),
+              on_station?.(a) and on_station?.(b) and elem(b, 1) - elem(a, 1) <= 2_000,
+              do: {elem(a, 1), elem(b, 1)}
+
+        assert spans != [], "no vehicle ever on station over the #{name} area"
+        [{first_arrival, _} | _] = spans = Enum.sort(spans)
+
+        # Merged, the spans are one: no second from the first arrival to the end without a vehicle there.
+        merged =
+          Enum.reduce(spans, [], fn
+            {a, b}, [{from, to} | rest] when a <= to -> [{from, max(to, b)} | rest]
+            span, acc -> [span | acc]
+          end)
+          |> Enum.reverse()
+
+        holes = merged |> Enum.chunk_every(2, 1, :discard) |> Enum.map(fn [{_, left}, {came, _}] -> {left, came} end) |> Enum.filter(fn {left, _} -> left < run_end end)
+        assert holes == [], "the #{name} area was left without a vehicle on station (from, to ms of clock time): #{inspect(holes)}"
+        assert {_, covered_to} = hd(merged)
+        assert covered_to >= run_end - 1_000, "the #{name} area was watched up to #{covered_to} ms, the run went on to #{run_end} ms"
+        # The watch went on for most of the run (the first arrival takes a minute: take-off, climb, 300 m).
+        assert first_arrival < 120_000, "the first vehicle reached the #{name} area only at #{first_arrival} ms"
+
+        # The ring went round: a vehicle watched, landed (and recharged), and watched again.
+        watched = for {v, reports} <- by_vehicle, Enum.any?(reports, on_station?), do: v
+        assert length(watched) == 3, "the #{name} area was watched by #{inspect(watched)}, not a ring of three"
+
+        assert Enum.any?(watched, fn v ->
+                 by_vehicle[v]
+                 |> Enum.sort_by(&elem(&1, 1))
+                 |> Enum.map(fn r -> if on_station?.(r), do: :on, else: if(elem(r, 3) < 1, do: :ground, else: :air) end)
+                 |> Enum.reject(&(&1 == :air))
+                 |> Enum.dedup()
+                 |> Enum.drop_while(&(&1 != :on))
+                 |> then(&match?([:on, :ground, :on | _], &1))
+               end),
+               "no vehicle came back to the #{name} area after landing"
+
+        MapSet.new(watched)
+      end
+
+    # Each area has its own ring.
+    assert MapSet.disjoint?(hd(watchers), List.last(watchers))
+  end
+
+  # {sysid, time_boot_ms, location, relative altitude in metres} of every GLOBAL_POSITION_INT in a .tlog.
+  defp tlog_positions(path) do
+    {records, reader} = Tlog.read(Tlog.reader(), File.read!(path))
+    {rest, _} = Tlog.finish(reader)
+
+    for {_, %{sysid: sysid, message: %GlobalPositionInt{} = m}} <- records ++ rest,
+        do: {sysid, m.time_boot_ms, Dolphin.Geo.location(m.lat / 1.0e7, m.lon / 1.0e7, m.alt / 1000), m.relative_alt / 1000}
   end
 
   test "Listing 4, faithful: pairs take turns", %{tmp_dir: dir} do
