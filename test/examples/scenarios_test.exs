@@ -1,7 +1,10 @@
 defmodule Dolphin.Examples.ScenariosTest do
   # The report's scenarios and the other examples, run as a user runs them —
   # `mix dolphin.run examples/NAME.exs --sim N --speedup 25 --events FILE` —
-  # against the simulator over UDP on 127.0.0.1, judged from the event log.
+  # against the simulator over UDP on 127.0.0.1, judged from the event log
+  # (and the continuous relay from the positions in its .tlog); dry_run.exs on
+  # fake vehicles (`--fake 3`); the two tours with `mix run`, judged from what
+  # they print.
   # At 25× a vehicle's 1 s mission re-request is 40 ms of real time and its
   # 20 s link timeout 0.8 s: on a shared, busy machine 50× made stalls of a
   # few hundred milliseconds read as lost vehicles and cancelled uploads.
@@ -19,13 +22,15 @@ defmodule Dolphin.Examples.ScenariosTest do
 
   @examples Path.expand("../../examples", __DIR__)
 
-  # Runs an example; returns the exit status, the output and the events.
+  # Runs an example on `sim` simulated vehicles, or `{:fake, n}` fake ones;
+  # returns the exit status, the output and the events.
   defp run_example(dir, name, sim, extra \\ []) do
     events = Path.join(dir, "#{name}.jsonl")
     {:ok, out} = StringIO.open("")
     {:ok, err} = StringIO.open("")
     tlog = Path.join(dir, "#{name}.tlog")
-    argv = [Path.join(@examples, "#{name}.exs"), "--sim", "#{sim}", "--speedup", "25", "--events", events, "--tlog", tlog, "--quiet"] ++ extra
+    vehicles = with {:fake, n} <- sim, do: ["--fake", "#{n}"], else: (n -> ["--sim", "#{n}", "--tlog", tlog])
+    argv = [Path.join(@examples, "#{name}.exs")] ++ vehicles ++ ["--speedup", "25", "--events", events, "--quiet"] ++ extra
     code = Run.main(argv, out: out, err: err)
     GroundStation.forget_vehicles()
     output = elem(StringIO.contents(out), 1) <> elem(StringIO.contents(err), 1)
@@ -193,5 +198,76 @@ defmodule Dolphin.Examples.ScenariosTest do
     assert [%{"result" => "stopped"}] = tasks(all, "stopped", "Field patrol")
     assert [_] = tasks(all, "done", "Home")
     assert output =~ "patrol over"
+  end
+
+  test "dry_run.exs on fake vehicles: the scout's survey stops on its drained battery, the photos wait for the signal, one_of picks the scout, a failure is handled", %{tmp_dir: dir} do
+    {code, output, all} = run_example(dir, "dry_run", {:fake, 3})
+    assert code == 0, output
+    assert %{"result" => "done"} = all |> events("script_finished") |> List.last()
+    finished = fn name -> all |> events("task_finished") |> Enum.filter(&(&1["kind"] == "test" and &1["name"] == name)) end
+
+    # The survey runs until the action drains the scout's battery a minute in, then the scout returns.
+    assert [%{"result" => "stopped", "vehicle" => scout, "t_ms" => stopped}] = finished.("survey")
+    assert stopped >= 60_000
+    assert all |> events("condition_met") |> Enum.any?(&(&1["condition"] == "battery(scout) < 0.3" and &1["t_ms"] <= stopped))
+
+    # The spare's photos start only once :go is posted (20 s in) and take their two minutes.
+    assert [%{"key" => "go", "t_ms" => posted}] = events(all, "signal_posted")
+    assert posted >= 20_000
+    photos = all |> events("task_started") |> Enum.find(&(&1["name"] == "photos"))
+    assert photos["t_ms"] >= posted and photos["vehicle"] != scout
+    assert [%{"result" => "done", "t_ms" => done}] = finished.("photos")
+    assert done - photos["t_ms"] >= 120_000
+
+    # one_of: the scout's branch (its battery is low, the spare's is full); the
+    # flaky task's failure handled by the fallback on the spare; then the end.
+    messages = all |> events("message") |> Enum.map(& &1["text"])
+    assert "scout needs charging" in messages
+    refute "spare is empty" in messages
+    assert [%{"result" => "failed", "vehicle" => spare}] = finished.("flaky")
+    assert Enum.any?(messages, &(&1 =~ ~r/^handled: .*compass variance/))
+    assert [_, %{"result" => "done", "vehicle" => ^spare}] = finished.("return home")
+    assert List.last(messages) == "Done!"
+  end
+
+  # The tours are plain `mix run` scripts: run as the header says, in a VM of their own.
+  defp mix_run(name) do
+    root = Path.expand("../..", __DIR__)
+    System.cmd(System.find_executable("mix"), ["run", Path.join(@examples, "#{name}.exs")], cd: root, env: [{"MIX_ENV", "#{Mix.env()}"}], stderr_to_stdout: true)
+  end
+
+  test "codec_tour.exs: truncated payloads, the intact frames recovered from a damaged stream, a signature checked, the .tlog read by pymavlink" do
+    {output, status} = mix_run("codec_tour")
+    assert status == 0, output
+    # MAVLink 2 drops the trailing zero bytes of a payload: the 43-byte SYS_STATUS goes as 31.
+    assert output =~ ~r/SYS_STATUS +id +1 +43 bytes on the wire \(payload 31 of 43\)/
+    assert output =~ ~r/HEARTBEAT +id +0 +21 bytes on the wire \(payload 9 of 9\)/
+    # The flipped and the cut frame are lost, every other one comes through, the garbage skipped.
+    assert output =~ "recovered 5 frames: HEARTBEAT, SYS_STATUS, MISSION_ITEM_INT, STATUSTEXT, HEARTBEAT\n"
+    assert output =~ ~r/2 candidate frames failed their CRC/
+    assert output =~ "the waypoint's yaw is still :nan"
+    assert output =~ "COMMAND_LONG :mav_cmd_component_arm_disarm: accepted with the fleet key, bad_signature with another"
+    # pymavlink reads back all six frames, with their values.
+    assert output =~ "SYS_STATUS {'battery_remaining': 87}"
+    assert output =~ "GLOBAL_POSITION_INT {'lat': 411780000}"
+    assert output =~ "MISSION_ITEM_INT {'param4': nan}"
+    assert output =~ "STATUSTEXT {'text': 'Flight plan received'}"
+  end
+
+  test "ground_station_tour.exs: a pymavlink vehicle discovered, its telemetry, a mode change acknowledged and a bad one refused, a mission it received item by item" do
+    {output, status} = mix_run("ground_station_tour")
+    assert status == 0, output
+    assert output =~ "discovered vehicle 1 from its HEARTBEAT"
+    # What scripts/pymavlink_vehicle.py sends: GUIDED, armed, 77 %, 20 m up.
+    assert output =~ "state: mode :guided, armed true, battery 77 %, at 41.178, -8.596, 20.0 m up"
+    assert output =~ "set mode :brake -> {:ok, :accepted}"
+    assert output =~ ~r/set mode :warp  -> "MAV_CMD_DO_SET_MODE not sent to vehicle 1 \(no mode :warp on this vehicle/
+    assert output =~ "accepted by the vehicle (MISSION_ACK 0)"
+    # The vehicle's side: the mode change (DO_SET_MODE 176, custom mode) and all six items as sent.
+    assert output =~ "vehicle got COMMAND_LONG 176 (param1 1.0)"
+    assert output =~ "vehicle holds 6 items:"
+    assert output =~ "#1 :mav_cmd_nav_takeoff frame 6 x 0 y 0 z 20.0"
+    assert output =~ "#4 :mav_cmd_nav_waypoint frame 6 x 411795000 y -85960000 z 20.0"
+    assert output =~ "#5 :mav_cmd_nav_return_to_launch frame 6"
   end
 end
