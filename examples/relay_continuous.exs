@@ -18,14 +18,14 @@
 # 0.25 %/s; 0.3 %/s climbing at 2.5 m/s, 0.28 %/s cruising at 10 m/s, 0.27 %/s
 # circling; charging 0.5 %/s on the ground at home):
 #   out:       climb 50 m (20 s) + 300 m to the point (about 35 s)  ~ 15 %, 55 s
-#   on station from about 85 % to about 40 % (the relief launched at 55 %
-#   arrives some 55 s later)                                       ~ 170 s
+#   on station from about 85 % to about 43 % (the relief, launched at
+#   55 %, arrives some 50 s later)                                 ~ 165 s
 #   back:      300 m (35 s) + descend 50 m at 1.5 m/s (33 s) + the
 #              10 s before disarming                               ~ 18 %, 80 s
-#   recharge:  from about 22 % to 90 %                             ~ 140 s
-# A vehicle is away from station for 55 + 80 + 140 = 275 s, while the other
-# two of its ring cover 2 × 170 = 340 s: three vehicles leave a minute of
-# margin (two could not: 170 < 275). A relieved vehicle lands with about 22 %;
+#   recharge:  from about 25 % to 90 %                             ~ 130 s
+# A vehicle is away from station for 55 + 80 + 130 = 265 s, while the other
+# two of its ring cover 2 × 165 = 330 s: three vehicles leave a minute of
+# margin (two could not: 165 < 265). A relieved vehicle lands with about 25 %;
 # if its relief never comes it leaves at 30 % and lands with about 12 %.
 use Dolphin.Script
 
