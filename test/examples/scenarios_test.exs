@@ -99,14 +99,16 @@ defmodule Dolphin.Examples.ScenariosTest do
   @relay_reach 30 + 20
 
   test "the continuous relay keeps a vehicle on station over each area every second, from the first arrival to the end", %{tmp_dir: dir} do
-    # 13 minutes: three shifts of about 170 s each after the first arrival,
-    # then the first vehicle, recharged, back on station.
+    # 13 minutes: three shifts of about 165 s each after the first arrival
+    # (a minute in), then the first vehicle, recharged, back on station.
     {code, output, all} = run_example(dir, "relay_continuous", 6, ["--for", "13m"])
     assert code == 0, output
     assert %{"result" => "stopped"} = all |> events("script_finished") |> List.last()
 
     # Positions as the vehicles reported them (GLOBAL_POSITION_INT, 2 Hz of
-    # clock time, stamped with the vehicle's own clock): {sysid, t_ms, location, metres above home}.
+    # clock time, stamped with the vehicle's own clock; the simulator starts
+    # its vehicles together, their clocks agree to a step of 50 ms):
+    # {sysid, t_ms, location, metres above home}.
     samples = tlog_positions(Path.join(dir, "relay_continuous.tlog"))
     by_vehicle = Enum.group_by(samples, &elem(&1, 0))
     assert map_size(by_vehicle) == 6
@@ -125,7 +127,7 @@ defmodule Dolphin.Examples.ScenariosTest do
               do: {elem(a, 1), elem(b, 1)}
 
         assert spans != [], "no vehicle ever on station over the #{name} area"
-        [{first_arrival, _} | _] = spans = Enum.sort(spans)
+        spans = Enum.sort(spans)
 
         # Merged, the spans are one: no second from the first arrival to the end without a vehicle there.
         merged =
@@ -139,10 +141,9 @@ defmodule Dolphin.Examples.ScenariosTest do
         assert holes == [], "the #{name} area was left without a vehicle on station (from, to ms of clock time): #{inspect(holes)}"
         assert {_, covered_to} = hd(merged)
         assert covered_to >= run_end - 1_000, "the #{name} area was watched up to #{covered_to} ms, the run went on to #{run_end} ms"
-        # The watch went on for most of the run (the first arrival takes a minute: take-off, climb, 300 m).
-        assert first_arrival < 120_000, "the first vehicle reached the #{name} area only at #{first_arrival} ms"
 
-        # The ring went round: a vehicle watched, landed (and recharged), and watched again.
+        # The ring went round: a vehicle watched, landed, and watched again (it
+        # takes off only at 90 %: it recharged).
         watched = for {v, reports} <- by_vehicle, Enum.any?(reports, on_station?), do: v
         assert length(watched) == 3, "the #{name} area was watched by #{inspect(watched)}, not a ring of three"
 
