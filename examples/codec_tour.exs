@@ -2,7 +2,11 @@
 # station: encode, damage the stream as a bad radio link would, recover every
 # intact frame, sign a command, and hand a .tlog to pymavlink.
 #
-#   mix run examples/codec_tour.exs          (make run does this)
+#   mix run examples/codec_tour.exs
+#
+# (`make run` flies examples/two_vehicles.exs, not this; the scenario tests run
+# this tour exactly so and check what it prints.) The last part needs the
+# project's venv with pymavlink, which scripts/bootstrap creates.
 alias Dolphin.MAVLink.{Frame, Message, Parser, Signing, Tlog}
 alias Dolphin.MAVLink.Ardupilotmega, as: APM
 
@@ -61,17 +65,20 @@ key = :crypto.hash(:sha256, "fleet secret")
 {:ok, cmd, <<>>} = Frame.decode(bytes, APM)
 {:ok, _} = Signing.verify(Signing.new(key: key, unsigned: :reject), cmd)
 {:error, why, _} = Signing.verify(Signing.new(key: :crypto.hash(:sha256, "wrong")), cmd)
-IO.puts("  COMMAND_LONG #{inspect(APM.enum_name(:mav_cmd, cmd.message.command))}: accepted with the fleet key, #{why} with another")
+{:ok, command} = APM.enum_name(:mav_cmd, cmd.message.command)
+IO.puts("  COMMAND_LONG #{inspect(command)}: accepted with the fleet key, #{why} with another")
 
 IO.puts("\n== The telemetry as a .tlog, read back by pymavlink (the reference implementation)")
-path = Path.join(System.tmp_dir!(), "dolphin-tour.tlog")
+# Named after this OS process: two tours at once must not share the file.
+path = Path.join(System.tmp_dir!(), "dolphin-tour-#{System.pid()}.tlog")
 t0 = System.os_time(:microsecond)
 File.write!(path, for({f, i} <- Enum.with_index(frames), do: Tlog.record(t0 + i * 100_000, f)))
 python = Path.expand("../.venv/bin/python", __DIR__)
 
 if File.exists?(python) do
   script = "import sys\nfrom pymavlink import mavutil\nm = mavutil.mavlink_connection(sys.argv[1])\nwhile True:\n    msg = m.recv_match(blocking=False)\n    if msg is None: break\n    print('  ' + msg.get_type(), {k: v for k, v in msg.to_dict().items() if k in ('battery_remaining', 'lat', 'text', 'param4')} or '')\n"
-  {out, _} = System.cmd(python, ["-c", script, path])
+  {out, status} = System.cmd(python, ["-c", script, path], stderr_to_stdout: true)
+  status == 0 || Mix.raise("pymavlink could not read #{path} (exit status #{status}):\n#{out}")
   IO.write(out)
 else
   IO.puts("  (no .venv: run scripts/bootstrap to see pymavlink read it)")

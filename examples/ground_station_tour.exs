@@ -3,7 +3,11 @@
 # 127.0.0.1: discovery, telemetry, a mode change, a mission upload, each seen
 # from both sides.
 #
-#   mix run examples/ground_station_tour.exs          (make run does this)
+#   mix run examples/ground_station_tour.exs
+#
+# (`make run` flies examples/two_vehicles.exs, not this; the scenario tests run
+# this tour exactly so and check what it prints.) It needs the project's venv
+# with pymavlink, which scripts/bootstrap creates.
 alias Dolphin.{Link, Vehicles}
 alias Dolphin.Link.Connection
 alias Dolphin.MAVLink.Ardupilotmega, as: M
