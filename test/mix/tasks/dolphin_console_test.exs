@@ -69,7 +69,7 @@ defmodule Mix.Tasks.Dolphin.ConsoleTest do
     assert ieval(port, "h vehicles") =~ "The fleet at a glance"
     # So are the script language's readers and values (.iex.exs too), live.
     assert ieval(port, "h battery") =~ "The remaining battery of a one-vehicle set"
-    poll(port, "battery(1)", &(&1 =~ ~r/^1\.0$/m))
+    poll(port, "IO.inspect(battery(1))", &(&1 =~ ~r/^1\.0$/m))
 
     table = ieval(port, "vehicles()")
     assert table =~ ~r/^ID\s+TYPE\s+MODE\s+ARMED/m
