@@ -1,7 +1,9 @@
 defmodule Dolphin.Script do
   @moduledoc """
   Dolphin scripts: `.exs` files that start with `use Dolphin.Script` and are
-  run with `mix dolphin.run script.exs` (or `compile/2` and `run/2`).
+  run with `mix dolphin.run script.exs` (or `compile/2` and `run/2`). The
+  language reference, with a runnable example of every construct, is
+  `docs/language.md` in the project.
 
       use Dolphin.Script
 
@@ -10,9 +12,28 @@ defmodule Dolphin.Script do
       release(v)
       message("Done!")
 
-  `use Dolphin.Script` imports the vocabulary of `../shared/DSL.md`:
-  `Dolphin.DSL` (vehicles, tasks, running), `Dolphin.DSL.Values` (locations,
-  areas, units) and the `mission` block of `Dolphin.DSL.Mission`.
+  A script is plain Elixir plus the words that `use Dolphin.Script` imports
+  from `Dolphin.DSL`, `Dolphin.DSL.Values` and `Dolphin.DSL.Mission`:
+
+    * values — `location/3`, `area/2`, `seconds/1`, `minutes/1`, `hours/1`,
+      `days/1`, `meters/1`, `km/1`, `percent/1`, `degrees/1`, `distance/2`,
+      `near?/3`, `contains?/2` (`Dolphin.DSL.Values`);
+    * vehicles — `pick`, `release`, `union`, `difference`, `intersection`,
+      `filter`, `set_connection_timeout`, and the readers `battery`,
+      `position`, `altitude`, `relative_altitude`, `mode`, `armed?`,
+      `connected?`, `mission_progress` (nil until the vehicle has reported
+      them; in a condition an unknown value is not met);
+    * tasks — `mission "name" do ... end` (the commands of
+      `Dolphin.Mission.Command`), `idle`, `action`, `condition`, `>>>`,
+      `|||`, `on`, `until`, `during`, `wait_for`, `one_of`, `all_of`,
+      `watch`, `named`;
+    * statements — `execute`, `forever`, `repeat`, `message`, `post`,
+      `consume`, `poll`, `pause`, `halt`, `ask`, `send_message`.
+
+  In the console (`iex -S mix dolphin.console`) `h battery`, `h location`
+  show a reader's or a value's documentation; every other word is
+  `h Dolphin.DSL.until` (or `h Dolphin.DSL.Mission.mission`,
+  `h Dolphin.Mission.Command.survey_area`).
 
   ## Compiling
 

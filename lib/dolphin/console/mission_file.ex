@@ -17,8 +17,8 @@ defmodule Dolphin.Console.MissionFile do
 
   alias Dolphin.Mission
 
-  # The statements of the script language that do something (DSL.md,
-  # "Vehicles" and "Running"): never run when only missions are wanted.
+  # The statements of the script language that do something (docs/language.md,
+  # "Vehicles" and "Statements"): never run when only missions are wanted.
   @acting [:pick, :release, :execute, :forever, :repeat, :message, :post, :consume, :poll, :pause, :halt, :ask, :send_message, :set_connection_timeout]
 
   @typedoc "A mission found: `name` is the variable it is bound to (nil for a bare expression)."

@@ -1,6 +1,6 @@
 defmodule Dolphin.DSL do
   @moduledoc """
-  The vocabulary of scripts (`../shared/DSL.md`), imported by
+  The vocabulary of scripts (docs/language.md is the reference), imported by
   `use Dolphin.Script` together with `Dolphin.DSL.Values` (locations, areas,
   units) and the `mission` block of `Dolphin.DSL.Mission`.
 
@@ -35,85 +35,270 @@ defmodule Dolphin.DSL do
 
   # --- vehicles ---
 
-  @doc "Picks vehicles (blocks; see `Dolphin.Fleet`): `count`, `type`, `payload`, `region`, `id`, `timeout`."
+  @doc """
+  Picks vehicles for the script and returns them as a vehicle set: blocks
+  until `count` *available* vehicles (connected, picked by nobody, not busy)
+  match every filter. Options: `count:` (default 1), `type:` (`:uav`,
+  `:ugv`, `:usv`, `:uuv`, `:other` or a list), `payload:` (an atom or a list,
+  all required), `region:` (an `area/2`), `id:` (a system id or a list),
+  `timeout:` (clock ms, default `:infinity`).
+
+      v = pick(type: :uav, timeout: seconds(30))
+      pair = pick(count: 2, payload: :camera, region: area(base, km(2)))
+
+  A timeout stops the script with a `Dolphin.Fleet.PickError` naming the
+  requirement and the known vehicles (`pick timed out after 30000 ms: wanted
+  1 vehicle, type :uav; ...`), reported at the line of the `pick`; a bad
+  option raises `ArgumentError`. See docs/language.md, "Vehicles".
+  """
   defmacro pick(opts \\ []), do: at_line(quote(do: Dolphin.Script.pick(unquote(opts))), __CALLER__)
-  @doc "Makes vehicles available again: a set or a list of sets."
+
+  @doc """
+  Makes vehicles the script picked available again: a set or a list of sets.
+  Returns `:ok`. A script's vehicles are released when it ends anyway.
+
+      release(v)
+      release([scout, spare])
+  """
   defdelegate release(sets), to: Dolphin.Script
-  @doc "Vehicles in either set."
+
+  @doc """
+  The vehicles of either set.
+
+      everyone = union(scouts, spares)
+  """
   defdelegate union(a, b), to: VehicleSet
-  @doc "Vehicles of `a` not in `b`."
+
+  @doc """
+  The vehicles of `a` that are not in `b`.
+
+      others = difference(all, v)
+  """
   defdelegate difference(a, b), to: VehicleSet
-  @doc "Vehicles in both sets."
+
+  @doc """
+  The vehicles in both sets.
+
+      both = intersection(cameras, in_zone)
+  """
   defdelegate intersection(a, b), to: VehicleSet
-  @doc "Vehicles of `set` for which `fun` (given a one-vehicle set) is truthy."
+
+  @doc """
+  The vehicles of `set` for which `fun`, given a one-vehicle set, is truthy.
+
+      charged = filter(all, fn v -> battery(v) > 0.9 end)
+  """
   defdelegate filter(set, fun), to: VehicleSet
-  @doc "A vehicle silent for longer than `ms` is lost (its task fails); for the vehicles picked now and later."
+
+  @doc """
+  A vehicle not heard for longer than `ms` (clock ms; default 20 s) is lost:
+  the task running on it fails. For the vehicles the script picked and will
+  pick; returns `:ok`, raises `ArgumentError` unless `ms` is positive.
+
+      set_connection_timeout(minutes(10))
+  """
   defdelegate set_connection_timeout(ms), to: Dolphin.Script
-  @doc "The connection timeout of the vehicles of `set`."
+
+  @doc """
+  The connection timeout (clock ms) of the vehicles of `set`.
+
+      set_connection_timeout(v, seconds(30))
+  """
   defdelegate set_connection_timeout(set, ms), to: Dolphin.Script
 
   @typedoc "A one-vehicle set (or a system id)."
   @type vehicle :: VehicleSet.t() | non_neg_integer()
 
-  @doc "Remaining battery, 0.0..1.0 (nil until reported), of a one-vehicle set."
+  # The readers share one paragraph: what they return before the first report
+  # and how conditions treat that.
+  @unknown """
+  `nil` until the vehicle has reported it. In a condition, an unknown value
+  makes the condition not met (it never raises): `wait_for(battery(v) >= 0.9)`
+  waits until the battery is known and at least 90 %. Raises `ArgumentError`
+  for a set of several vehicles.
+  """
+
+  @doc """
+  The remaining battery of a one-vehicle set (or a system id), `0.0..1.0`;
+  #{@unknown}
+      until(survey, battery(v) < 0.3) >>> return_home
+      message("battery at \#{round(battery(v) * 100)} %")
+  """
   @spec battery(vehicle()) :: float() | nil
   def battery(v), do: Fleet.state(v, :battery).battery
-  @doc "Position (a `Dolphin.Geo.Location`, height above mean sea level) or nil."
+
+  @doc """
+  The position of a vehicle: a `Dolphin.Geo.Location` (latitude, longitude,
+  height `h` above mean sea level); #{@unknown}
+      until(patrol, not contains?(zone, position(v)))
+      home_pos = position(v)
+  """
   @spec position(vehicle()) :: Dolphin.Geo.Location.t() | nil
   def position(v), do: Fleet.state(v, :position).position
-  @doc "Height above mean sea level in metres, or nil."
+
+  @doc """
+  The height of a vehicle above mean sea level, in metres (what missions
+  use); #{@unknown}
+      wait_for(altitude(v) > 1000, then: photos)
+  """
   @spec altitude(vehicle()) :: float() | nil
   def altitude(v), do: with(%{h: h} <- Fleet.state(v, :altitude).position, do: h)
-  @doc "Height above home in metres, or nil."
+
+  @doc """
+  The height of a vehicle above its home, in metres; #{@unknown}
+      wait_for(relative_altitude(v) > 30, then: survey)
+  """
   @spec relative_altitude(vehicle()) :: float() | nil
   def relative_altitude(v), do: Fleet.state(v, :relative_altitude).relative_altitude
-  @doc "Flight mode (`:guided`, `:auto`, ...) or nil."
+
+  @doc """
+  The flight mode of a vehicle: `:stabilize`, `:guided`, `:auto`, `:brake`,
+  `:land`, `:rtl`, ...; #{@unknown}
+      until(watch_only, mode(v) == :rtl)
+  """
   @spec mode(vehicle()) :: atom() | nil
   def mode(v), do: Fleet.state(v, :mode).mode
-  @doc "Whether the vehicle is armed."
+
+  @doc """
+  Whether a vehicle is armed (`false` until it has reported otherwise).
+
+      wait_for(not armed?(v), then: swap_battery)
+  """
   @spec armed?(vehicle()) :: boolean()
   def armed?(v), do: Fleet.state(v, :armed?).armed?
-  @doc "Whether the vehicle is heard (not lost)."
+
+  @doc """
+  Whether a vehicle is heard: `false` once it is silent for longer than its
+  connection timeout (see `set_connection_timeout/1`).
+
+      one_of do
+        not connected?(v) -> action do message("lost \#{inspect(v)}") end
+        battery(v) < 0.2 -> return_home
+      end
+  """
   @spec connected?(vehicle()) :: boolean()
   def connected?(v), do: Fleet.state(v, :connected?).connected?
-  @doc "`{reached, total}`: the last mission item reached and the items of its mission."
+
+  @doc """
+  `{reached, total}`: the sequence number of the last mission item the
+  vehicle reached and the number of items of its mission after home
+  (`{0, 0}` before any mission).
+
+      until(survey, elem(mission_progress(v), 0) >= 5)
+  """
   @spec mission_progress(vehicle()) :: {non_neg_integer(), non_neg_integer()}
   def mission_progress(v), do: Fleet.state(v, :mission_progress).mission_progress
 
   # --- tasks ---
 
-  @doc "A task that completes after `d` ms."
+  @doc """
+  A task that does nothing for `d` ms of clock time, then is done; raises
+  `ArgumentError` unless `d` is a non-negative number.
+
+      execute idle(seconds(30)) >>> survey
+  """
   defdelegate idle(d), to: Engine
-  @doc "`t` restricted to the vehicles of `set`."
+
+  @doc """
+  `t`, whose platform tasks (missions) may only use the vehicles of `set`.
+
+      execute on(survey >>> return_home, v)
+      execute survey |> on(v)
+  """
   defdelegate on(t, set), to: Engine
-  @doc "`t` for at most `d` ms."
+
+  @doc """
+  `t` for at most `d` ms of clock time: then `t` is stopped (its vehicles
+  hold) and `during` is done; done earlier if `t` is; fails if `t` fails.
+
+      execute during(minutes(10), patrol) >>> return_home
+  """
   defdelegate during(d, t), to: Engine
-  @doc "`t` with an error handler: `on_error: :ignore | :propagate | fn failure -> ... end`."
+
+  @doc """
+  `t` with an error handler. When `t` fails: `on_error: :ignore` — done;
+  `:propagate` (the default) — fails the same way; `fn failure -> ... end` —
+  runs with the `Dolphin.Engine.Failure`; if it returns a task, that task
+  runs and `watch` ends as it does, else `watch` is done.
+
+      execute watch(survey, on_error: fn failure ->
+        message("survey failed: " <> Dolphin.Engine.Failure.message(failure))
+        return_home
+      end)
+  """
   defdelegate watch(t, opts), to: Engine
-  @doc "A task with a name."
+
+  @doc """
+  `t` with a name, shown in events, errors and the console.
+
+      execute named(survey ||| photos, "morning round")
+  """
   defdelegate named(t, name), to: Engine
 
-  @doc "Sequence: `t1` then `t2`."
+  @doc """
+  Sequence: `t1`, then `t2` once `t1` is done; a failure ends it (`t2` does
+  not run). Binds tighter than `|||`, as tight as `|>`:
+
+      execute until(survey, battery(v) < 0.3) >>> return_home
+      execute takeoff >>> survey ||| photos      # (takeoff >>> survey) ||| photos
+  """
   @spec term() >>> term() :: Dolphin.Engine.Sequence.t()
   def t1 >>> t2, do: Engine.sequence([t1, t2])
-  @doc "Concurrency: `t1` and `t2` at the same time."
+
+  @doc """
+  Concurrency: `t1` and `t2` at the same time, on distinct vehicles; done
+  when both are. When one fails the other is stopped and the whole fails.
+
+      execute on(survey_north, v1) ||| on(survey_south, v2)
+  """
   @spec term() ||| term() :: Dolphin.Engine.Concurrent.t()
   def t1 ||| t2, do: Engine.concurrent([t1, t2])
 
-  @doc "A task running the block once (in its own process)."
+  @doc """
+  A task that runs the block once, in its own process: done when it
+  returns, failed if it raises, throws or exits.
+
+      execute idle(seconds(20)) >>> action do post(:go, true) end
+  """
   defmacro action(do: block), do: action_ast(nil, block, __CALLER__)
-  @doc "A named `action`."
+
+  @doc """
+  A named `action/1`.
+
+      execute action "report" do message("battery \#{battery(v)}") end
+  """
   defmacro action(name, do: block), do: action_ast(name, block, __CALLER__)
 
-  @doc "A task that completes when `c` holds."
+  @doc """
+  A task that is done when the condition `c` holds (at once if it already
+  does). `c` is an expression, re-evaluated when what it reads changes.
+
+      execute condition(battery(v) >= 0.9) >>> survey
+  """
   defmacro condition(c), do: quote(do: Dolphin.Engine.condition(unquote(cond_ast(c, __CALLER__)), meta: unquote(meta(__CALLER__))))
 
-  @doc "`t` until `c` holds."
+  @doc """
+  `t` until the condition `c` holds: then `t` is stopped (its vehicles hold)
+  and `until` is done; done earlier if `t` is; if `c` holds at the start `t`
+  does not run. Fails if `t` fails.
+
+      execute until(survey, battery(v) < 0.3) >>> return_home
+  """
   defmacro until(t, c), do: quote(do: Dolphin.Engine.until(unquote(t), unquote(cond_ast(c, __CALLER__)), meta: unquote(meta(__CALLER__))))
 
-  @doc "Waits until `c` holds (`wait_for(c)`), then runs `then:` (`wait_for(c, then: t)`)."
+  @doc """
+  A task that waits until the condition `c` holds, then is done.
+
+      execute wait_for(poll(:target_found))
+  """
   defmacro wait_for(c), do: quote(do: Dolphin.Engine.wait_for(unquote(cond_ast(c, __CALLER__)), nil, meta: unquote(meta(__CALLER__))))
 
+  @doc """
+  `wait_for(c, then: t)`: waits until `c` holds, then runs `t` and ends as it
+  does. Anything but `then: task` raises `ArgumentError` at compile time.
+
+      execute %{v => wait_for(battery(v) >= 0.9, then: until(survey, battery(v) < 0.3) >>> return_home)}
+  """
   defmacro wait_for(c, opts) do
     case opts do
       [then: t] -> quote(do: Dolphin.Engine.wait_for(unquote(cond_ast(c, __CALLER__)), unquote(t), meta: unquote(meta(__CALLER__))))
@@ -121,51 +306,160 @@ defmodule Dolphin.DSL do
     end
   end
 
-  @doc "The first branch whose condition holds runs: `one_of do c1 -> t1; c2 -> t2 end`."
+  @doc """
+  Runs the task of the first branch whose condition holds (checked in order
+  at the start, so the earliest wins a tie); the others never start.
+
+      execute one_of do
+        battery(v) < 0.3 -> return_home
+        poll(:target_found) -> circle_target
+      end
+  """
   defmacro one_of(do: clauses), do: quote(do: Dolphin.Engine.one_of(unquote(branches(clauses, :one_of, __CALLER__)), meta: unquote(meta(__CALLER__))))
 
-  @doc "Every branch runs once its condition holds: `all_of do c1 -> t1; c2 -> t2 end`."
+  @doc """
+  Runs every branch's task as soon as its own condition holds; done when all
+  are. A failure stops the running tasks, drops the waiting branches and
+  fails `all_of`.
+
+      execute all_of do
+        battery(v1) >= 0.9 -> survey_north |> on(v1)
+        battery(v2) >= 0.9 -> survey_south |> on(v2)
+      end
+  """
   defmacro all_of(do: clauses), do: quote(do: Dolphin.Engine.all_of(unquote(branches(clauses, :all_of, __CALLER__)), meta: unquote(meta(__CALLER__))))
 
   # --- running ---
 
   @doc """
-  Runs a task (or a map `%{set => task, _: task}`: each on its set, all at
-  the same time) and returns when it is done; a failure stops the script.
-  `execute action do ... end` means `execute(action do ... end)`.
+  Runs a task: allocates the vehicles the script picked to its platform
+  tasks, runs it and returns `:ok` when it is done (`:stopped` if the
+  operator stopped it). A map runs each task on its own vehicle set (`_`:
+  any picked vehicle), all at the same time.
+
+      execute until(survey, battery(v) < 0.3) >>> return_home
+      execute %{v1 => survey_north, v2 => survey_south, _: photos}
+
+  A failure stops the script, reported at the line of the `execute`
+  (`execute failed: mission "Survey" (task 7, line 12) on vehicle 2 failed:
+  vehicle 2 lost`), unless a `watch/2` handles it.
   """
   defmacro execute(task), do: at_line(quote(do: Dolphin.Script.execute(unquote(task))), __CALLER__)
 
+  @doc """
+  `execute action do ... end` means `execute(action do ... end)`: Elixir
+  gives the `do` block to `execute`, which hands it on.
+
+      execute action do
+        message("up and away")
+      end
+  """
   defmacro execute({name, meta, args}, do: block) when is_atom(name) and (is_atom(args) or args == []),
     do: at_line(quote(do: Dolphin.Script.execute(unquote({name, meta, [[do: block]]}))), __CALLER__)
 
   defmacro execute(other, do: _block),
     do: raise(ArgumentError, "execute with a do block takes a word such as `action`, got: #{Macro.to_string(other)}")
 
-  @doc "Runs the block for ever."
+  @doc """
+  Runs the block for ever: until the script is stopped (`--for`, the
+  operator), halts or fails.
+
+      forever do
+        v = pick(type: :uav)
+        execute until(survey, battery(v) < 0.3) >>> return_home |> on(v)
+        release(v)
+      end
+  """
   defmacro forever(do: block), do: quote(do: Dolphin.Script.forever(fn -> unquote(block) end))
-  @doc "Runs `fun` for ever, each round given what the previous one returned (starting with `state`)."
+
+  @doc """
+  Runs `fun` for ever, each round given what the previous one returned
+  (the first: `state`).
+
+      forever(pick(type: :uav), fn flying ->
+        spare = pick(type: :uav)
+        execute until(survey, battery(flying) < 0.3) |> on(flying)
+        release(flying)
+        spare
+      end)
+  """
   defdelegate forever(state, fun), to: Dolphin.Script
-  @doc "Runs the block `n` times."
+
+  @doc """
+  Runs the block `n` times; `:ok`. Raises `ArgumentError` unless `n` is a
+  non-negative integer.
+
+      repeat 3 do
+        execute survey >>> return_home
+      end
+  """
   defmacro repeat(n, do: block), do: quote(do: Dolphin.Script.repeat(unquote(n), fn -> unquote(block) end))
 
-  @doc "An operator log line."
+  @doc """
+  An operator log line (`message: text` in the output of `mix dolphin.run`,
+  a `message` event); not a string: `inspect`ed. `:ok`.
+
+      message("Done!")
+  """
   defdelegate message(text), to: Dolphin.Script
-  @doc "Posts `value` to signal `key`."
+
+  @doc """
+  Adds `value` to the script's signal `key`, shared by all its tasks; `:ok`.
+  Conditions that poll `key` are evaluated again.
+
+      action do post(:target_found, position(v)) end
+  """
   defdelegate post(key, value), to: Dolphin.Script
-  @doc "Consumes `value` from signal `key`; true if it was there."
+
+  @doc """
+  Removes `value` from signal `key`: `true` if it was there, else `false`.
+
+      if consume(:charged, v), do: execute survey |> on(v)
+  """
   defdelegate consume(key, value), to: Dolphin.Script
-  @doc "Whether signal `key` has a value."
+
+  @doc """
+  Whether signal `key` has a value.
+
+      execute wait_for(poll(:target_found), then: circle)
+  """
   defdelegate poll(key), to: Dolphin.Script
-  @doc "Whether signal `key` has a value satisfying `fun`."
+
+  @doc """
+  Whether signal `key` has a value for which `fun` is truthy.
+
+      execute wait_for(poll(:found, fn p -> contains?(zone, p) end), then: circle)
+  """
   defdelegate poll(key, fun), to: Dolphin.Script
-  @doc "Pauses the script for `d` ms."
+
+  @doc """
+  Pauses the script for `d` ms of clock time; `:ok`.
+
+      pause(seconds(10))
+  """
   defdelegate pause(d), to: Dolphin.Script
-  @doc "Stops the script with a message."
+
+  @doc """
+  Stops the script and all its tasks (vehicles hold): the run ends with
+  `FILE:LINE: halted: text` and exit status 1. Works from inside an action.
+
+      if battery(v) < 0.5, do: halt("not enough battery to start")
+  """
   defmacro halt(text \\ "halted"), do: at_line(quote(do: Dolphin.Script.halt(unquote(text))), __CALLER__)
-  @doc "Asks the operator; returns the line typed."
+
+  @doc """
+  Asks the operator: prints `prompt`, returns the line typed (without its
+  newline), `nil` at the end of input.
+
+      if ask("Fly? (y/n)") == "y", do: execute survey
+  """
   defdelegate ask(prompt), to: Dolphin.Script
-  @doc "Sends a raw (MAVLink) message to the vehicles of a set."
+
+  @doc """
+  Sends a raw MAVLink message struct to every vehicle of `set`; `:ok`.
+
+      send_message(v, %Dolphin.MAVLink.Ardupilotmega.CommandLong{command: 183, param1: 9.0, param2: 1900.0})
+  """
   defdelegate send_message(set, message), to: Dolphin.Script
 
   # --- macro helpers ---

@@ -63,10 +63,35 @@ defmodule Dolphin.DSL.Mission do
   }
   @duration_values [:seconds, :minutes, :hours, :days]
 
-  @doc "A mission named `name` from the commands of the block (see the module doc)."
+  @doc """
+  A mission named `name` (a `%Dolphin.Mission{}`, plain data: nothing flies
+  until `execute`) from the commands of the block, in order (see the module
+  doc for what the block may hold, and `Dolphin.Mission.Command` for the
+  commands).
+
+      survey =
+        mission "Survey Area 1" do
+          home location(40.444233, -7.375234, 820)
+          take_off location(40.444233, -7.375234, 1200)
+          survey_area 3000, 10000, 500, :north_east
+          capture_several_photos 10, 2
+        end
+
+  It is done when the vehicle reaches its last item (landed and disarmed if
+  it lands); one that ends in an endless loiter runs until stopped.
+  """
   defmacro mission(name, do: block), do: build(name, block, __CALLER__)
 
-  @doc "A mission from the commands of the block, named by its `name` command."
+  @doc """
+  A mission from the commands of the block, named by its `name` command
+  (default `"mission"`).
+
+      back =
+        mission do
+          name "Return to base"
+          return_home_and_land()
+        end
+  """
   defmacro mission(do: block), do: build("mission", block, __CALLER__)
 
   defp build(name, block, caller) do

@@ -1,6 +1,6 @@
 defmodule Dolphin.DSL.Values do
   @moduledoc """
-  The values of the script language (DSL.md, "Values"): positions, areas,
+  The values of the script language (docs/language.md, "Values"): positions, areas,
   units, distances. Scripts import this module.
 
   | Dolphin (Groovy) | here |
@@ -32,27 +32,64 @@ defmodule Dolphin.DSL.Values do
 
   alias Dolphin.Geo
 
-  @doc "A WGS84 position: degrees, degrees, metres above mean sea level (default 0)."
+  @doc """
+  A WGS84 position: latitude and longitude in degrees, `h` in metres above
+  mean sea level (default 0), as missions take heights. Raises
+  `ArgumentError` for a latitude or longitude out of range.
+
+      iex> p = location(40.444233, -7.375234, 820)
+      iex> {p.lat, p.lon, p.h}
+      {40.444233, -7.375234, 820.0}
+  """
   @spec location(number(), number(), number()) :: Geo.Location.t()
   def location(lat, lon, h \\ 0), do: Geo.location(lat, lon, h)
 
-  @doc "A circular area of `radius` metres around `center`."
+  @doc """
+  A circular area of `radius` metres around `center` (for `contains?/2` and
+  `pick(region: ...)`).
+
+      iex> zone = area(location(38.43462, -8.86118), km(2))
+      iex> zone.radius
+      2000.0
+  """
   @spec area(Geo.Location.t(), number()) :: Geo.Area.t()
   def area(center, radius), do: Geo.area(center, radius)
 
-  @doc "`n` days, in milliseconds."
+  @doc """
+  `n` days, in milliseconds.
+
+      iex> days(1)
+      86400000
+  """
   @spec days(number()) :: integer()
   def days(n), do: ms(n, 86_400_000, :days)
 
-  @doc "`n` hours, in milliseconds."
+  @doc """
+  `n` hours, in milliseconds.
+
+      iex> hours(2)
+      7200000
+  """
   @spec hours(number()) :: integer()
   def hours(n), do: ms(n, 3_600_000, :hours)
 
-  @doc "`n` minutes, in milliseconds."
+  @doc """
+  `n` minutes, in milliseconds (what `idle`, `during`, `pause` and `pick`'s
+  timeout take).
+
+      iex> minutes(10)
+      600000
+  """
   @spec minutes(number()) :: integer()
   def minutes(n), do: ms(n, 60_000, :minutes)
 
-  @doc "`n` seconds, in milliseconds (rounded to the millisecond)."
+  @doc """
+  `n` seconds, in milliseconds (rounded to the millisecond). Mission
+  commands take plain seconds instead (`delay 30`).
+
+      iex> seconds(1.5)
+      1500
+  """
   @spec seconds(number()) :: integer()
   def seconds(n), do: ms(n, 1000, :seconds)
 
@@ -60,35 +97,72 @@ defmodule Dolphin.DSL.Values do
   defp ms(n, scale, _unit) when is_float(n), do: round(n * scale)
   defp ms(other, _scale, unit), do: raise(ArgumentError, "#{unit}/1 takes a number, got: #{inspect(other)}")
 
-  @doc "`n` kilometres, in metres."
+  @doc """
+  `n` kilometres, in metres.
+
+      iex> km(2)
+      2000
+  """
   @spec km(number()) :: number()
   def km(n) when is_number(n), do: n * 1000
   def km(other), do: raise(ArgumentError, "km/1 takes a number, got: #{inspect(other)}")
 
-  @doc "`n` metres."
+  @doc """
+  `n` metres (distances are metres throughout; this only reads well).
+
+      iex> meters(500)
+      500
+  """
   @spec meters(number()) :: number()
   def meters(n) when is_number(n), do: n
   def meters(other), do: raise(ArgumentError, "meters/1 takes a number, got: #{inspect(other)}")
 
-  @doc "`n` percent, as a fraction: `percent(30)` is `0.3`."
+  @doc """
+  `n` percent, as a fraction, the unit of `battery/1`.
+
+      iex> percent(30)
+      0.3
+  """
   @spec percent(number()) :: float()
   def percent(n) when is_number(n), do: n / 100
   def percent(other), do: raise(ArgumentError, "percent/1 takes a number, got: #{inspect(other)}")
 
-  @doc "`n` degrees: angles (yaw, pitch, headings) are degrees throughout."
+  @doc """
+  `n` degrees, as a float: angles (yaw, pitch, headings) are degrees
+  throughout.
+
+      iex> degrees(15)
+      15.0
+  """
   @spec degrees(number()) :: float()
   def degrees(n) when is_number(n), do: n / 1
   def degrees(other), do: raise(ArgumentError, "degrees/1 takes a number, got: #{inspect(other)}")
 
-  @doc "The geodesic distance in metres between two locations (see `Dolphin.Geo.distance/2`)."
+  @doc """
+  The geodesic distance in metres between two locations, on WGS84, heights
+  aside (see `Dolphin.Geo.distance/2`).
+
+      iex> round(distance(location(40.0, -7.0), location(40.001, -7.0)))
+      111
+  """
   @spec distance(Geo.Location.t(), Geo.Location.t()) :: float()
   def distance(p, q), do: Geo.distance(p, q)
 
-  @doc "Whether `q` is within `radius` metres of `p`."
+  @doc """
+  Whether `q` is within `radius` metres of `p`.
+
+      iex> near?(location(40.0, -7.0), location(40.001, -7.0), 200)
+      true
+  """
   @spec near?(Geo.Location.t(), Geo.Location.t(), number()) :: boolean()
   def near?(p, q, radius), do: Geo.near?(p, q, radius)
 
-  @doc "Whether location `p` lies within `area`."
+  @doc """
+  Whether location `p` lies within `area`.
+
+      iex> contains?(area(location(40.0, -7.0), 100), location(40.01, -7.0))
+      false
+  """
   @spec contains?(Geo.Area.t(), Geo.Location.t()) :: boolean()
   def contains?(area, p), do: Geo.contains?(area, p)
 end

@@ -52,7 +52,11 @@ defmodule Dolphin.Mission.Command do
 
   # --- mission attributes ---------------------------------------------------
 
-  @doc "Sets the mission's name (`name \"Survey Area\"`)."
+  @doc """
+  Sets the mission's name (`name "Survey Area"`).
+
+      name "Survey Area"
+  """
   @spec name(String.t()) :: t()
   def name(name) when is_binary(name), do: cmd(:name, name: name)
   def name(other), do: raise(ArgumentError, "name/1: a mission's name is a string, got: #{inspect(other)}")
@@ -61,25 +65,43 @@ defmodule Dolphin.Mission.Command do
   Sets the home position: item 0 of the upload (ArduPilot keeps its own home
   there), the origin of the `..._from_home` moves and the target of the
   `return_home...` commands. Also `home(lat, lon, h)`.
+
+      home location(40.444233, -7.375234, 820)
   """
   @spec home(position()) :: t()
   def home(position), do: cmd(:home, position: pos!(:home, position))
 
+  @doc """
+  `home/1` with the position as `lat, lon, h`.
+
+      home 40.444233, -7.375234, 820
+  """
   @spec home(number(), number(), number()) :: t()
   def home(lat, lon, h), do: cmd(:home, position: pos!(:home, lat, lon, h))
 
   # --- absolute positions ---------------------------------------------------
 
-  @doc "Goes to a position (a waypoint). Also `go_pos(lat, lon, h)`."
+  @doc """
+  Goes to a position (a waypoint). Also `go_pos(lat, lon, h)`.
+
+      go_pos location(40.4451, -7.3752, 1200)
+  """
   @spec go_pos(position()) :: t()
   def go_pos(position), do: cmd(:go_pos, position: pos!(:go_pos, position))
 
+  @doc """
+  `go_pos/1` with the position as `lat, lon, h`.
+
+      go_pos 40.4451, -7.3752, 1200
+  """
   @spec go_pos(number(), number(), number()) :: t()
   def go_pos(lat, lon, h), do: cmd(:go_pos, position: pos!(:go_pos, lat, lon, h))
 
   @doc """
   Takes off and climbs to the position's height; `pitch` (degrees, default
   15) only matters to fixed-wing aircraft. Also `take_off(lat, lon, h, pitch \\\\ 15)`.
+
+      take_off location(40.444233, -7.375234, 1200)      # pitch 15
   """
   @spec take_off(position(), number()) :: t()
   def take_off(position, pitch \\ @default_pitch)
@@ -87,6 +109,11 @@ defmodule Dolphin.Mission.Command do
   def take_off(lat, lon) when is_number(lat) and is_number(lon), do: arity_error(:take_off, [lat, lon])
   def take_off(other, _pitch), do: pos!(:take_off, other)
 
+  @doc """
+  `take_off/2` with the position as `lat, lon, h`.
+
+      take_off 40.444233, -7.375234, 1200, 15
+  """
   @spec take_off(number(), number(), number(), number()) :: t()
   def take_off(lat, lon, h, pitch \\ @default_pitch),
     do: cmd(:take_off, position: pos!(:take_off, lat, lon, h), pitch: num!(:take_off, :pitch, pitch))
@@ -95,6 +122,8 @@ defmodule Dolphin.Mission.Command do
   Takes off like `take_off/2`, turning to `yaw` degrees (`:nan`, the default,
   keeps the heading). The arguments are in the original plugin's order:
   position, pitch, yaw. Also `take_off_with_yaw(lat, lon, h, pitch, yaw \\\\ :nan)`.
+
+      take_off_with_yaw location(40.444233, -7.375234, 1200), 15, 90
   """
   @spec take_off_with_yaw(position(), number(), yaw()) :: t()
   def take_off_with_yaw(position, pitch, yaw \\ :nan)
@@ -104,6 +133,11 @@ defmodule Dolphin.Mission.Command do
 
   def take_off_with_yaw(other, _pitch, _yaw), do: pos!(:take_off_with_yaw, other)
 
+  @doc """
+  `take_off_with_yaw/3` with the position as `lat, lon, h`.
+
+      take_off_with_yaw 40.444233, -7.375234, 1200, 15, 90
+  """
   @spec take_off_with_yaw(number(), number(), number(), number(), yaw()) :: t()
   def take_off_with_yaw(lat, lon, h, pitch, yaw \\ :nan),
     do:
@@ -113,18 +147,31 @@ defmodule Dolphin.Mission.Command do
         yaw: yaw!(:take_off_with_yaw, yaw)
       )
 
-  @doc "Goes to a position and circles it with `radius` metres (default 15) for ever. Also `loiter_pos(lat, lon, h, radius \\\\ 15)`."
+  @doc """
+  Goes to a position and circles it with `radius` metres (default 15) for ever. Also `loiter_pos(lat, lon, h, radius \\\\ 15)`.
+
+      loiter_pos location(40.4451, -7.3752, 1200), 50
+  """
   @spec loiter_pos(position(), number()) :: t()
   def loiter_pos(position, radius \\ @default_radius)
   def loiter_pos(%Location{} = p, radius), do: cmd(:loiter_pos, position: p, radius: num!(:loiter_pos, :radius, radius))
   def loiter_pos(lat, lon) when is_number(lat) and is_number(lon), do: arity_error(:loiter_pos, [lat, lon])
   def loiter_pos(other, _radius), do: pos!(:loiter_pos, other)
 
+  @doc """
+  `loiter_pos/2` with the position as `lat, lon, h`.
+
+      loiter_pos 40.4451, -7.3752, 1200, 50
+  """
   @spec loiter_pos(number(), number(), number(), number()) :: t()
   def loiter_pos(lat, lon, h, radius \\ @default_radius),
     do: cmd(:loiter_pos, position: pos!(:loiter_pos, lat, lon, h), radius: num!(:loiter_pos, :radius, radius))
 
-  @doc "Goes to a position and circles it `turns` times. Also `loiter_turns(lat, lon, h, turns, radius \\\\ 15)`."
+  @doc """
+  Goes to a position and circles it `turns` times. Also `loiter_turns(lat, lon, h, turns, radius \\\\ 15)`.
+
+      loiter_turns location(40.4451, -7.3752, 1200), 3
+  """
   @spec loiter_turns(position(), number(), number()) :: t()
   def loiter_turns(position, turns, radius \\ @default_radius)
 
@@ -133,6 +180,11 @@ defmodule Dolphin.Mission.Command do
 
   def loiter_turns(other, _turns, _radius), do: pos!(:loiter_turns, other)
 
+  @doc """
+  `loiter_turns/3` with the position as `lat, lon, h`.
+
+      loiter_turns 40.4451, -7.3752, 1200, 3
+  """
   @spec loiter_turns(number(), number(), number(), number(), number()) :: t()
   def loiter_turns(lat, lon, h, turns, radius \\ @default_radius),
     do:
@@ -142,7 +194,11 @@ defmodule Dolphin.Mission.Command do
         radius: num!(:loiter_turns, :radius, radius)
       )
 
-  @doc "Goes to a position and circles it for `time` seconds. Also `loiter_time(lat, lon, h, time, radius \\\\ 15)`."
+  @doc """
+  Goes to a position and circles it for `time` seconds. Also `loiter_time(lat, lon, h, time, radius \\\\ 15)`.
+
+      loiter_time location(40.4451, -7.3752, 1200), 30
+  """
   @spec loiter_time(position(), number(), number()) :: t()
   def loiter_time(position, time, radius \\ @default_radius)
 
@@ -151,6 +207,11 @@ defmodule Dolphin.Mission.Command do
 
   def loiter_time(other, _time, _radius), do: pos!(:loiter_time, other)
 
+  @doc """
+  `loiter_time/3` with the position as `lat, lon, h`.
+
+      loiter_time 40.4451, -7.3752, 1200, 30
+  """
   @spec loiter_time(number(), number(), number(), number(), number()) :: t()
   def loiter_time(lat, lon, h, time, radius \\ @default_radius),
     do:
@@ -166,20 +227,38 @@ defmodule Dolphin.Mission.Command do
   `1`/`:opportunistic`, `2`/`:required`. Also
   `landing_point(lat, lon, h, yaw \\\\ :nan, land_mode \\\\ 0)`; `h` is the
   ground's height above mean sea level.
+
+      landing_point location(40.4451, -7.3752, 820)
   """
   @spec landing_point(position()) :: t()
   def landing_point(%Location{} = p), do: landing(p, :nan, 0)
   def landing_point(other), do: pos!(:landing_point, other)
 
+  @doc """
+  `landing_point/1` facing `yaw` degrees.
+
+      landing_point location(40.4451, -7.3752, 820), 90
+  """
   @spec landing_point(position(), yaw()) :: t()
   def landing_point(%Location{} = p, yaw), do: landing(p, yaw, 0)
   def landing_point(lat, lon) when is_number(lat) and is_number(lon), do: arity_error(:landing_point, [lat, lon])
   def landing_point(other, _yaw), do: pos!(:landing_point, other)
 
+  @doc """
+  `landing_point/1` with a yaw and a precision-landing mode, or with the position as `lat, lon, h`.
+
+      landing_point location(40.4451, -7.3752, 820), :nan, :opportunistic
+      landing_point 40.4451, -7.3752, 820
+  """
   @spec landing_point(position() | number(), yaw() | number(), non_neg_integer() | atom() | number()) :: t()
   def landing_point(%Location{} = p, yaw, land_mode), do: landing(p, yaw, land_mode)
   def landing_point(lat, lon, h), do: landing(pos!(:landing_point, lat, lon, h), :nan, 0)
 
+  @doc """
+  `landing_point/3` with the position as `lat, lon, h`.
+
+      landing_point 40.4451, -7.3752, 820, 90, :required
+  """
   @spec landing_point(number(), number(), number(), yaw(), non_neg_integer() | atom()) :: t()
   def landing_point(lat, lon, h, yaw, land_mode \\ 0), do: landing(pos!(:landing_point, lat, lon, h), yaw, land_mode)
 
@@ -188,28 +267,52 @@ defmodule Dolphin.Mission.Command do
 
   # --- relative moves -------------------------------------------------------
 
-  @doc "Moves `north`, `east`, `up` metres from the previous point of the mission (home at first)."
+  @doc """
+  Moves `north`, `east`, `up` metres from the previous point of the mission (home at first).
+
+      move 100, 200, 100
+  """
   @spec move(number(), number(), number()) :: t()
   def move(north, east, up), do: cmd(:move, neu(:move, north, east, up))
 
-  @doc "Moves to `north`, `east`, `up` metres from home."
+  @doc """
+  Moves to `north`, `east`, `up` metres from home.
+
+      move_from_home 0, 500, 380
+  """
   @spec move_from_home(number(), number(), number()) :: t()
   def move_from_home(north, east, up), do: cmd(:move_from_home, neu(:move_from_home, north, east, up))
 
-  @doc "Moves like `move/3`, then circles the point for ever (radius default 15 m)."
+  @doc """
+  Moves like `move/3`, then circles the point for ever (radius default 15 m).
+
+      move_and_loiter_pos 200, 100, -20, 50
+  """
   @spec move_and_loiter_pos(number(), number(), number(), number()) :: t()
   def move_and_loiter_pos(north, east, up, radius \\ @default_radius),
     do: cmd(:move_and_loiter_pos, neu(:move_and_loiter_pos, north, east, up) ++ [radius: num!(:move_and_loiter_pos, :radius, radius)])
 
-  @doc "Moves like `move/3`, then circles the point `turns` times."
+  @doc """
+  Moves like `move/3`, then circles the point `turns` times.
+
+      move_and_loiter_turns 200, 100, 0, 3
+  """
   @spec move_and_loiter_turns(number(), number(), number(), number(), number()) :: t()
   def move_and_loiter_turns(north, east, up, turns, radius \\ @default_radius), do: loiter_turns_cmd(:move_and_loiter_turns, north, east, up, turns, radius)
 
-  @doc "Moves like `move/3`, then circles the point for `time` seconds."
+  @doc """
+  Moves like `move/3`, then circles the point for `time` seconds.
+
+      move_and_loiter_time 200, 100, 0, 30
+  """
   @spec move_and_loiter_time(number(), number(), number(), number(), number()) :: t()
   def move_and_loiter_time(north, east, up, time, radius \\ @default_radius), do: loiter_time_cmd(:move_and_loiter_time, north, east, up, time, radius)
 
-  @doc "Moves like `move_from_home/3`, then circles the point for ever."
+  @doc """
+  Moves like `move_from_home/3`, then circles the point for ever.
+
+      move_and_loiter_from_home 500, 0, 380
+  """
   @spec move_and_loiter_from_home(number(), number(), number(), number()) :: t()
   def move_and_loiter_from_home(north, east, up, radius \\ @default_radius),
     do:
@@ -218,12 +321,20 @@ defmodule Dolphin.Mission.Command do
         neu(:move_and_loiter_from_home, north, east, up) ++ [radius: num!(:move_and_loiter_from_home, :radius, radius)]
       )
 
-  @doc "Moves like `move_from_home/3`, then circles the point `turns` times."
+  @doc """
+  Moves like `move_from_home/3`, then circles the point `turns` times.
+
+      move_and_loiter_turns_from_home 500, 0, 380, 3
+  """
   @spec move_and_loiter_turns_from_home(number(), number(), number(), number(), number()) :: t()
   def move_and_loiter_turns_from_home(north, east, up, turns, radius \\ @default_radius),
     do: loiter_turns_cmd(:move_and_loiter_turns_from_home, north, east, up, turns, radius)
 
-  @doc "Moves like `move_from_home/3`, then circles the point for `time` seconds."
+  @doc """
+  Moves like `move_from_home/3`, then circles the point for `time` seconds.
+
+      move_and_loiter_time_from_home 500, 0, 380, 30
+  """
   @spec move_and_loiter_time_from_home(number(), number(), number(), number(), number()) :: t()
   def move_and_loiter_time_from_home(north, east, up, time, radius \\ @default_radius),
     do: loiter_time_cmd(:move_and_loiter_time_from_home, north, east, up, time, radius)
@@ -236,15 +347,27 @@ defmodule Dolphin.Mission.Command do
 
   # --- home -------------------------------------------------------------------
 
-  @doc "Flies back over home, at the height of the previous point, and holds there."
+  @doc """
+  Flies back over home, at the height of the previous point, and holds there.
+
+      return_home()
+  """
   @spec return_home() :: t()
   def return_home, do: cmd(:return_home, [])
 
-  @doc "Flies back over home, at the height of the previous point, and circles it for ever."
+  @doc """
+  Flies back over home, at the height of the previous point, and circles it for ever.
+
+      return_home_and_loiter 30
+  """
   @spec return_home_and_loiter(number()) :: t()
   def return_home_and_loiter(radius \\ @default_radius), do: cmd(:return_home_and_loiter, radius: num!(:return_home_and_loiter, :radius, radius))
 
-  @doc "Flies back to home and lands there (yaw and precision-landing mode as in `landing_point/3`)."
+  @doc """
+  Flies back to home and lands there (yaw and precision-landing mode as in `landing_point/3`).
+
+      return_home_and_land()
+  """
   @spec return_home_and_land(yaw(), non_neg_integer() | atom()) :: t()
   def return_home_and_land(yaw \\ :nan, land_mode \\ 0),
     do: cmd(:return_home_and_land, yaw: yaw!(:return_home_and_land, yaw), land_mode: land_mode!(:return_home_and_land, land_mode))
@@ -254,15 +377,25 @@ defmodule Dolphin.Mission.Command do
   @doc """
   Changes the speed, in m/s. `speed_type`: `0`/`:airspeed` (the default),
   `1`/`:ground_speed`, `2`/`:climb_speed`, `3`/`:descent_speed`.
+
+      speed 12                  # airspeed, m/s
   """
   @spec speed(number(), non_neg_integer() | atom()) :: t()
   def speed(new_speed, speed_type \\ 0), do: cmd(:speed, speed: num!(:speed, :speed, new_speed), speed_type: speed_type!(speed_type))
 
-  @doc "Climbs or descends, over the previous point, to `altitude` metres above mean sea level."
+  @doc """
+  Climbs or descends, over the previous point, to `altitude` metres above mean sea level.
+
+      altitude 1000             # metres above mean sea level
+  """
   @spec altitude(number()) :: t()
   def altitude(altitude), do: cmd(:altitude, altitude: num!(:altitude, :altitude, altitude))
 
-  @doc "Holds the mission for `seconds` seconds."
+  @doc """
+  Holds the mission for `seconds` seconds.
+
+      delay 30                  # seconds
+  """
   @spec delay(number()) :: t()
   def delay(seconds), do: cmd(:delay, seconds: secs!(:delay, :seconds, seconds))
 
@@ -278,25 +411,55 @@ defmodule Dolphin.Mission.Command do
   position: `survey_area(position, length, width, spacing \\\\ 50, direction \\\\ :north_west)`,
   also with `lat, lon, h` in place of the position. The survey flies at the
   base's height.
+
+      survey_area 3000, 10000, 500, :north_east
   """
   @spec survey_area(number(), number()) :: t()
   def survey_area(length, width), do: survey(:previous, length, width, @default_spacing, @default_direction)
 
+  @doc """
+  `survey_area/2` from a given base corner, or with a spacing.
+
+      survey_area location(40.4451, -7.3752, 1200), 3000, 10000
+      survey_area 3000, 10000, 500
+  """
   @spec survey_area(number() | position(), number(), number()) :: t()
   def survey_area(%Location{} = p, length, width), do: survey(p, length, width, @default_spacing, @default_direction)
   def survey_area(length, width, spacing), do: survey(:previous, length, width, spacing, @default_direction)
 
+  @doc """
+  `survey_area/2` from a given base corner with a spacing, or with a spacing and a direction.
+
+      survey_area location(40.4451, -7.3752, 1200), 3000, 10000, 500
+      survey_area 3000, 10000, 500, :north_east
+  """
   @spec survey_area(number() | position(), number(), number(), number() | direction()) :: t()
   def survey_area(%Location{} = p, length, width, spacing), do: survey(p, length, width, spacing, @default_direction)
   def survey_area(length, width, spacing, direction), do: survey(:previous, length, width, spacing, direction)
 
+  @doc """
+  `survey_area/2` from a given base corner with a spacing and a direction, or from `lat, lon, h`.
+
+      survey_area location(40.4451, -7.3752, 1200), 3000, 10000, 500, :south_east
+      survey_area 40.4451, -7.3752, 1200, 3000, 10000
+  """
   @spec survey_area(number() | position(), number(), number(), number(), number() | direction()) :: t()
   def survey_area(%Location{} = p, length, width, spacing, direction), do: survey(p, length, width, spacing, direction)
   def survey_area(lat, lon, h, length, width), do: survey(pos!(:survey_area, lat, lon, h), length, width, @default_spacing, @default_direction)
 
+  @doc """
+  `survey_area/2` from `lat, lon, h` with a spacing.
+
+      survey_area 40.4451, -7.3752, 1200, 3000, 10000, 500
+  """
   @spec survey_area(number(), number(), number(), number(), number(), number() | direction()) :: t()
   def survey_area(lat, lon, h, length, width, spacing), do: survey(pos!(:survey_area, lat, lon, h), length, width, spacing, @default_direction)
 
+  @doc """
+  `survey_area/2` from `lat, lon, h` with a spacing and a direction.
+
+      survey_area 40.4451, -7.3752, 1200, 3000, 10000, 500, :north_east
+  """
   @spec survey_area(number(), number(), number(), number(), number(), number(), direction()) :: t()
   def survey_area(lat, lon, h, length, width, spacing, direction), do: survey(pos!(:survey_area, lat, lon, h), length, width, spacing, direction)
 
@@ -312,11 +475,19 @@ defmodule Dolphin.Mission.Command do
 
   # --- camera -----------------------------------------------------------------
 
-  @doc "Takes one picture."
+  @doc """
+  Takes one picture.
+
+      capture_photo()
+  """
   @spec capture_photo() :: t()
   def capture_photo, do: cmd(:capture_photo, [])
 
-  @doc "Takes `count` pictures, one every `interval` seconds (default 2)."
+  @doc """
+  Takes `count` pictures, one every `interval` seconds (default 2).
+
+      capture_several_photos 10, 2
+  """
   @spec capture_several_photos(pos_integer(), number()) :: t()
   def capture_several_photos(count, interval \\ @default_interval) do
     unless is_integer(count) and count > 0,
@@ -325,11 +496,19 @@ defmodule Dolphin.Mission.Command do
     cmd(:capture_several_photos, count: count, interval: interval!(:capture_several_photos, interval))
   end
 
-  @doc "Takes a picture every `interval` seconds (default 2) until `stop_capturing/0`."
+  @doc """
+  Takes a picture every `interval` seconds (default 2) until `stop_capturing/0`.
+
+      capture_until_stop 5
+  """
   @spec capture_until_stop(number()) :: t()
   def capture_until_stop(interval \\ @default_interval), do: cmd(:capture_until_stop, interval: interval!(:capture_until_stop, interval))
 
-  @doc "Stops the pictures started by `capture_until_stop/1` (or `capture_several_photos/2`)."
+  @doc """
+  Stops the pictures started by `capture_until_stop/1` (or `capture_several_photos/2`).
+
+      stop_capturing()
+  """
   @spec stop_capturing() :: t()
   def stop_capturing, do: cmd(:stop_capturing, [])
 
@@ -339,6 +518,8 @@ defmodule Dolphin.Mission.Command do
   Jumps to mission item `item` (its sequence number in `Dolphin.Mission.to_items/1`:
   1 is the first item after home), `repeat` times (default 1; `:forever` or
   `-1` for ever).
+
+      jump_to_item 2, :forever
   """
   @spec jump_to_item(pos_integer(), integer() | :forever) :: t()
   def jump_to_item(item, repeat \\ 1) do
@@ -363,6 +544,8 @@ defmodule Dolphin.Mission.Command do
   MAV_FRAME_MISSION) with raw `x:`, `y:` (integers), `z:`; `autocontinue:`
   (default 1). Plans imported from QGroundControl (`Dolphin.Mission.from_plan/2`)
   use it for items that no other command produces.
+
+      item :mav_cmd_do_set_servo, params: [9, 1900, 0, 0]
   """
   @spec item(atom() | non_neg_integer(), keyword()) :: t()
   def item(command, opts \\ []) do

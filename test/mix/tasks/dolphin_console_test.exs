@@ -67,6 +67,9 @@ defmodule Mix.Tasks.Dolphin.ConsoleTest do
 
     # The helpers are imported (by .iex.exs), with their docs.
     assert ieval(port, "h vehicles") =~ "The fleet at a glance"
+    # So are the script language's readers and values (.iex.exs too), live.
+    assert ieval(port, "h battery") =~ "The remaining battery of a one-vehicle set"
+    poll(port, "IO.inspect(battery(1))", &(&1 =~ ~r/^1\.0$/m))
 
     table = ieval(port, "vehicles()")
     assert table =~ ~r/^ID\s+TYPE\s+MODE\s+ARMED/m
