@@ -1,3 +1,14 @@
 # Interop tests talk to the reference implementation (pymavlink) in the project's
 # venv, which scripts/bootstrap creates; `make test` runs them all.
-ExUnit.start()
+#
+# The shared test vectors are an extra cross-check: without the shared folder
+# (../shared beside the project, or $DOLPHIN_SHARED) their tests are excluded.
+exclude =
+  if Dolphin.Test.Vectors.available?(:shared) do
+    []
+  else
+    IO.puts("shared vectors not found in #{Dolphin.Test.Vectors.dir(:shared)}: their cross-check is skipped (set DOLPHIN_SHARED to the shared folder to run it)")
+    [:shared_vectors]
+  end
+
+ExUnit.start(exclude: exclude)
