@@ -7,7 +7,8 @@ exclude =
   if Dolphin.Test.Vectors.available?(:shared) do
     []
   else
-    IO.puts("shared vectors not found in #{Dolphin.Test.Vectors.dir(:shared)}: their cross-check is skipped (set DOLPHIN_SHARED to the shared folder to run it)")
+    dir = Dolphin.Test.Vectors.dir(:shared)
+    IO.puts("shared vectors not found in #{dir}: their cross-check is skipped (set DOLPHIN_SHARED to the shared folder to run it)")
     [:shared_vectors]
   end
 
