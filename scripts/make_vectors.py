@@ -153,7 +153,7 @@ def random_char(rng, n, full=False):
 def draw_scalar(rng, ty, profile):
     if ty in INT_RANGES:
         lo, hi = INT_RANGES[ty]
-        return {"zero": 0, "max": hi, "min": lo}.get(profile) if profile in ("zero", "max", "min") else random_int(rng, ty)
+        return {"zero": 0, "max": hi, "min": lo}[profile] if profile in ("zero", "max", "min") else random_int(rng, ty)
     double = ty == "double"
     if profile == "zero":
         return 0.0
@@ -242,7 +242,7 @@ def decode(frame, signed):
     if signed:
         mav.signing.secret_key = KEY
     got = mav.parse_buffer(frame) or []
-    check(len(got) == 1 and got[0].get_type() not in ("BAD_DATA",) and not got[0].get_type().startswith("UNKNOWN"),
+    check(len(got) == 1 and got[0].get_type() != "BAD_DATA" and not got[0].get_type().startswith("UNKNOWN"),
           "pymavlink does not read %s as one message: %r" % (frame.hex(), got))
     check(bool(got[0]._signed) == signed, "pymavlink's signature check on %s" % frame.hex())
     return got[0]
@@ -461,12 +461,15 @@ def telemetry_mix():
     lat, lon, alt, t = -353632593, 1491652372, 584090, 123460
     wp = 0
     out = bytearray()
+
+    def r(s):
+        return rng.uniform(-s, s)
+
     for name in order:
         t += rng.randint(2, 5)
         lat += rng.randint(-30, 30)
         lon += rng.randint(-30, 30)
         alt = max(584000, alt + rng.randint(-60, 80))
-        r = lambda s: rng.uniform(-s, s)
         if name == "ATTITUDE":
             m = dialect.MAVLink_attitude_message(t, r(0.1), r(0.1), r(3.1), r(0.05), r(0.05), r(0.05))
         elif name == "GLOBAL_POSITION_INT":
