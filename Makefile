@@ -1,5 +1,6 @@
 # The two commands a newcomer needs: `make test` and `make run`. Both install what is
-# missing first (scripts/bootstrap: Debian packages, the Python venv, the dialect XML).
+# missing first (scripts/bootstrap: Debian packages, the Python venv, the dialect XML,
+# the test vectors).
 SHELL := /bin/bash
 export LANG := C.UTF-8
 export LC_ALL := C.UTF-8
@@ -26,4 +27,4 @@ dialyzer: bootstrap
 	scripts/dialyzer
 
 clean:
-	rm -rf _build priv/mavlink/*.xml
+	rm -rf _build priv/mavlink/*.xml test/vectors bench/data

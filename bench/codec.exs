@@ -1,5 +1,6 @@
-# Codec throughput on ../shared/mavlink/bench/telemetry_mix.bin (100,000 MAVLink 2
-# frames), the way a link uses the codec:
+# Codec throughput on bench/data/telemetry_mix.bin (100,000 MAVLink 2 frames of a
+# copter's telemetry: attitude, position, HUD, status, battery, mission; made by
+# scripts/make_vectors.py, which scripts/bootstrap runs), the way a link uses the codec:
 #   decode: the file fed to a streaming parser in 4 KiB chunks (a TCP read; UDP
 #           datagrams are smaller), every frame checked and decoded into structs;
 #   encode: every decoded message re-encoded with its header, as a sender does
@@ -25,14 +26,14 @@ defmodule CodecBench do
   alias Dolphin.MAVLink.{Frame, Parser}
 
   def main do
-    path = System.get_env("BENCH_FILE", Path.expand("../../shared/mavlink/bench/telemetry_mix.bin", __DIR__))
+    path = System.get_env("BENCH_FILE", Path.expand("data/telemetry_mix.bin", __DIR__))
     rounds = String.to_integer(System.get_env("BENCH_ROUNDS", "9"))
     chunk = String.to_integer(System.get_env("BENCH_CHUNK", "4096"))
 
     bytes =
       case File.read(path) do
         {:ok, bytes} -> bytes
-        {:error, why} -> Mix.raise("cannot read #{path}: #{:file.format_error(why)}")
+        {:error, why} -> Mix.raise("cannot read the benchmark input #{path}: #{:file.format_error(why)} (scripts/bootstrap makes it)")
       end
 
     heaps = [link: Dolphin.Link.Connection.spawn_opt(), default: []]

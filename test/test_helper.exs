@@ -12,9 +12,20 @@ sitl_exclude =
     [:sitl]
   end
 
+# The shared test vectors are an extra cross-check: without the shared folder
+# (../shared beside the project, or $DOLPHIN_SHARED) their tests are excluded.
+shared_exclude =
+  if Dolphin.Test.Vectors.available?(:shared) do
+    []
+  else
+    dir = Dolphin.Test.Vectors.dir(:shared)
+    IO.puts("shared vectors not found in #{dir}: their cross-check is skipped (set DOLPHIN_SHARED to the shared folder to run it)")
+    [:shared_vectors]
+  end
+
 # :lossy_transfer tests move missions through an impairing proxy
 # (test/dolphin/test/udp_proxy_sim_test.exs); they fail on known defects of the
 # mission protocol until the lossy mission-transfer work fixes them.
 IO.puts("Excluded by default: :lossy_transfer (mission transfer over a lossy link, known to fail); run with --include lossy_transfer")
 
-ExUnit.start(exclude: [:lossy_transfer | sitl_exclude])
+ExUnit.start(exclude: [:lossy_transfer] ++ sitl_exclude ++ shared_exclude)

@@ -1,7 +1,7 @@
 #!/usr/bin/env python3
 """pymavlink as a live interop peer for test/interop/pymavlink_test.exs.
 
-Subcommands (JSON records as in shared/mavlink/vectors/README.md, one a line):
+Subcommands (JSON records as in test/vectors/README.md, made by scripts/make_vectors.py; one a line):
 
   generate --seed S --count N [--key HEX]
       N random messages of the ardupilotmega dialect, encoded by pymavlink

@@ -1,7 +1,8 @@
 defmodule Dolphin.MAVLink.Record do
   @moduledoc """
   Frames as JSON records, one object per line, in the conventions of the
-  MAVLink test vectors (`shared/mavlink/vectors/README.md`):
+  MAVLink test vectors (`scripts/make_vectors.py` makes the project's, and
+  describes them in `test/vectors/README.md`):
 
       {"msg":"HEARTBEAT","id":0,"mavlink":2,"signed":false,"sysid":1,"compid":1,"seq":0,
        "fields":{"type":2,"autopilot":3,...}}
