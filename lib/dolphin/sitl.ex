@@ -74,7 +74,9 @@ defmodule Dolphin.SITL do
   Options: `:bin`, `:defaults`, `:params` (see above), `:first_sysid` (1),
   `:home` / `:homes` (as `Dolphin.Sim.start/1`), `:charge_per_s` (charge in
   percent per second of clock time, default 0.5), `:ready_timeout_ms` (real
-  time, default 60 s), and the link's options (`:tlog`, `:forward`).
+  time, default 60 s), `:send_to` (a function from the link's port to the
+  port SITL sends to, for something standing between them such as a test's
+  impairment proxy), and the link's options (`:tlog`, `:forward`).
   """
   @spec start(pos_integer(), keyword()) :: {:ok, t()} | {:error, String.t()}
   def start(count, opts \\ []) when is_integer(count) and count > 0 do
@@ -89,6 +91,8 @@ defmodule Dolphin.SITL do
           port = Dolphin.Link.Connection.port(name)
           first = Keyword.get(opts, :first_sysid, 1)
           sysids = Enum.to_list(first..(first + count - 1))
+          # Where SITL sends: the link, or what stands between (a test's proxy).
+          send_to = Keyword.get(opts, :send_to, & &1)
           numbers = take_instances(count)
           fleet = %{link: link, port: port, sysids: sysids, instances: [], numbers: numbers, charger: nil}
           root = Path.join(System.tmp_dir!(), "dolphin-sitl-#{System.unique_integer([:positive])}")
@@ -103,7 +107,7 @@ defmodule Dolphin.SITL do
                 instance: instance,
                 home: home,
                 speedup: Dolphin.Clock.speedup(),
-                gcs_port: port,
+                gcs_port: send_to.(port),
                 dir: Path.join(root, "vehicle-#{sysid}")
               }
             end
@@ -137,6 +141,16 @@ defmodule Dolphin.SITL do
     Enum.each(sysids, &Dolphin.Vehicles.forget/1)
     DynamicSupervisor.terminate_child(Dolphin.Link.Supervisor, link)
     :ok
+  end
+
+  @doc """
+  Kills one vehicle's SITL process at once (SIGKILL), as a vehicle that
+  vanishes mid-flight: the ground station stops hearing it.
+  """
+  @spec crash(t(), byte()) :: :ok
+  def crash(%{sysids: sysids, instances: instances}, sysid) do
+    {_, pid} = Enum.zip(sysids, instances) |> List.keyfind(sysid, 0)
+    Instance.kill(pid)
   end
 
   @doc """

@@ -39,6 +39,9 @@ defmodule Dolphin.Test.Backend do
     fleet.sysids
   end
 
+  @doc "What the backend's `start` returned, for the vehicles whose first id is `first`."
+  def fleet(first), do: Process.get({__MODULE__, first}) |> elem(1)
+
   @doc "Stops the vehicles `start/3` returned (their picks are released with them)."
   def stop([first | _] = sysids) do
     {backend, fleet} = Process.delete({__MODULE__, first})

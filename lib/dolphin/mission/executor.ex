@@ -36,6 +36,7 @@ defmodule Dolphin.Mission.Executor do
   @booting [0, 1]
   @boot_timeout_ms 60_000
   @boot_poll_ms 200
+  @transfer_attempts 3
 
   def start_link(mission, vehicle, opts), do: GenServer.start_link(__MODULE__, {mission, vehicle, Map.new(opts)})
 
@@ -189,37 +190,9 @@ defmodule Dolphin.Mission.Executor do
 
   defp step(:clear, s, _me), do: mission_op(Vehicles.clear_mission(s.vehicle))
 
-  defp step(:upload, s, me) do
-    started = s.clock.now_ms()
+  defp step(:upload, s, me), do: upload(s, me, s.clock.now_ms(), @transfer_attempts)
 
-    # The protocol's counts ({:mission_done, ...}) go to the executor itself.
-    case Vehicles.upload_mission(s.vehicle, s.items, progress_to: me) do
-      :ok ->
-        {:uploaded, s.clock.now_ms() - started}
-
-      # Every item went out but the vehicle's final MISSION_ACK was lost (it is
-      # never repeated): whether the vehicle has the mission is for the
-      # verification, which downloads it, to say.
-      {:error, %Dolphin.MissionError{result: :timeout, detail: "the vehicle stopped asking for items"}} ->
-        {:uploaded, s.clock.now_ms() - started}
-
-      error ->
-        mission_op(error)
-    end
-  end
-
-  defp step(:verify, s, _me) do
-    case Vehicles.download_mission(s.vehicle) do
-      {:ok, back} ->
-        case Mission.compare_download(s.items, back) do
-          :ok -> :ok
-          {:error, why} -> {:error, "the mission read back differs from the one uploaded: #{why}"}
-        end
-
-      {:error, e} ->
-        {:error, "reading the mission back to verify it failed: #{Exception.message(e)}"}
-    end
-  end
+  defp step(:verify, s, _me), do: verify(s, @transfer_attempts)
 
   defp step(:guided, s, _me) do
     case Vehicles.state(s.vehicle) do
@@ -278,6 +251,45 @@ defmodule Dolphin.Mission.Executor do
           {:error, e} ->
             {:error, "arming: #{Exception.message(e)}"}
         end
+    end
+  end
+
+  # A transfer that timed out on a lossy link (the protocol's own retries ran
+  # out) is started again from the beginning, a few times: only the vehicle's
+  # refusals are final.
+  defp upload(s, me, started, attempts) do
+    # The protocol's counts ({:mission_done, ...}) go to the executor itself.
+    case Vehicles.upload_mission(s.vehicle, s.items, progress_to: me) do
+      :ok ->
+        {:uploaded, s.clock.now_ms() - started}
+
+      # Every item went out but the vehicle's final MISSION_ACK was lost (it is
+      # never repeated): whether the vehicle has the mission is for the
+      # verification, which downloads it, to say.
+      {:error, %Dolphin.MissionError{result: :timeout, detail: "the vehicle stopped asking for items"}} ->
+        {:uploaded, s.clock.now_ms() - started}
+
+      {:error, %Dolphin.MissionError{result: :timeout}} when attempts > 1 ->
+        upload(s, me, started, attempts - 1)
+
+      error ->
+        mission_op(error)
+    end
+  end
+
+  defp verify(s, attempts) do
+    case Vehicles.download_mission(s.vehicle) do
+      {:ok, back} ->
+        case Mission.compare_download(s.items, back) do
+          :ok -> :ok
+          {:error, why} -> {:error, "the mission read back differs from the one uploaded: #{why}"}
+        end
+
+      {:error, %Dolphin.MissionError{result: :timeout}} when attempts > 1 ->
+        verify(s, attempts - 1)
+
+      {:error, e} ->
+        {:error, "reading the mission back to verify it failed#{if attempts < @transfer_attempts, do: " (#{@transfer_attempts} attempts)"}: #{Exception.message(e)}"}
     end
   end
 

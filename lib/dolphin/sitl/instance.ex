@@ -23,6 +23,10 @@ defmodule Dolphin.SITL.Instance do
   # The last lines SITL printed, and its exit status once it has exited.
   def log(pid), do: GenServer.call(pid, :log)
 
+  @doc false
+  # Kills the OS process at once; the exit is seen as SITL exiting by itself.
+  def kill(pid), do: GenServer.call(pid, :kill)
+
   @impl true
   def init(spec) do
     Process.flag(:trap_exit, true)
@@ -62,6 +66,11 @@ defmodule Dolphin.SITL.Instance do
   end
 
   @impl true
+  def handle_call(:kill, _from, s) do
+    System.cmd("kill", ["-KILL", to_string(s.os_pid)], stderr_to_stdout: true)
+    {:reply, :ok, s}
+  end
+
   def handle_call(:log, _from, s), do: {:reply, %{lines: :queue.to_list(s.lines), exit_status: s.exit_status, cmdline: s.cmdline, dir: s.dir}, s}
 
   @impl true

@@ -1,0 +1,172 @@
+defmodule Dolphin.SITLTest do
+  # ArduCopter SITL as a backend, and what the ground station does with the
+  # real autopilot: its mission protocol, arming before the position estimate
+  # is ready, a stop that holds position, a vehicle that vanishes, a lossy link.
+  # Runs ArduCopter processes and changes the clock's speed-up: not async.
+  use ExUnit.Case, async: false
+
+  alias Dolphin.{Clock, Engine, Geo, Mission, SITL, Vehicles}
+  alias Dolphin.Mission.Command, as: C
+  alias Dolphin.Test.{Backend, UDPProxy, Wait}
+
+  @moduletag :sitl
+  @moduletag timeout: 300_000
+
+  setup do
+    Dolphin.Fleet.set_source({Dolphin.Fleet.MAVLinkSource, nil})
+    :ok
+  end
+
+  defp home_of(id) do
+    Wait.until(fn -> match?({:ok, %{home: %{}}}, Vehicles.state(id)) end, 2_000, fn -> "home of vehicle #{id}" end)
+    {:ok, %{home: h}} = Vehicles.state(id)
+    Geo.location(h.lat, h.lon, h.alt)
+  end
+
+  defp pick(id), do: {:ok, _} = Dolphin.Fleet.pick(Dolphin.Fleet, self(), id: id)
+
+  defp hop(home) do
+    Mission.new("hop")
+    |> Mission.add(C.home(home))
+    |> Mission.add(C.take_off(%{home | h: home.h + 10}))
+    |> Mission.add(C.move(20, 0, 0))
+    |> Mission.add(C.return_home_and_land())
+  end
+
+  describe "Dolphin.SITL" do
+    test "a missing binary or defaults file is a clear error" do
+      assert {:error, message} = SITL.start(1, bin: "/nonexistent/arducopter")
+      assert message =~ "no ArduCopter SITL binary at /nonexistent/arducopter (--sitl-bin)"
+
+      {:ok, bin} = SITL.find_binary()
+      assert {:error, message} = SITL.start(1, bin: bin, defaults: ["/nonexistent/x.parm"])
+      assert message =~ "no such defaults file: /nonexistent/x.parm"
+    end
+
+    @tag :tmp_dir
+    test "a binary that exits at once is reported with the last lines it printed", %{tmp_dir: dir} do
+      fake = Path.join(dir, "arducopter")
+      File.write!(fake, "#!/bin/sh\necho 'bad option --model'\necho 'giving up'\nexit 3\n")
+      File.chmod!(fake, 0o755)
+      File.write!(Path.join(dir, "copter.parm"), "")
+      assert {:error, message} = SITL.start(1, bin: fake)
+      assert message =~ "exited with status 3 before it answered"
+      assert message =~ "giving up"
+    end
+
+    test "instances get distinct system ids, homes 30 m apart, and stop cleanly" do
+      ids = Backend.start(:sitl, 2)
+      assert ids == [1, 2]
+      [a, b] = Enum.map(ids, &home_of/1)
+      assert_in_delta Geo.distance(a, b), 30, 1
+      Backend.stop(ids)
+      assert Vehicles.list() == []
+      assert {"", 1} == System.cmd("pgrep", ["-f", "arducopter --model"])
+    end
+  end
+
+  test "mission protocol on ArduCopter: 650 items exact both ways, 700 refused with its reason, clear, a bad item refused" do
+    [id] = Backend.start(:sitl, 1)
+    home = home_of(id)
+    many = fn n -> Enum.reduce(1..(n - 3), hop(home) |> Map.update!(:commands, &Enum.take(&1, 2)), fn i, m -> Mission.add(m, C.move(rem(i, 7) - 3, rem(i, 5) - 2, 0)) end) end
+
+    # ArduCopter SITL stores 650 items (home included): the most it takes.
+    items = Mission.to_items(many.(650))
+    assert length(items) == 650
+    assert :ok = Vehicles.upload_mission(id, items), inspect(Vehicles.state(id))
+    assert {:ok, back} = Vehicles.download_mission(id)
+    assert :ok = Mission.compare_download(items, back)
+
+    assert {:error, %Dolphin.MissionError{result: :no_space}} = Vehicles.upload_mission(id, Mission.to_items(many.(700)))
+    Wait.until(fn -> match?({:ok, %{status_texts: [{_, "Only 650 items are supported"} | _]}}, Vehicles.state(id)) end)
+
+    assert :ok = Vehicles.clear_mission(id)
+    # Cleared, ArduCopter reports a count of 0: not even home is read back.
+    assert {:ok, []} = Vehicles.download_mission(id)
+
+    # A take-off whose pitch is not a number: ArduCopter refuses the item.
+    [h, t | _] = Mission.to_items(hop(home))
+    assert {:error, %Dolphin.MissionError{result: result}} = Vehicles.upload_mission(id, [h, %{t | param4: 0.0, command: 31_999}])
+    assert result in [:unsupported, :invalid_param4, :invalid]
+  end
+
+  test "arming refused before the position estimate is ready is retried; the mission then flies and lands" do
+    [id] = Backend.start(:sitl, 1)
+    home = home_of(id)
+    pick(id)
+    # At once after boot: ArduCopter refuses to arm until its EKF uses GPS.
+    assert {:ok, :done} = Engine.run(Engine.on(hop(home), [id]))
+    {:ok, st} = Vehicles.state(id)
+    refute st.armed
+    texts = Enum.map(st.status_texts, &elem(&1, 1))
+    assert "Arming motors" in texts
+    assert Enum.any?(texts, &(&1 =~ "Need Position Estimate"))
+  end
+
+  test "a stopped mission leaves the vehicle holding its position and height for 30 s" do
+    [id] = Backend.start(:sitl, 1)
+    home = home_of(id)
+    pick(id)
+
+    endless = Mission.new("endless") |> Mission.add(C.home(home)) |> Mission.add(C.take_off(%{home | h: home.h + 15})) |> Mission.add(C.move_and_loiter_pos(40, 0, 0, 10))
+    at_loiter = fn -> match?({:ok, %{mission: %{current: 2}, mode: :auto}}, Vehicles.state(id)) end
+    assert {:ok, :done} = Engine.run(Engine.on(Engine.until(endless, at_loiter), [id]))
+
+    # BRAKE stops with a short overshoot, then holds.
+    Wait.until(fn -> match?({:ok, %{mode: :brake, armed: true}}, Vehicles.state(id)) end, 500)
+    Clock.sleep(5_000)
+    {:ok, %{position: a}} = Vehicles.state(id)
+    samples = for _ <- 1..6, do: (Clock.sleep(5_000); Vehicles.state(id))
+
+    for {:ok, st} <- samples do
+      assert st.mode == :brake and st.armed
+      assert Geo.distance(Geo.location(a.lat, a.lon), Geo.location(st.position.lat, st.position.lon)) < 3
+      assert_in_delta st.position.relative_alt, 15, 1.5
+    end
+
+    assert {:ok, :done} = Engine.run(Engine.on(hop(home), [id]))
+  end
+
+  test "a vehicle that vanishes mid-mission is lost within the connection timeout; its task fails and the watch handler runs" do
+    [id] = Backend.start(:sitl, 1)
+    home = home_of(id)
+    pick(id)
+    Vehicles.set_timeout(id, 5_000)
+    test = self()
+    handler = fn failure -> send(test, {:handled, failure}) end
+    long = Mission.new("long") |> Mission.add(C.home(home)) |> Mission.add(C.take_off(%{home | h: home.h + 10})) |> Mission.add(C.move_and_loiter_time(200, 0, 0, 600))
+
+    {:ok, run} = Engine.start(Engine.watch(Engine.on(long, [id]), on_error: handler))
+    Wait.until(fn -> match?({:ok, %{armed: true, position: %{relative_alt: alt}}} when alt > 3, Vehicles.state(id)) end, 3_000)
+    Vehicles.subscribe(id)
+    lost_from = Clock.now_ms()
+    :ok = SITL.crash(Backend.fleet(id), id)
+
+    assert_receive {:dolphin, {:vehicle, ^id}, {:vehicle_lost, ^id}}, Clock.to_real_ms(30_000) + 2_000
+    # Lost after its 5 s of silence, with the slack of the link's checks.
+    assert Clock.now_ms() - lost_from < 15_000
+    assert_receive {:handled, %Dolphin.Engine.Failure{vehicle: ^id, reason: {:vehicle_lost, ^id}}}, 10_000
+    assert {:ok, :done} = Engine.await(run, 30_000)
+  end
+
+  test "over a link that loses 20 % each way, duplicates and reorders, a mission uploads exactly and flies" do
+    test = self()
+
+    send_to = fn gcs_port ->
+      {:ok, proxy} = UDPProxy.start_link(gcs: gcs_port, seed: 7, both: [loss: 0.2, duplicate: 0.05, reorder: 0.05])
+      send(test, {:proxy, proxy})
+      UDPProxy.port(proxy)
+    end
+
+    [id] = Backend.start(:sitl, 1, send_to: send_to)
+    assert_received {:proxy, proxy}
+    home = home_of(id)
+    pick(id)
+    Dolphin.Telemetry.subscribe()
+
+    assert {:ok, :done} = Engine.run(Engine.on(hop(home), [id]))
+    assert_received {:dolphin, :events, %{event: :mission_uploaded, vehicle: ^id, items: 4}}
+    assert %{to_gcs: %{dropped: lost}} = UDPProxy.stats(proxy)
+    assert lost > 0
+  end
+end
