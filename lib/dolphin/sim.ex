@@ -71,6 +71,8 @@ defmodule Dolphin.Sim do
     * `:seed` — seeds the faults' randomness (default 1);
     * `:faults` — faults on every vehicle's link from the start;
     * any vehicle setting: `:battery` (initial fraction, default 1.0),
+      `:boot_ms` (how long it reports MAV_STATE BOOT and refuses uploads
+      with NO_SPACE, as ArduCopter does while it boots; default 0),
       `:ekf_ready_ms`, `:charge_rate` (fraction per second, default 0.005),
       `:charger` (where a landed vehicle charges besides its own home:
       default the fleet's `:home`),

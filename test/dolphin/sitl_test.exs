@@ -65,6 +65,17 @@ defmodule Dolphin.SITLTest do
     end
   end
 
+  test "the SITL fleet charges a landed vehicle: MAV_CMD_BATTERY_RESET sets the charge, which then rises" do
+    [id] = Backend.start(:sitl, 1)
+    Wait.until(fn -> match?({:ok, %{battery: b}} when is_number(b), Vehicles.state(id)) end, 500)
+    assert {:ok, :accepted} = Vehicles.command(id, :mav_cmd_battery_reset, [1, 40.0])
+    Wait.until(fn -> match?({:ok, %{battery: b}} when b < 0.45, Vehicles.state(id)) end, 500)
+    # 0.5 % a second of clock time: 10 s make 5 %.
+    Clock.sleep(12_000)
+    assert {:ok, %{battery: b}} = Vehicles.state(id)
+    assert b >= 0.43 and b <= 0.5
+  end
+
   test "mission protocol on ArduCopter: 650 items exact both ways, 700 refused with its reason, clear, a bad item refused" do
     [id] = Backend.start(:sitl, 1)
     home = home_of(id)

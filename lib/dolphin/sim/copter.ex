@@ -57,6 +57,9 @@ defmodule Dolphin.Sim.Copter do
     rtl_alt: 15.0,
     circle_speed: 5.0,
     ekf_ready_ms: 15_000,
+    # How long the vehicle reports MAV_STATE BOOT (ArduCopter SITL: ~2 s);
+    # 0 for none.
+    boot_ms: 0,
     disarm_delay_ms: 10_000,
     capacity_mah: 3300.0,
     hover_current: 30.0,
@@ -250,6 +253,12 @@ defmodule Dolphin.Sim.Copter do
   defp handle_message(c, %M.ParamRequestList{}, _from), do: Streams.send_params(c)
   defp handle_message(c, %M.ParamRequestRead{} = r, _from), do: Streams.send_param(c, r.param_id, r.param_index)
   defp handle_message(c, %M.ParamSet{} = p, _from), do: Streams.set_param(c, p.param_id, p.param_value)
+
+  # While it boots (MAV_STATE BOOT), ArduCopter already answers the mission
+  # protocol but its mission store is not set up: every upload is refused
+  # with NO_SPACE (docs/ardupilot.md).
+  defp handle_message(c, %M.MissionCount{mission_type: type}, {sysid, compid}) when c.time_ms < c.config.boot_ms,
+    do: say(c, %M.MissionAck{target_system: sysid, target_component: compid, type: 4, mission_type: type})
 
   defp handle_message(c, message, from) do
     {missions, replies} = MissionServer.handle(c.missions, message, from, %{now: c.time_ms, home: home_item(c)})

@@ -23,7 +23,8 @@ defmodule Dolphin.Sim.Local do
       {:ok, link} ->
         port = Dolphin.Link.Connection.port(name)
         # Camera drones: every simulated vehicle carries a camera (component 100).
-        sim_opts = [count: count, gcs: {{127, 0, 0, 1}, port}, speedup: Dolphin.Clock.speedup(), seed: seed, camera: true]
+        # They boot as ArduCopter does: 2 s of MAV_STATE BOOT refusing uploads.
+        sim_opts = [count: count, gcs: {{127, 0, 0, 1}, port}, speedup: Dolphin.Clock.speedup(), seed: seed, camera: true, boot_ms: 2_000]
 
         case Dolphin.Sim.start(sim_opts) do
           {:ok, sysids} ->
@@ -54,9 +55,10 @@ defmodule Dolphin.Sim.Local do
     :ok
   end
 
-  # Simulated vehicles announce themselves within a heartbeat.
-  defp await_fleet(sysids, tries \\ 200) do
-    known = for %{vehicle: v} <- Dolphin.Fleet.vehicles(), v.type != nil, do: v.id
+  # Simulated vehicles announce themselves within a heartbeat, and have
+  # booted (past MAV_STATE BOOT) 2 s of clock time later.
+  defp await_fleet(sysids, tries \\ 200 + div(Dolphin.Clock.to_real_ms(2_000), 50)) do
+    known = for id <- sysids, match?({:ok, %{type: t, system_status: st}} when t != nil and st not in [nil, 0, 1], Dolphin.Vehicles.state(id)), do: id
 
     if tries > 0 and not Enum.all?(sysids, &(&1 in known)) do
       Process.sleep(50)

@@ -226,6 +226,7 @@ defmodule Dolphin.Sim.Streams do
 
     status =
       cond do
+        c.time_ms < c.config.boot_ms -> 1
         c.failsafe != nil -> 5
         c.armed -> 4
         true -> 3

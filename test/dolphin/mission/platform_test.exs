@@ -111,6 +111,14 @@ defmodule Dolphin.Mission.PlatformTest do
     refute st.armed
   end
 
+  test "a vehicle still booting (which refuses uploads with NO_SPACE, as ArduCopter does) is waited for", %{port: port} do
+    {:ok, [5]} = Sim.start(sysids: [5], gcs: port, speedup: @speedup, boot_ms: 20_000, ekf_ready_ms: 25_000)
+    Wait.until(fn -> match?({:ok, %{system_status: 1}}, Vehicles.state(5)) end, 200)
+    {:ok, _} = Dolphin.Fleet.pick(Dolphin.Fleet, self(), id: 5)
+    home = Dolphin.Geo.location(40.444233, -7.375234, 820)
+    assert {:ok, :done} = Engine.run(Engine.on(out_and_back(home), [5]))
+  end
+
   test "arming refused for longer than the bound fails the task with the autopilot's reason", %{port: port} do
     {:ok, [4]} = Sim.start(sysids: [4], gcs: port, speedup: @speedup, ekf_ready_ms: 3_600_000)
     Wait.until(fn -> match?({:ok, _}, Vehicles.state(4)) end, 200)
