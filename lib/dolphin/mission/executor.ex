@@ -269,7 +269,10 @@ defmodule Dolphin.Mission.Executor do
       {:error, %Dolphin.MissionError{result: :timeout, detail: "the vehicle stopped asking for items"}} ->
         {:uploaded, s.clock.now_ms() - started}
 
-      {:error, %Dolphin.MissionError{result: :timeout}} when attempts > 1 ->
+      # MAV_MISSION_ERROR is ArduCopter's answer to an item that reaches it out
+      # of a transfer (a duplicate or a late one on a bad link), not a refusal
+      # of the mission: worth starting again too.
+      {:error, %Dolphin.MissionError{result: result}} when result in [:timeout, :error] and attempts > 1 ->
         upload(s, me, started, attempts - 1)
 
       error ->
