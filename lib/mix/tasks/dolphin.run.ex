@@ -501,8 +501,9 @@ defmodule Mix.Tasks.Dolphin.Run do
 
   defp line(%{event: :task_finished, result: :failed} = e, _), do: "task #{e.task_id} #{e.kind} failed: #{e.reason}"
 
+  # "stopped (the run's time (--for) is over)": the result is not said twice.
   defp line(%{event: :task_finished, vehicle: v} = e, _) when v != nil,
-    do: "task #{e.task_id} #{e.kind} #{inspect(e.name)} on vehicle #{v}: #{e.result}#{if e.reason, do: " (#{e.reason})", else: ""}"
+    do: "task #{e.task_id} #{e.kind} #{inspect(e.name)} on vehicle #{v}: #{e.result}#{if e.reason, do: " (#{String.replace_prefix(e.reason, "stopped: ", "")})", else: ""}"
 
   defp line(_event, _quiet), do: nil
 end
