@@ -49,7 +49,7 @@ defmodule Dolphin.Engine.Failure do
   def format_reason({:time_limit, id}), do: "stopped: time limit of task #{id}"
   def format_reason({:sibling_failed, _}), do: "stopped: a concurrent task failed"
   def format_reason({:parent_exit, reason}), do: "stopped: what started it #{parent_words(reason)}"
-  def format_reason({:signal, :sigint}), do: "stopped: the run was interrupted (Ctrl-C, SIGINT)"
+  def format_reason({:signal, :sigint}), do: "stopped: the run was interrupted (SIGINT, Ctrl-C)"
   def format_reason({:signal, :sigterm}), do: "stopped: the run was terminated (SIGTERM)"
   def format_reason(:stopped), do: "stopped: the task above it ended"
   def format_reason(:halted), do: "stopped: the script halted"
