@@ -59,11 +59,22 @@ defmodule Mix.Tasks.Dolphin.Run do
   are used (`config :dolphin, links: [...]`), or if there are none the ground
   station listens on `Dolphin.Link.default_endpoint/0` (`udpin:0.0.0.0:14550`).
 
+  ## Interrupting a run
+
+  Ctrl-C (SIGINT) or SIGTERM stops the script the way `--for` does: running
+  tasks are stopped (each says why), vehicles are told to hold, the summary
+  is printed and the events end with `script_finished` (result `stopped`).
+  A second Ctrl-C or SIGTERM exits at once, without waiting for the stops.
+  (Ctrl-C is caught by `c_src/dolphin_signals.c`, built into `priv/` with
+  the project; without a C compiler it opens the Erlang BREAK menu. Under
+  IEx both keep their usual meaning.)
+
   ## Exit status
 
   0 — the script completed (or `--for` ended it); 1 — the script failed
   (could not compile, a task failed, `halt`, a pick timed out: the message
-  says what, where and why); 2 — bad usage.
+  says what, where and why); 2 — bad usage; 130 — Ctrl-C (SIGINT) stopped
+  it; 143 — SIGTERM stopped it (128 + the signal's number, as a shell says).
   """
 
   use Mix.Task
