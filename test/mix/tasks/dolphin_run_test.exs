@@ -138,6 +138,7 @@ defmodule Mix.Tasks.Dolphin.RunTest do
       # The stop says why in words, not as an Erlang term.
       assert Enum.all?(finished, &(&1["reason"] == "stopped: the run's time (--for) is over")), inspect(finished)
       refute out =~ ":killed"
+      assert out =~ ~s[test "a" on vehicle 1: stopped (the run's time (--for) is over)]
 
       released = Enum.find_index(names, &(&1 == "released"))
       assert released, "no released event"
