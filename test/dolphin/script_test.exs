@@ -190,6 +190,32 @@ defmodule Dolphin.ScriptTest do
       assert %{reason: :deadline} = assert_platform(:stopped, "patrol")
     end
 
+    test "stop/2: the tasks stop for the script's reason, then the vehicles are released, then the script ends", ctx do
+      fake_vehicles(ctx, 1)
+      me = :erlang.pid_to_list(self())
+
+      source = """
+      use Dolphin.Script
+      _v = pick()
+      forever do
+        execute Dolphin.Engine.TestPlatform.task("patrol", duration: :infinity, notify: :erlang.list_to_pid(#{inspect(me)}))
+      end
+      """
+
+      {:ok, pid} = Script.start(compile!(source))
+      assert_platform(:started, "patrol")
+      Script.stop(pid, {:signal, :sigterm})
+      assert {:ok, %{result: :stopped}} = Script.await(pid)
+      assert %{reason: {:signal, :sigterm}} = assert_platform(:stopped, "patrol")
+
+      # Everything was emitted before the script's answer, in the order it happened.
+      {:messages, messages} = Process.info(self(), :messages)
+      events = for {:dolphin, :events, %{event: e} = event} <- messages, e in [:task_finished, :script_finished], do: event
+
+      assert [%{event: :task_finished, result: :stopped, reason: "stopped: the run was terminated (SIGTERM)"}, %{event: :script_finished, result: :stopped}] =
+               events
+    end
+
     test "ask, send_message and set_connection_timeout act for the script", ctx do
       [a] = fake_vehicles(ctx, 1)
 
