@@ -212,7 +212,7 @@ defmodule Dolphin.ScriptTest do
       {:messages, messages} = Process.info(self(), :messages)
       events = for {:dolphin, :events, %{event: e} = event} <- messages, e in [:task_finished, :script_finished], do: event
 
-      assert [%{event: :task_finished, result: :stopped, reason: "stopped: the run was terminated (SIGTERM)"}, %{event: :script_finished, result: :stopped}] =
+      assert [%{event: :task_finished, result: :stopped, reason: "stopped: the run was terminated (SIGTERM)"}, %{event: :script_finished, result: :stopped, reason: "stopped: the run was terminated (SIGTERM)"}] =
                events
     end
 

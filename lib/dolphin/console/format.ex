@@ -283,7 +283,7 @@ defmodule Dolphin.Console.Format do
   def event_text(%{event: :script_started} = e), do: "script #{e.script} started"
 
   def event_text(%{event: :script_finished} = e),
-    do: "script #{e.script}: #{e.result}" <> if(e.reason, do: " (#{e.reason})", else: "")
+    do: "script #{e.script}: #{e.result}" <> if(e.reason, do: " (#{String.replace_prefix(e.reason, "stopped: ", "")})", else: "")
 
   def event_text(%{event: name} = e), do: "#{name} " <> inspect(Map.drop(e, [:event, :at_ms]))
 

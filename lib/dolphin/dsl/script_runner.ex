@@ -53,11 +53,11 @@ defmodule Dolphin.Script.Runner do
 
       :deadline ->
         stop_code(s, :deadline)
-        finish(s, {:ok, :stopped})
+        finish(s, {:ok, :stopped}, :deadline)
 
       {:"$dolphin_script_stop", reason} ->
         stop_code(s, reason)
-        finish(s, {:ok, :stopped})
+        finish(s, {:ok, :stopped}, reason)
 
       {:"$dolphin_halt", text} ->
         stop_code(s, :halted)
@@ -115,11 +115,13 @@ defmodule Dolphin.Script.Runner do
   # Real ms to wait for the runs' trees to stop: each platform stop is bounded by stop_timeout_ms.
   defp stop_bound(s), do: s.ctx.clock.real_ms(s.ctx.stop_timeout_ms * 3)
 
-  defp finish(s, result) do
+  # `stop_reason`: why a script that did not end on its own was stopped.
+  defp finish(s, result, stop_reason \\ nil) do
     release_all(s)
 
     {name, reason} =
       case result do
+        {:ok, :stopped} -> {:stopped, Dolphin.Engine.Failure.format_reason(stop_reason)}
         {:ok, r} -> {r, nil}
         {:error, %Error{kind: kind} = e} -> {if(kind == :halted, do: :halted, else: :failed), Error.format(e)}
       end

@@ -35,7 +35,7 @@ defmodule Mix.Tasks.Dolphin.RunSignalsTest do
     last_finished = names |> Enum.with_index() |> Enum.filter(&(elem(&1, 0) == "task_finished")) |> List.last() |> elem(1)
     released = Enum.find_index(names, &(&1 == "released"))
     assert released && last_finished < released, "released before a task stopped: #{inspect(names)}"
-    assert %{"event" => "script_finished", "result" => "stopped"} = List.last(lines)
+    assert %{"event" => "script_finished", "result" => "stopped", "reason" => ^reason} = List.last(lines)
     assert output =~ "script stopped after"
     assert output =~ "(#{signal}): running tasks were stopped, vehicles hold"
     refute output =~ "BREAK"

@@ -145,7 +145,7 @@ defmodule Mix.Tasks.Dolphin.RunTest do
       last_finished = names |> Enum.with_index() |> Enum.filter(&(elem(&1, 0) == "task_finished")) |> List.last() |> elem(1)
       assert last_finished < released, "released before a task stopped: #{inspect(names)}"
       assert List.last(names) == "script_finished"
-      assert %{"result" => "stopped"} = List.last(lines)
+      assert %{"result" => "stopped", "reason" => "stopped: the run's time (--for) is over"} = List.last(lines)
     end
 
     test "a failing script: status 1, what, where, why", %{tmp_dir: dir} do
