@@ -355,7 +355,7 @@ defmodule Mix.Tasks.Dolphin.Run do
 
     receive do: ({:printer_ready, ^printer} -> :ok)
     Process.put(:dolphin_run_printer, printer)
-    defer(fn -> stop_printer(printer) end, :output)
+    defer(fn -> stop_printer(Process.delete(:dolphin_run_printer)) end, :output)
 
     if path = opts[:events] do
       case Dolphin.Telemetry.Writer.start_link(path: path, origin_ms: origin) do
