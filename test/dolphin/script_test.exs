@@ -216,6 +216,35 @@ defmodule Dolphin.ScriptTest do
                events
     end
 
+    test "a script whose caller dies stops its tasks, then says it ended", ctx do
+      fake_vehicles(ctx, 1)
+      me = self()
+      script = compile!("""
+      use Dolphin.Script
+      _v = pick()
+      execute Dolphin.Engine.TestPlatform.task("patrol", duration: :infinity, notify: :erlang.list_to_pid(#{inspect(:erlang.pid_to_list(me))}))
+      """)
+
+      # The caller runs in the test's context (its fleet and clock).
+      context = Dolphin.Engine.Context.current()
+
+      caller =
+        spawn(fn ->
+          Dolphin.Engine.Context.put(context)
+          {:ok, pid} = Script.start(script)
+          send(me, {:script, pid})
+          Process.sleep(:infinity)
+        end)
+
+      assert_receive {:script, pid}, 5_000
+      ref = Process.monitor(pid)
+      assert_platform(:started, "patrol")
+      Process.exit(caller, :kill)
+      assert %{reason: :shutdown} = assert_platform(:stopped, "patrol")
+      assert_receive {:DOWN, ^ref, :process, ^pid, :normal}, 30_000
+      assert_received {:dolphin, :events, %{event: :script_finished, result: :stopped, reason: "stopped: shutting down"}}
+    end
+
     test "ask, send_message and set_connection_timeout act for the script", ctx do
       [a] = fake_vehicles(ctx, 1)
 

@@ -70,8 +70,9 @@ defmodule Dolphin.Script.Runner do
         finish(s, {:error, %Error{kind: :failed, file: s.script.file, message: "the script's process #{Dolphin.Engine.Failure.exit_words(reason)}", reason: reason}})
 
       {:EXIT, ^caller, _reason} ->
+        # Nobody waits for the result any more; the event log still tells the end.
         stop_code(s, :shutdown)
-        exit(:normal)
+        finish(s, {:ok, :stopped}, :shutdown)
 
       _other ->
         loop(s)
