@@ -4,9 +4,10 @@ defmodule Dolphin.Script.Runner do
   # script's signal table and context, runs the script's code in a linked
   # process (the owner of its picks), and ends it — on completion, on `halt`
   # from any of its tasks, at the `--for` deadline, on `Dolphin.Script.stop/2`
-  # or when the caller dies. Ending a script that still runs kills its code;
-  # its runs, linked to it, stop their task trees (vehicles hold), and the
-  # runner waits for them before it reports.
+  # or when the caller dies. Ending a script that still runs first holds its
+  # code (suspended), stops its runs for the script's reason (their tasks
+  # stop, vehicles hold) and waits for them, then kills the code and releases
+  # its vehicles, and only then reports: the events come in that order.
 
   alias Dolphin.Engine.{Context, Signals}
   alias Dolphin.Script.Error
