@@ -1,38 +1,44 @@
 defmodule Mix.Tasks.Compile.DolphinNative do
   @moduledoc false
-  # Builds priv/dolphin_crc.so, the C MAVLink checksum that
-  # Dolphin.MAVLink.CRC loads (scripts/bootstrap installs the compiler). Without
-  # a C compiler the build goes on and the checksum runs in Erlang, slower.
+  # Builds the C libraries of c_src/ into priv/ (scripts/bootstrap installs the
+  # compiler): dolphin_crc.so, the MAVLink checksum that Dolphin.MAVLink.CRC
+  # loads, and dolphin_signals.so, Ctrl-C for Dolphin.Run.Signals. Without a C
+  # compiler the build goes on: the checksum runs in Erlang, slower, and
+  # Ctrl-C opens the Erlang BREAK menu.
   use Mix.Task.Compiler
 
-  @source "c_src/dolphin_crc.c"
-  @target "priv/dolphin_crc.so"
+  @libraries [
+    {"c_src/dolphin_crc.c", "priv/dolphin_crc.so", "the MAVLink checksum will run in Erlang, several times slower"},
+    {"c_src/dolphin_signals.c", "priv/dolphin_signals.so", "Ctrl-C will open the Erlang BREAK menu instead of stopping a run"}
+  ]
 
   @impl true
   def run(_args) do
+    Enum.each(@libraries, &build/1)
+    {:ok, []}
+  end
+
+  defp build({source, target, without}) do
     cond do
-      not Mix.Utils.stale?([@source], [@target]) ->
-        {:noop, []}
+      not Mix.Utils.stale?([source], [target]) ->
+        :ok
 
       cc = System.get_env("CC") || System.find_executable("cc") ->
         include = Path.join([:code.root_dir(), "usr", "include"])
-        args = ~w(-O2 -std=c99 -Wall -Wextra -fPIC -shared -I #{include} -o #{@target} #{@source})
-        File.mkdir_p!(Path.dirname(@target))
+        args = ~w(-O2 -std=c99 -D_POSIX_C_SOURCE=200809L -Wall -Wextra -fPIC -shared -I #{include} -o #{target} #{source})
+        File.mkdir_p!(Path.dirname(target))
 
         case System.cmd(cc, args, stderr_to_stdout: true) do
-          {_, 0} -> {:ok, []}
-          {output, status} -> warn("#{cc} failed (exit #{status}):\n#{output}")
+          {_, 0} -> :ok
+          {output, status} -> warn("#{cc} failed (exit #{status}):\n#{output}", without, source)
         end
 
       true ->
-        warn("no C compiler (cc) found")
+        warn("no C compiler (cc) found", without, source)
     end
   end
 
-  defp warn(why) do
-    Mix.shell().error("#{why}; the MAVLink checksum will run in Erlang, several times slower (see c_src/dolphin_crc.c)")
-    {:ok, []}
-  end
+  defp warn(why, without, source), do: Mix.shell().error("#{why}; #{without} (see #{source})")
 end
 
 defmodule Dolphin.MixProject do

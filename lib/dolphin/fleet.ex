@@ -100,6 +100,14 @@ defmodule Dolphin.Fleet do
   @spec release(fleet(), pid(), VehicleSet.t() | [VehicleSet.t()]) :: :ok
   def release(fleet, owner, sets), do: GenServer.call(fleet, {:release, owner, VehicleSet.new(List.wrap(sets))})
 
+  @doc """
+  Releases every vehicle `owner` picked and drops its waiting picks (never
+  answered), as when the owner ends — but now, so that the caller knows the
+  `released` event has been given (a script that ends says so after it).
+  """
+  @spec release_all(fleet(), pid()) :: :ok
+  def release_all(fleet, owner), do: GenServer.call(fleet, {:release_all, owner})
+
   @doc "The vehicles `owner` has picked."
   @spec picked(fleet(), pid()) :: VehicleSet.t()
   def picked(fleet, owner), do: GenServer.call(fleet, {:picked, owner})
@@ -280,6 +288,7 @@ defmodule Dolphin.Fleet do
   end
 
   def handle_call({:release, owner, set}, _from, s), do: {:reply, :ok, s |> release_vehicles(owner, set.ids) |> serve()}
+  def handle_call({:release_all, owner}, _from, s), do: {:reply, :ok, s |> drop_owner(owner) |> serve()}
   def handle_call({:picked, owner}, _from, s), do: {:reply, VehicleSet.new(picked_by(s, owner)), s}
 
   def handle_call({:timeout, owner, ms}, _from, s) do
@@ -359,16 +368,9 @@ defmodule Dolphin.Fleet do
 
   def handle_info({:DOWN, _ref, :process, pid, _reason}, s) do
     s = %{s | monitors: Map.delete(s.monitors, pid), timeouts: Map.delete(s.timeouts, pid)}
-
-    # A waiting caller or owner that died: its picks are dropped.
-    {gone, waiters} = Enum.split_with(s.waiters, &(&1.caller == pid or &1.owner == pid))
-    for %{timer: timer} <- gone, timer != nil, do: Process.cancel_timer(timer)
-    s = %{s | waiters: waiters}
-
-    # An owner: its vehicles are released. A run: its vehicles are no longer busy.
-    s = release_vehicles(s, pid, picked_by(s, pid))
+    # A run: its vehicles are no longer busy.
     s = Enum.reduce(for({run_id, ^pid} <- s.runs, do: run_id), s, &unreserve_run(&2, &1))
-    {:noreply, serve(s)}
+    {:noreply, s |> drop_owner(pid) |> serve()}
   end
 
   def handle_info(_other, s), do: {:noreply, s}
@@ -419,6 +421,13 @@ defmodule Dolphin.Fleet do
   end
 
   # --- picks ---
+
+  # A waiting caller or owner gone: its waiting picks are dropped; an owner's vehicles are released.
+  defp drop_owner(s, pid) do
+    {gone, waiters} = Enum.split_with(s.waiters, &(&1.caller == pid or &1.owner == pid))
+    for %{timer: timer} <- gone, timer != nil, do: Process.cancel_timer(timer)
+    release_vehicles(%{s | waiters: waiters}, pid, picked_by(s, pid))
+  end
 
   defp picked_by(s, owner), do: for({id, ^owner} <- s.picked, do: id)
 

@@ -211,7 +211,12 @@ defmodule Dolphin.Script do
     end
   end
 
-  @doc "Stops a running script: its tasks stop (vehicles hold), its result is `:stopped`."
+  @doc """
+  Stops a running script: its tasks stop (vehicles hold), then its vehicles
+  are released, and its result is `:stopped`. `reason` goes to every task's
+  stop and, in words (`Dolphin.Engine.Failure.format_reason/1`), into the
+  `task_finished` and `script_finished` events.
+  """
   @spec stop(pid(), term()) :: :ok
   def stop(pid, reason \\ :operator), do: send(pid, {:"$dolphin_script_stop", reason}) && :ok
 

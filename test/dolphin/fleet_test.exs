@@ -37,6 +37,25 @@ defmodule Dolphin.FleetTest do
       assert m =~ "#{v} (ugv, available)"
     end
 
+    test "release_all/2 releases an owner's vehicles and drops its waiting picks at once, while it still lives", ctx do
+      [a] = fake_vehicles(ctx, 1)
+      owner = spawn_link(fn -> Process.sleep(:infinity) end)
+      assert {:ok, %VehicleSet{ids: [^a]}} = pick(ctx, [count: 1, timeout: 0], owner)
+      # Its waiting pick (for a vehicle that does not exist yet) and someone else's.
+      me = self()
+      spawn_link(fn -> send(me, {:owner_picked, Fleet.pick(ctx.fleet, owner, count: 1, timeout: 10_000)}) end)
+      async_pick(ctx, count: 1, timeout: 10_000)
+      refute_receive {:picked, _}, 50
+
+      :ok = Fleet.release_all(ctx.fleet, owner)
+      assert Fleet.picked(ctx.fleet, owner) == VehicleSet.new([])
+      assert_receive {:picked, {:ok, %VehicleSet{ids: [^a]}}}, 5_000
+      # The owner's own waiting pick was dropped, not served by the next vehicle.
+      [_b] = fake_vehicles(ctx, 1)
+      refute_receive {:owner_picked, _}, 50
+      assert Fleet.picked(ctx.fleet, owner) == VehicleSet.new([])
+    end
+
     test "waiting picks are served as vehicles appear or are released", ctx do
       [a] = fake_vehicles(ctx, 1, pick: true)
       async_pick(ctx, count: 2, timeout: 10_000)

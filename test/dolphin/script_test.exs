@@ -186,7 +186,63 @@ defmodule Dolphin.ScriptTest do
 
       assert {:ok, %{result: :stopped}} = run_source(source, for: 50)
       assert_platform(:started, "patrol")
-      assert %{reason: {:parent_exit, :killed}} = assert_platform(:stopped, "patrol")
+      # Stopped for the script's reason, not as the orphan of its killed code.
+      assert %{reason: :deadline} = assert_platform(:stopped, "patrol")
+    end
+
+    test "stop/2: the tasks stop for the script's reason, then the vehicles are released, then the script ends", ctx do
+      fake_vehicles(ctx, 1)
+      me = :erlang.pid_to_list(self())
+
+      source = """
+      use Dolphin.Script
+      _v = pick()
+      forever do
+        execute Dolphin.Engine.TestPlatform.task("patrol", duration: :infinity, notify: :erlang.list_to_pid(#{inspect(me)}))
+      end
+      """
+
+      {:ok, pid} = Script.start(compile!(source))
+      assert_platform(:started, "patrol")
+      Script.stop(pid, {:signal, :sigterm})
+      assert {:ok, %{result: :stopped}} = Script.await(pid)
+      assert %{reason: {:signal, :sigterm}} = assert_platform(:stopped, "patrol")
+
+      # Everything was emitted before the script's answer, in the order it happened.
+      {:messages, messages} = Process.info(self(), :messages)
+      events = for {:dolphin, :events, %{event: e} = event} <- messages, e in [:task_finished, :script_finished], do: event
+
+      assert [%{event: :task_finished, result: :stopped, reason: "stopped: the run was terminated (SIGTERM)"}, %{event: :script_finished, result: :stopped, reason: "stopped: the run was terminated (SIGTERM)"}] =
+               events
+    end
+
+    test "a script whose caller dies stops its tasks, then says it ended", ctx do
+      fake_vehicles(ctx, 1)
+      me = self()
+      script = compile!("""
+      use Dolphin.Script
+      _v = pick()
+      execute Dolphin.Engine.TestPlatform.task("patrol", duration: :infinity, notify: :erlang.list_to_pid(#{inspect(:erlang.pid_to_list(me))}))
+      """)
+
+      # The caller runs in the test's context (its fleet and clock).
+      context = Dolphin.Engine.Context.current()
+
+      caller =
+        spawn(fn ->
+          Dolphin.Engine.Context.put(context)
+          {:ok, pid} = Script.start(script)
+          send(me, {:script, pid})
+          Process.sleep(:infinity)
+        end)
+
+      assert_receive {:script, pid}, 5_000
+      ref = Process.monitor(pid)
+      assert_platform(:started, "patrol")
+      Process.exit(caller, :kill)
+      assert %{reason: :shutdown} = assert_platform(:stopped, "patrol")
+      assert_receive {:DOWN, ^ref, :process, ^pid, :normal}, 30_000
+      assert_received {:dolphin, :events, %{event: :script_finished, result: :stopped, reason: "stopped: shutting down"}}
     end
 
     test "ask, send_message and set_connection_timeout act for the script", ctx do

@@ -271,8 +271,9 @@ defmodule Dolphin.Console.Format do
 
   def event_text(%{event: :task_progress} = e), do: "task #{e.task_id} on vehicle #{e.vehicle}: " <> task_state(nil, e)
 
+  # "stopped (the run's time (--for) is over)": the result is not said twice.
   def event_text(%{event: :task_finished} = e),
-    do: "task #{e.task_id} #{e.kind} #{inspect(cut(e.name, 60))}: #{e.result}" <> if(e.reason, do: " (#{e.reason})", else: "")
+    do: "task #{e.task_id} #{e.kind} #{inspect(cut(e.name, 60))}: #{e.result}" <> if(e.reason, do: " (#{String.replace_prefix(e.reason, "stopped: ", "")})", else: "")
 
   def event_text(%{event: :condition_met} = e),
     do: "task #{e.task_id}: #{e.condition} holds" <> if(e.branch, do: " (branch #{e.branch})", else: "")
@@ -282,7 +283,7 @@ defmodule Dolphin.Console.Format do
   def event_text(%{event: :script_started} = e), do: "script #{e.script} started"
 
   def event_text(%{event: :script_finished} = e),
-    do: "script #{e.script}: #{e.result}" <> if(e.reason, do: " (#{e.reason})", else: "")
+    do: "script #{e.script}: #{e.result}" <> if(e.reason, do: " (#{String.replace_prefix(e.reason, "stopped: ", "")})", else: "")
 
   def event_text(%{event: name} = e), do: "#{name} " <> inspect(Map.drop(e, [:event, :at_ms]))
 

@@ -193,7 +193,7 @@ defmodule Dolphin.Console.Runs do
         {:noreply, if(reason == :normal, do: s, else: ended(s, worker, {:crashed, reason}))}
 
       {start, starting} ->
-        GenServer.reply(start.from, {:error, "could not start: #{inspect(reason)}"})
+        GenServer.reply(start.from, {:error, "could not start: its console worker #{Dolphin.Engine.Failure.exit_words(reason)}"})
         {:noreply, %{s | starting: starting}}
     end
   end
@@ -225,7 +225,7 @@ defmodule Dolphin.Console.Runs do
   def result_text({:error, %Dolphin.Script.Error{} = e}), do: "failed: " <> Dolphin.Script.Error.format(e)
   def result_text({:error, %Dolphin.Engine.Failure{} = f}), do: "failed: " <> Dolphin.Engine.Failure.message(f)
   def result_text({:error, %{__exception__: true} = e}), do: "failed: " <> Exception.message(e)
-  def result_text({:crashed, reason}), do: "its console worker crashed: #{inspect(reason)}"
+  def result_text({:crashed, reason}), do: "its console worker #{Dolphin.Engine.Failure.exit_words(reason)}"
   def result_text(other), do: inspect(other)
 
   defp task_text(task) do

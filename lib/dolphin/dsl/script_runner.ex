@@ -4,9 +4,10 @@ defmodule Dolphin.Script.Runner do
   # script's signal table and context, runs the script's code in a linked
   # process (the owner of its picks), and ends it — on completion, on `halt`
   # from any of its tasks, at the `--for` deadline, on `Dolphin.Script.stop/2`
-  # or when the caller dies. Ending a script that still runs kills its code;
-  # its runs, linked to it, stop their task trees (vehicles hold), and the
-  # runner waits for them before it reports.
+  # or when the caller dies. Ending a script that still runs first holds its
+  # code (suspended), stops its runs for the script's reason (their tasks
+  # stop, vehicles hold) and waits for them, then kills the code and releases
+  # its vehicles, and only then reports: the events come in that order.
 
   alias Dolphin.Engine.{Context, Signals}
   alias Dolphin.Script.Error
@@ -52,41 +53,77 @@ defmodule Dolphin.Script.Runner do
         finish(s, {:error, error(s.script, kind, reason, stack, line)})
 
       :deadline ->
-        stop_code(s)
-        finish(s, {:ok, :stopped})
+        stop_code(s, :deadline)
+        finish(s, {:ok, :stopped}, :deadline)
 
-      {:"$dolphin_script_stop", _reason} ->
-        stop_code(s)
-        finish(s, {:ok, :stopped})
+      {:"$dolphin_script_stop", reason} ->
+        stop_code(s, reason)
+        finish(s, {:ok, :stopped}, reason)
 
       {:"$dolphin_halt", text} ->
-        stop_code(s)
+        stop_code(s, :halted)
         finish(s, {:error, %Error{kind: :halted, file: s.script.file, message: "halted: #{text}"}})
 
       {:EXIT, ^code, reason} ->
-        # Died without reporting (killed from outside).
-        finish(s, {:error, %Error{kind: :failed, file: s.script.file, message: "the script's process exited: #{inspect(reason)}", reason: reason}})
+        # Died without reporting (killed from outside). Its runs stop their
+        # trees as they get its exit: the script ends after them.
+        Dolphin.Engine.Run.await(for(%{owner: owner, pid: pid} <- Dolphin.Engine.runs(), owner == code, do: pid), stop_bound(s))
+        finish(s, {:error, %Error{kind: :failed, file: s.script.file, message: "the script's process #{Dolphin.Engine.Failure.exit_words(reason)}", reason: reason}})
 
       {:EXIT, ^caller, _reason} ->
-        stop_code(s)
-        exit(:normal)
+        # Nobody waits for the result any more; the event log still tells the end.
+        stop_code(s, :shutdown)
+        finish(s, {:ok, :stopped}, :shutdown)
 
       _other ->
         loop(s)
     end
   end
 
-  defp stop_code(s) do
+  # Ends the script's code after its runs have stopped, in that order, so
+  # that the history reads true: every task stopped (and says why), then the
+  # vehicles released (the fleet releases an owner's picks when it dies).
+  defp stop_code(s, reason) do
+    bound = stop_bound(s)
+    # Suspended, the code starts nothing more, and a run's `:stopped` answer
+    # does not let it go on to its next statement.
+    suspend(s.code)
+    runs = Dolphin.Engine.Run.runs_of(s.code)
+    Enum.each(runs, &send(&1, {:"$dolphin_run_stop", reason}))
+    Dolphin.Engine.Run.await(runs, bound)
     Process.unlink(s.code)
     Process.exit(s.code, :kill)
-    # Its runs stop their trees as they get the exit; wait until they are done.
-    runs = for %{owner: owner, pid: pid} <- Dolphin.Engine.runs(), owner == s.code, do: pid
-    Dolphin.Engine.Run.await(runs, s.ctx.clock.real_ms(s.ctx.stop_timeout_ms * 3))
+    # A run that was starting as the code was suspended (not registered yet)
+    # stops its tree when it gets the code's exit; wait for it too.
+    Dolphin.Engine.Run.await(for(%{owner: owner, pid: pid} <- Dolphin.Engine.runs(), owner == s.code, do: pid), bound)
   end
 
-  defp finish(s, result) do
+  defp suspend(pid) do
+    :erlang.suspend_process(pid)
+  rescue
+    # It has ended already (its result crossed the stop): nothing to hold back.
+    ArgumentError -> false
+  end
+
+  # The code's picks are released before the script reports its end (the
+  # fleet would release them too when the code dies, but later than that).
+  defp release_all(s) do
+    Dolphin.Fleet.release_all(s.ctx.fleet, s.code)
+  catch
+    # No fleet (a script without vehicles in a bare test): nothing was picked.
+    :exit, _ -> :ok
+  end
+
+  # Real ms to wait for the runs' trees to stop: each platform stop is bounded by stop_timeout_ms.
+  defp stop_bound(s), do: s.ctx.clock.real_ms(s.ctx.stop_timeout_ms * 3)
+
+  # `stop_reason`: why a script that did not end on its own was stopped.
+  defp finish(s, result, stop_reason \\ nil) do
+    release_all(s)
+
     {name, reason} =
       case result do
+        {:ok, :stopped} -> {:stopped, Dolphin.Engine.Failure.format_reason(stop_reason)}
         {:ok, r} -> {r, nil}
         {:error, %Error{kind: kind} = e} -> {if(kind == :halted, do: :halted, else: :failed), Error.format(e)}
       end

@@ -33,26 +33,59 @@ defmodule Dolphin.Engine.Failure do
   @doc "A reason (of a failure or of a stop) as text."
   @spec format_reason(term()) :: String.t()
   def format_reason({:exception, e, _stack}), do: format_exception(e)
+  def format_reason({:exit, reason}) when reason in [:killed, :shutdown], do: exit_words(reason)
   def format_reason({:exit, reason}), do: "exited: #{inspect(reason)}"
   def format_reason({:throw, value}), do: "threw #{inspect(value)}"
   def format_reason({:condition_error, source, e}), do: "condition `#{source}` raised #{format_exception(e)}"
   def format_reason({:vehicle_lost, id}), do: "vehicle #{id} lost"
-  def format_reason({:platform_exited, reason}), do: "its process exited without reporting (#{inspect(reason)})"
+  def format_reason({:platform_exited, reason}), do: "its process #{exit_words(reason)} without reporting"
   def format_reason({:stop_timeout, ms}), do: "did not stop within #{ms} ms of clock time (killed)"
   def format_reason({:stop_failed, reason}), do: "could not be stopped: #{format_reason(reason)}"
   def format_reason({:handler_failed, reason}), do: "the on_error handler failed: #{format_reason(reason)}"
-  def format_reason({:crashed, reason}), do: "engine process crashed: #{inspect(reason)}"
+  def format_reason({:crashed, :start_timeout}), do: "engine process crashed: its subtree did not start in time (killed)"
+  def format_reason({:crashed, :no_report_after_stop}), do: "engine process crashed: it did not report after it was stopped (killed)"
+  def format_reason({:crashed, reason}), do: "engine process #{exit_words(reason)}"
   def format_reason({:condition_met, id}), do: "stopped: the condition of task #{id} held"
   def format_reason({:time_limit, id}), do: "stopped: time limit of task #{id}"
   def format_reason({:sibling_failed, _}), do: "stopped: a concurrent task failed"
-  def format_reason({:parent_exit, reason}), do: "stopped: its parent went away (#{inspect(reason)})"
+  def format_reason({:parent_exit, reason}), do: "stopped: what started it #{parent_words(reason)}"
+  def format_reason({:signal, :sigint}), do: "stopped: the run was interrupted (SIGINT, Ctrl-C)"
+  def format_reason({:signal, :sigterm}), do: "stopped: the run was terminated (SIGTERM)"
+  def format_reason(:stopped), do: "stopped: the task above it ended"
+  def format_reason(:halted), do: "stopped: the script halted"
   def format_reason(:operator), do: "stopped by the operator"
   def format_reason(:shutdown), do: "stopped: shutting down"
   def format_reason(:deadline), do: "stopped: the run's time (--for) is over"
   def format_reason(%__MODULE__{} = f), do: message(f)
   def format_reason(%_{__exception__: true} = e), do: format_exception(e)
   def format_reason(text) when is_binary(text), do: text
+  # A reason no one foresaw: the term itself is the most truthful text.
   def format_reason(other), do: inspect(other)
+
+  @doc """
+  How a process ended, in words (an exit reason as text; an unforeseen
+  reason is shown as it is).
+
+      iex> Dolphin.Engine.Failure.exit_words(:killed)
+      "was killed"
+      iex> Dolphin.Engine.Failure.exit_words({:shutdown, :deadline})
+      "was shut down (stopped: the run's time (--for) is over)"
+      iex> Dolphin.Engine.Failure.exit_words({:badmatch, 3})
+      "crashed ({:badmatch, 3})"
+  """
+  @spec exit_words(term()) :: String.t()
+  def exit_words(:normal), do: "ended"
+  def exit_words(:killed), do: "was killed"
+  def exit_words(:shutdown), do: "was shut down"
+  def exit_words({:shutdown, reason}), do: "was shut down (#{format_reason(reason)})"
+  def exit_words(:noproc), do: "was not running"
+  def exit_words({%_{__exception__: true} = e, _stack}), do: "raised #{format_exception(e)}"
+  def exit_words(other), do: "crashed (#{inspect(other)})"
+
+  # The parent's end: a parent that ended normally was stopped (a script's code at its end).
+  defp parent_words(:normal), do: "ended"
+  defp parent_words(:killed), do: "was stopped"
+  defp parent_words(reason), do: exit_words(reason)
 
   defp format_exception(%_{__exception__: true} = e), do: "#{inspect(e.__struct__)}: #{Exception.message(e)}"
   defp format_exception(other), do: inspect(other)

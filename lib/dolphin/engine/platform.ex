@@ -29,7 +29,9 @@ defmodule Dolphin.Engine.Platform do
      returns once the vehicle is safe — for a mission: holding position — and
      the process is gone or going. Reasons: `{:condition_met, task_id}`,
      `{:time_limit, task_id}`, `{:sibling_failed, key}`, `{:vehicle_lost, id}`,
-     `:operator`, `{:parent_exit, reason}`, `:shutdown`, ...
+     `:operator`, `{:parent_exit, reason}`, `:shutdown`, and when a script
+     ends early `:deadline` (`--for`), `:halted`, `{:signal, :sigint | :sigterm}`
+     (`Dolphin.Engine.Failure.format_reason/1` says each in words)
   5. If the engine's leaf dies without calling `stop` (killed), the link
      delivers an exit signal: a platform whose vehicle must not fly on blind
      traps exits and makes it safe on `{:EXIT, owner, reason}`.

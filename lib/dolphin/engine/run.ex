@@ -49,10 +49,12 @@ defmodule Dolphin.Engine.Run do
 
   @doc false
   # Waits (bounded, real ms) until the runs started by `caller` have ended.
-  def await_runs_of(caller, bound) do
-    runs = for {pid, %{caller: ^caller}} <- Registry.select(Dolphin.Engine.Registry, [{{{:run, :_}, :"$1", :"$2"}, [], [{{:"$1", :"$2"}}]}]), do: pid
-    await(runs, bound)
-  end
+  def await_runs_of(caller, bound), do: await(runs_of(caller), bound)
+
+  @doc false
+  # The runs `caller` started (not those started by their tasks' code).
+  def runs_of(caller),
+    do: for({pid, %{caller: ^caller}} <- Registry.select(Dolphin.Engine.Registry, [{{{:run, :_}, :"$1", :"$2"}, [], [{{:"$1", :"$2"}}]}]), do: pid)
 
   @doc false
   def await(pids, bound) do

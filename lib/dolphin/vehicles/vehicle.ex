@@ -219,10 +219,14 @@ defmodule Dolphin.Vehicles.Vehicle do
   end
 
   defp crashed(s, {:mission, operation, type}, reason),
-    do: %Dolphin.MissionError{operation: operation, vehicle: s.sysid, mission_type: type, result: :error, detail: "stopped: #{inspect(reason)}"}
+    do: %Dolphin.MissionError{operation: operation, vehicle: s.sysid, mission_type: type, result: :error, detail: "stopped: #{op_words(reason)}"}
 
   defp crashed(s, {:command, command}, reason),
-    do: %Dolphin.CommandError{command: command, vehicle: s.sysid, result: :failed, attempts: 0, detail: "stopped: #{inspect(reason)}"}
+    do: %Dolphin.CommandError{command: command, vehicle: s.sysid, result: :failed, attempts: 0, detail: "stopped: #{op_words(reason)}"}
+
+  # Why a protocol exchange ended without an answer, in words.
+  defp op_words(:caller_gone), do: "its caller went away"
+  defp op_words(reason), do: "the exchange #{Dolphin.Engine.Failure.exit_words(reason)}"
 
   # The data streams (no answer expected), then each message interval as a
   # command of our own through the command protocol, so that its

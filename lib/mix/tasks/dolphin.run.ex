@@ -65,11 +65,22 @@ defmodule Mix.Tasks.Dolphin.Run do
   are used (`config :dolphin, links: [...]`), or if there are none the ground
   station listens on `Dolphin.Link.default_endpoint/0` (`udpin:0.0.0.0:14550`).
 
+  ## Interrupting a run
+
+  Ctrl-C (SIGINT) or SIGTERM stops the script the way `--for` does: running
+  tasks are stopped (each says why), vehicles are told to hold, the summary
+  is printed and the events end with `script_finished` (result `stopped`).
+  A second Ctrl-C or SIGTERM exits at once, without waiting for the stops.
+  (Ctrl-C is caught by `c_src/dolphin_signals.c`, built into `priv/` with
+  the project; without a C compiler it opens the Erlang BREAK menu. Under
+  IEx both keep their usual meaning.)
+
   ## Exit status
 
   0 — the script completed (or `--for` ended it); 1 — the script failed
   (could not compile, a task failed, `halt`, a pick timed out: the message
-  says what, where and why); 2 — bad usage.
+  says what, where and why); 2 — bad usage; 130 — Ctrl-C (SIGINT) stopped
+  it; 143 — SIGTERM stopped it (128 + the signal's number, as a shell says).
   """
 
   use Mix.Task
@@ -111,7 +122,8 @@ defmodule Mix.Tasks.Dolphin.Run do
       {:ok, _} = Task.start(fn -> main(argv, plain: true, ask: &Dolphin.Console.Runs.ask/1) end)
       :ok
     else
-      case main(argv) do
+      # Ctrl-C and SIGTERM stop the script (see "Exit status"), not the VM.
+      case main(argv, signals: true) do
         0 -> :ok
         code -> exit({:shutdown, code})
       end
@@ -123,9 +135,10 @@ defmodule Mix.Tasks.Dolphin.Run do
   @doc """
   Does the work of the task and returns the exit status. `io` options:
   `:out` and `:err` (devices, default `:stdio` and `:stderr`), `:plain`
-  (never the status block) and `:ask` (the script's `ask/1`).
+  (never the status block), `:ask` (the script's `ask/1`) and `:signals`
+  (SIGINT and SIGTERM stop the script, `Dolphin.Run.Signals`).
   """
-  @spec main([String.t()], keyword()) :: 0 | 1 | 2
+  @spec main([String.t()], keyword()) :: 0 | 1 | 2 | 130 | 143
   def main(argv, io \\ []) do
     out = Keyword.get(io, :out, :stdio)
     err = Keyword.get(io, :err, :stderr)
@@ -138,7 +151,7 @@ defmodule Mix.Tasks.Dolphin.Run do
           {:ok, script} ->
             try do
               Mix.Task.run("app.start")
-              run_script(script, opts ++ Keyword.take(io, [:plain, :ask]), out, err)
+              run_script(script, opts ++ Keyword.take(io, [:plain, :ask, :signals]), out, err)
             after
               Dolphin.Script.purge(script)
             end
@@ -231,6 +244,7 @@ defmodule Mix.Tasks.Dolphin.Run do
     if k = opts[:speedup], do: Dolphin.Clock.set_speedup(k)
     origin = Dolphin.Clock.now_ms()
     Process.put(:dolphin_run_cleanup, [])
+    catch_signals(opts)
 
     try do
       opts = Keyword.put(opts, :tlog, tlog_path(opts, script.file))
@@ -239,10 +253,10 @@ defmodule Mix.Tasks.Dolphin.Run do
 
       case start_vehicles(opts, out) do
         :ok ->
-          result = Dolphin.Script.run(script, [for: opts[:for_ms]] ++ Keyword.take(opts, [:ask]))
+          {result, signal} = run_until_signal(script, opts)
           # The log and the status block end before the summary is printed below them.
           stop_outputs()
-          report(result, opts, out, err)
+          report(result, Keyword.put(opts, :signal, signal), out, err)
 
         {:error, message} ->
           IO.puts(err, "mix dolphin.run: #{message}")
@@ -256,6 +270,57 @@ defmodule Mix.Tasks.Dolphin.Run do
       Dolphin.Clock.set_speedup(previous_speedup)
     end
   end
+
+  # The script's result and the signal that stopped it (nil: none did).
+  defp run_until_signal(script, opts) do
+    {:ok, pid} = Dolphin.Script.start(script, [for: opts[:for_ms]] ++ Keyword.take(opts, [:ask]))
+    if opts[:signals], do: await_script(pid, nil), else: {Dolphin.Script.await(pid), nil}
+  end
+
+  defp await_script(pid, signal) do
+    receive do
+      {Dolphin.Script, ^pid, result} ->
+        {result, signal}
+
+      {:dolphin_signal, sig} when signal == nil ->
+        Dolphin.Script.stop(pid, {:signal, sig})
+        # In the log, so that the status block stays whole below it.
+        send(Process.get(:dolphin_run_printer), {:note, "#{signal_name(sig)}: stopping the script (tasks stop, vehicles hold); again to exit at once"})
+        await_script(pid, sig)
+    end
+  end
+
+  # From the start of the run to its end (teardown included), a first SIGINT
+  # or SIGTERM comes to this process as a message: the script stops as with
+  # `--for` (at once if it comes before the script starts). A second one ends
+  # the run at once, with the status of that signal.
+  defp catch_signals(opts) do
+    if opts[:signals] do
+      owner = self()
+
+      relay =
+        spawn_link(fn ->
+          receive do: ({:dolphin_signal, _} = first -> send(owner, first))
+          receive do: ({:dolphin_signal, sig} -> System.halt(signal_status(sig)))
+        end)
+
+      Dolphin.Run.Signals.catch_signals(relay)
+      defer(
+        fn ->
+          Dolphin.Run.Signals.release_signals()
+          Process.unlink(relay)
+          Process.exit(relay, :kill)
+        end,
+        :signals
+      )
+    end
+  end
+
+  defp signal_name(:sigint), do: "interrupted (SIGINT, Ctrl-C)"
+  defp signal_name(:sigterm), do: "terminated (SIGTERM)"
+
+  defp signal_status(:sigint), do: 130
+  defp signal_status(:sigterm), do: 143
 
   # Every run that talks MAVLink keeps a telemetry log unless told not to:
   # logs/<date>-<time>-<script>.tlog, readable by pymavlink, MAVExplorer and
@@ -304,7 +369,8 @@ defmodule Mix.Tasks.Dolphin.Run do
       end)
 
     receive do: ({:printer_ready, ^printer} -> :ok)
-    defer(fn -> stop_printer(printer) end, :output)
+    Process.put(:dolphin_run_printer, printer)
+    defer(fn -> stop_printer(Process.delete(:dolphin_run_printer)) end, :output)
 
     if path = opts[:events] do
       case Dolphin.Telemetry.Writer.start_link(path: path, origin_ms: origin) do
@@ -407,9 +473,14 @@ defmodule Mix.Tasks.Dolphin.Run do
   end
 
   defp report({:ok, %{result: :stopped, duration_ms: ms}}, opts, out, _err) do
-    why = if opts[:for_ms], do: "--for #{opts[:for]} is over", else: "stopped"
+    why =
+      case opts[:signal] do
+        nil -> if opts[:for_ms], do: "--for #{opts[:for]} is over", else: "stopped"
+        sig -> signal_name(sig)
+      end
+
     IO.puts(out, "script stopped after #{seconds(ms)} of clock time (#{why}): running tasks were stopped, vehicles hold")
-    0
+    if sig = opts[:signal], do: signal_status(sig), else: 0
   end
 
   defp report({:error, %Dolphin.Script.Error{} = e}, _opts, _out, err) do
@@ -461,6 +532,9 @@ defmodule Mix.Tasks.Dolphin.Run do
 
       {:dolphin, :events, event} ->
         print_loop(print(track(p, event), event))
+
+      {:note, text} ->
+        print_loop(print_line(p, Dolphin.Clock.now_ms(), text))
     end
   end
 
@@ -474,14 +548,15 @@ defmodule Mix.Tasks.Dolphin.Run do
 
   defp print(p, event) do
     case line(event, p.quiet) do
-      nil ->
-        p
-
-      text ->
-        log = "[#{String.pad_leading(seconds(event.at_ms - p.origin), 9)}] #{text}\n"
-        # The block is erased, the line written where it was, and the block drawn again below.
-        if p.live, do: draw_block(%{p | block: 0}, [StatusBlock.erase(p.block), log]), else: IO.write(p.out, log) && p
+      nil -> p
+      text -> print_line(p, event.at_ms, text)
     end
+  end
+
+  defp print_line(p, at_ms, text) do
+    log = "[#{String.pad_leading(seconds(at_ms - p.origin), 9)}] #{text}\n"
+    # The block is erased, the line written where it was, and the block drawn again below.
+    if p.live, do: draw_block(%{p | block: 0}, [StatusBlock.erase(p.block), log]), else: IO.write(p.out, log) && p
   end
 
   # Which task each vehicle flies, for the status block.
@@ -531,8 +606,9 @@ defmodule Mix.Tasks.Dolphin.Run do
 
   defp line(%{event: :task_finished, result: :failed} = e, _), do: "task #{e.task_id} #{e.kind} failed: #{e.reason}"
 
+  # "stopped (the run's time (--for) is over)": the result is not said twice.
   defp line(%{event: :task_finished, vehicle: v} = e, _) when v != nil,
-    do: "task #{e.task_id} #{e.kind} #{inspect(e.name)} on vehicle #{v}: #{e.result}#{if e.reason, do: " (#{e.reason})", else: ""}"
+    do: "task #{e.task_id} #{e.kind} #{inspect(e.name)} on vehicle #{v}: #{e.result}#{if e.reason, do: " (#{String.replace_prefix(e.reason, "stopped: ", "")})", else: ""}"
 
   defp line(_event, _quiet), do: nil
 end

@@ -143,6 +143,9 @@ defmodule Dolphin.Console.FormatTest do
       assert Format.event_text(%{event: :task_finished, task_id: 4, kind: :mission, name: "Survey", result: :failed, reason: "vehicle lost"}) ==
                ~s[task 4 mission "Survey": failed (vehicle lost)]
 
+      assert Format.event_text(%{event: :task_finished, task_id: 4, kind: :mission, name: "Survey", result: :stopped, reason: "stopped: the script halted"}) ==
+               ~s[task 4 mission "Survey": stopped (the script halted)]
+
       assert Format.event_text(%{event: :mode_changed, vehicle: 2, mode: :rtl}) == "vehicle 2 mode RTL"
       assert Format.event_text(%{event: :allocated, run: 7, allocation: %{"8" => 1, "9" => 2}}) == "run 7: task 8 on vehicle 1, task 9 on vehicle 2"
     end

@@ -117,6 +117,37 @@ defmodule Mix.Tasks.Dolphin.RunTest do
       assert out =~ "--for 2s is over"
     end
 
+    test "--for: the events file reads as the history: tasks stopped, then vehicles released, then the script's end", %{tmp_dir: dir} do
+      path =
+        script(dir, "patrol2.exs", """
+        use Dolphin.Script
+        vs = pick(count: 2)
+        forever do
+          execute %{vs => Dolphin.Engine.concurrent([Dolphin.Engine.TestPlatform.task("a", duration: :infinity), Dolphin.Engine.TestPlatform.task("b", duration: :infinity)])}
+        end
+        """)
+
+      events = Path.join(dir, "events.jsonl")
+      assert {0, out, ""} = main([path, "--fake", "2", "--for", "2s", "--speedup", "10", "--events", events])
+      lines = events |> File.read!() |> String.split("\n", trim: true) |> Enum.map(&:jiffy.decode(&1, [:return_maps, null_term: nil]))
+      names = Enum.map(lines, & &1["event"])
+
+      finished = for %{"event" => "task_finished"} = e <- lines, do: e
+      assert length(finished) == length(for "task_started" <- names, do: 1)
+      assert Enum.all?(finished, &(&1["result"] == "stopped"))
+      # The stop says why in words, not as an Erlang term.
+      assert Enum.all?(finished, &(&1["reason"] == "stopped: the run's time (--for) is over")), inspect(finished)
+      refute out =~ ":killed"
+      assert out =~ ~s[test "a" on vehicle 1: stopped (the run's time (--for) is over)]
+
+      released = Enum.find_index(names, &(&1 == "released"))
+      assert released, "no released event"
+      last_finished = names |> Enum.with_index() |> Enum.filter(&(elem(&1, 0) == "task_finished")) |> List.last() |> elem(1)
+      assert last_finished < released, "released before a task stopped: #{inspect(names)}"
+      assert List.last(names) == "script_finished"
+      assert %{"result" => "stopped", "reason" => "stopped: the run's time (--for) is over"} = List.last(lines)
+    end
+
     test "a failing script: status 1, what, where, why", %{tmp_dir: dir} do
       path =
         script(dir, "fails.exs", """
