@@ -265,7 +265,7 @@ defmodule Dolphin.Console.Runs do
       {:ok, ids} ->
         case Fleet.pick(fleet, self(), id: ids, count: length(ids), timeout: 0) do
           {:ok, _set} -> start_run(server, fleet, task)
-          {:error, e} -> send(server, {:start_failed, self(), "cannot pick #{inspect(ids)}: #{Exception.message(e)}"})
+          {:error, e} -> send(server, {:start_failed, self(), "cannot pick #{Dolphin.Fleet.VehicleSet.format(ids)}: #{Exception.message(e)}"})
         end
 
       {:error, why} ->

@@ -52,7 +52,7 @@ defmodule Dolphin.Engine.Failure do
   def format_reason(%__MODULE__{} = f), do: message(f)
   def format_reason(%_{__exception__: true} = e), do: format_exception(e)
   def format_reason(text) when is_binary(text), do: text
-  def format_reason(other), do: inspect(other)
+  def format_reason(other), do: inspect(other, charlists: :as_lists)
 
   defp format_exception(%_{__exception__: true} = e), do: "#{inspect(e.__struct__)}: #{Exception.message(e)}"
   defp format_exception(other), do: inspect(other)
