@@ -184,6 +184,7 @@ defmodule Dolphin.Vehicles.Vehicle do
 
     case module.start_link(request, opts) do
       {:ok, pid} ->
+        s = if what in [{:mission, :upload, :mission}, {:mission, :clear, :mission}], do: replace_mission(s), else: s
         %{s | ops: Map.put(s.ops, key, %{pid: pid, from: request.reply_to, monitor: monitor, what: what})}
 
       {:error, reason} ->
@@ -191,6 +192,20 @@ defmodule Dolphin.Vehicles.Vehicle do
         if monitor, do: Process.demonitor(monitor, [:flush])
         next_op(s, key)
     end
+  end
+
+  # From the first MISSION_COUNT or MISSION_CLEAR_ALL on, the vehicle's
+  # previous mission is going, whatever the transfer's outcome: its progress
+  # is forgotten, and subscribers told, before the new mission can report any.
+  defp replace_mission(s) do
+    new = State.mission_replaced(s.state)
+
+    case State.changes(s.state, new) do
+      [] -> :ok
+      changes -> PubSub.publish({:vehicle, s.sysid}, {:state, s.sysid, changes})
+    end
+
+    %{s | state: new}
   end
 
   defp next_op(s, key) do
