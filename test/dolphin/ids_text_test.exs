@@ -98,6 +98,13 @@ defmodule Dolphin.IdsTextTest do
 
         names_id!(StatusBlock.vehicle_line(%Vehicle{id: id, mission_progress: {0, 0}}, "go"), id)
         names_id!(Failure.format_reason({:no_such_vehicles, [id]}), id)
+        names_id!(Format.event_text(%{event: :signal_posted, key: :ready, value: [id]}), id)
+        names_id!(Dolphin.Console.Runs.result_text({:unexpected, [id]}), id)
+
+        # A script's message of a list of ids.
+        :ok = Dolphin.Script.message([id])
+        assert_receive {:dolphin, :events, %{event: :message, text: text}}
+        names_id!(text, id)
       end)
     )
   end

@@ -278,8 +278,8 @@ defmodule Dolphin.Console.Format do
   def event_text(%{event: :condition_met} = e),
     do: "task #{e.task_id}: #{e.condition} holds" <> if(e.branch, do: " (branch #{e.branch})", else: "")
 
-  def event_text(%{event: :signal_posted} = e), do: "signal #{inspect(e.key)} posted: #{inspect(e.value)}"
-  def event_text(%{event: :signal_consumed} = e), do: "signal #{inspect(e.key)} consumed: #{inspect(e.value)}"
+  def event_text(%{event: :signal_posted} = e), do: "signal #{inspect(e.key)} posted: #{inspect(e.value, charlists: :as_lists)}"
+  def event_text(%{event: :signal_consumed} = e), do: "signal #{inspect(e.key)} consumed: #{inspect(e.value, charlists: :as_lists)}"
   def event_text(%{event: :script_started} = e), do: "script #{e.script} started"
 
   def event_text(%{event: :script_finished} = e),

@@ -226,7 +226,7 @@ defmodule Dolphin.Console.Runs do
   def result_text({:error, %Dolphin.Engine.Failure{} = f}), do: "failed: " <> Dolphin.Engine.Failure.message(f)
   def result_text({:error, %{__exception__: true} = e}), do: "failed: " <> Exception.message(e)
   def result_text({:crashed, reason}), do: "its console worker crashed: #{inspect(reason)}"
-  def result_text(other), do: inspect(other)
+  def result_text(other), do: inspect(other, charlists: :as_lists)
 
   defp task_text(task) do
     t = Dolphin.Engine.Task.new!(task)
