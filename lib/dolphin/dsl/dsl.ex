@@ -34,8 +34,8 @@ defmodule Dolphin.DSL do
   condition that depends on an unknown value is **not met**, and reading one
   never raises:
 
-    * a comparison (`<`, `<=`, `>`, `>=`, `==`, `!=`, `===`, `!==`) with an
-      unknown side is unknown — `battery(v) >= 0.9` does not hold before
+    * a comparison (`<`, `<=`, `>`, `>=`, `==`, `!=`, `===`, `!==`, `in`)
+      with an unknown side is unknown — `battery(v) >= 0.9` does not hold before
       the battery is reported (Elixir alone would say `nil >= 0.9` is true);
     * `not`/`!` of unknown is unknown: `not (battery(v) < 0.3)` does not hold
       either;
@@ -260,6 +260,8 @@ defmodule Dolphin.DSL do
 
   defp logic({op, _, [a, b]}) when op in @comparisons,
     do: quote(do: Dolphin.Engine.Cond.compare(unquote(op), unquote(operand(a)), unquote(operand(b))))
+
+  defp logic({:in, _, [a, b]}), do: quote(do: Dolphin.Engine.Cond.member(unquote(operand(a)), unquote(b)))
 
   defp logic({:__block__, meta, [_ | _] = exprs}) do
     {init, [last]} = Enum.split(exprs, -1)

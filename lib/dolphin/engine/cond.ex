@@ -21,7 +21,7 @@ defmodule Dolphin.Engine.Cond do
   `position/1`, `mode/1`, `mission_progress/1`, ...). In Erlang's term order
   `nil >= 0.9` is true, so the script macros compile a condition with
   three-valued logic instead of `Kernel`'s (see `Dolphin.DSL`, "Unknown
-  values"), through `compare/3`, `arith/2,3`, `truth/1`, `negate/1`,
+  values"), through `compare/3`, `member/2`, `arith/2,3`, `truth/1`, `negate/1`,
   `both/2` and `either/2`. Their third truth value, unknown, is
   `unknown/0`; a condition whose value is unknown is not met, exactly as
   one whose value is `false` or `nil`.
@@ -107,6 +107,10 @@ defmodule Dolphin.Engine.Cond do
   def compare(op, a, b) when op in @comparisons do
     if unknown?(a) or unknown?(b), do: @unknown, else: apply(Kernel, op, [a, b])
   end
+
+  @doc "`a in b`: unknown when `a` or `b` is unknown (`mode(v) in [:rtl, :land]` of an unseen mode)."
+  @spec member(term(), term()) :: boolean() | atom()
+  def member(a, b), do: if(unknown?(a) or unknown?(b), do: @unknown, else: Enum.member?(b, a))
 
   @doc "`a op b` for `:+`, `:-`, `:*`, `:/`; `nil` (unknown) when either side is unknown, instead of raising."
   @spec arith(atom(), term(), term()) :: number() | nil

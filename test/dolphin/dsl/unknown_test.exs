@@ -66,7 +66,12 @@ defmodule Dolphin.DSL.UnknownTest do
             quote(do: unquote(cmp) != true),
             quote(do: unquote(read) != nil)
           ]
-        end)
+        end) ++
+        [
+          quote(do: unquote(read) in [unquote(known)]),
+          quote(do: unquote(read) not in [unquote(known)]),
+          quote(do: not (unquote(read) in [unquote(known), nil]))
+        ]
 
     met = [
       quote(do: unquote({:<, [], [read, known]}) or true),
@@ -100,6 +105,7 @@ defmodule Dolphin.DSL.UnknownTest do
     assert evaluate(condition(mode(v) != :auto or battery(v) < 0.1)) == {:ok, true}
     assert evaluate(condition(position(v) != nil)) == {:ok, true}
     assert evaluate(condition(mode(v) == :auto)) == {:ok, false}
+    assert evaluate(condition(mode(v) in [:guided, :auto] and mode(v) not in [:rtl])) == {:ok, true}
 
     TestSource.set(ctx.source, id, battery: nil)
     assert evaluate(condition(battery(v) >= 0.9)) == {:ok, false}
