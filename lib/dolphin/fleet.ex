@@ -220,7 +220,7 @@ defmodule Dolphin.Fleet do
       req.type && "type #{inspect(req.type)}",
       req.payload != [] && "payload #{inspect(req.payload)}",
       req.region && "in #{inspect(req.region)}",
-      req.id && "id #{inspect(req.id)}"
+      req.id && "id #{VehicleSet.format(req.id)}"
     ]
     |> Enum.filter(& &1)
     |> Enum.join(", ")

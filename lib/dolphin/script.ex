@@ -307,7 +307,8 @@ defmodule Dolphin.Script do
   @doc "An operator log line (a `message` event; printed by `mix dolphin.run`)."
   @spec message(term()) :: :ok
   def message(text) do
-    text = if is_binary(text), do: text, else: inspect(text)
+    # Lists print as lists: `message(ids)` of vehicle 99 is "[99]", not 'c'.
+    text = if is_binary(text), do: text, else: inspect(text, charlists: :as_lists)
     ctx = Context.current()
     Dolphin.Telemetry.emit(:message, %{text: text}, ctx.clock.now_ms())
     if ctx.output, do: ctx.output.(text)
@@ -348,7 +349,7 @@ defmodule Dolphin.Script do
   @dialyzer {:nowarn_function, halt: 0}
   @spec halt(term()) :: no_return()
   def halt(text \\ "halted") do
-    text = if is_binary(text), do: text, else: inspect(text)
+    text = if is_binary(text), do: text, else: inspect(text, charlists: :as_lists)
     ctx = Context.current()
     if ctx.script && ctx.owner != self(), do: send(ctx.script, {:"$dolphin_halt", text})
     raise Halt, message: text

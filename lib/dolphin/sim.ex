@@ -234,10 +234,10 @@ defmodule Dolphin.Sim do
       {:ok, ids} when is_list(ids) and ids != [] ->
         if Enum.all?(ids, &(is_integer(&1) and &1 in 1..254)) and length(Enum.uniq(ids)) == length(ids),
           do: {:ok, ids},
-          else: {:error, "bad :sysids #{inspect(ids)}: distinct system ids in 1..254"}
+          else: {:error, "bad :sysids #{inspect(ids, charlists: :as_lists)}: distinct system ids in 1..254"}
 
       {:ok, other} ->
-        {:error, "bad :sysids #{inspect(other)}: a list of system ids"}
+        {:error, "bad :sysids #{inspect(other, charlists: :as_lists)}: a list of system ids"}
 
       :error ->
         count = Keyword.get(opts, :count, 1)
@@ -264,7 +264,7 @@ defmodule Dolphin.Sim do
   defp free(sysids) do
     case Enum.filter(sysids, &whereis/1) do
       [] -> :ok
-      taken -> {:error, "simulated vehicles #{inspect(taken)} are already running"}
+      taken -> {:error, "simulated vehicles #{Dolphin.Fleet.VehicleSet.format(taken)} are already running"}
     end
   end
 

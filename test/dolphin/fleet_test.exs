@@ -177,7 +177,9 @@ defmodule Dolphin.FleetTest do
       assert %Vehicle{type: :uav, payloads: [:camera], battery: 0.42, mode: :auto, armed?: true, mission_progress: {2, 7}, landed: :in_air, relative_altitude: 80.0} = v
       assert %Geo.Location{lat: 40.1, lon: -7.3, h: 900.0} = v.position
       assert MAVLinkSource.apply_changes(nil, v, type: 11).type == :usv
-      assert MAVLinkSource.apply_changes(nil, v, mission: %{current: nil, total: nil, state: nil, reached: nil}).mission_progress == {0, 0}
+      # No MISSION_CURRENT yet: the progress is unknown, not "nothing reached of no items".
+      assert MAVLinkSource.apply_changes(nil, v, mission: %{current: nil, total: nil, state: nil, reached: nil}).mission_progress == nil
+      assert MAVLinkSource.apply_changes(nil, v, mission: %{current: 0, total: 4, state: :active, reached: nil}).mission_progress == {0, 4}
     end
 
     test "an unknown vehicle" do

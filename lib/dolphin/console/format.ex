@@ -4,6 +4,7 @@ defmodule Dolphin.Console.Format do
   # lines, the watch ticker. Every function takes plain data and returns a
   # string (no trailing newline), so all of it is tested without IEx.
 
+  alias Dolphin.Fleet.VehicleSet
   alias Dolphin.Geo.Location
 
   # --- generic -----------------------------------------------------------------
@@ -235,7 +236,7 @@ defmodule Dolphin.Console.Format do
     do: "item #{c || 0}/#{t}" <> if(is_integer(p[:reached]) and p[:reached] > 0, do: ", reached #{p.reached}", else: "")
 
   def task_state(_old, %{event: :task_progress, progress: p}) when is_map(p),
-    do: p |> Enum.sort() |> Enum.map_join(", ", fn {k, v} -> "#{k} #{inspect(v)}" end)
+    do: p |> Enum.sort() |> Enum.map_join(", ", fn {k, v} -> "#{k} #{inspect(v, charlists: :as_lists)}" end)
 
   def task_state(old, _event), do: old || "running"
 
@@ -261,9 +262,9 @@ defmodule Dolphin.Console.Format do
   def event_text(%{event: :mission_uploaded} = e),
     do: "vehicle #{e.vehicle}: mission #{inspect(e.name)} uploaded (#{e.items} items, #{e.duration_ms} ms, #{e.retransmissions} retransmissions)"
 
-  def event_text(%{event: :picked} = e), do: "picked #{inspect(e.vehicles)} (#{e.requirement})"
+  def event_text(%{event: :picked} = e), do: "picked #{VehicleSet.format(e.vehicles)} (#{e.requirement})"
   def event_text(%{event: :pick_failed} = e), do: "pick failed: #{e.reason}"
-  def event_text(%{event: :released} = e), do: "released #{inspect(e.vehicles)}"
+  def event_text(%{event: :released} = e), do: "released #{VehicleSet.format(e.vehicles)}"
   def event_text(%{event: :allocated} = e), do: "run #{e.run}: " <> Enum.map_join(Enum.sort(e.allocation), ", ", fn {t, v} -> "task #{t} on vehicle #{v}" end)
 
   def event_text(%{event: :task_started} = e),
@@ -278,14 +279,14 @@ defmodule Dolphin.Console.Format do
   def event_text(%{event: :condition_met} = e),
     do: "task #{e.task_id}: #{e.condition} holds" <> if(e.branch, do: " (branch #{e.branch})", else: "")
 
-  def event_text(%{event: :signal_posted} = e), do: "signal #{inspect(e.key)} posted: #{inspect(e.value)}"
-  def event_text(%{event: :signal_consumed} = e), do: "signal #{inspect(e.key)} consumed: #{inspect(e.value)}"
+  def event_text(%{event: :signal_posted} = e), do: "signal #{inspect(e.key)} posted: #{inspect(e.value, charlists: :as_lists)}"
+  def event_text(%{event: :signal_consumed} = e), do: "signal #{inspect(e.key)} consumed: #{inspect(e.value, charlists: :as_lists)}"
   def event_text(%{event: :script_started} = e), do: "script #{e.script} started"
 
   def event_text(%{event: :script_finished} = e),
     do: "script #{e.script}: #{e.result}" <> if(e.reason, do: " (#{String.replace_prefix(e.reason, "stopped: ", "")})", else: "")
 
-  def event_text(%{event: name} = e), do: "#{name} " <> inspect(Map.drop(e, [:event, :at_ms]))
+  def event_text(%{event: name} = e), do: "#{name} " <> inspect(Map.drop(e, [:event, :at_ms]), charlists: :as_lists)
 
   # --- one vehicle -------------------------------------------------------------------
 

@@ -226,7 +226,7 @@ defmodule Dolphin.Console.Runs do
   def result_text({:error, %Dolphin.Engine.Failure{} = f}), do: "failed: " <> Dolphin.Engine.Failure.message(f)
   def result_text({:error, %{__exception__: true} = e}), do: "failed: " <> Exception.message(e)
   def result_text({:crashed, reason}), do: "its console worker #{Dolphin.Engine.Failure.exit_words(reason)}"
-  def result_text(other), do: inspect(other)
+  def result_text(other), do: inspect(other, charlists: :as_lists)
 
   defp task_text(task) do
     t = Dolphin.Engine.Task.new!(task)
@@ -265,7 +265,7 @@ defmodule Dolphin.Console.Runs do
       {:ok, ids} ->
         case Fleet.pick(fleet, self(), id: ids, count: length(ids), timeout: 0) do
           {:ok, _set} -> start_run(server, fleet, task)
-          {:error, e} -> send(server, {:start_failed, self(), "cannot pick #{inspect(ids)}: #{Exception.message(e)}"})
+          {:error, e} -> send(server, {:start_failed, self(), "cannot pick #{Dolphin.Fleet.VehicleSet.format(ids)}: #{Exception.message(e)}"})
         end
 
       {:error, why} ->

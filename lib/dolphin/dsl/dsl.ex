@@ -25,6 +25,35 @@ defmodule Dolphin.DSL do
   `connected?(v) and mode(v) == :guided` — re-evaluated whenever what they
   read changes.
 
+  ## Unknown values
+
+  What a vehicle has not reported yet reads as `nil`: `battery/1`,
+  `position/1`, `altitude/1`, `relative_altitude/1`, `mode/1` and
+  `mission_progress/1` until the first report, `distance/2`, `near?/3` and
+  `contains?/2` of an unknown position, arithmetic on an unknown value. A
+  condition that depends on an unknown value is **not met**, and reading one
+  never raises:
+
+    * a comparison (`<`, `<=`, `>`, `>=`, `==`, `!=`, `===`, `!==`, `in`)
+      with an unknown side is unknown — `battery(v) >= 0.9` does not hold before
+      the battery is reported (Elixir alone would say `nil >= 0.9` is true);
+    * `not`/`!` of unknown is unknown: `not (battery(v) < 0.3)` does not hold
+      either;
+    * `and`/`&&`, `or`/`||` follow three-valued logic: `false and unknown`
+      is false, `true or unknown` is true, anything else with an unknown
+      side is unknown; `connected?(v) == false or battery(v) < 0.2` holds as
+      soon as the vehicle is lost, whatever its battery;
+    * any other expression is unknown when its value is `nil`;
+    * a condition holds only when its value is true; unknown is treated as
+      false, so `wait_for`, `until`, `one_of` and `all_of` keep waiting.
+
+  `x == nil` and `x != nil` (a literal `nil`) ask whether a value is known:
+  `wait_for(position(v) != nil)` waits for the first position. The same
+  rules apply to the function given to `filter/2` when it is written in
+  place (`filter(vs, fn v -> battery(v) > 0.5 end)` leaves out the
+  vehicles whose battery is unknown). Functions the condition calls are
+  evaluated as Elixir: the rules apply to the condition's own expression.
+
   `>>>` binds tighter than `|||`, as `>>` and `|` do in Dolphin:
   `a >>> b ||| c` is `(a >>> b) ||| c`.
   """
@@ -85,10 +114,15 @@ defmodule Dolphin.DSL do
 
   @doc """
   The vehicles of `set` for which `fun`, given a one-vehicle set, is truthy.
+  A `fn` written in place is a condition (see "Unknown values"): a vehicle
+  whose value is unknown is left out.
 
       charged = filter(all, fn v -> battery(v) > 0.9 end)
   """
-  defdelegate filter(set, fun), to: VehicleSet
+  defmacro filter(set, {:fn, meta, [{:->, arrow_meta, [args, body]}]}),
+    do: quote(do: VehicleSet.filter(unquote(set), unquote({:fn, meta, [{:->, arrow_meta, [args, quote(do: Dolphin.Engine.Cond.met?(unquote(logic(body))))]}]})))
+
+  defmacro filter(set, fun), do: quote(do: VehicleSet.filter(unquote(set), unquote(fun)))
 
   @doc """
   A vehicle not heard for longer than `ms` (clock ms; default 20 s) is lost:
@@ -180,13 +214,14 @@ defmodule Dolphin.DSL do
   def connected?(v), do: Fleet.state(v, :connected?).connected?
 
   @doc """
-  `{reached, total}`: the sequence number of the last mission item the
-  vehicle reached and the number of items of its mission after home
-  (`{0, 0}` before any mission).
+  `{reached, total}`: the last mission item reached (0 before the first) and
+  the items of the mission, counted from its last upload; #{@unknown}
+  Tuples compare element by element: `mission_progress(v) >= {3, 0}` holds
+  once item 3 is reached.
 
-      until(survey, elem(mission_progress(v), 0) >= 5)
+      until(survey, mission_progress(v) >= {5, 0})
   """
-  @spec mission_progress(vehicle()) :: {non_neg_integer(), non_neg_integer()}
+  @spec mission_progress(vehicle()) :: {non_neg_integer(), non_neg_integer()} | nil
   def mission_progress(v), do: Fleet.state(v, :mission_progress).mission_progress
 
   # --- tasks ---
@@ -475,9 +510,63 @@ defmodule Dolphin.DSL do
 
   defp cond_ast(c, caller) do
     quote do
-      Dolphin.Engine.Cond.new(fn -> unquote(c) end, source: unquote(Macro.to_string(c)), meta: unquote(meta(caller)))
+      Dolphin.Engine.Cond.new(fn -> unquote(logic(c)) end, source: unquote(Macro.to_string(c)), meta: unquote(meta(caller)))
     end
   end
+
+  @comparisons [:<, :>, :<=, :>=, :==, :!=, :===, :!==]
+  @equality [:==, :!=, :===, :!==]
+  @arithmetic [:+, :-, :*, :/]
+
+  # A condition's expression in three-valued logic (see "Unknown values" in
+  # the moduledoc and Dolphin.Engine.Cond): its boolean skeleton (and, or,
+  # not, &&, ||, !, comparisons, the last expression of a block) is rewritten;
+  # anything else is a leaf, evaluated as written, nil reading as unknown.
+  # `and`/`or` keep Elixir's short-circuit where the left side decides alone.
+  defp logic({op, _, [a, b]}) when op in [:and, :&&] do
+    quote do
+      case Dolphin.Engine.Cond.truth(unquote(logic(a))) do
+        false -> false
+        left -> Dolphin.Engine.Cond.both(left, unquote(logic(b)))
+      end
+    end
+  end
+
+  defp logic({op, _, [a, b]}) when op in [:or, :||] do
+    quote do
+      case Dolphin.Engine.Cond.truth(unquote(logic(a))) do
+        true -> true
+        left -> Dolphin.Engine.Cond.either(left, unquote(logic(b)))
+      end
+    end
+  end
+
+  defp logic({op, _, [a]}) when op in [:not, :!], do: quote(do: Dolphin.Engine.Cond.negate(unquote(logic(a))))
+
+  # `x == nil`, `x != nil` ask whether a value is known: a plain test.
+  defp logic({op, _, [a, b]} = test) when op in @equality and (a == nil or b == nil), do: test
+
+  defp logic({op, _, [a, b]}) when op in @comparisons,
+    do: quote(do: Dolphin.Engine.Cond.compare(unquote(op), unquote(operand(a)), unquote(operand(b))))
+
+  defp logic({:in, _, [a, b]}), do: quote(do: Dolphin.Engine.Cond.member(unquote(operand(a)), unquote(b)))
+
+  defp logic({:__block__, meta, [_ | _] = exprs}) do
+    {init, [last]} = Enum.split(exprs, -1)
+    {:__block__, meta, init ++ [logic(last)]}
+  end
+
+  defp logic(leaf), do: quote(do: Dolphin.Engine.Cond.truth(unquote(leaf)))
+
+  # An operand of a comparison: arithmetic on an unknown value is unknown
+  # (not an ArithmeticError); a nested condition keeps its unknowns.
+  defp operand({op, _, [a, b]}) when op in @arithmetic,
+    do: quote(do: Dolphin.Engine.Cond.arith(unquote(op), unquote(operand(a)), unquote(operand(b))))
+
+  defp operand({:-, _, [a]}) when not is_number(a), do: quote(do: Dolphin.Engine.Cond.arith(:-, unquote(operand(a))))
+  defp operand({op, _, args} = c) when op in [:and, :or, :not, :&&, :||, :!] and is_list(args), do: logic(c)
+  defp operand({op, _, [_, _]} = c) when op in @comparisons, do: logic(c)
+  defp operand(other), do: other
 
   defp action_ast(name, block, caller) do
     quote do

@@ -161,7 +161,7 @@ defmodule Dolphin.Script.Runner do
         %Error{kind: :failed, file: script.file, line: line, message: "#{inspect(e.__struct__)}: #{Exception.message(e)}", reason: e}
 
       {kind, reason} ->
-        %Error{kind: :failed, file: script.file, line: line, message: "#{kind}: #{inspect(reason)}", reason: reason}
+        %Error{kind: :failed, file: script.file, line: line, message: "#{kind}: #{inspect(reason, charlists: :as_lists)}", reason: reason}
     end
   end
 

@@ -138,31 +138,38 @@ defmodule Dolphin.DSL.Values do
   def degrees(n) when is_number(n), do: n / 1
   def degrees(other), do: raise(ArgumentError, "degrees/1 takes a number, got: #{inspect(other)}")
 
+  # An unknown position (nil: `position(v)` before the vehicle reports one)
+  # gives an unknown answer, which a condition treats as not met (see
+  # Dolphin.DSL, "Unknown values"), rather than an error that fails the task.
+
   @doc """
   The geodesic distance in metres between two locations, on WGS84, heights
-  aside (see `Dolphin.Geo.distance/2`).
+  aside (see `Dolphin.Geo.distance/2`); nil if either is nil (unknown).
 
       iex> round(distance(location(40.0, -7.0), location(40.001, -7.0)))
       111
   """
-  @spec distance(Geo.Location.t(), Geo.Location.t()) :: float()
+  @spec distance(Geo.Location.t() | nil, Geo.Location.t() | nil) :: float() | nil
+  def distance(p, q) when p == nil or q == nil, do: nil
   def distance(p, q), do: Geo.distance(p, q)
 
   @doc """
-  Whether `q` is within `radius` metres of `p`.
+  Whether `q` is within `radius` metres of `p`; nil if either location is nil (unknown).
 
       iex> near?(location(40.0, -7.0), location(40.001, -7.0), 200)
       true
   """
-  @spec near?(Geo.Location.t(), Geo.Location.t(), number()) :: boolean()
+  @spec near?(Geo.Location.t() | nil, Geo.Location.t() | nil, number()) :: boolean() | nil
+  def near?(p, q, _radius) when p == nil or q == nil, do: nil
   def near?(p, q, radius), do: Geo.near?(p, q, radius)
 
   @doc """
-  Whether location `p` lies within `area`.
+  Whether location `p` lies within `area`; nil if `p` is nil (unknown).
 
       iex> contains?(area(location(40.0, -7.0), 100), location(40.01, -7.0))
       false
   """
-  @spec contains?(Geo.Area.t(), Geo.Location.t()) :: boolean()
+  @spec contains?(Geo.Area.t(), Geo.Location.t() | nil) :: boolean() | nil
+  def contains?(_area, nil), do: nil
   def contains?(area, p), do: Geo.contains?(area, p)
 end

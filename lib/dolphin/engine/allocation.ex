@@ -28,7 +28,7 @@ defmodule Dolphin.Engine.Allocation do
   """
 
   alias Dolphin.Engine.{AllocationError, On, PlatformTask, Task}
-  alias Dolphin.Fleet.Vehicle
+  alias Dolphin.Fleet.{Vehicle, VehicleSet}
 
   @typedoc "A platform task to place: `path` lists `{node id, kind, child index}` from the root."
   @type leaf :: %{id: integer(), name: String.t(), requirements: map(), allowed: [non_neg_integer()] | nil, path: [{integer(), atom(), non_neg_integer()}]}
@@ -135,7 +135,7 @@ defmodule Dolphin.Engine.Allocation do
 
     error(
       leaf,
-      "#{describe(leaf)} could use vehicle(s) #{inspect(candidates[leaf.id])}, but they are needed at the same time by " <>
+      "#{describe(leaf)} could use vehicle(s) #{VehicleSet.format(candidates[leaf.id])}, but they are needed at the same time by " <>
         Enum.map_join(rivals, ", ", &"#{inspect(&1.name)} (task #{&1.id})") <>
         "; the vehicles at hand: #{describe_vehicles(vehicles)}"
     )
@@ -149,8 +149,8 @@ defmodule Dolphin.Engine.Allocation do
       [
         req[:type] && "type #{inspect(req[:type])}",
         req[:payloads] not in [nil, []] && "payload #{inspect(req[:payloads])}",
-        req[:id] && "id #{req[:id]}",
-        allowed && "one of #{inspect(allowed)} (on)"
+        req[:id] && "id #{VehicleSet.format(req[:id])}",
+        allowed && "one of #{VehicleSet.format(allowed)} (on)"
       ]
       |> Enum.filter(& &1)
 

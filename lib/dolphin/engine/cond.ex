@@ -14,6 +14,27 @@ defmodule Dolphin.Engine.Cond do
   evaluated), a signal (`poll/1`) — and on a slow tick for conditions on
   anything else (time). A closure returning another closure or condition is
   evaluated through it, so `until(t, my_condition)` works with a variable.
+
+  ## Unknown values
+
+  What a vehicle has not reported yet reads as `nil` (`battery/1`,
+  `position/1`, `mode/1`, `mission_progress/1`, ...). In Erlang's term order
+  `nil >= 0.9` is true, so the script macros compile a condition with
+  three-valued logic instead of `Kernel`'s (see `Dolphin.DSL`, "Unknown
+  values"), through `compare/3`, `member/2`, `arith/2,3`, `truth/1`, `negate/1`,
+  `both/2` and `either/2`. Their third truth value, unknown, is
+  `unknown/0`; a condition whose value is unknown is not met, exactly as
+  one whose value is `false` or `nil`.
+
+      iex> alias Dolphin.Engine.Cond
+      iex> Cond.compare(:>=, nil, 0.9) == Cond.unknown()
+      true
+      iex> Cond.negate(Cond.compare(:<, nil, 0.3)) == Cond.unknown()
+      true
+      iex> Cond.either(Cond.unknown(), true)
+      true
+      iex> Cond.evaluate(Cond.new(fn -> Cond.compare(:>=, nil, 0.9) end))
+      {:ok, false}
   """
 
   @enforce_keys [:fun]
@@ -22,6 +43,8 @@ defmodule Dolphin.Engine.Cond do
   @type t :: %__MODULE__{fun: (() -> term()), source: String.t(), meta: map()}
 
   @deps :"$dolphin_deps"
+  # A private atom: no value a script computes can be mistaken for it.
+  @unknown :"$dolphin_unknown"
 
   @doc "A condition from a 0-arity function; options `:source` (text), `:meta`."
   @spec new((() -> term()), keyword()) :: t()
@@ -61,7 +84,93 @@ defmodule Dolphin.Engine.Cond do
   defp value(%Dolphin.Engine.Condition{cond: c}), do: value(c)
   defp value(v), do: v
 
-  defp truthy(v), do: v != nil and v != false
+  defp truthy(v), do: v != nil and v != false and v != @unknown
+
+  # --- three-valued logic of compiled conditions ---
+
+  @comparisons [:<, :>, :<=, :>=, :==, :!=, :===, :!==]
+  @arithmetic [:+, :-, :*, :/]
+
+  @doc "The truth value \"unknown\" of compiled conditions: neither true nor false."
+  @spec unknown() :: atom()
+  def unknown, do: @unknown
+
+  @doc "Whether a value is unknown: `nil` (not reported yet) or `unknown/0`."
+  @spec unknown?(term()) :: boolean()
+  def unknown?(v), do: v == nil or v == @unknown
+
+  @doc """
+  `a op b` for a comparison operator (`:<`, `:>=`, `:==`, ...), unknown when
+  either side is unknown: nothing compares with a value nobody has seen.
+  """
+  @spec compare(atom(), term(), term()) :: boolean() | atom()
+  def compare(op, a, b) when op in @comparisons do
+    if unknown?(a) or unknown?(b), do: @unknown, else: apply(Kernel, op, [a, b])
+  end
+
+  @doc "`a in b`: unknown when `a` or `b` is unknown (`mode(v) in [:rtl, :land]` of an unseen mode)."
+  @spec member(term(), term()) :: boolean() | atom()
+  def member(a, b), do: if(unknown?(a) or unknown?(b), do: @unknown, else: Enum.member?(b, a))
+
+  @doc "`a op b` for `:+`, `:-`, `:*`, `:/`; `nil` (unknown) when either side is unknown, instead of raising."
+  @spec arith(atom(), term(), term()) :: number() | nil
+  def arith(op, a, b) when op in @arithmetic do
+    if unknown?(a) or unknown?(b), do: nil, else: apply(Kernel, op, [a, b])
+  end
+
+  @doc "Unary `-a`; `nil` when `a` is unknown."
+  @spec arith(:-, term()) :: number() | nil
+  def arith(:-, a), do: if(unknown?(a), do: nil, else: -a)
+
+  @doc """
+  The truth value of an expression in a condition: `true`, `false` or
+  unknown (`nil` reads as unknown). A function or condition is evaluated
+  through, as `evaluate/1` does.
+  """
+  @spec truth(term()) :: boolean() | atom()
+  def truth(v) do
+    case value(v) do
+      v when v == nil or v == @unknown -> @unknown
+      false -> false
+      _ -> true
+    end
+  end
+
+  @doc "Negation: `not unknown` is unknown (a `not` never turns an unseen value into a met condition)."
+  @spec negate(term()) :: boolean() | atom()
+  def negate(v) do
+    case truth(v) do
+      true -> false
+      false -> true
+      other -> other
+    end
+  end
+
+  @doc "Conjunction: false if either side is false, true if both are true, else unknown."
+  @spec both(term(), term()) :: boolean() | atom()
+  def both(a, b) do
+    case {truth(a), truth(b)} do
+      {false, _} -> false
+      {_, false} -> false
+      {true, true} -> true
+      _ -> @unknown
+    end
+  end
+
+  @doc "Disjunction: true if either side is true, false if both are false, else unknown."
+  @spec either(term(), term()) :: boolean() | atom()
+  def either(a, b) do
+    case {truth(a), truth(b)} do
+      {true, _} -> true
+      {_, true} -> true
+      {false, false} -> false
+      _ -> @unknown
+    end
+  end
+
+  @doc "Whether a truth value (see `truth/1`) is true: what `filter/2` keeps and a condition needs to be met."
+  @spec met?(term()) :: boolean()
+  def met?(v), do: truth(v) == true
 
   @doc """
   Called by what conditions read (vehicle state, signals): true when a

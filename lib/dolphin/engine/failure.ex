@@ -60,7 +60,7 @@ defmodule Dolphin.Engine.Failure do
   def format_reason(%_{__exception__: true} = e), do: format_exception(e)
   def format_reason(text) when is_binary(text), do: text
   # A reason no one foresaw: the term itself is the most truthful text.
-  def format_reason(other), do: inspect(other)
+  def format_reason(other), do: inspect(other, charlists: :as_lists)
 
   @doc """
   How a process ended, in words (an exit reason as text; an unforeseen
@@ -80,7 +80,7 @@ defmodule Dolphin.Engine.Failure do
   def exit_words({:shutdown, reason}), do: "was shut down (#{format_reason(reason)})"
   def exit_words(:noproc), do: "was not running"
   def exit_words({%_{__exception__: true} = e, _stack}), do: "raised #{format_exception(e)}"
-  def exit_words(other), do: "crashed (#{inspect(other)})"
+  def exit_words(other), do: "crashed (#{inspect(other, charlists: :as_lists)})"
 
   # The parent's end: a parent that ended normally was stopped (a script's code at its end).
   defp parent_words(:normal), do: "ended"

@@ -130,7 +130,7 @@ defmodule Dolphin.Engine.Task do
   defp fmt(%Action{name: n}, _), do: "action(#{inspect(n)})"
   defp fmt(%Condition{cond: c}, _), do: "condition(#{c.source})"
   defp fmt(%PlatformTask{} = t, _), do: PlatformTask.label(t) |> inspect()
-  defp fmt(%On{task: t, vehicles: v}, _), do: "on(#{fmt(t, 0)}, #{inspect(v)})"
+  defp fmt(%On{task: t, vehicles: v}, _), do: "on(#{fmt(t, 0)}, #{Dolphin.Fleet.VehicleSet.format(v)})"
   defp fmt(%Until{task: t, cond: c}, _), do: "until(#{fmt(t, 0)}, #{c.source})"
   defp fmt(%During{task: t, duration: d}, _), do: "during(#{d}, #{fmt(t, 0)})"
   defp fmt(%WaitFor{cond: c, then: nil}, _), do: "wait_for(#{c.source})"

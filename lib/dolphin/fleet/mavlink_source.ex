@@ -49,7 +49,9 @@ defmodule Dolphin.Fleet.MAVLinkSource do
   defp change({:mode, mode}, v), do: %{v | mode: mode}
   defp change({:armed, armed}, v), do: %{v | armed?: armed}
   defp change({:landed, landed}, v), do: %{v | landed: landed}
-  defp change({:mission, m}, v), do: %{v | mission_progress: {m.reached || 0, m.total || 0}}
+  # No MISSION_CURRENT yet: the total is not known, nor is the progress.
+  defp change({:mission, %{total: nil}}, v), do: %{v | mission_progress: nil}
+  defp change({:mission, m}, v), do: %{v | mission_progress: {m.reached || 0, m.total}}
   defp change({:lost, lost}, v), do: %{v | connected?: not lost}
   defp change(_other, v), do: v
 

@@ -12,10 +12,11 @@ defmodule Dolphin.Fleet.TestSource do
       :ok = Dolphin.Fleet.TestSource.lose(:fakes, 1)                 # {:vehicle_lost, 1}
 
   A vehicle's attributes are the fields of `Dolphin.Fleet.Vehicle` (`type`
-  defaults to `:uav`, `battery` to 1.0, `position` to a point near Porto); a
-  change is a keyword list of those fields. The state lives in a public ETS
-  table named after the source, so `set/3` publishes from the caller with no
-  process in between. Vehicle ids are system ids: tests running at the same
+  defaults to `:uav`, `battery` to 1.0, `position` to a point near Porto,
+  `mission_progress` to `{0, 0}`, no mission; `nil` is a value not reported
+  yet); a change is a keyword list of those fields. The state lives in a
+  public ETS table named after the source, so `set/3` publishes from the
+  caller with no process in between. Vehicle ids are system ids: tests running at the same
   time should use different ones, as the pub/sub topics are shared.
   """
 
@@ -45,7 +46,7 @@ defmodule Dolphin.Fleet.TestSource do
   @doc "Adds a vehicle and publishes its discovery."
   @spec add(atom(), non_neg_integer(), keyword()) :: :ok
   def add(name, id, attrs \\ []) when is_integer(id) and id >= 0 do
-    vehicle = struct!(%Vehicle{id: id, type: :uav, battery: 1.0, position: Dolphin.Geo.Location.new(41.1780, -8.5980, 100)}, check!(attrs))
+    vehicle = struct!(%Vehicle{id: id, type: :uav, battery: 1.0, position: Dolphin.Geo.Location.new(41.1780, -8.5980, 100), mission_progress: {0, 0}}, check!(attrs))
     :ets.insert(name, {id, %{vehicle | id: id, payloads: Enum.sort(vehicle.payloads)}})
     PubSub.publish(:vehicles, {:vehicle_discovered, id})
   end

@@ -14,7 +14,7 @@ defmodule Dolphin.Fleet.Vehicle do
   | `relative_altitude` | metres above home, or `nil` |
   | `mode` | flight mode name (`:guided`, `:auto`, ...) or `nil` |
   | `armed?`, `connected?` | booleans |
-  | `mission_progress` | `{reached, total}`: last mission item reached and items in the mission |
+  | `mission_progress` | `{reached, total}`: last mission item reached (0 before the first) and items in the mission, since the mission was last uploaded; `nil` until the vehicle reports its mission |
   | `landed` | `:on_ground`, `:in_air`, `:takeoff`, `:landing` or `nil` |
   """
 
@@ -27,7 +27,7 @@ defmodule Dolphin.Fleet.Vehicle do
             mode: nil,
             armed?: false,
             connected?: true,
-            mission_progress: {0, 0},
+            mission_progress: nil,
             landed: nil
 
   @type class :: :uav | :ugv | :usv | :uuv | :other
@@ -41,7 +41,7 @@ defmodule Dolphin.Fleet.Vehicle do
           mode: atom() | nil,
           armed?: boolean(),
           connected?: boolean(),
-          mission_progress: {non_neg_integer(), non_neg_integer()},
+          mission_progress: {non_neg_integer(), non_neg_integer()} | nil,
           landed: atom() | nil
         }
 

@@ -61,6 +61,26 @@ defmodule Dolphin.Fleet.VehicleSet do
   @spec size(t()) :: non_neg_integer()
   def size(%__MODULE__{ids: ids}), do: length(ids)
 
+  @doc """
+  System ids as text for people: one id as its number, a list of ids or a set
+  as a bracketed list of numbers. Every message, event line and table that
+  names vehicles prints them through this.
+
+      iex> Dolphin.Fleet.VehicleSet.format([9, 99])
+      "[9, 99]"
+      iex> Dolphin.Fleet.VehicleSet.format(Dolphin.Fleet.VehicleSet.new(99))
+      "[99]"
+      iex> Dolphin.Fleet.VehicleSet.format(99)
+      "99"
+  """
+  # `inspect/1` would print a list whose ids all happen to be printable
+  # character codes as a charlist ([99] as 'c'), so the list is spelled out.
+  @spec format(t() | [id()] | id()) :: String.t()
+  def format(%__MODULE__{ids: ids}), do: format(ids)
+  def format(id) when is_integer(id), do: Integer.to_string(id)
+  def format(ids) when is_list(ids), do: "[" <> Enum.map_join(ids, ", ", &format/1) <> "]"
+  def format(other), do: inspect(other, charlists: :as_lists)
+
   @doc "The one vehicle of a one-vehicle set (or a bare system id); raises `ArgumentError` otherwise."
   @spec one!(t() | id(), atom()) :: id()
   def one!(set, function \\ :vehicle)
@@ -68,7 +88,7 @@ defmodule Dolphin.Fleet.VehicleSet do
   def one!(id, _function) when is_integer(id) and id >= 0, do: id
 
   def one!(other, function),
-    do: raise(ArgumentError, "#{function} needs a one-vehicle set, got: #{inspect(other)}")
+    do: raise(ArgumentError, "#{function} needs a one-vehicle set, got: #{inspect(other, charlists: :as_lists)}")
 
   defimpl Enumerable do
     def count(%{ids: ids}), do: {:ok, length(ids)}
@@ -82,6 +102,6 @@ defmodule Dolphin.Fleet.VehicleSet do
   end
 
   defimpl Inspect do
-    def inspect(%{ids: ids}, _opts), do: "#Vehicles<#{inspect(ids)}>"
+    def inspect(set, _opts), do: "#Vehicles<#{Dolphin.Fleet.VehicleSet.format(set)}>"
   end
 end

@@ -28,8 +28,13 @@ defmodule Dolphin.Run.StatusBlock do
   def vehicle_line(%Vehicle{} = v, task) do
     mode = v.mode |> mode_name() |> String.pad_trailing(9)
     state = if(not v.connected?, do: "LOST", else: if(v.armed?, do: "armed", else: "disarmed")) |> String.pad_trailing(9)
-    {reached, total} = v.mission_progress
-    item = if total > 0, do: "item #{String.pad_leading(Integer.to_string(reached), 2)}/#{total}", else: "no mission"
+    item =
+      case v.mission_progress do
+        nil -> "item  ?/?"
+        {_reached, 0} -> "no mission"
+        {reached, total} -> "item #{String.pad_leading(Integer.to_string(reached), 2)}/#{total}"
+      end
+
     alt = if v.relative_altitude, do: "alt #{String.pad_leading(Integer.to_string(round(v.relative_altitude)), 4)} m", else: "alt    ? m"
 
     line = "#{String.pad_leading(Integer.to_string(v.id), 3)}  #{mode} #{state} #{battery(v.battery)}  #{alt}  #{String.pad_trailing(item, 10)}"

@@ -11,7 +11,7 @@ defmodule Dolphin.Vehicles.State do
   | `position` | GLOBAL_POSITION_INT | `%{lat, lon, alt, relative_alt, heading}`: degrees, metres, degrees (nil when unknown) |
   | `home` | HOME_POSITION | `%{lat, lon, alt}` |
   | `battery` | SYS_STATUS, BATTERY_STATUS (id 0) | remaining fraction 0.0..1.0, `nil` until reported |
-  | `mission` | MISSION_CURRENT, MISSION_ITEM_REACHED | `%{current, total, state, reached}` |
+  | `mission` | MISSION_CURRENT, MISSION_ITEM_REACHED | `%{current, total, state, reached}` of the mission on the vehicle: all `nil` again when a new one is uploaded or it is cleared (`mission_replaced/1`) |
   | `landed` | EXTENDED_SYS_STATE | `:on_ground`, `:in_air`, `:takeoff`, `:landing` or nil |
   | `status_texts` | STATUSTEXT | the last 20 `{severity, text}`, newest first |
   | `components` | HEARTBEAT of other components | e.g. `:camera`, `:gimbal` |
@@ -167,12 +167,15 @@ defmodule Dolphin.Vehicles.State do
   defp message(state, _compid, _other), do: state
 
   @doc """
-  The state when a new mission is uploaded or the mission cleared: nothing is
-  known of its progress yet (the old `current`, `total`, `state` and
-  `reached` described the previous mission) until the vehicle reports it.
+  The state once the vehicle's mission list is being replaced (an upload or a
+  clear has begun): what was known of the previous mission (the item reached,
+  current, total, state) no longer describes it, so it is unknown until the
+  vehicle reports again. Otherwise the next mission would start "at" the
+  previous one's last item reached, and reaching an item of the same number
+  would go unnoticed.
   """
-  @spec new_mission(t()) :: t()
-  def new_mission(%__MODULE__{} = state), do: %{state | mission: %{current: nil, total: nil, state: nil, reached: nil}}
+  @spec mission_replaced(t()) :: t()
+  def mission_replaced(%__MODULE__{} = state), do: %{state | mission: new(state.sysid).mission}
 
   @doc """
   The public fields that differ between two states, as `{field, new_value}`

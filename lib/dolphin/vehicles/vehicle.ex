@@ -164,21 +164,6 @@ defmodule Dolphin.Vehicles.Vehicle do
   end
 
   # `from` is nil for the vehicle process's own requests (nobody to answer).
-  # A new mission (or none) starts its progress from nothing: the reports of
-  # the previous one (reached, current) are not this one's.
-  defp forget_progress(s, %{operation: operation, mission_type: :mission}) when operation in [:upload, :clear] do
-    new = State.new_mission(s.state)
-
-    case State.changes(s.state, new) do
-      [] -> :ok
-      changes -> PubSub.publish({:vehicle, s.sysid}, {:state, s.sysid, changes})
-    end
-
-    %{s | state: new}
-  end
-
-  defp forget_progress(s, _request), do: s
-
   defp run_op(s, key, module, request, opts, from) do
     request = Map.merge(request, %{sysid: s.sysid, reply_to: from})
     monitor = if from, do: Process.monitor(elem(from, 0))
@@ -192,7 +177,6 @@ defmodule Dolphin.Vehicles.Vehicle do
   end
 
   defp start_op(s, key, module, request, opts, monitor) do
-    s = if module == MissionProtocol, do: forget_progress(s, request), else: s
     link = s.link
     sysid = s.sysid
     request = Map.put(request, :send, fn message -> Connection.send_message(link, sysid, message) end)
@@ -200,6 +184,7 @@ defmodule Dolphin.Vehicles.Vehicle do
 
     case module.start_link(request, opts) do
       {:ok, pid} ->
+        s = if what in [{:mission, :upload, :mission}, {:mission, :clear, :mission}], do: replace_mission(s), else: s
         %{s | ops: Map.put(s.ops, key, %{pid: pid, from: request.reply_to, monitor: monitor, what: what})}
 
       {:error, reason} ->
@@ -207,6 +192,20 @@ defmodule Dolphin.Vehicles.Vehicle do
         if monitor, do: Process.demonitor(monitor, [:flush])
         next_op(s, key)
     end
+  end
+
+  # From the first MISSION_COUNT or MISSION_CLEAR_ALL on, the vehicle's
+  # previous mission is going, whatever the transfer's outcome: its progress
+  # is forgotten, and subscribers told, before the new mission can report any.
+  defp replace_mission(s) do
+    new = State.mission_replaced(s.state)
+
+    case State.changes(s.state, new) do
+      [] -> :ok
+      changes -> PubSub.publish({:vehicle, s.sysid}, {:state, s.sysid, changes})
+    end
+
+    %{s | state: new}
   end
 
   defp next_op(s, key) do

@@ -124,7 +124,7 @@ defmodule Mix.Tasks.Dolphin.Console do
   defp start_sim(n, opts, link_opts) do
     # The console's simulated fleet lives as long as the VM.
     case Dolphin.Sim.Local.start(n, [seed: Keyword.get(opts, :seed, 1)] ++ link_opts) do
-      {:ok, sim} -> {:ok, ["#{n} simulated vehicle(s) #{inspect(sim.sysids)} on 127.0.0.1:#{sim.port}"]}
+      {:ok, sim} -> {:ok, ["#{n} simulated vehicle(s) #{Dolphin.Fleet.VehicleSet.format(sim.sysids)} on 127.0.0.1:#{sim.port}"]}
       error -> error
     end
   end

@@ -432,7 +432,7 @@ defmodule Mix.Tasks.Dolphin.Run do
     case Dolphin.Sim.Local.start(n, [seed: Keyword.get(opts, :seed, 1)] ++ link_opts) do
       {:ok, sim} ->
         defer(fn -> Dolphin.Sim.Local.stop(sim) end)
-        IO.puts(out, "#{n} simulated vehicle(s) #{inspect(sim.sysids)} on 127.0.0.1:#{sim.port}")
+        IO.puts(out, "#{n} simulated vehicle(s) #{Dolphin.Fleet.VehicleSet.format(sim.sysids)} on 127.0.0.1:#{sim.port}")
         :ok
 
       error ->
@@ -587,28 +587,31 @@ defmodule Mix.Tasks.Dolphin.Run do
     %{p | block: length(lines)}
   end
 
-  defp line(%{event: :message, text: text}, _quiet), do: "message: #{text}"
-  defp line(_event, true), do: nil
-  defp line(%{event: :vehicle_discovered} = e, _), do: "vehicle #{e.vehicle} discovered (#{e.type})"
-  defp line(%{event: :vehicle_lost} = e, _), do: "vehicle #{e.vehicle} lost"
-  defp line(%{event: :vehicle_reconnected} = e, _), do: "vehicle #{e.vehicle} reconnected"
-  defp line(%{event: :picked} = e, _), do: "picked #{inspect(e.vehicles)} (#{e.requirement})"
-  defp line(%{event: :released} = e, _), do: "released #{inspect(e.vehicles)}"
-  defp line(%{event: :pick_failed} = e, _), do: "pick failed: #{e.reason}"
-  defp line(%{event: :mode_changed} = e, _), do: "vehicle #{e.vehicle} mode #{e.mode}"
-  defp line(%{event: :armed} = e, _), do: "vehicle #{e.vehicle} armed"
-  defp line(%{event: :disarmed} = e, _), do: "vehicle #{e.vehicle} disarmed"
-  defp line(%{event: :mission_uploaded} = e, _), do: "vehicle #{e.vehicle}: mission #{inspect(e.name)} uploaded (#{e.items} items)"
-  defp line(%{event: :mission_item_reached} = e, _), do: "vehicle #{e.vehicle} reached item #{e.seq}"
-  defp line(%{event: :condition_met} = e, _), do: "task #{e.task_id}: #{e.condition} holds"
+  @doc false
+  # One event as a log line (nil: not shown); public for the tests of how ids print.
+  def line(event, quiet)
+  def line(%{event: :message, text: text}, _quiet), do: "message: #{text}"
+  def line(_event, true), do: nil
+  def line(%{event: :vehicle_discovered} = e, _), do: "vehicle #{e.vehicle} discovered (#{e.type})"
+  def line(%{event: :vehicle_lost} = e, _), do: "vehicle #{e.vehicle} lost"
+  def line(%{event: :vehicle_reconnected} = e, _), do: "vehicle #{e.vehicle} reconnected"
+  def line(%{event: :picked} = e, _), do: "picked #{Dolphin.Fleet.VehicleSet.format(e.vehicles)} (#{e.requirement})"
+  def line(%{event: :released} = e, _), do: "released #{Dolphin.Fleet.VehicleSet.format(e.vehicles)}"
+  def line(%{event: :pick_failed} = e, _), do: "pick failed: #{e.reason}"
+  def line(%{event: :mode_changed} = e, _), do: "vehicle #{e.vehicle} mode #{e.mode}"
+  def line(%{event: :armed} = e, _), do: "vehicle #{e.vehicle} armed"
+  def line(%{event: :disarmed} = e, _), do: "vehicle #{e.vehicle} disarmed"
+  def line(%{event: :mission_uploaded} = e, _), do: "vehicle #{e.vehicle}: mission #{inspect(e.name)} uploaded (#{e.items} items)"
+  def line(%{event: :mission_item_reached} = e, _), do: "vehicle #{e.vehicle} reached item #{e.seq}"
+  def line(%{event: :condition_met} = e, _), do: "task #{e.task_id}: #{e.condition} holds"
 
-  defp line(%{event: :task_started, vehicle: v} = e, _) when v != nil, do: "task #{e.task_id} #{e.kind} #{inspect(e.name)} started on vehicle #{v}"
+  def line(%{event: :task_started, vehicle: v} = e, _) when v != nil, do: "task #{e.task_id} #{e.kind} #{inspect(e.name)} started on vehicle #{v}"
 
-  defp line(%{event: :task_finished, result: :failed} = e, _), do: "task #{e.task_id} #{e.kind} failed: #{e.reason}"
+  def line(%{event: :task_finished, result: :failed} = e, _), do: "task #{e.task_id} #{e.kind} failed: #{e.reason}"
 
   # "stopped (the run's time (--for) is over)": the result is not said twice.
-  defp line(%{event: :task_finished, vehicle: v} = e, _) when v != nil,
+  def line(%{event: :task_finished, vehicle: v} = e, _) when v != nil,
     do: "task #{e.task_id} #{e.kind} #{inspect(e.name)} on vehicle #{v}: #{e.result}#{if e.reason, do: " (#{String.replace_prefix(e.reason, "stopped: ", "")})", else: ""}"
 
-  defp line(_event, _quiet), do: nil
+  def line(_event, _quiet), do: nil
 end

@@ -50,7 +50,7 @@ defmodule Mix.Tasks.Dolphin.Sim do
     opts = parse!(argv)
     Mix.Task.run("app.start")
     sysids = start!(opts)
-    unless opts[:quiet], do: Mix.shell().info("simulating #{length(sysids)} vehicle(s) #{inspect(sysids)}, sending to #{opts[:gcs]}")
+    unless opts[:quiet], do: Mix.shell().info("simulating #{length(sysids)} vehicle(s) #{Dolphin.Fleet.VehicleSet.format(sysids)}, sending to #{opts[:gcs]}")
     wait(sysids, opts)
   end
 

@@ -187,6 +187,25 @@ defmodule Dolphin.Mission.PlatformTest do
     assert {:ok, %{photos: 1}} = Sim.info(1)
   end
 
+  test "the second of two missions reports its own progress from the start, and its take-off is an item reached", %{port: port} do
+    [{1, home}] = start_fleet(port, count: 1)
+    # The first mission's last item reached is its take-off, item 1: the second one's take-off has the same number.
+    up = Mission.new("up") |> Mission.add(C.home(home)) |> Mission.add(C.take_off(%{home | h: home.h + 20})) |> Mission.add(C.move_and_loiter_pos(0, 0, 0, 10))
+    reached_loiter = fn -> match?({:ok, %{mission: %{current: 2, reached: 1}, mode: :auto}}, Vehicles.state(1)) end
+    assert {:ok, :done} = Engine.run(Engine.on(Engine.until(up, reached_loiter), [1]))
+    Telemetry.subscribe()
+    flush()
+
+    back = Mission.new("Return to base") |> Mission.add(C.home(home)) |> Mission.add(C.take_off(%{home | h: home.h + 30})) |> Mission.add(C.return_home_and_land())
+    assert {:ok, :done} = Engine.run(Engine.on(back, [1]))
+    events = for {:dolphin, :events, e} <- flush(), do: e
+
+    [first | _] = progress = for %{event: :task_progress, progress: p} <- events, do: p
+    assert first.reached in [nil, 0], "the first progress of \"Return to base\" is #{inspect(first)}"
+    assert Enum.uniq(for(p <- progress, p.reached, do: p.reached)) == [1, 2]
+    assert %{seq: 1} = Enum.find(events, &match?(%{event: :mission_item_reached, vehicle: 1}, &1))
+  end
+
   test "requirements: a mission that takes photos needs a camera" do
     home = Dolphin.Geo.location(40.444233, -7.375234, 820)
     photo = Mission.new("photo") |> Mission.add(C.home(home)) |> Mission.add(C.take_off(home)) |> Mission.add(C.capture_photo())

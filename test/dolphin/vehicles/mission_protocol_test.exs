@@ -31,7 +31,7 @@ defmodule Dolphin.Vehicles.MissionProtocolTest do
       DynamicSupervisor.terminate_child(Dolphin.Link.Supervisor, link)
     end)
 
-    %{port: Connection.port(name)}
+    %{port: Connection.port(name), link: name}
   end
 
   defp vehicle(port, opts) do
@@ -61,6 +61,46 @@ defmodule Dolphin.Vehicles.MissionProtocolTest do
   # An item without what only addresses it (targets, position in the list).
   defp meaning(item), do: %{item | seq: 0, mission_type: 0, target_system: 0, target_component: 0}
 
+
+  # The vehicle's mission state as published, once it satisfies `fun`.
+  defp await_mission(sysid, fun) do
+    receive do
+      {:dolphin, {:vehicle, ^sysid}, {:state, ^sysid, changes}} ->
+        case Keyword.fetch(changes, :mission) do
+          {:ok, mission} -> if fun.(mission), do: mission, else: await_mission(sysid, fun)
+          :error -> await_mission(sysid, fun)
+        end
+    after
+      Clock.to_real_ms(30_000) -> flunk("vehicle #{sysid}: no mission state as expected")
+    end
+  end
+
+  defp reached(sysid, link, seq),
+    do: Vehicles.route(%Dolphin.MAVLink.Frame{sysid: sysid, compid: 1, seq: 0, message: %M.MissionItemReached{seq: seq}}, link)
+
+  test "an upload or a clear makes the vehicle forget the previous mission's progress, and say so", %{port: port, link: link} do
+    {sysid, _vehicle} = vehicle(port, [])
+    Vehicles.subscribe(sysid)
+
+    reached(sysid, link, 2)
+    await_mission(sysid, &(&1.reached == 2))
+    assert :ok = Vehicles.upload_mission(sysid, items(3))
+    assert %{reached: nil, total: nil} = await_mission(sysid, &(&1.reached == nil))
+    assert {:ok, %{mission: %{reached: nil}}} = Vehicles.state(sysid)
+
+    # The new mission reaching its item 2 is news, not "no change".
+    reached(sysid, link, 2)
+    await_mission(sysid, &(&1.reached == 2))
+    assert :ok = Vehicles.clear_mission(sysid)
+    await_mission(sysid, &(&1.reached == nil))
+    assert {:ok, %{mission: %{reached: nil}}} = Vehicles.state(sysid)
+
+    # A download leaves the mission as it is.
+    reached(sysid, link, 1)
+    await_mission(sysid, &(&1.reached == 1))
+    assert {:ok, _} = Vehicles.download_mission(sysid)
+    assert {:ok, %{mission: %{reached: 1}}} = Vehicles.state(sysid)
+  end
 
   test "upload, download and clear over a clean link, with progress", %{port: port} do
     {sysid, vehicle} = vehicle(port, [])

@@ -66,6 +66,23 @@ defmodule Dolphin.Vehicles.StateTest do
     assert s.status_texts == [{6, "Reached command #2"}]
   end
 
+  test "a mission being replaced forgets the previous one's progress; reaching an item of the same number is then a change" do
+    s = fold([{%M.MissionCurrent{seq: 2, total: 3, mission_state: 5}, []}, {%M.MissionItemReached{seq: 2}, []}, {%M.SysStatus{battery_remaining: 80}, []}])
+    assert s.mission == %{current: 2, total: 3, state: :complete, reached: 2}
+
+    fresh = State.mission_replaced(s)
+    assert fresh.mission == %{current: nil, total: nil, state: nil, reached: nil}
+    assert State.changes(s, fresh) == [mission: fresh.mission]
+    # Nothing else is forgotten.
+    assert %{fresh | mission: s.mission} == s
+
+    # The new mission's take-off has the number the last one reached.
+    again = State.apply(fresh, frame(%M.MissionItemReached{seq: 2}), 200)
+    assert State.changes(fresh, again) == [mission: %{current: nil, total: nil, state: nil, reached: 2}]
+    started = State.apply(fresh, frame(%M.MissionCurrent{seq: 1, total: 4, mission_state: 3}), 200)
+    assert started.mission == %{current: 1, total: 4, state: :active, reached: nil}
+  end
+
   test "link quality: sequence gaps per component are counted as lost" do
     s = fold([{%M.Heartbeat{}, [seq: 254]}, {%M.Heartbeat{}, [seq: 255]}, {%M.Heartbeat{}, [seq: 2]}, {%M.Heartbeat{}, [seq: 0, compid: 100]}])
     assert s.link.received == 4
