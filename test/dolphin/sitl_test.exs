@@ -101,6 +101,60 @@ defmodule Dolphin.SITLTest do
     assert result in [:unsupported, :invalid_param4, :invalid]
   end
 
+  test "Table 2 on ArduCopter: the commands the other SITL tests do not fly, each reached in order at its point" do
+    [id] = Backend.start(:sitl, 1)
+    home = home_of(id)
+    pick(id)
+    up = home.h + 20
+
+    # Item numbers: 1 take-off, 2 go_pos, 3 move_from_home, 4 loiter_turns,
+    # 5 loiter_time, 6 move_and_loiter_time_from_home, 7 jump back to 5 once,
+    # 8 return_home_and_loiter (endless: the task is stopped there).
+    mission =
+      Mission.new("table 2")
+      |> Mission.add(C.home(home))
+      |> Mission.add(C.take_off_with_yaw(%{home | h: up}, 15, 90))
+      |> Mission.add(C.go_pos(%{Geo.offset(home, 30, 0) | h: up}))
+      |> Mission.add(C.move_from_home(30, 30, 20))
+      |> Mission.add(C.loiter_turns(%{Geo.offset(home, 0, 30) | h: up}, 1, 8))
+      |> Mission.add(C.loiter_time(%{Geo.offset(home, -20, 20) | h: up}, 3))
+      |> Mission.add(C.move_and_loiter_time_from_home(-20, -20, 20, 2))
+      |> Mission.add(C.jump_to_item(5, 1))
+      |> Mission.add(C.return_home_and_loiter())
+
+    items = Mission.to_items(mission)
+    Vehicles.subscribe(id)
+    at_end = fn -> match?({:ok, %{mission: %{current: 8}, mode: :auto}}, Vehicles.state(id)) end
+    assert {:ok, :done} = Engine.run(Engine.on(Engine.until(mission, at_end), [id]))
+
+    # Where the vehicle was when each item was reported reached.
+    reached = reached_positions(id)
+    # The jump sends the vehicle back to 5 once (DO_JUMP itself is never
+    # reported reached).
+    assert Enum.map(reached, &elem(&1, 0)) == [1, 2, 3, 4, 5, 6, 5, 6]
+
+    for {seq, at} <- reached, item = Enum.at(items, seq), item.command in [16, 19] do
+      point = Geo.location(item.x / 1.0e7, item.y / 1.0e7)
+      # Positions come a few times a second: within 5 m of the point.
+      assert Geo.distance(point, at) < 5, "item #{seq} reached #{Geo.distance(point, at)} m from its point"
+    end
+  end
+
+  # {seq, location} for each MISSION_ITEM_REACHED reported, from the state changes received.
+  defp reached_positions(id, acc \\ [], last \\ nil) do
+    receive do
+      {:dolphin, {:vehicle, ^id}, {:state, ^id, changes}} ->
+        last = with {:position, p} <- List.keyfind(changes, :position, 0), do: Geo.location(p.lat, p.lon), else: (_ -> last)
+
+        case List.keyfind(changes, :mission, 0) do
+          {:mission, %{reached: seq}} when seq != nil and (acc == [] or elem(hd(acc), 0) != seq) -> reached_positions(id, [{seq, last} | acc], last)
+          _ -> reached_positions(id, acc, last)
+        end
+    after
+      0 -> Enum.reverse(acc)
+    end
+  end
+
   test "arming refused before the position estimate is ready is retried; the mission then flies and lands" do
     [id] = Backend.start(:sitl, 1)
     home = home_of(id)
