@@ -37,6 +37,15 @@ defmodule Dolphin.SITL do
   (ArduPilot's `Tools/autotest/default_params/copter.parm`). `:params` adds
   parameters on top (`%{"BATT_CAPACITY" => 500}`).
 
+  ## Cameras
+
+  Like the simulator's, each SITL vehicle carries a camera (`camera: false`
+  for none): ArduPilot's camera library is configured (`CAM1_TYPE 1`, a
+  servo-triggered camera, which SITL simulates) so that the mission items
+  IMAGE_START_CAPTURE / IMAGE_STOP_CAPTURE take photos, and the vehicles are
+  given the `:camera` payload (`config :dolphin, vehicle_payloads:`), as SITL
+  announces no camera component of its own.
+
   ## Charging
 
   SITL's battery never recharges, while the simulator's does when a vehicle
@@ -71,7 +80,7 @@ defmodule Dolphin.SITL do
   ground station knows every vehicle, or an error saying what failed (with
   the last lines of a failing instance's output).
 
-  Options: `:bin`, `:defaults`, `:params` (see above), `:first_sysid` (1),
+  Options: `:bin`, `:defaults`, `:params` (see above), `:camera` (default true), `:first_sysid` (1),
   `:home` / `:homes` (as `Dolphin.Sim.start/1`), `:charge_per_s` (charge in
   percent per second of clock time, default 0.5), `:ready_timeout_ms` (real
   time, default 60 s), `:send_to` (a function from the link's port to the
@@ -102,7 +111,7 @@ defmodule Dolphin.SITL do
               %{
                 bin: bin,
                 defaults: defaults,
-                params: Map.new(Keyword.get(opts, :params, %{})),
+                params: Map.merge(camera_params(Keyword.get(opts, :camera, true)), Map.new(Keyword.get(opts, :params, %{}))),
                 sysid: sysid,
                 instance: instance,
                 home: home,
@@ -112,6 +121,8 @@ defmodule Dolphin.SITL do
               }
             end
 
+          # Before the vehicles are first heard, so that the fleet knows them with it.
+          if Keyword.get(opts, :camera, true), do: add_payload(sysids, :camera)
           instances = Enum.map(specs, &start_instance/1)
           fleet = %{fleet | instances: instances}
           deadline = System.monotonic_time(:millisecond) + Keyword.get(opts, :ready_timeout_ms, @ready_timeout_ms)
@@ -138,6 +149,7 @@ defmodule Dolphin.SITL do
     if pid = fleet.charger, do: DynamicSupervisor.terminate_child(Dolphin.SITL.Supervisor, pid)
     Enum.each(instances, &DynamicSupervisor.terminate_child(Dolphin.SITL.Supervisor, &1))
     release_instances(numbers)
+    remove_payload(sysids, :camera)
     Enum.each(sysids, &Dolphin.Vehicles.forget/1)
     DynamicSupervisor.terminate_child(Dolphin.Link.Supervisor, link)
     :ok
@@ -269,6 +281,22 @@ defmodule Dolphin.SITL do
 
   defp last_lines(%{lines: []}), do: "; it printed nothing"
   defp last_lines(%{lines: lines}), do: "; its last lines:\n" <> Enum.map_join(lines, "\n", &("    " <> &1))
+
+  defp camera_params(true), do: %{"CAM1_TYPE" => 1}
+  defp camera_params(_), do: %{}
+
+  # Payloads the fleet gives these system ids besides their components'.
+  defp add_payload(sysids, payload) do
+    payloads = Application.get_env(:dolphin, :vehicle_payloads, %{})
+    payloads = Enum.reduce(sysids, payloads, fn id, acc -> Map.update(acc, id, [payload], &Enum.uniq([payload | List.wrap(&1)])) end)
+    Application.put_env(:dolphin, :vehicle_payloads, payloads)
+  end
+
+  defp remove_payload(sysids, payload) do
+    payloads = Application.get_env(:dolphin, :vehicle_payloads, %{})
+    payloads = Enum.reduce(sysids, payloads, fn id, acc -> Map.update(acc, id, [], &List.delete(List.wrap(&1), payload)) end)
+    Application.put_env(:dolphin, :vehicle_payloads, payloads)
+  end
 
   defp start_charger(_sysids, rate) when rate <= 0, do: nil
 

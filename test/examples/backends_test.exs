@@ -9,9 +9,8 @@ defmodule Dolphin.Examples.BackendsTest do
   # than on the other: the histories are compared as far as both went, and
   # each example names how far that must at least be.
   #
-  # Not here: photo_patrol.exs (SITL has no camera component, so its `pick`
-  # for a camera never matches) and the two relays (4 and 6 SITL instances do
-  # not keep pace on a 2-core machine at a speed-up that fits the suite's time).
+  # Not here: the two relays (4 and 6 SITL instances do not keep pace on a
+  # 2-core machine at a speed-up that fits the suite's time).
   use ExUnit.Case, async: false
 
   alias Dolphin.MAVLink.Ardupilotmega.GlobalPositionInt
@@ -35,7 +34,8 @@ defmodule Dolphin.Examples.BackendsTest do
     {"search_and_signal", 3, nil, 10, %{"Search east" => 1, "Search west" => 1, "Home" => 1}},
     {"two_vehicles", 2, "14m", 15, %{"Survey Area 1" => 1, "Survey Area 2" => 1, "Return to base" => 2}},
     {"single_vehicle", 1, "14m", 15, %{"Survey Area" => 1, "Return to base" => 1}},
-    {"standby_patrols", 2, nil, 15, %{"Tower 1" => 2, "Tower 2" => 2, "Home" => 4}}
+    {"standby_patrols", 2, nil, 15, %{"Tower 1" => 2, "Tower 2" => 2, "Home" => 4}},
+    {"photo_patrol", 1, nil, 15, %{"Field patrol" => 1, "Home" => 1}}
   ]
 
   for {name, count, for_time, sitl_speedup, least} <- @cases do

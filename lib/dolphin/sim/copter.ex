@@ -42,15 +42,18 @@ defmodule Dolphin.Sim.Copter do
     203 => "DigiCamCtrl", 206 => "SetCamTrigDst", 2000 => "ImageStartCapture", 2001 => "ImageStopCapture"
   }
 
-  @spool_up_ms 2_000
+  @spool_up_ms 3_000
 
   @defaults %{
     camera: false,
     cruise_speed: 10.0,
     climb_speed: 2.5,
     descent_speed: 1.5,
-    # WPNAV_ACCEL, WPNAV_ACCEL_Z (m/s²) and CIRCLE_RATE (°/s), ArduCopter's defaults.
-    accel: 2.5,
+    # Accelerations (m/s²) and CIRCLE_RATE (°/s) as ArduCopter flew the
+    # differential test's missions: its jerk-limited WPNAV_ACCEL of 2.5 m/s²
+    # averages about 1.5 on a leg; BRAKE decelerates hard (BRAKE_DECEL...).
+    accel: 1.5,
+    brake_accel: 8.0,
     accel_z: 1.0,
     circle_rate: 20.0,
     wp_radius: 2.0,
@@ -561,7 +564,7 @@ defmodule Dolphin.Sim.Copter do
   # ---------------------------------------------------------------------------
   # GUIDED.
 
-  # The motors spool up before the copter leaves the ground (about 2 s on
+  # The motors spool up before the copter leaves the ground (about 3 s on
   # ArduCopter SITL between "Arming motors" and the first metre).
   defp start_takeoff(c, alt) do
     %{c | nav: {:spool_up, c.time_ms + @spool_up_ms, {:climb, c.n, c.e, alt}}, landed: :takeoff, ground_since: nil}
@@ -683,7 +686,17 @@ defmodule Dolphin.Sim.Copter do
     end
   end
 
-  defp run_item(c, %{command: command} = item) when command in [16, 17, 18, 19] do
+  # LOITER_TURNS: ArduCopter flies to the edge of the circle, the point of it
+  # nearest to where it is, then circles from there.
+  defp run_item(c, %{command: 18, param3: radius} = item) do
+    {n, e, alt} = item_target(c, item)
+    d = :math.sqrt((c.n - n) ** 2 + (c.e - e) ** 2)
+    r = abs(radius)
+    {en, ee} = if d > r and d > 0.01, do: {n + (c.n - n) / d * r, e + (c.e - e) / d * r}, else: {c.n, c.e}
+    %{c | nav: {:goto, en, ee, alt}}
+  end
+
+  defp run_item(c, %{command: command} = item) when command in [16, 17, 19] do
     {n, e, alt} = item_target(c, item)
     %{c | nav: {:goto, n, e, alt}}
   end
@@ -778,7 +791,7 @@ defmodule Dolphin.Sim.Copter do
       {:goto, n, e, alt} ->
         cond do
           dist3(c, n, e, alt) > max(c.config.wp_radius, 1.0) -> c
-          command == 18 -> %{c | nav: {:circle, n, e, alt, i.param3, 0.0, nil}, item: %{item | arrived_ms: c.time_ms}}
+          command == 18 -> circle_from_edge(c, item, alt)
           true -> %{c | nav: {:hold, n, e, alt}, item: %{item | arrived_ms: c.time_ms}}
         end
 
@@ -811,6 +824,11 @@ defmodule Dolphin.Sim.Copter do
 
   # RTL and LAND items are reached when the vehicle has landed and disarmed.
   defp check_item(c, _command, _item), do: c
+
+  defp circle_from_edge(c, %{item: i} = item, alt) do
+    {n, e, _} = item_target(c, i)
+    %{c | nav: {:circle, n, e, alt, i.param3, 0.0, nil}, item: %{item | arrived_ms: c.time_ms}}
+  end
 
   # ArduCopter reports a final RETURN_TO_LAUNCH reached after the disarm, and
   # the mission complete; a final NAV_LAND never: the land item stays current
@@ -940,7 +958,8 @@ defmodule Dolphin.Sim.Copter do
 
   defp fly(c, dt) do
     {c, {wn, we, wz}} = desired_velocity(c)
-    {vn, ve} = accelerate({c.vn, c.ve}, {wn, we}, c.config.accel * dt)
+    a = if c.nav == {:brake}, do: c.config.brake_accel, else: c.config.accel
+    {vn, ve} = accelerate({c.vn, c.ve}, {wn, we}, a * dt)
     max_dz = c.config.accel_z * dt
     vz = c.vz + max(-max_dz, min(max_dz, wz - c.vz))
     heading = if vn * vn + ve * ve > 1.0, do: :math.fmod(rad2deg(:math.atan2(ve, vn)) + 360, 360), else: c.heading
@@ -1035,7 +1054,8 @@ defmodule Dolphin.Sim.Copter do
     d = :math.sqrt(dn * dn + de * de)
     angle = :math.atan2(de, dn)
     direction = if radius < 0, do: -1, else: 1
-    speed = Enum.min([c.config.circle_speed, c.speed, r * c.config.circle_rate * :math.pi() / 180])
+    # At most CIRCLE_RATE, and slow enough for the centripetal acceleration.
+    speed = Enum.min([c.config.circle_speed, c.speed, r * c.config.circle_rate * :math.pi() / 180, 0.9 * :math.sqrt(c.config.accel * r)])
 
     {un, ue} = if d < 0.01, do: {1.0, 0.0}, else: {dn / d, de / d}
     # tangent clockwise (seen from above, north up): rotate the radial vector by +90°
