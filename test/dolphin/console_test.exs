@@ -41,7 +41,7 @@ defmodule Dolphin.ConsoleTest do
 
   # Waits until what is printed matches; returns the text up to the end of
   # the line of the match and leaves the rest for the next out/1 or await_out/2.
-  defp await_out(io, pattern, tries \\ 500) do
+  defp await_out(io, pattern, tries \\ 1_500) do
     text = out(io)
 
     case Regex.run(if(is_binary(pattern), do: ~r/#{Regex.escape(pattern)}/, else: pattern), text, return: :index) do
@@ -67,7 +67,7 @@ defmodule Dolphin.ConsoleTest do
   end
 
   # Waits until every pattern was printed, in any order; returns all the text seen.
-  defp await_all(io, patterns, tries \\ 500) do
+  defp await_all(io, patterns, tries \\ 1_500) do
     text = out(io)
 
     cond do

@@ -96,7 +96,7 @@ defmodule Dolphin.Test.ManualClock do
   fleet, fake source, this clock) is idle with an empty mailbox, three checks
   in a row.
   """
-  def settle(tries \\ 5_000), do: settle(tries, 0)
+  def settle(tries \\ 50_000), do: settle(tries, 0)
 
   defp settle(0, _quiet), do: raise("ManualClock: the engine never settled: #{inspect(busy())}")
   defp settle(_tries, 3), do: :ok
