@@ -103,6 +103,35 @@ defmodule Dolphin.VehiclesTest do
     assert_receive {:dolphin, :vehicles, {:vehicle_lost, 16}}, 10_000
   end
 
+  test "a pause of the ground station itself is not the vehicle's silence", %{name: name, port: port, peer: peer} do
+    Vehicles.subscribe(:all)
+    # Set before discovery (kept for the process to come), so that its checks
+    # come every 300 ms from the start.
+    {:error, :unknown_vehicle} = Vehicles.set_timeout(17, 3_000)
+    UDPPeer.send_message(peer, port, copter(), sysid: 17)
+    assert_receive {:dolphin, :vehicles, {:vehicle_discovered, 17}}, 10_000
+    Wait.until(fn -> match?({:ok, %{link: %{received: 1}}}, Vehicles.state(17)) end)
+    vehicle = Vehicles.whereis(17)
+    [{link, _}] = Registry.lookup(Dolphin.Registry, {:link, name})
+
+    # The whole ground station held up (as a loaded host does) for longer than
+    # the timeout and a check period, while the vehicle went on sending: its
+    # frame waits for the link. Then the vehicle's process runs first, its
+    # silence check late.
+    true = :erlang.suspend_process(link)
+    true = :erlang.suspend_process(vehicle)
+    UDPPeer.send_message(peer, port, copter(), sysid: 17, seq: 1)
+    Clock.sleep(4_500)
+    true = :erlang.resume_process(vehicle)
+    assert {:ok, %{lost: false}} = Vehicles.state(17)
+    true = :erlang.resume_process(link)
+    Wait.until(fn -> match?({:ok, %{link: %{received: 2}}}, Vehicles.state(17)) end)
+    refute_received {:dolphin, :vehicles, {:vehicle_lost, 17}}
+
+    # Real silence is still silence.
+    assert_receive {:dolphin, :vehicles, {:vehicle_lost, 17}}, 10_000
+  end
+
   test "a crashed vehicle process is restarted and rebuilt from the next telemetry; a crashed link loses no vehicle",
        %{name: name, port: port, peer: peer} do
     UDPPeer.send_message(peer, port, copter(), sysid: 14)
