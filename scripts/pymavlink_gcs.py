@@ -30,6 +30,13 @@ def real(seconds):
     return seconds / speedup
 
 
+def answer(seconds):
+    """How long to wait for an answer: `seconds` of vehicle time, but never
+    under 5 s of real time -- a round trip through a loaded machine's scheduler
+    does not get faster with the speed-up (as Dolphin.Clock.retry_real_ms)."""
+    return max(real(seconds), 5.0)
+
+
 def fail(why):
     say(done=False, error=why)
     sys.exit(1)
@@ -47,9 +54,9 @@ def command(cmd, *params, accept_failure=False, tries=5):
     params = list(params) + [0] * (7 - len(params))
     for attempt in range(tries):
         mav.mav.command_long_send(sysid, 1, cmd, attempt, *params)
-        ack = mav.recv_match(type="COMMAND_ACK", blocking=True, timeout=real(2))
+        ack = mav.recv_match(type="COMMAND_ACK", blocking=True, timeout=answer(2))
         while ack is not None and ack.command != cmd:
-            ack = mav.recv_match(type="COMMAND_ACK", blocking=True, timeout=real(2))
+            ack = mav.recv_match(type="COMMAND_ACK", blocking=True, timeout=answer(2))
         if ack is not None:
             if ack.result != 0 and not accept_failure:
                 fail("command %d refused with %d" % (cmd, ack.result))
@@ -71,7 +78,7 @@ while home is None and time.time() < deadline:
         home = (msg.latitude / 1e7, msg.longitude / 1e7, msg.altitude / 1000)
 if home is None:
     fail("no HOME_POSITION")
-pos = mav.recv_match(type="GLOBAL_POSITION_INT", blocking=True, timeout=real(5))
+pos = mav.recv_match(type="GLOBAL_POSITION_INT", blocking=True, timeout=answer(5))
 if pos is None:
     fail("no GLOBAL_POSITION_INT after REQUEST_DATA_STREAM")
 say(home=home)
@@ -87,10 +94,15 @@ items = [
 mav.mav.mission_count_send(sysid, 1, len(items), 0)
 requests = []
 while True:
-    msg = mav.recv_match(type=["MISSION_REQUEST", "MISSION_REQUEST_INT", "MISSION_ACK"], blocking=True, timeout=real(5))
+    msg = mav.recv_match(type=["MISSION_REQUEST", "MISSION_REQUEST_INT", "MISSION_ACK"], blocking=True, timeout=answer(5))
     if msg is None:
         fail("upload stalled")
     if msg.get_type() == "MISSION_ACK":
+        # INVALID_SEQUENCE answers an item it did not ask for (the answer to a
+        # request it repeated while a loaded machine held this script back):
+        # ArduCopter goes on asking, so does this ground station.
+        if msg.type == m.MAV_MISSION_INVALID_SEQUENCE:
+            continue
         if msg.type != 0:
             fail("upload refused: %d" % msg.type)
         break
@@ -126,6 +138,6 @@ while time.time() < deadline and not disarmed:
         if not armed and len(reached) == len(items) - 1:
             disarmed = True
 
-last = mav.recv_match(type="GLOBAL_POSITION_INT", blocking=True, timeout=real(5))
+last = mav.recv_match(type="GLOBAL_POSITION_INT", blocking=True, timeout=answer(5))
 distance = math.hypot((last.lat / 1e7 - home[0]) * 111_111, (last.lon / 1e7 - home[1]) * 111_111 * math.cos(math.radians(home[0])))
 say(done=disarmed, reached=reached, modes=modes, texts=texts, distance_from_home=distance)

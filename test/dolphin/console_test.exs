@@ -17,8 +17,8 @@ defmodule Dolphin.ConsoleTest do
     Dolphin.Fleet.set_source({Dolphin.Fleet.MAVLinkSource, nil})
     port = Dolphin.Test.GroundStation.open()
     {:ok, [1, 2]} = Sim.start(count: 2, gcs: port, speedup: @speedup, camera: true)
-    Wait.until(fn -> Enum.all?([1, 2], &match?({:ok, %{home: %{}, position: %{}, battery: b}} when b != nil, Vehicles.state(&1))) end, 500)
-    Wait.until(fn -> Enum.all?(Dolphin.Fleet.vehicles(), & &1.vehicle.connected?) and length(Dolphin.Fleet.vehicles()) == 2 end, 500)
+    Wait.until(fn -> Enum.all?([1, 2], &match?({:ok, %{home: %{}, position: %{}, battery: b}} when b != nil, Vehicles.state(&1))) end)
+    Wait.until(fn -> Enum.all?(Dolphin.Fleet.vehicles(), & &1.vehicle.connected?) and length(Dolphin.Fleet.vehicles()) == 2 end)
 
     # What the helpers print, and what the console's runs print later, goes to a
     # device of the test's own (as a console's group leader).
@@ -29,7 +29,7 @@ defmodule Dolphin.ConsoleTest do
     on_exit(fn ->
       for run <- Dolphin.Console.Runs.list(), do: Dolphin.Console.Runs.stop(run.id)
       for run <- Engine.runs(), do: Engine.stop(run.run)
-      Wait.until(fn -> Engine.runs() == [] and Dolphin.Console.Runs.list() == [] end, 500)
+      Wait.until(fn -> Engine.runs() == [] and Dolphin.Console.Runs.list() == [] end)
     end)
 
     on_exit(fn -> Process.group_leader(self(), gl) end)
@@ -41,7 +41,7 @@ defmodule Dolphin.ConsoleTest do
 
   # Waits until what is printed matches; returns the text up to the end of
   # the line of the match and leaves the rest for the next out/1 or await_out/2.
-  defp await_out(io, pattern, tries \\ 500) do
+  defp await_out(io, pattern, tries \\ 1_500) do
     text = out(io)
 
     case Regex.run(if(is_binary(pattern), do: ~r/#{Regex.escape(pattern)}/, else: pattern), text, return: :index) do
@@ -67,7 +67,7 @@ defmodule Dolphin.ConsoleTest do
   end
 
   # Waits until every pattern was printed, in any order; returns all the text seen.
-  defp await_all(io, patterns, tries \\ 500) do
+  defp await_all(io, patterns, tries \\ 1_500) do
     text = out(io)
 
     cond do
@@ -121,7 +121,7 @@ defmodule Dolphin.ConsoleTest do
     assert out(io) =~ ~r/vehicle 1: mode MANUAL refused: .*no mode :manual on this vehicle/
 
     :ok = Sim.stop(2)
-    Wait.until(fn -> match?({:ok, %{lost: true}}, Vehicles.state(2)) end, 500)
+    Wait.until(fn -> match?({:ok, %{lost: true}}, Vehicles.state(2)) end)
     arm(2)
     assert out(io) =~ ~r/^vehicle 2 is lost \(nothing heard for .+\): nothing sent; check its link/
     watch(2)
@@ -141,7 +141,7 @@ defmodule Dolphin.ConsoleTest do
     assert text =~ "vehicle 1: mode GUIDED accepted"
     assert text =~ "vehicle 1: arm accepted"
     assert text =~ "vehicle 1: take-off to 10.0 m above home accepted"
-    Wait.until(fn -> match?({:ok, %{position: %{relative_alt: a}}} when a > 9.5, Vehicles.state(1)) end, 500)
+    Wait.until(fn -> match?({:ok, %{position: %{relative_alt: a}}} when a > 9.5, Vehicles.state(1)) end)
 
     takeoff(1, 20)
     assert out(io) =~ ~r/^vehicle 1 is flying already \(\d+\.\d m above home\): goto\(1, lat, lon, alt\) moves it$/m
@@ -152,7 +152,7 @@ defmodule Dolphin.ConsoleTest do
 
     goto(1, 40.4444, -7.3754, 15)
     assert out(io) =~ "vehicle 1: go to 40.444400, -7.375400 at 15.0 m above home accepted"
-    Wait.until(fn -> match?({:ok, %{position: %{relative_alt: a}}} when a > 14.5, Vehicles.state(1)) end, 500)
+    Wait.until(fn -> match?({:ok, %{position: %{relative_alt: a}}} when a > 14.5, Vehicles.state(1)) end)
     hold(1)
     assert out(io) =~ "vehicle 1 holds already (GUIDED)"
     mode(1, "brake")
@@ -252,7 +252,7 @@ defmodule Dolphin.ConsoleTest do
     stop(String.to_integer(id))
     assert out(io) =~ "stopping run #{id} (script "
     await_out(io, ~r/run #{id} script .*patrol.exs: stopped: its tasks were stopped, vehicles hold/)
-    Wait.until(fn -> match?({:ok, %{mode: m, armed: true}} when m in [:brake, :guided], Vehicles.state(2)) end, 500)
+    Wait.until(fn -> match?({:ok, %{mode: m, armed: true}} when m in [:brake, :guided], Vehicles.state(2)) end)
     tasks()
     assert out(io) == "no tasks running\n"
   end

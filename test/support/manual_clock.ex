@@ -96,7 +96,7 @@ defmodule Dolphin.Test.ManualClock do
   fleet, fake source, this clock) is idle with an empty mailbox, three checks
   in a row.
   """
-  def settle(tries \\ 5_000), do: settle(tries, 0)
+  def settle(tries \\ 50_000), do: settle(tries, 0)
 
   defp settle(0, _quiet), do: raise("ManualClock: the engine never settled: #{inspect(busy())}")
   defp settle(_tries, 3), do: :ok
@@ -127,10 +127,17 @@ defmodule Dolphin.Test.ManualClock do
   defp idle?(status: :waiting, message_queue_len: 0, current_function: {m, _, _}), do: m != :code_server
   defp idle?(_), do: false
 
-  # A process that works for runs on this clock.
-  defp relevant?(pid) do
-    case Process.info(pid, :dictionary) do
-      {:dictionary, dict} ->
+  # A process that works for runs on this clock. One spawned a moment ago and
+  # not run yet has an empty dictionary (proc_lib fills it in the new process):
+  # it works for whoever spawned it. A loaded machine can leave such a process
+  # waiting for a scheduler while the engine looks idle, and without this the
+  # next timer would fire before it ran.
+  defp relevant?(pid, depth \\ 0) do
+    case Process.info(pid, [:dictionary, :parent]) do
+      [dictionary: [], parent: parent] when is_pid(parent) and depth < 8 ->
+        relevant?(parent, depth + 1)
+
+      [dictionary: dict, parent: _] ->
         case List.keyfind(dict, :"$dolphin_context", 0) do
           {_, %{clock: __MODULE__}} ->
             true

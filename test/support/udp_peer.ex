@@ -8,7 +8,12 @@ defmodule Dolphin.Test.UDPPeer do
 
   @doc "Opens a UDP socket on 127.0.0.1 (an ephemeral port), owned by the caller."
   def open do
-    {:ok, socket} = :gen_udp.open(0, [:binary, active: false, ip: {127, 0, 0, 1}])
+    # A test reads only when it looks for something, and a loaded machine can
+    # hold it back for seconds while the ground station sends (its heartbeats
+    # at a speed-up's rate): a kernel buffer larger than the default keeps the
+    # datagrams that matter from being dropped meanwhile (the kernel caps it at
+    # net.core.rmem_max).
+    {:ok, socket} = :gen_udp.open(0, [:binary, active: false, ip: {127, 0, 0, 1}, recbuf: 4_194_304])
     socket
   end
 

@@ -45,6 +45,7 @@ defmodule Dolphin.Vehicles.Vehicle do
 
     send(self(), :request_telemetry)
     Clock.send_after(self(), :check_link, check_period(timeout))
+    now = Clock.now_ms()
 
     {:ok,
      %{
@@ -52,8 +53,11 @@ defmodule Dolphin.Vehicles.Vehicle do
        link: link,
        # Seen now (it was just heard, or its process restarted): silence from
        # here on makes it lost.
-       state: put_in(State.new(sysid).link.last_seen_ms, Clock.now_ms()),
+       state: put_in(State.new(sysid).link.last_seen_ms, now),
        timeout_ms: timeout,
+       # When the next silence check is due (clock ms): one that runs much later
+       # than that does not judge (see :check_link).
+       check_due_ms: now + check_period(timeout),
        lost: false,
        requests_left: @request_tries,
        # Operations under way, by key (a command id, or :mission: one transfer
@@ -127,11 +131,21 @@ defmodule Dolphin.Vehicles.Vehicle do
     {:noreply, %{s | queued: queued}}
   end
 
+  # Silence is judged only by a check that runs on time. One that runs more than
+  # a period late means this machine held the ground station up (a loaded host,
+  # a paused VM; at a speed-up a pause of timeout / speed-up is enough): the
+  # vehicle's frames of that while may still wait in the link's socket and
+  # mailbox, so the silence may be ours, not the vehicle's. The next check,
+  # once they are read, judges.
   def handle_info(:check_link, s) do
-    Clock.send_after(self(), :check_link, check_period(s.timeout_ms))
+    period = check_period(s.timeout_ms)
+    Clock.send_after(self(), :check_link, period)
+    now = Clock.now_ms()
+    on_time? = now - s.check_due_ms <= period
+    s = %{s | check_due_ms: now + period}
     last = s.state.link.last_seen_ms
 
-    if not s.lost and last != nil and Clock.now_ms() - last > s.timeout_ms do
+    if on_time? and not s.lost and last != nil and now - last > s.timeout_ms do
       PubSub.publish(:vehicles, {:vehicle_lost, s.sysid})
       PubSub.publish({:vehicle, s.sysid}, {:vehicle_lost, s.sysid})
       {:noreply, %{s | lost: true}}

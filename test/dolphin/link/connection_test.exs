@@ -32,7 +32,7 @@ defmodule Dolphin.Link.ConnectionTest do
     {:min_heap_size, words} = Process.info(link, :min_heap_size)
     assert words >= Connection.spawn_opt()[:min_heap_size]
 
-    {:ok, conn} = :gen_tcp.accept(listen, 2_000)
+    {:ok, conn} = :gen_tcp.accept(listen, 30_000)
     bytes = Frame.encode(copter(), sysid: 41, compid: 1) <> Frame.encode(%M.SysStatus{battery_remaining: 66}, sysid: 41, compid: 1, seq: 1)
     # Three writes that cut both frames in the middle.
     for part <- [binary_part(bytes, 0, 7), binary_part(bytes, 7, 20), binary_part(bytes, 27, byte_size(bytes) - 27)] do
@@ -42,13 +42,13 @@ defmodule Dolphin.Link.ConnectionTest do
 
     Wait.until(fn -> match?({:ok, %{battery: 0.66, mode: :guided}}, Vehicles.state(41)) end)
     # The ground station answers over the same connection (its heartbeat, telemetry requests).
-    assert {:ok, data} = :gen_tcp.recv(conn, 0, 3_000)
+    assert {:ok, data} = :gen_tcp.recv(conn, 0, 30_000)
     {frames, _} = Parser.feed(Parser.new(), data)
     assert Enum.any?(frames, &(&1.sysid == 255))
 
     :gen_tcp.close(conn)
     # Backoff starts at 0.5 s: the link is back within a few seconds.
-    {:ok, conn2} = :gen_tcp.accept(listen, 5_000)
+    {:ok, conn2} = :gen_tcp.accept(listen, 30_000)
     assert Connection.info("tcp-test").connected
     :gen_tcp.close(conn2)
     :gen_tcp.close(listen)

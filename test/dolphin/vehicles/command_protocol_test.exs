@@ -18,8 +18,11 @@ defmodule Dolphin.Vehicles.CommandProtocolTest do
     port = Connection.port(name)
     peer = UDPPeer.open()
     sysid = 20 + rem(System.unique_integer([:positive]), 200)
-    # ack timeouts of 1.5 s of clock time become 15 ms of real time.
-    Clock.set_speedup(100)
+    # Ack timeouts of 1.5 s of clock time become 150 ms of real time. Not
+    # faster: the ground station's heartbeats come as fast (10 a second here),
+    # and a peer that reads only when a test looks must not see its socket's
+    # buffer fill up with them while a busy machine holds the test back.
+    Clock.set_speedup(10)
 
     on_exit(fn ->
       Clock.set_speedup(1)
@@ -33,47 +36,55 @@ defmodule Dolphin.Vehicles.CommandProtocolTest do
     # own message-interval commands (unanswered here) are let run out first.
     UDPPeer.send_message(peer, port, %M.GlobalPositionInt{}, sysid: sysid, seq: 1)
     Wait.until(fn -> :sys.get_state(Vehicles.whereis(sysid)).ops == %{} end)
-    %{peer: peer, port: port, sysid: sysid}
+    %{peer: peer, port: port, sysid: sysid, link: name}
   end
 
-  defp next_command(peer, command, timeout \\ 2_000),
+  # The test answers each command itself, after however long a busy machine
+  # takes to run it: an ack timeout of an hour of clock time (6 minutes of real
+  # time) keeps such a command to one attempt. The tests about retransmission
+  # use `@until_answered` instead: retries at the usual pace, never giving up.
+  @one_attempt [ack_timeout_ms: 3_600_000]
+  @until_answered [attempts: 1_000_000]
+
+  defp next_command(peer, command, timeout \\ 10_000),
     do: UDPPeer.receive_until(peer, &match?(%M.CommandLong{command: ^command}, &1.message), timeout).message
 
   defp ack(peer, port, sysid, command, result, extra \\ []),
     do: UDPPeer.send_message(peer, port, struct(M.CommandAck, [command: command, result: result, target_system: 255] ++ extra), sysid: sysid)
 
   test "a lost command is sent again with the confirmation counter incremented", %{peer: peer, port: port, sysid: sysid} do
-    task = Task.async(fn -> Vehicles.arm(sysid) end)
+    task = Task.async(fn -> Vehicles.arm(sysid, @until_answered) end)
     assert %M.CommandLong{confirmation: 0, param1: 1.0, target_system: ^sysid} = next_command(peer, 400)
     assert %M.CommandLong{confirmation: 1} = next_command(peer, 400)
     assert %M.CommandLong{confirmation: 2} = next_command(peer, 400)
-    ack(peer, port, sysid, 400, 0)
+    Process.sleep(300); ack(peer, port, sysid, 400, 0)
     assert Task.await(task) == {:ok, :accepted}
   end
 
   test "a refusal names the command, the vehicle and the result", %{peer: peer, port: port, sysid: sysid} do
-    # A long ack timeout: one attempt, however busy the machine.
-    task = Task.async(fn -> Vehicles.arm(sysid, ack_timeout_ms: 100_000) end)
+    task = Task.async(fn -> Vehicles.arm(sysid, @one_attempt) end)
     next_command(peer, 400)
     ack(peer, port, sysid, 400, 4)
     assert {:error, %CommandError{result: :failed, attempts: 1} = e} = Task.await(task)
     assert Exception.message(e) == "vehicle #{sysid} refused MAV_CMD_COMPONENT_ARM_DISARM: MAV_RESULT_FAILED"
   end
 
-  test "IN_PROGRESS stops retransmission and reports progress until the final answer", %{peer: peer, port: port, sysid: sysid} do
+  test "IN_PROGRESS stops retransmission and reports progress until the final answer", %{peer: peer, port: port, sysid: sysid, link: link} do
     me = self()
-    # The wait after IN_PROGRESS (3 s of real time here) outlasts this test's pauses.
-    task = Task.async(fn -> Vehicles.command(sysid, :mav_cmd_preflight_calibration, [1], progress_to: me, progress_timeout_ms: 300_000) end)
+    # Retransmitted until IN_PROGRESS comes, however late; the wait after it
+    # (a day of real time here) outlasts any pause of this test.
+    opts = [progress_to: me, progress_timeout_ms: 864_000_000] ++ @until_answered
+    task = Task.async(fn -> Vehicles.command(sysid, :mav_cmd_preflight_calibration, [1], opts) end)
     next_command(peer, 241)
-    ack(peer, port, sysid, 241, 5, progress: 40)
-    assert_receive {:command_progress, 241, 40}, 2_000
+    Process.sleep(300); ack(peer, port, sysid, 241, 5, progress: 40)
+    assert_receive {:command_progress, 241, 40}, 10_000
     # Retransmissions sent before IN_PROGRESS arrived (a busy machine) are
     # drained; from here on, several ack timeouts pass with none.
-    drain(peer)
-    Process.sleep(100)
+    drain(peer, link)
+    Process.sleep(5 * Clock.retry_real_ms(1_500))
     refute_command(peer, 241)
     ack(peer, port, sysid, 241, 5, progress: 90)
-    assert_receive {:command_progress, 241, 90}, 2_000
+    assert_receive {:command_progress, 241, 90}, 10_000
     ack(peer, port, sysid, 241, 0)
     assert Task.await(task) == {:ok, :accepted}
     refute_command(peer, 241)
@@ -86,10 +97,10 @@ defmodule Dolphin.Vehicles.CommandProtocolTest do
   end
 
   test "two commands with one id run one after the other", %{peer: peer, port: port, sysid: sysid} do
-    t1 = Task.async(fn -> Vehicles.set_message_interval(sysid, 33, 100_000) end)
+    t1 = Task.async(fn -> Vehicles.set_message_interval(sysid, 33, 100_000, @one_attempt) end)
     assert %M.CommandLong{param1: 33.0} = next_command(peer, 511)
-    t2 = Task.async(fn -> Vehicles.set_message_interval(sysid, 30, 50_000) end)
-    ack(peer, port, sysid, 511, 0)
+    t2 = Task.async(fn -> Vehicles.set_message_interval(sysid, 30, 50_000, @one_attempt) end)
+    Process.sleep(300); ack(peer, port, sysid, 511, 0)
     assert Task.await(t1) == {:ok, :accepted}
     assert %M.CommandLong{param1: 30.0} = UDPPeer.receive_until(peer, &match?(%M.CommandLong{command: 511, param1: 30.0}, &1.message)).message
     ack(peer, port, sysid, 511, 2)
@@ -97,7 +108,7 @@ defmodule Dolphin.Vehicles.CommandProtocolTest do
   end
 
   test "modes by name; a mode the vehicle does not have is refused before anything is sent", %{peer: peer, port: port, sysid: sysid} do
-    task = Task.async(fn -> Vehicles.set_mode(sysid, :brake) end)
+    task = Task.async(fn -> Vehicles.set_mode(sysid, :brake, @one_attempt) end)
     assert %M.CommandLong{param1: 1.0, param2: 17.0} = next_command(peer, 176)
     ack(peer, port, sysid, 176, 0)
     assert Task.await(task) == {:ok, :accepted}
@@ -107,14 +118,14 @@ defmodule Dolphin.Vehicles.CommandProtocolTest do
   end
 
   test "COMMAND_INT carries the position as integers", %{peer: peer, port: port, sysid: sysid} do
-    task = Task.async(fn -> Vehicles.command_int(sysid, :mav_cmd_do_reposition, [-1], {41.178, -8.596, 30}) end)
+    task = Task.async(fn -> Vehicles.command_int(sysid, :mav_cmd_do_reposition, [-1], {41.178, -8.596, 30}, @one_attempt) end)
     %M.CommandInt{x: 411_780_000, y: -85_960_000, z: 30.0, frame: 6, param1: -1.0} =
       UDPPeer.receive_until(peer, &match?(%M.CommandInt{}, &1.message)).message
 
     ack(peer, port, sysid, 192, 0)
     assert Task.await(task) == {:ok, :accepted}
 
-    home = Task.async(fn -> Vehicles.set_home(sysid, {41.1780001, -8.5960001, 110.5}) end)
+    home = Task.async(fn -> Vehicles.set_home(sysid, {41.1780001, -8.5960001, 110.5}, @one_attempt) end)
     %M.CommandInt{command: 179, frame: 0, x: 411_780_001, y: -85_960_001, z: 110.5} =
       UDPPeer.receive_until(peer, &match?(%M.CommandInt{command: 179}, &1.message)).message
 
@@ -141,7 +152,7 @@ defmodule Dolphin.Vehicles.CommandProtocolTest do
   end
 
   test "a command queued by a caller that went away is never sent", %{peer: peer, port: port, sysid: sysid} do
-    t1 = Task.async(fn -> Vehicles.arm(sysid) end)
+    t1 = Task.async(fn -> Vehicles.arm(sysid, @one_attempt) end)
     next_command(peer, 400)
     {pid, ref} = spawn_monitor(fn -> Vehicles.command(sysid, 400, [4]) end)
     Wait.until(fn -> :queue.len(Map.get(:sys.get_state(Vehicles.whereis(sysid)).queued, 400, :queue.new())) == 1 end)
@@ -158,9 +169,17 @@ defmodule Dolphin.Vehicles.CommandProtocolTest do
     assert_raise ArgumentError, ~r/unknown MAV_CMD :mav_cmd_warp/, fn -> Vehicles.command(1, :mav_cmd_warp) end
   end
 
-  defp drain(peer) do
-    case :gen_udp.recv(peer, 0, 20) do
-      {:ok, _} -> drain(peer)
+  # The protocol hands each message to the link (a cast) before it reports
+  # progress; a call to the link afterwards returns once the link has sent them
+  # all, so everything sent so far is in the peer's socket and no wait is needed.
+  defp drain(peer, link) do
+    Connection.port(link)
+    drain_socket(peer)
+  end
+
+  defp drain_socket(peer) do
+    case :gen_udp.recv(peer, 0, 0) do
+      {:ok, _} -> drain_socket(peer)
       {:error, :timeout} -> :ok
     end
   end

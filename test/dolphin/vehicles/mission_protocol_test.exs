@@ -16,9 +16,12 @@ defmodule Dolphin.Vehicles.MissionProtocolTest do
 
   doctest Dolphin.MissionError
 
-  # Retry timers of 1 s and 1.5 s of clock time become 50 and 75 ms: room for
-  # a busy machine's pauses. The lossy property runs faster (see there).
-  @speedup 20
+  # Over a clean link nothing is retried, and nothing should time out however
+  # slowly a loaded machine runs both sides: real time. The vehicle that stops
+  # answering is given up on faster, and the lossy property runs faster still
+  # (see there).
+  @speedup 1
+  @silent_speedup 20
   @lossy_speedup 100
 
   setup do
@@ -147,12 +150,13 @@ defmodule Dolphin.Vehicles.MissionProtocolTest do
     upload = %{operation: :upload, items: items(8), mission_type: :mission, progress_to: nil}
     r1 = :gen_server.send_request(pid, {:mission, upload, []})
     r2 = :gen_server.send_request(pid, {:mission, %{operation: :download, mission_type: :mission, progress_to: nil}, []})
-    assert {:reply, :ok} = :gen_server.wait_response(r1, 5_000)
-    assert {:reply, {:ok, got}} = :gen_server.wait_response(r2, 5_000)
+    assert {:reply, :ok} = :gen_server.wait_response(r1, 60_000)
+    assert {:reply, {:ok, got}} = :gen_server.wait_response(r2, 60_000)
     assert length(got) == 8
   end
 
   test "a vehicle that stops answering: a timeout error within the time limit", %{port: port} do
+    Clock.set_speedup(@silent_speedup)
     {sysid, vehicle} = vehicle(port, [])
     ScriptedVehicle.set_faults(vehicle, loss: 1.0)
     assert {:error, %MissionError{result: :timeout, operation: :download}} = Vehicles.download_mission(sysid, attempts: 3)
@@ -167,7 +171,8 @@ defmodule Dolphin.Vehicles.MissionProtocolTest do
     # Many retries: the vehicle re-asks every 10 ms of real time (8 times before
     # it gives up), our retries wait 20 ms at least (Clock.retry_real_ms/2: a
     # round trip does not speed up). A pause of the machine only adds errors,
-    # which the property allows.
+    # which the property allows; that uploads do get through faults is checked
+    # after it, in real time.
     Clock.set_speedup(@lossy_speedup)
     {sysid, vehicle} = vehicle(port, [])
 
@@ -179,7 +184,6 @@ defmodule Dolphin.Vehicles.MissionProtocolTest do
         case Vehicles.upload_mission(sysid, mission, attempts: 8) do
           :ok ->
             assert same_mission?(ScriptedVehicle.mission(vehicle), mission), "accepted, but the vehicle holds another mission"
-            if loss + dup + reorder > 0, do: Process.put(:faulty_ok, Process.get(:faulty_ok, 0) + 1)
 
           {:error, %MissionError{result: result}} -> assert result in [:timeout, :operation_cancelled]
         end
@@ -190,12 +194,16 @@ defmodule Dolphin.Vehicles.MissionProtocolTest do
       numtests: 12
     )
 
-    # The property is not won by failing: uploads through faults do succeed.
-    assert Process.get(:faulty_ok, 0) > 0
-
-    # And on a clean link it always works (at the calmer speed-up).
+    # The property is not won by failing: in real time, where no pause of a
+    # loaded machine outlasts the vehicle's 8 s of patience, an upload through
+    # every kind of fault succeeds.
     Clock.set_speedup(@speedup)
-    {sysid, vehicle} = vehicle(port, [])
+    {sysid, vehicle} = vehicle(port, loss: 0.1, duplicate: 0.1, reorder: 0.1)
+    assert :ok = Vehicles.upload_mission(sysid, items(30), attempts: 8)
+    assert same_mission?(ScriptedVehicle.mission(vehicle), items(30))
+
+    # And on a clean link it always works.
+    ScriptedVehicle.set_faults(vehicle, [])
     assert :ok = Vehicles.upload_mission(sysid, items(700))
     assert length(ScriptedVehicle.mission(vehicle)) == 700
   end

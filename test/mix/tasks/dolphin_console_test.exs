@@ -125,11 +125,15 @@ defmodule Mix.Tasks.Dolphin.ConsoleTest do
     use Dolphin.Script
     v = pick(timeout: seconds(30))
     message("going " <> ask("Which way?"))
-    execute %{v => mission "Hop" do
+    # The hop lasts until the operator answers a second question: tasks() sees
+    # it in flight however slowly a loaded machine runs this session.
+    hop = mission "Hop" do
       take_off location(40.444233, -7.375234, 840)
       move 40, 0, 0
-      return_home_and_land()
-    end}
+      return_home_and_loiter()
+    end
+    back = action do post(:back, ask("Back?")) end
+    execute (until(hop, poll(:back)) |> on(v)) ||| back
     message("hop done")
     """)
 
@@ -140,8 +144,10 @@ defmodule Mix.Tasks.Dolphin.ConsoleTest do
     poll(port, "tasks()", &(&1 =~ "Which way?"))
     answered = ieval(port, ~s|answer("north")|)
     seen_or_wait(port, answered, ~r/message: going north/)
-    poll(port, "tasks()", &(&1 =~ ~r/mission "Hop"  vehicle 1/))
-    poll(port, "tasks()", &(&1 =~ "no tasks running"), 1_000)
+    poll(port, "tasks()", &(&1 =~ ~r/mission "Hop"  vehicle 1/ and &1 =~ "Back?"))
+    back = ieval(port, ~s|answer("now")|)
+    seen_or_wait(port, back, ~r/message: hop done/)
+    poll(port, "tasks()", &(&1 =~ "no tasks running"))
     Port.command(port, "System.halt()\n")
     assert_receive {^port, {:exit_status, 0}}, 30_000
   end
