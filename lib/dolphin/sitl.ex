@@ -147,11 +147,12 @@ defmodule Dolphin.SITL do
   @spec stop(t()) :: :ok
   def stop(%{link: link, sysids: sysids, instances: instances, numbers: numbers} = fleet) do
     if pid = fleet.charger, do: DynamicSupervisor.terminate_child(Dolphin.SITL.Supervisor, pid)
+    # The link first: a frame still on its way would make a forgotten vehicle known again.
+    DynamicSupervisor.terminate_child(Dolphin.Link.Supervisor, link)
     Enum.each(instances, &DynamicSupervisor.terminate_child(Dolphin.SITL.Supervisor, &1))
     release_instances(numbers)
     remove_payload(sysids, :camera)
     Enum.each(sysids, &Dolphin.Vehicles.forget/1)
-    DynamicSupervisor.terminate_child(Dolphin.Link.Supervisor, link)
     :ok
   end
 
