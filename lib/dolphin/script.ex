@@ -77,13 +77,20 @@ defmodule Dolphin.Script do
     `:syntax`, `:compile`, `:failed` (a task or the code failed), `:halted`
     (the script called `halt/1`); `file` and `line` say where in the script.
     """
-    defexception [:kind, :file, :line, :message, :reason]
+    defexception [:kind, :file, :line, :column, :message, :reason]
 
-    @type t :: %__MODULE__{kind: :syntax | :compile | :failed | :halted, file: String.t() | nil, line: pos_integer() | nil, message: String.t(), reason: term()}
+    @type t :: %__MODULE__{
+            kind: :syntax | :compile | :failed | :halted,
+            file: String.t() | nil,
+            line: pos_integer() | nil,
+            column: pos_integer() | nil,
+            message: String.t(),
+            reason: term()
+          }
 
-    @doc "`file:line: message`"
-    def format(%__MODULE__{file: file, line: line, message: message}) do
-      where = Enum.reject([file && Path.relative_to_cwd(file), line], &is_nil/1) |> Enum.join(":")
+    @doc "`file:line: message` (`file:line:column:` for a syntax error)"
+    def format(%__MODULE__{file: file, line: line, column: column, message: message}) do
+      where = Enum.reject([file && Path.relative_to_cwd(file), line, line && column], &is_nil/1) |> Enum.join(":")
       if where == "", do: message, else: "#{where}: #{message}"
     end
   end
@@ -137,16 +144,57 @@ defmodule Dolphin.Script do
         end
 
       try do
-        Code.compile_quoted(wrapped, file)
+        compile_reporting_warnings(wrapped, file, module)
         {:ok, %__MODULE__{file: file, module: module, source: source}}
       rescue
         e in [CompileError, SyntaxError, TokenMissingError] ->
-          {:error, %Error{kind: :compile, file: file, line: e.line, message: compile_message(e.description, ast)}}
+          {:error, %Error{kind: :compile, file: file, line: e.line, message: compile_message(e.description, ast, module)}}
 
+        # A word of the language given a bad argument, found while the script is
+        # compiled: the line is the script's frame in the stack.
         e in ArgumentError ->
-          {:error, %Error{kind: :compile, file: file, line: nil, message: Exception.message(e)}}
+          {:error, %Error{kind: :compile, file: file, line: script_line(__STACKTRACE__, file), message: Exception.message(e)}}
       end
     end
+  end
+
+  defp script_line(stacktrace, file) do
+    Enum.find_value(stacktrace, fn {_m, _f, _a, location} ->
+      if to_string(location[:file]) == file, do: location[:line]
+    end)
+  end
+
+  # The compiler's warnings (an unused variable, ...) name the module the
+  # script is compiled into, which means nothing to its author: they are
+  # caught and printed in the script's terms, `file:line: warning: ...`.
+  defp compile_reporting_warnings(wrapped, file, module) do
+    {:ok, capture} = StringIO.open("")
+    original = Process.whereis(:standard_error)
+
+    try do
+      Process.unregister(:standard_error)
+      Process.register(capture, :standard_error)
+      Code.compile_quoted(wrapped, file)
+    after
+      Process.unregister(:standard_error)
+      Process.register(original, :standard_error)
+      {:ok, {_, warnings}} = StringIO.close(capture)
+      if warnings != "", do: IO.write(:stderr, script_warnings(warnings, module))
+    end
+  end
+
+  # "warning: TEXT\n  FILE:LINE: Module.__script__/0\n" -> "FILE:LINE: warning: TEXT\n"
+  defp script_warnings(text, module) do
+    internal = inspect(module)
+
+    text
+    |> String.split(~r/\n\n+/, trim: true)
+    |> Enum.map_join(fn warning ->
+      case Regex.run(~r/\A(?:warning: )?(.*?)\n\s+(\S+?:\d+)(?::\s*\S+)?\s*\z/s, warning) do
+        [_, message, where] -> "#{where}: warning: #{String.trim(message)}\n"
+        nil -> String.replace(warning, internal <> ".__script__/0", "the script") <> "\n"
+      end
+    end)
   end
 
   defp parse(source, file) do
@@ -155,16 +203,63 @@ defmodule Dolphin.Script do
         {:ok, ast}
 
       {:error, {meta, message, token}} ->
-        {message, token} = if is_tuple(message), do: {elem(message, 0) <> elem(message, 1), token}, else: {message, token}
-        line = if is_list(meta), do: meta[:line], else: meta
-        {:error, %Error{kind: :syntax, file: file, line: line, message: "syntax error: #{message}#{token}"}}
+        {line, column} = if is_list(meta), do: {meta[:line], meta[:column]}, else: {meta, nil}
+        {:error, %Error{kind: :syntax, file: file, line: line, column: column, message: syntax_error(syntax_message(message, token))}}
     end
   end
 
-  defp compile_message(description, ast) do
-    if String.starts_with?(description, "undefined function") and not uses_script?(ast),
-      do: description <> " (does the script start with `use Dolphin.Script`?)",
-      else: description
+  # Elixir's parser gives a message in two parts around the token ("unexpected
+  # reserved word: " "end" ". The \"(\" at line 6 is missing terminator
+  # \")\""), or one part followed by it.
+  defp syntax_message({prefix, suffix}, token) do
+    prefix = String.trim_trailing(prefix, ": ") |> String.trim_trailing(":")
+    suffix = suffix |> String.trim_leading(".") |> String.trim() |> lower_first()
+    "#{prefix} #{inspect(to_string(token))}" <> if(suffix == "", do: "", else: ": " <> suffix)
+  end
+
+  defp syntax_message(message, token) when is_binary(message) do
+    case to_string(token) do
+      "" -> message
+      token -> String.trim_trailing(message) <> " " <> token
+    end
+  end
+
+  defp syntax_error("syntax error" <> _ = message), do: message
+  defp syntax_error(message), do: "syntax error: " <> message
+
+  defp lower_first(<<first::utf8, rest::binary>>), do: String.downcase(<<first::utf8>>) <> rest
+  defp lower_first(""), do: ""
+
+  # "undefined function wait_fro/1 (expected Dolphin.Script.Compiled.S162 to
+  # define such a function ...)": said in the script's terms, with the
+  # nearest words of the language.
+  defp compile_message(description, ast, module) do
+    case Regex.run(~r/\Aundefined function ([^\s\/]+)\/(\d+)/, description) do
+      [_, name, arity] ->
+        hint = if uses_script?(ast), do: did_you_mean(name, String.to_integer(arity)), else: " (does the script start with `use Dolphin.Script`?)"
+        "undefined function #{name}/#{arity}: no word of the language or of Elixir has that name#{hint}"
+
+      nil ->
+        String.replace(description, inspect(module), "the script")
+    end
+  end
+
+  @vocabulary_modules [Dolphin.DSL, Dolphin.DSL.Values, Dolphin.DSL.Mission, Kernel]
+
+  defp did_you_mean(name, arity) do
+    words =
+      for module <- @vocabulary_modules,
+          Code.ensure_loaded?(module),
+          {word, n} <- module.__info__(:functions) ++ module.__info__(:macros),
+          word = Atom.to_string(word),
+          not String.starts_with?(word, "_"),
+          uniq: true,
+          do: {word, n}
+
+    case words |> Enum.map(fn {w, n} -> {String.jaro_distance(w, name), w, n} end) |> Enum.filter(&(elem(&1, 0) >= 0.8)) |> Enum.sort_by(&{-elem(&1, 0), abs(elem(&1, 2) - arity)}) do
+      [] -> ""
+      near -> "; did you mean " <> (near |> Enum.map(fn {_, w, n} -> "#{w}/#{n}" end) |> Enum.uniq() |> Enum.take(3) |> Enum.join(", ")) <> "?"
+    end
   end
 
   defp uses_script?(ast) do

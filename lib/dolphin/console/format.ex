@@ -302,10 +302,7 @@ defmodule Dolphin.Console.Format do
   # as a vehicle state keeps its last 20): the longest prefix of `now` whose
   # rest is what `before` began with.
   @spec new_texts(list(), list()) :: list()
-  def new_texts(before, now) do
-    k = Enum.find(0..length(now), fn k -> Enum.drop(now, k) == Enum.take(before, length(now) - k) end)
-    Enum.take(now, k)
-  end
+  def new_texts(before, now), do: Dolphin.Vehicles.State.texts_since(before, now)
 
   @doc false
   @spec severity(integer()) :: String.t()

@@ -67,6 +67,8 @@ defmodule Dolphin.Mission.Executor do
       auto_seen: false,
       landing_check: false,
       on_land_item: false,
+      # The vehicle's STATUSTEXTs when the flight began (see autopilot_says/3).
+      flight_texts: [],
       reached: nil,
       progress: nil
     }
@@ -95,7 +97,7 @@ defmodule Dolphin.Mission.Executor do
   defp next_step(s) do
     case Enum.drop_while(@steps, &(&1 != s.step)) do
       [_, next | _] -> {:noreply, run_step(s, next)}
-      _ -> follow(%{s | step: :flying, task: nil, started: true})
+      _ -> follow(%{s | step: :flying, task: nil, started: true, flight_texts: texts(s.vehicle)})
     end
   end
 
@@ -197,12 +199,12 @@ defmodule Dolphin.Mission.Executor do
   defp step(:guided, s, _me) do
     case Vehicles.state(s.vehicle) do
       {:ok, %{mode: :guided}} -> :ok
-      _ -> command(Vehicles.set_mode(s.vehicle, :guided), "switching to GUIDED", s.vehicle)
+      _ -> command(fn -> Vehicles.set_mode(s.vehicle, :guided) end, "switching to GUIDED", s.vehicle)
     end
   end
 
-  defp step(:arm, s, _me), do: arm(s, s.clock.now_ms() + s.arm_timeout_ms)
-  defp step(:start, s, _me), do: command(Vehicles.start_mission(s.vehicle), "MISSION_START", s.vehicle)
+  defp step(:arm, s, _me), do: arm(s, s.clock.now_ms() + s.arm_timeout_ms, texts(s.vehicle))
+  defp step(:start, s, _me), do: command(fn -> Vehicles.start_mission(s.vehicle) end, "MISSION_START", s.vehicle)
 
   # A copter on the ground can only start a mission that takes off (ArduCopter
   # refuses the others: "Auto: Missing Takeoff Cmd"). One that only comes back
@@ -230,7 +232,7 @@ defmodule Dolphin.Mission.Executor do
 
   defp landing_here?(_s, _st), do: false
 
-  defp arm(s, deadline) do
+  defp arm(s, deadline, before) do
     case Vehicles.state(s.vehicle) do
       {:ok, %{armed: true}} ->
         :ok
@@ -242,10 +244,10 @@ defmodule Dolphin.Mission.Executor do
 
           {:error, %{result: result}} when result in [:failed, :temporarily_rejected, :denied, :timeout] ->
             if s.clock.now_ms() >= deadline do
-              {:error, "arming refused for #{div(s.arm_timeout_ms, 1000)} s#{autopilot_says(s.vehicle, ["Arm", "PreArm"])}"}
+              {:error, "arming refused for #{div(s.arm_timeout_ms, 1000)} s#{autopilot_says(s.vehicle, before, ["Arm", "PreArm"])}"}
             else
               s.clock.sleep(@arm_retry_ms)
-              arm(s, deadline)
+              arm(s, deadline, before)
             end
 
           {:error, e} ->
@@ -313,7 +315,19 @@ defmodule Dolphin.Mission.Executor do
         {:ok, st}
 
       {:error, :unknown_vehicle} ->
-        {:error, "vehicle #{s.vehicle} is not connected"}
+        {:error, not_mavlink(s)}
+    end
+  end
+
+  # The fleet may be fake vehicles of the test platform (`--fake`), which the
+  # ground station never hears: say so rather than "not connected".
+  defp not_mavlink(s) do
+    case Dolphin.Fleet.source() do
+      {Dolphin.Fleet.TestSource, _} ->
+        "mission #{inspect(s.name)} needs a MAVLink vehicle; vehicle #{s.vehicle} is a fake vehicle (--fake), which runs only test-platform tasks"
+
+      _ ->
+        "vehicle #{s.vehicle} is not connected"
     end
   end
 
@@ -332,16 +346,28 @@ defmodule Dolphin.Mission.Executor do
   defp mission_op(:ok), do: :ok
   defp mission_op({:error, e}), do: {:error, Exception.message(e)}
 
-  defp command({:ok, _}, _what, _vehicle), do: :ok
-  defp command({:error, e}, what, vehicle), do: {:error, "#{what} refused: #{Exception.message(e)}#{autopilot_says(vehicle, [])}"}
+  # A command to the vehicle; refused, with what the autopilot said meanwhile.
+  defp command(send, what, vehicle) do
+    before = texts(vehicle)
 
-  # The autopilot's latest explanation (a STATUSTEXT of warning or worse, or one with a prefix).
-  defp autopilot_says(vehicle, prefixes) do
-    texts =
-      case Vehicles.state(vehicle) do
-        {:ok, st} -> st.status_texts
-        _ -> []
-      end
+    case send.() do
+      {:ok, _} -> :ok
+      {:error, e} -> {:error, "#{what} refused: #{Exception.message(e)}#{autopilot_says(vehicle, before, [])}"}
+    end
+  end
+
+  defp texts(vehicle) do
+    case Vehicles.state(vehicle) do
+      {:ok, st} -> st.status_texts
+      _ -> []
+    end
+  end
+
+  # The autopilot's latest explanation (a STATUSTEXT of warning or worse, or
+  # one with a prefix) among what it said since `before` (the texts when the
+  # exchange began): a text from an hour ago answers nothing now.
+  defp autopilot_says(vehicle, before, prefixes) do
+    texts = Dolphin.Vehicles.State.texts_since(before, texts(vehicle))
 
     found =
       Enum.find(texts, fn {severity, text} ->
@@ -390,10 +416,10 @@ defmodule Dolphin.Mission.Executor do
 
       s.auto_seen and st.mode != :auto ->
         # Left to what took it (a failsafe's RTL or LAND, the pilot): never overridden.
-        fail(s, "the vehicle left AUTO for #{mode_name(st.mode)} before the mission ended#{autopilot_says(s.vehicle, [])}", hold: false)
+        fail(s, "the vehicle left AUTO for #{mode_name(st.mode)} before the mission ended#{autopilot_says(s.vehicle, s.flight_texts, [])}", hold: false)
 
       s.armed_seen and not st.armed and not match?({:landing, _}, s.ending) ->
-        fail(s, "the vehicle disarmed before the mission ended#{autopilot_says(s.vehicle, [])}", hold: false)
+        fail(s, "the vehicle disarmed before the mission ended#{autopilot_says(s.vehicle, s.flight_texts, [])}", hold: false)
 
       s.armed_seen and not st.armed and not s.landing_check ->
         s.clock.send_after(self(), :check_landed, @landing_reports_ms)
@@ -462,15 +488,15 @@ defmodule Dolphin.Mission.Executor do
   # An accepted DO_SET_MODE means the mode has changed (ArduPilot acks after
   # the switch); the heartbeat shows it within a second.
   defp brake(vehicle) do
-    with {:error, _} <- command(Vehicles.set_mode(vehicle, :brake), "BRAKE", vehicle),
-         {:error, why} <- command(Vehicles.set_mode(vehicle, :guided), "GUIDED", vehicle) do
+    with {:error, _} <- command(fn -> Vehicles.set_mode(vehicle, :brake) end, "BRAKE", vehicle),
+         {:error, why} <- command(fn -> Vehicles.set_mode(vehicle, :guided) end, "GUIDED", vehicle) do
       {:error, "the vehicle could not be made to hold position: #{why}"}
     end
   end
 
   # "On the ground" may be a second old: a vehicle that refuses the disarm is flying.
   defp disarm_or_brake(vehicle) do
-    case command(Vehicles.disarm(vehicle), "disarming on the ground", vehicle) do
+    case command(fn -> Vehicles.disarm(vehicle) end, "disarming on the ground", vehicle) do
       :ok -> :ok
       {:error, _} -> brake(vehicle)
     end

@@ -178,6 +178,20 @@ defmodule Dolphin.Vehicles.State do
   def mission_replaced(%__MODULE__{} = state), do: %{state | mission: new(state.sysid).mission}
 
   @doc """
+  The STATUSTEXTs of `now` (newest first, as in `status_texts`) that came
+  after `before`, an earlier `status_texts` of the same vehicle: what the
+  autopilot said in between.
+
+      iex> Dolphin.Vehicles.State.texts_since([{6, "b"}, {6, "a"}], [{4, "c"}, {6, "b"}, {6, "a"}])
+      [{4, "c"}]
+  """
+  @spec texts_since([{integer(), String.t()}], [{integer(), String.t()}]) :: [{integer(), String.t()}]
+  def texts_since(before, now) do
+    k = Enum.find(0..length(now), fn k -> Enum.drop(now, k) == Enum.take(before, length(now) - k) end)
+    Enum.take(now, k)
+  end
+
+  @doc """
   The public fields that differ between two states, as `{field, new_value}`
   (link counters excepted: they change with every frame).
   """

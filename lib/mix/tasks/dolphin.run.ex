@@ -79,7 +79,9 @@ defmodule Mix.Tasks.Dolphin.Run do
 
   0 — the script completed (or `--for` ended it); 1 — the script failed
   (could not compile, a task failed, `halt`, a pick timed out: the message
-  says what, where and why); 2 — bad usage; 130 — Ctrl-C (SIGINT) stopped
+  says what, where and why) or its vehicles could not be started (a port in
+  use, a SITL binary missing); 2 — bad usage (an unknown option, a bad
+  endpoint, no such script); 130 — Ctrl-C (SIGINT) stopped
   it; 143 — SIGTERM stopped it (128 + the signal's number, as a shell says).
   """
 
@@ -177,6 +179,7 @@ defmodule Mix.Tasks.Dolphin.Run do
              :ok <- positive(opts, :fake),
              :ok <- exclusive(opts),
              :ok <- speedup(opts[:speedup]),
+             :ok <- endpoints(opts),
              {:ok, for_ms} <- duration(opts[:for]),
              :ok <- readable(file) do
           {:ok, file, Keyword.put(opts, :for_ms, for_ms)}
@@ -206,6 +209,17 @@ defmodule Mix.Tasks.Dolphin.Run do
       [_, _ | _] = given -> {:error, Enum.map_join(given, " and ", &"--#{&1}") <> " do not go together"}
       _ -> :ok
     end
+  end
+
+  defp endpoints(opts) do
+    given = for {key, ep} <- opts, key in [:connect, :forward], do: {key, ep}
+
+    Enum.reduce_while(given, :ok, fn {key, ep}, :ok ->
+      case Dolphin.Link.Endpoint.parse(ep) do
+        {:ok, _} -> {:cont, :ok}
+        {:error, why} -> {:halt, {:error, "--#{key} #{ep}: #{why}"}}
+      end
+    end)
   end
 
   defp speedup(nil), do: :ok
@@ -258,9 +272,11 @@ defmodule Mix.Tasks.Dolphin.Run do
           stop_outputs()
           report(result, Keyword.put(opts, :signal, signal), out, err)
 
+        # The usage was right (endpoints are checked when parsed): a port in
+        # use, a SITL binary that would not start... the run failed.
         {:error, message} ->
           IO.puts(err, "mix dolphin.run: #{message}")
-          2
+          1
       end
     after
       # The outputs stop first (they show the run, not its teardown); then

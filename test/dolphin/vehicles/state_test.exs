@@ -6,6 +6,7 @@ defmodule Dolphin.Vehicles.StateTest do
   alias Dolphin.Vehicles.{Modes, State}
 
   doctest Modes
+  doctest Dolphin.Vehicles.State
 
   defp frame(message, opts \\ []), do: struct(Frame, Keyword.merge([sysid: 1, compid: 1, seq: 0, message: message], opts))
   defp fold(messages), do: Enum.reduce(messages, State.new(1), fn {m, opts}, s -> State.apply(s, frame(m, opts), 100) end)

@@ -46,7 +46,7 @@ defmodule Mix.Tasks.Dolphin.RunTest do
       Dolphin.Telemetry.subscribe()
       bad = script(dir, "bad.exs", "use Dolphin.Script\nmessage(\"hi\")\nexecute %{v1 => \n")
       assert {1, "", err} = main([bad, "--fake", "1"])
-      assert err =~ ~r/bad.exs:\d+: syntax error/
+      assert err =~ ~r/bad.exs:\d+:\d+: syntax error/
 
       typo = script(dir, "typo.exs", "use Dolphin.Script\nmessage(\"hi\")\nv = pik(type: :uav)\n_ = v\n")
       assert {1, "", err} = main([typo, "--fake", "1"])

@@ -1,0 +1,76 @@
+defmodule Dolphin.ScriptErrorsTest do
+  # What a script's author reads when the script is wrong: their file, line
+  # and words, never the module the script is compiled into.
+  # Swaps :standard_error while compiling and runs scripts: not async.
+  use ExUnit.Case, async: false
+
+  import ExUnit.CaptureIO
+
+  alias Dolphin.Script
+  alias Dolphin.Script.Error
+  alias Mix.Tasks.Dolphin.Run
+
+  defp compile(source, file \\ "script.exs") do
+    case Script.compile_string(source, file) do
+      {:ok, script} -> Script.purge(script) && {:ok, script}
+      error -> error
+    end
+  end
+
+  test "an unknown word names the nearest words of the language, not the script's module" do
+    assert {:error, %Error{line: 3} = e} = compile("use Dolphin.Script\nv = pick(type: :uav)\nexecute(wait_fro(battery(v) > 0.5))\n", "typo.exs")
+    text = Error.format(e)
+    assert text =~ "typo.exs:3: undefined function wait_fro/1"
+    assert text =~ "did you mean wait_for/1"
+    refute text =~ "Dolphin.Script.Compiled"
+  end
+
+  test "compiler warnings are said in the script's terms" do
+    warnings = capture_io(:stderr, fn -> assert {:ok, _} = compile("use Dolphin.Script\nx = 1\nmessage(\"hi\")\n", "unused.exs") end)
+    assert warnings =~ ~s(unused.exs:2: warning: variable "x" is unused)
+    refute warnings =~ "Compiled"
+  end
+
+  test "a syntax error says the token, where it is and what is not closed, in plain words" do
+    source = "use Dolphin.Script\n\nforever do\n  v = pick(timeout: seconds(1)\n  release(v)\nend\n"
+    assert {:error, %Error{kind: :syntax, line: 6, column: 1} = e} = compile(source, "syntax.exs")
+    assert Error.format(e) == ~s|syntax.exs:6:1: syntax error: unexpected reserved word "end": the "(" at line 4 is missing terminator ")"|
+  end
+
+  test "a word of the language given bad arguments while compiling names the line" do
+    source = "use Dolphin.Script\n\nt = one_of do\n  1\nend\n"
+    assert {:error, %Error{line: 3, message: m}} = compile(source, "one_of.exs")
+    assert m =~ "one_of takes clauses"
+  end
+
+  @tag :tmp_dir
+  test "a mission on a fake vehicle says that fake vehicles run only test tasks", %{tmp_dir: dir} do
+    file = Path.join(dir, "fake.exs")
+    File.write!(file, "use Dolphin.Script\nv = pick(timeout: seconds(1))\nexecute(on(mission \"m\" do\n  home location(40.4, -7.3, 800)\n  take_off location(40.4, -7.3, 820)\nend, v))\n")
+    {:ok, out} = StringIO.open("")
+    {:ok, err} = StringIO.open("")
+    assert 1 == Run.main([file, "--fake", "1"], out: out, err: err)
+    {_, text} = StringIO.contents(err)
+    assert text =~ ~s|mission "m" needs a MAVLink vehicle; vehicle 1 is a fake vehicle (--fake), which runs only test-platform tasks|
+    refute text =~ "not connected"
+  end
+
+  @tag :tmp_dir
+  test "a port already in use fails the run (exit 1), it is not bad usage (exit 2)", %{tmp_dir: dir} do
+    {:ok, taken} = :gen_udp.open(0, ip: {127, 0, 0, 1})
+    {:ok, port} = :inet.port(taken)
+    file = Path.join(dir, "idle.exs")
+    File.write!(file, "use Dolphin.Script\nmessage(\"hi\")\n")
+    {:ok, out} = StringIO.open("")
+    {:ok, err} = StringIO.open("")
+    assert 1 == Run.main([file, "--connect", "udpin:127.0.0.1:#{port}", "--no-tlog"], out: out, err: err)
+    {_, text} = StringIO.contents(err)
+    assert text =~ "udpin:127.0.0.1:#{port}"
+    assert text =~ "in use"
+    refute text =~ "usage:"
+
+    # A malformed endpoint is bad usage.
+    assert 2 == Run.main([file, "--connect", "udp:127.0.0.1:1"], out: out, err: err)
+    :gen_udp.close(taken)
+  end
+end
