@@ -277,12 +277,7 @@ defmodule Dolphin.Console do
     end
   end
 
-  defp texts(id) do
-    case Vehicles.state(id) do
-      {:ok, s} -> s.status_texts
-      _ -> []
-    end
-  end
+  defp texts(id), do: Vehicles.status_texts(id)
 
   # The vehicle's STATUSTEXTs that came with an answer, as " — text; text".
   defp news(before, now) do

@@ -42,6 +42,19 @@ defmodule Dolphin.Vehicles do
     |> Enum.sort()
   end
 
+  @doc """
+  A vehicle's latest STATUSTEXTs, newest first, as `{severity, text}` (`[]`
+  for a vehicle not known); with `Dolphin.Vehicles.State.texts_since/2`, what
+  it said during an exchange.
+  """
+  @spec status_texts(byte()) :: [{integer(), String.t()}]
+  def status_texts(sysid) do
+    case state(sysid) do
+      {:ok, st} -> st.status_texts
+      _ -> []
+    end
+  end
+
   @doc "The state of a vehicle, plus `lost: boolean`."
   @spec state(byte()) :: {:ok, Dolphin.Vehicles.State.t()} | {:error, :unknown_vehicle}
   def state(sysid) do

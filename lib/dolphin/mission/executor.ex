@@ -356,12 +356,7 @@ defmodule Dolphin.Mission.Executor do
     end
   end
 
-  defp texts(vehicle) do
-    case Vehicles.state(vehicle) do
-      {:ok, st} -> st.status_texts
-      _ -> []
-    end
-  end
+  defp texts(vehicle), do: Vehicles.status_texts(vehicle)
 
   # The autopilot's latest explanation (a STATUSTEXT of warning or worse, or
   # one with a prefix) among what it said since `before` (the texts when the
