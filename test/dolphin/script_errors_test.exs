@@ -10,7 +10,7 @@ defmodule Dolphin.ScriptErrorsTest do
   alias Dolphin.Script.Error
   alias Mix.Tasks.Dolphin.Run
 
-  defp compile(source, file \\ "script.exs") do
+  defp compile(source, file) do
     case Script.compile_string(source, file) do
       {:ok, script} -> Script.purge(script) && {:ok, script}
       error -> error

@@ -43,7 +43,9 @@ defmodule Dolphin.SITLTest do
       assert message =~ "no such defaults file: /nonexistent/x.parm"
     end
 
+    # Its exit is logged with the lines it printed: expected here.
     @tag :tmp_dir
+    @tag :capture_log
     test "a binary that exits at once is reported with the last lines it printed", %{tmp_dir: dir} do
       fake = Path.join(dir, "arducopter")
       File.write!(fake, "#!/bin/sh\necho 'bad option --model'\necho 'giving up'\nexit 3\n")
@@ -192,6 +194,8 @@ defmodule Dolphin.SITLTest do
     assert {:ok, :done} = Engine.run(Engine.on(hop(home), [id]))
   end
 
+  # The killed instance's exit is logged: expected here.
+  @tag :capture_log
   test "a vehicle that vanishes mid-mission is lost within the connection timeout; its task fails and the watch handler runs" do
     [id] = Backend.start(:sitl, 1)
     home = home_of(id)
