@@ -251,7 +251,7 @@ defmodule Dolphin.SITL do
   # before that ArduCopter refuses missions with NO_SPACE), or one exited (a
   # bad binary, option or defaults file), or time ran out.
   defp await_fleet(fleet, deadline) do
-    known = Enum.filter(fleet.sysids, &booted?/1)
+    known = Enum.filter(fleet.sysids, &Dolphin.Vehicles.ready?/1)
     logs = Enum.zip(fleet.sysids, Enum.map(fleet.instances, &Instance.log/1))
 
     cond do
@@ -270,13 +270,6 @@ defmodule Dolphin.SITL do
       true ->
         Process.sleep(@poll_ms)
         await_fleet(fleet, deadline)
-    end
-  end
-
-  defp booted?(sysid) do
-    case Dolphin.Vehicles.state(sysid) do
-      {:ok, %{type: type, system_status: status}} -> type != nil and status not in [nil, 0, 1]
-      _ -> false
     end
   end
 

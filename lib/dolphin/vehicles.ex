@@ -42,6 +42,15 @@ defmodule Dolphin.Vehicles do
     |> Enum.sort()
   end
 
+  @doc "Whether a vehicle has been heard and has booted (`Dolphin.Vehicles.State.ready?/1`)."
+  @spec ready?(byte()) :: boolean()
+  def ready?(sysid) do
+    case state(sysid) do
+      {:ok, st} -> Dolphin.Vehicles.State.ready?(st)
+      _ -> false
+    end
+  end
+
   @doc """
   A vehicle's latest STATUSTEXTs, newest first, as `{severity, text}` (`[]`
   for a vehicle not known); with `Dolphin.Vehicles.State.texts_since/2`, what

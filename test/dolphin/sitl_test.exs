@@ -17,12 +17,6 @@ defmodule Dolphin.SITLTest do
     :ok
   end
 
-  defp home_of(id) do
-    Wait.until(fn -> match?({:ok, %{home: %{}}}, Vehicles.state(id)) end, 2_000, fn -> "home of vehicle #{id}" end)
-    {:ok, %{home: h}} = Vehicles.state(id)
-    Geo.location(h.lat, h.lon, h.alt)
-  end
-
   defp pick(id), do: {:ok, _} = Dolphin.Fleet.pick(Dolphin.Fleet, self(), id: id)
 
   defp hop(home) do
@@ -59,7 +53,7 @@ defmodule Dolphin.SITLTest do
     test "instances get distinct system ids, homes 30 m apart, and stop cleanly" do
       ids = Backend.start(:sitl, 2)
       assert ids == [1, 2]
-      [a, b] = Enum.map(ids, &home_of/1)
+      [a, b] = Enum.map(ids, &Backend.home/1)
       assert_in_delta Geo.distance(a, b), 30, 1
       Backend.stop(ids)
       assert Vehicles.list() == []
@@ -80,7 +74,7 @@ defmodule Dolphin.SITLTest do
 
   test "mission protocol on ArduCopter: 650 items exact both ways, 700 refused with its reason, clear, a bad item refused" do
     [id] = Backend.start(:sitl, 1)
-    home = home_of(id)
+    home = Backend.home(id)
     many = fn n -> Enum.reduce(1..(n - 3), hop(home) |> Map.update!(:commands, &Enum.take(&1, 2)), fn i, m -> Mission.add(m, C.move(rem(i, 7) - 3, rem(i, 5) - 2, 0)) end) end
 
     # ArduCopter SITL stores 650 items (home included): the most it takes.
@@ -105,7 +99,7 @@ defmodule Dolphin.SITLTest do
 
   test "Table 2 on ArduCopter: the commands the other SITL tests do not fly, each reached in order at its point" do
     [id] = Backend.start(:sitl, 1)
-    home = home_of(id)
+    home = Backend.home(id)
     pick(id)
     up = home.h + 20
 
@@ -159,7 +153,7 @@ defmodule Dolphin.SITLTest do
 
   test "arming refused before the position estimate is ready is retried; the mission then flies and lands" do
     [id] = Backend.start(:sitl, 1)
-    home = home_of(id)
+    home = Backend.home(id)
     pick(id)
     # At once after boot: ArduCopter refuses to arm until its EKF uses GPS.
     assert {:ok, :done} = Engine.run(Engine.on(hop(home), [id]))
@@ -172,7 +166,7 @@ defmodule Dolphin.SITLTest do
 
   test "a stopped mission leaves the vehicle holding its position and height for 30 s" do
     [id] = Backend.start(:sitl, 1)
-    home = home_of(id)
+    home = Backend.home(id)
     pick(id)
 
     endless = Mission.new("endless") |> Mission.add(C.home(home)) |> Mission.add(C.take_off(%{home | h: home.h + 15})) |> Mission.add(C.move_and_loiter_pos(40, 0, 0, 10))
@@ -198,7 +192,7 @@ defmodule Dolphin.SITLTest do
   @tag :capture_log
   test "a vehicle that vanishes mid-mission is lost within the connection timeout; its task fails and the watch handler runs" do
     [id] = Backend.start(:sitl, 1)
-    home = home_of(id)
+    home = Backend.home(id)
     pick(id)
     Vehicles.set_timeout(id, 5_000)
     test = self()
@@ -229,7 +223,7 @@ defmodule Dolphin.SITLTest do
 
     [id] = Backend.start(:sitl, 1, send_to: send_to)
     assert_received {:proxy, proxy}
-    home = home_of(id)
+    home = Backend.home(id)
     pick(id)
     Dolphin.Telemetry.subscribe()
 

@@ -39,6 +39,13 @@ defmodule Dolphin.Test.Backend do
     fleet.sysids
   end
 
+  @doc "A vehicle's home, once it reports one (ArduCopter: once its EKF has an origin)."
+  def home(id) do
+    Dolphin.Test.Wait.until(fn -> match?({:ok, %{home: %{}}}, Dolphin.Vehicles.state(id)) end, 2_000, fn -> "home of vehicle #{id}" end)
+    {:ok, %{home: h}} = Dolphin.Vehicles.state(id)
+    Dolphin.Geo.location(h.lat, h.lon, h.alt)
+  end
+
   @doc "What the backend's `start` returned, for the vehicles whose first id is `first`."
   def fleet(first), do: Process.get({__MODULE__, first}) |> elem(1)
 

@@ -32,8 +32,6 @@ defmodule Dolphin.Mission.Executor do
   # A landed vehicle this close to a mission's landing point is there.
   @here_m 5
   @arm_retry_ms 1_000
-  # MAV_STATE_UNINIT, MAV_STATE_BOOT.
-  @booting [0, 1]
   @boot_timeout_ms 60_000
   @boot_poll_ms 200
   @transfer_attempts 3
@@ -294,7 +292,8 @@ defmodule Dolphin.Mission.Executor do
         verify(s, attempts - 1)
 
       {:error, e} ->
-        {:error, "reading the mission back to verify it failed#{if attempts < @transfer_attempts, do: " (#{@transfer_attempts} attempts)"}: #{Exception.message(e)}"}
+        tried = @transfer_attempts - attempts + 1
+        {:error, "reading the mission back to verify it failed#{if tried > 1, do: " (#{tried} attempts)"}: #{Exception.message(e)}"}
     end
   end
 
@@ -303,16 +302,18 @@ defmodule Dolphin.Mission.Executor do
   # MAV_STATE UNINIT or BOOT is waited for.
   defp booted(s, deadline) do
     case Vehicles.state(s.vehicle) do
-      {:ok, %{system_status: status}} when status in @booting ->
-        if s.clock.now_ms() >= deadline do
-          {:error, "vehicle #{s.vehicle} was still booting after #{div(@boot_timeout_ms, 1000)} s (MAV_STATE #{if status == 0, do: "UNINIT", else: "BOOT"})"}
-        else
-          s.clock.sleep(@boot_poll_ms)
-          booted(s, deadline)
-        end
-
       {:ok, st} ->
-        {:ok, st}
+        cond do
+          not Dolphin.Vehicles.State.booting?(st) ->
+            {:ok, st}
+
+          s.clock.now_ms() >= deadline ->
+            {:error, "vehicle #{s.vehicle} was still booting after #{div(@boot_timeout_ms, 1000)} s (MAV_STATE #{if st.system_status == 0, do: "UNINIT", else: "BOOT"})"}
+
+          true ->
+            s.clock.sleep(@boot_poll_ms)
+            booted(s, deadline)
+        end
 
       {:error, :unknown_vehicle} ->
         {:error, not_mavlink(s)}

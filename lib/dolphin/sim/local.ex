@@ -58,9 +58,7 @@ defmodule Dolphin.Sim.Local do
   # Simulated vehicles announce themselves within a heartbeat, and have
   # booted (past MAV_STATE BOOT) 2 s of clock time later.
   defp await_fleet(sysids, tries \\ 200 + div(Dolphin.Clock.to_real_ms(2_000), 50)) do
-    known = for id <- sysids, match?({:ok, %{type: t, system_status: st}} when t != nil and st not in [nil, 0, 1], Dolphin.Vehicles.state(id)), do: id
-
-    if tries > 0 and not Enum.all?(sysids, &(&1 in known)) do
+    if tries > 0 and not Enum.all?(sysids, &Dolphin.Vehicles.ready?/1) do
       Process.sleep(50)
       await_fleet(sysids, tries - 1)
     end

@@ -178,6 +178,21 @@ defmodule Dolphin.Vehicles.State do
   def mission_replaced(%__MODULE__{} = state), do: %{state | mission: new(state.sysid).mission}
 
   @doc """
+  Whether the vehicle says it is still booting (HEARTBEAT `system_status`
+  MAV_STATE_UNINIT or MAV_STATE_BOOT). ArduCopter already answers the mission
+  protocol then, refusing every upload with NO_SPACE.
+  """
+  @spec booting?(t()) :: boolean()
+  def booting?(%{system_status: status}), do: status in [0, 1]
+
+  @doc """
+  Whether the vehicle has been heard and has booted: its type is known and
+  it reports a MAV_STATE past BOOT.
+  """
+  @spec ready?(t()) :: boolean()
+  def ready?(%{type: type, system_status: status} = state), do: type != nil and status != nil and not booting?(state)
+
+  @doc """
   The STATUSTEXTs of `now` (newest first, as in `status_texts`) that came
   after `before`, an earlier `status_texts` of the same vehicle: what the
   autopilot said in between.

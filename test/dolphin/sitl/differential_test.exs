@@ -55,10 +55,8 @@ defmodule Dolphin.SITL.DifferentialTest do
   defp fly(backend) do
     {:ok, recorder} = FrameRecorder.start_link()
     [id] = Backend.start(backend, 1, forward: [FrameRecorder.endpoint(recorder)])
-    Wait.until(fn -> match?({:ok, %{home: %{}}}, Vehicles.state(id)) end, 2_000, fn -> "home of vehicle #{id}" end)
+    home = Backend.home(id)
     {:ok, _} = Dolphin.Fleet.pick(Dolphin.Fleet, self(), id: id)
-    {:ok, %{home: h}} = Vehicles.state(id)
-    home = Geo.location(h.lat, h.lon, h.alt)
 
     result = Engine.run(Engine.on(tour(home), [id]))
     assert match?({:ok, :done}, result), "#{backend}: #{inspect(result)}; the autopilot said: #{inspect(texts(recorder, id))}"
