@@ -23,9 +23,4 @@ shared_exclude =
     [:shared_vectors]
   end
 
-# :lossy_transfer tests move missions through an impairing proxy
-# (test/dolphin/test/udp_proxy_sim_test.exs); they fail on known defects of the
-# mission protocol until the lossy mission-transfer work fixes them.
-IO.puts("Excluded by default: :lossy_transfer (mission transfer over a lossy link, known to fail); run with --include lossy_transfer")
-
-ExUnit.start(exclude: [:lossy_transfer] ++ sitl_exclude ++ shared_exclude)
+ExUnit.start(exclude: sitl_exclude ++ shared_exclude)

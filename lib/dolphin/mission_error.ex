@@ -5,7 +5,9 @@ defmodule Dolphin.MissionError do
   vehicle's `MAV_MISSION_RESULT` as an atom (`:no_space`, `:invalid_sequence`,
   `:unsupported`, `:denied`, `:operation_cancelled`, ...), or `:timeout` when
   the vehicle stopped answering within the retries or the time limit,
-  `:vehicle_gone` when the vehicle's process went away.
+  `:unconfirmed` when every item of an upload went out but the vehicle's
+  final MISSION_ACK never came (only reading the mission back tells whether
+  it holds it), `:vehicle_gone` when the vehicle's process went away.
 
       iex> e = %Dolphin.MissionError{operation: :upload, vehicle: 2, mission_type: :mission, result: :no_space}
       iex> Exception.message(e)
@@ -30,6 +32,7 @@ defmodule Dolphin.MissionError do
       case e.result do
         :timeout -> "vehicle #{e.vehicle} stopped answering during the #{what} #{e.operation}"
         :vehicle_gone -> "vehicle #{e.vehicle} went away during the #{what} #{e.operation}"
+        :unconfirmed -> "vehicle #{e.vehicle} did not confirm the #{what} #{e.operation}"
         result -> "vehicle #{e.vehicle} refused the #{what} #{e.operation}: MAV_MISSION_#{result |> Atom.to_string() |> String.upcase()}"
       end
 

@@ -3,11 +3,14 @@ defmodule Dolphin.Test.ScriptedVehicle do
   A scripted vehicle for tests and benchmarks. It answers COMMAND_LONG
   (accepting a command whose param1 is even, denying one whose param1 is odd,
   and recording every command it receives), and plays the vehicle side of the
-  MAVLink mission protocol as ArduCopter does (items asked for with MISSION_REQUEST,
-  INVALID_SEQUENCE for an unexpected item while it goes on asking, a re-request
-  every second of silence and OPERATION_CANCELLED after 8, NO_SPACE over a
-  limit), over UDP on 127.0.0.1, behind a link that can drop, duplicate and
-  reorder datagrams in both directions.
+  MAVLink mission protocol by the simulator's rules, which are ArduCopter's
+  (`Dolphin.Sim.MissionServer`: items asked for with MISSION_REQUEST,
+  INVALID_SEQUENCE and nothing else for an unexpected item, a re-request after
+  a second without one, OPERATION_CANCELLED after 8 s without an item,
+  MAV_MISSION_ERROR for an item when no upload is under way, NO_SPACE over a
+  limit) — but item 0 is kept as sent, not taken for home — over UDP on
+  127.0.0.1, behind a link that can drop, duplicate and reorder datagrams in
+  both directions.
 
   Options: `:port` (the ground station's), `:sysid`, `:limit` (items), `:loss`,
   `:duplicate`, `:reorder` (probabilities), `:seed`, `:speedup` (of its own
@@ -18,6 +21,7 @@ defmodule Dolphin.Test.ScriptedVehicle do
 
   alias Dolphin.MAVLink.{Frame, Parser}
   alias Dolphin.MAVLink.Ardupilotmega, as: M
+  alias Dolphin.Sim.MissionServer
 
   def start_link(opts), do: GenServer.start_link(__MODULE__, opts)
 
@@ -39,13 +43,12 @@ defmodule Dolphin.Test.ScriptedVehicle do
       socket: socket,
       port: Keyword.fetch!(opts, :port),
       sysid: Keyword.fetch!(opts, :sysid),
-      limit: Keyword.get(opts, :limit, 700),
       faults: Map.new(Keyword.take(opts, [:loss, :duplicate, :reorder])),
       speedup: Keyword.get(opts, :speedup, 1),
-      # mission type => items
-      lists: %{},
+      missions: MissionServer.new(home: false, limit: Keyword.get(opts, :limit, 700)),
+      # The mission server's timer: which one is current.
+      timer: nil,
       commands: [],
-      upload: nil,
       held: nil,
       seq: 0
     }
@@ -55,7 +58,7 @@ defmodule Dolphin.Test.ScriptedVehicle do
   end
 
   @impl true
-  def handle_call({:mission, type}, _from, s), do: {:reply, Map.get(s.lists, type, []), s}
+  def handle_call({:mission, type}, _from, s), do: {:reply, Enum.map(MissionServer.items(s.missions, type), &normalise/1), s}
   def handle_call(:commands, _from, s), do: {:reply, Enum.reverse(s.commands), s}
   def handle_call({:faults, faults}, _from, s), do: {:reply, :ok, %{s | faults: Map.new(faults)}}
 
@@ -86,47 +89,18 @@ defmodule Dolphin.Test.ScriptedVehicle do
 
   def handle_info({:late, datagram}, s), do: {:noreply, receive_datagram(s, datagram)}
 
-  # ArduPilot re-asks every second of its time, 8 times, then gives up.
-  def handle_info({:rerequest, ref}, %{upload: %{ref: ref} = up} = s) do
-    if up.tries >= 8 do
-      s = transmit(%{s | upload: nil}, ack(up.type, 15))
-      {:noreply, s}
-    else
-      s = %{s | upload: %{up | tries: up.tries + 1}}
-      {:noreply, request_next(s)}
-    end
+  # The mission server's re-request timer, in its (sped-up) time.
+  def handle_info({:mission_timer, ref}, %{timer: ref} = s) do
+    {missions, replies} = MissionServer.timeout(s.missions, now(s))
+    {:noreply, reply(%{s | missions: missions}, replies)}
   end
 
-  def handle_info({:rerequest, _old}, s), do: {:noreply, s}
+  def handle_info({:mission_timer, _old}, s), do: {:noreply, s}
   def handle_info(:flush_held, s), do: {:noreply, flush_held(s)}
 
   defp receive_datagram(s, datagram) do
     {frames, _} = Parser.feed(Parser.new(), datagram)
     Enum.reduce(frames, s, &handle_frame(&1.message, &2))
-  end
-
-  defp handle_frame(%M.MissionCount{count: count, mission_type: type}, s) do
-    cond do
-      count > s.limit -> transmit(s, ack(type, 4))
-      count == 0 -> transmit(%{s | lists: Map.put(s.lists, type, []), upload: nil}, ack(type, 0))
-      true -> request_next(%{s | upload: %{type: type, count: count, items: [], tries: 0, ref: nil}})
-    end
-  end
-
-  defp handle_frame(%M.MissionItemInt{seq: seq, mission_type: type} = item, %{upload: %{type: type} = up} = s) do
-    expected = length(up.items)
-
-    cond do
-      seq != expected ->
-        transmit(s, ack(type, 13)) |> request_next()
-
-      expected + 1 == up.count ->
-        list = Enum.reverse([normalise(item) | up.items])
-        transmit(%{s | lists: Map.put(s.lists, type, list), upload: nil}, ack(type, 0))
-
-      true ->
-        request_next(%{s | upload: %{up | items: [normalise(item) | up.items], tries: 0}})
-    end
   end
 
   defp handle_frame(%M.CommandLong{command: command, param1: p1}, s) do
@@ -135,29 +109,36 @@ defmodule Dolphin.Test.ScriptedVehicle do
     transmit(s, %M.CommandAck{command: command, result: result, target_system: 255, target_component: 190})
   end
 
-  defp handle_frame(%M.MissionRequestList{mission_type: type}, s),
-    do: transmit(s, %M.MissionCount{target_system: 255, target_component: 190, count: length(Map.get(s.lists, type, [])), mission_type: type})
+  @mission_messages [M.MissionCount, M.MissionItemInt, M.MissionItem, M.MissionRequestList, M.MissionRequestInt, M.MissionRequest, M.MissionClearAll, M.MissionAck]
 
-  defp handle_frame(%M.MissionRequestInt{seq: seq, mission_type: type}, s) do
-    case Enum.at(Map.get(s.lists, type, []), seq) do
-      nil -> s
-      item -> transmit(s, %{item | target_system: 255, target_component: 190})
-    end
+  defp handle_frame(%m{} = message, s) when m in @mission_messages do
+    {missions, replies} = MissionServer.handle(s.missions, message, {255, 190}, %{now: now(s), home: nil})
+    reply(%{s | missions: missions}, replies)
   end
-
-  defp handle_frame(%M.MissionClearAll{mission_type: type}, s),
-    do: transmit(%{s | lists: Map.put(s.lists, type, []), upload: nil}, ack(type, 0))
 
   defp handle_frame(_other, s), do: s
 
-  defp request_next(%{upload: up} = s) do
-    ref = make_ref()
-    Process.send_after(self(), {:rerequest, ref}, max(1, div(1_000, s.speedup)))
-    s = %{s | upload: %{up | ref: ref}}
-    transmit(s, %M.MissionRequest{target_system: 255, target_component: 190, seq: length(up.items), mission_type: up.type})
-  end
+  # The vehicle's clock: real time sped up as the ground station's is.
+  defp now(s), do: System.monotonic_time(:millisecond) * s.speedup
 
-  defp ack(mission_type, result), do: %M.MissionAck{target_system: 255, target_component: 190, type: result, mission_type: mission_type}
+  # What the mission server says goes out; its timer is set again.
+  defp reply(s, replies) do
+    s =
+      Enum.reduce(replies, s, fn
+        {:send, message}, s -> transmit(s, message)
+        _text_or_change, s -> s
+      end)
+
+    case MissionServer.deadline(s.missions) do
+      nil ->
+        %{s | timer: nil}
+
+      due ->
+        ref = make_ref()
+        Process.send_after(self(), {:mission_timer, ref}, max(1, ceil((due - now(s)) / s.speedup)))
+        %{s | timer: ref}
+    end
+  end
 
   # What the vehicle keeps of an item (targets are the sender's business).
   defp normalise(item), do: %{item | target_system: 0, target_component: 0}

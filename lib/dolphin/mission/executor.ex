@@ -266,12 +266,11 @@ defmodule Dolphin.Mission.Executor do
       # Every item went out but the vehicle's final MISSION_ACK was lost (it is
       # never repeated): whether the vehicle has the mission is for the
       # verification, which downloads it, to say.
-      {:error, %Dolphin.MissionError{result: :timeout, detail: "the vehicle stopped asking for items"}} ->
+      {:error, %Dolphin.MissionError{result: :unconfirmed}} ->
         {:uploaded, s.clock.now_ms() - started}
 
-      # MAV_MISSION_ERROR is ArduCopter's answer to an item that reaches it out
-      # of a transfer (a duplicate or a late one on a bad link), not a refusal
-      # of the mission: worth starting again too.
+      # The protocol starts a transaction again itself while the vehicle
+      # answers; a vehicle silent for all of them may come back.
       {:error, %Dolphin.MissionError{result: result}} when result in [:timeout, :error] and attempts > 1 ->
         upload(s, me, started, attempts - 1)
 

@@ -8,23 +8,33 @@ defmodule Dolphin.Sim.MissionServer do
   # - Uploads are asked for item by item with MISSION_REQUEST (ArduPilot's
   #   choice), or MISSION_REQUEST_INT when `request_int: true`; MISSION_ITEM_INT
   #   and the float MISSION_ITEM are both accepted (the latter with ArduPilot's
-  #   complaint). A wrong seq draws INVALID_SEQUENCE and the expected one is asked
-  #   for again; silence draws a re-request every second, 8 times, then
-  #   OPERATION_CANCELLED; more than `limit` items, NO_SPACE; an unknown command,
-  #   UNSUPPORTED; a second uploader while one is busy, DENIED.
+  #   complaint). Only the item asked for is taken, and the next one asked for
+  #   at once; any other draws INVALID_SEQUENCE and nothing else (the next
+  #   request is the timer's). Asked again when a second passes without a
+  #   request sent; OPERATION_CANCELLED after 8 s without an item taken. A
+  #   second MISSION_COUNT from the same ground station starts again; from
+  #   another, DENIED while one is busy. More than `limit` items, NO_SPACE; an
+  #   unknown command, UNSUPPORTED.
+  # - While an upload is under way, downloads are DENIED and a clear is an
+  #   ERROR; when none is, an item draws MAV_MISSION_ERROR (so a ground station
+  #   that resends the last item after a lost ACCEPTED learns the upload is over).
+  # - A request for an item past the end draws MISSION_COUNT (ArduPilot
+  #   "educates" the ground station) and INVALID_SEQUENCE.
   # - For the mission (type 0) item 0 is home: an uploaded item 0 is ignored and
-  #   a downloaded item 0 is the current home. Frames are normalised on the way
-  #   back (the `_INT` frames read back as their float twins), as ArduPilot does.
+  #   a downloaded item 0 is the current home (`home: false` keeps item 0 as
+  #   sent, for test vehicles). Frames are normalised on the way back (the
+  #   `_INT` frames read back as their float twins), as ArduPilot does.
   # - Fence (1) and rally (2) lists are kept as uploaded.
 
   alias Dolphin.MAVLink.Ardupilotmega, as: M
   alias Dolphin.MAVLink.MissionItems
 
   @rerequest_ms 1_000
-  @rerequest_tries 8
+  @upload_timeout_ms 8_000
 
   # MAV_MISSION_RESULT values.
   @accepted 0
+  @error 1
   @unsupported 3
   @no_space 4
   @invalid_sequence 13
@@ -40,6 +50,7 @@ defmodule Dolphin.Sim.MissionServer do
   defstruct lists: %{0 => [], 1 => [], 2 => []},
             upload: nil,
             request_int: false,
+            home: true,
             limit: 650
 
   @type t :: %__MODULE__{}
@@ -47,7 +58,8 @@ defmodule Dolphin.Sim.MissionServer do
   @type reply :: {:send, struct()} | {:text, 0..7, String.t()} | {:changed, 0..2}
 
   @spec new(keyword()) :: t()
-  def new(opts \\ []), do: %__MODULE__{request_int: Keyword.get(opts, :request_int, false), limit: Keyword.get(opts, :limit, 650)}
+  def new(opts \\ []),
+    do: %__MODULE__{request_int: Keyword.get(opts, :request_int, false), limit: Keyword.get(opts, :limit, 650), home: Keyword.get(opts, :home, true)}
 
   @doc false
   @spec supported?(non_neg_integer()) :: boolean()
@@ -60,7 +72,7 @@ defmodule Dolphin.Sim.MissionServer do
   @doc "When the upload's re-request timer is due (vehicle ms), or nil."
   @spec deadline(t()) :: integer() | nil
   def deadline(%__MODULE__{upload: nil}), do: nil
-  def deadline(%__MODULE__{upload: up}), do: up.deadline
+  def deadline(%__MODULE__{upload: up}), do: min(up.requested + @rerequest_ms, up.received + @upload_timeout_ms)
 
   @doc """
   One message from the ground station `peer`. `home` is the item 0 to hand out
@@ -84,7 +96,7 @@ defmodule Dolphin.Sim.MissionServer do
         {%{s | upload: nil, lists: Map.put(s.lists, type, [])}, [{:send, ack(peer, type, @accepted)}, {:changed, type}]}
 
       true ->
-        up = %{peer: peer, type: type, count: count, items: [], tries: 0, deadline: ctx.now + @rerequest_ms}
+        up = %{peer: peer, type: type, count: count, items: [], received: ctx.now, requested: ctx.now}
         s = %{s | upload: up}
         {s, [request(s, 0)]}
     end
@@ -97,8 +109,8 @@ defmodule Dolphin.Sim.MissionServer do
 
     cond do
       seq != expected ->
-        # The spec's answer to an unexpected item; ArduPilot then goes on asking.
-        {s, [{:send, ack(peer, type, @invalid_sequence)}, request(s, expected)]}
+        # The spec's answer to an unexpected item; ArduPilot's timer asks again.
+        {s, [{:send, ack(peer, type, @invalid_sequence)}]}
 
       type == 0 and seq > 0 and not supported?(item.command) ->
         {%{s | upload: nil}, complaint ++ [{:send, ack(peer, type, @unsupported)}, {:text, 6, "Mission: unsupported command #{item.command}"}]}
@@ -106,16 +118,26 @@ defmodule Dolphin.Sim.MissionServer do
       seq + 1 == up.count ->
         list = Enum.reverse([MissionItems.to_int(item) | up.items])
         # Item 0 of the mission is home: accepted and ignored.
-        list = if type == 0, do: tl(list), else: list
+        list = if type == 0 and s.home, do: tl(list), else: list
         lists = Map.put(s.lists, type, list)
         done = [{:send, ack(peer, type, @accepted)}, {:changed, type}] ++ if(type == 0, do: [{:text, 6, "Flight plan received"}], else: [])
         {%{s | upload: nil, lists: lists}, complaint ++ done}
 
       true ->
-        s = %{s | upload: %{up | items: [MissionItems.to_int(item) | up.items], tries: 0, deadline: ctx.now + @rerequest_ms}}
+        s = %{s | upload: %{up | items: [MissionItems.to_int(item) | up.items], received: ctx.now, requested: ctx.now}}
         {s, complaint ++ [request(s, seq + 1)]}
     end
   end
+
+  # No upload under way (it ended, or never began): ArduPilot's answer to an
+  # item (but a guided-mode target, current 2 or 3).
+  def handle(%__MODULE__{upload: nil} = s, %item_type{mission_type: type, current: current}, peer, _ctx)
+      when item_type in [M.MissionItemInt, M.MissionItem] and current not in [2, 3],
+      do: {s, [{:send, ack(peer, type, @error)}]}
+
+  # Downloads wait for the upload to end.
+  def handle(%__MODULE__{upload: %{}} = s, %request{mission_type: type}, peer, _ctx) when request in [M.MissionRequestList, M.MissionRequestInt, M.MissionRequest],
+    do: {s, [{:send, ack(peer, type, @denied)}]}
 
   def handle(%__MODULE__{} = s, %M.MissionRequestList{mission_type: type}, peer, ctx) do
     count = length(download_list(s, type, ctx.home))
@@ -123,15 +145,20 @@ defmodule Dolphin.Sim.MissionServer do
   end
 
   def handle(%__MODULE__{} = s, %request{seq: seq, mission_type: type}, peer, ctx) when request in [M.MissionRequestInt, M.MissionRequest] do
-    case Enum.at(download_list(s, type, ctx.home), seq) do
+    list = download_list(s, type, ctx.home)
+
+    case Enum.at(list, seq) do
       nil ->
-        {s, [{:send, ack(peer, type, 1)}]}
+        count = %M.MissionCount{target_system: elem(peer, 0), target_component: elem(peer, 1), count: length(list), mission_type: type}
+        {s, [{:send, count}, {:send, ack(peer, type, @invalid_sequence)}]}
 
       item ->
         item = %{item | seq: seq, target_system: elem(peer, 0), target_component: elem(peer, 1), mission_type: type}
         {s, [{:send, if(request == M.MissionRequestInt, do: item, else: MissionItems.to_float(item))}]}
     end
   end
+
+  def handle(%__MODULE__{upload: %{}} = s, %M.MissionClearAll{mission_type: type}, peer, _ctx), do: {s, [{:send, ack(peer, type, @error)}]}
 
   def handle(%__MODULE__{} = s, %M.MissionClearAll{mission_type: type}, peer, _ctx) when type in 0..2,
     do: {%{s | lists: Map.put(s.lists, type, []), upload: nil}, [{:send, ack(peer, type, @accepted)}, {:changed, type}]}
@@ -142,25 +169,25 @@ defmodule Dolphin.Sim.MissionServer do
   def handle(%__MODULE__{upload: %{peer: peer}} = s, %M.MissionAck{}, peer, _ctx), do: {%{s | upload: nil}, []}
   def handle(%__MODULE__{} = s, _other, _peer, _ctx), do: {s, []}
 
-  @doc "The re-request timer: ask again, or give up after 8 silent seconds."
+  @doc "The re-request timer: ask again after a second, give up after 8 s without an item."
   @spec timeout(t(), integer()) :: {t(), [reply()]}
   def timeout(%__MODULE__{upload: nil} = s, _now), do: {s, []}
 
   def timeout(%__MODULE__{upload: up} = s, now) do
     cond do
-      now < up.deadline ->
-        {s, []}
-
-      up.tries >= @rerequest_tries ->
+      now - up.received > @upload_timeout_ms ->
         {%{s | upload: nil}, [{:send, ack(up.peer, up.type, @cancelled)}, {:text, 3, "Mission upload timeout"}]}
 
-      true ->
-        s = %{s | upload: %{up | tries: up.tries + 1, deadline: now + @rerequest_ms}}
+      now - up.requested >= @rerequest_ms ->
+        s = %{s | upload: %{up | requested: now}}
         {s, [request(s, length(up.items))]}
+
+      true ->
+        {s, []}
     end
   end
 
-  defp download_list(s, 0, home), do: [home || %M.MissionItemInt{command: 16, frame: 0}] ++ Enum.map(items(s, 0), &normalise/1)
+  defp download_list(%{home: true} = s, 0, home), do: [home || %M.MissionItemInt{command: 16, frame: 0}] ++ Enum.map(items(s, 0), &normalise/1)
   defp download_list(s, type, _home), do: items(s, type)
 
   defp normalise(item), do: %{item | frame: Map.get(@normalised_frames, item.frame, item.frame)}

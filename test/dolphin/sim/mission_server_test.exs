@@ -32,10 +32,34 @@ defmodule Dolphin.Sim.MissionServerTest do
     {_s, [{:send, %M.MissionRequestInt{seq: 0}}]} = MissionServer.handle(MissionServer.new(request_int: true), count(2), @gcs, ctx())
   end
 
-  test "a wrong seq draws INVALID_SEQUENCE and the expected item is asked for again" do
-    {s, _} = MissionServer.handle(MissionServer.new(), count(3), @gcs, ctx())
+  # As ArduCopter SITL does: the answer is the ack alone; asking again is the
+  # timer's business (a re-request per unexpected item would feed a storm on
+  # a link that duplicates).
+  test "a wrong seq draws INVALID_SEQUENCE and nothing else, and does not count as an item" do
+    {s, _} = MissionServer.handle(MissionServer.new(), count(3), @gcs, ctx(0))
+    {s, _} = MissionServer.handle(s, item(0), @gcs, ctx(0))
+    {s, [{:send, %M.MissionAck{type: 13}}]} = MissionServer.handle(s, item(2), @gcs, ctx(5_000))
+    {s, [{:send, %M.MissionAck{type: 13}}]} = MissionServer.handle(s, item(0), @gcs, ctx(7_000))
+    # 8 s after the last item it took, not after the wrong ones, it gives up.
+    {_s, [{:send, %M.MissionAck{type: 15}} | _]} = MissionServer.timeout(s, 8_001)
+  end
+
+  test "while an upload is under way: downloads DENIED, a clear is an ERROR; after it, an item is an ERROR" do
+    {s, _} = MissionServer.handle(MissionServer.new(), count(2), @gcs, ctx())
+    {s, [{:send, %M.MissionAck{type: 14}}]} = MissionServer.handle(s, %M.MissionRequestList{mission_type: 0}, @gcs, ctx())
+    {s, [{:send, %M.MissionAck{type: 14}}]} = MissionServer.handle(s, %M.MissionRequestInt{seq: 0, mission_type: 0}, @gcs, ctx())
+    {s, [{:send, %M.MissionAck{type: 1}}]} = MissionServer.handle(s, %M.MissionClearAll{mission_type: 0}, @gcs, ctx())
     {s, _} = MissionServer.handle(s, item(0), @gcs, ctx())
-    {_s, [{:send, %M.MissionAck{type: 13}}, {:send, %M.MissionRequest{seq: 1}}]} = MissionServer.handle(s, item(2), @gcs, ctx())
+    {s, [{:send, %M.MissionAck{type: 0}} | _]} = MissionServer.handle(s, item(1), @gcs, ctx())
+    # The last item again (its ACCEPTED lost, say): no upload is under way.
+    {_s, [{:send, %M.MissionAck{type: 1}}]} = MissionServer.handle(s, item(1), @gcs, ctx())
+  end
+
+  test "a request past the end draws MISSION_COUNT and INVALID_SEQUENCE" do
+    {s, [{:send, %M.MissionCount{count: 1}}, {:send, %M.MissionAck{type: 13}}]} =
+      MissionServer.handle(MissionServer.new(), %M.MissionRequestInt{seq: 40, mission_type: 0}, @gcs, ctx())
+
+    assert s == MissionServer.new()
   end
 
   test "silence: asked again every second, 8 times, then OPERATION_CANCELLED" do
