@@ -55,10 +55,11 @@ defmodule Dolphin.Vehicles.MissionProtocol do
 
   **Timers and budgets.** Every retransmission timeout derives from the
   link's round trip: `:rtt_ms` (the vehicle's measured one, if known) and the
-  samples this transfer takes (an answer to something sent once: Karn's rule),
-  smoothed as RFC 6298 does; never under `Dolphin.Clock`'s retry floor,
-  doubled on every timeout in a row (up to 8×). Before any sample the
-  timeout is a second of clock time. An exchange is given up after a number of
+  samples this transfer takes (an answer to something sent once: Karn's rule):
+  twice their 80th percentile (`rto_of/1`), never under `Dolphin.Clock`'s
+  retry floor nor over a second of clock time (when the vehicle asks again
+  itself), doubled on every timeout in a row (up to 8×, within that second).
+  Before any sample the timeout is a second of clock time. An exchange is given up after a number of
   timeouts in a row that grows with the loss (`:loss`, the link's round-trip
   loss if known, and what this transfer sees; enough that a link losing that
   share fails them all with a chance under 1e-4) — and never before 8 s of
@@ -164,9 +165,8 @@ defmodule Dolphin.Vehicles.MissionProtocol do
         count: count,
         component: Keyword.get(opts, :target_component, 1),
         window: if(ahead, do: Keyword.get(opts, :window, 8), else: 1),
-        # Smoothed round trip and its variation (real ms), RFC 6298.
-        srtt: rtt_ms && rtt_ms * 1.0,
-        rttvar: rtt_ms && rtt_ms / 2,
+        # The latest round-trip samples (real ms), newest first.
+        samples: if(is_number(rtt_ms), do: [rtt_ms], else: []),
         link_loss: Keyword.get(opts, :loss) || 0.0,
         fixed_attempts: Keyword.get(opts, :attempts),
         restarts_left: Keyword.get(opts, :restarts, 4),
@@ -477,17 +477,13 @@ defmodule Dolphin.Vehicles.MissionProtocol do
       else: {:keep_state, data}
   end
 
-  # No upload under way on the vehicle. After the last item was sent, its
-  # ACCEPTED was most likely lost; before, it gave up (the next timeout
-  # restarts). Before the vehicle asked for anything, a late ack.
+  # No upload under way on the vehicle. Once every item went out, and the
+  # vehicle took one less than its patience ago (so it did not give up), it
+  # took the last one and its ACCEPTED was lost: only reading the mission
+  # back can tell. Otherwise it gave up: the next timeout starts again.
   defp upload_ack(@error, :sending, data) do
-    if MapSet.size(data.sent) == data.count and data.base == data.count - 1,
-      do:
-        fail(
-          data,
-          :unconfirmed,
-          "every item was sent, but the vehicle's MISSION_ACK never came and it is no longer receiving"
-        ),
+    if MapSet.size(data.sent) == data.count and now() - data.stalled_since < Clock.to_real_ms(@vehicle_patience_ms),
+      do: fail(data, :unconfirmed, "every item was sent, but the vehicle's MISSION_ACK never came and it is no longer receiving"),
       else: {:keep_state, %{data | not_receiving: true}}
   end
 
@@ -599,31 +595,47 @@ defmodule Dolphin.Vehicles.MissionProtocol do
   end
 
   # An answer to `what`: a round-trip sample if it was sent once (an answer to
-  # a resent one could be to either send).
+  # a resent one could be to either send). Until the first sample, an answer
+  # to a resent one is measured from the last send: too short at worst, which
+  # costs a resend, where no sample at all leaves every timeout at a second.
   defp sample(data, what) do
     case Map.get(data.sends, what) do
       {at, 1} -> rtt_sample(data, now() - at)
+      {at, _} when data.samples == [] -> rtt_sample(data, now() - at)
       _ -> data
     end
   end
 
-  defp rtt_sample(%{srtt: nil} = data, r), do: %{data | srtt: r * 1.0, rttvar: r / 2}
+  @samples 16
+  defp rtt_sample(data, r), do: %{data | samples: Enum.take([r | data.samples], @samples)}
 
-  defp rtt_sample(data, r) do
-    rttvar = 0.75 * data.rttvar + 0.25 * abs(data.srtt - r)
-    %{data | srtt: 0.875 * data.srtt + 0.125 * r, rttvar: rttvar}
+  @doc false
+  # The retransmission timeout (real ms) of round-trip samples: twice the
+  # 80th percentile of the latest 16, so that a stray slow answer (a busy
+  # vehicle, a radio's retry) does not slow every retry after it, as a mean
+  # would; a second of clock time until a round trip is known, never more
+  # than that (the vehicle asks again itself by then), never under
+  # `Dolphin.Clock`'s retry floor.
+  @spec rto_of([number()]) :: pos_integer()
+  def rto_of([]), do: Clock.retry_real_ms(1_000)
+
+  def rto_of(samples) do
+    sorted = Enum.sort(samples)
+    p80 = Enum.at(sorted, trunc(0.8 * (length(sorted) - 1)))
+    (2 * p80 + 2) |> round() |> max(Clock.retry_real_ms(0)) |> min(Clock.retry_real_ms(1_000))
   end
 
-  # The retransmission timeout (real ms): a second of clock time until a round
-  # trip is known.
-  defp rto_ms(%{srtt: nil}), do: Clock.retry_real_ms(1_000)
-  defp rto_ms(data), do: max(round(data.srtt + 4 * data.rttvar), Clock.retry_real_ms(0))
+  defp rto_ms(data), do: rto_of(data.samples)
 
   # Goes on in the same state, the retransmission timer started again.
   defp continue(data), do: {:keep_state, data, [rto(data)]}
 
-  defp rto(data),
-    do: {:state_timeout, rto_ms(data) * Bitwise.bsl(1, min(data.stalls, @max_backoff)), :rto}
+  # Doubled at every timeout in a row, up to 8 times or a second of clock
+  # time, whichever is less (but never under the timeout itself).
+  defp rto(data) do
+    base = rto_ms(data)
+    {:state_timeout, min(base * Bitwise.bsl(1, min(data.stalls, @max_backoff)), max(base, Clock.retry_real_ms(1_000))), :rto}
+  end
 
   # Something moved: the timeouts in a row start again.
   defp progressed(data),

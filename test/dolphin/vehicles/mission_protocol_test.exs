@@ -219,7 +219,7 @@ defmodule Dolphin.Vehicles.MissionProtocolTest do
 
           {:error, %MissionError{result: result} = e} ->
             assert result in [:timeout, :operation_cancelled, :unconfirmed]
-            assert Exception.message(e) =~ ~r/vehicle #{sysid} (stopped answering|refused)/
+            assert Exception.message(e) =~ ~r/vehicle #{sysid} (stopped answering|refused|did not confirm)/
         end
 
         ScriptedVehicle.set_faults(vehicle, [])
