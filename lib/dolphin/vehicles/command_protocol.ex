@@ -24,6 +24,7 @@ defmodule Dolphin.Vehicles.CommandProtocol do
   @behaviour :gen_statem
 
   alias Dolphin.{Clock, CommandError}
+  alias Dolphin.Vehicles.Retry
   alias Dolphin.MAVLink.Ardupilotmega, as: M
 
   @results %{
@@ -45,8 +46,13 @@ defmodule Dolphin.Vehicles.CommandProtocol do
   progress_to}` — `params` are the 7 parameters (for COMMAND_INT, `int: true`,
   params 1-4, then `x`, `y` as integers and `z`), `send` a function that sends
   a message to the vehicle, `reply_to` a `GenServer.from()`. Options
-  `:attempts` (default 5), `:ack_timeout_ms` (default 1_500 of clock time),
-  `:progress_timeout_ms` (default 30_000).
+  `:attempts` (default: as many as the link's round-trip loss `:loss` calls
+  for, `Dolphin.Vehicles.Retry.attempts/1`: 5 on a clean link, 8 when it is
+  not measured, 14 at 30 % each way), `:ack_timeout_ms` (the longest wait,
+  default 1_500 of clock time; with the link's round trip `:rtt_ms` known,
+  twice `Dolphin.Vehicles.Retry.timeout/3` of it but not under 250 ms of
+  clock time, for the vehicle's own work), `:progress_timeout_ms` (default
+  30_000).
   """
   @spec start_link(map(), keyword()) :: :gen_statem.start_ret()
   def start_link(request, opts \\ []), do: :gen_statem.start_link(__MODULE__, {request, opts}, [])
@@ -55,6 +61,10 @@ defmodule Dolphin.Vehicles.CommandProtocol do
   @spec result(non_neg_integer()) :: atom()
   def result(n), do: Map.get(@results, n, :"unknown_#{n}")
 
+  # How long to wait for a COMMAND_ACK (real ms).
+  defp ack_wait(longest, rtt) when is_number(rtt), do: min(Clock.retry_real_ms(longest), max(2 * Retry.timeout([rtt], longest), Clock.retry_real_ms(250)))
+  defp ack_wait(longest, _unknown), do: Clock.retry_real_ms(longest)
+
   @impl true
   def callback_mode, do: [:handle_event_function, :state_enter]
 
@@ -62,8 +72,8 @@ defmodule Dolphin.Vehicles.CommandProtocol do
   def init({request, opts}) do
     data =
       Map.merge(request, %{
-        attempts: Keyword.get(opts, :attempts, 5),
-        ack_timeout_ms: Keyword.get(opts, :ack_timeout_ms, 1_500),
+        attempts: Keyword.get_lazy(opts, :attempts, fn -> Retry.attempts(Keyword.get(opts, :loss)) end),
+        wait_ms: ack_wait(Keyword.get(opts, :ack_timeout_ms, 1_500), Keyword.get(opts, :rtt_ms)),
         progress_timeout_ms: Keyword.get(opts, :progress_timeout_ms, 30_000),
         sent: 0
       })
@@ -76,7 +86,7 @@ defmodule Dolphin.Vehicles.CommandProtocol do
   # of a retransmission) and waits for the COMMAND_ACK.
   def handle_event(:enter, _old, {:waiting, n}, data) do
     data.send.(message(data, n - 1))
-    {:keep_state, %{data | sent: n}, [{:state_timeout, Clock.retry_real_ms(data.ack_timeout_ms), :resend}]}
+    {:keep_state, %{data | sent: n}, [{:state_timeout, data.wait_ms, :resend}]}
   end
 
   def handle_event(:state_timeout, :resend, {:waiting, n}, data) when n < data.attempts,

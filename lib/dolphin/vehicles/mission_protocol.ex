@@ -56,13 +56,12 @@ defmodule Dolphin.Vehicles.MissionProtocol do
   **Timers and budgets.** Every retransmission timeout derives from the
   link's round trip: `:rtt_ms` (the vehicle's measured one, if known) and the
   samples this transfer takes (an answer to something sent once: Karn's rule):
-  twice their 80th percentile (`rto_of/1`), never under `Dolphin.Clock`'s
+  twice their 80th percentile (`Dolphin.Vehicles.Retry.timeout/3`), never under `Dolphin.Clock`'s
   retry floor nor over a second of clock time (when the vehicle asks again
   itself), doubled on every timeout in a row (up to 8×, within that second).
   Before any sample the timeout is a second of clock time. An exchange is given up after a number of
-  timeouts in a row that grows with the loss (`:loss`, the link's round-trip
-  loss if known, and what this transfer sees; enough that a link losing that
-  share fails them all with a chance under 1e-4) — and never before 8 s of
+  timeouts in a row that grows with the loss (`Dolphin.Vehicles.Retry.attempts/1`
+  of `:loss`, the link's round-trip loss if known, or what this transfer sees) — and never before 8 s of
   clock time without progress, the vehicle's own patience — or after exactly
   `:attempts` timeouts when given. `:total_timeout_ms`, when given, bounds
   the whole transfer.
@@ -79,6 +78,7 @@ defmodule Dolphin.Vehicles.MissionProtocol do
   alias Dolphin.{Clock, MissionError}
   alias Dolphin.MAVLink.Ardupilotmega, as: M
   alias Dolphin.MAVLink.MissionItems
+  alias Dolphin.Vehicles.Retry
 
   @types %{mission: 0, fence: 1, rally: 2}
 
@@ -95,8 +95,6 @@ defmodule Dolphin.Vehicles.MissionProtocol do
   @vehicle_patience_ms 8_000
   # A timeout's growth over timeouts in a row: 2^3.
   @max_backoff 3
-  # The chance, at the link's loss, that every try of an exchange is lost.
-  @give_up_chance 1.0e-4
 
   @doc """
   Starts a transfer, linked to the caller (the vehicle process). `request`:
@@ -119,28 +117,6 @@ defmodule Dolphin.Vehicles.MissionProtocol do
         :"unknown_#{n}"
     end
   end
-
-  @doc """
-  How many timeouts in a row an exchange is given at a round-trip loss of
-  `loss` (0.0..1.0): enough that all of them fail with a chance under 1e-4,
-  between 5 and 60.
-
-      iex> Dolphin.Vehicles.MissionProtocol.budget(0.0)
-      5
-      iex> Dolphin.Vehicles.MissionProtocol.budget(0.51)
-      14
-  """
-  @spec budget(float()) :: pos_integer()
-  def budget(loss) when loss <= 0.1, do: 5
-  def budget(loss) when loss >= 0.86, do: 60
-
-  def budget(loss),
-    do:
-      (:math.log(@give_up_chance) / :math.log(loss))
-      |> Float.ceil()
-      |> trunc()
-      |> max(5)
-      |> min(60)
 
   @impl true
   def callback_mode, do: [:handle_event_function, :state_enter]
@@ -609,23 +585,8 @@ defmodule Dolphin.Vehicles.MissionProtocol do
   @samples 16
   defp rtt_sample(data, r), do: %{data | samples: Enum.take([r | data.samples], @samples)}
 
-  @doc false
-  # The retransmission timeout (real ms) of round-trip samples: twice the
-  # 80th percentile of the latest 16, so that a stray slow answer (a busy
-  # vehicle, a radio's retry) does not slow every retry after it, as a mean
-  # would; a second of clock time until a round trip is known, never more
-  # than that (the vehicle asks again itself by then), never under
-  # `Dolphin.Clock`'s retry floor.
-  @spec rto_of([number()]) :: pos_integer()
-  def rto_of([]), do: Clock.retry_real_ms(1_000)
-
-  def rto_of(samples) do
-    sorted = Enum.sort(samples)
-    p80 = Enum.at(sorted, trunc(0.8 * (length(sorted) - 1)))
-    (2 * p80 + 2) |> round() |> max(Clock.retry_real_ms(0)) |> min(Clock.retry_real_ms(1_000))
-  end
-
-  defp rto_ms(data), do: rto_of(data.samples)
+  # The vehicle asks again itself after a second: no use waiting longer.
+  defp rto_ms(data), do: Retry.timeout(data.samples, 1_000)
 
   # Goes on in the same state, the retransmission timer started again.
   defp continue(data), do: {:keep_state, data, [rto(data)]}
@@ -655,7 +616,7 @@ defmodule Dolphin.Vehicles.MissionProtocol do
     over? =
       case data.fixed_attempts do
         nil ->
-          data.stalls >= budget(loss(data)) and
+          data.stalls >= Retry.attempts(loss(data)) and
             now() - data.stalled_since >= Clock.to_real_ms(@vehicle_patience_ms)
 
         n ->

@@ -196,7 +196,7 @@ defmodule Dolphin.Vehicles.Vehicle do
     request = Map.put(request, :send, fn message -> Connection.send_message(link, sysid, message) end)
     what = if module == MissionProtocol, do: {:mission, request.operation, request.mission_type}, else: {:command, key}
 
-    opts = if module == MissionProtocol, do: Keyword.merge(link_opts(s.state), opts), else: opts
+    opts = Keyword.merge(link_opts(s.state), opts)
 
     case module.start_link(request, opts) do
       {:ok, pid} ->
@@ -224,16 +224,11 @@ defmodule Dolphin.Vehicles.Vehicle do
     %{s | state: new}
   end
 
-  # What a transfer's timers and patience start from: the autopilot (whose
-  # rules say whether items may be sent ahead), the measured round trip and
-  # the round-trip loss, when known.
+  # What a protocol's timers and patience start from: the autopilot (whose
+  # rules say whether mission items may be sent ahead), the measured round
+  # trip and the round-trip loss, when known.
   defp link_opts(state) do
-    loss =
-      case {Map.get(state.link, :loss_in), Map.get(state.link, :loss_out)} do
-        {i, o} when is_number(i) and is_number(o) -> 1 - (1 - i) * (1 - o)
-        _ -> nil
-      end
-
+    loss = Dolphin.Vehicles.Retry.round_trip_loss(Map.get(state.link, :loss_in), Map.get(state.link, :loss_out))
     [autopilot: state.autopilot, rtt_ms: Map.get(state.link, :rtt_ms), loss: loss]
   end
 

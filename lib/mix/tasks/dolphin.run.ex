@@ -137,8 +137,9 @@ defmodule Mix.Tasks.Dolphin.Run do
   @doc """
   Does the work of the task and returns the exit status. `io` options:
   `:out` and `:err` (devices, default `:stdio` and `:stderr`), `:plain`
-  (never the status block), `:ask` (the script's `ask/1`) and `:signals`
-  (SIGINT and SIGTERM stop the script, `Dolphin.Run.Signals`).
+  (never the status block), `:ask` (the script's `ask/1`), `:signals`
+  (SIGINT and SIGTERM stop the script, `Dolphin.Run.Signals`) and `:sitl`
+  (more options of `Dolphin.SITL.start/2` for `--sitl`, such as `:send_to`).
   """
   @spec main([String.t()], keyword()) :: 0 | 1 | 2 | 130 | 143
   def main(argv, io \\ []) do
@@ -153,7 +154,7 @@ defmodule Mix.Tasks.Dolphin.Run do
           {:ok, script} ->
             try do
               Mix.Task.run("app.start")
-              run_script(script, opts ++ Keyword.take(io, [:plain, :ask, :signals]), out, err)
+              run_script(script, opts ++ Keyword.take(io, [:plain, :ask, :signals]) ++ [sitl_extra: Keyword.get(io, :sitl, [])], out, err)
             after
               Dolphin.Script.purge(script)
             end
@@ -457,7 +458,7 @@ defmodule Mix.Tasks.Dolphin.Run do
   end
 
   defp start_sitl(n, opts, link_opts, out) do
-    sitl_opts = [bin: opts[:sitl_bin], defaults: Keyword.get_values(opts, :sitl_defaults)] ++ link_opts
+    sitl_opts = [bin: opts[:sitl_bin], defaults: Keyword.get_values(opts, :sitl_defaults)] ++ link_opts ++ Keyword.get(opts, :sitl_extra, [])
 
     case Dolphin.SITL.start(n, Enum.reject(sitl_opts, fn {_, v} -> v in [nil, []] end)) do
       {:ok, fleet} ->

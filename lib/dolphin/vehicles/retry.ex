@@ -1,0 +1,69 @@
+defmodule Dolphin.Vehicles.Retry do
+  @moduledoc """
+  How long the vehicle protocols (`Dolphin.Vehicles.CommandProtocol`,
+  `Dolphin.Vehicles.MissionProtocol`) wait for an answer before asking again,
+  and how many times they ask, from what the link shows: its round trip
+  (`Dolphin.Vehicles.State`'s `link.rtt_ms`, and the samples a transfer takes)
+  and its loss. A radio link that loses a third of the frames each way needs
+  more tries than a cable, and one with a round trip of 5 ms should not wait
+  a second and a half to resend.
+
+      iex> Dolphin.Vehicles.Retry.attempts(0.0)
+      5
+      iex> Dolphin.Vehicles.Retry.attempts(0.51)
+      14
+  """
+
+  alias Dolphin.Clock
+
+  # The chance, at the link's loss, that every try of an exchange is lost.
+  @give_up_chance 1.0e-4
+
+  # A bad radio's round-trip loss, planned for until the link shows its own.
+  @assumed_loss 0.3
+
+  @doc """
+  How many tries an exchange is given at a round-trip loss of `loss`
+  (0.0..1.0, the share of requests that get no answer; nil: not measured
+  yet, planned as 30 %): enough that all of them fail with a chance under
+  1e-4 (up to 85 %), between 5 and 60.
+  """
+  @spec attempts(float() | nil) :: pos_integer()
+  def attempts(nil), do: attempts(@assumed_loss)
+  def attempts(loss) when loss <= 0.1, do: 5
+  def attempts(loss) when loss > 0.85, do: 60
+  def attempts(loss), do: (:math.log(@give_up_chance) / :math.log(loss)) |> Float.ceil() |> trunc() |> max(5) |> min(60)
+
+  @doc """
+  The round-trip loss of a link whose loss is `loss_in` towards the ground
+  station and `loss_out` towards the vehicle (nil if either is unknown).
+
+      iex> Dolphin.Vehicles.Retry.round_trip_loss(0.3, 0.3)
+      0.51
+  """
+  @spec round_trip_loss(float() | nil, float() | nil) :: float() | nil
+  def round_trip_loss(loss_in, loss_out) when is_number(loss_in) and is_number(loss_out), do: Float.round(1 - (1 - loss_in) * (1 - loss_out), 4)
+  def round_trip_loss(_, _), do: nil
+
+  @doc """
+  The retransmission timeout (real ms) of round-trip samples (real ms):
+  twice the 80th percentile of the latest ones, so that a stray slow answer
+  (a busy vehicle, a radio's retry) does not slow every retry after it, as a
+  mean would; `ceiling_ms` of clock time when no round trip is known, never
+  more than that, never under `Dolphin.Clock`'s retry floor.
+
+      iex> Dolphin.Vehicles.Retry.timeout([30, 40, 35, 38, 900], 1_000, 1)
+      82
+      iex> Dolphin.Vehicles.Retry.timeout([], 1_000, 1)
+      1000
+  """
+  @spec timeout([number()], number(), number()) :: pos_integer()
+  def timeout(samples, ceiling_ms, speedup \\ Clock.speedup())
+  def timeout([], ceiling_ms, speedup), do: Clock.retry_real_ms(ceiling_ms, speedup)
+
+  def timeout(samples, ceiling_ms, speedup) do
+    sorted = Enum.sort(samples)
+    p80 = Enum.at(sorted, trunc(0.8 * (length(sorted) - 1)))
+    (2 * p80 + 2) |> round() |> max(Clock.retry_real_ms(0, speedup)) |> min(Clock.retry_real_ms(ceiling_ms, speedup))
+  end
+end

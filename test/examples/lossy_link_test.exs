@@ -1,0 +1,86 @@
+defmodule Dolphin.Examples.LossyLinkTest do
+  # examples/two_vehicles.exs as a user runs it against vehicles behind a bad
+  # radio link — `mix dolphin.sim --count 2 --gcs PROXY` and `mix dolphin.run
+  # examples/two_vehicles.exs --connect udpin:127.0.0.1:PORT`, with an
+  # impairment proxy between them that loses 30 % of the datagrams each way,
+  # duplicates 5 % and reorders 5 % — flies what it flies over a clean link:
+  # the same missions, ending alike, reaching the same items. Five runs, each
+  # with other faults (the proxy's seed).
+  #
+  # On ArduCopter SITL the same (one run): tagged :sitl.
+  use ExUnit.Case, async: false
+
+  alias Dolphin.Sim
+  alias Dolphin.Test.{ExampleRun, GroundStation, UDPProxy}
+
+  @moduletag :tmp_dir
+  @moduletag timeout: 900_000
+
+  @faults [loss: 0.3, duplicate: 0.05, reorder: 0.05]
+  @least %{"Survey Area 1" => 1, "Survey Area 2" => 1, "Return to base" => 2}
+
+  setup do
+    on_exit(&GroundStation.forget_vehicles/0)
+  end
+
+  # A port nobody listens on now, for the run's `udpin` (the proxy sends there).
+  defp free_port do
+    {:ok, socket} = :gen_udp.open(0, ip: {127, 0, 0, 1})
+    {:ok, port} = :inet.port(socket)
+    :gen_udp.close(socket)
+    port
+  end
+
+  # A proxy in front of `port`, told apart by `label`.
+  defp proxy(port, label, seed), do: start_supervised!({UDPProxy, gcs: port, seed: seed, both: @faults}, id: {:proxy, label})
+
+  defp stats_and_stop(proxy, label) do
+    stats = UDPProxy.stats(proxy)
+    :ok = stop_supervised({:proxy, label})
+    GroundStation.forget_vehicles()
+    stats
+  end
+
+  test "two_vehicles.exs on the simulator over 30 % loss, 5 % duplicates and 5 % reordering flies as over a clean link, 5 runs of 5", %{tmp_dir: dir} do
+    clean = ExampleRun.run(dir, "two_vehicles", "-clean", ["--sim", "2", "--speedup", "25"], "14m")
+    assert clean.code == 0, clean.output
+
+    for seed <- 1..5 do
+      label = "-lossy#{seed}"
+      port = free_port()
+      proxy = proxy(port, label, seed)
+      {:ok, [1, 2]} = Sim.start(count: 2, gcs: UDPProxy.port(proxy), speedup: 25)
+      lossy = ExampleRun.run(dir, "two_vehicles", label, ["--connect", "udpin:127.0.0.1:#{port}", "--speedup", "25"], "14m")
+      stats = stats_and_stop(proxy, label)
+
+      assert lossy.code == 0, "run #{seed}: " <> lossy.output
+      assert stats.to_gcs.dropped > 0 and stats.to_vehicle.dropped > 0
+      assert lossy.result == clean.result, "run #{seed}"
+      ExampleRun.assert_same_history(clean, lossy, @least, {"a clean link", "the lossy link (run #{seed})"})
+    end
+  end
+
+  @tag :sitl
+  test "two_vehicles.exs on ArduCopter SITL over 30 % loss, 5 % duplicates and 5 % reordering flies as over a clean link", %{tmp_dir: dir} do
+    clean = ExampleRun.run(dir, "two_vehicles", "-sitl-clean", ["--sitl", "2", "--speedup", "15"], "14m")
+    assert clean.code == 0, clean.output
+
+    # SITL's link is the run's own (--sitl); the proxy stands between.
+    test = self()
+
+    send_to = fn gcs_port ->
+      proxy = proxy(gcs_port, "-sitl", 1)
+      send(test, {:proxy, proxy})
+      UDPProxy.port(proxy)
+    end
+
+    lossy = ExampleRun.run(dir, "two_vehicles", "-sitl-lossy", ["--sitl", "2", "--speedup", "15"], "14m", sitl: [send_to: send_to])
+    assert_received {:proxy, proxy}
+    stats = stats_and_stop(proxy, "-sitl")
+
+    assert lossy.code == 0, lossy.output <> ExampleRun.pace_note(lossy)
+    assert stats.to_gcs.dropped > 0 and stats.to_vehicle.dropped > 0
+    assert lossy.result == clean.result
+    ExampleRun.assert_same_history(clean, lossy, @least, {"a clean link", "the lossy link"}, ExampleRun.pace_note(lossy))
+  end
+end

@@ -1,0 +1,127 @@
+defmodule Dolphin.Test.ExampleRun do
+  @moduledoc """
+  An example script run as a user runs it (`Mix.Tasks.Dolphin.Run.main/2`),
+  and what tests compare of it: for each mission the script flew, in order,
+  how each run of it ended and which of its items were reached; how the
+  script ended; which vehicles were left disarmed.
+  """
+
+  alias Dolphin.MAVLink.Ardupilotmega.GlobalPositionInt
+  alias Dolphin.MAVLink.{JSON, Tlog}
+  alias Dolphin.Test.GroundStation
+  alias Mix.Tasks.Dolphin.Run
+
+  @examples Path.expand("../../examples", __DIR__)
+
+  @doc """
+  Runs `examples/NAME.exs` as `mix dolphin.run` would, with `args` (the
+  vehicles: `--sim N`, `--sitl N`, `--connect ENDPOINT`, and `--speedup`),
+  `--for FOR_TIME` if given, events and a .tlog written under `dir` (named
+  by `label`), `io` given to `Run.main/2` (such as `sitl: [send_to: ...]`). Returns the exit code, the output, how the script ended, the
+  history of its missions (`history/2`) and who was disarmed at the end.
+  """
+  def run(dir, name, label, args, for_time, io \\ []) do
+    events = Path.join(dir, "#{name}#{label}.jsonl")
+    tlog = Path.join(dir, "#{name}#{label}.tlog")
+    {:ok, out} = StringIO.open("")
+    {:ok, err} = StringIO.open("")
+    bound = if for_time, do: ["--for", for_time], else: []
+    argv = [Path.join(@examples, "#{name}.exs") | args] ++ ["--events", events, "--tlog", tlog, "--quiet"] ++ bound
+    code = Run.main(argv, [out: out, err: err] ++ io)
+    GroundStation.forget_vehicles()
+    all = events |> File.read!() |> String.split("\n", trim: true) |> Enum.map(fn line -> {:ok, e} = JSON.decode(line); e end)
+
+    %{
+      code: code,
+      output: elem(StringIO.contents(out), 1) <> elem(StringIO.contents(err), 1),
+      result: all |> Enum.filter(&(&1["event"] == "script_finished")) |> List.last() |> Map.get("result"),
+      history: history(all, for_time != nil),
+      disarmed_at_end: disarmed_at_end(all),
+      speedup: speedup(args),
+      tlog: tlog
+    }
+  end
+
+  # For each mission name, in the order they finished: how each ended and the
+  # items it reached. A run ended by --for stops what flies at that moment:
+  # those last tasks are not part of the history.
+  def history(all, bounded?) do
+    reached =
+      for %{"event" => "task_progress", "task_id" => id, "progress" => %{"reached" => r}} <- all, r != nil, reduce: %{} do
+        acc -> Map.update(acc, id, [r], fn seen -> if List.last(seen) == r, do: seen, else: seen ++ [r] end)
+      end
+
+    ending = all |> Enum.filter(&(&1["event"] == "script_finished")) |> List.last() |> Map.get("t_ms")
+
+    all
+    |> Enum.filter(&(&1["event"] == "task_finished" and &1["kind"] == "mission"))
+    |> Enum.reject(&(bounded? and &1["result"] == "stopped" and &1["t_ms"] >= ending - 2_000))
+    |> Enum.group_by(& &1["name"], &%{result: &1["result"], reached: Map.get(reached, &1["task_id"], [])})
+  end
+
+  @doc """
+  Asserts that two runs flew the same history as far as both went: each
+  mission of `least` flown at least that many times on both, each run of it
+  ending alike and reaching the same items (those both report: which DO
+  commands ArduCopter reports reached depends on the loop they end in). `on`
+  names the two runs in messages; `note` is added to a shortfall's message.
+  """
+  def assert_same_history(run_a, run_b, least, {on_a, on_b}, note \\ "") do
+    import ExUnit.Assertions
+
+    for {mission, at_least} <- least do
+      a = Map.get(run_a.history, mission, [])
+      b = Map.get(run_b.history, mission, [])
+      common = min(length(a), length(b))
+      assert common >= at_least, "#{mission}: flown #{length(a)} time(s) on #{on_a}, #{length(b)} on #{on_b}#{note}"
+
+      for {x, y} <- Enum.zip(Enum.take(a, common), Enum.take(b, common)) do
+        assert x.result == y.result, "#{mission}: #{inspect(a)} on #{on_a}, #{inspect(b)} on #{on_b}"
+        # Which DO commands (camera, jump) ArduCopter reports reached depends
+        # on the loop they end in (docs/ardupilot.md): the items compared are
+        # those both report.
+        both = MapSet.intersection(MapSet.new(x.reached), MapSet.new(y.reached))
+        {x, y} = {%{x | reached: Enum.filter(x.reached, &(&1 in both))}, %{y | reached: Enum.filter(y.reached, &(&1 in both))}}
+        # Items reached: the same for a mission that ended by itself; for one
+        # stopped by a condition (a battery threshold) as far as both went.
+        n = if x.result == "done", do: max(length(x.reached), length(y.reached)), else: min(length(x.reached), length(y.reached))
+        assert Enum.take(x.reached, n) == Enum.take(y.reached, n), "#{mission}: #{inspect(a)} on #{on_a}, #{inspect(b)} on #{on_b}"
+      end
+    end
+  end
+
+  # Which vehicles were disarmed when the script ended, by the order they were picked.
+  defp disarmed_at_end(all) do
+    picked = for %{"event" => "picked", "vehicles" => vs} <- all, v <- vs, uniq: true, do: v
+    armed = Enum.reduce(all, %{}, fn
+      %{"event" => "armed", "vehicle" => v}, acc -> Map.put(acc, v, true)
+      %{"event" => "disarmed", "vehicle" => v}, acc -> Map.put(acc, v, false)
+      _, acc -> acc
+    end)
+
+    Enum.map(picked, &(not Map.get(armed, &1, false)))
+  end
+
+  defp speedup(args) do
+    case Enum.drop_while(args, &(&1 != "--speedup")) do
+      ["--speedup", k | _] -> String.to_integer(k)
+      _ -> 1
+    end
+  end
+
+  # How fast SITL really ran: its own clock (time_boot_ms) against the log's
+  # wall-clock stamps, as a fraction of the speed-up asked for.
+  def pace_note(%{tlog: tlog, speedup: k}) do
+    {frames, _} = Tlog.read(Tlog.reader(), File.read!(tlog))
+    stamps = for {us, %{sysid: 1, message: %GlobalPositionInt{time_boot_ms: t}}} <- frames, do: {us, t}
+
+    case stamps do
+      [{us0, t0} | _] when length(stamps) > 10 ->
+        {us1, t1} = List.last(stamps)
+        "\nSITL ran at #{Float.round((t1 - t0) / ((us1 - us0) / 1000) / k, 2)} of the #{k}x asked for"
+
+      _ ->
+        ""
+    end
+  end
+end
