@@ -267,13 +267,22 @@ defmodule Dolphin.Vehicles do
   @doc "Reboots the autopilot."
   def reboot(sysid, opts \\ []), do: command(sysid, :mav_cmd_preflight_reboot_shutdown, [1], opts)
 
-  @typedoc "Options of a mission transfer: `:mission_type` (`:mission`, `:fence`, `:rally`), `:progress_to`, `:attempts`, `:item_timeout_ms`, `:total_timeout_ms`."
+  @typedoc """
+  Options of a mission transfer: `:mission_type` (`:mission`, `:fence`,
+  `:rally`), `:progress_to`, and those of `Dolphin.Vehicles.MissionProtocol`:
+  `:send_ahead` (default: for ArduPilot), `:window`, `:attempts` (timeouts in a
+  row an exchange is given; default from the link's loss), `:restarts`,
+  `:total_timeout_ms`.
+  """
   @type mission_opts :: keyword()
 
   @doc """
   Uploads a mission: `MISSION_ITEM_INT` structs in order (their `seq` and
   targets are filled in; for ArduPilot item 0 is home). See
-  `Dolphin.Vehicles.MissionProtocol`.
+  `Dolphin.Vehicles.MissionProtocol`. `{:error, %Dolphin.MissionError{result:
+  :unconfirmed}}` means every item went out but the vehicle's final
+  MISSION_ACK never came: `download_mission/2` tells whether it holds the
+  mission (a mission task always reads its upload back before it flies).
   """
   @spec upload_mission(byte(), [struct()], mission_opts()) :: :ok | {:error, Dolphin.MissionError.t()}
   def upload_mission(sysid, items, opts \\ []), do: transfer(sysid, :upload, %{items: items}, opts)
