@@ -468,7 +468,8 @@ defmodule Dolphin.Sim.Copter do
     if reason do
       {@failed, text(c, 2, reason)}
     else
-      c = %{c | armed: true, ground_since: c.time_ms, failsafe: nil, jumps: %{}}
+      # ArduCopter writes home into the mission's item 0 as it arms.
+      c = %{c | armed: true, ground_since: c.time_ms, failsafe: nil, jumps: %{}, missions: MissionServer.home_written(c.missions)}
       {@accepted, text(c, 6, "Arming motors")}
     end
   end

@@ -15,9 +15,12 @@ defmodule Dolphin.Sim.MissionServer do
   #   second MISSION_COUNT from the same ground station starts again; from
   #   another, DENIED while one is busy. More than `limit` items, NO_SPACE; an
   #   unknown command, UNSUPPORTED.
-  # - While an upload is under way, downloads are DENIED and a clear is an
-  #   ERROR; when none is, an item draws MAV_MISSION_ERROR (so a ground station
-  #   that resends the last item after a lost ACCEPTED learns the upload is over).
+  # - While an upload is under way, downloads are DENIED, and a clear is
+  #   accepted and ends the upload; when none is, an item draws
+  #   MAV_MISSION_ERROR (so a ground station that resends the last item after a
+  #   lost ACCEPTED learns the upload is over).
+  # - A cleared mission counts 0 items, not even home, until home is written
+  #   again (at arming: `home_written/1`, or by an upload).
   # - A request for an item past the end draws MISSION_COUNT (ArduPilot
   #   "educates" the ground station) and INVALID_SEQUENCE.
   # - For the mission (type 0) item 0 is home: an uploaded item 0 is ignored and
@@ -51,6 +54,7 @@ defmodule Dolphin.Sim.MissionServer do
             upload: nil,
             request_int: false,
             home: true,
+            home_stored: true,
             limit: 650
 
   @type t :: %__MODULE__{}
@@ -120,6 +124,7 @@ defmodule Dolphin.Sim.MissionServer do
         # Item 0 of the mission is home: accepted and ignored.
         list = if type == 0 and s.home, do: tl(list), else: list
         lists = Map.put(s.lists, type, list)
+        s = %{s | home_stored: s.home_stored or type == 0}
         done = [{:send, ack(peer, type, @accepted)}, {:changed, type}] ++ if(type == 0, do: [{:text, 6, "Flight plan received"}], else: [])
         {%{s | upload: nil, lists: lists}, complaint ++ done}
 
@@ -158,16 +163,22 @@ defmodule Dolphin.Sim.MissionServer do
     end
   end
 
-  def handle(%__MODULE__{upload: %{}} = s, %M.MissionClearAll{mission_type: type}, peer, _ctx), do: {s, [{:send, ack(peer, type, @error)}]}
-
-  def handle(%__MODULE__{} = s, %M.MissionClearAll{mission_type: type}, peer, _ctx) when type in 0..2,
-    do: {%{s | lists: Map.put(s.lists, type, []), upload: nil}, [{:send, ack(peer, type, @accepted)}, {:changed, type}]}
+  # A clear ends an upload under way too. A cleared mission has no home item
+  # either until home is written again (at arming, or by an upload).
+  def handle(%__MODULE__{} = s, %M.MissionClearAll{mission_type: type}, peer, _ctx) when type in 0..2 do
+    s = %{s | lists: Map.put(s.lists, type, []), upload: nil, home_stored: s.home_stored and type != 0}
+    {s, [{:send, ack(peer, type, @accepted)}, {:changed, type}]}
+  end
 
   def handle(%__MODULE__{} = s, %M.MissionClearAll{mission_type: type}, peer, _ctx), do: {s, [{:send, ack(peer, type, @unsupported)}]}
 
   # A ground station's acknowledgement of a download, or a cancellation of our upload.
   def handle(%__MODULE__{upload: %{peer: peer}} = s, %M.MissionAck{}, peer, _ctx), do: {%{s | upload: nil}, []}
   def handle(%__MODULE__{} = s, _other, _peer, _ctx), do: {s, []}
+
+  @doc "Home is written to the mission's item 0 (ArduCopter does so when it arms)."
+  @spec home_written(t()) :: t()
+  def home_written(%__MODULE__{} = s), do: %{s | home_stored: true}
 
   @doc "The re-request timer: ask again after a second, give up after 8 s without an item."
   @spec timeout(t(), integer()) :: {t(), [reply()]}
@@ -187,6 +198,7 @@ defmodule Dolphin.Sim.MissionServer do
     end
   end
 
+  defp download_list(%{home: true, home_stored: false}, 0, _home), do: []
   defp download_list(%{home: true} = s, 0, home), do: [home || %M.MissionItemInt{command: 16, frame: 0}] ++ Enum.map(items(s, 0), &normalise/1)
   defp download_list(s, type, _home), do: items(s, type)
 

@@ -44,15 +44,25 @@ defmodule Dolphin.Sim.MissionServerTest do
     {_s, [{:send, %M.MissionAck{type: 15}} | _]} = MissionServer.timeout(s, 8_001)
   end
 
-  test "while an upload is under way: downloads DENIED, a clear is an ERROR; after it, an item is an ERROR" do
+  test "while an upload is under way downloads are DENIED; after it, an item is an ERROR" do
     {s, _} = MissionServer.handle(MissionServer.new(), count(2), @gcs, ctx())
     {s, [{:send, %M.MissionAck{type: 14}}]} = MissionServer.handle(s, %M.MissionRequestList{mission_type: 0}, @gcs, ctx())
     {s, [{:send, %M.MissionAck{type: 14}}]} = MissionServer.handle(s, %M.MissionRequestInt{seq: 0, mission_type: 0}, @gcs, ctx())
-    {s, [{:send, %M.MissionAck{type: 1}}]} = MissionServer.handle(s, %M.MissionClearAll{mission_type: 0}, @gcs, ctx())
     {s, _} = MissionServer.handle(s, item(0), @gcs, ctx())
     {s, [{:send, %M.MissionAck{type: 0}} | _]} = MissionServer.handle(s, item(1), @gcs, ctx())
     # The last item again (its ACCEPTED lost, say): no upload is under way.
     {_s, [{:send, %M.MissionAck{type: 1}}]} = MissionServer.handle(s, item(1), @gcs, ctx())
+  end
+
+  # As ArduCopter 4.7 SITL does (test/dolphin/sitl/differential_test.exs).
+  test "a clear during an upload is accepted and ends it; a cleared mission counts no items until home is written again" do
+    {s, _} = MissionServer.handle(MissionServer.new(), count(3), @gcs, ctx())
+    {s, _} = MissionServer.handle(s, item(0), @gcs, ctx())
+    {s, [{:send, %M.MissionAck{type: 0}}, {:changed, 0}]} = MissionServer.handle(s, %M.MissionClearAll{mission_type: 0}, @gcs, ctx())
+    {s, [{:send, %M.MissionAck{type: 1}}]} = MissionServer.handle(s, item(1), @gcs, ctx())
+    {s, [{:send, %M.MissionCount{count: 0}}]} = MissionServer.handle(s, %M.MissionRequestList{mission_type: 0}, @gcs, ctx())
+    s = MissionServer.home_written(s)
+    {_s, [{:send, %M.MissionCount{count: 1}}]} = MissionServer.handle(s, %M.MissionRequestList{mission_type: 0}, @gcs, ctx())
   end
 
   test "a request past the end draws MISSION_COUNT and INVALID_SEQUENCE" do

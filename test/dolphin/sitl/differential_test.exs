@@ -152,4 +152,75 @@ defmodule Dolphin.SITL.DifferentialTest do
       if b.miss_m, do: assert(abs(a.miss_m - b.miss_m) <= 3.0, table)
     end
   end
+
+  # The mission protocol's answers to what a lossy link makes of an upload
+  # (an item out of order, a download or a clear during the upload, the last
+  # item again after the end, a request past the end), step by step: the
+  # simulator must answer as ArduCopter does, which the uploader relies on.
+  @probe [
+    count: [%M.MissionCount{count: 4}],
+    item_0: [{:item, 0}],
+    item_out_of_order: [{:item, 2}],
+    download_while_receiving: [%M.MissionRequestList{}],
+    clear_while_receiving: [%M.MissionClearAll{}],
+    the_rest: [{:item, 1}, {:item, 2}, {:item, 3}],
+    last_item_again: [{:item, 3}],
+    request_past_the_end: [%M.MissionRequestInt{seq: 40}]
+  ]
+
+  defp probe(backend) do
+    {:ok, recorder} = FrameRecorder.start_link()
+    # Slowly enough that no re-request (a second of the vehicle's time) falls in a step.
+    [id] = Backend.start(backend, 1, forward: [FrameRecorder.endpoint(recorder)], speedup: 2)
+    home = Backend.home(id)
+
+    answers =
+      for {step, messages} <- @probe do
+        before = length(FrameRecorder.frames(recorder))
+
+        for m <- messages do
+          m =
+            case m do
+              {:item, seq} -> %M.MissionItemInt{seq: seq, frame: 3, command: 16, autocontinue: 1, x: round(home.lat * 1.0e7) + seq * 100, y: round(home.lon * 1.0e7), z: 20.0}
+              m -> m
+            end
+
+          Vehicles.send_message(id, %{m | target_system: id, target_component: 1, mission_type: 0})
+        end
+
+        # Well inside the vehicle's 1 s re-request.
+        Dolphin.Clock.sleep(400)
+
+        got =
+          for {_, ^id, m} <- Enum.drop(FrameRecorder.frames(recorder), before), answer = mission_answer(m), uniq: true, do: answer
+
+        {step, Enum.sort(got)}
+      end
+
+    # A request already made in an earlier step is the vehicle asking again
+    # (its timer): when it falls is a matter of pace, not of the rules.
+    {answers, _} =
+      Enum.map_reduce(answers, MapSet.new(), fn {step, got}, asked ->
+        {{step, Enum.reject(got, &(match?({:request, _}, &1) and &1 in asked))}, MapSet.union(asked, MapSet.new(got))}
+      end)
+
+    Backend.stop([id])
+    answers
+  end
+
+  defp mission_answer(%M.MissionRequest{seq: seq}), do: {:request, seq}
+  defp mission_answer(%M.MissionRequestInt{seq: seq}), do: {:request, seq}
+  defp mission_answer(%M.MissionAck{type: result}), do: {:ack, result}
+  defp mission_answer(%M.MissionCount{count: n}), do: {:count, n}
+  defp mission_answer(_), do: nil
+
+  test "the simulator answers the mission protocol's odd moments as ArduCopter SITL does" do
+    sitl = probe(:sitl)
+    sim = probe(:sim)
+    # What ArduCopter answered (docs/ardupilot.md), so that a change of either shows.
+    assert sitl[:item_out_of_order] == [ack: 13]
+    assert sitl[:download_while_receiving] == [ack: 14]
+    assert sitl[:last_item_again] == [ack: 1]
+    assert sim == sitl
+  end
 end
