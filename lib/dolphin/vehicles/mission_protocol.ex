@@ -50,8 +50,8 @@ defmodule Dolphin.Vehicles.MissionProtocol do
   ones of the upload before it) except `DENIED` (the vehicle is busy with an
   upload: asked again later) and `UNSUPPORTED`.
 
-  **Clear** (`:clear`): MISSION_CLEAR_ALL until MISSION_ACK; `MAV_MISSION_ERROR`
-  (an upload under way on the vehicle) is retried.
+  **Clear** (`:clear`): MISSION_CLEAR_ALL until MISSION_ACK (ArduCopter
+  refuses with `MAV_MISSION_ERROR` while its mission runs in AUTO).
 
   **Timers and budgets.** Every retransmission timeout derives from the
   link's round trip: `:rtt_ms` (the vehicle's measured one, if known) and the
@@ -384,16 +384,6 @@ defmodule Dolphin.Vehicles.MissionProtocol do
       )
       when type == data.type,
       do: finish(data, :ok)
-
-  # ArduPilot refuses to clear while it receives an upload: asked again at the next timeout.
-  def handle_event(
-        :info,
-        {:mission, %M.MissionAck{type: @error, mission_type: type}},
-        {:clear, _},
-        %{operation: :clear} = data
-      )
-      when type == data.type,
-      do: {:keep_state, heard(data, "answered MAV_MISSION_ERROR (an upload is under way on it)")}
 
   def handle_event(
         :info,
