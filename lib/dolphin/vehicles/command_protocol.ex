@@ -47,8 +47,8 @@ defmodule Dolphin.Vehicles.CommandProtocol do
   params 1-4, then `x`, `y` as integers and `z`), `send` a function that sends
   a message to the vehicle, `reply_to` a `GenServer.from()`. Options
   `:attempts` (default: as many as the link's round-trip loss `:loss` calls
-  for, `Dolphin.Vehicles.Retry.attempts/1`: 5 on a clean link, 8 when it is
-  not measured, 14 at 30 % each way), `:ack_timeout_ms` (the longest wait,
+  for, `Dolphin.Vehicles.Retry.attempts/1`: 5 on a clean link, 12 when it is
+  not measured, 21 at 30 % each way), `:ack_timeout_ms` (the longest wait,
   default 1_500 of clock time; with the link's round trip `:rtt_ms` known,
   twice `Dolphin.Vehicles.Retry.timeout/3` of it but not under 250 ms of
   clock time, for the vehicle's own work), `:progress_timeout_ms` (default

@@ -11,13 +11,15 @@ defmodule Dolphin.Vehicles.Retry do
       iex> Dolphin.Vehicles.Retry.attempts(0.0)
       5
       iex> Dolphin.Vehicles.Retry.attempts(0.51)
-      14
+      21
   """
 
   alias Dolphin.Clock
 
   # The chance, at the link's loss, that every try of an exchange is lost.
-  @give_up_chance 1.0e-4
+  # A fleet sends thousands of commands a day: one in a million at most
+  # should fail for want of tries.
+  @give_up_chance 1.0e-6
 
   # A bad radio's round-trip loss, planned for until the link shows its own.
   @assumed_loss 0.3
@@ -26,12 +28,12 @@ defmodule Dolphin.Vehicles.Retry do
   How many tries an exchange is given at a round-trip loss of `loss`
   (0.0..1.0, the share of requests that get no answer; nil: not measured
   yet, planned as 30 %): enough that all of them fail with a chance under
-  1e-4 (up to 85 %), between 5 and 60.
+  one in a million (up to 79 % loss), between 5 and 60.
   """
   @spec attempts(float() | nil) :: pos_integer()
   def attempts(nil), do: attempts(@assumed_loss)
-  def attempts(loss) when loss <= 0.1, do: 5
-  def attempts(loss) when loss > 0.85, do: 60
+  def attempts(loss) when loss <= 0.0, do: 5
+  def attempts(loss) when loss >= 1.0, do: 60
   def attempts(loss), do: (:math.log(@give_up_chance) / :math.log(loss)) |> Float.ceil() |> trunc() |> max(5) |> min(60)
 
   @doc """
