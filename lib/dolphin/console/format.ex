@@ -146,14 +146,31 @@ defmodule Dolphin.Console.Format do
   end
 
   @doc false
-  # Link quality: the share of frames that arrived (sequence gaps are losses).
+  # Link quality: the share of frames that arrived (sequence gaps are
+  # losses), then what Dolphin.Vehicles.LinkQuality measured, if it has.
   @spec link(map() | nil) :: String.t()
   def link(nil), do: "-"
   def link(%{received: 0}), do: "-"
 
-  def link(%{received: r, lost: l}) do
+  def link(%{received: r, lost: l} = link) do
     pct = floor(r * 100 / (r + l))
-    if l == 0, do: "100 %", else: "#{pct} % (#{l} lost)"
+    frames = if l == 0, do: "100 %", else: "#{pct} % (#{l} lost)"
+    Enum.join([frames | link_figures(link)], ", ")
+  end
+
+  @doc false
+  # The measured round trip and loss each way, as far as known: ["45 ms", "loss in 10 % / out 12 %"].
+  @spec link_figures(map()) :: [String.t()]
+  def link_figures(link) do
+    rtt = if is_number(link[:rtt_ms]), do: ["#{round(link[:rtt_ms])} ms"], else: []
+
+    loss =
+      case {link[:loss_in], link[:loss_out]} do
+        {i, o} when is_number(i) and is_number(o) -> ["loss in #{round(i * 100)} % / out #{round(o * 100)} %"]
+        _ -> []
+      end
+
+    rtt ++ loss
   end
 
   @doc false

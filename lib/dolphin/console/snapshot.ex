@@ -60,7 +60,7 @@ defmodule Dolphin.Console.Snapshot do
       lat: pos[:lat],
       lon: pos[:lon],
       alt: pos[:relative_alt],
-      link: s.link,
+      link: Map.merge(s.link, Dolphin.Vehicles.State.link_figures(s)),
       seen_ms: s.link.last_seen_ms && now_ms - s.link.last_seen_ms,
       lost?: Map.get(s, :lost) == true,
       activity: activity(v, console_runs)

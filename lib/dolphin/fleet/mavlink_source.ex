@@ -53,6 +53,7 @@ defmodule Dolphin.Fleet.MAVLinkSource do
   defp change({:mission, %{total: nil}}, v), do: %{v | mission_progress: nil}
   defp change({:mission, m}, v), do: %{v | mission_progress: {m.reached || 0, m.total}}
   defp change({:lost, lost}, v), do: %{v | connected?: not lost}
+  defp change({:link_quality, q}, v), do: %{v | link: Map.take(q, [:rtt_ms, :loss_in, :loss_out])}
   defp change(_other, v), do: v
 
   defp configured(id), do: Application.get_env(:dolphin, :vehicle_payloads, %{}) |> Map.get(id, []) |> List.wrap()

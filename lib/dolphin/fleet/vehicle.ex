@@ -16,6 +16,7 @@ defmodule Dolphin.Fleet.Vehicle do
   | `armed?`, `connected?` | booleans |
   | `mission_progress` | `{reached, total}`: last mission item reached (0 before the first) and items in the mission, since the mission was last uploaded; `nil` until the vehicle reports its mission |
   | `landed` | `:on_ground`, `:in_air`, `:takeoff`, `:landing` or `nil` |
+  | `link` | `%{rtt_ms, loss_in, loss_out}`: round trip and loss each way, `nil`s until measured (`Dolphin.Vehicles.LinkQuality`) |
   """
 
   defstruct id: nil,
@@ -28,7 +29,8 @@ defmodule Dolphin.Fleet.Vehicle do
             armed?: false,
             connected?: true,
             mission_progress: nil,
-            landed: nil
+            landed: nil,
+            link: %{rtt_ms: nil, loss_in: nil, loss_out: nil}
 
   @type class :: :uav | :ugv | :usv | :uuv | :other
   @type t :: %__MODULE__{
@@ -42,7 +44,8 @@ defmodule Dolphin.Fleet.Vehicle do
           armed?: boolean(),
           connected?: boolean(),
           mission_progress: {non_neg_integer(), non_neg_integer()} | nil,
-          landed: atom() | nil
+          landed: atom() | nil,
+          link: %{rtt_ms: non_neg_integer() | nil, loss_in: float() | nil, loss_out: float() | nil}
         }
 
   @uav [1, 2, 3, 4, 7, 8, 13, 14, 15, 16, 17, 19, 20, 21, 22, 23, 24, 25, 28, 29, 35, 43, 47]

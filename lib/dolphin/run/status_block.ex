@@ -1,12 +1,16 @@
 defmodule Dolphin.Run.StatusBlock do
   @moduledoc """
   The live status block of `mix dolphin.run` on a terminal: one line per
-  vehicle — mode, armed, battery bar, mission progress and the task it flies —
-  redrawn in place under the scrolling log of events.
+  vehicle — mode, armed, battery bar, mission progress, the link's round trip
+  and loss each way once measured, and the task it flies — redrawn in place
+  under the scrolling log of events.
 
       iex> v = %Dolphin.Fleet.Vehicle{id: 2, mode: :auto, armed?: true, battery: 0.72, mission_progress: {3, 42}, relative_altitude: 380.4}
       iex> Dolphin.Run.StatusBlock.vehicle_line(v, "Survey Area 1")
       "  2  AUTO      armed     [#######---]  72 %  alt  380 m  item  3/42  Survey Area 1"
+      iex> v = %{v | link: %{rtt_ms: 45, loss_in: 0.1, loss_out: 0.12}}
+      iex> Dolphin.Run.StatusBlock.vehicle_line(v, nil)
+      "  2  AUTO      armed     [#######---]  72 %  alt  380 m  item  3/42  link 45 ms, loss in 10 % / out 12 %"
 
   `render/3` draws the block (a header and the lines) and `redraw/2` gives the
   ANSI sequence that replaces a block of `n` lines with a new one.
@@ -38,6 +42,13 @@ defmodule Dolphin.Run.StatusBlock do
     alt = if v.relative_altitude, do: "alt #{String.pad_leading(Integer.to_string(round(v.relative_altitude)), 4)} m", else: "alt    ? m"
 
     line = "#{String.pad_leading(Integer.to_string(v.id), 3)}  #{mode} #{state} #{battery(v.battery)}  #{alt}  #{String.pad_trailing(item, 10)}"
+
+    line =
+      case Dolphin.Console.Format.link_figures(v.link || %{}) do
+        [] -> line
+        figures -> line <> "  link " <> Enum.join(figures, ", ")
+      end
+
     if task, do: line <> "  " <> task, else: String.trim_trailing(line)
   end
 

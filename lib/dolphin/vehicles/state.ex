@@ -16,13 +16,14 @@ defmodule Dolphin.Vehicles.State do
   | `status_texts` | STATUSTEXT | the last 20 `{severity, text}`, newest first |
   | `components` | HEARTBEAT of other components | e.g. `:camera`, `:gimbal` |
   | `link` | every frame | `%{received, lost, last_seen_ms}`: `lost` counts sequence gaps |
+  | `link_quality` | TIMESYNC answers, sequence gaps | a `Dolphin.Vehicles.LinkQuality`: round trip and loss both ways (`link_figures/1`) |
   """
 
   import Bitwise
 
   alias Dolphin.MAVLink.Ardupilotmega, as: M
   alias Dolphin.MAVLink.Frame
-  alias Dolphin.Vehicles.Modes
+  alias Dolphin.Vehicles.{LinkQuality, Modes}
 
   @max_texts 20
   @camera_type 30
@@ -43,6 +44,7 @@ defmodule Dolphin.Vehicles.State do
             status_texts: [],
             components: MapSet.new(),
             link: %{received: 0, lost: 0, last_seen_ms: nil},
+            link_quality: LinkQuality.new(),
             autopilot_compid: nil,
             seqs: %{}
 
@@ -71,7 +73,7 @@ defmodule Dolphin.Vehicles.State do
     # A jump of more than half the sequence space is a restart or a reordering, not a loss.
     lost = if lost > 128, do: 0, else: lost
     link = %{link | received: link.received + 1, lost: link.lost + lost, last_seen_ms: now_ms}
-    %{state | link: link, seqs: Map.put(seqs, compid, seq)}
+    %{state | link: link, seqs: Map.put(seqs, compid, seq), link_quality: LinkQuality.frames(state.link_quality, 1, lost)}
   end
 
   defp message(state, compid, %M.Heartbeat{type: type} = hb) when compid in @camera_compids or type == @camera_type do
@@ -208,12 +210,24 @@ defmodule Dolphin.Vehicles.State do
 
   @doc """
   The public fields that differ between two states, as `{field, new_value}`
-  (link counters excepted: they change with every frame).
+  (link counters excepted: they change with every frame; the link's figures
+  as `{:link_quality, figures}`).
   """
   @spec changes(t(), t()) :: [{atom(), term()}]
   def changes(old, new) do
-    for field <- [:type, :autopilot, :mode, :armed, :system_status, :position, :home, :battery, :mission, :landed, :status_texts, :components],
-        Map.fetch!(old, field) != Map.fetch!(new, field),
-        do: {field, Map.fetch!(new, field)}
+    fields =
+      for field <- [:type, :autopilot, :mode, :armed, :system_status, :position, :home, :battery, :mission, :landed, :status_texts, :components],
+          Map.fetch!(old, field) != Map.fetch!(new, field),
+          do: {field, Map.fetch!(new, field)}
+
+    # The link's figures, not its bookkeeping (pending TIMESYNCs, counters).
+    case {link_figures(old), link_figures(new)} do
+      {same, same} -> fields
+      {_, figures} -> fields ++ [{:link_quality, figures}]
+    end
   end
+
+  @doc "The link's round trip (ms) and loss both ways, nil until measured: see `Dolphin.Vehicles.LinkQuality`."
+  @spec link_figures(t()) :: LinkQuality.figures()
+  def link_figures(%__MODULE__{link_quality: q}), do: LinkQuality.figures(q)
 end

@@ -10,7 +10,7 @@ defmodule Dolphin.Vehicles.Vehicle do
   alias Dolphin.{Clock, PubSub}
   alias Dolphin.Link.Connection
   alias Dolphin.MAVLink.Ardupilotmega, as: M
-  alias Dolphin.Vehicles.{CommandProtocol, MissionProtocol, State}
+  alias Dolphin.Vehicles.{CommandProtocol, LinkQuality, MissionProtocol, State}
 
   # Messages asked for by interval (µs of vehicle time) on top of the streams:
   # ArduPilot sends EXTENDED_SYS_STATE only when asked this way.
@@ -25,6 +25,14 @@ defmodule Dolphin.Vehicles.Vehicle do
   # Until position telemetry arrives, the requests are repeated this often, this many times.
   @request_every_ms 3_000
   @request_tries 5
+
+  # The link is measured with TIMESYNC once a second of real time (a radio's
+  # delay and loss do not change with the clock's speed-up), four times as
+  # often at first so that the first commands and transfers already have
+  # figures to go by; an answer later than this is a loss.
+  @timesync_every_ms 1_000
+  @timesync_first 8
+  @timesync_stale_ms 2_000
 
   def child_spec({sysid, _link, _opts} = args),
     do: %{id: {__MODULE__, sysid}, start: {__MODULE__, :start_link, [args]}, restart: :permanent}
@@ -44,6 +52,7 @@ defmodule Dolphin.Vehicles.Vehicle do
       end
 
     send(self(), :request_telemetry)
+    send(self(), {:timesync, 0})
     Clock.send_after(self(), :check_link, check_period(timeout))
     now = Clock.now_ms()
 
@@ -71,7 +80,7 @@ defmodule Dolphin.Vehicles.Vehicle do
   @impl true
   def handle_cast({:frame, frame, link}, s) do
     s = if s.lost, do: reconnected(s), else: s
-    new = State.apply(s.state, frame, Clock.now_ms())
+    new = s.state |> State.apply(frame, Clock.now_ms()) |> timesync_answer(frame.message)
 
     case State.changes(s.state, new) do
       [] -> :ok
@@ -131,6 +140,16 @@ defmodule Dolphin.Vehicles.Vehicle do
     {:noreply, %{s | queued: queued}}
   end
 
+  def handle_info({:timesync, n}, s) do
+    now = System.monotonic_time(:millisecond)
+    rtt = State.link_figures(s.state).rtt_ms || 0
+    quality = LinkQuality.measure(s.state.link_quality, now, max(@timesync_stale_ms, 4 * rtt))
+    ts1 = System.os_time(:nanosecond)
+    Connection.send_message(s.link, s.sysid, %M.Timesync{tc1: 0, ts1: ts1})
+    Process.send_after(self(), {:timesync, n + 1}, if(n < @timesync_first, do: div(@timesync_every_ms, 4), else: @timesync_every_ms))
+    {:noreply, publish(s, %{s.state | link_quality: LinkQuality.request(quality, ts1, now)})}
+  end
+
   # Silence is judged only by a check that runs on time. One that runs more than
   # a period late means this machine held the ground station up (a loaded host,
   # a paused VM; at a speed-up a pause of timeout / speed-up is enough): the
@@ -152,6 +171,21 @@ defmodule Dolphin.Vehicles.Vehicle do
     else
       {:noreply, s}
     end
+  end
+
+  # An answer to one of our TIMESYNCs (tc1 0 is the vehicle's own request).
+  defp timesync_answer(state, %M.Timesync{tc1: tc1, ts1: ts1}) when tc1 != 0,
+    do: %{state | link_quality: LinkQuality.reply(state.link_quality, ts1, System.monotonic_time(:millisecond))}
+
+  defp timesync_answer(state, _message), do: state
+
+  defp publish(s, new) do
+    case State.changes(s.state, new) do
+      [] -> :ok
+      changes -> PubSub.publish({:vehicle, s.sysid}, {:state, s.sysid, changes})
+    end
+
+    %{s | state: new}
   end
 
   # Heard again after a silence: say so, and ask for telemetry again (the
@@ -228,8 +262,8 @@ defmodule Dolphin.Vehicles.Vehicle do
   # rules say whether mission items may be sent ahead), the measured round
   # trip and the round-trip loss, when known.
   defp link_opts(state) do
-    loss = Dolphin.Vehicles.Retry.round_trip_loss(Map.get(state.link, :loss_in), Map.get(state.link, :loss_out))
-    [autopilot: state.autopilot, rtt_ms: Map.get(state.link, :rtt_ms), loss: loss]
+    figures = State.link_figures(state)
+    [autopilot: state.autopilot, rtt_ms: figures.rtt_ms, loss: figures.loss_rt]
   end
 
   defp next_op(s, key) do

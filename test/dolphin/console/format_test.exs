@@ -68,6 +68,9 @@ defmodule Dolphin.Console.FormatTest do
       assert Format.link(nil) == "-"
       assert Format.link(%{received: 0, lost: 0}) == "-"
       assert Format.link(%{received: 1, lost: 2}) == "33 % (2 lost)"
+      assert Format.link(%{received: 1, lost: 2, rtt_ms: nil, loss_in: nil, loss_out: nil}) == "33 % (2 lost)"
+      assert Format.link(%{received: 9, lost: 1, rtt_ms: 44.6, loss_in: 0.1, loss_out: 0.304}) == "90 % (1 lost), 45 ms, loss in 10 % / out 30 %"
+      assert Format.link(%{received: 9, lost: 0, rtt_ms: 3, loss_in: 0.0, loss_out: nil}) == "100 %, 3 ms"
     end
 
     test "MAV_TYPE numbers as words" do
