@@ -43,13 +43,32 @@ defmodule Mix.Tasks.Dolphin.Plan do
   corridor scans) are not read: save the plan with them converted to
   simple waypoints.
 
+  ## upload IN.plan --connect ENDPOINT [--vehicle ID] [--timeout SECONDS]
+
+  Uploads the plan's mission to a vehicle and reads it back to compare: what
+  a mission task does before it flies, as a command. `ENDPOINT` is a link as
+  `mix dolphin.run --connect` takes it (`udpin:0.0.0.0:14550`,
+  `udpout:HOST:PORT`, `tcp:HOST:PORT`); the vehicle is `--vehicle ID`, or the
+  only one heard within `--timeout` seconds (default 10). Prints the time each
+  transfer took and its retransmissions (items and requests sent again on a
+  lossy link), and whether the vehicle holds exactly the mission:
+
+      $ mix dolphin.plan upload survey.plan --connect udpin:0.0.0.0:14550
+      vehicle 1: uploaded 14 items in 0.21 s (0 retransmissions); read back in 0.05 s (0 retransmissions): the vehicle holds exactly the mission
+
+  ## download OUT.plan --connect ENDPOINT [--vehicle ID] [--timeout SECONDS]
+
+  Reads a vehicle's mission and writes it as a plan (its item 0 is the
+  plan's home).
+
   ## list FILE
 
   The missions `FILE` defines, as `export` finds them, and the statements
   it skipped.
 
-  Errors (a missing file, no such mission, a malformed plan) stop the task
-  with a message and a non-zero exit status.
+  Errors (a missing file, no such mission, a malformed plan, no vehicle
+  heard, a transfer that failed) stop the task with a message and exit
+  status 1.
   """
 
   use Mix.Task
@@ -57,17 +76,21 @@ defmodule Mix.Tasks.Dolphin.Plan do
   alias Dolphin.Console.{Format, MissionFile, MissionSource}
   alias Dolphin.Mission
 
-  @switches [home: :string, cruise_speed: :float, hover_speed: :float, items: :boolean, name: :string]
+  @switches [home: :string, cruise_speed: :float, hover_speed: :float, items: :boolean, name: :string, connect: :string, vehicle: :integer, timeout: :integer]
 
   @usage """
   usage: mix dolphin.plan export FILE NAME OUT.plan [--home LAT,LON,ALT] [--cruise-speed M_S] [--hover-speed M_S]
          mix dolphin.plan import IN.plan [--items] [--name NAME]
-         mix dolphin.plan list FILE\
+         mix dolphin.plan list FILE
+         mix dolphin.plan upload IN.plan --connect ENDPOINT [--vehicle ID] [--timeout SECONDS]
+         mix dolphin.plan download OUT.plan --connect ENDPOINT [--vehicle ID] [--timeout SECONDS]\
   """
 
   @impl Mix.Task
   def run(argv) do
     Mix.Task.run("app.config")
+    # Transfers need the links and vehicles of the application.
+    if List.first(argv) in ["upload", "download"], do: Mix.Task.run("app.start")
 
     case main(argv) do
       {:ok, text} -> Mix.shell().info(text)
@@ -124,11 +147,169 @@ defmodule Mix.Tasks.Dolphin.Plan do
     end
   end
 
-  defp command([verb | _] = args, _opts) when verb in ["export", "import", "list"],
+  defp command(["upload", file], opts) do
+    with :ok <- only(opts, [:connect, :vehicle, :timeout], "upload"),
+         {:ok, json} <- read(file),
+         {:ok, mission} <- decode(json, Path.basename(file, ".plan"), file) do
+      with_vehicle(opts, fn id -> upload(id, Mission.to_items(mission)) end)
+    end
+  end
+
+  defp command(["download", out], opts) do
+    with :ok <- only(opts, [:connect, :vehicle, :timeout], "download") do
+      with_vehicle(opts, fn id -> download(id, out) end)
+    end
+  end
+
+  defp command([verb | _] = args, _opts) when verb in ["export", "import", "list", "upload", "download"],
     do: usage("#{verb}: wrong arguments #{inspect(args)}")
 
   defp command([], _opts), do: usage("no command given")
-  defp command([verb | _], _opts), do: usage("unknown command #{inspect(verb)} (export, import or list)")
+  defp command([verb | _], _opts), do: usage("unknown command #{inspect(verb)} (export, import, list, upload or download)")
+
+  # --- transfers ---------------------------------------------------------------
+
+  # Opens the link, finds the vehicle, runs `fun` with its id; the link is
+  # closed and its vehicles forgotten afterwards.
+  defp with_vehicle(opts, fun) do
+    name = "dolphin.plan-#{System.unique_integer([:positive])}"
+
+    with {:ok, endpoint} <- (opts[:connect] && {:ok, opts[:connect]}) || usage("--connect ENDPOINT is needed"),
+         {:ok, link} <- connect(endpoint, name) do
+      try do
+        with {:ok, id} <- find_vehicle(endpoint, opts[:vehicle], Keyword.get(opts, :timeout, 10) * 1_000), do: fun.(id)
+      after
+        heard = Dolphin.Vehicles.list()
+        DynamicSupervisor.terminate_child(Dolphin.Link.Supervisor, link)
+        Enum.each(heard, &Dolphin.Vehicles.forget/1)
+      end
+    end
+  end
+
+  defp connect(endpoint, name) do
+    case Dolphin.Link.connect(endpoint, name: name) do
+      {:ok, link} -> {:ok, link}
+      {:error, why} -> usage("--connect #{endpoint}: #{why}")
+    end
+  end
+
+  @poll_ms 50
+  # Once one vehicle is heard, others on the link get this long to show up.
+  @others_ms 1_500
+
+  # The vehicle asked for, or the only one heard, once it has booted
+  # (ArduCopter refuses uploads while it boots).
+  defp find_vehicle(endpoint, wanted, timeout_ms) do
+    deadline = System.monotonic_time(:millisecond) + timeout_ms
+    await_vehicle(endpoint, wanted, deadline, nil)
+  end
+
+  defp await_vehicle(endpoint, wanted, deadline, first_heard) do
+    now = System.monotonic_time(:millisecond)
+    heard = Dolphin.Vehicles.list()
+    first_heard = first_heard || (heard != [] && now) || nil
+
+    cond do
+      wanted != nil and wanted in heard and Dolphin.Vehicles.ready?(wanted) ->
+        {:ok, wanted}
+
+      wanted == nil and length(heard) > 1 ->
+        {:error, "vehicles #{Enum.join(Enum.sort(heard), ", ")} are on #{endpoint}: say which with --vehicle ID"}
+
+      wanted == nil and heard != [] and now - first_heard >= @others_ms and Dolphin.Vehicles.ready?(hd(heard)) ->
+        {:ok, hd(heard)}
+
+      now >= deadline ->
+        cond do
+          wanted != nil and wanted in heard -> {:error, "vehicle #{wanted} on #{endpoint} did not finish booting in time (--timeout)"}
+          wanted != nil -> {:error, "no vehicle #{wanted} heard on #{endpoint} (heard: #{if heard == [], do: "none", else: Enum.join(Enum.sort(heard), ", ")})"}
+          heard != [] -> {:error, "vehicle #{hd(heard)} on #{endpoint} did not finish booting in time (--timeout)"}
+          true -> {:error, "no vehicle heard on #{endpoint} within #{div(deadline - now + 999, 1000) |> max(0)} s (--timeout)"}
+        end
+
+      true ->
+        Process.sleep(@poll_ms)
+        await_vehicle(endpoint, wanted, deadline, first_heard)
+    end
+  end
+
+  defp upload(id, items) do
+    {up_ms, up} = timed(fn -> Dolphin.Vehicles.upload_mission(id, items, progress_to: self()) end)
+    up_done = done(:upload)
+    unconfirmed? = match?({:error, %Dolphin.MissionError{result: :unconfirmed}}, up)
+
+    if up == :ok or unconfirmed? do
+      {down_ms, down} = timed(fn -> Dolphin.Vehicles.download_mission(id, progress_to: self()) end)
+      down_done = done(:download)
+      what = "vehicle #{id}: uploaded #{length(items)} items in #{seconds(up_ms)} (#{retransmissions(up_done)})"
+      lost_ack = if unconfirmed?, do: ", its final MISSION_ACK lost", else: ""
+      read = "read back in #{seconds(down_ms)} (#{retransmissions(down_done)})"
+
+      case down do
+        {:ok, back} ->
+          case Mission.compare_download(items, back) do
+            :ok -> {:ok, "#{what}#{lost_ack}; #{read}: the vehicle holds exactly the mission"}
+            {:error, why} -> {:error, "#{what}#{lost_ack}; #{read}, but it differs: #{why}"}
+          end
+
+        {:error, e} ->
+          {:error, "#{what}#{lost_ack}; reading it back failed: #{Exception.message(e)}"}
+      end
+    else
+      {:error, e} = up
+      {:error, "upload failed after #{seconds(up_ms)} (#{retransmissions(up_done)}): #{Exception.message(e)}"}
+    end
+  end
+
+  defp download(id, out) do
+    {ms, result} = timed(fn -> Dolphin.Vehicles.download_mission(id, progress_to: self()) end)
+    took = "in #{seconds(ms)} (#{retransmissions(done(:download))})"
+
+    with {:ok, items} <- result,
+         {:ok, mission} <- from_items(items, id, Path.basename(out, ".plan")),
+         :ok <- write(out, Mission.to_plan(mission)) do
+      {:ok, "vehicle #{id}: downloaded #{length(items)} items #{took}; wrote #{out}"}
+    else
+      {:error, %Dolphin.MissionError{} = e} -> {:error, "download failed #{took}: #{Exception.message(e)}"}
+      {:error, message} -> {:error, message}
+    end
+  end
+
+  defp from_items([], id, _name), do: {:error, "vehicle #{id} holds no mission (not even home): nothing to write"}
+
+  defp from_items(items, id, name) do
+    case MissionSource.from_items(items, name) do
+      {:ok, mission} -> {:ok, mission}
+      {:error, e} -> {:error, "vehicle #{id}'s mission cannot be written as a plan: #{Exception.message(e)}"}
+    end
+  end
+
+  defp timed(fun) do
+    start = System.monotonic_time(:millisecond)
+    result = fun.()
+    {System.monotonic_time(:millisecond) - start, result}
+  end
+
+  # What the protocol reported at the end of a transfer (it went to this process).
+  defp done(operation) do
+    receive do
+      {:mission_done, ^operation, report} -> flush_progress(report)
+    after
+      0 -> flush_progress(%{retransmissions: 0})
+    end
+  end
+
+  defp flush_progress(report) do
+    receive do
+      {:mission_progress, _, _, _} -> flush_progress(report)
+    after
+      0 -> report
+    end
+  end
+
+  defp seconds(ms), do: "#{:erlang.float_to_binary(ms / 1000, decimals: 2)} s"
+  defp retransmissions(%{retransmissions: 1}), do: "1 retransmission"
+  defp retransmissions(%{retransmissions: n}), do: "#{n} retransmissions"
 
   defp items(mission) do
     n = length(Mission.to_items(mission)) - 1
