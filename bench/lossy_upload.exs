@@ -19,7 +19,7 @@
 # lost) and the read-back is exact. Times are wall-clock seconds of the
 # upload alone.
 #
-#   mix run bench/lossy_upload.exs [--runs 5] [--sizes 100,400] [--losses 0,10,20,30] [--speedup 1]
+#   mix run bench/lossy_upload.exs [--runs 5] [--sizes 100,400] [--losses 0,10,20,30] [--speedup 1] [--uploaders ahead,request]
 #
 # Prints a Markdown table: median and max time, successes, median
 # retransmissions, per row and uploader.
@@ -30,12 +30,13 @@ alias Dolphin.{Clock, Mission, SITL, Vehicles}
 alias Dolphin.MAVLink.Ardupilotmega, as: M
 alias Dolphin.Test.UDPProxy
 
-{opts, _, _} = OptionParser.parse(System.argv(), strict: [runs: :integer, sizes: :string, losses: :string, speedup: :integer])
+{opts, _, _} = OptionParser.parse(System.argv(), strict: [runs: :integer, sizes: :string, losses: :string, speedup: :integer, uploaders: :string])
 ints = fn text -> text |> String.split(",") |> Enum.map(&String.to_integer/1) end
 runs = Keyword.get(opts, :runs, 5)
 sizes = ints.(Keyword.get(opts, :sizes, "100,400"))
 losses = ints.(Keyword.get(opts, :losses, "0,10,20,30"))
 speedup = Keyword.get(opts, :speedup, 1)
+uploaders = opts |> Keyword.get(:uploaders, "ahead,request") |> String.split(",") |> Enum.map(&{&1, &1 == "ahead"})
 
 unless SITL.available?() do
   IO.puts("no ArduCopter SITL binary (../shared/sitl/arducopter or ARDUPILOT_SITL): nothing to measure")
@@ -96,7 +97,7 @@ IO.puts("")
 IO.puts("| loss each way | dup / reorder | items | uploader | median s | max s | exact | median retransmissions |")
 IO.puts("| --- | --- | --- | --- | --- | --- | --- | --- |")
 
-for loss <- losses, n <- sizes, {name, ahead?} <- [{"ahead", true}, {"request", false}] do
+for loss <- losses, n <- sizes, {name, ahead?} <- uploaders do
   extra = if loss > 0, do: 0.05, else: 0.0
   :ok = UDPProxy.set(proxy, both: [loss: 0.0, duplicate: 0.0, reorder: 0.0])
   # The vehicle is left alone for a moment between rows (a failed upload may
