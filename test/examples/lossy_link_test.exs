@@ -23,14 +23,6 @@ defmodule Dolphin.Examples.LossyLinkTest do
     on_exit(&GroundStation.forget_vehicles/0)
   end
 
-  # A port nobody listens on now, for the run's `udpin` (the proxy sends there).
-  defp free_port do
-    {:ok, socket} = :gen_udp.open(0, ip: {127, 0, 0, 1})
-    {:ok, port} = :inet.port(socket)
-    :gen_udp.close(socket)
-    port
-  end
-
   # A proxy in front of `port`, told apart by `label`.
   defp proxy(port, label, seed), do: start_supervised!({UDPProxy, gcs: port, seed: seed, both: @faults}, id: {:proxy, label})
 
@@ -47,7 +39,7 @@ defmodule Dolphin.Examples.LossyLinkTest do
 
     for seed <- 1..5 do
       label = "-lossy#{seed}"
-      port = free_port()
+      port = GroundStation.free_udp_port()
       proxy = proxy(port, label, seed)
       {:ok, [1, 2]} = Sim.start(count: 2, gcs: UDPProxy.port(proxy), speedup: 25)
       lossy = ExampleRun.run(dir, "two_vehicles", label, ["--connect", "udpin:127.0.0.1:#{port}", "--speedup", "25"], "14m")

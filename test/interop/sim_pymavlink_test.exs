@@ -16,7 +16,7 @@ defmodule Dolphin.Interop.SimPymavlinkTest do
   @tag timeout: 120_000
   test "pymavlink as the ground station flies a simulated copter through a mission" do
     python = Dolphin.Test.Pymavlink.python()
-    port = free_udp_port()
+    port = Dolphin.Test.GroundStation.free_udp_port()
     on_exit(fn -> Sim.stop(); Clock.set_speedup(1) end)
 
     gcs = Port.open({:spawn_executable, python}, [:binary, :exit_status, {:line, 65_536}, args: [@script, "#{port}", "9", "#{@speedup}"]])
@@ -36,12 +36,6 @@ defmodule Dolphin.Interop.SimPymavlinkTest do
     assert summary["distance_from_home"] < 3
   end
 
-  defp free_udp_port do
-    {:ok, socket} = :gen_udp.open(0, ip: {127, 0, 0, 1})
-    {:ok, port} = :inet.port(socket)
-    :gen_udp.close(socket)
-    port
-  end
 
   defp next(port, timeout \\ 30_000) do
     receive do

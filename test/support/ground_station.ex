@@ -23,6 +23,14 @@ defmodule Dolphin.Test.GroundStation do
     Dolphin.Link.Connection.port(name)
   end
 
+  @doc "A UDP port on 127.0.0.1 nobody listens on now (for a link a test opens later)."
+  def free_udp_port do
+    {:ok, socket} = :gen_udp.open(0, ip: {127, 0, 0, 1})
+    {:ok, port} = :inet.port(socket)
+    :gen_udp.close(socket)
+    port
+  end
+
   @doc "Stops the simulated vehicles and forgets every vehicle the ground station knew."
   def forget_vehicles do
     Dolphin.Sim.stop()

@@ -202,18 +202,8 @@ defmodule Dolphin.Vehicles.MissionProtocol do
 
   ## Upload
 
-  def handle_event(:enter, _old, {:count, tries}, data) do
-    data = if tries > 0, do: bump(data, :retransmissions), else: data
-
-    data.send.(%M.MissionCount{
-      target_system: data.sysid,
-      target_component: data.component,
-      count: data.count,
-      mission_type: data.type
-    })
-
-    continue(sent_now(data, :count))
-  end
+  def handle_event(:enter, _old, {:count, tries}, data),
+    do: open_exchange(data, tries, :count, %M.MissionCount{target_system: data.sysid, target_component: data.component, count: data.count, mission_type: data.type})
 
   def handle_event(:state_timeout, :rto, {:count, tries}, data) do
     case stall(data) do
@@ -232,12 +222,7 @@ defmodule Dolphin.Vehicles.MissionProtocol do
     end
   end
 
-  def handle_event(
-        :info,
-        {:mission, %m{seq: seq, mission_type: type}},
-        state,
-        %{operation: :upload} = data
-      )
+  def handle_event(:info, {:mission, %m{seq: seq, mission_type: type}}, state, %{operation: :upload} = data)
       when m in [M.MissionRequestInt, M.MissionRequest] and type == data.type and seq < data.count do
     data = heard(data, "asked for item #{seq}")
 
@@ -249,29 +234,15 @@ defmodule Dolphin.Vehicles.MissionProtocol do
     end
   end
 
-  def handle_event(
-        :info,
-        {:mission, %M.MissionAck{type: result, mission_type: type}},
-        state,
-        %{operation: :upload} = data
-      )
+  def handle_event(:info, {:mission, %M.MissionAck{type: result, mission_type: type}}, state, %{operation: :upload} = data)
       when type == data.type do
     upload_ack(result, state, heard(data, "answered #{words(result)}"))
   end
 
   ## Download
 
-  def handle_event(:enter, _old, {:list, tries}, data) do
-    data = if tries > 0, do: bump(data, :retransmissions), else: data
-
-    data.send.(%M.MissionRequestList{
-      target_system: data.sysid,
-      target_component: data.component,
-      mission_type: data.type
-    })
-
-    continue(sent_now(data, :list))
-  end
+  def handle_event(:enter, _old, {:list, tries}, data),
+    do: open_exchange(data, tries, :list, %M.MissionRequestList{target_system: data.sysid, target_component: data.component, mission_type: data.type})
 
   def handle_event(:state_timeout, :rto, {:list, tries}, data) do
     case stall(data) do
@@ -280,12 +251,7 @@ defmodule Dolphin.Vehicles.MissionProtocol do
     end
   end
 
-  def handle_event(
-        :info,
-        {:mission, %M.MissionCount{count: count, mission_type: type}},
-        {:list, _},
-        %{operation: :download} = data
-      )
+  def handle_event(:info, {:mission, %M.MissionCount{count: count, mission_type: type}}, {:list, _}, %{operation: :download} = data)
       when type == data.type do
     data = data |> heard("counted #{count} items") |> sample(:list) |> progressed()
     data = %{data | count: count}
@@ -306,12 +272,7 @@ defmodule Dolphin.Vehicles.MissionProtocol do
     end
   end
 
-  def handle_event(
-        :info,
-        {:mission, %m{seq: seq, mission_type: type} = item},
-        :receiving,
-        %{operation: :download} = data
-      )
+  def handle_event(:info, {:mission, %m{seq: seq, mission_type: type} = item}, :receiving, %{operation: :download} = data)
       when m in [M.MissionItemInt, M.MissionItem] and type == data.type and seq < data.count do
     if Map.has_key?(data.received, seq) do
       # A duplicate.
@@ -335,39 +296,20 @@ defmodule Dolphin.Vehicles.MissionProtocol do
     end
   end
 
-  def handle_event(
-        :info,
-        {:mission, %M.MissionAck{type: @unsupported, mission_type: type}},
-        _state,
-        %{operation: :download} = data
-      )
+  def handle_event(:info, {:mission, %M.MissionAck{type: @unsupported, mission_type: type}}, _state, %{operation: :download} = data)
       when type == data.type,
       do: fail(data, :unsupported, nil)
 
   # Busy receiving an upload (maybe an earlier one of ours it has not given up
   # yet): asked again at the next timeout. Any other ack is a late one.
-  def handle_event(
-        :info,
-        {:mission, %M.MissionAck{type: result, mission_type: type}},
-        _state,
-        %{operation: :download} = data
-      )
+  def handle_event(:info, {:mission, %M.MissionAck{type: result, mission_type: type}}, _state, %{operation: :download} = data)
       when type == data.type,
       do: {:keep_state, heard(data, "answered #{words(result)}")}
 
   ## Clear
 
-  def handle_event(:enter, _old, {:clear, tries}, data) do
-    data = if tries > 0, do: bump(data, :retransmissions), else: data
-
-    data.send.(%M.MissionClearAll{
-      target_system: data.sysid,
-      target_component: data.component,
-      mission_type: data.type
-    })
-
-    continue(sent_now(data, :clear))
-  end
+  def handle_event(:enter, _old, {:clear, tries}, data),
+    do: open_exchange(data, tries, :clear, %M.MissionClearAll{target_system: data.sysid, target_component: data.component, mission_type: data.type})
 
   def handle_event(:state_timeout, :rto, {:clear, tries}, data) do
     case stall(data) do
@@ -376,26 +318,24 @@ defmodule Dolphin.Vehicles.MissionProtocol do
     end
   end
 
-  def handle_event(
-        :info,
-        {:mission, %M.MissionAck{type: @accepted, mission_type: type}},
-        {:clear, _},
-        %{operation: :clear} = data
-      )
+  def handle_event(:info, {:mission, %M.MissionAck{type: @accepted, mission_type: type}}, {:clear, _}, %{operation: :clear} = data)
       when type == data.type,
       do: finish(data, :ok)
 
-  def handle_event(
-        :info,
-        {:mission, %M.MissionAck{type: result, mission_type: type}},
-        {:clear, _},
-        %{operation: :clear} = data
-      )
+  def handle_event(:info, {:mission, %M.MissionAck{type: result, mission_type: type}}, {:clear, _}, %{operation: :clear} = data)
       when type == data.type,
       do: fail(data, result(result), nil)
 
   # Anything else (duplicates, other mission types, late answers) is not for this state.
   def handle_event(:info, {:mission, _message}, _state, _data), do: :keep_state_and_data
+
+  # The first message of an exchange (MISSION_COUNT, MISSION_REQUEST_LIST,
+  # MISSION_CLEAR_ALL), sent again on every try after the first.
+  defp open_exchange(data, tries, what, message) do
+    data = if tries > 0, do: bump(data, :retransmissions), else: data
+    data.send.(message)
+    continue(sent_now(data, what))
+  end
 
   ## Upload: the vehicle's requests and acks
 
@@ -530,12 +470,7 @@ defmodule Dolphin.Vehicles.MissionProtocol do
       if Map.has_key?(d.asked, seq) do
         d
       else
-        d.send.(%M.MissionRequestInt{
-          target_system: d.sysid,
-          target_component: d.component,
-          seq: seq,
-          mission_type: d.type
-        })
+        d.send.(%M.MissionRequestInt{target_system: d.sysid, target_component: d.component, seq: seq, mission_type: d.type})
 
         sent_now(%{d | asked: Map.put(d.asked, seq, true)}, {:item, seq})
       end
@@ -662,12 +597,7 @@ defmodule Dolphin.Vehicles.MissionProtocol do
   ## Endings
 
   defp finish_download(data) do
-    data.send.(%M.MissionAck{
-      target_system: data.sysid,
-      target_component: data.component,
-      type: @accepted,
-      mission_type: data.type
-    })
+    data.send.(%M.MissionAck{target_system: data.sysid, target_component: data.component, type: @accepted, mission_type: data.type})
 
     finish(data, {:ok, Enum.map(0..(data.count - 1)//1, &Map.fetch!(data.received, &1))})
   end
@@ -690,13 +620,7 @@ defmodule Dolphin.Vehicles.MissionProtocol do
   end
 
   defp fail(data, result, detail) do
-    error = %MissionError{
-      operation: data.operation,
-      vehicle: data.sysid,
-      mission_type: data.mission_type,
-      result: result,
-      detail: detail
-    }
+    error = %MissionError{operation: data.operation, vehicle: data.sysid, mission_type: data.mission_type, result: result, detail: detail}
 
     finish(data, {:error, error})
   end

@@ -80,18 +80,12 @@ defmodule Dolphin.Vehicles.Vehicle do
   @impl true
   def handle_cast({:frame, frame, link}, s) do
     s = if s.lost, do: reconnected(s), else: s
-    new = s.state |> State.apply(frame, Clock.now_ms()) |> timesync_answer(frame.message)
-
-    case State.changes(s.state, new) do
-      [] -> :ok
-      changes -> PubSub.publish({:vehicle, s.sysid}, {:state, s.sysid, changes})
-    end
-
+    s = publish(s, s.state |> State.apply(frame, Clock.now_ms()) |> timesync_answer(frame.message))
     route_to_op(s, frame)
 
     # Position telemetry flowing means the requests were heard.
     requests_left = if match?(%M.GlobalPositionInt{}, frame.message), do: 0, else: s.requests_left
-    {:noreply, %{s | state: new, link: link, requests_left: requests_left}}
+    {:noreply, %{s | link: link, requests_left: requests_left}}
   end
 
   def handle_cast({:send, message}, s) do
@@ -179,6 +173,7 @@ defmodule Dolphin.Vehicles.Vehicle do
 
   defp timesync_answer(state, _message), do: state
 
+  # The new state, and its changes to the vehicle's subscribers.
   defp publish(s, new) do
     case State.changes(s.state, new) do
       [] -> :ok
@@ -247,16 +242,7 @@ defmodule Dolphin.Vehicles.Vehicle do
   # From the first MISSION_COUNT or MISSION_CLEAR_ALL on, the vehicle's
   # previous mission is going, whatever the transfer's outcome: its progress
   # is forgotten, and subscribers told, before the new mission can report any.
-  defp replace_mission(s) do
-    new = State.mission_replaced(s.state)
-
-    case State.changes(s.state, new) do
-      [] -> :ok
-      changes -> PubSub.publish({:vehicle, s.sysid}, {:state, s.sysid, changes})
-    end
-
-    %{s | state: new}
-  end
+  defp replace_mission(s), do: publish(s, State.mission_replaced(s.state))
 
   # What a protocol's timers and patience start from: the autopilot (whose
   # rules say whether mission items may be sent ahead), the measured round

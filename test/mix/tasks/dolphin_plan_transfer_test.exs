@@ -15,14 +15,7 @@ defmodule Mix.Tasks.Dolphin.PlanTransferTest do
     on_exit(&GroundStation.forget_vehicles/0)
     plan = Path.join(dir, "survey.plan")
     {:ok, _} = Plan.main(["export", @example, "Survey Area", plan])
-    %{plan: plan, port: free_port()}
-  end
-
-  defp free_port do
-    {:ok, socket} = :gen_udp.open(0, ip: {127, 0, 0, 1})
-    {:ok, port} = :inet.port(socket)
-    :gen_udp.close(socket)
-    port
+    %{plan: plan, port: GroundStation.free_udp_port()}
   end
 
   defp plan_items(plan), do: plan |> File.read!() |> Mission.from_plan(name: "p") |> elem(1) |> Mission.to_items()

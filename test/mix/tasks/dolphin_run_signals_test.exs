@@ -67,7 +67,7 @@ defmodule Mix.Tasks.Dolphin.RunSignalsTest do
         File.write!(script, @hover)
         events = Path.join(ctx.tmp_dir, "events.jsonl")
         previous = Dolphin.Clock.speedup()
-        udp = free_udp_port()
+        udp = Dolphin.Test.GroundStation.free_udp_port()
         sysid = 77
 
         {:ok, [^sysid]} = Dolphin.Sim.start(gcs: udp, sysids: [sysid], speedup: 10)
@@ -138,12 +138,6 @@ defmodule Mix.Tasks.Dolphin.RunSignalsTest do
     end
   end
 
-  defp free_udp_port do
-    {:ok, socket} = :gen_udp.open(0, ip: {127, 0, 0, 1})
-    {:ok, port} = :inet.port(socket)
-    :gen_udp.close(socket)
-    port
-  end
 
   defp run_mix(args), do: open([System.find_executable("mix") | args])
 
