@@ -1,11 +1,10 @@
 # The ground station's mission upload and telemetry intake over loopback.
 #
 #   1. Upload time of a 100-item and a 700-item mission to a scripted
-#      ArduCopter-like vehicle (test/support/scripted_vehicle.ex: items asked
-#      for one by one with MISSION_REQUEST), at 0 % and 20 % loss each way.
-#      Lossy runs use Dolphin.Clock speed-up 10 (the vehicle's timers too):
-#      retries wait for timeouts, which the speed-up shortens; the clock time
-#      printed is what the same upload takes at real speed.
+#      ArduCopter-like vehicle (test/support/scripted_vehicle.ex: ArduCopter's
+#      mission protocol rules, Dolphin.Sim.MissionServer), at 0 % and 20 %
+#      loss each way, in real time. An upload whose final MISSION_ACK was
+#      lost ends :unconfirmed (the vehicle holds the mission: checked here).
 #   2. CPU of the ground station for 100 vehicles, each sending ArduPilot-like
 #      telemetry (GLOBAL_POSITION_INT, ATTITUDE, VFR_HUD, SYS_STATUS at 10 Hz,
 #      HEARTBEAT at 1 Hz) from its own UDP socket, made by a separate OS process
@@ -29,7 +28,7 @@ port = Connection.port("bench")
 
 IO.puts("mission upload over loopback (#{System.schedulers_online()} schedulers, OTP #{System.otp_release()})")
 
-for {loss, speedup} <- [{0.0, 1}, {0.2, 10}], n <- [100, 700] do
+for {loss, speedup} <- [{0.0, 1}, {0.2, 1}], n <- [100, 700] do
   Clock.set_speedup(speedup)
   sysid = if loss == 0.0, do: 100 + div(n, 100), else: 120 + div(n, 100)
   {:ok, vehicle} = ScriptedVehicle.start_link(port: port, sysid: sysid, speedup: speedup, loss: loss, seed: n)
@@ -37,11 +36,14 @@ for {loss, speedup} <- [{0.0, 1}, {0.2, 10}], n <- [100, 700] do
 
   runs =
     for _ <- 1..3 do
-      {us, result} = :timer.tc(fn -> Vehicles.upload_mission(sysid, items.(n), attempts: 10) end)
-      {us, result}
+      {us, result} = :timer.tc(fn -> Vehicles.upload_mission(sysid, items.(n)) end)
+      # Unconfirmed (the final ACK lost): what the vehicle holds says.
+      held? = length(ScriptedVehicle.mission(vehicle)) == n
+      {us, if(match?({:error, %Dolphin.MissionError{result: :unconfirmed}}, result) and held?, do: :unconfirmed, else: result)}
     end
 
-  ok = Enum.count(runs, &(elem(&1, 1) == :ok))
+  ok = Enum.count(runs, &(elem(&1, 1) in [:ok, :unconfirmed]))
+  unconfirmed = Enum.count(runs, &(elem(&1, 1) == :unconfirmed))
   {best, _} = Enum.min_by(runs, &elem(&1, 0))
   median = runs |> Enum.map(&elem(&1, 0)) |> Enum.sort() |> Enum.at(1)
 
@@ -49,8 +51,7 @@ for {loss, speedup} <- [{0.0, 1}, {0.2, 10}], n <- [100, 700] do
 
   IO.puts(
     "  #{String.pad_leading("#{n}", 3)} items, #{round(loss * 100)} % loss: best #{Float.round(best / 1000, 1)} ms, median #{Float.round(median / 1000, 1)} ms wall" <>
-      if(speedup > 1, do: " (= #{Float.round(median * speedup / 1_000_000, 1)} s at real speed)", else: "") <>
-      ", #{ok}/3 accepted" <> Enum.map_join(failures, "", &"\n      failed: #{&1}")
+      ", #{ok}/3 uploaded" <> if(unconfirmed > 0, do: " (#{unconfirmed} with the final ACK lost)", else: "") <> Enum.map_join(failures, "", &"\n      failed: #{&1}")
   )
 
   GenServer.stop(vehicle)
