@@ -60,9 +60,15 @@ defmodule Dolphin.Examples.LossyLinkTest do
     # SITL's link is the run's own (--sitl); the proxy stands between.
     test = self()
 
+    # Asked once per instance: both send to the same proxy.
     send_to = fn gcs_port ->
-      proxy = proxy(gcs_port, "-sitl", 1)
-      send(test, {:proxy, proxy})
+      proxy =
+        Process.get(:sitl_proxy) ||
+          tap(proxy(gcs_port, "-sitl", 1), fn proxy ->
+            Process.put(:sitl_proxy, proxy)
+            send(test, {:proxy, proxy})
+          end)
+
       UDPProxy.port(proxy)
     end
 

@@ -280,10 +280,19 @@ defmodule Dolphin.Vehicles.Vehicle do
     # time: at a speed-up of 100 this is already 200 frames a second per stream.)
     Connection.send_message(s.link, s.sysid, %M.RequestDataStream{target_system: s.sysid, target_component: 0, req_stream_id: 0, req_message_rate: 2, start_stop: 1})
 
-    Enum.reduce(@intervals, s, fn {msgid, interval_us}, s ->
-      params = [msgid * 1.0, interval_us * 1.0, 0.0, 0.0, 0.0, 0.0, 0.0]
-      request = %{command: 511, params: params, int: false, frame: 0, target_component: 1, progress_to: nil}
-      run_op(s, 511, CommandProtocol, request, [attempts: 1], nil)
-    end)
+    # Each interval is asked for until acknowledged, as many times as the
+    # link's loss calls for: on a bad radio a request sent once is lost, and
+    # a message asked for only by interval (MISSION_CURRENT on some builds,
+    # EXTENDED_SYS_STATE) would then never come. While the previous round is
+    # still under way, no new one is queued behind it.
+    if Map.has_key?(s.ops, 511) do
+      s
+    else
+      Enum.reduce(@intervals, s, fn {msgid, interval_us}, s ->
+        params = [msgid * 1.0, interval_us * 1.0, 0.0, 0.0, 0.0, 0.0, 0.0]
+        request = %{command: 511, params: params, int: false, frame: 0, target_component: 1, progress_to: nil}
+        run_op(s, 511, CommandProtocol, request, [], nil)
+      end)
+    end
   end
 end
