@@ -96,7 +96,7 @@ defmodule Dolphin.ConsoleTest do
     assert vehicles() == IEx.dont_display_result()
     [header, one, two] = String.split(out(io), "\n", trim: true)
     assert header =~ ~r/^ID\s+TYPE\s+MODE\s+ARMED\s+BATTERY\s+POSITION\s+ALT\s+LINK\s+SEEN\s+TASK$/
-    assert one =~ ~r/^ 1  quadrotor  STABILIZE\s+no\s+100 %  40\.44\d+, -7\.37\d+\s+0\.0 m  100 %\s+\d+ ms ago\s+-$/
+    assert one =~ ~r/^ 1  quadrotor  STABILIZE\s+no\s+100 %  40\.44\d+, -7\.37\d+\s+0\.0 m  100 %(, \d+ ms)?\s+\d+ ms ago\s+-$/
     assert two =~ ~r/^ 2  quadrotor/
   end
 
