@@ -48,7 +48,8 @@ defmodule Dolphin.Vehicles.CommandProtocol do
   a message to the vehicle, `reply_to` a `GenServer.from()`. Options
   `:attempts` (default: as many as the link's round-trip loss `:loss` calls
   for, `Dolphin.Vehicles.Retry.attempts/1`: 5 on a clean link, 12 when it is
-  not measured, 21 at 30 % each way), `:ack_timeout_ms` (the longest wait,
+  not measured, 21 at 30 % each way, and as many more as fit in 5 s of real
+  time, `Dolphin.Vehicles.Retry.patience_real_ms/2`), `:ack_timeout_ms` (the longest wait,
   default 1_500 of clock time; with the link's round trip `:rtt_ms` known,
   twice `Dolphin.Vehicles.Retry.timeout/3` of it but not under 250 ms of
   clock time, for the vehicle's own work), `:progress_timeout_ms` (default
@@ -73,6 +74,9 @@ defmodule Dolphin.Vehicles.CommandProtocol do
     data =
       Map.merge(request, %{
         attempts: Keyword.get_lazy(opts, :attempts, fn -> Retry.attempts(Keyword.get(opts, :loss)) end),
+        # Given attempts are exact; the link's are tried for at least the least patience too.
+        fixed_attempts?: Keyword.has_key?(opts, :attempts),
+        first_sent_at: System.monotonic_time(:millisecond),
         wait_ms: ack_wait(Keyword.get(opts, :ack_timeout_ms, 1_500), Keyword.get(opts, :rtt_ms)),
         progress_timeout_ms: Keyword.get(opts, :progress_timeout_ms, 30_000),
         sent: 0
@@ -89,11 +93,11 @@ defmodule Dolphin.Vehicles.CommandProtocol do
     {:keep_state, %{data | sent: n}, [{:state_timeout, data.wait_ms, :resend}]}
   end
 
-  def handle_event(:state_timeout, :resend, {:waiting, n}, data) when n < data.attempts,
-    do: {:next_state, {:waiting, n + 1}, data}
-
-  def handle_event(:state_timeout, :resend, {:waiting, _n}, data),
-    do: finish(data, {:error, error(data, :timeout, nil)})
+  def handle_event(:state_timeout, :resend, {:waiting, n}, data) do
+    if n < data.attempts or patient?(data),
+      do: {:next_state, {:waiting, n + 1}, data},
+      else: finish(data, {:error, error(data, :timeout, nil)})
+  end
 
   # IN_PROGRESS: no more retransmission, a longer wait for the final answer.
   def handle_event(:enter, _old, :in_progress, data),
@@ -121,6 +125,11 @@ defmodule Dolphin.Vehicles.CommandProtocol do
     detail = if param2 != 0, do: "result_param2 #{param2}"
     finish(data, {:error, error(data, result(n), detail)})
   end
+
+  # A silence shorter than the least patience is not given up on, however
+  # many tries went out in it (unless the caller fixed the attempts).
+  defp patient?(%{fixed_attempts?: true}), do: false
+  defp patient?(data), do: System.monotonic_time(:millisecond) - data.first_sent_at < Retry.patience_real_ms(0)
 
   defp finish(data, reply) do
     if data.reply_to, do: :gen_statem.reply(data.reply_to, reply)

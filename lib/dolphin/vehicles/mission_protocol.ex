@@ -62,7 +62,8 @@ defmodule Dolphin.Vehicles.MissionProtocol do
   Before any sample the timeout is a second of clock time. An exchange is given up after a number of
   timeouts in a row that grows with the loss (`Dolphin.Vehicles.Retry.attempts/1`
   of `:loss`, the link's round-trip loss if known, or what this transfer sees) — and never before 8 s of
-  clock time without progress, the vehicle's own patience — or after exactly
+  clock time without progress, the vehicle's own patience, nor before 5 s of real time
+  (`Dolphin.Vehicles.Retry.patience_real_ms/2`: a fading radio or a stalled host) — or after exactly
   `:attempts` timeouts when given. `:total_timeout_ms`, when given, bounds
   the whole transfer.
 
@@ -542,7 +543,7 @@ defmodule Dolphin.Vehicles.MissionProtocol do
       case data.fixed_attempts do
         nil ->
           data.stalls >= Retry.attempts(loss(data)) and
-            now() - data.stalled_since >= Clock.to_real_ms(@vehicle_patience_ms)
+            now() - data.stalled_since >= Retry.patience_real_ms(@vehicle_patience_ms)
 
         n ->
           data.stalls >= n

@@ -24,6 +24,12 @@ defmodule Dolphin.Vehicles.Retry do
   # A bad radio's round-trip loss, planned for until the link shows its own.
   @assumed_loss 0.3
 
+  # However many tries the loss calls for, an exchange is not given up in
+  # less than this much real time: a radio fades, and a loaded host stalls
+  # its processes, for a second or more, and neither gets shorter with the
+  # clock's speed-up (at 25x, 8 s of clock time is a third of a second).
+  @least_patience_real_ms 5_000
+
   @doc """
   How many tries an exchange is given at a round-trip loss of `loss`
   (0.0..1.0, the share of requests that get no answer; nil: not measured
@@ -35,6 +41,19 @@ defmodule Dolphin.Vehicles.Retry do
   def attempts(loss) when loss <= 0.0, do: 5
   def attempts(loss) when loss >= 1.0, do: 60
   def attempts(loss), do: (:math.log(@give_up_chance) / :math.log(loss)) |> Float.ceil() |> trunc() |> max(5) |> min(60)
+
+  @doc """
+  The least real time (ms) an exchange is given before it is given up: the
+  patience `clock_ms` of clock time asks for, and never under 5 s of real
+  time, whatever the speed-up.
+
+      iex> Dolphin.Vehicles.Retry.patience_real_ms(8_000, 1)
+      8000
+      iex> Dolphin.Vehicles.Retry.patience_real_ms(8_000, 25)
+      5000
+  """
+  @spec patience_real_ms(number(), number()) :: pos_integer()
+  def patience_real_ms(clock_ms, speedup \\ Clock.speedup()), do: max(Clock.to_real_ms(clock_ms, speedup), @least_patience_real_ms)
 
   @doc """
   The round-trip loss of a link whose loss is `loss_in` towards the ground
