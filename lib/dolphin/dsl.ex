@@ -58,7 +58,7 @@ defmodule Dolphin.DSL do
   `a >>> b ||| c` is `(a >>> b) ||| c`.
   """
 
-  import Dolphin.DSL.Conditions, only: [cond_ast: 2, branches: 3, logic: 1, meta: 1]
+  import Dolphin.DSL.Expand
 
   alias Dolphin.Engine
   alias Dolphin.Fleet
@@ -499,19 +499,4 @@ defmodule Dolphin.DSL do
       send_message(v, %Dolphin.MAVLink.Ardupilotmega.CommandLong{command: 183, param1: 9.0, param2: 1900.0})
   """
   defdelegate send_message(set, message), to: Statements
-
-  # --- macro helpers (conditions: Dolphin.DSL.Conditions) ---
-
-  defp at_line(call, caller) do
-    quote do
-      Dolphin.Script.Statements.__line__(unquote(caller.line))
-      unquote(call)
-    end
-  end
-
-  defp action_ast(name, block, caller) do
-    quote do
-      Dolphin.Engine.action(fn -> unquote(block) end, name: unquote(name), meta: unquote(meta(caller)))
-    end
-  end
 end

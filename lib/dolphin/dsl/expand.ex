@@ -1,8 +1,26 @@
-defmodule Dolphin.DSL.Conditions do
+defmodule Dolphin.DSL.Expand do
   @moduledoc false
-  # Compile-time helpers of Dolphin.DSL's macros: a condition's expression
-  # becomes a `Dolphin.Engine.Cond` built from a closure in three-valued
-  # logic, with its source text and script line.
+  # What the macros of Dolphin.DSL expand to, built at compile time: a
+  # condition becomes a `Dolphin.Engine.Cond` of a closure in three-valued
+  # logic (with its source text and script line), an action a closure, and a
+  # statement records its script line first.
+
+  # The line goes first so that an error whose stack has lost the script's
+  # frame (raised in another process, say) is still reported at it.
+  @spec at_line(Macro.t(), Macro.Env.t()) :: Macro.t()
+  def at_line(call, caller) do
+    quote do
+      Dolphin.Script.Statements.__line__(unquote(caller.line))
+      unquote(call)
+    end
+  end
+
+  @spec action_ast(Macro.t(), Macro.t(), Macro.Env.t()) :: Macro.t()
+  def action_ast(name, block, caller) do
+    quote do
+      Dolphin.Engine.action(fn -> unquote(block) end, name: unquote(name), meta: unquote(meta(caller)))
+    end
+  end
 
   @spec meta(Macro.Env.t()) :: Macro.t()
   def meta(caller), do: Macro.escape(%{line: caller.line, file: caller.file})
