@@ -1,7 +1,7 @@
 defmodule Dolphin.Script do
   @moduledoc """
   Dolphin scripts: `.exs` files that start with `use Dolphin.Script` and are
-  run with `mix dolphin.run script.exs` (or `compile/2` and `run/2`). The
+  run with `mix dolphin.run script.exs` (or `compile/1` and `run/2`). The
   language reference, with a runnable example of every construct, is
   `docs/language.md` in the project.
 
@@ -37,7 +37,7 @@ defmodule Dolphin.Script do
 
   ## Compiling
 
-  `compile/2` reads a script and compiles it as the body of a function of a
+  `compile/1` reads a script and compiles it as the body of a function of a
   fresh module — so a syntax error, an unknown word (`pik(type: :uav)`) or an
   unbound variable is reported with file and line (`Dolphin.Script.Error`)
   before anything runs or is sent to a vehicle.
@@ -66,9 +66,10 @@ defmodule Dolphin.Script do
       act for the script that the calling process works for;
     * `Dolphin.Engine` — the tasks and their combinators.
 
-  This module compiles scripts (with `Dolphin.Script.Compiler`) and runs them
-  (each in a `Dolphin.Script.Runner`, a `GenServer`: `:sys.get_state/1` on
-  the pid that `start/2` returns shows the script's state).
+  This module is the facade: it compiles scripts (the compiler is in
+  `lib/dolphin/script/`) and runs each in its own runner process, a
+  `GenServer` — `:sys.get_state/1` and `:sys.trace/2` on the pid that
+  `start/2` returns show a running script.
   """
 
   alias Dolphin.Engine.Context
