@@ -73,6 +73,7 @@ defmodule Dolphin.Script do
   """
 
   alias Dolphin.Engine.Context
+  alias Dolphin.Fleet.VehicleSet
   alias Dolphin.Script.{Compiler, Error, Runner, Statements}
 
   defstruct [:file, :module, :source]
@@ -160,53 +161,71 @@ defmodule Dolphin.Script do
   # --- statements (see Dolphin.Script.Statements) ---
 
   @doc "`Dolphin.Script.Statements.pick/1`: picks vehicles for the script."
+  @spec pick(keyword()) :: VehicleSet.t()
   defdelegate pick(opts \\ []), to: Statements
 
   @doc "`Dolphin.Script.Statements.release/1`: releases vehicles the script picked."
+  @spec release(VehicleSet.t() | [VehicleSet.t()]) :: :ok
   defdelegate release(sets), to: Statements
 
   @doc "`Dolphin.Script.Statements.set_connection_timeout/1`."
+  @spec set_connection_timeout(pos_integer()) :: :ok
   defdelegate set_connection_timeout(ms), to: Statements
 
   @doc "`Dolphin.Script.Statements.set_connection_timeout/2`."
+  @spec set_connection_timeout(VehicleSet.t(), pos_integer()) :: :ok
   defdelegate set_connection_timeout(set, ms), to: Statements
 
   @doc "`Dolphin.Script.Statements.execute/1`: runs a task (or a map of tasks) to its end."
+  @spec execute(term()) :: :ok | :stopped
   defdelegate execute(tasks), to: Statements
 
   @doc "`Dolphin.Script.Statements.forever/1`: runs `fun` for ever."
+  @spec forever((() -> term())) :: no_return()
   defdelegate forever(fun), to: Statements
 
   @doc "`Dolphin.Script.Statements.forever/2`: runs `fun` for ever, threading a state."
+  @spec forever(term(), (term() -> term())) :: no_return()
   defdelegate forever(state, fun), to: Statements
 
   @doc "`Dolphin.Script.Statements.repeat/2`: runs `fun` `n` times."
+  @spec repeat(non_neg_integer(), (() -> term())) :: :ok
   defdelegate repeat(n, fun), to: Statements
 
   @doc "`Dolphin.Script.Statements.message/1`: an operator log line."
+  @spec message(term()) :: :ok
   defdelegate message(text), to: Statements
 
   @doc "`Dolphin.Script.Statements.post/2`: posts `value` to signal `key`."
+  @spec post(term(), term()) :: :ok
   defdelegate post(key, value), to: Statements
 
   @doc "`Dolphin.Script.Statements.consume/2`: consumes `value` from signal `key`."
+  @spec consume(term(), term()) :: boolean()
   defdelegate consume(key, value), to: Statements
 
   @doc "`Dolphin.Script.Statements.poll/1`: whether signal `key` has a value."
+  @spec poll(term()) :: boolean()
   defdelegate poll(key), to: Statements
 
   @doc "`Dolphin.Script.Statements.poll/2`: whether signal `key` has a value for which `fun` is truthy."
+  @spec poll(term(), (term() -> term())) :: boolean()
   defdelegate poll(key, fun), to: Statements
 
   @doc "`Dolphin.Script.Statements.pause/1`: pauses for `ms` of clock time."
+  @spec pause(non_neg_integer()) :: :ok
   defdelegate pause(ms), to: Statements
 
   @doc "`Dolphin.Script.Statements.halt/1`: stops the script with a message."
+  @dialyzer {:nowarn_function, halt: 0}
+  @spec halt(term()) :: no_return()
   defdelegate halt(text \\ "halted"), to: Statements
 
   @doc "`Dolphin.Script.Statements.ask/1`: asks the operator."
+  @spec ask(String.t()) :: String.t() | nil
   defdelegate ask(prompt), to: Statements
 
   @doc "`Dolphin.Script.Statements.send_message/2`: a raw MAVLink message to every vehicle of `set`."
+  @spec send_message(VehicleSet.t(), term()) :: :ok
   defdelegate send_message(set, message), to: Statements
 end
