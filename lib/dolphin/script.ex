@@ -1,7 +1,7 @@
 defmodule Dolphin.Script do
   @moduledoc """
   Dolphin scripts: `.exs` files that start with `use Dolphin.Script` and are
-  run with `mix dolphin.run script.exs` (or `compile/2` and `run/2`). The
+  run with `mix dolphin.run script.exs` (or `compile/1` and `run/2`). The
   language reference, with a runnable example of every construct, is
   `docs/language.md` in the project.
 
@@ -37,7 +37,7 @@ defmodule Dolphin.Script do
 
   ## Compiling
 
-  `compile/2` reads a script and compiles it as the body of a function of a
+  `compile/1` reads a script and compiles it as the body of a function of a
   fresh module — so a syntax error, an unknown word (`pik(type: :uav)`) or an
   unbound variable is reported with file and line (`Dolphin.Script.Error`)
   before anything runs or is sent to a vehicle.
@@ -57,48 +57,29 @@ defmodule Dolphin.Script do
     * `:output` — a function given each `message/1` text (default: none; the
       `message` event is emitted either way).
 
-  The functions below are the statements of the language, usable from any
-  process (they act for the script that the calling process works for).
+  ## Where the language lives
+
+    * `Dolphin.DSL`, `Dolphin.DSL.Values`, `Dolphin.DSL.Mission` — the words
+      (macros and thin functions), which expand to calls of:
+    * `Dolphin.Script.Statements` — the statements as plain functions (also
+      offered below under this module's name), usable from any process: they
+      act for the script that the calling process works for;
+    * `Dolphin.Engine` — the tasks and their combinators.
+
+  This module is the facade: it compiles scripts (the compiler is in
+  `lib/dolphin/script/`) and runs each in its own runner process, a
+  `GenServer` — `:sys.get_state/1` and `:sys.trace/2` on the pid that
+  `start/2` returns show a running script.
   """
 
-  alias Dolphin.Engine
-  alias Dolphin.Engine.{Context, Signals}
-  alias Dolphin.Fleet
+  alias Dolphin.Engine.Context
   alias Dolphin.Fleet.VehicleSet
+  alias Dolphin.Script.{Compiler, Error, Runner, Statements}
 
   defstruct [:file, :module, :source]
 
   @type t :: %__MODULE__{file: String.t(), module: module(), source: String.t()}
   @type summary :: %{result: :done | :stopped, duration_ms: non_neg_integer(), file: String.t()}
-
-  defmodule Error do
-    @moduledoc """
-    Why a script could not be compiled or did not complete: `kind` is
-    `:syntax`, `:compile`, `:failed` (a task or the code failed), `:halted`
-    (the script called `halt/1`); `file` and `line` say where in the script.
-    """
-    defexception [:kind, :file, :line, :column, :message, :reason]
-
-    @type t :: %__MODULE__{
-            kind: :syntax | :compile | :failed | :halted,
-            file: String.t() | nil,
-            line: pos_integer() | nil,
-            column: pos_integer() | nil,
-            message: String.t(),
-            reason: term()
-          }
-
-    @doc "`file:line: message` (`file:line:column:` for a syntax error)"
-    def format(%__MODULE__{file: file, line: line, column: column, message: message}) do
-      where = Enum.reject([file && Path.relative_to_cwd(file), line, line && column], &is_nil/1) |> Enum.join(":")
-      if where == "", do: message, else: "#{where}: #{message}"
-    end
-  end
-
-  defmodule Halt do
-    @moduledoc "Raised by `Dolphin.Script.halt/1` to stop the script."
-    defexception message: "halted"
-  end
 
   @doc false
   defmacro __using__(_opts) do
@@ -128,156 +109,14 @@ defmodule Dolphin.Script do
   @doc "Compiles a script given as a string; `file` is the name errors give."
   @spec compile_string(String.t(), String.t()) :: {:ok, t()} | {:error, Error.t()}
   def compile_string(source, file \\ "nofile") do
-    with {:ok, ast} <- parse(source, file) do
-      module = Module.concat(Dolphin.Script.Compiled, "S#{System.unique_integer([:positive])}")
-
-      wrapped =
-        quote do
-          defmodule unquote(module) do
-            @moduledoc false
-            # Not a tail call: the script's own frame stays in stack traces.
-            def __script__ do
-              _ = unquote(ast)
-              :ok
-            end
-          end
-        end
-
-      try do
-        compile_reporting_warnings(wrapped, file, module)
-        {:ok, %__MODULE__{file: file, module: module, source: source}}
-      rescue
-        e in [CompileError, SyntaxError, TokenMissingError] ->
-          {:error, %Error{kind: :compile, file: file, line: e.line, message: compile_message(e.description, ast, module)}}
-
-        # A word of the language given a bad argument, found while the script is
-        # compiled: the line is the script's frame in the stack.
-        e in ArgumentError ->
-          {:error, %Error{kind: :compile, file: file, line: script_line(__STACKTRACE__, file), message: Exception.message(e)}}
-      end
+    with {:ok, module} <- Compiler.compile(source, file) do
+      {:ok, %__MODULE__{file: file, module: module, source: source}}
     end
-  end
-
-  defp script_line(stacktrace, file) do
-    Enum.find_value(stacktrace, fn {_m, _f, _a, location} ->
-      if to_string(location[:file]) == file, do: location[:line]
-    end)
-  end
-
-  # The compiler's warnings (an unused variable, ...) name the module the
-  # script is compiled into, which means nothing to its author: they are
-  # caught and printed in the script's terms, `file:line: warning: ...`.
-  defp compile_reporting_warnings(wrapped, file, module) do
-    {:ok, capture} = StringIO.open("")
-    original = Process.whereis(:standard_error)
-
-    try do
-      Process.unregister(:standard_error)
-      Process.register(capture, :standard_error)
-      Code.compile_quoted(wrapped, file)
-    after
-      Process.unregister(:standard_error)
-      Process.register(original, :standard_error)
-      {:ok, {_, warnings}} = StringIO.close(capture)
-      if warnings != "", do: IO.write(:stderr, script_warnings(warnings, module))
-    end
-  end
-
-  # "warning: TEXT\n  FILE:LINE: Module.__script__/0\n" -> "FILE:LINE: warning: TEXT\n"
-  defp script_warnings(text, module) do
-    internal = inspect(module)
-
-    text
-    |> String.split(~r/\n\n+/, trim: true)
-    |> Enum.map_join(fn warning ->
-      case Regex.run(~r/\A(?:warning: )?(.*?)\n\s+(\S+?:\d+)(?::\s*\S+)?\s*\z/s, warning) do
-        [_, message, where] -> "#{where}: warning: #{String.trim(message)}\n"
-        nil -> String.replace(warning, internal <> ".__script__/0", "the script") <> "\n"
-      end
-    end)
-  end
-
-  defp parse(source, file) do
-    case Code.string_to_quoted(source, file: file, columns: true) do
-      {:ok, ast} ->
-        {:ok, ast}
-
-      {:error, {meta, message, token}} ->
-        {line, column} = if is_list(meta), do: {meta[:line], meta[:column]}, else: {meta, nil}
-        {:error, %Error{kind: :syntax, file: file, line: line, column: column, message: syntax_error(syntax_message(message, token))}}
-    end
-  end
-
-  # Elixir's parser gives a message in two parts around the token ("unexpected
-  # reserved word: " "end" ". The \"(\" at line 6 is missing terminator
-  # \")\""), or one part followed by it.
-  defp syntax_message({prefix, suffix}, token) do
-    prefix = String.trim_trailing(prefix, ": ") |> String.trim_trailing(":")
-    suffix = suffix |> String.trim_leading(".") |> String.trim() |> lower_first()
-    "#{prefix} #{inspect(to_string(token))}" <> if(suffix == "", do: "", else: ": " <> suffix)
-  end
-
-  defp syntax_message(message, token) when is_binary(message) do
-    case to_string(token) do
-      "" -> message
-      token -> String.trim_trailing(message) <> " " <> token
-    end
-  end
-
-  defp syntax_error("syntax error" <> _ = message), do: message
-  defp syntax_error(message), do: "syntax error: " <> message
-
-  defp lower_first(<<first::utf8, rest::binary>>), do: String.downcase(<<first::utf8>>) <> rest
-  defp lower_first(""), do: ""
-
-  # "undefined function wait_fro/1 (expected Dolphin.Script.Compiled.S162 to
-  # define such a function ...)": said in the script's terms, with the
-  # nearest words of the language.
-  defp compile_message(description, ast, module) do
-    case Regex.run(~r/\Aundefined function ([^\s\/]+)\/(\d+)/, description) do
-      [_, name, arity] ->
-        hint = if uses_script?(ast), do: did_you_mean(name, String.to_integer(arity)), else: " (does the script start with `use Dolphin.Script`?)"
-        "undefined function #{name}/#{arity}: no word of the language or of Elixir has that name#{hint}"
-
-      nil ->
-        String.replace(description, inspect(module), "the script")
-    end
-  end
-
-  @vocabulary_modules [Dolphin.DSL, Dolphin.DSL.Values, Dolphin.DSL.Mission, Kernel]
-
-  defp did_you_mean(name, arity) do
-    words =
-      for module <- @vocabulary_modules,
-          Code.ensure_loaded?(module),
-          {word, n} <- module.__info__(:functions) ++ module.__info__(:macros),
-          word = Atom.to_string(word),
-          not String.starts_with?(word, "_"),
-          uniq: true,
-          do: {word, n}
-
-    case words |> Enum.map(fn {w, n} -> {String.jaro_distance(w, name), w, n} end) |> Enum.filter(&(elem(&1, 0) >= 0.8)) |> Enum.sort_by(&{-elem(&1, 0), abs(elem(&1, 2) - arity)}) do
-      [] -> ""
-      near -> "; did you mean " <> (near |> Enum.map(fn {_, w, n} -> "#{w}/#{n}" end) |> Enum.uniq() |> Enum.take(3) |> Enum.join(", ")) <> "?"
-    end
-  end
-
-  defp uses_script?(ast) do
-    {_, found} = Macro.prewalk(ast, false, fn
-      {:use, _, [{:__aliases__, _, [:Dolphin, :Script]} | _]} = node, _ -> {node, true}
-      node, acc -> {node, acc}
-    end)
-
-    found
   end
 
   @doc "Forgets a compiled script's module."
   @spec purge(t()) :: :ok
-  def purge(%__MODULE__{module: module}) do
-    :code.purge(module)
-    :code.delete(module)
-    :ok
-  end
+  def purge(%__MODULE__{module: module}), do: Compiler.purge(module)
 
   # --- running ---
 
@@ -288,19 +127,23 @@ defmodule Dolphin.Script do
     await(pid)
   end
 
-  @doc "Starts a script (linked to the caller); see `await/2` and `stop/2`."
+  @doc """
+  Starts a script (linked to the caller); see `await/2` and `stop/2`. The
+  pid is the script's `Dolphin.Script.Runner`; its end is reported to the
+  caller as a message `{Dolphin.Script, pid, result}`, which `await/2` reads.
+  """
   @spec start(t(), keyword()) :: {:ok, pid()}
   def start(%__MODULE__{} = script, opts \\ []) do
     # The caller's context (its fleet, clock) is the script's, unless the options say otherwise.
     ctx = Context.new(Keyword.take(opts, [:fleet, :clock, :tick_ms, :stop_timeout_ms, :ask, :output]))
-    Dolphin.Script.Runner.start_link(script, ctx, opts, self())
+    Runner.start_link(script, ctx, opts, {self(), __MODULE__})
   end
 
   @doc "Waits for the end of a script started by the caller."
   @spec await(pid(), timeout()) :: {:ok, summary()} | {:error, Error.t()} | {:error, :timeout}
   def await(pid, timeout \\ :infinity) do
     receive do
-      {Dolphin.Script, ^pid, result} -> result
+      {__MODULE__, ^pid, result} -> result
     after
       timeout -> {:error, :timeout}
     end
@@ -313,162 +156,76 @@ defmodule Dolphin.Script do
   `task_finished` and `script_finished` events.
   """
   @spec stop(pid(), term()) :: :ok
-  def stop(pid, reason \\ :operator), do: send(pid, {:"$dolphin_script_stop", reason}) && :ok
+  def stop(pid, reason \\ :operator), do: Runner.stop(pid, reason)
 
-  # --- statements ---
+  # --- statements (see Dolphin.Script.Statements) ---
 
-  @doc false
-  # The script line of the statement about to run (set by the DSL's
-  # `execute`, `pick` and `halt`), for errors whose stack has lost it.
-  def __line__(line), do: Process.put(:"$dolphin_line", line)
-
-  @doc "Picks vehicles for the script (see `Dolphin.Fleet`); raises `Dolphin.Fleet.PickError` on timeout."
+  @doc "`Dolphin.Script.Statements.pick/1`: picks vehicles for the script."
   @spec pick(keyword()) :: VehicleSet.t()
-  def pick(opts \\ []) do
-    ctx = Context.current()
+  defdelegate pick(opts \\ []), to: Statements
 
-    case Fleet.pick(ctx.fleet, ctx.owner, opts) do
-      {:ok, set} -> set
-      {:error, error} -> raise error
-    end
-  end
-
-  @doc "Releases vehicles the script picked."
+  @doc "`Dolphin.Script.Statements.release/1`: releases vehicles the script picked."
   @spec release(VehicleSet.t() | [VehicleSet.t()]) :: :ok
-  def release(sets) do
-    ctx = Context.current()
-    Fleet.release(ctx.fleet, ctx.owner, sets)
-  end
+  defdelegate release(sets), to: Statements
 
-  @doc "Sets the connection timeout (ms) of the vehicles the script picked and will pick."
+  @doc "`Dolphin.Script.Statements.set_connection_timeout/1`."
   @spec set_connection_timeout(pos_integer()) :: :ok
-  def set_connection_timeout(ms) do
-    ctx = Context.current()
-    Fleet.set_connection_timeout(ctx.fleet, ctx.owner, ms)
-  end
+  defdelegate set_connection_timeout(ms), to: Statements
 
-  @doc "Sets the connection timeout (ms) of the vehicles of `set`."
+  @doc "`Dolphin.Script.Statements.set_connection_timeout/2`."
   @spec set_connection_timeout(VehicleSet.t(), pos_integer()) :: :ok
-  def set_connection_timeout(set, ms) when is_integer(ms) and ms > 0 do
-    source = Context.source(Context.current())
-    Enum.each(VehicleSet.ids(VehicleSet.new(set)), &Dolphin.Fleet.Source.set_timeout(source, &1, ms))
-  end
+  defdelegate set_connection_timeout(set, ms), to: Statements
 
-  def set_connection_timeout(_set, ms), do: raise(ArgumentError, "a connection timeout is a positive number of milliseconds, got: #{inspect(ms)}")
-
-  @doc """
-  Runs a task and returns `:ok` when it is done; a failure raises
-  (`Dolphin.Engine.TaskError`, `Dolphin.Engine.AllocationError`) and stops the
-  script unless a `watch` handles it. A map `%{set => task, _: task}` runs each
-  task on its own set (`_`: any picked vehicle), all at the same time.
-  """
+  @doc "`Dolphin.Script.Statements.execute/1`: runs a task (or a map of tasks) to its end."
   @spec execute(term()) :: :ok | :stopped
-  def execute(tasks) when is_map(tasks) and not is_struct(tasks), do: execute(Map.to_list(tasks))
+  defdelegate execute(tasks), to: Statements
 
-  def execute([{_, _} | _] = pairs) do
-    {wild, bound} = Enum.split_with(pairs, fn {k, _} -> k == :_ end)
-
-    tasks =
-      Enum.map(Enum.sort_by(bound, fn {set, _} -> VehicleSet.ids(VehicleSet.new(set)) end), fn {set, t} -> Engine.on(t, set) end) ++
-        Enum.map(wild, &elem(&1, 1))
-
-    case tasks do
-      [one] -> execute(one)
-      many -> execute(Engine.concurrent(many))
-    end
-  end
-
-  def execute(task) do
-    ctx = Context.current()
-    Engine.execute!(task, fleet: ctx.fleet, clock: ctx.clock, owner: ctx.owner)
-  end
-
-  @doc "Runs `fun` for ever."
+  @doc "`Dolphin.Script.Statements.forever/1`: runs `fun` for ever."
   @spec forever((() -> term())) :: no_return()
-  def forever(fun) when is_function(fun, 0) do
-    fun.()
-    forever(fun)
-  end
+  defdelegate forever(fun), to: Statements
 
-  @doc "Runs `fun` for ever, each round given what the previous one returned (first: `state`)."
+  @doc "`Dolphin.Script.Statements.forever/2`: runs `fun` for ever, threading a state."
   @spec forever(term(), (term() -> term())) :: no_return()
-  def forever(state, fun) when is_function(fun, 1), do: forever(fun.(state), fun)
+  defdelegate forever(state, fun), to: Statements
 
-  @doc "Runs `fun` `n` times."
+  @doc "`Dolphin.Script.Statements.repeat/2`: runs `fun` `n` times."
   @spec repeat(non_neg_integer(), (() -> term())) :: :ok
-  def repeat(n, fun) when is_integer(n) and n >= 0 and is_function(fun, 0), do: Enum.each(1..n//1, fn _ -> fun.() end)
-  def repeat(n, _fun), do: raise(ArgumentError, "repeat takes a number of times, got: #{inspect(n)}")
+  defdelegate repeat(n, fun), to: Statements
 
-  @doc "An operator log line (a `message` event; printed by `mix dolphin.run`)."
+  @doc "`Dolphin.Script.Statements.message/1`: an operator log line."
   @spec message(term()) :: :ok
-  def message(text) do
-    # Lists print as lists: `message(ids)` of vehicle 99 is "[99]", not 'c'.
-    text = if is_binary(text), do: text, else: inspect(text, charlists: :as_lists)
-    ctx = Context.current()
-    Dolphin.Telemetry.emit(:message, %{text: text}, ctx.clock.now_ms())
-    if ctx.output, do: ctx.output.(text)
-    :ok
-  end
+  defdelegate message(text), to: Statements
 
-  @doc "Posts `value` to the script's signal `key`."
+  @doc "`Dolphin.Script.Statements.post/2`: posts `value` to signal `key`."
   @spec post(term(), term()) :: :ok
-  def post(key, value) do
-    ctx = Context.current()
-    Dolphin.Telemetry.emit(:signal_posted, %{key: key, value: value}, ctx.clock.now_ms())
-    Signals.post(ctx.signals, key, value)
-  end
+  defdelegate post(key, value), to: Statements
 
-  @doc "Consumes `value` from signal `key`: true if it was there."
+  @doc "`Dolphin.Script.Statements.consume/2`: consumes `value` from signal `key`."
   @spec consume(term(), term()) :: boolean()
-  def consume(key, value) do
-    ctx = Context.current()
-    consumed = Signals.consume(ctx.signals, key, value)
-    if consumed, do: Dolphin.Telemetry.emit(:signal_consumed, %{key: key, value: value}, ctx.clock.now_ms())
-    consumed
-  end
+  defdelegate consume(key, value), to: Statements
 
-  @doc "Whether signal `key` has a value."
+  @doc "`Dolphin.Script.Statements.poll/1`: whether signal `key` has a value."
   @spec poll(term()) :: boolean()
-  def poll(key), do: Signals.poll(Context.current().signals, key)
+  defdelegate poll(key), to: Statements
 
-  @doc "Whether signal `key` has a value for which `fun` is truthy."
+  @doc "`Dolphin.Script.Statements.poll/2`: whether signal `key` has a value for which `fun` is truthy."
   @spec poll(term(), (term() -> term())) :: boolean()
-  def poll(key, fun), do: Signals.poll(Context.current().signals, key, fun)
+  defdelegate poll(key, fun), to: Statements
 
-  @doc "Pauses for `ms` of clock time."
+  @doc "`Dolphin.Script.Statements.pause/1`: pauses for `ms` of clock time."
   @spec pause(non_neg_integer()) :: :ok
-  def pause(ms) when is_number(ms) and ms >= 0, do: Context.current().clock.sleep(round(ms))
-  def pause(ms), do: raise(ArgumentError, "pause takes milliseconds, got: #{inspect(ms)}")
+  defdelegate pause(ms), to: Statements
 
-  @doc "Stops the script (all its tasks) with a message; the script's result is `:halted`."
+  @doc "`Dolphin.Script.Statements.halt/1`: stops the script with a message."
   @dialyzer {:nowarn_function, halt: 0}
   @spec halt(term()) :: no_return()
-  def halt(text \\ "halted") do
-    text = if is_binary(text), do: text, else: inspect(text, charlists: :as_lists)
-    ctx = Context.current()
-    if ctx.script && ctx.owner != self(), do: send(ctx.script, {:"$dolphin_halt", text})
-    raise Halt, message: text
-  end
+  defdelegate halt(text \\ "halted"), to: Statements
 
-  @doc "Asks the operator: prints `prompt`, returns the line typed (without its newline; nil at end of input)."
+  @doc "`Dolphin.Script.Statements.ask/1`: asks the operator."
   @spec ask(String.t()) :: String.t() | nil
-  def ask(prompt) do
-    case Context.current().ask do
-      nil ->
-        case IO.gets(prompt <> " ") do
-          line when is_binary(line) -> String.trim_trailing(line, "\n")
-          _ -> nil
-        end
+  defdelegate ask(prompt), to: Statements
 
-      fun ->
-        fun.(prompt)
-    end
-  end
-
-  @doc "Sends a raw message (a MAVLink message struct) to every vehicle of `set`."
+  @doc "`Dolphin.Script.Statements.send_message/2`: a raw MAVLink message to every vehicle of `set`."
   @spec send_message(VehicleSet.t(), term()) :: :ok
-  def send_message(set, message) do
-    source = Context.source(Context.current())
-    Enum.each(VehicleSet.ids(VehicleSet.new(set)), &Dolphin.Fleet.Source.send_message(source, &1, message))
-  end
+  defdelegate send_message(set, message), to: Statements
 end

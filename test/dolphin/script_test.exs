@@ -216,6 +216,35 @@ defmodule Dolphin.ScriptTest do
                events
     end
 
+    test "a running script's runner is an OTP process: :sys.get_state/1 and :sys.trace/2 see into it", ctx do
+      fake_vehicles(ctx, 1)
+      me = :erlang.pid_to_list(self())
+
+      script =
+        compile!("""
+        use Dolphin.Script
+        _v = pick()
+        execute Dolphin.Engine.TestPlatform.task("patrol", duration: :infinity, notify: :erlang.list_to_pid(#{inspect(me)}))
+        """)
+
+      {:ok, pid} = Script.start(script)
+      assert_platform(:started, "patrol")
+
+      assert %{script: ^script, code: code, ctx: %Dolphin.Engine.Context{script: ^pid}} = :sys.get_state(pid)
+      assert Process.alive?(code)
+      assert {:status, ^pid, {:module, :gen_server}, _} = :sys.get_status(pid)
+      # The debug machinery behind :sys.trace/2 sees the messages it handles.
+      :ok = :sys.log(pid, true)
+      send(pid, :nothing_it_expects)
+      assert {:ok, [_ | _] = log} = :sys.log(pid, :get)
+      assert {:in, :nothing_it_expects} in log
+      :ok = :sys.log(pid, false)
+
+      Script.stop(pid, :operator)
+      assert {:ok, %{result: :stopped}} = Script.await(pid)
+      assert %{reason: :operator} = assert_platform(:stopped, "patrol")
+    end
+
     test "a script whose caller dies stops its tasks, then says it ended", ctx do
       fake_vehicles(ctx, 1)
       me = self()

@@ -8,17 +8,37 @@ defmodule Dolphin.Script.Runner do
   # code (suspended), stops its runs for the script's reason (their tasks
   # stop, vehicles hold) and waits for them, then kills the code and releases
   # its vehicles, and only then reports: the events come in that order.
+  #
+  # A GenServer, so that :sys.get_state/1, :sys.trace/2 and observer see a
+  # running script (its state: script, code pid, context, start time).
+
+  use GenServer
 
   alias Dolphin.Engine.{Context, Signals}
-  alias Dolphin.Script.Error
+  alias Dolphin.Script.{Error, Statements}
 
-  def start_link(script, ctx, opts, caller) do
-    pid = :proc_lib.spawn_link(__MODULE__, :init, [script, ctx, opts, caller])
-    {:ok, pid}
+  @type reply_to :: {pid(), tag :: term()}
+
+  # The caller gets `{tag, runner, result}` when the script ends.
+  @spec start_link(map(), Context.t(), keyword(), reply_to()) :: {:ok, pid()}
+  def start_link(script, ctx, opts, {caller, _tag} = reply_to) when is_pid(caller) do
+    # Started unlinked and linked from init: the caller is then not the
+    # runner's OTP parent, so the caller's exit arrives in handle_info like
+    # any other reason to end, and the script ends in order (an exit from the
+    # parent would bypass handle_info and skip stopping the tasks).
+    {:ok, _pid} = GenServer.start(__MODULE__, {script, ctx, opts, reply_to})
   end
 
-  def init(script, base, opts, caller) do
+  @spec stop(pid(), term()) :: :ok
+  def stop(pid, reason) do
+    send(pid, {:"$dolphin_script_stop", reason})
+    :ok
+  end
+
+  @impl GenServer
+  def init({script, base, opts, {caller, _tag} = reply_to}) do
     Process.flag(:trap_exit, true)
+    Process.link(caller)
     signals = Signals.new()
     ctx = %{base | signals: signals, script: self(), owner: nil}
     me = self()
@@ -32,53 +52,53 @@ defmodule Dolphin.Script.Runner do
 
     Dolphin.Telemetry.emit(:script_started, %{script: script.file}, started)
     if ms = opts[:for], do: ctx.clock.send_after(self(), :deadline, ms)
-    loop(%{script: script, caller: caller, code: code, ctx: ctx, started: started})
+    {:ok, %{script: script, caller: caller, reply_to: reply_to, code: code, ctx: ctx, started: started}}
   end
 
   defp execute(script) do
     script.module.__script__()
     :ok
   rescue
-    e -> {:error, :error, e, __STACKTRACE__, Process.get(:"$dolphin_line")}
+    e -> {:error, :error, e, __STACKTRACE__, Statements.__line__()}
   catch
-    kind, reason -> {:error, kind, reason, __STACKTRACE__, Process.get(:"$dolphin_line")}
+    kind, reason -> {:error, kind, reason, __STACKTRACE__, Statements.__line__()}
   end
 
-  defp loop(%{code: code, caller: caller} = s) do
-    receive do
-      {:script_done, ^code, :ok} ->
-        finish(s, {:ok, :done})
+  @impl GenServer
+  def handle_info({:script_done, code, :ok}, %{code: code} = s), do: finish(s, {:ok, :done})
 
-      {:script_done, ^code, {:error, kind, reason, stack, line}} ->
-        finish(s, {:error, error(s.script, kind, reason, stack, line)})
+  def handle_info({:script_done, code, {:error, kind, reason, stack, line}}, %{code: code} = s),
+    do: finish(s, {:error, error(s.script, kind, reason, stack, line)})
 
-      :deadline ->
-        stop_code(s, :deadline)
-        finish(s, {:ok, :stopped}, :deadline)
-
-      {:"$dolphin_script_stop", reason} ->
-        stop_code(s, reason)
-        finish(s, {:ok, :stopped}, reason)
-
-      {:"$dolphin_halt", text} ->
-        stop_code(s, :halted)
-        finish(s, {:error, %Error{kind: :halted, file: s.script.file, message: "halted: #{text}"}})
-
-      {:EXIT, ^code, reason} ->
-        # Died without reporting (killed from outside). Its runs stop their
-        # trees as they get its exit: the script ends after them.
-        Dolphin.Engine.Run.await(for(%{owner: owner, pid: pid} <- Dolphin.Engine.runs(), owner == code, do: pid), stop_bound(s))
-        finish(s, {:error, %Error{kind: :failed, file: s.script.file, message: "the script's process #{Dolphin.Engine.Failure.exit_words(reason)}", reason: reason}})
-
-      {:EXIT, ^caller, _reason} ->
-        # Nobody waits for the result any more; the event log still tells the end.
-        stop_code(s, :shutdown)
-        finish(s, {:ok, :stopped}, :shutdown)
-
-      _other ->
-        loop(s)
-    end
+  def handle_info(:deadline, s) do
+    stop_code(s, :deadline)
+    finish(s, {:ok, :stopped}, :deadline)
   end
+
+  def handle_info({:"$dolphin_script_stop", reason}, s) do
+    stop_code(s, reason)
+    finish(s, {:ok, :stopped}, reason)
+  end
+
+  def handle_info({:"$dolphin_halt", text}, s) do
+    stop_code(s, :halted)
+    finish(s, {:error, %Error{kind: :halted, file: s.script.file, message: "halted: #{text}"}})
+  end
+
+  def handle_info({:EXIT, code, reason}, %{code: code} = s) do
+    # Died without reporting (killed from outside). Its runs stop their
+    # trees as they get its exit: the script ends after them.
+    Dolphin.Engine.Run.await(for(%{owner: owner, pid: pid} <- Dolphin.Engine.runs(), owner == code, do: pid), stop_bound(s))
+    finish(s, {:error, %Error{kind: :failed, file: s.script.file, message: "the script's process #{Dolphin.Engine.Failure.exit_words(reason)}", reason: reason}})
+  end
+
+  def handle_info({:EXIT, caller, _reason}, %{caller: caller} = s) do
+    # Nobody waits for the result any more; the event log still tells the end.
+    stop_code(s, :shutdown)
+    finish(s, {:ok, :stopped}, :shutdown)
+  end
+
+  def handle_info(_other, s), do: {:noreply, s}
 
   # Ends the script's code after its runs have stopped, in that order, so
   # that the history reads true: every task stopped (and says why), then the
@@ -136,8 +156,9 @@ defmodule Dolphin.Script.Runner do
         error -> error
       end
 
-    send(s.caller, {Dolphin.Script, self(), result})
-    exit(:normal)
+    {caller, tag} = s.reply_to
+    send(caller, {tag, self(), result})
+    {:stop, :normal, s}
   end
 
   # What failed, where (the script line), why.

@@ -5,21 +5,21 @@ defmodule Dolphin.DSL do
   units) and the `mission` block of `Dolphin.DSL.Mission`.
 
   Every word is sugar: functions delegate to `Dolphin.Engine` (tasks),
-  `Dolphin.Fleet` (vehicles) and `Dolphin.Script` (statements); the macros
+  `Dolphin.Fleet` (vehicles) and `Dolphin.Script.Statements` (statements); the macros
   only turn expressions into closures (conditions, `action` bodies, loop
   bodies) and record the script line.
 
   | word | plain function |
   | --- | --- |
-  | `pick(opts)`, `release(set)` | `Dolphin.Script.pick/1`, `Dolphin.Script.release/1` |
+  | `pick(opts)`, `release(set)` | `Dolphin.Script.Statements.pick/1`, `Dolphin.Script.Statements.release/1` |
   | `union/2`, `difference/2`, `intersection/2`, `filter/2` | `Dolphin.Fleet.VehicleSet` |
   | `battery(v)`, `position(v)`, `altitude(v)`, `relative_altitude(v)`, `mode(v)`, `armed?(v)`, `connected?(v)`, `mission_progress(v)` | `Dolphin.Fleet.state/2` |
-  | `set_connection_timeout(t)`, `set_connection_timeout(set, t)` | `Dolphin.Script.set_connection_timeout/1,2` |
+  | `set_connection_timeout(t)`, `set_connection_timeout(set, t)` | `Dolphin.Script.Statements.set_connection_timeout/1,2` |
   | `idle(d)`, `on(t, set)`, `during(d, t)`, `watch(t, on_error: h)`, `named(t, name)`, `t1 >>> t2`, `t1 \\|\\|\\| t2` | `Dolphin.Engine` |
   | `action do ... end`, `condition(c)`, `until(t, c)`, `wait_for(c)`, `wait_for(c, then: t)`, `one_of do c -> t ... end`, `all_of do ... end` | `Dolphin.Engine` with a `Dolphin.Engine.Cond` |
-  | `execute(t)`, `execute(%{v1 => t1, _: t2})`, `execute action do ... end` | `Dolphin.Script.execute/1` |
-  | `forever do ... end`, `forever(state, fn s -> ... end)`, `repeat(n) do ... end` | `Dolphin.Script.forever/1,2`, `Dolphin.Script.repeat/2` |
-  | `message`, `post`, `consume`, `poll`, `pause`, `halt`, `ask`, `send_message` | `Dolphin.Script` |
+  | `execute(t)`, `execute(%{v1 => t1, _: t2})`, `execute action do ... end` | `Dolphin.Script.Statements.execute/1` |
+  | `forever do ... end`, `forever(state, fn s -> ... end)`, `repeat(n) do ... end` | `Dolphin.Script.Statements.forever/1,2`, `Dolphin.Script.Statements.repeat/2` |
+  | `message`, `post`, `consume`, `poll`, `pause`, `halt`, `ask`, `send_message` | `Dolphin.Script.Statements` |
 
   Conditions are ordinary expressions — `battery(v1) < 0.3`, `poll(:go)`,
   `connected?(v) and mode(v) == :guided` — re-evaluated whenever what they
@@ -58,9 +58,12 @@ defmodule Dolphin.DSL do
   `a >>> b ||| c` is `(a >>> b) ||| c`.
   """
 
+  import Dolphin.DSL.Expand
+
   alias Dolphin.Engine
   alias Dolphin.Fleet
   alias Dolphin.Fleet.VehicleSet
+  alias Dolphin.Script.Statements
 
   # --- vehicles ---
 
@@ -80,7 +83,7 @@ defmodule Dolphin.DSL do
   1 vehicle, type :uav; ...`), reported at the line of the `pick`; a bad
   option raises `ArgumentError`. See docs/language.md, "Vehicles".
   """
-  defmacro pick(opts \\ []), do: at_line(quote(do: Dolphin.Script.pick(unquote(opts))), __CALLER__)
+  defmacro pick(opts \\ []), do: at_line(quote(do: Dolphin.Script.Statements.pick(unquote(opts))), __CALLER__)
 
   @doc """
   Makes vehicles the script picked available again: a set or a list of sets.
@@ -89,7 +92,7 @@ defmodule Dolphin.DSL do
       release(v)
       release([scout, spare])
   """
-  defdelegate release(sets), to: Dolphin.Script
+  defdelegate release(sets), to: Statements
 
   @doc """
   The vehicles of either set.
@@ -131,14 +134,14 @@ defmodule Dolphin.DSL do
 
       set_connection_timeout(minutes(10))
   """
-  defdelegate set_connection_timeout(ms), to: Dolphin.Script
+  defdelegate set_connection_timeout(ms), to: Statements
 
   @doc """
   The connection timeout (clock ms) of the vehicles of `set`.
 
       set_connection_timeout(v, seconds(30))
   """
-  defdelegate set_connection_timeout(set, ms), to: Dolphin.Script
+  defdelegate set_connection_timeout(set, ms), to: Statements
 
   @typedoc "A one-vehicle set (or a system id)."
   @type vehicle :: VehicleSet.t() | non_neg_integer()
@@ -379,7 +382,7 @@ defmodule Dolphin.DSL do
   (`execute failed: mission "Survey" (task 7, line 12) on vehicle 2 failed:
   vehicle 2 lost`), unless a `watch/2` handles it.
   """
-  defmacro execute(task), do: at_line(quote(do: Dolphin.Script.execute(unquote(task))), __CALLER__)
+  defmacro execute(task), do: at_line(quote(do: Dolphin.Script.Statements.execute(unquote(task))), __CALLER__)
 
   @doc """
   `execute action do ... end` means `execute(action do ... end)`: Elixir
@@ -390,7 +393,7 @@ defmodule Dolphin.DSL do
       end
   """
   defmacro execute({name, meta, args}, do: block) when is_atom(name) and (is_atom(args) or args == []),
-    do: at_line(quote(do: Dolphin.Script.execute(unquote({name, meta, [[do: block]]}))), __CALLER__)
+    do: at_line(quote(do: Dolphin.Script.Statements.execute(unquote({name, meta, [[do: block]]}))), __CALLER__)
 
   defmacro execute(other, do: _block),
     do: raise(ArgumentError, "execute with a do block takes a word such as `action`, got: #{Macro.to_string(other)}")
@@ -405,7 +408,7 @@ defmodule Dolphin.DSL do
         release(v)
       end
   """
-  defmacro forever(do: block), do: quote(do: Dolphin.Script.forever(fn -> unquote(block) end))
+  defmacro forever(do: block), do: quote(do: Dolphin.Script.Statements.forever(fn -> unquote(block) end))
 
   @doc """
   Runs `fun` for ever, each round given what the previous one returned
@@ -418,7 +421,7 @@ defmodule Dolphin.DSL do
         spare
       end)
   """
-  defdelegate forever(state, fun), to: Dolphin.Script
+  defdelegate forever(state, fun), to: Statements
 
   @doc """
   Runs the block `n` times; `:ok`. Raises `ArgumentError` unless `n` is a
@@ -428,7 +431,7 @@ defmodule Dolphin.DSL do
         execute survey >>> return_home
       end
   """
-  defmacro repeat(n, do: block), do: quote(do: Dolphin.Script.repeat(unquote(n), fn -> unquote(block) end))
+  defmacro repeat(n, do: block), do: quote(do: Dolphin.Script.Statements.repeat(unquote(n), fn -> unquote(block) end))
 
   @doc """
   An operator log line (`message: text` in the output of `mix dolphin.run`,
@@ -436,7 +439,7 @@ defmodule Dolphin.DSL do
 
       message("Done!")
   """
-  defdelegate message(text), to: Dolphin.Script
+  defdelegate message(text), to: Statements
 
   @doc """
   Adds `value` to the script's signal `key`, shared by all its tasks; `:ok`.
@@ -444,35 +447,35 @@ defmodule Dolphin.DSL do
 
       action do post(:target_found, position(v)) end
   """
-  defdelegate post(key, value), to: Dolphin.Script
+  defdelegate post(key, value), to: Statements
 
   @doc """
   Removes `value` from signal `key`: `true` if it was there, else `false`.
 
       if consume(:charged, v), do: execute survey |> on(v)
   """
-  defdelegate consume(key, value), to: Dolphin.Script
+  defdelegate consume(key, value), to: Statements
 
   @doc """
   Whether signal `key` has a value.
 
       execute wait_for(poll(:target_found), then: circle)
   """
-  defdelegate poll(key), to: Dolphin.Script
+  defdelegate poll(key), to: Statements
 
   @doc """
   Whether signal `key` has a value for which `fun` is truthy.
 
       execute wait_for(poll(:found, fn p -> contains?(zone, p) end), then: circle)
   """
-  defdelegate poll(key, fun), to: Dolphin.Script
+  defdelegate poll(key, fun), to: Statements
 
   @doc """
   Pauses the script for `d` ms of clock time; `:ok`.
 
       pause(seconds(10))
   """
-  defdelegate pause(d), to: Dolphin.Script
+  defdelegate pause(d), to: Statements
 
   @doc """
   Stops the script and all its tasks (vehicles hold): the run ends with
@@ -480,7 +483,7 @@ defmodule Dolphin.DSL do
 
       if battery(v) < 0.5, do: halt("not enough battery to start")
   """
-  defmacro halt(text \\ "halted"), do: at_line(quote(do: Dolphin.Script.halt(unquote(text))), __CALLER__)
+  defmacro halt(text \\ "halted"), do: at_line(quote(do: Dolphin.Script.Statements.halt(unquote(text))), __CALLER__)
 
   @doc """
   Asks the operator: prints `prompt`, returns the line typed (without its
@@ -488,102 +491,12 @@ defmodule Dolphin.DSL do
 
       if ask("Fly? (y/n)") == "y", do: execute survey
   """
-  defdelegate ask(prompt), to: Dolphin.Script
+  defdelegate ask(prompt), to: Statements
 
   @doc """
   Sends a raw MAVLink message struct to every vehicle of `set`; `:ok`.
 
       send_message(v, %Dolphin.MAVLink.Ardupilotmega.CommandLong{command: 183, param1: 9.0, param2: 1900.0})
   """
-  defdelegate send_message(set, message), to: Dolphin.Script
-
-  # --- macro helpers ---
-
-  defp at_line(call, caller) do
-    quote do
-      Dolphin.Script.__line__(unquote(caller.line))
-      unquote(call)
-    end
-  end
-
-  defp meta(caller), do: Macro.escape(%{line: caller.line, file: caller.file})
-
-  defp cond_ast(c, caller) do
-    quote do
-      Dolphin.Engine.Cond.new(fn -> unquote(logic(c)) end, source: unquote(Macro.to_string(c)), meta: unquote(meta(caller)))
-    end
-  end
-
-  @comparisons [:<, :>, :<=, :>=, :==, :!=, :===, :!==]
-  @equality [:==, :!=, :===, :!==]
-  @arithmetic [:+, :-, :*, :/]
-
-  # A condition's expression in three-valued logic (see "Unknown values" in
-  # the moduledoc and Dolphin.Engine.Cond): its boolean skeleton (and, or,
-  # not, &&, ||, !, comparisons, the last expression of a block) is rewritten;
-  # anything else is a leaf, evaluated as written, nil reading as unknown.
-  # `and`/`or` keep Elixir's short-circuit where the left side decides alone.
-  defp logic({op, _, [a, b]}) when op in [:and, :&&] do
-    quote do
-      case Dolphin.Engine.Cond.truth(unquote(logic(a))) do
-        false -> false
-        left -> Dolphin.Engine.Cond.both(left, unquote(logic(b)))
-      end
-    end
-  end
-
-  defp logic({op, _, [a, b]}) when op in [:or, :||] do
-    quote do
-      case Dolphin.Engine.Cond.truth(unquote(logic(a))) do
-        true -> true
-        left -> Dolphin.Engine.Cond.either(left, unquote(logic(b)))
-      end
-    end
-  end
-
-  defp logic({op, _, [a]}) when op in [:not, :!], do: quote(do: Dolphin.Engine.Cond.negate(unquote(logic(a))))
-
-  # `x == nil`, `x != nil` ask whether a value is known: a plain test.
-  defp logic({op, _, [a, b]} = test) when op in @equality and (a == nil or b == nil), do: test
-
-  defp logic({op, _, [a, b]}) when op in @comparisons,
-    do: quote(do: Dolphin.Engine.Cond.compare(unquote(op), unquote(operand(a)), unquote(operand(b))))
-
-  defp logic({:in, _, [a, b]}), do: quote(do: Dolphin.Engine.Cond.member(unquote(operand(a)), unquote(b)))
-
-  defp logic({:__block__, meta, [_ | _] = exprs}) do
-    {init, [last]} = Enum.split(exprs, -1)
-    {:__block__, meta, init ++ [logic(last)]}
-  end
-
-  defp logic(leaf), do: quote(do: Dolphin.Engine.Cond.truth(unquote(leaf)))
-
-  # An operand of a comparison: arithmetic on an unknown value is unknown
-  # (not an ArithmeticError); a nested condition keeps its unknowns.
-  defp operand({op, _, [a, b]}) when op in @arithmetic,
-    do: quote(do: Dolphin.Engine.Cond.arith(unquote(op), unquote(operand(a)), unquote(operand(b))))
-
-  defp operand({:-, _, [a]}) when not is_number(a), do: quote(do: Dolphin.Engine.Cond.arith(:-, unquote(operand(a))))
-  defp operand({op, _, args} = c) when op in [:and, :or, :not, :&&, :||, :!] and is_list(args), do: logic(c)
-  defp operand({op, _, [_, _]} = c) when op in @comparisons, do: logic(c)
-  defp operand(other), do: other
-
-  defp action_ast(name, block, caller) do
-    quote do
-      Dolphin.Engine.action(fn -> unquote(block) end, name: unquote(name), meta: unquote(meta(caller)))
-    end
-  end
-
-  defp branches(clauses, what, caller) when is_list(clauses) do
-    Enum.map(clauses, fn
-      {:->, _, [[c], t]} ->
-        quote(do: {unquote(cond_ast(c, caller)), unquote(t)})
-
-      other ->
-        raise ArgumentError, "#{what} takes clauses `condition -> task`, got: #{Macro.to_string(other)}"
-    end)
-  end
-
-  defp branches(other, what, _caller),
-    do: raise(ArgumentError, "#{what} takes clauses `condition -> task` in its do block, got: #{Macro.to_string(other)}")
+  defdelegate send_message(set, message), to: Statements
 end

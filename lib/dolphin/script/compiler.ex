@@ -1,0 +1,161 @@
+defmodule Dolphin.Script.Compiler do
+  @moduledoc false
+  # Turns a script's source into a module with a `__script__/0` function,
+  # saying what is wrong in the script's terms (file:line, did you mean ...)
+  # before anything runs; `Dolphin.Script.compile/1` is its public face.
+
+  alias Dolphin.Script.Error
+
+  @spec compile(String.t(), String.t()) :: {:ok, module()} | {:error, Error.t()}
+  def compile(source, file) do
+    with {:ok, ast} <- parse(source, file) do
+      module = Module.concat(Dolphin.Script.Compiled, "S#{System.unique_integer([:positive])}")
+
+      wrapped =
+        quote do
+          defmodule unquote(module) do
+            @moduledoc false
+            # Not a tail call: the script's own frame stays in stack traces.
+            def __script__ do
+              _ = unquote(ast)
+              :ok
+            end
+          end
+        end
+
+      try do
+        compile_reporting_warnings(wrapped, file, module)
+        {:ok, module}
+      rescue
+        e in [CompileError, SyntaxError, TokenMissingError] ->
+          {:error, %Error{kind: :compile, file: file, line: e.line, message: compile_message(e.description, ast, module)}}
+
+        # A word of the language given a bad argument, found while the script is
+        # compiled: the line is the script's frame in the stack.
+        e in ArgumentError ->
+          {:error, %Error{kind: :compile, file: file, line: script_line(__STACKTRACE__, file), message: Exception.message(e)}}
+      end
+    end
+  end
+
+  @spec purge(module()) :: :ok
+  def purge(module) do
+    :code.purge(module)
+    :code.delete(module)
+    :ok
+  end
+
+  defp script_line(stacktrace, file) do
+    Enum.find_value(stacktrace, fn {_m, _f, _a, location} ->
+      if to_string(location[:file]) == file, do: location[:line]
+    end)
+  end
+
+  # The compiler's warnings (an unused variable, ...) name the module the
+  # script is compiled into, which means nothing to its author: they are
+  # caught and printed in the script's terms, `file:line: warning: ...`.
+  defp compile_reporting_warnings(wrapped, file, module) do
+    {:ok, capture} = StringIO.open("")
+    original = Process.whereis(:standard_error)
+
+    try do
+      Process.unregister(:standard_error)
+      Process.register(capture, :standard_error)
+      Code.compile_quoted(wrapped, file)
+    after
+      Process.unregister(:standard_error)
+      Process.register(original, :standard_error)
+      {:ok, {_, warnings}} = StringIO.close(capture)
+      if warnings != "", do: IO.write(:stderr, script_warnings(warnings, module))
+    end
+  end
+
+  # "warning: TEXT\n  FILE:LINE: Module.__script__/0\n" -> "FILE:LINE: warning: TEXT\n"
+  defp script_warnings(text, module) do
+    internal = inspect(module)
+
+    text
+    |> String.split(~r/\n\n+/, trim: true)
+    |> Enum.map_join(fn warning ->
+      case Regex.run(~r/\A(?:warning: )?(.*?)\n\s+(\S+?:\d+)(?::\s*\S+)?\s*\z/s, warning) do
+        [_, message, where] -> "#{where}: warning: #{String.trim(message)}\n"
+        nil -> String.replace(warning, internal <> ".__script__/0", "the script") <> "\n"
+      end
+    end)
+  end
+
+  defp parse(source, file) do
+    case Code.string_to_quoted(source, file: file, columns: true) do
+      {:ok, ast} ->
+        {:ok, ast}
+
+      {:error, {meta, message, token}} ->
+        {line, column} = if is_list(meta), do: {meta[:line], meta[:column]}, else: {meta, nil}
+        {:error, %Error{kind: :syntax, file: file, line: line, column: column, message: syntax_error(syntax_message(message, token))}}
+    end
+  end
+
+  # Elixir's parser gives a message in two parts around the token ("unexpected
+  # reserved word: " "end" ". The \"(\" at line 6 is missing terminator
+  # \")\""), or one part followed by it.
+  defp syntax_message({prefix, suffix}, token) do
+    prefix = String.trim_trailing(prefix, ": ") |> String.trim_trailing(":")
+    suffix = suffix |> String.trim_leading(".") |> String.trim() |> lower_first()
+    "#{prefix} #{inspect(to_string(token))}" <> if(suffix == "", do: "", else: ": " <> suffix)
+  end
+
+  defp syntax_message(message, token) when is_binary(message) do
+    case to_string(token) do
+      "" -> message
+      token -> String.trim_trailing(message) <> " " <> token
+    end
+  end
+
+  defp syntax_error("syntax error" <> _ = message), do: message
+  defp syntax_error(message), do: "syntax error: " <> message
+
+  defp lower_first(<<first::utf8, rest::binary>>), do: String.downcase(<<first::utf8>>) <> rest
+  defp lower_first(""), do: ""
+
+  # "undefined function wait_fro/1 (expected Dolphin.Script.Compiled.S162 to
+  # define such a function ...)": said in the script's terms, with the
+  # nearest words of the language.
+  defp compile_message(description, ast, module) do
+    case Regex.run(~r/\Aundefined function ([^\s\/]+)\/(\d+)/, description) do
+      [_, name, arity] ->
+        hint = if uses_script?(ast), do: did_you_mean(name, String.to_integer(arity)), else: " (does the script start with `use Dolphin.Script`?)"
+        "undefined function #{name}/#{arity}: no word of the language or of Elixir has that name#{hint}"
+
+      nil ->
+        String.replace(description, inspect(module), "the script")
+    end
+  end
+
+  # The words `use Dolphin.Script` imports, plus Elixir's own.
+  @vocabulary_modules [Dolphin.DSL, Dolphin.DSL.Values, Dolphin.DSL.Mission, Kernel]
+
+  defp did_you_mean(name, arity) do
+    words =
+      for module <- @vocabulary_modules,
+          Code.ensure_loaded?(module),
+          {word, n} <- module.__info__(:functions) ++ module.__info__(:macros),
+          word = Atom.to_string(word),
+          not String.starts_with?(word, "_"),
+          uniq: true,
+          do: {word, n}
+
+    case words |> Enum.map(fn {w, n} -> {String.jaro_distance(w, name), w, n} end) |> Enum.filter(&(elem(&1, 0) >= 0.8)) |> Enum.sort_by(&{-elem(&1, 0), abs(elem(&1, 2) - arity)}) do
+      [] -> ""
+      near -> "; did you mean " <> (near |> Enum.map(fn {_, w, n} -> "#{w}/#{n}" end) |> Enum.uniq() |> Enum.take(3) |> Enum.join(", ")) <> "?"
+    end
+  end
+
+  defp uses_script?(ast) do
+    {_, found} = Macro.prewalk(ast, false, fn
+      {:use, _, [{:__aliases__, _, [:Dolphin, :Script]} | _]} = node, _ -> {node, true}
+      node, acc -> {node, acc}
+    end)
+
+    found
+  end
+end
