@@ -1,13 +1,14 @@
 defmodule Dolphin.ManoeuvreError do
   @moduledoc """
   A manoeuvre of `Dolphin.Vehicles.Manoeuvres` that did not succeed: which
-  manoeuvre (`:hold`, `:arm`, `:take_off`, `:command`), on which vehicle,
-  the exchange the vehicle refused (`action`, in words), the refusal itself
-  (`refusal`: a `Dolphin.CommandError`, or for a hold the
-  `Dolphin.ManoeuvreError` of its last resort), `waited_ms` (arming: how
-  long the autopilot refused before the manoeuvre gave up; `nil` when a
-  refusal was final at once) and `texts`, the STATUSTEXTs the autopilot sent
-  during the manoeuvre (newest first), which often say why.
+  manoeuvre (`:hold`, `:arm`, or `:command` for one command: GUIDED, the
+  take-off, the landing...), on which vehicle, the exchange the vehicle
+  refused (`action`, in words), the refusal itself (`refusal`: a
+  `Dolphin.CommandError`, or for a hold the `Dolphin.ManoeuvreError` of its
+  last resort), `waited_ms` (arming: how long the autopilot refused before
+  the manoeuvre gave up; `nil` when a refusal was final at once) and
+  `texts`, the STATUSTEXTs the autopilot sent during the manoeuvre (newest
+  first), which often say why.
 
       iex> refusal = %Dolphin.CommandError{command: :mav_cmd_do_set_mode, vehicle: 2, result: :denied, attempts: 1}
       iex> e = %Dolphin.ManoeuvreError{manoeuvre: :command, vehicle: 2, action: "GUIDED", refusal: refusal, texts: [{3, "Mode change failed"}]}
@@ -20,7 +21,7 @@ defmodule Dolphin.ManoeuvreError do
   defexception [:manoeuvre, :vehicle, :action, :refusal, :waited_ms, texts: []]
 
   @type t :: %__MODULE__{
-          manoeuvre: :hold | :arm | :take_off | :command,
+          manoeuvre: :hold | :arm | :command,
           vehicle: byte(),
           action: String.t(),
           refusal: Dolphin.CommandError.t() | t(),

@@ -2,9 +2,9 @@ defmodule Dolphin.Mission.Executor do
   @moduledoc false
   # One running mission on one vehicle (the MAVLink platform's process; see
   # Dolphin.Mission.Platform for its contract with the engine), a :gen_statem
-  # over the steps ArduCopter needs (ARDUPILOT.md):
+  # over the steps ArduCopter needs (docs/ardupilot.md):
   #
-  #   :hold -> :clear -> :upload -> :verify -> :guided -> :arm -> :start -> :flying
+  #   :hold -> :clear -> :upload -> :verify -> :guided -> :arm -> :start -> :flying -> done | failed
   #
   # :hold waits for the end of the vehicle's boot and holds it if it is flying
   # another mission; then clear; upload; download it back and compare by
@@ -13,14 +13,14 @@ defmodule Dolphin.Mission.Executor do
   # (a copter armed on the ground disarms itself after ~10 s). In :flying it
   # follows the vehicle's state (Dolphin.Mission.Executor.Flight judges it).
   # Every state ends in the next one or, done or failed, in a report to the
-  # engine and a normal exit.
+  # engine (Dolphin.Engine.Platform.done/1, failed/2) and a normal exit.
   #
   # A step's exchange with the vehicle (the mission and command protocols,
   # the manoeuvres of Dolphin.Vehicles.Manoeuvres) blocks until the vehicle
   # answers, so it runs in a linked task whose result is the state's event:
   # a stop is served at any moment. Stopping makes the vehicle hold position
   # (Dolphin.Vehicles.Manoeuvres.hold/2). Timers are in Dolphin.Clock time,
-  # the vehicles' time.
+  # the vehicles' time (the engine's `:clock` option times the engine only).
 
   @behaviour :gen_statem
 
@@ -70,7 +70,7 @@ defmodule Dolphin.Mission.Executor do
       attempt: 1,
       upload_started: nil,
       retransmissions: 0,
-      # The vehicle's STATUSTEXTs when the flight began (see fail_flying/2).
+      # The vehicle's STATUSTEXTs when the flight began (see judge/2).
       flight_texts: [],
       flight: nil
     }
