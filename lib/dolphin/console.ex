@@ -52,7 +52,8 @@ defmodule Dolphin.Console do
   node; the text they print comes from pure functions (tested without IEx).
   """
 
-  alias Dolphin.{Clock, Engine, Mission, Vehicles}
+  alias Dolphin.{Clock, Engine, ManoeuvreError, Mission, Vehicles}
+  alias Dolphin.Vehicles.Manoeuvres
   alias Dolphin.Console.{Check, Events, Format, MissionSource, Runs, Snapshot}
 
   @type vehicle_id :: non_neg_integer()
@@ -235,57 +236,50 @@ defmodule Dolphin.Console do
       cond do
         state.armed -> say("vehicle #{id} is armed already")
         state.mode == :auto -> say("vehicle #{id} is in AUTO, where ArduCopter does not arm: mode(#{id}, :guided) first")
-        true -> arm_with_retries(id, Keyword.get(opts, :wait, 30_000))
+        true -> with_wait(id, opts, &finish(id, Manoeuvres.arm_when_ready(id, within: &1, report: reporter(id)), nil))
       end
     end)
   end
 
-  defp arm_with_retries(id, wait_ms) when not is_integer(wait_ms) or wait_ms < 0 do
-    {:error, why} = Check.ms(wait_ms, :wait)
-    say("vehicle #{id}: " <> why)
+  # The `wait:` of arm/2 and takeoff/3, checked before anything is sent.
+  defp with_wait(id, opts, fun) do
+    case Check.ms(Keyword.get(opts, :wait, 30_000), :wait) do
+      {:ok, wait} -> fun.(wait)
+      {:error, why} -> say("vehicle #{id}: " <> why)
+    end
+  end
+
+  # Prints the steps of a manoeuvre (Dolphin.Vehicles.Manoeuvres) as the
+  # vehicle accepts them, and each new refusal it will try again.
+  defp reporter(id, altitude \\ nil) do
+    fn
+      {:accepted, step} ->
+        say("vehicle #{id}: #{step(step, altitude)} accepted")
+
+      {:refused, step, e, texts, left_ms} ->
+        say("vehicle #{id}: #{step(step, altitude)} refused (#{Exception.message(e)}#{news(texts)}); trying again until #{Format.duration(left_ms)} from now")
+    end
+  end
+
+  # The refusal that ended a manoeuvre; the steps before it were printed.
+  defp finish(_id, :ok, _altitude), do: :ok
+
+  defp finish(id, {:error, %ManoeuvreError{} = e}, altitude) do
+    step = %{"switching to GUIDED" => :guided, "arming" => :arm, "take-off" => :take_off} |> Map.get(e.action, e.action)
+    say("vehicle #{id}: #{step(step, altitude)} refused: #{Exception.message(e.refusal)}#{news(e.texts)}")
     :error
   end
 
-  defp arm_with_retries(id, wait_ms) do
-    deadline = Clock.now_ms() + wait_ms
-    attempt(id, "arm", fn -> Vehicles.arm(id) end, deadline, nil)
-  end
-
-  # Runs a command until accepted or the deadline (clock time); prints the
-  # first refusal and the vehicle's messages about it once.
-  defp attempt(id, what, fun, deadline, said) do
-    before = texts(id)
-
-    case fun.() do
-      {:ok, :accepted} ->
-        say("vehicle #{id}: #{what} accepted")
-        :ok
-
-      {:error, e} ->
-        why = Exception.message(e) <> news(before, texts(id))
-
-        cond do
-          Clock.now_ms() >= deadline ->
-            say("vehicle #{id}: #{what} refused: #{why}")
-            :error
-
-          true ->
-            if why != said, do: say("vehicle #{id}: #{what} refused (#{why}); trying again until #{Format.duration(deadline - Clock.now_ms())} from now")
-            Clock.sleep(1_000)
-            attempt(id, what, fun, deadline, why)
-        end
-    end
-  end
+  defp step(:guided, _altitude), do: "mode GUIDED"
+  defp step(:arm, _altitude), do: "arm"
+  defp step(:take_off, altitude), do: "take-off to #{Format.metres(altitude)} above home"
+  defp step(action, _altitude), do: action
 
   defp texts(id), do: Vehicles.status_texts(id)
 
   # The vehicle's STATUSTEXTs that came with an answer, as " — text; text".
-  defp news(before, now) do
-    case Format.new_texts(before, now) do
-      [] -> ""
-      new -> " — " <> Enum.map_join(new, "; ", &elem(&1, 1))
-    end
-  end
+  defp news([]), do: ""
+  defp news(new), do: " — " <> Enum.map_join(new, "; ", &elem(&1, 1))
 
   @doc "Disarms the motors; refused in the air (it would fall: `land/2` lands and disarms)."
   @spec disarm(vehicle_id(), keyword()) :: printed()
@@ -293,7 +287,7 @@ defmodule Dolphin.Console do
     command(id, :control, opts, [:force], fn state, _opts ->
       cond do
         not state.armed -> say("vehicle #{id} is disarmed already")
-        in_air?(state) -> say("vehicle #{id} is in the air: disarming would make it fall; land(#{id}) lands it and it disarms on the ground")
+        Manoeuvres.in_air?(state) -> say("vehicle #{id} is in the air: disarming would make it fall; land(#{id}) lands it and it disarms on the ground")
         true -> result(id, "disarm", fn -> Vehicles.disarm(id) end)
       end
     end)
@@ -309,7 +303,7 @@ defmodule Dolphin.Console do
     case Check.mode(mode) do
       {:ok, mode} ->
         command(id, :control, opts, [:force], fn state, opts ->
-          case Check.pilot_mode(mode, in_air?(state), opts[:force] == true) do
+          case Check.pilot_mode(mode, Manoeuvres.in_air?(state), opts[:force] == true) do
             :ok -> result(id, "mode #{Format.mode(mode)}", fn -> Vehicles.set_mode(id, mode) end)
             {:error, why} -> say("vehicle #{id}: " <> why)
           end
@@ -330,13 +324,10 @@ defmodule Dolphin.Console do
     case Check.altitude(altitude) do
       {:ok, alt} ->
         command(id, :control, opts, [:force, :wait], fn state, opts ->
-          if in_air?(state) do
+          if Manoeuvres.in_air?(state) do
             say("vehicle #{id} is flying already (#{Format.metres(state.position[:relative_alt])} above home): goto(#{id}, lat, lon, alt) moves it")
           else
-            with :ok <- if(state.mode == :guided, do: :ok, else: result(id, "mode GUIDED", fn -> Vehicles.set_mode(id, :guided) end)),
-                 :ok <- if(state.armed, do: :ok, else: arm_with_retries(id, Keyword.get(opts, :wait, 30_000))),
-                 :ok <- result(id, "take-off to #{Format.metres(alt)} above home", fn -> Vehicles.takeoff(id, alt) end),
-                 do: :ok
+            with_wait(id, opts, &finish(id, Manoeuvres.take_off(id, alt, within: &1, report: reporter(id, alt)), alt))
           end
         end)
 
@@ -356,15 +347,10 @@ defmodule Dolphin.Console do
     case Check.position(lat, lon, altitude) do
       {:ok, point} ->
         command(id, :control, opts, [:force, :amsl], fn state, opts ->
-          {frame, ref} = if opts[:amsl], do: {0, "AMSL"}, else: {6, "above home"}
+          ref = if opts[:amsl], do: "AMSL", else: "above home"
 
-          if in_air?(state) do
-            # p1 -1: default speed; p2 bit 0: switch to GUIDED; p4 NaN: keep the yaw behaviour.
-            result(
-              id,
-              "go to #{Format.position(lat, lon)} at #{Format.metres(altitude)} #{ref}",
-              fn -> Vehicles.command_int(id, :mav_cmd_do_reposition, [-1, 1, 0, :nan], point, frame: frame) end
-            )
+          if Manoeuvres.in_air?(state) do
+            result(id, "go to #{Format.position(lat, lon)} at #{Format.metres(altitude)} #{ref}", fn -> Manoeuvres.go_to(id, point, amsl: opts[:amsl]) end)
           else
             say("vehicle #{id} is not in the air: takeoff(#{id}, altitude) first")
           end
@@ -380,7 +366,7 @@ defmodule Dolphin.Console do
   @spec hold(vehicle_id(), keyword()) :: printed()
   def hold(id, opts \\ []) do
     command(id, :control, opts, [:force], fn state, _opts ->
-      case Dolphin.Mission.Executor.hold(id) do
+      case Manoeuvres.hold(id) do
         :ok ->
           cond do
             not state.armed -> say("vehicle #{id} is disarmed: nothing to hold")
@@ -388,8 +374,8 @@ defmodule Dolphin.Console do
             true -> say("vehicle #{id}: holding position (was #{Format.mode(state.mode)})")
           end
 
-        {:error, why} ->
-          say("vehicle #{id}: hold failed: #{why}")
+        {:error, e} ->
+          say("vehicle #{id}: hold failed: #{Exception.message(e)}")
       end
     end)
   end
@@ -400,7 +386,7 @@ defmodule Dolphin.Console do
 
   @doc "Lands where the vehicle is (it disarms on the ground)."
   @spec land(vehicle_id(), keyword()) :: printed()
-  def land(id, opts \\ []), do: command(id, :control, opts, [:force], fn _state, _ -> result(id, "land", fn -> Vehicles.land(id) end) end)
+  def land(id, opts \\ []), do: command(id, :control, opts, [:force], fn _state, _ -> result(id, "land", fn -> Manoeuvres.land(id) end) end)
 
   @doc """
   Uploads a mission: a `%Dolphin.Mission{}` (one without a home gets the
@@ -628,24 +614,23 @@ defmodule Dolphin.Console do
     end
   end
 
-  # Runs a command; says whether the vehicle accepted it, with the messages it sent about it.
+  # Runs a command or a one-command manoeuvre; says whether the vehicle
+  # accepted it, with the messages it sent about it.
   defp result(id, what, fun) do
     before = texts(id)
 
     case fun.() do
-      {:ok, :accepted} ->
+      accepted when accepted in [:ok, {:ok, :accepted}] ->
         say("vehicle #{id}: #{what} accepted")
         :ok
 
+      {:error, %ManoeuvreError{refusal: e, texts: said}} ->
+        say("vehicle #{id}: #{what} refused: #{Exception.message(e)}#{news(said)}")
+        :error
+
       {:error, e} ->
-        say("vehicle #{id}: #{what} refused: #{Exception.message(e)}#{news(before, texts(id))}")
+        say("vehicle #{id}: #{what} refused: #{Exception.message(e)}#{news(Format.new_texts(before, texts(id)))}")
         :error
     end
-  end
-
-  defp in_air?(state) do
-    state.armed and
-      (state.landed in [:in_air, :takeoff, :landing] or
-         (state.landed == nil and is_map(state.position) and (state.position[:relative_alt] || 0) > 1))
   end
 end

@@ -1,45 +1,54 @@
 defmodule Dolphin.Mission.Executor do
   @moduledoc false
   # One running mission on one vehicle (the MAVLink platform's process; see
-  # Dolphin.Mission.Platform for its contract with the engine).
+  # Dolphin.Mission.Platform for its contract with the engine), a :gen_statem
+  # over the steps ArduCopter needs (docs/ardupilot.md):
   #
-  # Start, as ArduCopter needs it (ARDUPILOT.md): hold the vehicle if it is
-  # flying another mission; clear; upload; download it back and compare by
+  #   :hold -> :clear -> :upload -> :verify -> :guided -> :arm -> :start -> :flying -> done | failed
+  #
+  # :hold waits for the end of the vehicle's boot and holds it if it is flying
+  # another mission; then clear; upload; download it back and compare by
   # meaning (never start an unverified mission); GUIDED; arm, retried while the
   # autopilot is not ready, for at most `:arm_timeout_ms`; MISSION_START at once
-  # (a copter armed on the ground disarms itself after ~10 s).
+  # (a copter armed on the ground disarms itself after ~10 s). In :flying it
+  # follows the vehicle's state (Dolphin.Mission.Executor.Flight judges it).
+  # Every state ends in the next one or, done or failed, in a report to the
+  # engine (Dolphin.Engine.Platform.done/1, failed/2) and a normal exit.
   #
-  # Then it follows the vehicle's state: progress from MISSION_CURRENT /
-  # MISSION_ITEM_REACHED, completion by how the mission ends (last item
-  # reached; for a landing, landed and disarmed; never for an endless loiter),
-  # and failure when the vehicle leaves AUTO or disarms before the end.
-  #
-  # Blocking steps (the mission and command protocols) run in a linked task so
-  # that a stop is served at any moment. Stopping makes the vehicle hold
-  # position: BRAKE, else GUIDED (never LOITER, which sinks without RC input),
-  # or disarm when it is still on the ground.
+  # A step's exchange with the vehicle (the mission and command protocols,
+  # the manoeuvres of Dolphin.Vehicles.Manoeuvres) blocks until the vehicle
+  # answers, so it runs in a linked task whose result is the state's event:
+  # a stop is served at any moment. Stopping makes the vehicle hold position
+  # (Dolphin.Vehicles.Manoeuvres.hold/2). Timers are in Dolphin.Clock time,
+  # the vehicles' time (the engine's `:clock` option times the engine only).
 
-  use GenServer, restart: :temporary
+  @behaviour :gen_statem
 
-  alias Dolphin.{Mission, PubSub, Telemetry, Vehicles}
+  alias Dolphin.{Clock, Mission, PubSub, Telemetry, Vehicles}
   alias Dolphin.Engine.Platform
+  alias Dolphin.Mission.Executor.Flight
+  alias Dolphin.Vehicles.Manoeuvres
 
   @arm_timeout_ms 120_000
   @landing_reports_ms 5_000
-  @landing_modes [:rtl, :land, :smart_rtl, :auto_rtl]
   @takeoff 22
   @land 21
   # A landed vehicle this close to a mission's landing point is there.
   @here_m 5
-  @arm_retry_ms 1_000
   @boot_timeout_ms 60_000
   @boot_poll_ms 200
   @transfer_attempts 3
 
-  def start_link(mission, vehicle, opts), do: GenServer.start_link(__MODULE__, {mission, vehicle, Map.new(opts)})
+  @spec start_link(Mission.t(), byte(), keyword()) :: :gen_statem.start_ret()
+  def start_link(mission, vehicle, opts), do: :gen_statem.start_link(__MODULE__, {mission, vehicle, Map.new(opts)}, [])
 
   @doc false
-  def stop(pid, reason), do: GenServer.call(pid, {:stop, reason}, :infinity)
+  # Returns once the vehicle is safe: :ok, or {:error, why} when it could not be made to hold.
+  @spec stop(pid(), term()) :: :ok | {:error, String.t()}
+  def stop(pid, reason), do: :gen_statem.call(pid, {:stop, reason}, :infinity)
+
+  @impl true
+  def callback_mode, do: [:handle_event_function, :state_enter]
 
   @impl true
   def init({%Mission{} = mission, vehicle, opts}) do
@@ -47,179 +56,239 @@ defmodule Dolphin.Mission.Executor do
     Process.flag(:trap_exit, true)
     PubSub.subscribe({:vehicle, vehicle})
 
-    s = %{
+    data = %{
       mission: mission,
       name: mission.name,
       vehicle: vehicle,
       owner: opts.owner,
-      clock: Map.get(opts, :clock, Dolphin.Engine.TimeSource.Clock),
       arm_timeout_ms: Map.get(opts, :arm_timeout_ms, @arm_timeout_ms),
       items: nil,
       ending: nil,
-      step: nil,
+      boot_deadline: Clock.now_ms() + @boot_timeout_ms,
+      # The exchange of the current step, and the how-manieth try of it.
       task: nil,
+      attempt: 1,
+      upload_started: nil,
       retransmissions: 0,
-      started: false,
-      active: false,
-      armed_seen: false,
-      auto_seen: false,
-      landing_check: false,
-      on_land_item: false,
-      # The vehicle's STATUSTEXTs when the flight began (see autopilot_says/3).
+      # The vehicle's STATUSTEXTs when the flight began (see judge/2).
       flight_texts: [],
-      reached: nil,
-      progress: nil
+      flight: nil
     }
 
-    {:ok, s, {:continue, :start}}
+    {:ok, :hold, data}
   end
+
+  # --- entering a step ----------------------------------------------------------
 
   @impl true
-  def handle_continue(:start, s) do
-    case items(s) do
-      {:ok, items} -> {:noreply, run_step(%{s | items: items, ending: Mission.ending(items)}, :hold_if_flying)}
-      {:error, why} -> fail(s, why)
-    end
-  end
-
-  # The steps before the flight, in order; each runs in a task.
-  @steps [:hold_if_flying, :clear, :upload, :verify, :guided, :arm, :start]
-
-  defp run_step(s, step) do
-    me = self()
-    task = Task.async(fn -> step(step, s, me) end)
-    %{s | step: step, task: task}
-  end
-
-  # The next step, or the flight once MISSION_START is accepted; a GenServer reply.
-  defp next_step(s) do
-    case Enum.drop_while(@steps, &(&1 != s.step)) do
-      [_, next | _] -> {:noreply, run_step(s, next)}
-      _ -> follow(%{s | step: :flying, task: nil, started: true, flight_texts: texts(s.vehicle)})
-    end
-  end
-
-  @impl true
-  def handle_info({ref, result}, %{task: %Task{ref: ref}} = s) do
-    Process.demonitor(ref, [:flush])
-    s = %{s | task: nil}
-
-    case result do
-      :ok ->
-        next_step(s)
-
-      :already_there ->
-        Platform.done(s.owner)
-        {:stop, :normal, s}
-
-      {:uploaded, duration_ms} ->
-        Telemetry.emit(:mission_uploaded, %{vehicle: s.vehicle, name: s.name, items: length(s.items), duration_ms: duration_ms, retransmissions: s.retransmissions})
-        next_step(s)
+  def handle_event(:enter, _old, :hold, data) do
+    case items(data) do
+      {:ok, items} ->
+        ending = Mission.ending(items)
+        # At once: the first look at the vehicle needs no wait.
+        {:keep_state, %{data | items: items, ending: ending, flight: Flight.new(ending)}, [{:state_timeout, 0, :look}]}
 
       {:error, why} ->
-        fail(s, why)
+        fail(:hold, data, why)
     end
   end
 
-  def handle_info({:DOWN, ref, :process, _, reason}, %{task: %Task{ref: ref}} = s),
-    do: fail(%{s | task: nil}, "#{s.step} crashed: #{Exception.format_exit(reason)}")
+  def handle_event(:enter, _old, :clear, data), do: exchange(data, fn -> Vehicles.clear_mission(data.vehicle) end)
 
-  def handle_info({:mission_done, :upload, %{retransmissions: n}}, s), do: {:noreply, %{s | retransmissions: n}}
-  def handle_info({:mission_done, _, _}, s), do: {:noreply, s}
-  def handle_info({:mission_progress, _, _, _}, s), do: {:noreply, s}
-
-  # MISSION_CURRENT's ACTIVE may come and go between two reads of the state (a
-  # mission that completes at once): the changes carried by the events count.
-  def handle_info({:dolphin, {:vehicle, id}, {:state, id, changes}}, %{step: step} = s) when step in [:start, :flying] do
-    s = if Enum.any?(changes, &match?({:mission, %{state: :active}}, &1)), do: %{s | active: true}, else: s
-    if step == :flying, do: follow(s), else: {:noreply, s}
+  def handle_event(:enter, _old, :upload, data) do
+    me = self()
+    data = %{data | upload_started: data.upload_started || Clock.now_ms()}
+    # The protocol's counts ({:mission_done, ...}) come to the executor itself.
+    exchange(data, fn -> Vehicles.upload_mission(data.vehicle, data.items, progress_to: me) end)
   end
 
-  def handle_info({:dolphin, _topic, _event}, s), do: {:noreply, s}
+  def handle_event(:enter, _old, :verify, data), do: exchange(data, fn -> Vehicles.download_mission(data.vehicle) end)
+  def handle_event(:enter, _old, :guided, data), do: exchange(data, fn -> Manoeuvres.guided(data.vehicle) end)
+  def handle_event(:enter, _old, :arm, data), do: exchange(data, fn -> Manoeuvres.arm_when_ready(data.vehicle, within: data.arm_timeout_ms) end)
 
-  # A landing mission's disarm comes before its last report (ArduPilot reports
-  # the final item after "Disarming motors"): give the reports their time.
-  def handle_info(:check_landed, %{step: :flying} = s) do
-    case Vehicles.state(s.vehicle) do
-      {:ok, st} -> if complete?(s, st), do: done(s), else: fail(s, "the vehicle landed and disarmed before the mission's end (at item #{st.mission.current} of #{st.mission.total})")
-      _ -> {:noreply, s}
+  def handle_event(:enter, _old, :start, data),
+    do: exchange(data, fn -> Manoeuvres.command(data.vehicle, "MISSION_START", fn -> Vehicles.start_mission(data.vehicle) end) end)
+
+  def handle_event(:enter, _old, :flying, data), do: follow(%{data | flight_texts: Vehicles.status_texts(data.vehicle)})
+
+  # --- :hold: booted, and not flying another mission -----------------------------
+
+  def handle_event(:state_timeout, :look, :hold, data) do
+    case Vehicles.state(data.vehicle) do
+      {:ok, st} ->
+        cond do
+          not Dolphin.Vehicles.State.booting?(st) -> look(data, st)
+          Clock.now_ms() >= data.boot_deadline -> fail(:hold, data, booting(data, st))
+          # ArduCopter answers the mission protocol while it boots, before its
+          # mission store is set up, refusing any upload with NO_SPACE: a
+          # vehicle that reports MAV_STATE UNINIT or BOOT is looked at again.
+          true -> {:keep_state_and_data, [{:state_timeout, Clock.to_real_ms(@boot_poll_ms), :look}]}
+        end
+
+      {:error, :unknown_vehicle} ->
+        fail(:hold, data, not_mavlink(data))
     end
   end
 
-  def handle_info(:check_landed, s), do: {:noreply, s}
+  # --- a step's exchange ended ------------------------------------------------
 
-  # The engine's leaf (our parent) exiting reaches terminate/2, not here.
-  def handle_info({:EXIT, _pid, _reason}, s), do: {:noreply, s}
-  def handle_info({:DOWN, _, :process, _, _}, s), do: {:noreply, s}
+  def handle_event(:info, {ref, result}, state, %{task: %Task{ref: ref}} = data) do
+    Process.demonitor(ref, [:flush])
+    answered(state, result, %{data | task: nil})
+  end
+
+  def handle_event(:info, {:DOWN, ref, :process, _, reason}, state, %{task: %Task{ref: ref}} = data),
+    do: fail(state, %{data | task: nil}, "#{state} crashed: #{Exception.format_exit(reason)}")
+
+  def handle_event(:info, {:mission_done, :upload, %{retransmissions: n}}, _state, data), do: {:keep_state, %{data | retransmissions: n}}
+  def handle_event(:info, {:mission_done, _, _}, _state, _data), do: :keep_state_and_data
+  def handle_event(:info, {:mission_progress, _, _, _}, _state, _data), do: :keep_state_and_data
+
+  # --- :start and :flying: the vehicle's state ----------------------------------
+
+  def handle_event(:info, {:dolphin, {:vehicle, id}, {:state, id, changes}}, state, data) when state in [:start, :flying] do
+    data = %{data | flight: Flight.changes(data.flight, changes)}
+    if state == :flying, do: follow(data), else: {:keep_state, data}
+  end
+
+  def handle_event(:info, {:dolphin, _topic, _event}, _state, _data), do: :keep_state_and_data
+
+  def handle_event(:state_timeout, :check_landed, :flying, data) do
+    case Vehicles.state(data.vehicle) do
+      {:ok, st} ->
+        case Flight.landed(data.flight, st) do
+          :done -> done(data)
+          {:failed, why} -> fail(:flying, data, why)
+        end
+
+      _ ->
+        :keep_state_and_data
+    end
+  end
+
+  # --- stopping ---------------------------------------------------------------
+
+  def handle_event({:call, from}, {:stop, {:vehicle_lost, _}}, _state, data) do
+    # Nothing can be asked of a vehicle we cannot hear.
+    cancel_task(data)
+    {:stop_and_reply, :normal, [{:reply, from, :ok}]}
+  end
+
+  def handle_event({:call, from}, {:stop, _reason}, state, data) do
+    cancel_task(data)
+    {:stop_and_reply, :normal, [{:reply, from, hold(data.vehicle, commanded?(state))}]}
+  end
+
+  # A task's exit comes with its :DOWN; the engine's leaf (our parent) exiting
+  # reaches terminate/3, not here.
+  def handle_event(:info, {:EXIT, _pid, _reason}, _state, _data), do: :keep_state_and_data
+  def handle_event(:info, {:DOWN, _, :process, _, _}, _state, _data), do: :keep_state_and_data
 
   # The engine's leaf died without stopping us: make the vehicle safe, then go.
   @impl true
-  def terminate(:normal, _s), do: :ok
+  def terminate(:normal, _state, _data), do: :ok
 
-  def terminate(_reason, s) do
-    cancel_task(s)
-    _ = hold(s.vehicle, commanded?(s))
+  def terminate(_reason, state, data) do
+    cancel_task(data)
+    _ = hold(data.vehicle, commanded?(state))
     :ok
-  end
-
-  @impl true
-  def handle_call({:stop, {:vehicle_lost, _}}, _from, s) do
-    # Nothing can be asked of a vehicle we cannot hear.
-    cancel_task(s)
-    {:stop, :normal, :ok, s}
-  end
-
-  def handle_call({:stop, _reason}, _from, s) do
-    cancel_task(s)
-    {:stop, :normal, hold(s.vehicle, commanded?(s)), s}
   end
 
   # Once arming or MISSION_START may have been accepted, the 1 Hz telemetry can
   # be older than the vehicle's state: a stop then assumes it may be flying.
-  defp commanded?(s), do: s.started or s.step in [:arm, :start]
+  defp commanded?(state), do: state in [:arm, :start, :flying]
+
+  defp hold(vehicle, fresh?) do
+    case Manoeuvres.hold(vehicle, fresh: fresh?) do
+      :ok -> :ok
+      {:error, e} -> {:error, Exception.message(e)}
+    end
+  end
 
   # --- steps ------------------------------------------------------------------
 
-  defp step(:hold_if_flying, s, _me) do
-    case booted(s, s.clock.now_ms() + @boot_timeout_ms) do
-      {:ok, %{armed: true, mode: :auto} = st} when st.landed != :on_ground -> hold(s.vehicle)
-      {:ok, st} -> on_the_ground(s, st)
-      {:error, _} = error -> error
+  # Runs a step's exchange in a linked task; its result comes as an event.
+  defp exchange(data, fun), do: {:keep_state, %{data | task: Task.async(fun)}}
+
+  defp next(state, data), do: {:next_state, state, %{data | attempt: 1}}
+
+  # The vehicle flies another mission: it holds first (ArduCopter refuses to
+  # clear a mission that runs in AUTO).
+  defp look(data, %{armed: true, mode: :auto} = st) when st.landed != :on_ground,
+    do: exchange(data, fn -> Manoeuvres.hold(data.vehicle) end)
+
+  defp look(data, st) do
+    case on_the_ground(data, st) do
+      :ok -> next(:clear, data)
+      :already_there -> done(data)
+      {:error, why} -> fail(:hold, data, why)
     end
   end
 
-  defp step(:clear, s, _me), do: mission_op(Vehicles.clear_mission(s.vehicle))
+  # What the exchange of `state` answered; the next step, or the end.
+  defp answered(:hold, :ok, data), do: next(:clear, data)
+  defp answered(:clear, :ok, data), do: next(:upload, data)
 
-  defp step(:upload, s, me), do: upload(s, me, s.clock.now_ms(), @transfer_attempts)
+  defp answered(:upload, :ok, data), do: uploaded(data)
 
-  defp step(:verify, s, _me), do: verify(s, @transfer_attempts)
+  # Every item went out but the vehicle's final MISSION_ACK was lost (it is
+  # never repeated): whether the vehicle has the mission is for the
+  # verification, which downloads it, to say.
+  defp answered(:upload, {:error, %Dolphin.MissionError{result: :unconfirmed}}, data), do: uploaded(data)
 
-  defp step(:guided, s, _me) do
-    case Vehicles.state(s.vehicle) do
-      {:ok, %{mode: :guided}} -> :ok
-      _ -> command(fn -> Vehicles.set_mode(s.vehicle, :guided) end, "switching to GUIDED", s.vehicle)
+  # A transfer that timed out on a lossy link (the protocol's own retries ran
+  # out; it starts a transaction again itself while the vehicle answers) is
+  # started again from the beginning, a few times: only the vehicle's
+  # refusals are final.
+  defp answered(:upload, {:error, %Dolphin.MissionError{result: result}}, data) when result in [:timeout, :error] and data.attempt < @transfer_attempts,
+    do: {:repeat_state, %{data | attempt: data.attempt + 1}}
+
+  defp answered(:verify, {:ok, back}, data) do
+    case Mission.compare_download(data.items, back) do
+      :ok -> next(:guided, data)
+      {:error, why} -> fail(:verify, data, "the mission read back differs from the one uploaded: #{why}")
     end
   end
 
-  defp step(:arm, s, _me), do: arm(s, s.clock.now_ms() + s.arm_timeout_ms, texts(s.vehicle))
-  defp step(:start, s, _me), do: command(fn -> Vehicles.start_mission(s.vehicle) end, "MISSION_START", s.vehicle)
+  defp answered(:verify, {:error, %Dolphin.MissionError{result: :timeout}}, data) when data.attempt < @transfer_attempts,
+    do: {:repeat_state, %{data | attempt: data.attempt + 1}}
+
+  defp answered(:verify, {:error, e}, data),
+    do: fail(:verify, data, "reading the mission back to verify it failed#{if data.attempt > 1, do: " (#{data.attempt} attempts)"}: #{Exception.message(e)}")
+
+  defp answered(:guided, :ok, data), do: next(:arm, data)
+  defp answered(:arm, :ok, data), do: next(:start, data)
+  defp answered(:start, :ok, data), do: next(:flying, data)
+  defp answered(state, {:error, e}, data), do: fail(state, data, Exception.message(e))
+
+  defp uploaded(data) do
+    Telemetry.emit(:mission_uploaded, %{
+      vehicle: data.vehicle,
+      name: data.name,
+      items: length(data.items),
+      duration_ms: Clock.now_ms() - data.upload_started,
+      retransmissions: data.retransmissions
+    })
+
+    next(:verify, data)
+  end
 
   # A copter on the ground can only start a mission that takes off (ArduCopter
   # refuses the others: "Auto: Missing Takeoff Cmd"). One that only comes back
   # and lands is already done when the vehicle stands at its landing point.
-  defp on_the_ground(s, st) do
-    takes_off? = Enum.any?(s.items, &(&1.command == @takeoff))
+  defp on_the_ground(data, st) do
+    takes_off? = Enum.any?(data.items, &(&1.command == @takeoff))
     grounded? = not st.armed and st.landed in [:on_ground, nil]
 
     cond do
       takes_off? or not grounded? -> :ok
-      landing_here?(s, st) -> :already_there
-      true -> {:error, "vehicle #{s.vehicle} is on the ground and the mission has no take-off"}
+      landing_here?(data, st) -> :already_there
+      true -> {:error, "vehicle #{data.vehicle} is on the ground and the mission has no take-off"}
     end
   end
 
-  defp landing_here?(%{ending: {:landing, seq}} = s, %{position: %{lat: lat, lon: lon}}) do
-    item = Enum.at(s.items, seq)
+  defp landing_here?(%{ending: {:landing, seq}} = data, %{position: %{lat: lat, lon: lon}}) do
+    item = Enum.at(data.items, seq)
     at = Dolphin.Geo.location(lat, lon)
 
     cond do
@@ -228,106 +297,20 @@ defmodule Dolphin.Mission.Executor do
     end
   end
 
-  defp landing_here?(_s, _st), do: false
+  defp landing_here?(_data, _st), do: false
 
-  defp arm(s, deadline, before) do
-    case Vehicles.state(s.vehicle) do
-      {:ok, %{armed: true}} ->
-        :ok
-
-      _ ->
-        case Vehicles.arm(s.vehicle) do
-          {:ok, :accepted} ->
-            :ok
-
-          {:error, %{result: result}} when result in [:failed, :temporarily_rejected, :denied, :timeout] ->
-            if s.clock.now_ms() >= deadline do
-              {:error, "arming refused for #{div(s.arm_timeout_ms, 1000)} s#{autopilot_says(s.vehicle, before, ["Arm", "PreArm"])}"}
-            else
-              s.clock.sleep(@arm_retry_ms)
-              arm(s, deadline, before)
-            end
-
-          {:error, e} ->
-            {:error, "arming: #{Exception.message(e)}"}
-        end
-    end
-  end
-
-  # A transfer that timed out on a lossy link (the protocol's own retries ran
-  # out) is started again from the beginning, a few times: only the vehicle's
-  # refusals are final.
-  defp upload(s, me, started, attempts) do
-    # The protocol's counts ({:mission_done, ...}) go to the executor itself.
-    case Vehicles.upload_mission(s.vehicle, s.items, progress_to: me) do
-      :ok ->
-        {:uploaded, s.clock.now_ms() - started}
-
-      # Every item went out but the vehicle's final MISSION_ACK was lost (it is
-      # never repeated): whether the vehicle has the mission is for the
-      # verification, which downloads it, to say.
-      {:error, %Dolphin.MissionError{result: :unconfirmed}} ->
-        {:uploaded, s.clock.now_ms() - started}
-
-      # The protocol starts a transaction again itself while the vehicle
-      # answers; a vehicle silent for all of them may come back.
-      {:error, %Dolphin.MissionError{result: result}} when result in [:timeout, :error] and attempts > 1 ->
-        upload(s, me, started, attempts - 1)
-
-      error ->
-        mission_op(error)
-    end
-  end
-
-  defp verify(s, attempts) do
-    case Vehicles.download_mission(s.vehicle) do
-      {:ok, back} ->
-        case Mission.compare_download(s.items, back) do
-          :ok -> :ok
-          {:error, why} -> {:error, "the mission read back differs from the one uploaded: #{why}"}
-        end
-
-      {:error, %Dolphin.MissionError{result: :timeout}} when attempts > 1 ->
-        verify(s, attempts - 1)
-
-      {:error, e} ->
-        tried = @transfer_attempts - attempts + 1
-        {:error, "reading the mission back to verify it failed#{if tried > 1, do: " (#{tried} attempts)"}: #{Exception.message(e)}"}
-    end
-  end
-
-  # ArduCopter answers the mission protocol while it boots, before its mission
-  # store is set up, refusing any upload with NO_SPACE: a vehicle that reports
-  # MAV_STATE UNINIT or BOOT is waited for.
-  defp booted(s, deadline) do
-    case Vehicles.state(s.vehicle) do
-      {:ok, st} ->
-        cond do
-          not Dolphin.Vehicles.State.booting?(st) ->
-            {:ok, st}
-
-          s.clock.now_ms() >= deadline ->
-            {:error, "vehicle #{s.vehicle} was still booting after #{div(@boot_timeout_ms, 1000)} s (MAV_STATE #{if st.system_status == 0, do: "UNINIT", else: "BOOT"})"}
-
-          true ->
-            s.clock.sleep(@boot_poll_ms)
-            booted(s, deadline)
-        end
-
-      {:error, :unknown_vehicle} ->
-        {:error, not_mavlink(s)}
-    end
-  end
+  defp booting(data, st),
+    do: "vehicle #{data.vehicle} was still booting after #{div(@boot_timeout_ms, 1000)} s (MAV_STATE #{if st.system_status == 0, do: "UNINIT", else: "BOOT"})"
 
   # The fleet may be fake vehicles of the test platform (`--fake`), which the
   # ground station never hears: say so rather than "not connected".
-  defp not_mavlink(s) do
+  defp not_mavlink(data) do
     case Dolphin.Fleet.source() do
       {Dolphin.Fleet.TestSource, _} ->
-        "mission #{inspect(s.name)} needs a MAVLink vehicle; vehicle #{s.vehicle} is a fake vehicle (--fake), which runs only test-platform tasks"
+        "mission #{inspect(data.name)} needs a MAVLink vehicle; vehicle #{data.vehicle} is a fake vehicle (--fake), which runs only test-platform tasks"
 
       _ ->
-        "vehicle #{s.vehicle} is not connected"
+        "vehicle #{data.vehicle} is not connected"
     end
   end
 
@@ -343,173 +326,55 @@ defmodule Dolphin.Mission.Executor do
     e in ArgumentError -> {:error, "mission #{inspect(mission.name)} cannot be turned into items: #{Exception.message(e)}"}
   end
 
-  defp mission_op(:ok), do: :ok
-  defp mission_op({:error, e}), do: {:error, Exception.message(e)}
+  # --- :flying ----------------------------------------------------------------
 
-  # A command to the vehicle; refused, with what the autopilot said meanwhile.
-  defp command(send, what, vehicle) do
-    before = texts(vehicle)
-
-    case send.() do
-      {:ok, _} -> :ok
-      {:error, e} -> {:error, "#{what} refused: #{Exception.message(e)}#{autopilot_says(vehicle, before, [])}"}
-    end
-  end
-
-  defp texts(vehicle), do: Vehicles.status_texts(vehicle)
-
-  # The autopilot's latest explanation (a STATUSTEXT of warning or worse, or
-  # one with a prefix) among what it said since `before` (the texts when the
-  # exchange began): a text from an hour ago answers nothing now.
-  defp autopilot_says(vehicle, before, prefixes) do
-    texts = Dolphin.Vehicles.State.texts_since(before, texts(vehicle))
-
-    found =
-      Enum.find(texts, fn {severity, text} ->
-        Enum.any?(prefixes, &String.starts_with?(text, &1 <> ":")) or (prefixes == [] and severity <= 4)
-      end)
-
-    case found do
-      {_, text} -> ": the autopilot says \"#{text}\""
-      nil -> ""
-    end
-  end
-
-  # --- flying -----------------------------------------------------------------
-
-  defp follow(s) do
-    case Vehicles.state(s.vehicle) do
-      {:ok, st} -> judge(s, st)
+  defp follow(data) do
+    case Vehicles.state(data.vehicle) do
+      {:ok, st} -> judge(data, st)
       # Lost: the engine stops us with {:vehicle_lost, id}.
-      {:error, _} -> {:noreply, s}
+      {:error, _} -> {:keep_state, data}
     end
   end
 
-  defp judge(s, st) do
-    mission = st.mission
-    # The mission counts as running once the vehicle reports it active in AUTO,
-    # or reports an item of it reached (progress restarts at every upload): a
-    # mission that ends in the loop that starts it is only ever reported
-    # COMPLETE, as ArduCopter sends the latest MISSION_CURRENT only. Before
-    # that, the state still describes the previous mission.
-    active = s.active or (st.mode == :auto and mission.state == :active) or mission.reached != nil
-    # Reports travel separately (mode and armed bit with the 1 Hz heartbeat,
-    # the mission state with MISSION_CURRENT): leaving AUTO or disarming counts
-    # only once the heartbeat has shown AUTO, or armed, during this mission.
-    s = %{s | active: active, armed_seen: s.armed_seen or (active and st.armed), auto_seen: s.auto_seen or (active and st.mode == :auto)}
-    s = %{s | on_land_item: s.on_land_item or (active and st.armed and on_land_item?(s, mission))}
-    # After its final landing ArduCopter resets the mission to item 1, often
-    # before the heartbeat shows the disarm: that is no progress of this mission.
-    s = if s.on_land_item and not on_land_item?(s, mission), do: s, else: report_progress(s, mission)
+  defp judge(data, st) do
+    {verdict, progress, flight} = Flight.judge(data.flight, st)
+    data = %{data | flight: flight}
+    if progress, do: Platform.progress(data.owner, progress)
 
-    cond do
-      not active ->
-        {:noreply, s}
+    case verdict do
+      :flying ->
+        {:keep_state, data}
 
-      complete?(s, st) ->
-        done(s)
+      :done ->
+        done(data)
 
-      s.auto_seen and st.mode != :auto ->
-        # Left to what took it (a failsafe's RTL or LAND, the pilot): never overridden.
-        fail(s, "the vehicle left AUTO for #{mode_name(st.mode)} before the mission ended#{autopilot_says(s.vehicle, s.flight_texts, [])}", hold: false)
+      # Left to what took it (a failsafe's RTL or LAND, the pilot): never overridden.
+      {:left, why} ->
+        fail(:flying, data, why <> Dolphin.ManoeuvreError.says(Dolphin.Vehicles.State.texts_since(data.flight_texts, st.status_texts), []), hold: false)
 
-      s.armed_seen and not st.armed and not match?({:landing, _}, s.ending) ->
-        fail(s, "the vehicle disarmed before the mission ended#{autopilot_says(s.vehicle, s.flight_texts, [])}", hold: false)
-
-      s.armed_seen and not st.armed and not s.landing_check ->
-        s.clock.send_after(self(), :check_landed, @landing_reports_ms)
-        {:noreply, %{s | landing_check: true}}
-
-      true ->
-        {:noreply, s}
+      # A landing mission's disarm comes before its last report (ArduPilot
+      # reports the final item after "Disarming motors"): the reports are
+      # given their time, which a state change would not cut short.
+      :check_landed ->
+        {:keep_state, data, [{:state_timeout, Clock.to_real_ms(@landing_reports_ms), :check_landed}]}
     end
   end
 
-  # ArduPilot reports the end with MISSION_CURRENT state COMPLETE (after the
-  # landing and disarm when the mission lands); `reached` of the last item
-  # counts too, for autopilots without mission states.
-  # ArduCopter reports a final RETURN_TO_LAUNCH reached after the disarm, but
-  # a final NAV_LAND never: it disarms with the land item still current and
-  # the mission ACTIVE (docs/ardupilot.md), so landed and disarmed at the last
-  # item is the end.
-  defp complete?(%{ending: {:landing, seq}} = s, st),
-    do: s.armed_seen and not st.armed and (st.mission.state == :complete or st.mission.reached == seq or landed_at_end?(s, st, seq))
-
-  defp complete?(%{ending: {:reached, seq}}, st), do: st.mission.state == :complete or (st.mission.state == nil and st.mission.reached == seq)
-  defp complete?(_forever, _st), do: false
-
-  # After that disarm ArduCopter resets its mission to item 1, often reported
-  # before the heartbeat shows the disarm: what counts is that the vehicle
-  # flew the final land item armed, then disarmed on the ground.
-  defp landed_at_end?(s, st, _seq), do: s.on_land_item and st.landed in [:on_ground, nil]
-
-  defp on_land_item?(%{ending: {:landing, seq}}, mission), do: mission.current == seq
-  defp on_land_item?(_s, _mission), do: false
-
-  defp report_progress(s, mission) do
-    progress = %{reached: mission.reached, current: mission.current, total: mission.total}
-
-    if s.active and progress != s.progress do
-      Platform.progress(s.owner, progress)
-      %{s | progress: progress}
-    else
-      s
-    end
-  end
-
-  defp mode_name({:custom, n}), do: "mode #{n}"
-  defp mode_name(mode), do: mode |> to_string() |> String.upcase()
-
-  # --- stopping -----------------------------------------------------------------
-
-  @doc false
-  # Makes a vehicle safe: holding position in the air (BRAKE, else GUIDED),
-  # disarmed on the ground, and left alone when its autopilot is bringing it
-  # down (RTL, LAND: a failsafe or the pilot decided). `fresh?`: the state may
-  # be older than commands just accepted (arming, MISSION_START), so the
-  # vehicle is held as if flying whatever the telemetry says.
-  @spec hold(byte(), boolean()) :: :ok | {:error, String.t()}
-  def hold(vehicle, fresh? \\ false) do
-    case Vehicles.state(vehicle) do
-      {:error, :unknown_vehicle} -> :ok
-      {:ok, %{mode: mode}} when mode in @landing_modes -> :ok
-      {:ok, %{armed: false}} when not fresh? -> :ok
-      {:ok, %{mode: mode}} when mode in [:brake, :guided] and not fresh? -> :ok
-      {:ok, %{landed: :on_ground}} when not fresh? -> disarm_or_brake(vehicle)
-      {:ok, _} -> brake(vehicle)
-    end
-  end
-
-  # An accepted DO_SET_MODE means the mode has changed (ArduPilot acks after
-  # the switch); the heartbeat shows it within a second.
-  defp brake(vehicle) do
-    with {:error, _} <- command(fn -> Vehicles.set_mode(vehicle, :brake) end, "BRAKE", vehicle),
-         {:error, why} <- command(fn -> Vehicles.set_mode(vehicle, :guided) end, "GUIDED", vehicle) do
-      {:error, "the vehicle could not be made to hold position: #{why}"}
-    end
-  end
-
-  # "On the ground" may be a second old: a vehicle that refuses the disarm is flying.
-  defp disarm_or_brake(vehicle) do
-    case command(fn -> Vehicles.disarm(vehicle) end, "disarming on the ground", vehicle) do
-      :ok -> :ok
-      {:error, _} -> brake(vehicle)
-    end
-  end
+  # --- the end ----------------------------------------------------------------
 
   defp cancel_task(%{task: nil}), do: :ok
   defp cancel_task(%{task: task}), do: Task.shutdown(task, :brutal_kill) && :ok
 
-  defp done(s) do
-    Platform.done(s.owner)
-    {:stop, :normal, s}
+  defp done(data) do
+    Platform.done(data.owner)
+    {:stop, :normal, data}
   end
 
-  defp fail(s, why, opts \\ []) do
+  defp fail(state, data, why, opts \\ []) do
     # The engine says which task and which vehicle; the reason says what happened.
-    Platform.failed(s.owner, why)
+    Platform.failed(data.owner, why)
     # A failed mission leaves the vehicle holding, not flying on.
-    _ = if Keyword.get(opts, :hold, true) and commanded?(s), do: hold(s.vehicle, true)
-    {:stop, :normal, s}
+    _ = if Keyword.get(opts, :hold, true) and commanded?(state), do: hold(data.vehicle, true)
+    {:stop, :normal, data}
   end
 end

@@ -169,6 +169,27 @@ defmodule Dolphin.Mission.PlatformTest do
     assert {:ok, %{mode: :brake, armed: true}} = Sim.info(1)
   end
 
+  test "the mission's process is a :gen_statem through its steps, open to :sys; stopped in flight, the vehicle holds", %{port: port} do
+    [{1, home}] = start_fleet(port, count: 1)
+    hover = Mission.new("hover") |> Mission.add(C.home(home)) |> Mission.add(C.take_off(%{home | h: home.h + 20})) |> Mission.add(C.move_and_loiter_time(0, 0, 0, 3_600))
+    {:ok, pid} = Dolphin.Mission.Executor.start_link(hover, 1, owner: self())
+    # Every change of step, as :sys reports it.
+    test = self()
+    :ok = :sys.install(pid, {fn acc, event, _ -> match?({:consume, _, from, to} when from != to, event) and send(test, {:step, elem(event, 3)}) && acc end, nil})
+
+    Wait.until(fn -> match?({:flying, %{vehicle: 1}}, :sys.get_state(pid)) end)
+    steps = steps()
+    # The steps it took after :sys was installed, in order.
+    assert Enum.drop_while([:hold, :clear, :upload, :verify, :guided, :arm, :start, :flying], &(&1 not in steps)) == steps
+
+    Wait.until(fn -> match?({:ok, %{mode: :auto, position: %{relative_alt: alt}}} when alt > 5, Sim.info(1)) end)
+    assert_receive {:dolphin_platform, ^pid, {:progress, %{}}}, 30_000
+    ref = Process.monitor(pid)
+    assert :ok = Dolphin.Mission.Executor.stop(pid, :operator)
+    assert_receive {:DOWN, ^ref, :process, ^pid, :normal}
+    assert {:ok, %{mode: :brake, armed: true}} = Sim.info(1)
+  end
+
   test "stopped right after MISSION_START, before telemetry shows it, the vehicle still holds", %{port: port} do
     [{1, home}] = start_fleet(port, count: 1)
     {:ok, run} = Engine.start(Engine.on(out_and_back(home), [1]))
@@ -216,6 +237,14 @@ defmodule Dolphin.Mission.PlatformTest do
     photo = Mission.new("photo") |> Mission.add(C.home(home)) |> Mission.add(C.take_off(home)) |> Mission.add(C.capture_photo())
     assert Dolphin.Mission.Platform.requirements(photo) == %{type: :uav, payloads: [:camera]}
     assert Dolphin.Mission.Platform.requirements(Mission.new("x")) == %{type: nil, payloads: []}
+  end
+
+  defp steps do
+    receive do
+      {:step, s} -> [s | steps()]
+    after
+      0 -> []
+    end
   end
 
   defp flush do

@@ -1,0 +1,117 @@
+defmodule Dolphin.Mission.Executor.Flight do
+  @moduledoc false
+  # The executor's judgement of a mission in flight, pure: from the vehicle's
+  # state (Dolphin.Vehicles.State) to progress and an end (done, or the
+  # vehicle left the mission), with what it has seen of this flight.
+
+  defstruct [:ending, active: false, armed_seen: false, auto_seen: false, landing_check: false, on_land_item: false, progress: nil]
+
+  @typedoc "How the mission ends (`Dolphin.Mission.ending/1`) and what this flight has shown so far."
+  @type t :: %__MODULE__{
+          ending: {:landing, non_neg_integer()} | {:reached, non_neg_integer()} | term(),
+          active: boolean(),
+          armed_seen: boolean(),
+          auto_seen: boolean(),
+          landing_check: boolean(),
+          on_land_item: boolean(),
+          progress: map() | nil
+        }
+
+  @typedoc """
+  `:flying`; `:done`; `{:left, why}`: the vehicle left the mission (a failsafe,
+  the pilot), to be left to what took it; `:check_landed`: a landing mission's
+  vehicle disarmed, whose last reports are still to come.
+  """
+  @type verdict :: :flying | :done | {:left, String.t()} | :check_landed
+
+  @spec new(term()) :: t()
+  def new(ending), do: %__MODULE__{ending: ending}
+
+  @doc false
+  # MISSION_CURRENT's ACTIVE may come and go between two reads of the state (a
+  # mission that completes at once): the changes carried by the events count.
+  @spec changes(t(), [{atom(), term()}]) :: t()
+  def changes(f, changes) do
+    if Enum.any?(changes, &match?({:mission, %{state: :active}}, &1)), do: %{f | active: true}, else: f
+  end
+
+  @doc false
+  # The verdict on a state of the vehicle, and the progress to report (nil:
+  # none new).
+  @spec judge(t(), map()) :: {verdict(), map() | nil, t()}
+  def judge(f, st) do
+    mission = st.mission
+    # The mission counts as running once the vehicle reports it active in AUTO,
+    # or reports an item of it reached (progress restarts at every upload): a
+    # mission that ends in the loop that starts it is only ever reported
+    # COMPLETE, as ArduCopter sends the latest MISSION_CURRENT only. Before
+    # that, the state still describes the previous mission.
+    active = f.active or (st.mode == :auto and mission.state == :active) or mission.reached != nil
+    # Reports travel separately (mode and armed bit with the 1 Hz heartbeat,
+    # the mission state with MISSION_CURRENT): leaving AUTO or disarming counts
+    # only once the heartbeat has shown AUTO, or armed, during this mission.
+    f = %{f | active: active, armed_seen: f.armed_seen or (active and st.armed), auto_seen: f.auto_seen or (active and st.mode == :auto)}
+    f = %{f | on_land_item: f.on_land_item or (active and st.armed and on_land_item?(f, mission))}
+    # After its final landing ArduCopter resets the mission to item 1, often
+    # before the heartbeat shows the disarm: that is no progress of this mission.
+    {progress, f} = if f.on_land_item and not on_land_item?(f, mission), do: {nil, f}, else: progress(f, mission)
+
+    cond do
+      not active ->
+        {:flying, progress, f}
+
+      complete?(f, st) ->
+        {:done, progress, f}
+
+      f.auto_seen and st.mode != :auto ->
+        {{:left, "the vehicle left AUTO for #{mode_name(st.mode)} before the mission ended"}, progress, f}
+
+      f.armed_seen and not st.armed and not match?({:landing, _}, f.ending) ->
+        {{:left, "the vehicle disarmed before the mission ended"}, progress, f}
+
+      f.armed_seen and not st.armed and not f.landing_check ->
+        {:check_landed, progress, %{f | landing_check: true}}
+
+      true ->
+        {:flying, progress, f}
+    end
+  end
+
+  @doc false
+  # A landing mission's vehicle disarmed some time ago: its reports have come.
+  @spec landed(t(), map()) :: :done | {:failed, String.t()}
+  def landed(f, st) do
+    if complete?(f, st),
+      do: :done,
+      else: {:failed, "the vehicle landed and disarmed before the mission's end (at item #{st.mission.current} of #{st.mission.total})"}
+  end
+
+  # ArduPilot reports the end with MISSION_CURRENT state COMPLETE (after the
+  # landing and disarm when the mission lands); `reached` of the last item
+  # counts too, for autopilots without mission states.
+  # ArduCopter reports a final RETURN_TO_LAUNCH reached after the disarm, but
+  # a final NAV_LAND never: it disarms with the land item still current and
+  # the mission ACTIVE (docs/ardupilot.md), so landed and disarmed at the last
+  # item is the end.
+  defp complete?(%{ending: {:landing, seq}} = f, st),
+    do: f.armed_seen and not st.armed and (st.mission.state == :complete or st.mission.reached == seq or landed_at_end?(f, st))
+
+  defp complete?(%{ending: {:reached, seq}}, st), do: st.mission.state == :complete or (st.mission.state == nil and st.mission.reached == seq)
+  defp complete?(_forever, _st), do: false
+
+  # After that disarm ArduCopter resets its mission to item 1, often reported
+  # before the heartbeat shows the disarm: what counts is that the vehicle
+  # flew the final land item armed, then disarmed on the ground.
+  defp landed_at_end?(f, st), do: f.on_land_item and st.landed in [:on_ground, nil]
+
+  defp on_land_item?(%{ending: {:landing, seq}}, mission), do: mission.current == seq
+  defp on_land_item?(_f, _mission), do: false
+
+  defp progress(f, mission) do
+    progress = %{reached: mission.reached, current: mission.current, total: mission.total}
+    if f.active and progress != f.progress, do: {progress, %{f | progress: progress}}, else: {nil, f}
+  end
+
+  defp mode_name({:custom, n}), do: "mode #{n}"
+  defp mode_name(mode), do: mode |> to_string() |> String.upcase()
+end
