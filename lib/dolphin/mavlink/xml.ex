@@ -54,12 +54,12 @@ defmodule Dolphin.MAVLink.XML do
 
   @type definitions :: %{messages: [message()], enums: [enum()], files: [Path.t()]}
 
-  @doc "Like `load/1` but raises the `Dolphin.MAVLink.DialectError`."
+  @doc "Like `load/1` but raises `ArgumentError` with the error's message."
   @spec load!(Path.t()) :: definitions()
   def load!(path) do
     case load(path) do
       {:ok, defs} -> defs
-      {:error, error} -> raise error
+      {:error, error} -> raise ArgumentError, Exception.message(error)
     end
   end
 

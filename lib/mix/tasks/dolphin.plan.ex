@@ -73,6 +73,7 @@ defmodule Mix.Tasks.Dolphin.Plan do
 
   use Mix.Task
 
+  alias Dolphin.CommandLineError
   alias Dolphin.Console.{Format, MissionFile, MissionSource}
   alias Dolphin.Mission
 
@@ -94,23 +95,32 @@ defmodule Mix.Tasks.Dolphin.Plan do
 
     case main(argv) do
       {:ok, text} -> Mix.shell().info(text)
-      {:error, message} -> Mix.raise("mix dolphin.plan: " <> message)
+      {:error, error} -> Mix.raise("mix dolphin.plan: " <> Exception.message(error))
     end
   end
 
   @doc """
-  Does the work of the task: `{:ok, text to print}` or `{:error, message}`
-  (the usage is part of the message of a usage error).
+  Does the work of the task: `{:ok, text to print}` or
+  `{:error, %Dolphin.CommandLineError{}}` (the usage is part of the message of
+  a usage error).
   """
-  @spec main([String.t()]) :: {:ok, String.t()} | {:error, String.t()}
+  @spec main([String.t()]) :: {:ok, String.t()} | {:error, CommandLineError.t()}
   def main(argv) do
-    case OptionParser.parse(argv, strict: @switches) do
-      {opts, args, []} -> command(args, opts)
-      {_, _, [{switch, value} | _]} -> usage("bad option #{switch}#{if value, do: " " <> value, else: ""}")
+    result =
+      case OptionParser.parse(argv, strict: @switches) do
+        {opts, args, []} -> command(args, opts)
+        {_, _, [{switch, value} | _]} -> usage("bad option #{switch}#{if value, do: " " <> value, else: ""}")
+      end
+
+    case result do
+      {:error, {:usage, message}} -> {:error, %CommandLineError{reason: :usage, message: message, usage: @usage}}
+      {:error, message} when is_binary(message) -> {:error, %CommandLineError{reason: :failed, message: message}}
+      {:ok, text} -> {:ok, text}
     end
   end
 
-  defp usage(message), do: {:error, message <> "\n" <> @usage}
+  # The steps below say what went wrong in words; main/1 makes the error of them.
+  defp usage(message), do: {:error, {:usage, message}}
 
   defp command(["export", file, name, out], opts) do
     with :ok <- only(opts, [:home, :cruise_speed, :hover_speed], "export"),
@@ -189,7 +199,7 @@ defmodule Mix.Tasks.Dolphin.Plan do
   defp connect(endpoint, name) do
     case Dolphin.Link.connect(endpoint, name: name) do
       {:ok, link} -> {:ok, link}
-      {:error, why} -> usage("--connect #{endpoint}: #{why}")
+      {:error, e} -> usage("--connect #{endpoint}: #{Exception.message(e)}")
     end
   end
 
