@@ -284,7 +284,7 @@ defmodule Dolphin.Mission.Executor do
       {:ok, back} ->
         case Mission.compare_download(s.items, back) do
           :ok -> :ok
-          {:error, why} -> {:error, "the mission read back differs from the one uploaded: #{why}"}
+          {:error, e} -> {:error, "the mission read back differs from the one uploaded: #{Exception.message(e)}"}
         end
 
       {:error, %Dolphin.MissionError{result: :timeout}} when attempts > 1 ->

@@ -259,7 +259,7 @@ defmodule Mix.Tasks.Dolphin.Plan do
         {:ok, back} ->
           case Mission.compare_download(items, back) do
             :ok -> {:ok, "#{what}#{lost_ack}; #{read}: the vehicle holds exactly the mission"}
-            {:error, why} -> {:error, "#{what}#{lost_ack}; #{read}, but it differs: #{why}"}
+            {:error, e} -> {:error, "#{what}#{lost_ack}; #{read}, but it differs: #{Exception.message(e)}"}
           end
 
         {:error, e} ->
