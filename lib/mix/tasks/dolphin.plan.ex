@@ -115,6 +115,7 @@ defmodule Mix.Tasks.Dolphin.Plan do
     case result do
       {:error, {:usage, message}} -> {:error, %CommandLineError{reason: :usage, message: message, usage: @usage}}
       {:error, message} when is_binary(message) -> {:error, %CommandLineError{reason: :failed, message: message}}
+      {:error, %{__exception__: true} = e} -> {:error, %CommandLineError{reason: :failed, message: Exception.message(e), cause: e}}
       {:ok, text} -> {:ok, text}
     end
   end
@@ -377,7 +378,7 @@ defmodule Mix.Tasks.Dolphin.Plan do
   defp pick(found, name, notes) do
     case MissionFile.pick(found, name) do
       {:ok, one} -> {:ok, one}
-      {:error, why} -> {:error, Enum.join([why | notes], "\n")}
+      {:error, e} -> {:error, Enum.join([Exception.message(e) | notes], "\n")}
     end
   end
 
