@@ -118,7 +118,7 @@ defmodule Dolphin.Console do
          {:ok, id} <- Runs.start_script(script, opts) do
       say("run #{id} started: script #{Path.relative_to_cwd(path)} (tasks() shows it, stop(#{id}) stops it)")
     else
-      {:error, why} -> say("run: " <> why)
+      {:error, why} -> say("run: " <> why_text(why))
     end
 
     done()
@@ -130,7 +130,7 @@ defmodule Dolphin.Console do
          {:ok, id} <- Runs.start_task(task, opts) do
       say("run #{id} started: #{Engine.Task.kind(task)} #{inspect(Engine.Task.label(task))} (tasks() shows it, stop(#{id}) stops it)")
     else
-      {:error, why} -> say("run: " <> why)
+      {:error, why} -> say("run: " <> why_text(why))
     end
 
     done()
@@ -242,7 +242,7 @@ defmodule Dolphin.Console do
 
   defp arm_with_retries(id, wait_ms) when not is_integer(wait_ms) or wait_ms < 0 do
     {:error, why} = Check.ms(wait_ms, :wait)
-    say("vehicle #{id}: " <> why)
+    say("vehicle #{id}: " <> why_text(why))
     :error
   end
 
@@ -311,12 +311,12 @@ defmodule Dolphin.Console do
         command(id, :control, opts, [:force], fn state, opts ->
           case Check.pilot_mode(mode, in_air?(state), opts[:force] == true) do
             :ok -> result(id, "mode #{Format.mode(mode)}", fn -> Vehicles.set_mode(id, mode) end)
-            {:error, why} -> say("vehicle #{id}: " <> why)
+            {:error, why} -> say("vehicle #{id}: " <> why_text(why))
           end
         end)
 
       {:error, why} ->
-        say("mode: " <> why)
+        say("mode: " <> why_text(why))
         done()
     end
   end
@@ -341,7 +341,7 @@ defmodule Dolphin.Console do
         end)
 
       {:error, why} ->
-        say("takeoff: " <> why)
+        say("takeoff: " <> why_text(why))
         done()
     end
   end
@@ -371,7 +371,7 @@ defmodule Dolphin.Console do
         end)
 
       {:error, why} ->
-        say("goto: " <> why)
+        say("goto: " <> why_text(why))
         done()
     end
   end
@@ -583,7 +583,7 @@ defmodule Dolphin.Console do
         events -> say(Enum.map_join(events, "\n", &Format.event(&1, Events.origin_ms())))
       end
     else
-      {:error, why} -> say("events: " <> why)
+      {:error, why} -> say("events: " <> why_text(why))
     end
 
     done()
@@ -601,11 +601,15 @@ defmodule Dolphin.Console do
          {:ok, state} <- Vehicles.state(id) |> gone(id) do
       fun.(state, opts)
     else
-      {:error, why} -> say(why)
+      {:error, why} -> say(why_text(why))
     end
 
     done()
   end
+
+  # The checks' and the runs' errors are structs; the helpers' own reasons are words.
+  defp why_text(%{__exception__: true} = e), do: Exception.message(e)
+  defp why_text(why) when is_binary(why), do: why
 
   defp gone({:ok, state}, _id), do: {:ok, state}
   defp gone(_, id), do: {:error, "vehicle #{id} went away"}
