@@ -81,7 +81,7 @@ one = fn items, ahead? ->
     else
       {:upload, {:error, e}} -> {:failed, "upload: " <> Exception.message(e)}
       {:error, %Dolphin.MissionError{} = e} -> {:failed, "read-back: " <> Exception.message(e)}
-      {:error, why} -> {:failed, "read-back differs: " <> why}
+      {:error, e} -> {:failed, "read-back differs: " <> Exception.message(e)}
     end
 
   # Flush what the transfers sent us.

@@ -119,7 +119,7 @@ defmodule Dolphin.Console do
          {:ok, id} <- Runs.start_script(script, opts) do
       say("run #{id} started: script #{Path.relative_to_cwd(path)} (tasks() shows it, stop(#{id}) stops it)")
     else
-      {:error, why} -> say("run: " <> why)
+      {:error, why} -> say("run: " <> why_text(why))
     end
 
     done()
@@ -131,7 +131,7 @@ defmodule Dolphin.Console do
          {:ok, id} <- Runs.start_task(task, opts) do
       say("run #{id} started: #{Engine.Task.kind(task)} #{inspect(Engine.Task.label(task))} (tasks() shows it, stop(#{id}) stops it)")
     else
-      {:error, why} -> say("run: " <> why)
+      {:error, why} -> say("run: " <> why_text(why))
     end
 
     done()
@@ -245,7 +245,7 @@ defmodule Dolphin.Console do
   defp with_wait(id, opts, fun) do
     case Check.ms(Keyword.get(opts, :wait, 30_000), :wait) do
       {:ok, wait} -> fun.(wait)
-      {:error, why} -> say("vehicle #{id}: " <> why)
+      {:error, why} -> say("vehicle #{id}: " <> why_text(why))
     end
   end
 
@@ -305,12 +305,12 @@ defmodule Dolphin.Console do
         command(id, :control, opts, [:force], fn state, opts ->
           case Check.pilot_mode(mode, Manoeuvres.in_air?(state), opts[:force] == true) do
             :ok -> result(id, "mode #{Format.mode(mode)}", fn -> Vehicles.set_mode(id, mode) end)
-            {:error, why} -> say("vehicle #{id}: " <> why)
+            {:error, why} -> say("vehicle #{id}: " <> why_text(why))
           end
         end)
 
       {:error, why} ->
-        say("mode: " <> why)
+        say("mode: " <> why_text(why))
         done()
     end
   end
@@ -332,7 +332,7 @@ defmodule Dolphin.Console do
         end)
 
       {:error, why} ->
-        say("takeoff: " <> why)
+        say("takeoff: " <> why_text(why))
         done()
     end
   end
@@ -357,7 +357,7 @@ defmodule Dolphin.Console do
         end)
 
       {:error, why} ->
-        say("goto: " <> why)
+        say("goto: " <> why_text(why))
         done()
     end
   end
@@ -569,7 +569,7 @@ defmodule Dolphin.Console do
         events -> say(Enum.map_join(events, "\n", &Format.event(&1, Events.origin_ms())))
       end
     else
-      {:error, why} -> say("events: " <> why)
+      {:error, why} -> say("events: " <> why_text(why))
     end
 
     done()
@@ -587,11 +587,15 @@ defmodule Dolphin.Console do
          {:ok, state} <- Vehicles.state(id) |> gone(id) do
       fun.(state, opts)
     else
-      {:error, why} -> say(why)
+      {:error, why} -> say(why_text(why))
     end
 
     done()
   end
+
+  # The checks' and the runs' errors are structs; the helpers' own reasons are words.
+  defp why_text(%{__exception__: true} = e), do: Exception.message(e)
+  defp why_text(why) when is_binary(why), do: why
 
   defp gone({:ok, state}, _id), do: {:ok, state}
   defp gone(_, id), do: {:error, "vehicle #{id} went away"}

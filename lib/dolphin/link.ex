@@ -21,7 +21,7 @@ defmodule Dolphin.Link do
   MAVProxy's port), for tools such as `mix dolphin.run` to use.
   """
 
-  alias Dolphin.Link.Endpoint
+  alias Dolphin.Link.{Endpoint, EndpointError}
 
   @doc "Where a ground station listens when told nothing else: `udpin:0.0.0.0:14550`."
   @spec default_endpoint() :: String.t()
@@ -48,7 +48,7 @@ defmodule Dolphin.Link do
 
       case connect(endpoint, Keyword.put_new(opts, :forward, forward)) do
         {:ok, _} -> :ok
-        {:error, why} -> raise ArgumentError, "config :dolphin, links: #{why}"
+        {:error, error} -> raise ArgumentError, "config :dolphin, links: #{Exception.message(error)}"
       end
     end
 
@@ -57,9 +57,10 @@ defmodule Dolphin.Link do
 
   @doc """
   Starts a link. Options as for `Dolphin.Link.Connection.start_link/1` (but
-  `:endpoint`); `:forward` may be given as endpoint strings.
+  `:endpoint`); `:forward` may be given as endpoint strings. An endpoint that
+  cannot be read or opened gives a `Dolphin.Link.EndpointError`.
   """
-  @spec connect(String.t(), keyword()) :: {:ok, pid()} | {:error, String.t()}
+  @spec connect(String.t(), keyword()) :: {:ok, pid()} | {:error, EndpointError.t()}
   def connect(endpoint, opts \\ []) do
     with {:ok, %Endpoint{} = ep} <- Endpoint.parse(endpoint),
          {:ok, forward} <- parse_all(Keyword.get(opts, :forward, [])) do
@@ -67,10 +68,10 @@ defmodule Dolphin.Link do
 
       case DynamicSupervisor.start_child(Dolphin.Link.Supervisor, {Dolphin.Link.Connection, [endpoint: ep] ++ opts}) do
         {:ok, pid} -> {:ok, pid}
-        {:error, {:already_started, _}} -> {:error, "#{endpoint}: already connected"}
-        {:error, {{:cannot_open, where, why}, _}} -> {:error, "#{where}: cannot open: #{why}"}
-        {:error, {:cannot_open, where, why}} -> {:error, "#{where}: cannot open: #{why}"}
-        {:error, other} -> {:error, "#{endpoint}: #{inspect(other)}"}
+        {:error, {:already_started, _}} -> {:error, %EndpointError{endpoint: endpoint, reason: :already_connected}}
+        {:error, {{:cannot_open, where, why}, _}} -> {:error, %EndpointError{endpoint: where, reason: :cannot_open, detail: why}}
+        {:error, {:cannot_open, where, why}} -> {:error, %EndpointError{endpoint: where, reason: :cannot_open, detail: why}}
+        {:error, other} -> {:error, %EndpointError{endpoint: endpoint, reason: :failed, detail: inspect(other)}}
       end
     end
   end

@@ -227,7 +227,8 @@ defmodule Dolphin.Mission do
 
   @doc """
   Compares a mission downloaded from a vehicle with the items uploaded, by
-  meaning: `:ok`, or `{:error, reason}` naming the first difference.
+  meaning: `:ok`, or `{:error, %Dolphin.Mission.MismatchError{}}` naming the
+  first difference.
 
   What ArduPilot gives back differs from what it was sent in ways that do not
   change the mission, and those are ignored: item 0 is the vehicle's own home;
@@ -239,10 +240,10 @@ defmodule Dolphin.Mission do
   command, and for items with a position its latitude and longitude (exactly,
   degrees × 10⁷), its altitude reference and its height (within 1 cm).
   """
-  @spec compare_download([struct()], [struct()]) :: :ok | {:error, String.t()}
+  @spec compare_download([struct()], [struct()]) :: :ok | {:error, Dolphin.Mission.MismatchError.t()}
   def compare_download(uploaded, downloaded) when is_list(uploaded) and is_list(downloaded) do
     if length(uploaded) != length(downloaded) do
-      {:error, "the vehicle has #{length(downloaded)} items, #{length(uploaded)} were uploaded"}
+      {:error, %Dolphin.Mission.MismatchError{what: :count, on_vehicle: length(downloaded), uploaded: length(uploaded)}}
     else
       uploaded
       |> Enum.zip(downloaded)
@@ -255,22 +256,23 @@ defmodule Dolphin.Mission do
 
   defp item_difference(up, down) do
     reference = Map.get(@altitude_reference, up.frame)
+    differs = &{:error, %Dolphin.Mission.MismatchError{what: &1, item: up.seq, on_vehicle: &2, uploaded: &3}}
 
     cond do
       up.command != down.command ->
-        {:error, "item #{up.seq} is command #{down.command} on the vehicle, #{up.command} was uploaded"}
+        differs.(:command, down.command, up.command)
 
       reference == nil ->
         nil
 
       Map.get(@altitude_reference, down.frame) != reference ->
-        {:error, "item #{up.seq} has frame #{down.frame} on the vehicle, #{up.frame} was uploaded"}
+        differs.(:frame, down.frame, up.frame)
 
       {up.x, up.y} != {down.x, down.y} ->
-        {:error, "item #{up.seq} is at #{inspect({down.x, down.y})} on the vehicle, #{inspect({up.x, up.y})} was uploaded"}
+        differs.(:position, {down.x, down.y}, {up.x, up.y})
 
       not (is_number(down.z) and abs(down.z - up.z) <= 0.01) ->
-        {:error, "item #{up.seq} is at height #{inspect(down.z)} on the vehicle, #{up.z} was uploaded"}
+        differs.(:height, down.z, up.z)
 
       true ->
         nil

@@ -222,7 +222,7 @@ defmodule Dolphin.Sim do
     case Dolphin.Link.Endpoint.parse(endpoint) do
       {:ok, %{kind: :udpout, address: address, port: port}} -> {:ok, {address, port}}
       {:ok, _} -> {:error, "the simulator sends to a ground station: give it udpout:HOST:PORT, not #{endpoint}"}
-      error -> error
+      {:error, e} -> {:error, Exception.message(e)}
     end
   end
 

@@ -56,7 +56,7 @@ defmodule Dolphin.SITL do
   MAV_CMD_BATTERY_RESET (`charge_per_s: 0` turns that off).
   """
 
-  alias Dolphin.SITL.{Charger, Instance}
+  alias Dolphin.SITL.{Charger, Error, Instance}
 
   @typedoc "What `start/2` started."
   @type t :: %{
@@ -87,7 +87,7 @@ defmodule Dolphin.SITL do
   port SITL sends to, for something standing between them such as a test's
   impairment proxy), and the link's options (`:tlog`, `:forward`).
   """
-  @spec start(pos_integer(), keyword()) :: {:ok, t()} | {:error, String.t()}
+  @spec start(pos_integer(), keyword()) :: {:ok, t()} | {:error, Error.t()}
   def start(count, opts \\ []) when is_integer(count) and count > 0 do
     with {:ok, bin} <- find_binary(opts),
          {:ok, defaults} <- find_defaults(bin, opts),
@@ -137,8 +137,8 @@ defmodule Dolphin.SITL do
               {:error, why}
           end
 
-        {:error, why} ->
-          {:error, "--sitl: cannot open a local link: #{why}"}
+        {:error, e} ->
+          {:error, %Error{reason: :no_link, cause: e}}
       end
     end
   end
@@ -170,22 +170,20 @@ defmodule Dolphin.SITL do
   The SITL binary to run: `:bin`, else `$ARDUPILOT_SITL`, else
   `../shared/sitl/arducopter` beside the project when it exists.
   """
-  @spec find_binary(keyword()) :: {:ok, Path.t()} | {:error, String.t()}
+  @spec find_binary(keyword()) :: {:ok, Path.t()} | {:error, Error.t()}
   def find_binary(opts \\ []) do
     candidates = [{"--sitl-bin", opts[:bin]}, {"ARDUPILOT_SITL", System.get_env("ARDUPILOT_SITL")}, {"beside the project", default_binary()}]
 
     case Enum.find(candidates, fn {_, path} -> path not in [nil, ""] end) do
       {from, path} ->
         cond do
-          not File.regular?(path) -> {:error, "--sitl: no ArduCopter SITL binary at #{path} (#{from})"}
-          not executable?(path) -> {:error, "--sitl: #{path} (#{from}) is not executable"}
+          not File.regular?(path) -> {:error, %Error{reason: :binary_missing, path: path, from: from}}
+          not executable?(path) -> {:error, %Error{reason: :not_executable, path: path, from: from}}
           true -> {:ok, Path.expand(path)}
         end
 
       nil ->
-        {:error,
-         "--sitl: no ArduCopter SITL binary found: give --sitl-bin PATH or set ARDUPILOT_SITL " <>
-           "(build one from ArduPilot's source: ./waf configure --board sitl && ./waf copter)"}
+        {:error, %Error{reason: :no_binary}}
     end
   end
 
@@ -213,14 +211,14 @@ defmodule Dolphin.SITL do
 
         if File.regular?(beside),
           do: {:ok, [beside]},
-          else: {:error, "--sitl: no copter.parm beside #{bin}: give the defaults file (ArduPilot's Tools/autotest/default_params/copter.parm) with --sitl-defaults"}
+          else: {:error, %Error{reason: :no_defaults, path: bin}}
 
       files ->
         files = List.wrap(files) |> Enum.map(&Path.expand/1)
 
         case Enum.reject(files, &File.regular?/1) do
           [] -> {:ok, files}
-          missing -> {:error, "--sitl: no such defaults file: #{Enum.join(missing, ", ")}"}
+          missing -> {:error, %Error{reason: :defaults_missing, detail: missing}}
         end
     end
   end
@@ -228,7 +226,7 @@ defmodule Dolphin.SITL do
   defp homes(count, opts) do
     {:ok, Dolphin.Sim.homes(count, opts)}
   rescue
-    e in ArgumentError -> {:error, "--sitl: #{Exception.message(e)}"}
+    e in ArgumentError -> {:error, %Error{reason: :bad_homes, detail: Exception.message(e)}}
   end
 
   defp start_instance(spec) do
@@ -260,21 +258,18 @@ defmodule Dolphin.SITL do
 
       failed = Enum.find(logs, fn {_, log} -> log.exit_status != nil end) ->
         {sysid, log} = failed
-        {:error, "--sitl: the ArduCopter SITL of vehicle #{sysid} exited with status #{log.exit_status} before it answered#{last_lines(log)}"}
+        {:error, %Error{reason: :exited, vehicle: sysid, detail: log.exit_status, output: log.lines}}
 
       System.monotonic_time(:millisecond) > deadline ->
         silent = Enum.reject(fleet.sysids, &(&1 in known))
-        {sysid, log} = List.keyfind(logs, hd(silent), 0)
-        {:error, "--sitl: vehicle #{Enum.join(silent, ", ")} never answered on 127.0.0.1:#{fleet.port} (ArduCopter SITL of vehicle #{sysid}: #{log.cmdline})#{last_lines(log)}"}
+        {_sysid, log} = List.keyfind(logs, hd(silent), 0)
+        {:error, %Error{reason: :never_answered, vehicle: silent, port: fleet.port, detail: log.cmdline, output: log.lines}}
 
       true ->
         Process.sleep(@poll_ms)
         await_fleet(fleet, deadline)
     end
   end
-
-  defp last_lines(%{lines: []}), do: "; it printed nothing"
-  defp last_lines(%{lines: lines}), do: "; its last lines:\n" <> Enum.map_join(lines, "\n", &("    " <> &1))
 
   defp camera_params(true), do: %{"CAM1_TYPE" => 1}
   defp camera_params(_), do: %{}

@@ -10,6 +10,7 @@ defmodule Dolphin.MissionTest do
   doctest Dolphin.Mission
   doctest Dolphin.Mission.Command
   doctest Dolphin.Mission.PlanError
+  doctest Dolphin.Mission.MismatchError
 
   @home Geo.location(40.444233, -7.375234, 820)
   @up Geo.location(40.444233, -7.375234, 1200)
@@ -500,11 +501,11 @@ defmodule Dolphin.MissionTest do
 
     test "a missing item, another command, another position, height or altitude reference do not", %{up: up} do
       down = as_downloaded(up)
-      assert {:error, "the vehicle has 4 items, 5 were uploaded"} = Mission.compare_download(up, Enum.drop(down, -1))
-      assert {:error, "item 2 is command 177 on the vehicle, 178 was uploaded"} = Mission.compare_download(up, List.update_at(down, 2, &%{&1 | command: 177}))
-      assert {:error, "item 3 is at " <> _} = Mission.compare_download(up, List.update_at(down, 3, &%{&1 | x: &1.x + 1}))
-      assert {:error, "item 4 is at height " <> _} = Mission.compare_download(up, List.update_at(down, 4, &%{&1 | z: &1.z + 0.5}))
-      assert {:error, "item 1 has frame 3 on the vehicle, 5 was uploaded"} = Mission.compare_download(up, List.update_at(down, 1, &%{&1 | frame: 3}))
+      assert "the vehicle has 4 items, 5 were uploaded" = mismatch(Mission.compare_download(up, Enum.drop(down, -1)))
+      assert "item 2 is command 177 on the vehicle, 178 was uploaded" = mismatch(Mission.compare_download(up, List.update_at(down, 2, &%{&1 | command: 177})))
+      assert "item 3 is at " <> _ = mismatch(Mission.compare_download(up, List.update_at(down, 3, &%{&1 | x: &1.x + 1})))
+      assert "item 4 is at height " <> _ = mismatch(Mission.compare_download(up, List.update_at(down, 4, &%{&1 | z: &1.z + 0.5})))
+      assert "item 1 has frame 3 on the vehicle, 5 was uploaded" = mismatch(Mission.compare_download(up, List.update_at(down, 1, &%{&1 | frame: 3})))
     end
   end
 
@@ -530,5 +531,10 @@ defmodule Dolphin.MissionTest do
       assert inspect(C.survey_area(3000, 10000, 500, :north_east)) == "survey_area(3000, 10000, 500, :north_east)"
       assert inspect(C.landing_point(Geo.location(40.5, -7.25, 800.5))) == "landing_point(location(40.5, -7.25, 800.5), :nan, 0)"
     end
+  end
+
+  defp mismatch(result) do
+    assert {:error, %Dolphin.Mission.MismatchError{} = e} = result
+    Exception.message(e)
   end
 end

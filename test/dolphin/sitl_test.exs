@@ -29,11 +29,13 @@ defmodule Dolphin.SITLTest do
 
   describe "Dolphin.SITL" do
     test "a missing binary or defaults file is a clear error" do
-      assert {:error, message} = SITL.start(1, bin: "/nonexistent/arducopter")
+      assert {:error, %SITL.Error{} = e} = SITL.start(1, bin: "/nonexistent/arducopter")
+      message = Exception.message(e)
       assert message =~ "no ArduCopter SITL binary at /nonexistent/arducopter (--sitl-bin)"
 
       {:ok, bin} = SITL.find_binary()
-      assert {:error, message} = SITL.start(1, bin: bin, defaults: ["/nonexistent/x.parm"])
+      assert {:error, %SITL.Error{} = e} = SITL.start(1, bin: bin, defaults: ["/nonexistent/x.parm"])
+      message = Exception.message(e)
       assert message =~ "no such defaults file: /nonexistent/x.parm"
     end
 
@@ -45,7 +47,8 @@ defmodule Dolphin.SITLTest do
       File.write!(fake, "#!/bin/sh\necho 'bad option --model'\necho 'giving up'\nexit 3\n")
       File.chmod!(fake, 0o755)
       File.write!(Path.join(dir, "copter.parm"), "")
-      assert {:error, message} = SITL.start(1, bin: fake)
+      assert {:error, %SITL.Error{} = e} = SITL.start(1, bin: fake)
+      message = Exception.message(e)
       assert message =~ "exited with status 3 before it answered"
       assert message =~ "giving up"
     end

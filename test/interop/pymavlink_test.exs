@@ -352,7 +352,7 @@ defmodule Dolphin.MAVLink.Interop.PymavlinkTest do
     from_record =
       case Record.decode(line, APM) do
         {:ok, message, opts} -> Frame.encode(message, opts)
-        {:error, why} -> {:error, why}
+        {:error, e} -> {:error, Exception.message(e)}
       end
 
     [
@@ -683,8 +683,8 @@ defmodule Dolphin.MAVLink.Interop.PymavlinkTest do
       {:ok, value} ->
         value
 
-      {:error, why} ->
-        flunk("bad JSON (#{why}): #{String.slice(IO.iodata_to_binary(iodata), 0, 300)}")
+      {:error, e} ->
+        flunk("bad JSON (#{Exception.message(e)}): #{String.slice(IO.iodata_to_binary(iodata), 0, 300)}")
     end
   end
 

@@ -1,10 +1,11 @@
 defmodule Dolphin.Console.Check do
   @moduledoc false
   # Pure argument checks of the console's helpers: each returns {:ok, value}
-  # or {:error, text an operator can act on}. The vehicle check works on a
-  # snapshot of what the ground station knows (Dolphin.Console.Snapshot).
+  # or {:error, %UsageError{}} whose message an operator can act on. The
+  # vehicle check works on a snapshot of what the ground station knows
+  # (Dolphin.Console.Snapshot).
 
-  alias Dolphin.Console.Format
+  alias Dolphin.Console.UsageError
 
   @typedoc """
   What the console knows of a vehicle: `mavlink?` (it has a MAVLink state;
@@ -19,28 +20,26 @@ defmodule Dolphin.Console.Check do
   # that changes what the vehicle does), :link (it talks to the vehicle but
   # changes nothing), :any (reads what the ground station already has).
   # {:ok, :free}, {:ok, {:stop_first, task}} (force: true and a task flies
-  # it), or {:error, why}.
+  # it), or {:error, %UsageError{}}.
   @spec vehicle(term(), %{integer() => info()}, :control | :link | :any, boolean()) ::
-          {:ok, :free | {:stop_first, map()}} | {:error, String.t()}
+          {:ok, :free | {:stop_first, map()}} | {:error, UsageError.t()}
   def vehicle(id, known, needs, force \\ false)
 
   def vehicle(id, known, needs, force) when is_integer(id) and id >= 0 do
     case Map.fetch(known, id) do
       :error ->
-        {:error, unknown(id, known)}
+        {:error, %UsageError{reason: :unknown_vehicle, value: id, detail: known |> Map.keys() |> Enum.sort()}}
 
       {:ok, info} ->
         cond do
           needs != :any and not info.mavlink? ->
-            {:error, "vehicle #{id} is a fake vehicle of the test platform: it takes no MAVLink commands"}
+            {:error, %UsageError{reason: :fake_vehicle, value: id}}
 
           needs != :any and info.lost? ->
-            {:error, "vehicle #{id} is lost (nothing heard for #{Format.duration(info.silent_ms || 0)}): nothing sent; check its link (vehicles())"}
+            {:error, %UsageError{reason: :lost, value: id, detail: info.silent_ms}}
 
           needs == :control and info.task != nil and not force ->
-            {:error,
-             "vehicle #{id} is flying task #{Format.task_label(info.task)} (run #{info.task.run}): nothing sent. " <>
-               "Add force: true to stop that task first (the vehicle holds; the task's parent goes on as if it had completed)"}
+            {:error, %UsageError{reason: :busy, value: id, detail: info.task}}
 
           needs == :control and info.task != nil ->
             {:ok, {:stop_first, info.task}}
@@ -51,16 +50,11 @@ defmodule Dolphin.Console.Check do
     end
   end
 
-  def vehicle(other, _known, _needs, _force), do: {:error, "a vehicle is given by its system id (an integer, as vehicles() lists them), got: #{inspect(other)}"}
-
-  defp unknown(id, known) when map_size(known) == 0,
-    do: "no vehicle #{id}: no vehicle is known yet (is a link connected? see vehicles())"
-
-  defp unknown(id, known), do: "no vehicle #{id}: the known vehicles are #{known |> Map.keys() |> Enum.sort() |> Enum.join(", ")} (see vehicles())"
+  def vehicle(other, _known, _needs, _force), do: {:error, %UsageError{reason: :not_a_vehicle_id, value: other}}
 
   @doc false
   # A mode name: :guided, "GUIDED", "guided", :GUIDED -> :guided.
-  @spec mode(term()) :: {:ok, atom()} | {:error, String.t()}
+  @spec mode(term()) :: {:ok, atom()} | {:error, UsageError.t()}
   def mode(mode) when is_atom(mode) and mode not in [nil, true, false], do: mode(Atom.to_string(mode))
 
   def mode(mode) when is_binary(mode) do
@@ -72,13 +66,13 @@ defmodule Dolphin.Console.Check do
     if name =~ ~r/^[a-z][a-z0-9_]*$/ do
       {:ok, String.to_existing_atom(name)}
     else
-      {:error, "a mode is a name such as :guided or \"BRAKE\", got: #{inspect(mode)}"}
+      {:error, %UsageError{reason: :not_a_mode, value: mode}}
     end
   rescue
-    ArgumentError -> {:error, "no flight mode is called #{inspect(mode)}"}
+    ArgumentError -> {:error, %UsageError{reason: :no_such_mode, value: mode}}
   end
 
-  def mode(other), do: {:error, "a mode is a name such as :guided or \"BRAKE\", got: #{inspect(other)}"}
+  def mode(other), do: {:error, %UsageError{reason: :not_a_mode, value: other}}
 
   # ArduCopter modes flown by a pilot's sticks: without RC throttle the copter sinks.
   @pilot_modes [:stabilize, :acro, :alt_hold, :loiter, :poshold, :sport, :drift, :flowhold]
@@ -86,53 +80,50 @@ defmodule Dolphin.Console.Check do
   @doc false
   # Refuses a pilot-controlled mode for a copter in the air (ARDUPILOT.md:
   # with no RC throttle it descends, lands and disarms) unless forced.
-  @spec pilot_mode(atom(), boolean(), boolean()) :: :ok | {:error, String.t()}
+  @spec pilot_mode(atom(), boolean(), boolean()) :: :ok | {:error, UsageError.t()}
   def pilot_mode(mode, in_air?, force) do
     if mode in @pilot_modes and in_air? and not force,
-      do:
-        {:error,
-         "#{Format.mode(mode)} is flown by a pilot's sticks: with no RC throttle the copter sinks, lands and disarms. " <>
-           "hold/1 holds position (BRAKE, else GUIDED); add force: true to set #{Format.mode(mode)} anyway"},
+      do: {:error, %UsageError{reason: :pilot_mode, value: mode}},
       else: :ok
   end
 
   @doc false
-  @spec altitude(term()) :: {:ok, number()} | {:error, String.t()}
+  @spec altitude(term()) :: {:ok, number()} | {:error, UsageError.t()}
   def altitude(alt) when is_number(alt) and alt > 0 and alt <= 10_000, do: {:ok, alt}
-  def altitude(alt), do: {:error, "an altitude is a number of metres above home, more than 0, got: #{inspect(alt)}"}
+  def altitude(alt), do: {:error, %UsageError{reason: :bad_altitude, value: alt}}
 
   @doc false
-  @spec position(term(), term(), term()) :: {:ok, {number(), number(), number()}} | {:error, String.t()}
+  @spec position(term(), term(), term()) :: {:ok, {number(), number(), number()}} | {:error, UsageError.t()}
   def position(lat, lon, alt) do
     cond do
-      not (is_number(lat) and lat >= -90 and lat <= 90) -> {:error, "latitude must be degrees in -90..90, got: #{inspect(lat)}"}
-      not (is_number(lon) and lon >= -180 and lon <= 180) -> {:error, "longitude must be degrees in -180..180, got: #{inspect(lon)}"}
-      not is_number(alt) -> {:error, "altitude must be a number of metres, got: #{inspect(alt)}"}
+      not (is_number(lat) and lat >= -90 and lat <= 90) -> {:error, %UsageError{reason: :bad_latitude, value: lat}}
+      not (is_number(lon) and lon >= -180 and lon <= 180) -> {:error, %UsageError{reason: :bad_longitude, value: lon}}
+      not is_number(alt) -> {:error, %UsageError{reason: :bad_position_altitude, value: alt}}
       true -> {:ok, {lat, lon, alt}}
     end
   end
 
   @doc false
   # A wait or a period in milliseconds.
-  @spec ms(term(), atom()) :: {:ok, non_neg_integer()} | {:error, String.t()}
+  @spec ms(term(), atom()) :: {:ok, non_neg_integer()} | {:error, UsageError.t()}
   def ms(n, _what) when is_integer(n) and n >= 0, do: {:ok, n}
-  def ms(n, what), do: {:error, "#{what}: takes milliseconds (an integer, 0 or more), got: #{inspect(n)}"}
+  def ms(n, what), do: {:error, %UsageError{reason: :bad_ms, value: n, detail: what}}
 
   @doc false
-  @spec count(term()) :: {:ok, pos_integer()} | {:error, String.t()}
+  @spec count(term()) :: {:ok, pos_integer()} | {:error, UsageError.t()}
   def count(n) when is_integer(n) and n > 0, do: {:ok, n}
-  def count(n), do: {:error, "a count is a positive integer, got: #{inspect(n)}"}
+  def count(n), do: {:error, %UsageError{reason: :bad_count, value: n}}
 
   @doc false
   # Keyword options of a helper: unknown keys are a mistake worth saying.
-  @spec options(term(), [atom()]) :: {:ok, keyword()} | {:error, String.t()}
+  @spec options(term(), [atom()]) :: {:ok, keyword()} | {:error, UsageError.t()}
   def options(opts, allowed) do
     cond do
       not Keyword.keyword?(opts) ->
-        {:error, "options are a keyword list (#{Enum.map_join(allowed, ", ", &"#{&1}: ...")}), got: #{inspect(opts)}"}
+        {:error, %UsageError{reason: :not_options, value: opts, detail: allowed}}
 
       (unknown = Keyword.keys(opts) -- allowed) != [] ->
-        {:error, "unknown option#{if length(unknown) > 1, do: "s"} #{Enum.map_join(unknown, ", ", &inspect/1)}; options are #{Enum.map_join(allowed, ", ", &inspect/1)}"}
+        {:error, %UsageError{reason: :unknown_options, value: unknown, detail: allowed}}
 
       true ->
         {:ok, opts}

@@ -15,6 +15,7 @@ defmodule Dolphin.Console.MissionFile do
   # missions) at the end, and the value of every bare `mission` block. The
   # evaluation runs in its own process, bounded in time.
 
+  alias Dolphin.Console.MissionFileError
   alias Dolphin.Mission
 
   # The statements of the script language that do something (docs/language.md,
@@ -25,8 +26,8 @@ defmodule Dolphin.Console.MissionFile do
   @type found :: %{var: String.t() | nil, mission: Mission.t(), line: pos_integer() | nil}
 
   @doc false
-  # {:ok, missions, notes} — notes say what was skipped and why — or {:error, why}.
-  @spec read(Path.t(), keyword()) :: {:ok, [found()], [String.t()]} | {:error, String.t()}
+  # {:ok, missions, notes} — notes say what was skipped and why — or {:error, %MissionFileError{}}.
+  @spec read(Path.t(), keyword()) :: {:ok, [found()], [String.t()]} | {:error, MissionFileError.t()}
   def read(path, opts \\ []) do
     timeout = Keyword.get(opts, :timeout, 30_000)
 
@@ -37,8 +38,8 @@ defmodule Dolphin.Console.MissionFile do
 
       case Task.yield(task, timeout) || Task.shutdown(task, :brutal_kill) do
         {:ok, result} -> result
-        {:exit, reason} -> {:error, "#{path}: the evaluation crashed: #{inspect(reason)}"}
-        nil -> {:error, "#{path}: evaluating its statements took longer than #{div(timeout, 1000)} s (stopped)"}
+        {:exit, reason} -> {:error, %MissionFileError{reason: :crashed, path: path, detail: inspect(reason)}}
+        nil -> {:error, %MissionFileError{reason: :timeout, path: path, detail: "#{div(timeout, 1000)} s"}}
       end
     end
   end
@@ -46,7 +47,7 @@ defmodule Dolphin.Console.MissionFile do
   defp read_file(path) do
     case File.read(path) do
       {:ok, source} -> {:ok, source}
-      {:error, why} -> {:error, "#{path}: cannot read: #{:file.format_error(why)}"}
+      {:error, why} -> {:error, %MissionFileError{reason: :unreadable, path: path, detail: List.to_string(:file.format_error(why))}}
     end
   end
 
@@ -58,7 +59,7 @@ defmodule Dolphin.Console.MissionFile do
       {:error, {meta, message, token}} ->
         message = if is_tuple(message), do: elem(message, 0) <> elem(message, 1), else: message
         line = if is_list(meta), do: meta[:line], else: meta
-        {:error, "#{path}:#{line}: syntax error: #{message}#{token}"}
+        {:error, %MissionFileError{reason: :syntax, path: path, line: line, detail: "#{message}#{token}"}}
     end
   end
 
@@ -68,7 +69,7 @@ defmodule Dolphin.Console.MissionFile do
 
     if script? or missions?,
       do: :ok,
-      else: {:error, "#{path} is neither a Dolphin script (it has no `use Dolphin.Script`) nor a file of `mission` blocks"}
+      else: {:error, %MissionFileError{reason: :not_a_script, path: path}}
   end
 
   defp mission_call({:=, _, [_, rhs]}), do: mission_call(rhs)
@@ -168,19 +169,19 @@ defmodule Dolphin.Console.MissionFile do
 
   @doc false
   # The mission called `name`: by its name or by its variable.
-  @spec pick([found()], String.t()) :: {:ok, found()} | {:error, String.t()}
+  @spec pick([found()], String.t()) :: {:ok, found()} | {:error, MissionFileError.t()}
   def pick(found, name) do
     case Enum.filter(found, &(&1.mission.name == name or &1.var == name)) do
       [one] ->
         {:ok, one}
 
       [] ->
-        {:error, "no mission #{inspect(name)}; " <> describe(found)}
+        {:error, %MissionFileError{reason: :no_mission, name: name, detail: describe(found)}}
 
       [first | _] = several ->
         if Enum.all?(several, &(&1.mission == first.mission)),
           do: {:ok, first},
-          else: {:error, "#{length(several)} different missions answer to #{inspect(name)} (#{Enum.map_join(several, ", ", &label/1)}): give the variable's name"}
+          else: {:error, %MissionFileError{reason: :ambiguous, name: name, detail: Enum.map(several, &label/1)}}
     end
   end
 

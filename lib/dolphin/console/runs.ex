@@ -23,6 +23,7 @@ defmodule Dolphin.Console.Runs do
   use GenServer
 
   alias Dolphin.{Clock, Engine, Fleet}
+  alias Dolphin.Console.RunError
 
   @typedoc "A run of the console."
   @type run :: %{
@@ -43,9 +44,10 @@ defmodule Dolphin.Console.Runs do
 
   @doc """
   Starts a compiled script (`Dolphin.Script.compile/1`) in the background;
-  options: `:for` (stop it after this much clock time, ms). `{:ok, id}`.
+  options: `:for` (stop it after this much clock time, ms). `{:ok, id}`, or
+  `{:error, %Dolphin.Console.RunError{}}`.
   """
-  @spec start_script(Dolphin.Script.t(), keyword()) :: {:ok, integer()} | {:error, String.t()}
+  @spec start_script(Dolphin.Script.t(), keyword()) :: {:ok, integer()} | {:error, RunError.t()}
   def start_script(%Dolphin.Script{} = script, opts \\ []),
     do: GenServer.call(__MODULE__, {:start, {:script, script}, opts, Process.group_leader()}, :infinity)
 
@@ -54,9 +56,9 @@ defmodule Dolphin.Console.Runs do
   combinator...) in the background on the vehicles of `on:` (ids; default:
   every available vehicle). The vehicles are picked for the run; those the
   allocation does not use are released as soon as it has started.
-  `{:ok, run_id}`, or an error saying why it could not start.
+  `{:ok, run_id}`, or a `Dolphin.Console.RunError` saying why it could not start.
   """
-  @spec start_task(term(), keyword()) :: {:ok, integer()} | {:error, String.t()}
+  @spec start_task(term(), keyword()) :: {:ok, integer()} | {:error, RunError.t()}
   def start_task(task, opts \\ []), do: GenServer.call(__MODULE__, {:start, {:task, task}, opts, Process.group_leader()}, :infinity)
 
   @doc "The running runs of the console, oldest first."
@@ -193,7 +195,7 @@ defmodule Dolphin.Console.Runs do
         {:noreply, if(reason == :normal, do: s, else: ended(s, worker, {:crashed, reason}))}
 
       {start, starting} ->
-        GenServer.reply(start.from, {:error, "could not start: its console worker #{Dolphin.Engine.Failure.exit_words(reason)}"})
+        GenServer.reply(start.from, {:error, %RunError{reason: :worker_exit, detail: Dolphin.Engine.Failure.exit_words(reason)}})
         {:noreply, %{s | starting: starting}}
     end
   end
@@ -265,7 +267,7 @@ defmodule Dolphin.Console.Runs do
       {:ok, ids} ->
         case Fleet.pick(fleet, self(), id: ids, count: length(ids), timeout: 0) do
           {:ok, _set} -> start_run(server, fleet, task)
-          {:error, e} -> send(server, {:start_failed, self(), "cannot pick #{Dolphin.Fleet.VehicleSet.format(ids)}: #{Exception.message(e)}"})
+          {:error, e} -> send(server, {:start_failed, self(), %RunError{reason: :pick_failed, vehicles: ids, cause: e}})
         end
 
       {:error, why} ->
@@ -288,7 +290,7 @@ defmodule Dolphin.Console.Runs do
         send(server, {:finished, self(), Engine.await(run)})
 
       {:ended, {:error, %Dolphin.Engine.AllocationError{} = e}} ->
-        send(server, {:start_failed, self(), "no vehicle fits: " <> Exception.message(e)})
+        send(server, {:start_failed, self(), %RunError{reason: :no_fit, cause: e}})
 
       {:ended, result} ->
         # It ended as it started (an empty sequence, say): a run all the same.
@@ -326,17 +328,17 @@ defmodule Dolphin.Console.Runs do
 
     case on do
       nil ->
-        if free == [], do: {:error, "no vehicle is free (every known vehicle is lost, picked or busy: see vehicles())"}, else: {:ok, free}
+        if free == [], do: {:error, %RunError{reason: :no_free_vehicle}}, else: {:ok, free}
 
       on ->
         ids = Dolphin.Fleet.VehicleSet.ids(Dolphin.Fleet.VehicleSet.new(on))
 
         case ids -- free do
           [] -> {:ok, ids}
-          taken -> {:error, "vehicle#{if length(taken) > 1, do: "s"} #{Enum.join(taken, ", ")} #{if length(taken) > 1, do: "are", else: "is"} not free (lost, picked or busy: see vehicles())"}
+          taken -> {:error, %RunError{reason: :not_free, vehicles: ids, detail: taken}}
         end
     end
   rescue
-    e in ArgumentError -> {:error, "on: " <> Exception.message(e)}
+    e in ArgumentError -> {:error, %RunError{reason: :bad_vehicles, detail: Exception.message(e)}}
   end
 end

@@ -12,10 +12,12 @@ defmodule Dolphin.Link.Endpoint do
 
       iex> Dolphin.Link.Endpoint.parse("udpin:0.0.0.0:14550")
       {:ok, %Dolphin.Link.Endpoint{kind: :udpin, host: "0.0.0.0", address: {0, 0, 0, 0}, port: 14550}}
-      iex> {:error, message} = Dolphin.Link.Endpoint.parse("udp:1.2.3.4:5")
-      iex> message =~ "unknown kind"
-      true
+      iex> {:error, error} = Dolphin.Link.Endpoint.parse("udp:1.2.3.4:5")
+      iex> Exception.message(error)
+      ~s|endpoint "udp:1.2.3.4:5": unknown kind "udp" (expected udpin, udpout or tcp)|
   """
+
+  alias Dolphin.Link.EndpointError
 
   @enforce_keys [:kind, :host, :address, :port]
   defstruct [:kind, :host, :address, :port]
@@ -26,22 +28,22 @@ defmodule Dolphin.Link.Endpoint do
   @kinds %{"udpin" => :udpin, "udpout" => :udpout, "tcp" => :tcp}
 
   @doc "Parses an endpoint string; host names are resolved (IPv4 or IPv6)."
-  @spec parse(String.t()) :: {:ok, t()} | {:error, String.t()}
+  @spec parse(String.t()) :: {:ok, t()} | {:error, EndpointError.t()}
   def parse(string) when is_binary(string) do
     with {:ok, kind, host, port} <- split(string),
          {:ok, address} <- resolve(host) do
       {:ok, %__MODULE__{kind: kind, host: host, address: address, port: port}}
     else
-      {:error, why} -> {:error, "endpoint #{inspect(string)}: #{why}"}
+      {:error, reason, detail} -> {:error, %EndpointError{endpoint: string, reason: reason, detail: detail}}
     end
   end
 
-  @doc "Like `parse/1`, raising `ArgumentError`."
+  @doc "Like `parse/1`, raising `ArgumentError` with the error's message."
   @spec parse!(String.t()) :: t()
   def parse!(string) do
     case parse(string) do
       {:ok, endpoint} -> endpoint
-      {:error, why} -> raise ArgumentError, why
+      {:error, error} -> raise ArgumentError, Exception.message(error)
     end
   end
 
@@ -56,18 +58,18 @@ defmodule Dolphin.Link.Endpoint do
          [host, port] <- split_last(rest) do
       case Integer.parse(port) do
         {port, ""} when port in 0..65_535 -> {:ok, kind, String.trim(host, "[") |> String.trim("]"), port}
-        _ -> {:error, "bad port #{inspect(port)} (expected 0..65535)"}
+        _ -> {:error, :bad_port, port}
       end
     else
-      {:error, _} = error -> error
-      _ -> {:error, "expected KIND:HOST:PORT, e.g. udpin:0.0.0.0:14550"}
+      {:error, _, _} = error -> error
+      _ -> {:error, :bad_form, nil}
     end
   end
 
   defp kind(kind) do
     case Map.fetch(@kinds, kind) do
       {:ok, k} -> {:ok, k}
-      :error -> {:error, "unknown kind #{inspect(kind)} (expected udpin, udpout or tcp)"}
+      :error -> {:error, :unknown_kind, kind}
     end
   end
 
@@ -78,7 +80,7 @@ defmodule Dolphin.Link.Endpoint do
     end
   end
 
-  defp resolve(""), do: {:error, "no host"}
+  defp resolve(""), do: {:error, :no_host, nil}
 
   defp resolve(host) do
     chars = String.to_charlist(host)
@@ -90,7 +92,7 @@ defmodule Dolphin.Link.Endpoint do
       {:error, _} ->
         case :inet.getaddr(chars, :inet) do
           {:ok, address} -> {:ok, address}
-          {:error, _} -> {:error, "cannot resolve host #{inspect(host)}"}
+          {:error, _} -> {:error, :unresolved, host}
         end
     end
   end

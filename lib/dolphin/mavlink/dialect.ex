@@ -26,11 +26,11 @@ defmodule Dolphin.MAVLink.Dialect do
         {:ok, defs} ->
           defs
 
-        {:error, reason} ->
+        {:error, error} ->
           raise CompileError,
             file: __CALLER__.file,
             line: __CALLER__.line,
-            description: "MAVLink dialect: #{reason} (scripts/bootstrap copies the XML into priv/mavlink/; `make test` runs it)"
+            description: "MAVLink dialect: #{Exception.message(error)} (scripts/bootstrap copies the XML into priv/mavlink/; `make test` runs it)"
       end
 
     specs = Generator.message_specs(defs, __CALLER__.module)

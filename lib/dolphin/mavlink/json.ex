@@ -16,16 +16,18 @@ defmodule Dolphin.MAVLink.JSON do
       ~s({"b":-0.0,"a":"x"})
   """
 
+  alias Dolphin.MAVLink.JSONError
+
   @type value :: map() | list() | String.t() | number() | boolean() | nil
 
   @doc "Parses one JSON text. Errors say what was found where (byte offset)."
-  @spec decode(binary()) :: {:ok, value()} | {:error, String.t()}
+  @spec decode(binary()) :: {:ok, value()} | {:error, JSONError.t()}
   def decode(text) when is_binary(text) do
     case value(skip_ws(text), text) do
       {:ok, v, rest} ->
         case skip_ws(rest) do
           <<>> -> {:ok, v}
-          rest -> error("unexpected data after the value", rest, text)
+          rest -> error(:trailing_data, rest, text)
         end
 
       {:error, _} = error ->
@@ -40,7 +42,7 @@ defmodule Dolphin.MAVLink.JSON do
   defp value(<<"false", rest::binary>>, _text), do: {:ok, false, rest}
   defp value(<<"null", rest::binary>>, _text), do: {:ok, nil, rest}
   defp value(<<c, _::binary>> = bin, text) when c == ?- or c in ?0..?9, do: number(bin, text)
-  defp value(rest, text), do: error("expected a value", rest, text)
+  defp value(rest, text), do: error(:expected_value, rest, text)
 
   defp object(<<?}, rest::binary>>, _text, []), do: {:ok, %{}, rest}
 
@@ -51,15 +53,15 @@ defmodule Dolphin.MAVLink.JSON do
       case skip_ws(rest) do
         <<?,, rest::binary>> -> object(skip_ws(rest), text, [{key, v} | acc])
         <<?}, rest::binary>> -> {:ok, Map.new(Enum.reverse([{key, v} | acc])), rest}
-        rest -> error("expected , or } in an object", rest, text)
+        rest -> error(:object_separator, rest, text)
       end
     else
       {:error, _} = error -> error
-      rest -> error("expected : after an object key", rest, text)
+      rest -> error(:object_colon, rest, text)
     end
   end
 
-  defp object(rest, text, _acc), do: error("expected a string key", rest, text)
+  defp object(rest, text, _acc), do: error(:object_key, rest, text)
 
   defp array(<<?], rest::binary>>, _text, []), do: {:ok, [], rest}
 
@@ -68,7 +70,7 @@ defmodule Dolphin.MAVLink.JSON do
       case skip_ws(rest) do
         <<?,, rest::binary>> -> array(skip_ws(rest), text, [v | acc])
         <<?], rest::binary>> -> {:ok, Enum.reverse([v | acc]), rest}
-        rest -> error("expected , or ] in an array", rest, text)
+        rest -> error(:array_separator, rest, text)
       end
     end
   end
@@ -92,20 +94,20 @@ defmodule Dolphin.MAVLink.JSON do
   defp string(<<"\\u", _::binary>> = bin, text, acc), do: escape_u(bin, text, acc)
 
   defp string(<<c, rest::binary>>, text, acc) when c >= 0x20 and c != ?\\, do: string(rest, text, [c | acc])
-  defp string(rest, text, _acc), do: error("bad character in a string", rest, text)
+  defp string(rest, text, _acc), do: error(:string_character, rest, text)
 
   # \u00XX stands for the byte XX in our records (char[N] fields are bytes);
   # higher code points are written as UTF-8.
   defp escape_u(<<"\\u", hex::binary-4, rest::binary>> = bin, text, acc) do
     case hex4(hex) do
       {:ok, cp} when cp < 0x100 -> string(rest, text, [cp | acc])
-      {:ok, cp} when cp in 0xD800..0xDFFF -> error("lone surrogate in a string", bin, text)
+      {:ok, cp} when cp in 0xD800..0xDFFF -> error(:lone_surrogate, bin, text)
       {:ok, cp} -> string(rest, text, [<<cp::utf8>> | acc])
-      :error -> error("bad \\u escape", bin, text)
+      :error -> error(:bad_escape, bin, text)
     end
   end
 
-  defp escape_u(bin, text, _acc), do: error("bad \\u escape", bin, text)
+  defp escape_u(bin, text, _acc), do: error(:bad_escape, bin, text)
 
   # Exactly four hex digits (Integer.parse/2 would take a sign too).
   defp hex4(<<a, b, c, d>> = hex) do
@@ -129,21 +131,20 @@ defmodule Dolphin.MAVLink.JSON do
         try do
           {:ok, :erlang.binary_to_float(int <> "." <> frac <> "e" <> exp), rest}
         rescue
-          ArgumentError -> error("number out of range", bin, text)
+          ArgumentError -> error(:number_range, bin, text)
         end
 
       nil ->
-        error("bad number", bin, text)
+        error(:bad_number, bin, text)
     end
   end
 
   defp skip_ws(<<c, rest::binary>>) when c in ~c( \t\r\n), do: skip_ws(rest)
   defp skip_ws(bin), do: bin
 
-  defp error(what, rest, text) do
-    at = byte_size(text) - byte_size(rest)
-    found = if rest == <<>>, do: "end of input", else: inspect(binary_part(rest, 0, min(12, byte_size(rest))))
-    {:error, "#{what} at byte #{at}, found #{found}"}
+  defp error(reason, rest, text) do
+    found = if rest == <<>>, do: nil, else: binary_part(rest, 0, min(12, byte_size(rest)))
+    {:error, %JSONError{reason: reason, position: byte_size(text) - byte_size(rest), found: found}}
   end
 
   @doc """

@@ -16,7 +16,7 @@ defmodule Dolphin.MAVLink.Message do
       [type: 6, autopilot: 8, base_mode: 0, custom_mode: 0, system_status: 0, mavlink_version: 3]
   """
 
-  alias Dolphin.MAVLink.Value
+  alias Dolphin.MAVLink.{FieldError, Value}
 
   @typedoc "A message struct of some dialect."
   @type t :: struct()
@@ -47,17 +47,17 @@ defmodule Dolphin.MAVLink.Message do
   @doc """
   Builds a message of `module` from field values given by name (atom or
   string keys); fields not given keep the struct's default (zero, except
-  HEARTBEAT's `mavlink_version`, 3). Returns `{:error, reason}` for an unknown
-  field name; values are checked when the message is encoded.
+  HEARTBEAT's `mavlink_version`, 3). Returns `{:error, %Dolphin.MAVLink.FieldError{}}`
+  for an unknown field name; values are checked when the message is encoded.
   """
-  @spec new(module(), Enumerable.t()) :: {:ok, t()} | {:error, String.t()}
+  @spec new(module(), Enumerable.t()) :: {:ok, t()} | {:error, FieldError.t()}
   def new(module, values) do
     known = Map.new(module.__mavlink__(:fields), &{Atom.to_string(&1.name), &1.name})
 
     Enum.reduce_while(values, {:ok, struct(module)}, fn {key, value}, {:ok, msg} ->
       case Map.fetch(known, to_string(key)) do
         {:ok, name} -> {:cont, {:ok, Map.put(msg, name, value)}}
-        :error -> {:halt, {:error, "#{module.__mavlink__(:name)} has no field #{inspect(to_string(key))}"}}
+        :error -> {:halt, {:error, %FieldError{msg: module.__mavlink__(:name), field: to_string(key), reason: :unknown_field}}}
       end
     end)
   end
@@ -81,9 +81,8 @@ defmodule Dolphin.MAVLink.Message do
       {:ok, bytes} ->
         bytes
 
-      {:error, why} ->
-        raise ArgumentError,
-              "cannot encode #{module.__mavlink__(:name)}.#{name} = #{inspect(value)}: #{why}"
+      {:error, error} ->
+        raise ArgumentError, Exception.message(%{error | msg: module.__mavlink__(:name), field: name})
     end
   end
 end

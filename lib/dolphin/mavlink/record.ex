@@ -18,7 +18,7 @@ defmodule Dolphin.MAVLink.Record do
   of integers and floats.
   """
 
-  alias Dolphin.MAVLink.{Frame, JSON, Message}
+  alias Dolphin.MAVLink.{FieldError, Frame, JSON, Message, RecordError}
 
   @doc "The JSON line (without newline) of a decoded frame. `opts`: `:key` to include as `secret_key`."
   @spec encode(Frame.t(), keyword()) :: iodata()
@@ -50,8 +50,10 @@ defmodule Dolphin.MAVLink.Record do
   @doc """
   Reads one JSON record into the message and `Dolphin.MAVLink.Frame.encode/2`
   options that reproduce its frame. The `frame` and `profile` keys are ignored.
+  A line that is no record of a frame gives a `Dolphin.MAVLink.RecordError`,
+  one naming a field its message lacks a `Dolphin.MAVLink.FieldError`.
   """
-  @spec decode(binary(), module()) :: {:ok, Message.t(), keyword()} | {:error, String.t()}
+  @spec decode(binary(), module()) :: {:ok, Message.t(), keyword()} | {:error, RecordError.t() | FieldError.t()}
   def decode(line, dialect) do
     with {:ok, map} <- parse(line),
          {:ok, module} <- message_module(map, dialect),
@@ -66,8 +68,8 @@ defmodule Dolphin.MAVLink.Record do
   defp parse(line) do
     case JSON.decode(line) do
       {:ok, map} when is_map(map) -> {:ok, map}
-      {:ok, _other} -> {:error, "not a JSON object"}
-      {:error, why} -> {:error, "not valid JSON: " <> why}
+      {:ok, _other} -> {:error, %RecordError{reason: :not_an_object}}
+      {:error, e} -> {:error, %RecordError{reason: :invalid_json, cause: e}}
     end
   end
 
@@ -75,19 +77,19 @@ defmodule Dolphin.MAVLink.Record do
     case {Map.get(map, "msg"), Map.get(map, "id")} do
       {name, id} when is_binary(name) ->
         case dialect.message_module(name) do
-          nil -> {:error, "unknown message #{inspect(name)}"}
+          nil -> {:error, %RecordError{reason: :unknown_message, value: name}}
           module when id == nil -> {:ok, module}
-          module -> if module.__mavlink__(:id) == id, do: {:ok, module}, else: {:error, "\"msg\" #{name} has id #{module.__mavlink__(:id)}, not #{inspect(id)}"}
+          module -> if module.__mavlink__(:id) == id, do: {:ok, module}, else: {:error, %RecordError{reason: :id_mismatch, value: id, detail: {name, module.__mavlink__(:id)}}}
         end
 
       {nil, id} when is_integer(id) ->
         case dialect.message_info(id) do
-          nil -> {:error, "unknown message id #{id}"}
+          nil -> {:error, %RecordError{reason: :unknown_id, value: id}}
           {module, _, _, _} -> {:ok, module}
         end
 
       _ ->
-        {:error, "no \"msg\" or \"id\""}
+        {:error, %RecordError{reason: :no_message}}
     end
   end
 
@@ -108,16 +110,16 @@ defmodule Dolphin.MAVLink.Record do
        when is_binary(hex) and is_integer(link_id) and link_id in 0..255 and is_integer(ts) and ts >= 0 and ts < 0x1000000000000 do
     case Dolphin.MAVLink.Signing.decode_key(hex) do
       {:ok, key} -> {:ok, signing: %{key: key, link_id: link_id, timestamp: ts}}
-      :error -> {:error, "signing.secret_key must be 64 hex digits"}
+      :error -> {:error, %RecordError{reason: :bad_key}}
     end
   end
 
-  defp signing(true, _), do: {:error, "a signed record needs \"signing\" with secret_key, link_id and timestamp"}
+  defp signing(true, _), do: {:error, %RecordError{reason: :no_signing}}
 
   defp fetch(map, key, valid?, default \\ :required) do
     case Map.fetch(map, key) do
-      {:ok, v} -> if valid?.(v), do: {:ok, v}, else: {:error, "bad #{inspect(key)}: #{inspect(v)}"}
-      :error when default == :required -> {:error, "no #{inspect(key)}"}
+      {:ok, v} -> if valid?.(v), do: {:ok, v}, else: {:error, %RecordError{reason: :bad_value, key: key, value: v}}
+      :error when default == :required -> {:error, %RecordError{reason: :missing, key: key}}
       :error -> {:ok, default}
     end
   end
@@ -130,7 +132,7 @@ defmodule Dolphin.MAVLink.Record do
       %{type: t, name: name}, {:ok, msg} when t in [:float, :double] ->
         case from_json_float(Map.fetch!(msg, name)) do
           {:ok, v} -> {:cont, {:ok, Map.put(msg, name, v)}}
-          :error -> {:halt, {:error, "#{Message.name(msg)}.#{name}: not a number: #{inspect(Map.fetch!(msg, name))}"}}
+          :error -> {:halt, {:error, %RecordError{reason: :not_a_number, key: "#{Message.name(msg)}.#{name}", value: Map.fetch!(msg, name)}}}
         end
 
       _field, acc ->

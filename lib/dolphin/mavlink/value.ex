@@ -26,6 +26,8 @@ defmodule Dolphin.MAVLink.Value do
 
   import Bitwise
 
+  alias Dolphin.MAVLink.FieldError
+
   @typedoc "A `float` or `double` field's value."
   @type float_value :: float() | :nan | :infinity | :neg_infinity | {:nan, non_neg_integer()}
 
@@ -125,9 +127,17 @@ defmodule Dolphin.MAVLink.Value do
   end
 
   @doc false
-  # Encodes one field to exactly its bytes, or returns {:error, why}.
-  @spec encode(base_type(), pos_integer() | nil, term()) :: {:ok, binary()} | {:error, String.t()}
-  def encode(:char, n, value) do
+  # Encodes one field to exactly its bytes, or returns {:error, %FieldError{}}
+  # for the value alone (the caller knows the message and the field).
+  @spec encode(base_type(), pos_integer() | nil, term()) :: {:ok, binary()} | {:error, FieldError.t()}
+  def encode(type, n, value) do
+    case encode_value(type, n, value) do
+      {:ok, bytes} -> {:ok, bytes}
+      {:error, why} -> {:error, %FieldError{reason: :bad_value, value: value, detail: why}}
+    end
+  end
+
+  defp encode_value(:char, n, value) do
     n = n || 1
 
     cond do
@@ -137,9 +147,9 @@ defmodule Dolphin.MAVLink.Value do
     end
   end
 
-  def encode(type, nil, value), do: encode_scalar(type, value)
+  defp encode_value(type, nil, value), do: encode_scalar(type, value)
 
-  def encode(type, n, values) when is_list(values) do
+  defp encode_value(type, n, values) when is_list(values) do
     if length(values) > n do
       {:error, "expected at most #{n} elements"}
     else
@@ -158,7 +168,7 @@ defmodule Dolphin.MAVLink.Value do
     end
   end
 
-  def encode(_type, n, _value), do: {:error, "expected a list of at most #{n} elements"}
+  defp encode_value(_type, n, _value), do: {:error, "expected a list of at most #{n} elements"}
 
   @doc false
   # Bytes of a float or double value, special values included; :error otherwise.

@@ -20,6 +20,8 @@ defmodule Dolphin.MAVLink.XML do
 
   require Record
 
+  alias Dolphin.MAVLink.DialectError
+
   Record.defrecordp(:element, :xmlElement, Record.extract(:xmlElement, from_lib: "xmerl/include/xmerl.hrl"))
   Record.defrecordp(:attribute, :xmlAttribute, Record.extract(:xmlAttribute, from_lib: "xmerl/include/xmerl.hrl"))
   Record.defrecordp(:text, :xmlText, Record.extract(:xmlText, from_lib: "xmerl/include/xmerl.hrl"))
@@ -52,23 +54,23 @@ defmodule Dolphin.MAVLink.XML do
 
   @type definitions :: %{messages: [message()], enums: [enum()], files: [Path.t()]}
 
-  @doc "Like `load/1` but raises `ArgumentError` with the reason."
+  @doc "Like `load/1` but raises `ArgumentError` with the error's message."
   @spec load!(Path.t()) :: definitions()
   def load!(path) do
     case load(path) do
       {:ok, defs} -> defs
-      {:error, reason} -> raise ArgumentError, reason
+      {:error, error} -> raise ArgumentError, Exception.message(error)
     end
   end
 
   @doc """
   Loads a dialect and everything it includes.
 
-  Returns `{:error, message}` naming the file and the problem when a file is
-  missing, is not XML, or breaks a rule the wire format depends on (two messages
-  with one id, an unknown field type).
+  Returns `{:error, %Dolphin.MAVLink.DialectError{}}` naming the file and the
+  problem when a file is missing, is not XML, or breaks a rule the wire format
+  depends on (two messages with one id, an unknown field type).
   """
-  @spec load(Path.t()) :: {:ok, definitions()} | {:error, String.t()}
+  @spec load(Path.t()) :: {:ok, definitions()} | {:error, DialectError.t()}
   def load(path) do
     with {:ok, files} <- read_tree(Path.expand(path), []),
          {:ok, messages} <- merge_messages(files) do
@@ -108,10 +110,10 @@ defmodule Dolphin.MAVLink.XML do
         {doc, _rest} = :xmerl_scan.file(String.to_charlist(path), quiet: true)
         {:ok, doc}
       catch
-        :exit, reason -> {:error, "#{path}: not well-formed XML: #{inspect(reason)}"}
+        :exit, reason -> {:error, %DialectError{file: path, reason: :not_xml, detail: inspect(reason)}}
       end
     else
-      {:error, "#{path}: no such dialect file"}
+      {:error, %DialectError{file: path, reason: :no_file}}
     end
   end
 
@@ -125,13 +127,13 @@ defmodule Dolphin.MAVLink.XML do
     end
   end
 
-  defp read_file(path, _other), do: {:error, "#{path}: the root element is not <mavlink>"}
+  defp read_file(path, _other), do: {:error, %DialectError{file: path, reason: :not_mavlink}}
 
   defp read_message(el, path) do
     name = attr(el, :name)
 
-    with {:ok, id} <- parse_int(attr(el, :id), "#{path}: message #{name} id"),
-         {:ok, fields} <- map_ok(tag_extensions(element_children(el)), &read_field(&1, "#{path}: message #{name}")) do
+    with {:ok, id} <- parse_int(attr(el, :id), path, "message #{name} id"),
+         {:ok, fields} <- map_ok(tag_extensions(element_children(el)), &read_field(&1, path, "message #{name}")) do
       {:ok, %{id: id, name: name, description: description(el), fields: fields, file: path}}
     end
   end
@@ -148,10 +150,10 @@ defmodule Dolphin.MAVLink.XML do
     tagged
   end
 
-  defp read_field({el, extension?}, where) do
+  defp read_field({el, extension?}, path, where) do
     name = attr(el, :name)
 
-    with {:ok, type, array_length, version?} <- parse_type(attr(el, :type), "#{where} field #{name}") do
+    with {:ok, type, array_length, version?} <- parse_type(attr(el, :type), path, "#{where} field #{name}") do
       {:ok,
        %{
          name: name,
@@ -180,9 +182,9 @@ defmodule Dolphin.MAVLink.XML do
     "char" => :char
   }
 
-  defp parse_type("uint8_t_mavlink_version", _where), do: {:ok, :uint8, nil, true}
+  defp parse_type("uint8_t_mavlink_version", _path, _where), do: {:ok, :uint8, nil, true}
 
-  defp parse_type(type, where) when is_binary(type) do
+  defp parse_type(type, path, where) when is_binary(type) do
     {base, array_length} =
       case Regex.run(~r/^([a-z0-9_]+)\[(\d+)\]$/, type) do
         [_, base, n] -> {base, String.to_integer(n)}
@@ -191,11 +193,11 @@ defmodule Dolphin.MAVLink.XML do
 
     case Map.fetch(@base_types, base) do
       {:ok, t} when array_length == nil or array_length > 0 -> {:ok, t, array_length, false}
-      _ -> {:error, "#{where}: unknown type #{inspect(type)}"}
+      _ -> {:error, %DialectError{file: path, where: where, reason: :unknown_type, detail: inspect(type)}}
     end
   end
 
-  defp parse_type(nil, where), do: {:error, "#{where}: no type"}
+  defp parse_type(nil, path, where), do: {:error, %DialectError{file: path, where: where, reason: :no_type}}
 
   defp read_enum(el) do
     {entries, _next} =
@@ -204,7 +206,7 @@ defmodule Dolphin.MAVLink.XML do
       |> Enum.map_reduce(0, fn entry, next ->
         # An entry without a value takes the next one, as mavgen does.
         value =
-          case parse_int(attr(entry, :value), "") do
+          case parse_int(attr(entry, :value), nil, nil) do
             {:ok, v} -> v
             {:error, _} -> next
           end
@@ -229,7 +231,7 @@ defmodule Dolphin.MAVLink.XML do
         {:cont, {:ok, [msg | acc]}}
 
       {id, [a, b | _]}, _acc ->
-        {:halt, {:error, "message id #{id} defined twice: #{a.name} in #{a.file} and #{b.name} in #{b.file}"}}
+        {:halt, {:error, %DialectError{where: "message id #{id}", reason: :duplicate_id, detail: "#{a.name} in #{a.file} and #{b.name} in #{b.file}"}}}
     end)
     |> case do
       {:ok, msgs} -> {:ok, Enum.sort_by(msgs, & &1.id)}
@@ -260,9 +262,9 @@ defmodule Dolphin.MAVLink.XML do
     order |> Enum.reverse() |> Enum.map(&Map.fetch!(by_name, &1))
   end
 
-  defp parse_int(nil, where), do: {:error, "#{where}: missing"}
+  defp parse_int(nil, path, where), do: {:error, %DialectError{file: path, where: where, reason: :missing}}
 
-  defp parse_int(string, where) do
+  defp parse_int(string, path, where) do
     string = String.trim(string)
 
     result =
@@ -274,7 +276,7 @@ defmodule Dolphin.MAVLink.XML do
 
     case result do
       {int, ""} -> {:ok, int}
-      _ -> {:error, "#{where}: not an integer: #{inspect(string)}"}
+      _ -> {:error, %DialectError{file: path, where: where, reason: :not_an_integer, detail: inspect(string)}}
     end
   end
 

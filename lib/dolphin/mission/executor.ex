@@ -246,7 +246,7 @@ defmodule Dolphin.Mission.Executor do
   defp answered(:verify, {:ok, back}, data) do
     case Mission.compare_download(data.items, back) do
       :ok -> next(:guided, data)
-      {:error, why} -> fail(:verify, data, "the mission read back differs from the one uploaded: #{why}")
+      {:error, e} -> fail(:verify, data, "the mission read back differs from the one uploaded: #{Exception.message(e)}")
     end
   end
 

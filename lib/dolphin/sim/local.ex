@@ -36,8 +36,8 @@ defmodule Dolphin.Sim.Local do
             {:error, "--sim: #{why}"}
         end
 
-      {:error, why} ->
-        {:error, "--sim: cannot open a local link: #{why}"}
+      {:error, e} ->
+        {:error, "--sim: cannot open a local link: #{Exception.message(e)}"}
     end
   end
 

@@ -41,6 +41,8 @@ defmodule Mix.Tasks.Dolphin.Console do
 
   use Mix.Task
 
+  alias Dolphin.CommandLineError
+
   @switches [connect: :keep, sim: :integer, sitl: :integer, sitl_bin: :string, sitl_defaults: :keep, seed: :integer, speedup: :float, tlog: :string, forward: :keep]
 
   @usage "usage: iex -S mix dolphin.console [--connect ENDPOINT]... [--sim N | --sitl N] [--speedup K] [--seed N] [--tlog FILE] [--forward ENDPOINT]..."
@@ -50,7 +52,7 @@ defmodule Mix.Tasks.Dolphin.Console do
     opts =
       case parse(argv) do
         {:ok, opts} -> opts
-        {:error, message} -> Mix.raise("mix dolphin.console: #{message}\n#{@usage}")
+        {:error, error} -> Mix.raise("mix dolphin.console: #{Exception.message(error)}\n#{@usage}")
       end
 
     unless iex?(), do: Mix.raise("mix dolphin.console starts a console for IEx: run it as `iex -S mix dolphin.console #{Enum.join(argv, " ")}`")
@@ -59,16 +61,23 @@ defmodule Mix.Tasks.Dolphin.Console do
 
     case start(opts) do
       {:ok, banner} -> Mix.shell().info(banner)
-      {:error, message} -> Mix.raise("mix dolphin.console: #{message}")
+      {:error, error} -> Mix.raise("mix dolphin.console: #{Exception.message(error)}")
     end
   end
 
   defp iex?, do: Code.ensure_loaded?(IEx) and IEx.started?()
 
   @doc false
-  # {:ok, opts} | {:error, message}
-  @spec parse([String.t()]) :: {:ok, keyword()} | {:error, String.t()}
+  # {:ok, opts} | {:error, %CommandLineError{reason: :usage}} (run/1 adds the usage line)
+  @spec parse([String.t()]) :: {:ok, keyword()} | {:error, CommandLineError.t()}
   def parse(argv) do
+    case check(argv) do
+      {:ok, opts} -> {:ok, opts}
+      {:error, message} -> {:error, %CommandLineError{reason: :usage, message: message}}
+    end
+  end
+
+  defp check(argv) do
     case OptionParser.parse(argv, strict: @switches) do
       {opts, [], []} ->
         cond do
@@ -89,9 +98,10 @@ defmodule Mix.Tasks.Dolphin.Console do
 
   @doc """
   Opens the links and starts the simulated vehicles of `opts` (parsed
-  options) in the running application; returns the banner to print.
+  options) in the running application; returns the banner to print, or a
+  `Dolphin.CommandLineError` whose `cause` is the link's or the simulator's error.
   """
-  @spec start(keyword()) :: {:ok, String.t()} | {:error, String.t()}
+  @spec start(keyword()) :: {:ok, String.t()} | {:error, CommandLineError.t()}
   def start(opts) do
     if k = opts[:speedup], do: Dolphin.Clock.set_speedup(k)
     link_opts = Enum.reject([tlog: opts[:tlog], forward: Keyword.get_values(opts, :forward)], fn {_, v} -> v in [nil, []] end)
@@ -116,7 +126,7 @@ defmodule Mix.Tasks.Dolphin.Console do
     Enum.reduce_while(endpoints, {:ok, []}, fn ep, {:ok, lines} ->
       case Dolphin.Link.connect(ep, link_opts) do
         {:ok, _pid} -> {:cont, {:ok, lines ++ ["link #{ep}"]}}
-        {:error, why} -> {:halt, {:error, "--connect #{ep}: #{why}"}}
+        {:error, e} -> {:halt, {:error, %CommandLineError{reason: :failed, message: "--connect #{ep}: #{Exception.message(e)}", cause: e}}}
       end
     end)
   end
@@ -125,7 +135,7 @@ defmodule Mix.Tasks.Dolphin.Console do
     # The console's simulated fleet lives as long as the VM.
     case Dolphin.Sim.Local.start(n, [seed: Keyword.get(opts, :seed, 1)] ++ link_opts) do
       {:ok, sim} -> {:ok, ["#{n} simulated vehicle(s) #{Dolphin.Fleet.VehicleSet.format(sim.sysids)} on 127.0.0.1:#{sim.port}"]}
-      error -> error
+      {:error, why} -> {:error, %CommandLineError{reason: :failed, message: why}}
     end
   end
 
@@ -135,7 +145,7 @@ defmodule Mix.Tasks.Dolphin.Console do
 
     case Dolphin.SITL.start(n, Enum.reject(sitl_opts, fn {_, v} -> v in [nil, []] end)) do
       {:ok, fleet} -> {:ok, ["#{n} ArduCopter SITL instance(s), vehicles #{Enum.join(fleet.sysids, ", ")}, on 127.0.0.1:#{fleet.port}"]}
-      error -> error
+      {:error, e} -> {:error, %CommandLineError{reason: :failed, message: Exception.message(e), cause: e}}
     end
   end
 

@@ -73,6 +73,7 @@ defmodule Mix.Tasks.Dolphin.Plan do
 
   use Mix.Task
 
+  alias Dolphin.CommandLineError
   alias Dolphin.Console.{Format, MissionFile, MissionSource}
   alias Dolphin.Mission
 
@@ -94,23 +95,33 @@ defmodule Mix.Tasks.Dolphin.Plan do
 
     case main(argv) do
       {:ok, text} -> Mix.shell().info(text)
-      {:error, message} -> Mix.raise("mix dolphin.plan: " <> message)
+      {:error, error} -> Mix.raise("mix dolphin.plan: " <> Exception.message(error))
     end
   end
 
   @doc """
-  Does the work of the task: `{:ok, text to print}` or `{:error, message}`
-  (the usage is part of the message of a usage error).
+  Does the work of the task: `{:ok, text to print}` or
+  `{:error, %Dolphin.CommandLineError{}}` (the usage is part of the message of
+  a usage error).
   """
-  @spec main([String.t()]) :: {:ok, String.t()} | {:error, String.t()}
+  @spec main([String.t()]) :: {:ok, String.t()} | {:error, CommandLineError.t()}
   def main(argv) do
-    case OptionParser.parse(argv, strict: @switches) do
-      {opts, args, []} -> command(args, opts)
-      {_, _, [{switch, value} | _]} -> usage("bad option #{switch}#{if value, do: " " <> value, else: ""}")
+    result =
+      case OptionParser.parse(argv, strict: @switches) do
+        {opts, args, []} -> command(args, opts)
+        {_, _, [{switch, value} | _]} -> usage("bad option #{switch}#{if value, do: " " <> value, else: ""}")
+      end
+
+    case result do
+      {:error, {:usage, message}} -> {:error, %CommandLineError{reason: :usage, message: message, usage: @usage}}
+      {:error, message} when is_binary(message) -> {:error, %CommandLineError{reason: :failed, message: message}}
+      {:error, %{__exception__: true} = e} -> {:error, %CommandLineError{reason: :failed, message: Exception.message(e), cause: e}}
+      {:ok, text} -> {:ok, text}
     end
   end
 
-  defp usage(message), do: {:error, message <> "\n" <> @usage}
+  # The steps below say what went wrong in words; main/1 makes the error of them.
+  defp usage(message), do: {:error, {:usage, message}}
 
   defp command(["export", file, name, out], opts) do
     with :ok <- only(opts, [:home, :cruise_speed, :hover_speed], "export"),
@@ -189,7 +200,7 @@ defmodule Mix.Tasks.Dolphin.Plan do
   defp connect(endpoint, name) do
     case Dolphin.Link.connect(endpoint, name: name) do
       {:ok, link} -> {:ok, link}
-      {:error, why} -> usage("--connect #{endpoint}: #{why}")
+      {:error, e} -> usage("--connect #{endpoint}: #{Exception.message(e)}")
     end
   end
 
@@ -249,7 +260,7 @@ defmodule Mix.Tasks.Dolphin.Plan do
         {:ok, back} ->
           case Mission.compare_download(items, back) do
             :ok -> {:ok, "#{what}#{lost_ack}; #{read}: the vehicle holds exactly the mission"}
-            {:error, why} -> {:error, "#{what}#{lost_ack}; #{read}, but it differs: #{why}"}
+            {:error, e} -> {:error, "#{what}#{lost_ack}; #{read}, but it differs: #{Exception.message(e)}"}
           end
 
         {:error, e} ->
@@ -367,7 +378,7 @@ defmodule Mix.Tasks.Dolphin.Plan do
   defp pick(found, name, notes) do
     case MissionFile.pick(found, name) do
       {:ok, one} -> {:ok, one}
-      {:error, why} -> {:error, Enum.join([why | notes], "\n")}
+      {:error, e} -> {:error, Enum.join([Exception.message(e) | notes], "\n")}
     end
   end
 

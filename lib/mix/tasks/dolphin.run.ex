@@ -218,7 +218,7 @@ defmodule Mix.Tasks.Dolphin.Run do
     Enum.reduce_while(given, :ok, fn {key, ep}, :ok ->
       case Dolphin.Link.Endpoint.parse(ep) do
         {:ok, _} -> {:cont, :ok}
-        {:error, why} -> {:halt, {:error, "--#{key} #{ep}: #{why}"}}
+        {:error, e} -> {:halt, {:error, "--#{key} #{ep}: #{Exception.message(e)}"}}
       end
     end)
   end
@@ -439,8 +439,8 @@ defmodule Mix.Tasks.Dolphin.Run do
           defer(fn -> DynamicSupervisor.terminate_child(Dolphin.Link.Supervisor, pid) end)
           {:cont, :ok}
 
-        {:error, why} ->
-          {:halt, {:error, "--connect #{ep}: #{why}"}}
+        {:error, e} ->
+          {:halt, {:error, "--connect #{ep}: #{Exception.message(e)}"}}
       end
     end)
   end
@@ -466,8 +466,8 @@ defmodule Mix.Tasks.Dolphin.Run do
         IO.puts(out, "#{n} ArduCopter SITL instance(s), vehicles #{Enum.join(fleet.sysids, ", ")}, on 127.0.0.1:#{fleet.port} at #{Dolphin.Clock.speedup()}x")
         :ok
 
-      error ->
-        error
+      {:error, e} ->
+        {:error, Exception.message(e)}
     end
   end
 

@@ -69,8 +69,9 @@ defmodule Mix.Tasks.Mavlink.Encode do
   end
 
   defp encode_line(line, dialect) do
-    with {:ok, message, opts} <- Record.decode(line, dialect) do
-      {:ok, Base.encode16(Frame.encode(message, opts), case: :lower)}
+    case Record.decode(line, dialect) do
+      {:ok, message, opts} -> {:ok, Base.encode16(Frame.encode(message, opts), case: :lower)}
+      {:error, e} -> {:error, Exception.message(e)}
     end
   rescue
     e in ArgumentError -> {:error, Exception.message(e)}

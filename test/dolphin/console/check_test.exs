@@ -1,7 +1,10 @@
 defmodule Dolphin.Console.CheckTest do
   use ExUnit.Case, async: true
 
-  alias Dolphin.Console.Check
+  alias Dolphin.Console.{Check, UsageError}
+
+  doctest UsageError
+  doctest Dolphin.Console.RunError
 
   @task %{task_id: 17, kind: :mission, name: "Survey Area", run: 14, vehicle: 1, parent_id: 15}
 
@@ -18,34 +21,34 @@ defmodule Dolphin.Console.CheckTest do
     end
 
     test "not an id, an unknown id, no vehicles at all" do
-      assert {:error, "a vehicle is given by its system id" <> _ = why} = Check.vehicle("1", @known, :control)
+      assert "a vehicle is given by its system id" <> _ = why = message(Check.vehicle("1", @known, :control))
       assert why =~ ~s(got: "1")
       assert Check.vehicle(-1, @known, :any) |> elem(0) == :error
-      assert {:error, "no vehicle 9: the known vehicles are 1, 2, 3, 7 (see vehicles())"} = Check.vehicle(9, @known, :any)
-      assert {:error, "no vehicle 9: no vehicle is known yet" <> _} = Check.vehicle(9, %{}, :control)
+      assert "no vehicle 9: the known vehicles are 1, 2, 3, 7 (see vehicles())" = message(Check.vehicle(9, @known, :any))
+      assert "no vehicle 9: no vehicle is known yet" <> _ = message(Check.vehicle(9, %{}, :control))
     end
 
     test "a lost vehicle is sent nothing, but what the ground station has of it can be read" do
-      assert {:error, why} = Check.vehicle(3, @known, :control)
+      why = message(Check.vehicle(3, @known, :control))
       assert why =~ "vehicle 3 is lost (nothing heard for 23.4 s): nothing sent"
-      assert {:error, _} = Check.vehicle(3, @known, :link)
+      assert {:error, %UsageError{}} = Check.vehicle(3, @known, :link)
       assert {:ok, :free} = Check.vehicle(3, @known, :any)
     end
 
     test "a fake vehicle takes no MAVLink" do
-      assert {:error, "vehicle 7 is a fake vehicle of the test platform" <> _} = Check.vehicle(7, @known, :control)
+      assert "vehicle 7 is a fake vehicle of the test platform" <> _ = message(Check.vehicle(7, @known, :control))
       assert {:ok, :free} = Check.vehicle(7, @known, :any)
     end
 
     test "a vehicle flying a task: commands say they would stop it, and with force they do" do
-      assert {:error, why} = Check.vehicle(1, @known, :control)
+      why = message(Check.vehicle(1, @known, :control))
       assert why =~ ~s[vehicle 1 is flying task 17 mission "Survey Area" (run 14): nothing sent]
       assert why =~ "force: true to stop that task first"
       assert Check.vehicle(1, @known, :control, true) == {:ok, {:stop_first, @task}}
       # Reading from it disturbs nothing.
       assert Check.vehicle(1, @known, :link) == {:ok, :free}
       # A lost vehicle is refused even with force.
-      assert {:error, _} = Check.vehicle(3, @known, :control, true)
+      assert {:error, %UsageError{}} = Check.vehicle(3, @known, :control, true)
     end
   end
 
@@ -53,14 +56,14 @@ defmodule Dolphin.Console.CheckTest do
     assert Check.mode(:guided) == {:ok, :guided}
     assert Check.mode("BRAKE") == {:ok, :brake}
     assert Check.mode(:ALT_HOLD) == {:ok, :alt_hold}
-    assert {:error, "a mode is a name" <> _} = Check.mode(4)
-    assert {:error, _} = Check.mode("not a mode!")
-    assert {:error, "no flight mode is called \"warp_drive_xyz\""} = Check.mode("warp_drive_xyz")
-    assert {:error, _} = Check.mode(nil)
+    assert "a mode is a name" <> _ = message(Check.mode(4))
+    assert {:error, %UsageError{}} = Check.mode("not a mode!")
+    assert "no flight mode is called \"warp_drive_xyz\"" = message(Check.mode("warp_drive_xyz"))
+    assert {:error, %UsageError{}} = Check.mode(nil)
   end
 
   test "pilot modes are refused in the air unless forced" do
-    assert {:error, why} = Check.pilot_mode(:loiter, true, false)
+    why = message(Check.pilot_mode(:loiter, true, false))
     assert why =~ "LOITER is flown by a pilot's sticks"
     assert why =~ "hold/1"
     assert Check.pilot_mode(:loiter, true, true) == :ok
@@ -70,21 +73,33 @@ defmodule Dolphin.Console.CheckTest do
 
   test "numbers" do
     assert Check.altitude(20) == {:ok, 20}
-    assert {:error, "an altitude is a number of metres above home" <> _} = Check.altitude(0)
-    assert {:error, _} = Check.altitude("20")
+    assert "an altitude is a number of metres above home" <> _ = message(Check.altitude(0))
+    assert {:error, %UsageError{}} = Check.altitude("20")
     assert Check.position(40.1, -7.2, 30) == {:ok, {40.1, -7.2, 30}}
-    assert {:error, "latitude must be degrees in -90..90, got: 91"} = Check.position(91, 0, 0)
-    assert {:error, "longitude" <> _} = Check.position(0, -181, 0)
-    assert {:error, "altitude" <> _} = Check.position(0, 0, :high)
+    assert "latitude must be degrees in -90..90, got: 91" = message(Check.position(91, 0, 0))
+    assert "longitude" <> _ = message(Check.position(0, -181, 0))
+    assert "altitude" <> _ = message(Check.position(0, 0, :high))
     assert Check.ms(0, :wait) == {:ok, 0}
-    assert {:error, "wait: takes milliseconds" <> _} = Check.ms(-1, :wait)
+    assert "wait: takes milliseconds" <> _ = message(Check.ms(-1, :wait))
     assert Check.count(5) == {:ok, 5}
-    assert {:error, _} = Check.count(0)
+    assert {:error, %UsageError{}} = Check.count(0)
   end
 
   test "options" do
     assert Check.options([force: true], [:force]) == {:ok, [force: true]}
-    assert {:error, "unknown option :forse; options are :force"} = Check.options([forse: true], [:force])
-    assert {:error, "options are a keyword list" <> _} = Check.options(:force, [:force])
+    assert "unknown option :forse; options are :force" = message(Check.options([forse: true], [:force]))
+    assert "options are a keyword list" <> _ = message(Check.options(:force, [:force]))
+  end
+
+  test "errors name the check that failed" do
+    assert {:error, %UsageError{reason: :unknown_vehicle, value: 9, detail: [1, 2, 3, 7]}} = Check.vehicle(9, @known, :any)
+    assert {:error, %UsageError{reason: :busy, value: 1, detail: @task}} = Check.vehicle(1, @known, :control)
+    assert {:error, %UsageError{reason: :no_such_mode}} = Check.mode("warp_drive_xyz")
+    assert {:error, %UsageError{reason: :unknown_options, value: [:forse], detail: [:force]}} = Check.options([forse: true], [:force])
+  end
+
+  defp message(result) do
+    assert {:error, %UsageError{} = e} = result
+    Exception.message(e)
   end
 end

@@ -4,6 +4,8 @@ defmodule Dolphin.Console.MissionFileTest do
 
   alias Dolphin.Console.MissionFile
 
+  doctest Dolphin.Console.MissionFileError
+
   @moduletag :tmp_dir
   @fixtures Path.expand("../../fixtures/console", __DIR__)
 
@@ -40,22 +42,22 @@ defmodule Dolphin.Console.MissionFileTest do
   test "files that are not scripts or missions, missing files, syntax errors", %{tmp_dir: dir} do
     other = Path.join(dir, "other.exs")
     File.write!(other, "IO.puts(:hello)\n")
-    assert {:error, why} = MissionFile.read(other)
+    why = message(MissionFile.read(other))
     assert why =~ "neither a Dolphin script"
 
-    assert {:error, why} = MissionFile.read(Path.join(dir, "nope.exs"))
+    why = message(MissionFile.read(Path.join(dir, "nope.exs")))
     assert why =~ "cannot read: no such file"
 
     bad = Path.join(dir, "bad.exs")
     File.write!(bad, "use Dolphin.Script\nm = mission \"x\" do\n")
-    assert {:error, why} = MissionFile.read(bad)
+    why = message(MissionFile.read(bad))
     assert why =~ ~r/bad.exs:\d+: syntax error/
   end
 
   test "the evaluation is bounded in time", %{tmp_dir: dir} do
     slow = Path.join(dir, "slow.exs")
     File.write!(slow, "use Dolphin.Script\nx = Process.sleep(:infinity)\n")
-    assert {:error, why} = MissionFile.read(slow, timeout: 200)
+    why = message(MissionFile.read(slow, timeout: 200))
     assert why =~ "took longer than"
   end
 
@@ -64,11 +66,11 @@ defmodule Dolphin.Console.MissionFileTest do
     assert {:ok, %{var: "inspection"}} = MissionFile.pick(found, "Inspection")
     assert {:ok, %{mission: %{name: "Inspection"}}} = MissionFile.pick(found, "inspection")
     assert {:ok, %{mission: %{name: "Hop"}}} = MissionFile.pick(found, "Hop")
-    assert {:error, why} = MissionFile.pick(found, "Nope")
+    why = message(MissionFile.pick(found, "Nope"))
     assert why =~ ~s{no mission "Nope"; the file defines: "Inspection" (inspection), "Leg 30-0" (tour[0])}
 
     twice = found ++ [%{var: "other", mission: %{hd(found).mission | commands: []}, line: nil}]
-    assert {:error, why} = MissionFile.pick(twice, "Inspection")
+    why = message(MissionFile.pick(twice, "Inspection"))
     assert why =~ "2 different missions answer to \"Inspection\""
     assert MissionFile.describe([]) == "the file defines no mission"
   end
@@ -77,5 +79,10 @@ defmodule Dolphin.Console.MissionFileTest do
     assert MissionFile.acting(quote(do: x = execute(%{v => t}))) == :execute
     assert MissionFile.acting(quote(do: y = if(true, do: pick(count: 1)))) == :pick
     assert MissionFile.acting(quote(do: z = mission("m", do: delay(1)))) == nil
+  end
+
+  defp message(result) do
+    assert {:error, %Dolphin.Console.MissionFileError{} = e} = result
+    Exception.message(e)
   end
 end

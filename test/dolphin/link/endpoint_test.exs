@@ -1,9 +1,10 @@
 defmodule Dolphin.Link.EndpointTest do
   use ExUnit.Case, async: true
 
-  alias Dolphin.Link.Endpoint
+  alias Dolphin.Link.{Endpoint, EndpointError}
 
   doctest Endpoint
+  doctest EndpointError
 
   test "the three kinds, names resolved, IPv6 in brackets" do
     assert {:ok, %Endpoint{kind: :udpout, address: {127, 0, 0, 1}, port: 14_551}} = Endpoint.parse("udpout:localhost:14551")
@@ -13,10 +14,21 @@ defmodule Dolphin.Link.EndpointTest do
   end
 
   test "errors say what is wrong" do
-    assert {:error, "endpoint \"udpin:0.0.0.0\": expected KIND:HOST:PORT, e.g. udpin:0.0.0.0:14550"} = Endpoint.parse("udpin:0.0.0.0")
-    assert {:error, "endpoint \"udpin:0.0.0.0:70000\": bad port \"70000\" (expected 0..65535)"} = Endpoint.parse("udpin:0.0.0.0:70000")
-    assert {:error, "endpoint \"udpout::5\": no host"} = Endpoint.parse("udpout::5")
-    assert {:error, "endpoint \"udpout:no-such-host.invalid:5\": cannot resolve host \"no-such-host.invalid\""} = Endpoint.parse("udpout:no-such-host.invalid:5")
+    assert error("udpin:0.0.0.0") == "endpoint \"udpin:0.0.0.0\": expected KIND:HOST:PORT, e.g. udpin:0.0.0.0:14550"
+    assert error("udpin:0.0.0.0:70000") == "endpoint \"udpin:0.0.0.0:70000\": bad port \"70000\" (expected 0..65535)"
+    assert error("udpout::5") == "endpoint \"udpout::5\": no host"
+    assert error("udpout:no-such-host.invalid:5") == "endpoint \"udpout:no-such-host.invalid:5\": cannot resolve host \"no-such-host.invalid\""
     assert_raise ArgumentError, ~r/unknown kind/, fn -> Endpoint.parse!("serial:/dev/ttyUSB0:57600") end
+  end
+
+  test "errors name the rule broken" do
+    assert {:error, %EndpointError{reason: :bad_form, endpoint: "udpin:0.0.0.0"}} = Endpoint.parse("udpin:0.0.0.0")
+    assert {:error, %EndpointError{reason: :unknown_kind, detail: "serial"}} = Endpoint.parse("serial:/dev/ttyUSB0:57600")
+    assert {:error, %EndpointError{reason: :no_host}} = Endpoint.parse("udpout::5")
+  end
+
+  defp error(string) do
+    assert {:error, %EndpointError{} = e} = Endpoint.parse(string)
+    Exception.message(e)
   end
 end

@@ -1,7 +1,7 @@
 defmodule Dolphin.MAVLink.DialectTest do
   use ExUnit.Case, async: true
 
-  alias Dolphin.MAVLink.{Frame, Generator, Message, XML}
+  alias Dolphin.MAVLink.{DialectError, FieldError, Frame, Generator, Message, XML}
   alias Dolphin.Test.Dialect
   alias Dolphin.Test.Dialect.TestMixed
 
@@ -9,6 +9,8 @@ defmodule Dolphin.MAVLink.DialectTest do
   doctest Dolphin.MAVLink.Ardupilotmega
   doctest Dolphin.MAVLink.Message
   doctest Dolphin.MAVLink.CRC
+  doctest Dolphin.MAVLink.DialectError
+  doctest Dolphin.MAVLink.FieldError
 
   @fixtures Path.expand("../../fixtures/mavlink", __DIR__)
 
@@ -33,27 +35,33 @@ defmodule Dolphin.MAVLink.DialectTest do
 
     @tag :tmp_dir
     test "errors name the file and the problem", %{tmp_dir: dir} do
-      assert {:error, msg} = XML.load(Path.join(dir, "missing.xml"))
+      assert {:error, %DialectError{reason: :no_file} = e} = XML.load(Path.join(dir, "missing.xml"))
+      msg = Exception.message(e)
       assert msg =~ "missing.xml: no such dialect file"
 
       File.write!(Path.join(dir, "broken.xml"), "<mavlink><messages>")
-      assert {:error, msg} = XML.load(Path.join(dir, "broken.xml"))
+      assert {:error, %DialectError{reason: :not_xml} = e} = XML.load(Path.join(dir, "broken.xml"))
+      msg = Exception.message(e)
       assert msg =~ "broken.xml: not well-formed XML"
 
       File.write!(Path.join(dir, "type.xml"), ~s(<mavlink><messages><message id="1" name="M"><field type="uint7_t" name="x"/></message></messages></mavlink>))
-      assert {:error, msg} = XML.load(Path.join(dir, "type.xml"))
+      assert {:error, %DialectError{reason: :unknown_type} = e} = XML.load(Path.join(dir, "type.xml"))
+      msg = Exception.message(e)
       assert msg =~ ~s(message M field x: unknown type "uint7_t")
 
       File.write!(Path.join(dir, "inc.xml"), ~s(<mavlink><include>type.xml</include></mavlink>))
-      assert {:error, msg} = XML.load(Path.join(dir, "inc.xml"))
+      assert {:error, %DialectError{reason: :unknown_type} = e} = XML.load(Path.join(dir, "inc.xml"))
+      msg = Exception.message(e)
       assert msg =~ "type.xml"
 
       File.write!(Path.join(dir, "dup.xml"), ~s(<mavlink><messages><message id="5" name="A"/><message id="5" name="B"/></messages></mavlink>))
-      assert {:error, msg} = XML.load(Path.join(dir, "dup.xml"))
+      assert {:error, %DialectError{reason: :duplicate_id} = e} = XML.load(Path.join(dir, "dup.xml"))
+      msg = Exception.message(e)
       assert msg =~ "message id 5 defined twice: A" and msg =~ "and B"
 
       File.write!(Path.join(dir, "root.xml"), "<other/>")
-      assert {:error, msg} = XML.load(Path.join(dir, "root.xml"))
+      assert {:error, %DialectError{reason: :not_mavlink} = e} = XML.load(Path.join(dir, "root.xml"))
+      msg = Exception.message(e)
       assert msg =~ "root element is not <mavlink>"
     end
   end
@@ -125,6 +133,7 @@ defmodule Dolphin.MAVLink.DialectTest do
 
   test "Message.new/2 builds from string or atom keys and names unknown fields" do
     assert {:ok, %TestMixed{color: 1, gain: 2.0}} = Message.new(TestMixed, %{"color" => 1, gain: 2.0})
-    assert {:error, "TEST_MIXED has no field \"colour\""} = Message.new(TestMixed, %{"colour" => 1})
+    assert {:error, %FieldError{reason: :unknown_field} = e} = Message.new(TestMixed, %{"colour" => 1})
+    assert Exception.message(e) == "TEST_MIXED has no field \"colour\""
   end
 end

@@ -6,6 +6,7 @@ defmodule Mix.Tasks.Dolphin.PlanTest do
   alias Mix.Tasks.Dolphin.Plan
 
   doctest Mix.Tasks.Dolphin.Plan
+  doctest Dolphin.CommandLineError
 
   @moduletag :tmp_dir
   @fixtures Path.expand("../../fixtures/console", __DIR__)
@@ -43,7 +44,7 @@ defmodule Mix.Tasks.Dolphin.PlanTest do
       file = Path.join(dir, "nohome.exs")
       File.write!(file, "m = mission \"Away\" do\n  move 10, 0, 0\nend\n")
       out = Path.join(dir, "away.plan")
-      assert {:error, why} = Plan.main(["export", file, "Away", out])
+      why = message(Plan.main(["export", file, "Away", out]))
       assert why =~ "--home supplies a home"
       assert {:ok, _} = Plan.main(["export", file, "Away", out, "--home", "40.444233,-7.375234,820"])
       assert {:ok, m} = Mission.from_plan(File.read!(out))
@@ -51,7 +52,7 @@ defmodule Mix.Tasks.Dolphin.PlanTest do
     end
 
     test "no such mission: what the file defines, and what was skipped", %{tmp_dir: dir} do
-      assert {:error, why} = Plan.main(["export", @example, "Nope", Path.join(dir, "x.plan")])
+      why = message(Plan.main(["export", @example, "Nope", Path.join(dir, "x.plan")]))
       assert why =~ ~s{no mission "Nope"; the file defines: "Return to base" (return_home), "Survey Area" (simple_mission)}
       assert why =~ "single_vehicle.exs:27: skipped (not a definition)"
       refute File.exists?(Path.join(dir, "x.plan"))
@@ -87,13 +88,13 @@ defmodule Mix.Tasks.Dolphin.PlanTest do
     end
 
     test "plans that cannot be read say why", %{tmp_dir: dir} do
-      assert {:error, why} = Plan.main(["import", Path.join(@fixtures, "complex.plan")])
+      why = message(Plan.main(["import", Path.join(@fixtures, "complex.plan")]))
       assert why =~ ~s(only SimpleItem items are read)
       garbage = Path.join(dir, "garbage.plan")
       File.write!(garbage, "{not json")
-      assert {:error, why} = Plan.main(["import", garbage])
+      why = message(Plan.main(["import", garbage]))
       assert why =~ "garbage.plan: "
-      assert {:error, why} = Plan.main(["import", Path.join(dir, "none.plan")])
+      why = message(Plan.main(["import", Path.join(dir, "none.plan")]))
       assert why =~ "cannot read"
     end
   end
@@ -114,13 +115,13 @@ defmodule Mix.Tasks.Dolphin.PlanTest do
   end
 
   test "bad usage" do
-    assert {:error, "no command given\nusage: mix dolphin.plan export" <> _} = Plan.main([])
-    assert {:error, "unknown command \"frob\"" <> _} = Plan.main(["frob"])
-    assert {:error, "export: wrong arguments" <> _} = Plan.main(["export", "a.exs"])
-    assert {:error, "bad option --bogus" <> _} = Plan.main(["import", "a.plan", "--bogus"])
-    assert {:error, "--home is no option of import" <> _} = Plan.main(["import", "a.plan", "--home", "1,2,3"])
-    assert {:error, "--home takes LAT,LON,ALT" <> _} = Plan.main(["export", @example, "x", "o.plan", "--home", "north"])
-    assert {:error, "speeds must be positive"} = Plan.main(["export", @example, "x", "o.plan", "--cruise-speed", "0"])
+    assert "no command given\nusage: mix dolphin.plan export" <> _ = message(Plan.main([]))
+    assert "unknown command \"frob\"" <> _ = message(Plan.main(["frob"]))
+    assert "export: wrong arguments" <> _ = message(Plan.main(["export", "a.exs"]))
+    assert "bad option --bogus" <> _ = message(Plan.main(["import", "a.plan", "--bogus"]))
+    assert "--home is no option of import" <> _ = message(Plan.main(["import", "a.plan", "--home", "1,2,3"]))
+    assert "--home takes LAT,LON,ALT" <> _ = message(Plan.main(["export", @example, "x", "o.plan", "--home", "north"]))
+    assert "speeds must be positive" = message(Plan.main(["export", @example, "x", "o.plan", "--cruise-speed", "0"]))
   end
 
   test "the task raises on errors and prints on success", %{tmp_dir: dir} do
@@ -129,5 +130,10 @@ defmodule Mix.Tasks.Dolphin.PlanTest do
     on_exit(fn -> Mix.shell(Mix.Shell.IO) end)
     Plan.run(["export", @example, "Return to base", Path.join(dir, "r.plan")])
     assert_received {:mix_shell, :info, ["wrote " <> _]}
+  end
+
+  defp message(result) do
+    assert {:error, %Dolphin.CommandLineError{} = e} = result
+    Exception.message(e)
   end
 end

@@ -52,15 +52,15 @@ defmodule Mix.Tasks.Dolphin.PlanTransferTest do
 
   test "which vehicle: --vehicle, or a clear error naming those heard", %{plan: plan, port: port} do
     {:ok, [1, 2]} = Sim.start(count: 2, gcs: port, speedup: 5)
-    assert {:error, why} = Plan.main(["upload", plan, "--connect", "udpin:127.0.0.1:#{port}"])
+    why = message(Plan.main(["upload", plan, "--connect", "udpin:127.0.0.1:#{port}"]))
     assert why == "vehicles 1, 2 are on udpin:127.0.0.1:#{port}: say which with --vehicle ID"
     assert {:ok, "vehicle 2: uploaded" <> _} = Plan.main(["upload", plan, "--connect", "udpin:127.0.0.1:#{port}", "--vehicle", "2"])
-    assert {:error, why} = Plan.main(["download", "x.plan", "--connect", "udpin:127.0.0.1:#{port}", "--vehicle", "7", "--timeout", "1"])
+    why = message(Plan.main(["download", "x.plan", "--connect", "udpin:127.0.0.1:#{port}", "--vehicle", "7", "--timeout", "1"]))
     assert why == "no vehicle 7 heard on udpin:127.0.0.1:#{port} (heard: 1, 2)"
   end
 
   test "no vehicle, a refusal, bad usage: clear errors", %{plan: plan, port: port, tmp_dir: dir} do
-    assert {:error, why} = Plan.main(["upload", plan, "--connect", "udpin:127.0.0.1:#{port}", "--timeout", "1"])
+    why = message(Plan.main(["upload", plan, "--connect", "udpin:127.0.0.1:#{port}", "--timeout", "1"]))
     assert why =~ "no vehicle heard on udpin:127.0.0.1:#{port}"
 
     # More items than the simulated ArduCopter takes (650).
@@ -69,12 +69,17 @@ defmodule Mix.Tasks.Dolphin.PlanTransferTest do
     {:ok, mission} = Dolphin.Console.MissionSource.from_items(items, "long")
     File.write!(long, Mission.to_plan(mission))
     {:ok, [1]} = Sim.start(count: 1, gcs: port, speedup: 5)
-    assert {:error, why} = Plan.main(["upload", long, "--connect", "udpin:127.0.0.1:#{port}"])
+    why = message(Plan.main(["upload", long, "--connect", "udpin:127.0.0.1:#{port}"]))
     assert why =~ ~r/^upload failed after \d+\.\d\d s \(0 retransmissions\): vehicle 1 refused the mission upload: MAV_MISSION_NO_SPACE/
 
-    assert {:error, why} = Plan.main(["upload", plan])
+    why = message(Plan.main(["upload", plan]))
     assert why =~ "--connect ENDPOINT is needed"
-    assert {:error, why} = Plan.main(["upload", plan, "--connect", "carrier-pigeon:1"])
+    why = message(Plan.main(["upload", plan, "--connect", "carrier-pigeon:1"]))
     assert why =~ "--connect carrier-pigeon:1"
+  end
+
+  defp message(result) do
+    assert {:error, %Dolphin.CommandLineError{} = e} = result
+    Exception.message(e)
   end
 end
