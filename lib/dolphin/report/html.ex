@@ -17,8 +17,8 @@ defmodule Dolphin.Report.HTML do
       "<title>Flight report — ", esc(Path.basename(info.tlog)), "</title>",
       "<style>", css(), "</style></head>\n<body data-vehicles=\"#{length(model.vehicles)}\">",
       "<header><h1>Flight report</h1>",
-      "<p class=\"files\">telemetry log <code>", esc(info.tlog), "</code>",
-      if(info.events, do: ["; events <code>", esc(info.events), "</code>"], else: "; no events file: the time line shows no tasks"),
+      "<p class=\"files\">telemetry log ", file(info.tlog),
+      if(info.events, do: ["; events ", file(info.events)], else: "; no events file: the time line shows no tasks"),
       "</p><p class=\"when\">",
       if(model.started_at, do: ["started ", model.started_at |> DateTime.truncate(:second) |> DateTime.to_string(), " · "], else: []),
       "#{clock(model.span_s)} of clock time",
@@ -38,6 +38,9 @@ defmodule Dolphin.Report.HTML do
       "</section>\n<script>", js(), "</script></body></html>\n"
     ]
   end
+
+  # A file by its name, its whole path on hover.
+  defp file(path), do: [~s(<code title="), esc(Path.expand(path)), ~s(">), esc(Path.basename(path)), "</code>"]
 
   defp notes(model, info) do
     skipped =
@@ -79,7 +82,7 @@ defmodule Dolphin.Report.HTML do
 
   defp script_result(s) do
     [
-      ~s(<p class="script">Script <code>#{esc(s.name || "?")}</code>: <span class="result result-#{esc(s.result)}" id="script-result">#{esc(s.result)}</span>),
+      ~s(<p class="script">Script <code title="#{esc(s.name)}">#{esc(Path.basename(s.name || "?"))}</code>: <span class="result result-#{esc(s.result)}" id="script-result">#{esc(s.result)}</span>),
       if(s.reason, do: [" — ", esc(s.reason)], else: []),
       "</p>"
     ]

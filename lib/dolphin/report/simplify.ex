@@ -26,10 +26,10 @@ defmodule Dolphin.Report.Simplify do
   Douglas–Peucker with `tolerance` in the points' unit; the first and last
   points always stay.
 
-  A long track is cut in windows of #{@window} points, each simplified within
-  half the tolerance, and what they keep is simplified again within the
-  other half: each pass of Douglas–Peucker costs its points times the corners
-  it finds, and an hour of a survey has hundreds of corners.
+  A long track is cut in windows of #{@window} points, simplified one by
+  one (their ends stay: a point more per window): Douglas–Peucker costs its
+  points times the corners it finds, and an hour of a survey has hundreds of
+  corners.
   """
   @spec track([point()], number()) :: [point()]
   def track(points, tolerance) when tolerance <= 0, do: points
@@ -38,7 +38,9 @@ defmodule Dolphin.Report.Simplify do
     case length(points) do
       n when n < 3 -> points
       n when n <= 2 * @window -> douglas_peucker(points, tolerance)
-      _ -> points |> windows([]) |> Enum.flat_map(&douglas_peucker(&1, tolerance / 2)) |> Enum.dedup() |> douglas_peucker(tolerance / 2)
+      _ ->
+        [first | rest] = points |> windows([]) |> Enum.map(&douglas_peucker(&1, tolerance))
+        first ++ Enum.flat_map(rest, &tl/1)
     end
   end
 

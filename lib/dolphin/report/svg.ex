@@ -21,14 +21,14 @@ defmodule Dolphin.Report.SVG do
     h = maxy - miny
     span = max(w, h)
     r = span / 160
-    font = span / 55
+    font = span / 80
     ctx = %{r: r, font: font}
 
     [
       ~s(<svg id="map" class="map" xmlns="http://www.w3.org/2000/svg" viewBox="#{num(minx)} #{num(-maxy)} #{num(w)} #{num(h)}" preserveAspectRatio="xMidYMid meet" data-span-m="#{num(span, 0)}">),
       grid(minx, miny, maxx, maxy, span),
       Enum.map(model.vehicles, &vehicle_map(&1, ctx)),
-      scale_bar(minx, miny, span, font),
+      scale_bar(minx, miny, span, font, nice(span / 8)),
       north_arrow(maxx, maxy, span, font),
       "</svg>"
     ]
@@ -78,7 +78,7 @@ defmodule Dolphin.Report.SVG do
     ]
   end
 
-  defp scale_bar(minx, miny, span, font) do
+  defp scale_bar(minx, miny, span, font, grid_step) do
     len = nice(span / 5)
     x = minx + span * 0.03
     y = -(miny + span * 0.04)
@@ -86,7 +86,7 @@ defmodule Dolphin.Report.SVG do
     [
       ~s(<g class="scale-bar" data-length-m="#{num(len, 0)}">),
       ~s(<rect x="#{num(x)}" y="#{num(y - font * 0.4)}" width="#{num(len)}" height="#{num(font * 0.4)}"/>),
-      ~s(<text x="#{num(x)}" y="#{num(y - font * 0.7)}" font-size="#{num(font)}">#{metres(len)}</text>),
+      ~s(<text x="#{num(x)}" y="#{num(y - font * 0.7)}" font-size="#{num(font)}">#{metres(len)} · grid #{metres(grid_step)}</text>),
       "</g>"
     ]
   end
