@@ -43,10 +43,12 @@ defmodule Dolphin.Report do
   The events file carries no run id, so it is matched against the log by what
   both record: its vehicles must be in the log, its arming, mode changes and
   mission items reached must line up in time with the log's frames (which
-  also places the events on the log's time line), and its time must overlap
-  the log's. Otherwise it is refused with reason `:events_mismatch`. Two runs
-  alike in all of that — a deterministic simulation run twice — cannot be
-  told apart.
+  also places the events on the log's time line), and its time must be the
+  log's: overlapping it, no longer than it, and a script that ended must end
+  with the log (give the run's own log, as `mix dolphin.run --tlog` writes
+  it, not a longer recording). Otherwise it is refused with reason
+  `:events_mismatch`. Two runs alike in all of that — a deterministic
+  simulation run twice — cannot be told apart.
   """
 
   alias Dolphin.Report.{Error, Events, FlightLog, HTML, Model}

@@ -220,6 +220,19 @@ defmodule Dolphin.ReportTest do
       assert {:error, %Error{reason: :events_mismatch, detail: detail}} = Report.write(tlog(dir), path, Path.join(dir, "r.html"))
       assert detail =~ "overlap"
     end
+
+    test "its script ended long before the log does", %{tmp_dir: dir} do
+      # A shorter run of the same vehicles, alike at first: armed and in AUTO at 5 s.
+      shorter = fn lines ->
+        lines
+        |> Enum.filter(&(&1.t_ms <= 7_000 or &1.event == "script_finished"))
+        |> Enum.map(&if(&1.event == "script_finished", do: %{&1 | t_ms: 7_000}, else: &1))
+      end
+
+      path = events(dir, 1.0, "other.jsonl", shorter)
+      assert {:error, %Error{reason: :events_mismatch, detail: detail}} = Report.write(tlog(dir), path, Path.join(dir, "r.html"))
+      assert detail =~ "its script ended"
+    end
   end
 
   test "errors: no log, no vehicle in it, nowhere to write", %{tmp_dir: dir} do

@@ -51,7 +51,7 @@ defmodule Dolphin.Report.Events do
 
   @doc false
   # The seconds to add to an event's `t_ms / 1000` to put it on the log's time
-  # line. `log` is the log's anchors: %{vehicles: [id], span_s: s, arming: %{id
+  # line. `log` is the log's anchors: %{vehicles: [id], span_s: s, speedup: k, arming: %{id
   # => [t]}, modes: %{id => [{t, mode}]}, reached: %{id => [{t, seq}]}, cut: bool}.
   @spec align([map()], map(), Path.t()) :: {:ok, float()} | {:error, Error.t()}
   def align([], _log, _path), do: {:ok, 0.0}
@@ -77,12 +77,16 @@ defmodule Dolphin.Report.Events do
     end
   end
 
-  # Both files start when the run starts; events far outside the log's time
-  # are another run's. A log cut short may end before the events do.
+  # Both files start when the run starts and end when it ends (the log a
+  # little later: the vehicles and links stop after the script, a few real
+  # seconds); events far outside the log's time are another run's. A log cut
+  # short may end before the events do.
   defp overlap(events, offset, log, path) do
     first = hd(events)["t_ms"] / 1000 + offset
     last = List.last(events)["t_ms"] / 1000 + offset
     slack = max(30.0, 0.2 * log.span_s)
+    teardown = 30.0 + 0.1 * log.span_s + 5.0 * log.speedup
+    finished = Enum.any?(events, &(&1["event"] == "script_finished"))
 
     cond do
       first > log.span_s + slack or last < -slack ->
@@ -90,6 +94,9 @@ defmodule Dolphin.Report.Events do
 
       not log.cut and last - first > log.span_s + slack ->
         mismatch(path, "it spans #{round(last - first)} s, the telemetry log #{round(log.span_s)} s")
+
+      finished and not log.cut and log.span_s - last > teardown ->
+        mismatch(path, "its script ended #{round(log.span_s - last)} s before the end of the telemetry log (of #{round(log.span_s)} s)")
 
       true ->
         {:ok, offset}

@@ -62,6 +62,7 @@ defmodule Dolphin.Report.Model do
     %{
       vehicles: Enum.map(vs, & &1.id),
       span_s: if(log.first_us, do: clock.(log.last_us), else: 0.0),
+      speedup: k,
       arming: Map.new(vs, fn v -> {v.id, for({ts, true} <- v.arming, do: clock.(ts))} end),
       # The first mode is where the vehicle was found, not a change.
       modes: Map.new(vs, fn v -> {v.id, for({ts, m} <- Enum.drop(v.modes, 1), do: {clock.(ts), m})} end),

@@ -22,7 +22,10 @@ defmodule Dolphin.Report.SVG do
     span = max(w, h)
     r = span / 160
     font = span / 80
-    ctx = %{r: r, font: font}
+    homes = Enum.map(model.vehicles, &(&1.home && {round(elem(&1.home, 0) / r), round(elem(&1.home, 1) / r)}))
+    shared = homes |> Enum.frequencies() |> Enum.filter(fn {h, n} -> h != nil and n > 1 end) |> Map.new()
+    shared_homes = for v <- model.vehicles, v.home != nil, Map.has_key?(shared, {round(elem(v.home, 0) / r), round(elem(v.home, 1) / r)}), do: v.home
+    ctx = %{r: r, font: font, shared_homes: shared_homes}
 
     [
       ~s(<svg id="map" class="map" xmlns="http://www.w3.org/2000/svg" viewBox="#{num(minx)} #{num(-maxy)} #{num(w)} #{num(h)}" preserveAspectRatio="xMidYMid meet" data-span-m="#{num(span, 0)}">),
@@ -130,21 +133,21 @@ defmodule Dolphin.Report.SVG do
       end),
       Enum.map(v.takeoffs, fn {t, x, y} -> triangle("takeoff", x, y, r * 1.6, false, "vehicle #{v.id}: take-off at #{clock(t)}") end),
       Enum.map(v.landings, fn {t, x, y} -> triangle("landing", x, y, r * 1.6, true, "vehicle #{v.id}: landing at #{clock(t)}") end),
-      home_mark(v, r, ctx.font),
+      home_mark(v, r, ctx.font, v.home in ctx.shared_homes),
       "</g>"
     ]
   end
 
-  defp home_mark(%{home: nil}, _r, _font), do: []
+  defp home_mark(%{home: nil}, _r, _font, _shared), do: []
 
-  defp home_mark(%{home: {x, y}, id: id, index: i}, r, font) do
+  defp home_mark(%{home: {x, y}, id: id, index: i}, r, font, shared) do
     s = r * 1.5
-    # Vehicles sharing a home get their labels one under the other.
-    ly = -y - s + i * font * 0.9
+    # Above the mark; vehicles sharing a home get their labels one above the other.
+    ly = -y - s - font * 0.3 - i * font * 0.9 * if(shared, do: 1, else: 0)
 
     [
       ~s(<g class="home" data-vehicle="#{id}"><rect x="#{num(x - s)}" y="#{num(-y - s)}" width="#{num(2 * s)}" height="#{num(2 * s)}"/>),
-      ~s(<text x="#{num(x + 2 * s)}" y="#{num(ly)}" font-size="#{num(font * 0.8)}">H#{id}</text><title>vehicle #{id}: home</title></g>)
+      ~s(<text x="#{num(x)}" y="#{num(ly)}" font-size="#{num(font * 0.8)}" text-anchor="middle">H#{id}</text><title>vehicle #{id}: home</title></g>)
     ]
   end
 
