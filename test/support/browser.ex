@@ -10,7 +10,10 @@ defmodule Dolphin.Test.Browser do
   @doc "The browser's path, or nil."
   @spec executable() :: String.t() | nil
   def executable do
-    System.get_env("CHROMIUM") || System.find_executable("chromium") || System.find_executable("chromium-browser")
+    case System.get_env("CHROMIUM") do
+      path when path in [nil, ""] -> System.find_executable("chromium") || System.find_executable("chromium-browser")
+      path -> path
+    end
   end
 
   @doc "Whether a browser is there."

@@ -116,7 +116,7 @@ defmodule Dolphin.Report.Model do
       takeoffs: takeoffs,
       landings: landings,
       photos: for({ts, lat, lon} <- v.photos, {x, y} = project.(lat, lon), do: {clock.(ts), x, y}),
-      plans: Enum.map(v.uploads, &plan(&1, v.home, project, clock)),
+      plans: v.uploads |> Enum.map(&plan(&1, v.home, project, clock)) |> same_plans(),
       tasks: Enum.map(my_tasks, &Map.merge(&1, %{from: at.(&1.start), to: at.(&1.stop)})),
       marks: marks(v, mine, clock),
       series: %{
@@ -209,6 +209,15 @@ defmodule Dolphin.Report.Model do
       end)
 
     %{at: clock.(upload.at), count: upload.count, points: points}
+  end
+
+  # A mission uploaded again (each `forever` round of a script) is drawn once,
+  # with the times it was uploaded.
+  defp same_plans(plans) do
+    plans
+    |> Enum.group_by(& &1.points)
+    |> Enum.map(fn {_points, [first | _] = same} -> Map.put(first, :times, Enum.map(same, & &1.at)) end)
+    |> Enum.sort_by(& &1.at)
   end
 
   defp link_quality(samples, clock) do

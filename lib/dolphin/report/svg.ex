@@ -118,7 +118,7 @@ defmodule Dolphin.Report.SVG do
         [
           ~s(<polyline class="planned" data-vehicle="#{v.id}" data-upload="#{i + 1}" points="),
           points(Enum.map(p.points, fn {_, _, x, y} -> {x, y} end)),
-          ~s|"><title>vehicle #{v.id}: mission uploaded at #{clock(p.at)} (#{p.count} items)</title></polyline>|,
+          ~s|"><title>vehicle #{v.id}: mission of #{p.count} items uploaded at #{Enum.map_join(p.times, ", ", &clock/1)}</title></polyline>|,
           Enum.map(p.points, fn {seq, cmd, x, y} ->
             ~s|<circle class="item" cx="#{num(x)}" cy="#{num(-y)}" r="#{num(r * 0.6)}"><title>vehicle #{v.id}, upload #{i + 1}: item #{seq} (#{command(cmd)})</title></circle>|
           end)
