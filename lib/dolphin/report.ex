@@ -69,7 +69,8 @@ defmodule Dolphin.Report do
 
   @doc """
   Reads `tlog_path` (and `events_path`, unless nil), writes the report to
-  `out_path` and returns its summary. No options yet; `opts` is for later ones.
+  `out_path` and returns its summary. Option: `:title`, the page's heading
+  (default "Flight report").
   """
   @spec write(Path.t(), Path.t() | nil, Path.t(), keyword()) :: {:ok, summary()} | {:error, Error.t()}
   def write(tlog_path, events_path, out_path, opts \\ []) when is_list(opts) do
@@ -88,7 +89,8 @@ defmodule Dolphin.Report do
          {:ok, events, bad} <- read_events(events_path),
          {:ok, offset} <- Events.align(events, Model.anchors(log), events_path) do
       model = Model.build(log, events, offset)
-      page = HTML.page(model, %{tlog: tlog_path, events: events_path, events_skipped: bad})
+      title = Keyword.get(opts, :title, "Flight report")
+      page = HTML.page(model, %{title: title, tlog: tlog_path, events: events_path, events_skipped: bad})
 
       {:ok, page,
        %{

@@ -153,8 +153,9 @@ defmodule Dolphin.ReportTest do
 
   test "without events: the log alone", %{tmp_dir: dir} do
     out = Path.join(dir, "report.html")
-    assert {:ok, %{events: nil, script_result: nil}} = Report.write(tlog(dir), nil, out)
+    assert {:ok, %{events: nil, script_result: nil}} = Report.write(tlog(dir), nil, out, title: "Survey <north>")
     html = File.read!(out)
+    assert html =~ "<h1>Survey &lt;north&gt;</h1>"
     assert html =~ "no events file"
     assert count(html, ~r/<polyline class="flown"/) == 2
     refute html =~ ~s(class="task")

@@ -14,9 +14,9 @@ defmodule Dolphin.Report.HTML do
     [
       "<!DOCTYPE html>\n<html lang=\"en\"><head><meta charset=\"utf-8\">",
       "<meta name=\"viewport\" content=\"width=device-width, initial-scale=1\">",
-      "<title>Flight report — ", esc(Path.basename(info.tlog)), "</title>",
+      "<title>", esc(info.title), " — ", esc(Path.basename(info.tlog)), "</title>",
       "<style>", css(), "</style></head>\n<body data-vehicles=\"#{length(model.vehicles)}\">",
-      "<header><h1>Flight report</h1>",
+      "<header><h1>", esc(info.title), "</h1>",
       "<p class=\"files\">telemetry log ", file(info.tlog),
       if(info.events, do: ["; events ", file(info.events)], else: "; no events file: the time line shows no tasks"),
       "</p><p class=\"when\">",

@@ -46,8 +46,7 @@ defmodule Dolphin.Report.Model do
       stats: log.stats,
       vehicles: vehicles,
       script: script(events, span),
-      script_marks: script_marks(events, tasks),
-      has_events: events != []
+      script_marks: script_marks(events, tasks)
     }
   end
 
