@@ -33,16 +33,15 @@ defmodule Dolphin.Report.FlightLog do
               modes: [],
               battery: [],
               link: [],
-              received: 0,
-              lost: 0,
-              last_seq: nil,
               uploads: [],
               reached: [],
               photos: [],
               texts: []
   end
 
-  defstruct vehicles: %{}, first_us: nil, last_us: nil, boot_ms: 0, boot_real_us: 0, boot_last: %{}, stats: nil
+  # `links`: per system id, {last seq, frames received, frames lost} of its
+  # autopilot (kept apart from the vehicles: updated on every frame).
+  defstruct vehicles: %{}, links: %{}, first_us: nil, last_us: nil, boot_ms: 0, boot_real_us: 0, boot_last: %{}, stats: nil
 
   @type t :: %__MODULE__{}
 
@@ -82,11 +81,14 @@ defmodule Dolphin.Report.FlightLog do
   # One record into the log.
   @spec add({non_neg_integer(), Frame.t()}, t()) :: t()
   def add({ts, %Frame{} = frame}, log) do
-    log = %{log | first_us: log.first_us || ts, last_us: max(log.last_us || ts, ts)}
+    log = %{log | first_us: log.first_us || ts, last_us: max(log.last_us || ts, ts), links: sequence(log.links, frame)}
     message(frame.message, ts, frame, log)
   end
 
   defp message(%M.Heartbeat{autopilot: ap, type: type} = hb, ts, frame, log) when ap != @mav_autopilot_invalid and type != @mav_type_gcs do
+    # An autopilot off component 1 has no link counters: none lost.
+    {_, received, lost} = Map.get(log.links, frame.sysid, {nil, 0, 0})
+
     update(log, frame, fn v ->
       armed = (hb.base_mode &&& @armed_flag) != 0
       autopilot = if ap == @mav_autopilot_px4, do: :px4, else: :ardupilot
@@ -94,7 +96,7 @@ defmodule Dolphin.Report.FlightLog do
       v = %{v | type: type, autopilot: autopilot}
       v = if armed != v.armed, do: %{v | armed: armed, arming: [{ts, armed} | v.arming]}, else: v
       v = if mode != v.mode, do: %{v | mode: mode, modes: [{ts, mode} | v.modes]}, else: v
-      %{v | link: [{ts, v.received, v.lost} | v.link]}
+      %{v | link: [{ts, received, lost} | v.link]}
     end)
   end
 
@@ -135,20 +137,9 @@ defmodule Dolphin.Report.FlightLog do
     end)
   end
 
-  defp message(_other, _ts, frame, log), do: count_only(log, frame)
+  defp message(_other, _ts, _frame, log), do: log
 
-  # Frames the report does not read still count for the link's quality.
-  defp count_only(log, %Frame{sysid: id} = frame) do
-    case log.vehicles do
-      %{^id => v} -> %{log | vehicles: %{log.vehicles | id => sequence(v, frame)}}
-      _ -> log
-    end
-  end
-
-  defp update(log, %Frame{sysid: id} = frame, fun) do
-    v = Map.get_lazy(log.vehicles, id, fn -> %Vehicle{id: id} end)
-    %{log | vehicles: Map.put(log.vehicles, id, fun.(sequence(v, frame)))}
-  end
+  defp update(log, %Frame{sysid: id}, fun), do: update_id(log, id, fun)
 
   defp update_id(log, id, fun) do
     v = Map.get_lazy(log.vehicles, id, fn -> %Vehicle{id: id} end)
@@ -158,20 +149,20 @@ defmodule Dolphin.Report.FlightLog do
   # Link quality from the autopilot's sequence numbers: each gap is frames lost
   # on the way. A number repeated or from up to half the ring behind is a
   # duplicate or a frame overtaken on the way: neither received nor lost.
-  defp sequence(v, %Frame{compid: 1, seq: seq}) do
-    case v.last_seq do
-      nil ->
-        %{v | last_seq: seq, received: v.received + 1}
-
-      last ->
+  defp sequence(links, %Frame{compid: 1, sysid: id, seq: seq}) do
+    case links do
+      %{^id => {last, received, lost}} ->
         case band(seq - last, 0xFF) do
-          step when step == 0 or step > 128 -> v
-          step -> %{v | last_seq: seq, received: v.received + 1, lost: v.lost + step - 1}
+          step when step == 0 or step > 128 -> links
+          step -> %{links | id => {seq, received + 1, lost + step - 1}}
         end
+
+      _ ->
+        Map.put(links, id, {seq, 1, 0})
     end
   end
 
-  defp sequence(v, _frame), do: v
+  defp sequence(links, _frame), do: links
 
   # How fast the vehicles' clocks ran against the log's: the sum of steps of
   # their boot time over the steps of the log's time. A simulator sped up K
@@ -218,7 +209,7 @@ defmodule Dolphin.Report.FlightLog do
          }}
       end
 
-    %{log | vehicles: vehicles, boot_last: %{}}
+    %{log | vehicles: vehicles, links: %{}, boot_last: %{}}
   end
 
   @doc false
