@@ -23,4 +23,15 @@ shared_exclude =
     [:shared_vectors]
   end
 
-ExUnit.start(exclude: sitl_exclude ++ shared_exclude)
+# Browser tests (tagged :browser) load pages in a headless Chromium and read
+# back what it drew; they run whenever one is installed (scripts/bootstrap
+# installs Debian's chromium).
+browser_exclude =
+  if Dolphin.Test.Browser.available?() do
+    []
+  else
+    IO.puts("browser tests skipped: no chromium (install Debian's chromium, or set CHROMIUM=/path/to/chromium, to run them)")
+    [:browser]
+  end
+
+ExUnit.start(exclude: sitl_exclude ++ shared_exclude ++ browser_exclude)

@@ -1,0 +1,220 @@
+defmodule Dolphin.Report.FlightLog do
+  @moduledoc false
+  # Reads a .tlog into what a flight report shows, one fold over its records:
+  # per vehicle the positions, home, arming and modes, battery, link counters,
+  # uploaded missions, items reached, photos and status texts.
+
+  alias Dolphin.MAVLink.Ardupilotmega, as: M
+  alias Dolphin.MAVLink.{Frame, Tlog}
+  alias Dolphin.Vehicles.Modes
+
+  import Bitwise
+
+  @chunk 1_048_576
+  @mav_type_gcs 6
+  @mav_autopilot_invalid 8
+  @mav_autopilot_px4 12
+  @armed_flag 0x80
+  # A gap in the vehicle's boot clock this long is a reboot or a silence, not
+  # a measure of how fast its clock runs.
+  @max_boot_step_ms 60_000
+
+  defmodule Vehicle do
+    @moduledoc false
+    # One vehicle's records, newest first while reading (reversed by finish/1).
+    defstruct id: nil,
+              type: nil,
+              autopilot: nil,
+              home: nil,
+              positions: [],
+              armed: nil,
+              arming: [],
+              mode: nil,
+              modes: [],
+              battery: [],
+              link: [],
+              uploads: [],
+              reached: [],
+              photos: [],
+              texts: []
+  end
+
+  # `links`: per system id, {last seq, frames received, frames lost} of its
+  # autopilot (kept apart from the vehicles: updated on every frame).
+  defstruct vehicles: %{}, links: %{}, first_us: nil, last_us: nil, boot_ms: 0, boot_real_us: 0, boot_last: %{}, stats: nil
+
+  @type t :: %__MODULE__{}
+
+  @doc false
+  @spec read_file(Path.t()) :: {:ok, t()} | {:error, File.posix()}
+  def read_file(path) do
+    case File.open(path, [:read, :binary, :raw, :read_ahead]) do
+      {:ok, io} ->
+        try do
+          {:ok, read_io(io, Tlog.reader(unknown: :drop), new())}
+        after
+          File.close(io)
+        end
+
+      {:error, _} = error ->
+        error
+    end
+  end
+
+  defp read_io(io, reader, log) do
+    case IO.binread(io, @chunk) do
+      data when is_binary(data) ->
+        {records, reader} = Tlog.read(reader, data)
+        read_io(io, reader, Enum.reduce(records, log, &add/2))
+
+      _eof_or_error ->
+        {records, reader} = Tlog.finish(reader)
+        finish(%{Enum.reduce(records, log, &add/2) | stats: Tlog.stats(reader)})
+    end
+  end
+
+  @doc false
+  @spec new() :: t()
+  def new, do: %__MODULE__{}
+
+  @doc false
+  # One record into the log.
+  @spec add({non_neg_integer(), Frame.t()}, t()) :: t()
+  def add({ts, %Frame{} = frame}, log) do
+    log = %{log | first_us: log.first_us || ts, last_us: max(log.last_us || ts, ts), links: sequence(log.links, frame)}
+    message(frame.message, ts, frame, log)
+  end
+
+  defp message(%M.Heartbeat{autopilot: ap, type: type} = hb, ts, frame, log) when ap != @mav_autopilot_invalid and type != @mav_type_gcs do
+    # An autopilot off component 1 has no link counters: none lost.
+    {_, received, lost} = Map.get(log.links, frame.sysid, {nil, 0, 0})
+
+    update(log, frame, fn v ->
+      armed = (hb.base_mode &&& @armed_flag) != 0
+      autopilot = if ap == @mav_autopilot_px4, do: :px4, else: :ardupilot
+      mode = Modes.name(autopilot, type, hb.custom_mode)
+      v = %{v | type: type, autopilot: autopilot}
+      v = if armed != v.armed, do: %{v | armed: armed, arming: [{ts, armed} | v.arming]}, else: v
+      v = if mode != v.mode, do: %{v | mode: mode, modes: [{ts, mode} | v.modes]}, else: v
+      %{v | link: [{ts, received, lost} | v.link]}
+    end)
+  end
+
+  defp message(%M.GlobalPositionInt{} = p, ts, frame, log) do
+    log = boot_clock(log, frame.sysid, ts, p.time_boot_ms)
+    update(log, frame, &%{&1 | positions: [{ts, p.lat, p.lon, p.relative_alt, p.vx, p.vy} | &1.positions]})
+  end
+
+  defp message(%M.HomePosition{} = h, _ts, frame, log),
+    do: update(log, frame, &%{&1 | home: &1.home || {h.latitude, h.longitude, h.altitude}})
+
+  defp message(%M.SysStatus{battery_remaining: pct}, ts, frame, log) when pct >= 0,
+    do: update(log, frame, &%{&1 | battery: [{ts, pct} | &1.battery]})
+
+  defp message(%M.MissionItemReached{seq: seq}, ts, frame, log),
+    do: update(log, frame, &%{&1 | reached: [{ts, seq} | &1.reached]})
+
+  defp message(%M.CameraImageCaptured{lat: lat, lon: lon}, ts, frame, log),
+    do: update(log, frame, &%{&1 | photos: [{ts, lat, lon} | &1.photos]})
+
+  defp message(%M.Statustext{severity: severity, text: text}, ts, frame, log),
+    do: update(log, frame, &%{&1 | texts: [{ts, severity, clean_text(text)} | &1.texts]})
+
+  # A ground station's upload: MISSION_COUNT opens it, MISSION_ITEM_INT fills
+  # it (a retransmitted item replaces its first copy). The vehicle's own
+  # items (a download to verify) are addressed to the ground station and so
+  # land under its id, which is not a vehicle.
+  defp message(%M.MissionCount{mission_type: 0, target_system: target, count: count}, ts, %Frame{sysid: from}, log) when target != from,
+    do: update_id(log, target, &%{&1 | uploads: [%{at: ts, count: count, items: %{}} | &1.uploads]})
+
+  defp message(%M.MissionItemInt{mission_type: 0, target_system: target} = item, _ts, %Frame{sysid: from}, log) when target != from do
+    update_id(log, target, fn
+      %{uploads: [upload | older]} = v ->
+        %{v | uploads: [%{upload | items: Map.put(upload.items, item.seq, {item.command, item.x, item.y, item.z})} | older]}
+
+      v ->
+        v
+    end)
+  end
+
+  defp message(_other, _ts, _frame, log), do: log
+
+  defp update(log, %Frame{sysid: id}, fun), do: update_id(log, id, fun)
+
+  defp update_id(log, id, fun) do
+    v = Map.get_lazy(log.vehicles, id, fn -> %Vehicle{id: id} end)
+    %{log | vehicles: Map.put(log.vehicles, id, fun.(v))}
+  end
+
+  # Link quality from the autopilot's sequence numbers: each gap is frames lost
+  # on the way. A number repeated or from up to half the ring behind is a
+  # duplicate or a frame overtaken on the way: neither received nor lost.
+  defp sequence(links, %Frame{compid: 1, sysid: id, seq: seq}) do
+    case links do
+      %{^id => {last, received, lost}} ->
+        case band(seq - last, 0xFF) do
+          step when step == 0 or step > 128 -> links
+          step -> %{links | id => {seq, received + 1, lost + step - 1}}
+        end
+
+      _ ->
+        Map.put(links, id, {seq, 1, 0})
+    end
+  end
+
+  defp sequence(links, _frame), do: links
+
+  # How fast the vehicles' clocks ran against the log's: the sum of steps of
+  # their boot time over the steps of the log's time. A simulator sped up K
+  # times runs K times faster than the wall clock that stamps the records.
+  defp boot_clock(log, id, ts, boot_ms) do
+    log =
+      case log.boot_last do
+        %{^id => {last_ts, last_boot}} when boot_ms > last_boot and boot_ms - last_boot < @max_boot_step_ms and ts > last_ts ->
+          %{log | boot_ms: log.boot_ms + (boot_ms - last_boot), boot_real_us: log.boot_real_us + (ts - last_ts)}
+
+        _ ->
+          log
+      end
+
+    %{log | boot_last: Map.put(log.boot_last, id, {ts, boot_ms})}
+  end
+
+  defp clean_text(text) when is_binary(text) do
+    text = text |> :binary.split(<<0>>) |> hd()
+    if String.valid?(text), do: text, else: inspect(text)
+  end
+
+  defp clean_text(text), do: inspect(text)
+
+  # Keeps the vehicles (a ground station or a lone camera is not one) with
+  # their lists oldest first.
+  defp finish(log) do
+    vehicles =
+      for {id, v} <- log.vehicles, v.type != nil or v.positions != [], into: %{} do
+        uploads = v.uploads |> Enum.reverse() |> Enum.reject(&(&1.items == %{}))
+
+        {id,
+         %{
+           v
+           | positions: Enum.reverse(v.positions),
+             arming: Enum.reverse(v.arming),
+             modes: Enum.reverse(v.modes),
+             battery: Enum.reverse(v.battery),
+             link: Enum.reverse(v.link),
+             uploads: uploads,
+             reached: Enum.reverse(v.reached),
+             photos: Enum.reverse(v.photos),
+             texts: Enum.reverse(v.texts)
+         }}
+      end
+
+    %{log | vehicles: vehicles, links: %{}, boot_last: %{}}
+  end
+
+  @doc false
+  # The vehicles' clock rate over the log's (1.0 when the log does not tell).
+  @spec speedup(t()) :: float()
+  def speedup(%__MODULE__{boot_ms: b, boot_real_us: r}) when b > 0 and r > 0, do: b * 1000 / r
+  def speedup(_log), do: 1.0
+end

@@ -1,0 +1,66 @@
+defmodule Mix.Tasks.Dolphin.Report do
+  @shortdoc "Makes an HTML flight report of a run from its .tlog (and events)"
+
+  @moduledoc """
+  Makes a flight report of a run: one self-contained HTML page with a map of
+  where each vehicle flew against what was planned, a time line of its tasks,
+  plots of battery, height, speed and link quality, and a summary table (see
+  `Dolphin.Report` for what it shows and how it reads its input).
+
+      mix dolphin.run examples/two_vehicles.exs --sim 2 --speedup 30 --for 10m --tlog run.tlog --events run.jsonl
+      mix dolphin.report run.tlog --events run.jsonl -o run.html
+
+  ## Options
+
+    * `--events FILE` — the run's events (`mix dolphin.run --events FILE`):
+      tasks, conditions and the script's result; without it the report shows
+      what the log alone tells
+    * `-o FILE`, `--output FILE` — where to write the page (default: the
+      log's name with `.html`)
+
+  A damaged log still gives a report, which says what was skipped; events of
+  another run are refused.
+  """
+
+  use Mix.Task
+
+  @switches [events: :string, output: :string]
+  @aliases [o: :output]
+  @usage "usage: mix dolphin.report RUN.tlog [--events RUN.jsonl] [-o REPORT.html]"
+
+  @impl Mix.Task
+  def run(args) do
+    case OptionParser.parse(args, strict: @switches, aliases: @aliases) do
+      {opts, [tlog], []} ->
+        # The report reads the MAVLink dialect only: no vehicles, links or clock.
+        Mix.Task.run("compile", [])
+        out = opts[:output] || Path.rootname(tlog, ".tlog") <> ".html"
+
+        case make(tlog, opts[:events], out) do
+          {:ok, line} -> Mix.shell().info(line)
+          {:error, error} -> Mix.raise("dolphin.report: " <> Exception.message(error))
+        end
+
+      {_, _, [{switch, _} | _]} ->
+        Mix.raise("dolphin.report: unknown or malformed option #{switch}\n" <> @usage)
+
+      {_, _, []} ->
+        Mix.raise(@usage)
+    end
+  end
+
+  @doc """
+  Writes the report and returns the line the task prints.
+  """
+  @spec make(Path.t(), Path.t() | nil, Path.t()) :: {:ok, String.t()} | {:error, Dolphin.Report.Error.t()}
+  def make(tlog, events, out) do
+    with {:ok, s} <- Dolphin.Report.write(tlog, events, out) do
+      damaged = if s.bytes_skipped > 0, do: "; the log is damaged: #{s.bytes_skipped} bytes skipped (see the report)", else: ""
+      skipped = if s.events_skipped > 0, do: "; #{s.events_skipped} unreadable event line(s) skipped", else: ""
+
+      {:ok,
+       "report: #{out} (#{div(s.bytes + 1023, 1024)} KiB): #{length(s.vehicles)} vehicle(s), #{s.frames} frames, " <>
+         "#{round(s.span_s)} s of clock time" <> if(s.events, do: ", #{s.events} events", else: "") <> damaged <> skipped}
+    end
+  end
+end

@@ -1,0 +1,269 @@
+defmodule Dolphin.ReportTest do
+  use ExUnit.Case, async: true
+
+  import ExUnit.CaptureIO
+
+  alias Dolphin.MAVLink.Ardupilotmega, as: M
+  alias Dolphin.MAVLink.{Frame, Tlog}
+  alias Dolphin.Report
+  alias Dolphin.Report.Error
+
+  @moduletag :tmp_dir
+
+  @t0 1_800_000_000_000_000
+  @lat0 404_442_330
+  @lon0 -73_752_340
+  # About 1 m in degrees × 10⁷ at that latitude.
+  @m 90
+
+  # Two vehicles over 60 s at 2 Hz, seen as a ground station's log sees them:
+  # vehicle 1 flies 100 m north, vehicle 2 100 m east, each after an upload of
+  # three items; vehicle 1 arms and goes AUTO at 5 s, takes a photo at 20 s
+  # and reaches item 1 at 30 s.
+  defp tlog(dir, name \\ "run.tlog") do
+    path = Path.join(dir, name)
+    File.write!(path, tlog_bytes())
+    path
+  end
+
+  defp tlog_bytes do
+    upload =
+      for v <- [1, 2] do
+        count = %M.MissionCount{target_system: v, target_component: 1, count: 3}
+
+        items =
+          for {seq, {n, e}} <- Enum.with_index([{0, 0}, {100, 0}, {0, 0}], &{&2, &1}) do
+            {n, e} = if v == 2, do: {e, n}, else: {n, e}
+            %M.MissionItemInt{target_system: v, target_component: 1, seq: seq, frame: 5, command: 16, x: @lat0 + n * @m, y: @lon0 + e * @m, z: 850.0}
+          end
+
+        Enum.map([count | items], &{2_000_000, 255, 190, &1})
+      end
+
+    telemetry =
+      for half <- 0..119, v <- [1, 2] do
+        t = half / 2
+        armed = t >= 5
+        up = round(min(max(t - 5, 0) * 4, 50))
+        along = round(min(max(t - 10, 0) * 5, 100) * @m)
+        {lat, lon} = if v == 1, do: {@lat0 + along, @lon0}, else: {@lat0, @lon0 + along}
+        ts = round(t * 1_000_000) + v * 1_000
+
+        [{ts, v, 1, %M.GlobalPositionInt{time_boot_ms: round(t * 1000), lat: lat, lon: lon, alt: 820_000 + up * 1000, relative_alt: up * 1000, vx: 500, vy: 0}}] ++
+          if rem(half, 2) == 0 do
+            [
+              {ts + 1, v, 1, %M.Heartbeat{type: 2, autopilot: 3, base_mode: if(armed, do: 0x91, else: 0x11), custom_mode: if(armed, do: 3, else: 0), mavlink_version: 3}},
+              {ts + 2, v, 1, %M.SysStatus{battery_remaining: 100 - div(half, 3)}},
+              {ts + 3, v, 1, %M.HomePosition{latitude: @lat0, longitude: @lon0, altitude: 820_000}}
+            ]
+          else
+            []
+          end
+      end
+
+    extra = [
+      {20_000_100, 1, 100, %M.CameraImageCaptured{lat: @lat0 + 50 * @m, lon: @lon0, image_index: 1, capture_result: 1}},
+      {30_000_100, 1, 1, %M.MissionItemReached{seq: 1}},
+      {31_000_100, 1, 1, %M.Statustext{severity: 6, text: "Reached waypoint #1"}}
+    ]
+
+    (List.flatten(upload) ++ List.flatten(telemetry) ++ extra)
+    |> Enum.sort_by(&elem(&1, 0))
+    |> Enum.map_reduce(%{}, fn {ts, sysid, compid, msg}, seqs ->
+      seq = Map.get(seqs, {sysid, compid}, 0)
+      {Tlog.record(@t0 + ts, Frame.encode(msg, sysid: sysid, compid: compid, seq: rem(seq, 256))), Map.put(seqs, {sysid, compid}, seq + 1)}
+    end)
+    |> elem(0)
+    |> IO.iodata_to_binary()
+  end
+
+  # The run's events, their clock starting `lead_s` before the log's.
+  defp events(dir, lead_s \\ 1.0, name \\ "run.jsonl", edit \\ & &1) do
+    ms = fn t -> round((t + lead_s) * 1000) end
+
+    lines =
+      [
+        %{t_ms: ms.(0.5), event: "vehicle_discovered", vehicle: 1, type: "uav"},
+        %{t_ms: ms.(0.5), event: "vehicle_discovered", vehicle: 2, type: "uav"},
+        %{t_ms: ms.(1), event: "script_started", script: "survey.exs"},
+        %{t_ms: ms.(1.5), event: "task_started", run: 1, task_id: 1, parent_id: nil, kind: "concurrent", name: "both", vehicle: nil},
+        %{t_ms: ms.(1.5), event: "task_started", run: 1, task_id: 2, parent_id: 1, kind: "mission", name: "North", vehicle: 1},
+        %{t_ms: ms.(1.5), event: "task_started", run: 1, task_id: 3, parent_id: 1, kind: "mission", name: "East", vehicle: 2},
+        %{t_ms: ms.(5), event: "armed", vehicle: 1},
+        %{t_ms: ms.(5), event: "mode_changed", vehicle: 1, mode: "auto"},
+        %{t_ms: ms.(5), event: "armed", vehicle: 2},
+        %{t_ms: ms.(5), event: "mode_changed", vehicle: 2, mode: "auto"},
+        %{t_ms: ms.(12), event: "condition_met", run: 1, task_id: 2, condition: "battery(v) < 0.9", branch: nil},
+        %{t_ms: ms.(30), event: "mission_item_reached", vehicle: 1, seq: 1},
+        %{t_ms: ms.(40), event: "task_finished", run: 1, task_id: 3, parent_id: 1, kind: "mission", name: "East", vehicle: 2, result: "failed", reason: "the vehicle left its mission"},
+        %{t_ms: ms.(55), event: "task_finished", run: 1, task_id: 2, parent_id: 1, kind: "mission", name: "North", vehicle: 1, result: "done", reason: nil},
+        %{t_ms: ms.(55), event: "message", text: "all done"},
+        %{t_ms: ms.(58), event: "script_finished", script: "survey.exs", result: "failed", reason: "East failed"}
+      ]
+      |> edit.()
+
+    path = Path.join(dir, name)
+    File.write!(path, Enum.map(lines, &[:jiffy.encode(Map.new(&1, fn {k, v} -> {k, if(v == nil, do: :null, else: v)} end)), ?\n]))
+    path
+  end
+
+  defp count(html, pattern), do: length(Regex.scan(pattern, html))
+
+  test "a report of a log and its events", %{tmp_dir: dir} do
+    out = Path.join(dir, "report.html")
+    assert {:ok, summary} = Report.write(tlog(dir), events(dir), out)
+    assert %{vehicles: [1, 2], path: ^out, events: 16, events_skipped: 0, bytes_skipped: 0, script_result: "failed"} = summary
+    assert_in_delta summary.speedup, 1.0, 0.01
+    assert_in_delta summary.span_s, 59.5, 0.1
+    html = File.read!(out)
+    assert byte_size(html) == summary.bytes
+
+    # Map: a track and a planned path per vehicle, home, a photo, take-offs.
+    assert count(html, ~r/<polyline class="flown" data-vehicle="1"/) == 1
+    assert count(html, ~r/<polyline class="flown" data-vehicle="2"/) == 1
+    assert count(html, ~r/<polyline class="planned"/) == 2
+    assert count(html, ~r/class="photo"/) == 1
+    assert count(html, ~r/class="takeoff"/) == 2
+    assert count(html, ~r/class="home"/) == 2
+    assert html =~ ~s(class="scale-bar") and html =~ ~s(class="north-arrow")
+
+    # Time line: the two platform tasks with their results and the reason.
+    assert html =~ ~r/data-vehicle="1" data-name="North" data-kind="mission" data-result="done"/
+    assert html =~ ~r/data-vehicle="2" data-name="East" data-kind="mission" data-result="failed"/
+    assert html =~ "failed — the vehicle left its mission"
+    # The condition is under task 1 > 2, whose only vehicle is 1: on its lane.
+    assert html =~ "condition met: battery(v) &lt; 0.9"
+
+    # Plots and summary.
+    for plot <- ~w(battery height speed link), do: assert(html =~ ~s(class="plot plot-#{plot}"))
+    assert html =~ ~s(id="script-result">failed)
+    assert html =~ "<b>East</b>: the vehicle left its mission"
+
+    # Self-contained: nothing to fetch.
+    refute html =~ ~r/<script[^>]+src|<link|<img|url\(|@import/
+    assert html |> String.replace("http://www.w3.org/2000/svg", "") |> String.contains?("http") == false
+  end
+
+  test "the events are placed on the log's time line by what both record", %{tmp_dir: dir} do
+    {:ok, log} = Dolphin.Report.FlightLog.read_file(tlog(dir))
+    {:ok, events, 0} = Dolphin.Report.Events.read_file(events(dir, 7.5))
+    assert {:ok, offset} = Dolphin.Report.Events.align(events, Dolphin.Report.Model.anchors(log), "run.jsonl")
+    assert_in_delta offset, -7.5, 0.6
+  end
+
+  test "without events: the log alone", %{tmp_dir: dir} do
+    out = Path.join(dir, "report.html")
+    assert {:ok, %{events: nil, script_result: nil}} = Report.write(tlog(dir), nil, out, title: "Survey <north>")
+    html = File.read!(out)
+    assert html =~ "<h1>Survey &lt;north&gt;</h1>"
+    assert html =~ "no events file"
+    assert count(html, ~r/<polyline class="flown"/) == 2
+    refute html =~ ~s(class="task")
+    # The mode changes come from the log's heartbeats.
+    assert html =~ "mode auto"
+  end
+
+  test "a damaged log gives a report of what could be read, and says what was skipped", %{tmp_dir: dir} do
+    bytes = tlog_bytes()
+    half = div(byte_size(bytes), 2)
+    # Garbage in the middle, a flipped byte (bad checksum), the end cut off.
+    <<a::binary-size(half), b::binary>> = bytes
+    <<b1::binary-size(100), x, b2::binary>> = b
+    damaged = a <> :crypto.strong_rand_bytes(300) <> b1 <> <<Bitwise.bxor(x, 0xFF)>> <> b2
+    damaged = binary_part(damaged, 0, byte_size(damaged) - 7)
+    path = Path.join(dir, "damaged.tlog")
+    File.write!(path, damaged)
+
+    out = Path.join(dir, "report.html")
+    assert {:ok, summary} = Report.write(path, events(dir), out)
+    assert summary.vehicles == [1, 2]
+    assert summary.bytes_skipped >= 300
+    html = File.read!(out)
+    assert html =~ ~r/The telemetry log is damaged: \d+ of \d+ bytes were skipped \(.*truncated 1/
+    assert count(html, ~r/<polyline class="flown"/) == 2
+  end
+
+  test "unreadable event lines are skipped and counted", %{tmp_dir: dir} do
+    path = events(dir)
+    File.write!(path, "{\"t_ms\": 3, \"event\": \"arm\n" <> File.read!(path) <> "not json\n")
+    out = Path.join(dir, "report.html")
+    assert {:ok, %{events: 16, events_skipped: 2}} = Report.write(tlog(dir), path, out)
+    assert File.read!(out) =~ "2 line(s) of the events file could not be read"
+  end
+
+  describe "events of another run are refused" do
+    test "its vehicles are not in the log", %{tmp_dir: dir} do
+      path = events(dir, 1.0, "other.jsonl", fn lines -> Enum.map(lines, &if(&1[:vehicle] == 2, do: %{&1 | vehicle: 7}, else: &1)) end)
+      assert {:error, %Error{reason: :events_mismatch, detail: detail} = e} = Report.write(tlog(dir), path, Path.join(dir, "r.html"))
+      assert detail =~ "vehicles 7 are not in the telemetry log"
+      assert Exception.message(e) =~ "the events do not belong to the telemetry log"
+      refute File.exists?(Path.join(dir, "r.html"))
+    end
+
+    test "its arming, modes and items do not line up with the log's", %{tmp_dir: dir} do
+      scatter = fn lines ->
+        Enum.map(lines, fn
+          %{event: "armed", vehicle: 1} = e -> %{e | t_ms: 30_000}
+          %{event: "mode_changed", vehicle: 2} = e -> %{e | t_ms: 50_000}
+          %{event: "mission_item_reached"} = e -> %{e | t_ms: 2_000}
+          e -> e
+        end)
+      end
+
+      path = events(dir, 1.0, "other.jsonl", scatter)
+      assert {:error, %Error{reason: :events_mismatch, detail: detail}} = Report.write(tlog(dir), path, Path.join(dir, "r.html"))
+      assert detail =~ "line up with the telemetry log"
+    end
+
+    test "its time does not overlap the log's", %{tmp_dir: dir} do
+      later = fn lines -> Enum.map(lines, &%{&1 | t_ms: &1.t_ms + 3_600_000}) |> Enum.reject(&(&1.event in ["armed", "mode_changed", "mission_item_reached"])) end
+      path = events(dir, 1.0, "other.jsonl", later)
+      assert {:error, %Error{reason: :events_mismatch, detail: detail}} = Report.write(tlog(dir), path, Path.join(dir, "r.html"))
+      assert detail =~ "overlap"
+    end
+
+    test "its script ended long before the log does", %{tmp_dir: dir} do
+      # A shorter run of the same vehicles, alike at first: armed and in AUTO at 5 s.
+      shorter = fn lines ->
+        lines
+        |> Enum.filter(&(&1.t_ms <= 7_000 or &1.event == "script_finished"))
+        |> Enum.map(&if(&1.event == "script_finished", do: %{&1 | t_ms: 7_000}, else: &1))
+      end
+
+      path = events(dir, 1.0, "other.jsonl", shorter)
+      assert {:error, %Error{reason: :events_mismatch, detail: detail}} = Report.write(tlog(dir), path, Path.join(dir, "r.html"))
+      assert detail =~ "its script ended"
+    end
+  end
+
+  test "errors: no log, no vehicle in it, nowhere to write", %{tmp_dir: dir} do
+    assert {:error, %Error{reason: :tlog_unreadable}} = Report.write(Path.join(dir, "missing.tlog"), nil, Path.join(dir, "r.html"))
+    empty = Path.join(dir, "empty.tlog")
+    File.write!(empty, :crypto.strong_rand_bytes(2000))
+    assert {:error, %Error{reason: :no_vehicles}} = Report.write(empty, nil, Path.join(dir, "r.html"))
+    assert {:error, %Error{reason: :events_unreadable}} = Report.write(tlog(dir), Path.join(dir, "missing.jsonl"), Path.join(dir, "r.html"))
+    assert {:error, %Error{reason: :write_failed}} = Report.write(tlog(dir), nil, Path.join([dir, "no", "such", "r.html"]))
+  end
+
+  describe "mix dolphin.report" do
+    test "writes the report beside the log, or where -o says", %{tmp_dir: dir} do
+      log = tlog(dir)
+      ev = events(dir)
+      out = capture_io(fn -> Mix.Tasks.Dolphin.Report.run([log, "--events", ev]) end)
+      assert out =~ "report: #{Path.join(dir, "run.html")}"
+      assert out =~ "2 vehicle(s)"
+      assert out =~ "16 events"
+      assert File.exists?(Path.join(dir, "run.html"))
+
+      other = Path.join(dir, "other.html")
+      capture_io(fn -> Mix.Tasks.Dolphin.Report.run([log, "-o", other]) end)
+      assert File.exists?(other)
+    end
+
+    test "usage and input errors", %{tmp_dir: dir} do
+      assert_raise Mix.Error, ~r/usage: mix dolphin.report/, fn -> Mix.Tasks.Dolphin.Report.run([]) end
+      assert_raise Mix.Error, ~r/unknown or malformed option --bogus/, fn -> Mix.Tasks.Dolphin.Report.run(["x.tlog", "--bogus"]) end
+      assert_raise Mix.Error, ~r/cannot read the telemetry log/, fn -> Mix.Tasks.Dolphin.Report.run([Path.join(dir, "none.tlog")]) end
+    end
+  end
+end
