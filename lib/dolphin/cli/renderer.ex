@@ -30,7 +30,8 @@ defmodule Dolphin.CLI.Renderer do
   Starts a renderer linked to the caller. Options: `:out` (the device, default
   `:stdio`), `:origin_ms` (the clock time shown as zero, default now),
   `:quiet` (only the script's messages) and `:terminal` (the device path of
-  the terminal `out` is, from `terminal/1`, for the status block; nil: plain lines).
+  the terminal `out` is, from `terminal/1`, for the status block; nil: plain
+  lines); `subscribe: false` leaves the events to be sent by hand (tests).
   """
   @spec start_link(keyword()) :: GenServer.on_start()
   def start_link(opts), do: GenServer.start_link(__MODULE__, opts)
@@ -71,7 +72,7 @@ defmodule Dolphin.CLI.Renderer do
 
   @impl true
   def init(opts) do
-    Dolphin.Telemetry.subscribe()
+    if Keyword.get(opts, :subscribe, true), do: Dolphin.Telemetry.subscribe()
     tty = Keyword.get(opts, :terminal)
     live = tty != nil
     if live, do: Process.send_after(self(), :redraw, @redraw_ms)
