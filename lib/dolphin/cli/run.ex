@@ -56,7 +56,6 @@ defmodule Dolphin.CLI.Run do
       opts = Keyword.put(opts, :tlog, Vehicles.tlog_path(opts, script.file))
 
       with {:ok, renderer} <- start_outputs(opts, origin, out),
-           _ = if(opts[:tlog] && !opts[:quiet], do: IO.puts(out, "telemetry log: #{opts[:tlog]}")),
            :ok <- Vehicles.start(opts, out, &defer(&1, :vehicles)) do
         {result, signal} = run_until_signal(script, opts, renderer)
         # The log and the status block end before the summary is printed below them.
@@ -125,16 +124,38 @@ defmodule Dolphin.CLI.Run do
     {:ok, renderer} = Renderer.start_link(out: out, origin_ms: origin, quiet: opts[:quiet] == true, terminal: terminal)
     defer(fn -> Renderer.stop(renderer) end, :output)
 
-    with path when path != nil <- opts[:events],
-         {:error, why} <- Dolphin.Telemetry.Writer.start_link(path: path, origin_ms: origin) do
-      {:error, %StartError{option: "--events", reason: why}}
-    else
-      {:ok, writer} ->
-        defer(fn -> Dolphin.Telemetry.Writer.stop(writer) end, :output)
-        {:ok, renderer}
+    with :ok <- start_writer(opts[:events], origin) do
+      if opts[:tlog] && !opts[:quiet], do: IO.puts(out, "telemetry log: #{opts[:tlog]}")
+      {:ok, renderer}
+    end
+  end
 
-      nil ->
-        {:ok, renderer}
+  defp start_writer(nil, _origin), do: :ok
+
+  defp start_writer(path, origin) do
+    # A writer that cannot open its file stops in its init, and its exit
+    # would take this process with it: trapped while it starts, it is a
+    # message, and the run ends with what went wrong instead.
+    trapping = Process.flag(:trap_exit, true)
+
+    try do
+      case Dolphin.Telemetry.Writer.start_link(path: path, origin_ms: origin) do
+        {:ok, writer} ->
+          defer(fn -> Dolphin.Telemetry.Writer.stop(writer) end, :output)
+          :ok
+
+        {:error, why} ->
+          # (It exits right after saying so; the bound only keeps a surprise from hanging the run.)
+          receive do
+            {:EXIT, _writer, ^why} -> :ok
+          after
+            5_000 -> :ok
+          end
+
+          {:error, %StartError{option: "--events", reason: why}}
+      end
+    after
+      Process.flag(:trap_exit, trapping)
     end
   end
 
