@@ -177,7 +177,9 @@ defmodule Mix.Tasks.Dolphin.Run do
             :failed -> 1
             # The usage was right (endpoints are checked when parsed): a port in
             # use, a SITL binary that would not start... the run failed.
-            {:error, e} -> IO.puts(err, "mix dolphin.run: #{Exception.message(e)}") && 1
+            {:error, e} ->
+              IO.puts(err, "mix dolphin.run: #{Exception.message(e)}")
+              1
           end
         after
           Dolphin.Script.purge(script)
