@@ -17,7 +17,9 @@ defmodule Dolphin.CLI do
     * `Dolphin.CLI.Renderer` — the process that prints the events of a run
       (and on a terminal redraws the status block below them);
     * `Dolphin.CLI.StatusBlock` — the status block's text, one line per vehicle;
-    * `Dolphin.CLI.Signals` — SIGINT and SIGTERM as messages.
+    * `Dolphin.CLI.Signals` — SIGINT and SIGTERM as messages;
+    * `Dolphin.CLI.UsageError` and `Dolphin.CLI.StartError` — a command line
+      that cannot be run (exit status 2), a run that could not start (1).
   """
 
   alias Dolphin.Console.Format

@@ -243,7 +243,7 @@ defmodule Mix.Tasks.Dolphin.Run do
     Enum.reduce_while(given, :ok, fn {key, ep}, :ok ->
       case Dolphin.Link.Endpoint.parse(ep) do
         {:ok, _} -> {:cont, :ok}
-        {:error, why} -> {:halt, usage_error("--#{key} #{ep}: #{why}")}
+        {:error, why} -> {:halt, usage_error("--#{key} #{ep}: #{if is_exception(why), do: Exception.message(why), else: why}")}
       end
     end)
   end
