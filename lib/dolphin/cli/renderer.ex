@@ -47,7 +47,14 @@ defmodule Dolphin.CLI.Renderer do
     Process.unlink(renderer)
     GenServer.stop(renderer, :normal, @stop_ms)
   catch
-    :exit, _ -> :ok
+    # GenServer.stop/3 gives up on it but leaves it running: a renderer stuck
+    # on its output device must not outlive the run.
+    :exit, :timeout ->
+      Process.exit(renderer, :kill)
+      :ok
+
+    :exit, _gone ->
+      :ok
   end
 
   @doc """
