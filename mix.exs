@@ -2,7 +2,7 @@ defmodule Mix.Tasks.Compile.DolphinNative do
   @moduledoc false
   # Builds the C libraries of c_src/ into priv/ (scripts/bootstrap installs the
   # compiler): dolphin_crc.so, the MAVLink checksum that Dolphin.MAVLink.CRC
-  # loads, and dolphin_signals.so, Ctrl-C for Dolphin.Run.Signals. Without a C
+  # loads, and dolphin_signals.so, Ctrl-C for Dolphin.CLI.Signals. Without a C
   # compiler the build goes on: the checksum runs in Erlang, slower, and
   # Ctrl-C opens the Erlang BREAK menu.
   use Mix.Task.Compiler

@@ -1,5 +1,5 @@
 /*
- * SIGINT (Ctrl-C) as a message, for Dolphin.Run.Signals: `mix dolphin.run`
+ * SIGINT (Ctrl-C) as a message, for Dolphin.CLI.Signals: `mix dolphin.run`
  * stops its script on Ctrl-C the way `--for` does (tasks stopped, vehicles
  * told to hold, a summary) instead of opening the Erlang BREAK menu.
  *
@@ -115,4 +115,4 @@ static ErlNifFunc functions[] = {
     {"restore_sigint", 0, restore, 0},
 };
 
-ERL_NIF_INIT(Elixir.Dolphin.Run.Signals, functions, load, NULL, NULL, unload)
+ERL_NIF_INIT(Elixir.Dolphin.CLI.Signals, functions, load, NULL, NULL, unload)

@@ -566,7 +566,7 @@ defmodule Dolphin.Console do
 
       case Events.last(n, filter) do
         [] -> say("no events#{if opts != [], do: " match", else: " yet"}")
-        events -> say(Enum.map_join(events, "\n", &Format.event(&1, Events.origin_ms())))
+        events -> say(Enum.map_join(events, "\n", &Dolphin.CLI.event_line(&1, Events.origin_ms())))
       end
     else
       {:error, why} -> say("events: " <> why_text(why))

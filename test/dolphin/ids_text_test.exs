@@ -10,8 +10,7 @@ defmodule Dolphin.IdsTextTest do
   alias Dolphin.Engine.{Allocation, Failure}
   alias Dolphin.Fleet
   alias Dolphin.Fleet.{PickError, Vehicle}
-  alias Dolphin.Run.StatusBlock
-  alias Mix.Tasks.Dolphin.Run, as: RunTask
+  alias Dolphin.CLI.StatusBlock
 
   # The text names `id` as a decimal number and has no charlist in it.
   defp names_id!(text, id) do
@@ -82,11 +81,8 @@ defmodule Dolphin.IdsTextTest do
           %{event: :something_new, vehicles: [id]}
         ]
 
-        for e <- events, do: names_id!(Format.event_text(e), id)
-        names_id!(RunTask.line(%{event: :task_finished, task_id: 5, kind: :fly, name: "go", vehicle: id, result: :done, reason: nil}, false), id)
-
-        for e <- events, line = RunTask.line(e, false), e.event != :allocated and e.event != :task_progress and e.event != :something_new,
-            do: names_id!(line, id)
+        for e <- events, do: names_id!(Dolphin.CLI.event_text(e), id)
+        names_id!(Dolphin.CLI.event_text(%{event: :task_finished, task_id: 5, kind: :fly, name: "go", vehicle: id, result: :done, reason: nil}), id)
 
         assert Format.task_state(nil, %{event: :task_progress, progress: %{vehicles: [id]}}) |> names_id!(id)
 
@@ -98,7 +94,7 @@ defmodule Dolphin.IdsTextTest do
 
         names_id!(StatusBlock.vehicle_line(%Vehicle{id: id, mission_progress: {0, 0}}, "go"), id)
         names_id!(Failure.format_reason({:no_such_vehicles, [id]}), id)
-        names_id!(Format.event_text(%{event: :signal_posted, key: :ready, value: [id]}), id)
+        names_id!(Dolphin.CLI.event_text(%{event: :signal_posted, key: :ready, value: [id]}), id)
         names_id!(Dolphin.Console.Runs.result_text({:unexpected, [id]}), id)
 
         # A script's message of a list of ids.
@@ -117,11 +113,10 @@ defmodule Dolphin.IdsTextTest do
 
     assert {:ok, set} = Fleet.pick(fleet, self(), id: 9, timeout: 5_000)
     assert_receive {:dolphin, :events, %{event: :picked, vehicles: [9]} = picked}, 5_000
-    assert Format.event_text(picked) == "picked [9] (1 vehicle, id [9])"
-    assert RunTask.line(picked, false) == "picked [9] (1 vehicle, id [9])"
+    assert Dolphin.CLI.event_text(picked) == "picked [9] (1 vehicle, id [9])"
 
     Fleet.release(fleet, self(), set)
     assert_receive {:dolphin, :events, %{event: :released, vehicles: [9]} = released}, 5_000
-    assert Format.event_text(released) == "released [9]"
+    assert Dolphin.CLI.event_text(released) == "released [9]"
   end
 end

@@ -1,10 +1,10 @@
 defmodule Dolphin.Console.Format do
   @moduledoc false
-  # Pure text of the console (Dolphin.Console): tables, the task tree, event
-  # lines, the watch ticker. Every function takes plain data and returns a
-  # string (no trailing newline), so all of it is tested without IEx.
+  # Pure text of the console (Dolphin.Console): tables, the task tree, the
+  # watch ticker (event lines are Dolphin.CLI's). Every function takes plain
+  # data and returns a string (no trailing newline), so all of it is tested
+  # without IEx.
 
-  alias Dolphin.Fleet.VehicleSet
   alias Dolphin.Geo.Location
 
   # --- generic -----------------------------------------------------------------
@@ -256,54 +256,6 @@ defmodule Dolphin.Console.Format do
     do: p |> Enum.sort() |> Enum.map_join(", ", fn {k, v} -> "#{k} #{inspect(v, charlists: :as_lists)}" end)
 
   def task_state(old, _event), do: old || "running"
-
-  # --- events ----------------------------------------------------------------------
-
-  @doc false
-  # One event for an operator: "[   81.2 s] vehicle 1 armed"; `origin_ms` is
-  # the clock time shown as zero.
-  @spec event(map(), integer()) :: String.t()
-  def event(%{at_ms: at} = e, origin_ms), do: "[#{String.pad_leading(seconds(at - origin_ms), 9)}] " <> event_text(e)
-
-  @doc false
-  @spec event_text(map()) :: String.t()
-  def event_text(%{event: :message, text: text}), do: "message: #{text}"
-  def event_text(%{event: :vehicle_discovered} = e), do: "vehicle #{e.vehicle} discovered (#{e.type || "type unknown"})"
-  def event_text(%{event: :vehicle_lost} = e), do: "vehicle #{e.vehicle} lost"
-  def event_text(%{event: :vehicle_reconnected} = e), do: "vehicle #{e.vehicle} reconnected"
-  def event_text(%{event: :mode_changed} = e), do: "vehicle #{e.vehicle} mode #{mode(e.mode)}"
-  def event_text(%{event: :armed} = e), do: "vehicle #{e.vehicle} armed"
-  def event_text(%{event: :disarmed} = e), do: "vehicle #{e.vehicle} disarmed"
-  def event_text(%{event: :mission_item_reached} = e), do: "vehicle #{e.vehicle} reached item #{e.seq}"
-
-  def event_text(%{event: :mission_uploaded} = e),
-    do: "vehicle #{e.vehicle}: mission #{inspect(e.name)} uploaded (#{e.items} items, #{e.duration_ms} ms, #{e.retransmissions} retransmissions)"
-
-  def event_text(%{event: :picked} = e), do: "picked #{VehicleSet.format(e.vehicles)} (#{e.requirement})"
-  def event_text(%{event: :pick_failed} = e), do: "pick failed: #{e.reason}"
-  def event_text(%{event: :released} = e), do: "released #{VehicleSet.format(e.vehicles)}"
-  def event_text(%{event: :allocated} = e), do: "run #{e.run}: " <> Enum.map_join(Enum.sort(e.allocation), ", ", fn {t, v} -> "task #{t} on vehicle #{v}" end)
-
-  def event_text(%{event: :task_started} = e),
-    do: "task #{e.task_id} #{e.kind} #{inspect(cut(e.name, 60))} started" <> if(e.vehicle, do: " on vehicle #{e.vehicle}", else: "")
-
-  def event_text(%{event: :task_progress} = e), do: "task #{e.task_id} on vehicle #{e.vehicle}: " <> task_state(nil, e)
-
-  # "stopped (the run's time (--for) is over)": the result is not said twice.
-  def event_text(%{event: :task_finished} = e),
-    do: "task #{e.task_id} #{e.kind} #{inspect(cut(e.name, 60))}: #{e.result}" <> if(e.reason, do: " (#{String.replace_prefix(e.reason, "stopped: ", "")})", else: "")
-
-  def event_text(%{event: :condition_met} = e),
-    do: "task #{e.task_id}: #{e.condition} holds" <> if(e.branch, do: " (branch #{e.branch})", else: "")
-
-  def event_text(%{event: :signal_posted} = e), do: "signal #{inspect(e.key)} posted: #{inspect(e.value, charlists: :as_lists)}"
-  def event_text(%{event: :signal_consumed} = e), do: "signal #{inspect(e.key)} consumed: #{inspect(e.value, charlists: :as_lists)}"
-  def event_text(%{event: :script_started} = e), do: "script #{e.script} started"
-
-  def event_text(%{event: :script_finished} = e),
-    do: "script #{e.script}: #{e.result}" <> if(e.reason, do: " (#{String.replace_prefix(e.reason, "stopped: ", "")})", else: "")
-
-  def event_text(%{event: name} = e), do: "#{name} " <> inspect(Map.drop(e, [:event, :at_ms]), charlists: :as_lists)
 
   # --- one vehicle -------------------------------------------------------------------
 

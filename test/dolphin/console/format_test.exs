@@ -124,36 +124,6 @@ defmodule Dolphin.Console.FormatTest do
     end
   end
 
-  describe "events" do
-    test "every event of the catalogue has its own line" do
-      values = %{
-        vehicle: 1, type: :uav, mode: :guided, seq: 2, name: "Survey", items: 5, duration_ms: 30, retransmissions: 0,
-        vehicles: [1, 2], requirement: "1 vehicle", reason: "why", run: 7, allocation: %{"8" => 1}, task_id: 8,
-        parent_id: nil, kind: :mission, progress: %{current: 1, total: 3}, result: :done, condition: "battery(v) < 0.3",
-        branch: nil, text: "hello", key: :k, value: 1, script: "x.exs"
-      }
-
-      for {name, fields} <- Dolphin.Telemetry.catalogue() do
-        event = Map.merge(Map.take(values, fields), %{event: name, at_ms: 1_500})
-        line = Format.event(event, 1_000)
-        assert line =~ ~r/^\[\s+0\.5 s\] /
-        # Not the catch-all clause, which inspects the event.
-        refute line =~ "%{", "#{name}: #{line}"
-      end
-    end
-
-    test "lines say what happened" do
-      assert Format.event_text(%{event: :task_finished, task_id: 4, kind: :mission, name: "Survey", result: :failed, reason: "vehicle lost"}) ==
-               ~s[task 4 mission "Survey": failed (vehicle lost)]
-
-      assert Format.event_text(%{event: :task_finished, task_id: 4, kind: :mission, name: "Survey", result: :stopped, reason: "stopped: the script halted"}) ==
-               ~s[task 4 mission "Survey": stopped (the script halted)]
-
-      assert Format.event_text(%{event: :mode_changed, vehicle: 2, mode: :rtl}) == "vehicle 2 mode RTL"
-      assert Format.event_text(%{event: :allocated, run: 7, allocation: %{"8" => 1, "9" => 2}}) == "run 7: task 8 on vehicle 1, task 9 on vehicle 2"
-    end
-  end
-
   describe "one vehicle" do
     test "messages oldest first with their severity" do
       assert Format.messages([{6, "Arming motors"}, {2, "PreArm: Need Position Estimate"}]) ==

@@ -162,6 +162,14 @@ defmodule Mix.Tasks.Dolphin.RunTest do
       assert err =~ "on vehicle 1 failed: motor failure"
     end
 
+    test "an events file that cannot be written: status 1, and why, before anything runs", %{tmp_dir: dir} do
+      path = script(dir, "hello.exs", "use Dolphin.Script\nmessage(\"hello\")\n")
+      assert {1, out, err} = main([path, "--fake", "1", "--events", Path.join([dir, "no_such_dir", "events.jsonl"])])
+      assert err =~ "mix dolphin.run: --events: cannot write"
+      refute out =~ "message: hello"
+      assert Dolphin.Clock.speedup() == 1
+    end
+
     test "--quiet prints only messages, errors and the summary", %{tmp_dir: dir} do
       path = script(dir, "quiet.exs", "use Dolphin.Script\nv = pick()\nmessage(\"hello\")\nrelease(v)\n")
       assert {0, out, ""} = main([path, "--fake", "1", "--quiet"])

@@ -1,16 +1,16 @@
-defmodule Dolphin.Run.Signals do
+defmodule Dolphin.CLI.Signals do
   @moduledoc """
   SIGINT (Ctrl-C) and SIGTERM as messages, so that `mix dolphin.run` stops
   its script the way `--for` does — tasks stopped, vehicles told to hold, a
   summary, a `script_finished` event — instead of the VM's default: the
   Erlang BREAK menu on Ctrl-C, `init:stop/0` (an abrupt shutdown) on SIGTERM.
 
-      signals = Dolphin.Run.Signals.catch_signals(self())
+      signals = Dolphin.CLI.Signals.catch_signals(self())
       receive do
         {:dolphin_signal, :sigint} -> ...
         {:dolphin_signal, :sigterm} -> ...
       end
-      Dolphin.Run.Signals.release_signals()
+      Dolphin.CLI.Signals.release_signals()
 
   SIGTERM goes through the VM's signal server (`:os.set_signal/2` and a
   handler in `:erl_signal_server` in place of OTP's). SIGINT cannot (OTP 25
@@ -21,12 +21,15 @@ defmodule Dolphin.Run.Signals do
 
   @behaviour :gen_event
 
+  @typedoc "A signal that stops a run."
+  @type signal :: :sigint | :sigterm
+
   @doc """
   From now on SIGTERM (and SIGINT, when the C library is loaded) sends
   `{:dolphin_signal, signal}` to `pid` instead of its default action.
   Returns the signals caught.
   """
-  @spec catch_signals(pid()) :: [:sigint | :sigterm]
+  @spec catch_signals(pid()) :: [signal()]
   def catch_signals(pid) do
     :ok = :os.set_signal(:sigterm, :handle)
     # OTP's own handler (init:stop on SIGTERM) makes way for ours; it comes back in release_signals/0.
@@ -47,6 +50,26 @@ defmodule Dolphin.Run.Signals do
 
     :ok
   end
+
+  @doc """
+  The signal in words, for the log and the summary.
+
+      iex> Dolphin.CLI.Signals.name(:sigint)
+      "interrupted (SIGINT, Ctrl-C)"
+  """
+  @spec name(signal()) :: String.t()
+  def name(:sigint), do: "interrupted (SIGINT, Ctrl-C)"
+  def name(:sigterm), do: "terminated (SIGTERM)"
+
+  @doc """
+  The exit status of a run the signal stopped: 128 + the signal's number, as a shell says.
+
+      iex> Dolphin.CLI.Signals.status(:sigterm)
+      143
+  """
+  @spec status(signal()) :: 130 | 143
+  def status(:sigint), do: 130
+  def status(:sigterm), do: 143
 
   # The C library replaces these two when it loads; without it SIGINT keeps its default.
   @doc false

@@ -1,8 +1,8 @@
-defmodule Dolphin.Run.StatusBlockTest do
+defmodule Dolphin.CLI.StatusBlockTest do
   use ExUnit.Case, async: true
 
   alias Dolphin.Fleet.Vehicle
-  alias Dolphin.Run.StatusBlock
+  alias Dolphin.CLI.StatusBlock
 
   doctest StatusBlock
 

@@ -1,8 +1,10 @@
-defmodule Dolphin.Run.SignalsTest do
+defmodule Dolphin.CLI.SignalsTest do
   # Signals this test VM itself: nothing else may catch them meanwhile.
   use ExUnit.Case, async: false
 
-  alias Dolphin.Run.Signals
+  alias Dolphin.CLI.Signals
+
+  doctest Signals
 
   defp kill_self(signal), do: {_, 0} = System.cmd("kill", ["-#{signal}", System.pid()])
 

@@ -1,4 +1,4 @@
-defmodule Dolphin.Run.StatusBlock do
+defmodule Dolphin.CLI.StatusBlock do
   @moduledoc """
   The live status block of `mix dolphin.run` on a terminal: one line per
   vehicle — mode, armed, battery bar, mission progress, the link's round trip
@@ -6,10 +6,10 @@ defmodule Dolphin.Run.StatusBlock do
   under the scrolling log of events.
 
       iex> v = %Dolphin.Fleet.Vehicle{id: 2, mode: :auto, armed?: true, battery: 0.72, mission_progress: {3, 42}, relative_altitude: 380.4}
-      iex> Dolphin.Run.StatusBlock.vehicle_line(v, "Survey Area 1")
+      iex> Dolphin.CLI.StatusBlock.vehicle_line(v, "Survey Area 1")
       "  2  AUTO      armed     [#######---]  72 %  alt  380 m  item  3/42  Survey Area 1"
       iex> v = %{v | link: %{rtt_ms: 45, loss_in: 0.1, loss_out: 0.12}}
-      iex> Dolphin.Run.StatusBlock.vehicle_line(v, nil)
+      iex> Dolphin.CLI.StatusBlock.vehicle_line(v, nil)
       "  2  AUTO      armed     [#######---]  72 %  alt  380 m  item  3/42  link 45 ms, loss in 10 % / out 12 %"
 
   `render/3` draws the block (a header and the lines) and `redraw/2` gives the

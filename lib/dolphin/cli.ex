@@ -1,0 +1,129 @@
+defmodule Dolphin.CLI do
+  @moduledoc """
+  What an operator reads of a run, in one place: one line per event, and
+  which events a run's log shows. `mix dolphin.run` and the console
+  (`Dolphin.Console.events/1`) both print events through `event_line/2`, so an
+  event reads the same wherever it is shown.
+
+      iex> Dolphin.CLI.event_text(%{event: :armed, vehicle: 2})
+      "vehicle 2 armed"
+      iex> Dolphin.CLI.event_line(%{event: :task_finished, task_id: 5, kind: :test, name: "survey", vehicle: 1, result: :done, reason: nil, at_ms: 31_300}, 500)
+      ~s([   30.8 s] task 5 test "survey" on vehicle 1: done)
+
+  The rest of the command line's view lives beside it:
+
+    * `Dolphin.CLI.Run` — a compiled script run as `mix dolphin.run` runs it:
+      vehicles started, the live output, the script, the summary, teardown;
+    * `Dolphin.CLI.Renderer` — the process that prints the events of a run
+      (and on a terminal redraws the status block below them);
+    * `Dolphin.CLI.StatusBlock` — the status block's text, one line per vehicle;
+    * `Dolphin.CLI.Signals` — SIGINT and SIGTERM as messages;
+    * `Dolphin.CLI.UsageError` and `Dolphin.CLI.StartError` — a command line
+      that cannot be run (exit status 2), a run that could not start (1).
+  """
+
+  alias Dolphin.Console.Format
+  alias Dolphin.Fleet.VehicleSet
+
+  # Events a run's log shows besides the script's messages (for an operator's
+  # eye: the rest is in --events and the console's events/1).
+  @logged [
+    :vehicle_discovered,
+    :vehicle_lost,
+    :vehicle_reconnected,
+    :picked,
+    :released,
+    :pick_failed,
+    :mode_changed,
+    :armed,
+    :disarmed,
+    :mission_uploaded,
+    :mission_item_reached,
+    :condition_met
+  ]
+
+  @doc """
+  One event (`Dolphin.Telemetry`) as a line stamped with its clock time since
+  `origin_ms`.
+  """
+  @spec event_line(map(), integer()) :: String.t()
+  def event_line(%{at_ms: at} = event, origin_ms), do: stamp(at, origin_ms, event_text(event))
+
+  @doc """
+  A line of the log at clock time `at_ms`, with the time since `origin_ms` in front.
+
+      iex> Dolphin.CLI.stamp(81_200, 0, "vehicle 1 armed")
+      "[   81.2 s] vehicle 1 armed"
+  """
+  @spec stamp(integer(), integer(), String.t()) :: String.t()
+  def stamp(at_ms, origin_ms, text), do: "[#{String.pad_leading(Format.seconds(at_ms - origin_ms), 9)}] " <> text
+
+  @doc """
+  Whether a run's log shows `event`: the script's messages always; with
+  `quiet` nothing else; otherwise the vehicles' comings and goings, picks,
+  modes, arming, missions, conditions, and the platform tasks (those on a
+  vehicle) as they start and end, with every failure.
+
+      iex> Dolphin.CLI.logged?(%{event: :message, text: "hi"}, true)
+      true
+      iex> Dolphin.CLI.logged?(%{event: :armed, vehicle: 1}, true)
+      false
+      iex> Dolphin.CLI.logged?(%{event: :task_started, task_id: 2, kind: :sequence, name: nil, vehicle: nil}, false)
+      false
+  """
+  @spec logged?(map(), boolean()) :: boolean()
+  def logged?(%{event: :message}, _quiet), do: true
+  def logged?(_event, true), do: false
+  def logged?(%{event: name}, _quiet) when name in @logged, do: true
+  def logged?(%{event: :task_started} = e, _quiet), do: Map.get(e, :vehicle) != nil
+  def logged?(%{event: :task_finished, result: :failed}, _quiet), do: true
+  def logged?(%{event: :task_finished} = e, _quiet), do: Map.get(e, :vehicle) != nil
+  def logged?(_event, _quiet), do: false
+
+  @doc """
+  One event in words: the only text of each event, for the run's log and the
+  console alike. An event with no words of its own is shown as its fields.
+  """
+  @spec event_text(map()) :: String.t()
+  def event_text(%{event: :message, text: text}), do: "message: #{text}"
+  def event_text(%{event: :vehicle_discovered} = e), do: "vehicle #{e.vehicle} discovered (#{e.type || "type unknown"})"
+  def event_text(%{event: :vehicle_lost} = e), do: "vehicle #{e.vehicle} lost"
+  def event_text(%{event: :vehicle_reconnected} = e), do: "vehicle #{e.vehicle} reconnected"
+  def event_text(%{event: :mode_changed} = e), do: "vehicle #{e.vehicle} mode #{Format.mode(e.mode)}"
+  def event_text(%{event: :armed} = e), do: "vehicle #{e.vehicle} armed"
+  def event_text(%{event: :disarmed} = e), do: "vehicle #{e.vehicle} disarmed"
+  def event_text(%{event: :mission_item_reached} = e), do: "vehicle #{e.vehicle} reached item #{e.seq}"
+
+  def event_text(%{event: :mission_uploaded} = e),
+    do: "vehicle #{e.vehicle}: mission #{inspect(e.name)} uploaded (#{e.items} items, #{e.duration_ms} ms, #{e.retransmissions} retransmissions)"
+
+  def event_text(%{event: :picked} = e), do: "picked #{VehicleSet.format(e.vehicles)} (#{e.requirement})"
+  def event_text(%{event: :pick_failed} = e), do: "pick failed: #{e.reason}"
+  def event_text(%{event: :released} = e), do: "released #{VehicleSet.format(e.vehicles)}"
+  def event_text(%{event: :allocated} = e), do: "run #{e.run}: " <> Enum.map_join(Enum.sort(e.allocation), ", ", fn {t, v} -> "task #{t} on vehicle #{v}" end)
+
+  def event_text(%{event: :task_started} = e), do: "task #{e.task_id} #{e.kind} #{inspect(cut(e.name, 60))} started" <> on_vehicle(e)
+
+  def event_text(%{event: :task_progress} = e), do: "task #{e.task_id} on vehicle #{e.vehicle}: " <> Format.task_state(nil, e)
+
+  # "stopped (the run's time (--for) is over)": the result is not said twice.
+  def event_text(%{event: :task_finished} = e),
+    do: "task #{e.task_id} #{e.kind} #{inspect(cut(e.name, 60))}#{on_vehicle(e)}: #{e.result}" <> because(e.reason)
+
+  def event_text(%{event: :condition_met} = e),
+    do: "task #{e.task_id}: #{e.condition} holds" <> if(Map.get(e, :branch), do: " (branch #{e.branch})", else: "")
+
+  def event_text(%{event: :signal_posted} = e), do: "signal #{inspect(e.key)} posted: #{inspect(e.value, charlists: :as_lists)}"
+  def event_text(%{event: :signal_consumed} = e), do: "signal #{inspect(e.key)} consumed: #{inspect(e.value, charlists: :as_lists)}"
+  def event_text(%{event: :script_started} = e), do: "script #{e.script} started"
+  def event_text(%{event: :script_finished} = e), do: "script #{e.script}: #{e.result}" <> because(e.reason)
+  def event_text(%{event: name} = e), do: "#{name} " <> inspect(Map.drop(e, [:event, :at_ms]), charlists: :as_lists)
+
+  defp on_vehicle(e), do: if(v = Map.get(e, :vehicle), do: " on vehicle #{v}", else: "")
+
+  defp because(nil), do: ""
+  defp because(reason), do: " (#{String.replace_prefix(reason, "stopped: ", "")})"
+
+  defp cut(nil, _n), do: ""
+  defp cut(text, n), do: if(String.length(text) > n, do: String.slice(text, 0, n - 1) <> "…", else: text)
+end

@@ -1,0 +1,190 @@
+defmodule Dolphin.CLI.Run do
+  @moduledoc """
+  A compiled script run the way `mix dolphin.run` runs it: at the run's
+  speed-up, with the vehicles it asks for (links, simulated vehicles, SITL
+  instances or fake ones), its live output (`Dolphin.CLI.Renderer`) and
+  events file, the script until it ends (or `--for`, or a signal, stops it),
+  and a one-line summary; then all it started is stopped again.
+
+      {:ok, script} = Dolphin.Script.compile("examples/single_vehicle.exs")
+      Dolphin.CLI.Run.run(script, sim: 1, speedup: 50.0, for: "30m", for_ms: 1_800_000)
+      #=> :stopped
+
+  Options: those of `mix dolphin.run`, parsed (`:connect`, `:sim`, `:sitl`,
+  `:sitl_bin`, `:sitl_defaults`, `:fake`, `:seed`, `:speedup`, `:for` and
+  `:for_ms`, `:events`, `:tlog`, `:no_tlog`, `:forward`, `:quiet`), and
+  `:out`, `:err` (devices, default `:stdio` and `:stderr`), `:plain` (never
+  the status block), `:ask` (the script's `ask/1`), `:signals` (SIGINT and
+  SIGTERM stop the script, `Dolphin.CLI.Signals`) and `:sitl_extra` (more
+  options of `Dolphin.SITL.start/2`).
+
+  ## Outcomes
+
+    * `:completed` — the script completed;
+    * `:stopped` — `--for` (or `Dolphin.Script.stop/2`) stopped it: running
+      tasks were stopped, vehicles hold;
+    * `{:stopped, signal}` — SIGINT or SIGTERM stopped it the same way; a
+      second one ends the VM at once with `Dolphin.CLI.Signals.status/1`;
+    * `:failed` — the script failed (what, where and why are printed on `:err`);
+    * `{:error, %Dolphin.CLI.StartError{}}` — its vehicles or outputs could
+      not be started (a port in use, a SITL binary missing): nothing ran.
+  """
+
+  alias Dolphin.CLI.{Renderer, Signals, StartError, Vehicles}
+  alias Dolphin.Console.Format
+
+  @type outcome :: :completed | :stopped | {:stopped, Signals.signal()} | :failed | {:error, StartError.t()}
+
+  # What to undo when the run ends, newest first, each tagged with its kind:
+  # :output (stopped before the summary, which comes below them), :vehicles
+  # and :signals. Kept in the run's process so that a run that raises half
+  # way still stops all it started.
+  @cleanup :dolphin_cli_run_cleanup
+
+  @doc "Runs `script` (see the options above) and says how it ended."
+  @spec run(Dolphin.Script.t(), keyword()) :: outcome()
+  def run(script, opts) do
+    out = Keyword.get(opts, :out, :stdio)
+    err = Keyword.get(opts, :err, :stderr)
+    previous_speedup = Dolphin.Clock.speedup()
+    if k = opts[:speedup], do: Dolphin.Clock.set_speedup(k)
+    origin = Dolphin.Clock.now_ms()
+    Process.put(@cleanup, [])
+    catch_signals(opts)
+
+    try do
+      opts = Keyword.put(opts, :tlog, Vehicles.tlog_path(opts, script.file))
+
+      with {:ok, renderer} <- start_outputs(opts, origin, out),
+           :ok <- Vehicles.start(opts, out, &defer(&1, :vehicles)) do
+        {result, signal} = run_until_signal(script, opts, renderer)
+        # The log and the status block end before the summary is printed below them.
+        stop_outputs()
+        summary(result, Keyword.put(opts, :signal, signal), out, err)
+      end
+    after
+      # The outputs stop first (they show the run, not its teardown); then
+      # the last started is the first stopped: the simulator before its link.
+      stop_outputs()
+      Enum.each(Process.delete(@cleanup), fn {_, fun} -> fun.() end)
+      Dolphin.Clock.set_speedup(previous_speedup)
+    end
+  end
+
+  # The script's result and the signal that stopped it (nil: none did).
+  defp run_until_signal(script, opts, renderer) do
+    {:ok, pid} = Dolphin.Script.start(script, [for: opts[:for_ms]] ++ Keyword.take(opts, [:ask]))
+    if opts[:signals], do: await_script(pid, renderer, nil), else: {Dolphin.Script.await(pid), nil}
+  end
+
+  defp await_script(pid, renderer, signal) do
+    receive do
+      {Dolphin.Script, ^pid, result} ->
+        {result, signal}
+
+      {:dolphin_signal, sig} when signal == nil ->
+        Dolphin.Script.stop(pid, {:signal, sig})
+        # In the log, so that the status block stays whole below it.
+        Renderer.note(renderer, "#{Signals.name(sig)}: stopping the script (tasks stop, vehicles hold); again to exit at once")
+        await_script(pid, renderer, sig)
+    end
+  end
+
+  # From the start of the run to its end (teardown included), a first SIGINT
+  # or SIGTERM comes to this process as a message: the script stops as with
+  # `--for` (at once if it comes before the script starts). A second one ends
+  # the run at once, with the status of that signal.
+  defp catch_signals(opts) do
+    if opts[:signals] do
+      owner = self()
+
+      relay =
+        spawn_link(fn ->
+          receive do: ({:dolphin_signal, _} = first -> send(owner, first))
+          receive do: ({:dolphin_signal, sig} -> System.halt(Signals.status(sig)))
+        end)
+
+      Signals.catch_signals(relay)
+
+      defer(
+        fn ->
+          Signals.release_signals()
+          Process.unlink(relay)
+          Process.exit(relay, :kill)
+        end,
+        :signals
+      )
+    end
+  end
+
+  defp start_outputs(opts, origin, out) do
+    # On a terminal the log scrolls above a status block redrawn in place;
+    # elsewhere (pipes, CI, files) it is plain timestamped lines.
+    terminal = if !opts[:quiet] && !opts[:plain], do: Renderer.terminal(out)
+    {:ok, renderer} = Renderer.start_link(out: out, origin_ms: origin, quiet: opts[:quiet] == true, terminal: terminal)
+    defer(fn -> Renderer.stop(renderer) end, :output)
+
+    with :ok <- start_writer(opts[:events], origin) do
+      if opts[:tlog] && !opts[:quiet], do: IO.puts(out, "telemetry log: #{opts[:tlog]}")
+      {:ok, renderer}
+    end
+  end
+
+  defp start_writer(nil, _origin), do: :ok
+
+  defp start_writer(path, origin) do
+    # A writer that cannot open its file stops in its init, and its exit
+    # would take this process with it: trapped while it starts, it is a
+    # message, and the run ends with what went wrong instead.
+    trapping = Process.flag(:trap_exit, true)
+
+    try do
+      case Dolphin.Telemetry.Writer.start_link(path: path, origin_ms: origin) do
+        {:ok, writer} ->
+          defer(fn -> Dolphin.Telemetry.Writer.stop(writer) end, :output)
+          :ok
+
+        {:error, why} ->
+          # (It exits right after saying so; the bound only keeps a surprise from hanging the run.)
+          receive do
+            {:EXIT, _writer, ^why} -> :ok
+          after
+            5_000 -> :ok
+          end
+
+          {:error, %StartError{option: "--events", reason: why}}
+      end
+    after
+      Process.flag(:trap_exit, trapping)
+    end
+  end
+
+  defp stop_outputs do
+    {outputs, others} = Enum.split_with(Process.get(@cleanup), &match?({:output, _}, &1))
+    Process.put(@cleanup, others)
+    Enum.each(outputs, fn {_, fun} -> fun.() end)
+  end
+
+  defp defer(fun, kind), do: Process.put(@cleanup, [{kind, fun} | Process.get(@cleanup)])
+
+  defp summary({:ok, %{result: :done, duration_ms: ms}}, _opts, out, _err) do
+    IO.puts(out, "script completed in #{Format.seconds(ms)} of clock time")
+    :completed
+  end
+
+  defp summary({:ok, %{result: :stopped, duration_ms: ms}}, opts, out, _err) do
+    why =
+      case opts[:signal] do
+        nil -> if opts[:for_ms], do: "--for #{opts[:for]} is over", else: "stopped"
+        sig -> Signals.name(sig)
+      end
+
+    IO.puts(out, "script stopped after #{Format.seconds(ms)} of clock time (#{why}): running tasks were stopped, vehicles hold")
+    if sig = opts[:signal], do: {:stopped, sig}, else: :stopped
+  end
+
+  defp summary({:error, %Dolphin.Script.Error{} = e}, _opts, _out, err) do
+    IO.puts(err, Dolphin.Script.Error.format(e))
+    :failed
+  end
+end

@@ -1,0 +1,113 @@
+defmodule Dolphin.CLI.Vehicles do
+  @moduledoc false
+  # The vehicles a run of `mix dolphin.run` asks for: its links (--connect,
+  # else the configured ones, else the default endpoint), simulated vehicles
+  # (--sim), SITL instances (--sitl) or fake ones (--fake). Each thing started
+  # hands its undoing to `defer` at once, so that a run that fails half way
+  # still stops what it started.
+
+  alias Dolphin.CLI.StartError
+  alias Dolphin.Fleet.TestSource
+
+  @doc false
+  # `opts`: the run's options (those of Mix.Tasks.Dolphin.Run, :tlog resolved,
+  # :sitl_extra); `out`: where to say what was started.
+  @spec start(keyword(), IO.device(), (fun() -> any())) :: :ok | {:error, StartError.t()}
+  def start(opts, out, defer) do
+    link_opts = Enum.reject([tlog: opts[:tlog], forward: Keyword.get_values(opts, :forward)], fn {_, v} -> v in [nil, []] end)
+
+    with :ok <- connect_all(Keyword.get_values(opts, :connect), link_opts, defer) do
+      cond do
+        n = opts[:sim] -> start_sim(n, opts, link_opts, out, defer)
+        n = opts[:sitl] -> start_sitl(n, opts, link_opts, out, defer)
+        n = opts[:fake] -> start_fake(n, out, defer)
+        opts[:connect] != nil or Application.get_env(:dolphin, :links, []) != [] -> :ok
+        true -> listen_default(link_opts, out, defer)
+      end
+    end
+  end
+
+  # Told nothing: listen where vehicles and simulators send by default.
+  defp listen_default(link_opts, out, defer) do
+    endpoint = Dolphin.Link.default_endpoint()
+
+    with :ok <- connect_all([endpoint], link_opts, defer) do
+      IO.puts(out, "listening on #{endpoint} (no --connect, --sim or --fake given)")
+    end
+  end
+
+  defp connect_all(endpoints, link_opts, defer) do
+    Enum.reduce_while(endpoints, :ok, fn ep, :ok ->
+      case Dolphin.Link.connect(ep, link_opts) do
+        {:ok, pid} ->
+          defer.(fn -> DynamicSupervisor.terminate_child(Dolphin.Link.Supervisor, pid) end)
+          {:cont, :ok}
+
+        {:error, why} ->
+          {:halt, {:error, %StartError{option: "--connect #{ep}", reason: why}}}
+      end
+    end)
+  end
+
+  defp start_sim(n, opts, link_opts, out, defer) do
+    case Dolphin.Sim.Local.start(n, [seed: Keyword.get(opts, :seed, 1)] ++ link_opts) do
+      {:ok, sim} ->
+        defer.(fn -> Dolphin.Sim.Local.stop(sim) end)
+        IO.puts(out, "#{n} simulated vehicle(s) #{Dolphin.Fleet.VehicleSet.format(sim.sysids)} on 127.0.0.1:#{sim.port}")
+        :ok
+
+      {:error, why} ->
+        {:error, %StartError{reason: why}}
+    end
+  end
+
+  defp start_sitl(n, opts, link_opts, out, defer) do
+    sitl_opts = [bin: opts[:sitl_bin], defaults: Keyword.get_values(opts, :sitl_defaults)] ++ link_opts ++ Keyword.get(opts, :sitl_extra, [])
+
+    case Dolphin.SITL.start(n, Enum.reject(sitl_opts, fn {_, v} -> v in [nil, []] end)) do
+      {:ok, fleet} ->
+        defer.(fn -> Dolphin.SITL.stop(fleet) end)
+        IO.puts(out, "#{n} ArduCopter SITL instance(s), vehicles #{Enum.join(fleet.sysids, ", ")}, on 127.0.0.1:#{fleet.port} at #{Dolphin.Clock.speedup()}x")
+        :ok
+
+      {:error, why} ->
+        {:error, %StartError{reason: why}}
+    end
+  end
+
+  defp start_fake(n, out, defer) do
+    name = :"dolphin_run_fakes_#{System.unique_integer([:positive])}"
+    {:ok, source} = TestSource.start_link(name: name)
+    Process.unlink(source)
+    defer.(fn -> GenServer.stop(source) end)
+    previous = Dolphin.Fleet.source()
+    :ok = Dolphin.Fleet.set_source(TestSource.source(name))
+    defer.(fn -> Dolphin.Fleet.set_source(previous) end)
+    for id <- 1..n, do: TestSource.add(name, id, type: :uav)
+    IO.puts(out, "#{n} fake vehicle(s) [1..#{n}] of the test platform (no MAVLink: missions cannot fly on them)")
+    :ok
+  end
+
+  @doc false
+  # Where the run's telemetry log goes (nil: none). Every run that talks
+  # MAVLink keeps one unless told not to: logs/<date>_<time>-<script>.tlog,
+  # readable by pymavlink, MAVExplorer and `mix mavlink.decode --tlog`.
+  @spec tlog_path(keyword(), Path.t()) :: Path.t() | nil
+  def tlog_path(opts, file) do
+    cond do
+      opts[:no_tlog] || opts[:fake] ->
+        nil
+
+      path = opts[:tlog] ->
+        path
+
+      true ->
+        {{y, mo, d}, {h, mi, sec}} = :calendar.local_time()
+        stamp = :io_lib.format("~4..0B-~2..0B-~2..0B_~2..0B-~2..0B-~2..0B", [y, mo, d, h, mi, sec]) |> IO.iodata_to_binary()
+        File.mkdir_p!("logs")
+        base = Path.join("logs", "#{stamp}-#{Path.basename(file, ".exs")}")
+        # Two runs of one script in the same second get two logs.
+        Enum.find(Stream.map(Stream.iterate(1, &(&1 + 1)), &"#{base}#{if &1 > 1, do: "-#{&1}"}.tlog"), &(not File.exists?(&1)))
+    end
+  end
+end

@@ -1,0 +1,67 @@
+defmodule Dolphin.CLITest do
+  use ExUnit.Case, async: true
+
+  alias Dolphin.CLI
+
+  doctest Dolphin.CLI
+  doctest Dolphin.CLI.UsageError
+  doctest Dolphin.CLI.StartError
+
+  describe "event lines" do
+    test "every event of the catalogue has its own line" do
+      values = %{
+        vehicle: 1, type: :uav, mode: :guided, seq: 2, name: "Survey", items: 5, duration_ms: 30, retransmissions: 0,
+        vehicles: [1, 2], requirement: "1 vehicle", reason: "why", run: 7, allocation: %{"8" => 1}, task_id: 8,
+        parent_id: nil, kind: :mission, progress: %{current: 1, total: 3}, result: :done, condition: "battery(v) < 0.3",
+        branch: nil, text: "hello", key: :k, value: 1, script: "x.exs"
+      }
+
+      for {name, fields} <- Dolphin.Telemetry.catalogue() do
+        event = Map.merge(Map.take(values, fields), %{event: name, at_ms: 1_500})
+        line = CLI.event_line(event, 1_000)
+        assert line =~ ~r/^\[\s+0\.5 s\] /
+        # Not the catch-all clause, which inspects the event.
+        refute line =~ "%{", "#{name}: #{line}"
+      end
+    end
+
+    test "lines say what happened" do
+      assert CLI.event_text(%{event: :task_finished, task_id: 4, kind: :mission, name: "Survey", result: :failed, reason: "vehicle lost"}) ==
+               ~s[task 4 mission "Survey": failed (vehicle lost)]
+
+      assert CLI.event_text(%{event: :task_finished, task_id: 4, kind: :mission, name: "Survey", result: :stopped, reason: "stopped: the script halted"}) ==
+               ~s[task 4 mission "Survey": stopped (the script halted)]
+
+      assert CLI.event_text(%{event: :mode_changed, vehicle: 2, mode: :rtl}) == "vehicle 2 mode RTL"
+      assert CLI.event_text(%{event: :allocated, run: 7, allocation: %{"8" => 1, "9" => 2}}) == "run 7: task 8 on vehicle 1, task 9 on vehicle 2"
+    end
+
+    test "a platform task's lines name its vehicle" do
+      started = %{event: :task_started, task_id: 3, parent_id: 1, kind: :test, name: "patrol", vehicle: 1}
+      assert CLI.event_text(started) == ~s(task 3 test "patrol" started on vehicle 1)
+
+      finished = %{event: :task_finished, task_id: 3, kind: :test, name: "patrol", vehicle: 1, result: :stopped, reason: "stopped: the run's time (--for) is over"}
+      assert CLI.event_text(finished) == ~s[task 3 test "patrol" on vehicle 1: stopped (the run's time (--for) is over)]
+      assert CLI.event_text(%{finished | result: :done, reason: nil}) == ~s(task 3 test "patrol" on vehicle 1: done)
+    end
+  end
+
+  describe "a run's log" do
+    test "messages always; with quiet nothing else" do
+      for quiet <- [true, false], do: assert(CLI.logged?(%{event: :message, text: "hi"}, quiet))
+      refute CLI.logged?(%{event: :picked, vehicles: [1], requirement: "1 vehicle"}, true)
+      assert CLI.logged?(%{event: :picked, vehicles: [1], requirement: "1 vehicle"}, false)
+    end
+
+    test "the platform tasks as they start and end, every failure; not the bookkeeping" do
+      on_vehicle = %{event: :task_finished, task_id: 3, kind: :test, name: "a", vehicle: 1, result: :done, reason: nil}
+      assert CLI.logged?(on_vehicle, false)
+      refute CLI.logged?(%{on_vehicle | vehicle: nil}, false)
+      assert CLI.logged?(%{on_vehicle | vehicle: nil, result: :failed, reason: "boom"}, false)
+      assert CLI.logged?(%{event: :task_started, task_id: 3, kind: :test, name: "a", vehicle: 1}, false)
+
+      for name <- [:allocated, :task_progress, :signal_posted, :script_started, :script_finished],
+          do: refute(CLI.logged?(%{event: name}, false), "#{name} is logged")
+    end
+  end
+end
