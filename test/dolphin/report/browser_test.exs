@@ -8,6 +8,11 @@ defmodule Dolphin.Report.BrowserTest do
   @moduletag :tmp_dir
   @moduletag timeout: 180_000
 
+  # The run's vehicles stay known to this node's ground station: forgotten after.
+  setup do
+    on_exit(&Dolphin.Test.GroundStation.forget_vehicles/0)
+  end
+
   # Two vehicles: one flies "North" to its end, the other flies "East" until
   # `during` stops it. What a person looking at the report must see follows
   # from this script and from what the run recorded, not from the report's

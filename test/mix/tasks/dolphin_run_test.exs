@@ -8,6 +8,12 @@ defmodule Mix.Tasks.Dolphin.RunTest do
 
   @moduletag :tmp_dir
 
+  # A run's vehicles are discovered afresh: none left known by a test before.
+  setup do
+    Dolphin.Test.GroundStation.forget_vehicles()
+    on_exit(&Dolphin.Test.GroundStation.forget_vehicles/0)
+  end
+
   defp script(dir, name, source) do
     path = Path.join(dir, name)
     File.write!(path, source)
