@@ -44,6 +44,15 @@ defmodule Dolphin.Engine do
       15 s of clock time; then it is killed and the task fails) — for a
       mission, the vehicle holds position.
 
+  Runs and nodes are `:proc_lib` processes with full `:sys` support: each
+  answers system messages in every phase of its life (running, or stopped
+  and waiting for its report), so `:sys.get_state/1`, `:sys.trace/2`,
+  `:sys.install/2` and observer look into any process of a running tree. A
+  run's `:sys` parent is its supervisor, handed to it when it starts (an exit
+  from it stops the tree, then the run exits with the same reason); a node's
+  is its parent node (or run). `:sys.terminate/2` on a node or a run stops
+  its subtree first, like any other way out.
+
   Stopping a subtree (`until`, `during`, `one_of`, a failed sibling in `|||`
   or `all_of`, the operator, the end of `--for`) is a two-phase protocol:
   **stop** travels down the whole subtree at once (every platform stop runs

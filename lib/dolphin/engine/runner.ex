@@ -3,6 +3,8 @@ defmodule Dolphin.Engine.Runner do
   # The process shell of a task node: one process per combinator node, running
   # the node's pure semantics (Dolphin.Engine.Node) and doing their effects.
   # Exit semantics and the start/stop protocol are documented in Dolphin.Engine.
+  # A proc_lib process with full :sys support (system messages, debug/trace
+  # hooks), whose :sys parent is its parent node or run.
   #
   # Messages (parent -> child): {:"$dolphin_stop", reason} (phase 1: stop what
   # runs under you), {:"$dolphin_report", parent} (phase 2: finish and report),
@@ -117,7 +119,9 @@ defmodule Dolphin.Engine.Runner do
       tick: nil,
       acked: false,
       # outcome of the platform stop in phase 1
-      halted: :ok
+      halted: :ok,
+      # :sys debug options (:sys.trace/2, :sys.log/2, ...)
+      debug: :sys.debug_options([])
     }
 
     Registry.register(Dolphin.Engine.Registry, {:task, s.id}, %{run: run.id, parent_id: parent_id, kind: s.kind, name: s.name, vehicle: s.vehicle})
@@ -135,11 +139,23 @@ defmodule Dolphin.Engine.Runner do
     %{s | acked: true}
   end
 
+  # Every message is taken in arrival order (each has a clause below), so it
+  # goes through the :sys debug hook first.
   defp loop(s) do
+    receive do
+      {:system, from, request} ->
+        :sys.handle_system_msg(request, from, s.parent, __MODULE__, s.debug, {:running, s})
+
+      msg ->
+        handle_msg(msg, debug_in(s, msg))
+    end
+  end
+
+  defp handle_msg(msg, s) do
     parent = s.parent
     platform = s.platform
 
-    receive do
+    case msg do
       {:"$dolphin_result", pid, result} ->
         case child_key(s, pid) do
           nil -> loop(s)
@@ -189,12 +205,7 @@ defmodule Dolphin.Engine.Runner do
         loop(feed(s, {:platform, msg}))
 
       {:"$dolphin_stop", reason} ->
-        s = halt(s, reason)
-
-        receive do
-          {:"$dolphin_report", _} -> finish_stopped(s, reason, true)
-          {:EXIT, ^parent, why} -> finish_stopped(s, {:parent_exit, why}, false)
-        end
+        s |> halt(reason) |> stopped(reason)
 
       {:"$dolphin_report", _} ->
         s |> halt(:stopped) |> finish_stopped(:stopped, true)
@@ -212,6 +223,54 @@ defmodule Dolphin.Engine.Runner do
         loop(s)
     end
   end
+
+  # Phase 1 done: waits for the parent to ask for the report (phase 2), or to die.
+  defp stopped(s, reason) do
+    parent = s.parent
+
+    receive do
+      {:system, from, request} ->
+        :sys.handle_system_msg(request, from, parent, __MODULE__, s.debug, {{:stopped, reason}, s})
+
+      {:"$dolphin_report", _} = msg ->
+        s |> debug_in(msg) |> finish_stopped(reason, true)
+
+      {:EXIT, ^parent, why} = msg ->
+        s |> debug_in(msg) |> finish_stopped({:parent_exit, why}, false)
+    end
+  end
+
+  # --- :sys callbacks ---
+
+  @doc false
+  def system_continue(_parent, debug, {:running, s}), do: loop(%{s | debug: debug})
+  def system_continue(_parent, debug, {{:stopped, reason}, s}), do: stopped(%{s | debug: debug}, reason)
+
+  @doc false
+  # :sys.terminate/2: the subtree stops first, as on any other way out.
+  def system_terminate(reason, _parent, _debug, {_phase, s}) do
+    halt(s, :shutdown)
+    Enum.each(s.order, &collected(s, s.children[&1]))
+    exit(reason)
+  end
+
+  @doc false
+  def system_get_state({_phase, s}), do: {:ok, s}
+
+  @doc false
+  def system_replace_state(fun, {phase, s}) do
+    s = fun.(s)
+    {:ok, s, {phase, s}}
+  end
+
+  @doc false
+  def system_code_change(misc, _module, _old_vsn, _extra), do: {:ok, misc}
+
+  defp debug_in(%{debug: []} = s, _msg), do: s
+  defp debug_in(s, msg), do: %{s | debug: :sys.handle_debug(s.debug, &write_debug/3, {s.kind, s.id}, {:in, msg})}
+
+  @doc false
+  def write_debug(device, {:in, msg}, {kind, id}), do: IO.write(device, "*DBG* task #{id} (#{kind}) got #{inspect(msg)}\n")
 
   defp exited(s, pid, reason) do
     cond do
