@@ -9,7 +9,7 @@ defmodule Dolphin.Engine do
 
       import Dolphin.Engine
       survey = Dolphin.Engine.TestPlatform.task("survey", duration: :infinity)
-      t = sequence([until(survey, fn -> Dolphin.Fleet.state(v).battery < 0.3 end), idle(5_000)])
+      t = sequence([until(survey, fn -> Dolphin.Engine.Watcher.vehicle(v).battery < 0.3 end), idle(5_000)])
       {:ok, :done} = Dolphin.Engine.run(t)
 
   ## Results
@@ -18,7 +18,7 @@ defmodule Dolphin.Engine do
   operator) or `{:failed, %Dolphin.Engine.Failure{}}` — naming the task where
   the failure began, its vehicle and the reason. `run/2` returns
   `{:ok, :done | :stopped}` or `{:error, failure}` (or
-  `{:error, %Dolphin.Engine.AllocationError{}}` when no vehicles fit).
+  `{:error, %Dolphin.Fleet.AllocationError{}}` when no vehicles fit).
   Combinators' semantics are in their modules (`Dolphin.Engine.Until`, ...).
   A child stopped from outside (by the operator) counts as completed for
   its parent.
@@ -78,15 +78,19 @@ defmodule Dolphin.Engine do
   ## Conditions
 
   Conditions are closures (`Dolphin.Engine.Cond`) evaluated when their node
-  starts and again on every change of what they read — a vehicle's state
-  event, a signal — plus a slow tick (`tick_ms`, 1 s of clock time) for
-  conditions on anything else. Reaction is thus event-driven: see
+  starts and again on every change of what they read — a vehicle's view
+  (`Dolphin.Vehicles.View`, published whole by the vehicle's owner), a
+  signal — plus a slow tick (`tick_ms`, 1 s of clock time) for conditions
+  on anything else. Each node's `Dolphin.Engine.Watcher` follows exactly
+  the vehicles and signals its conditions read and hands them a snapshot;
+  a frame thus travels link -> vehicle process -> view published -> node,
+  crossing each layer once. Reaction is thus event-driven: see
   `bench/reaction.exs` for the latency from a state change to the stop of
   the task it ends.
 
   ## Allocation
 
-  See `Dolphin.Engine.Allocation`: platform tasks get vehicles among those
+  See `Dolphin.Fleet.Allocation`: platform tasks get vehicles among those
   the script picked and that no other run holds; tasks that may run at the
   same time get distinct vehicles, sequential ones may share, `on/2`
   restricts, requirements are honoured; a real search, with an error naming
@@ -96,7 +100,7 @@ defmodule Dolphin.Engine do
   alias Dolphin.Engine.{Action, AllOf, Concurrent, Cond, Condition, Context, During, Idle, On, OneOf, PlatformTask, Run, Sequence, Task, Until, WaitFor, Watch}
 
   @type task :: Task.t()
-  @type result :: {:ok, :done | :stopped} | {:error, Dolphin.Engine.Failure.t() | Dolphin.Engine.AllocationError.t()}
+  @type result :: {:ok, :done | :stopped} | {:error, Dolphin.Engine.Failure.t() | Dolphin.Fleet.AllocationError.t()}
 
   # --- building tasks ---
 
@@ -232,7 +236,7 @@ defmodule Dolphin.Engine do
   @doc """
   Runs a task; returns `:ok` when it is done (or `:stopped` if the operator
   stopped it), raises `Dolphin.Engine.TaskError` when it fails and
-  `Dolphin.Engine.AllocationError` when no vehicles fit.
+  `Dolphin.Fleet.AllocationError` when no vehicles fit.
   """
   @spec execute!(term(), keyword()) :: :ok | :stopped
   def execute!(task, opts \\ []) do
@@ -240,7 +244,7 @@ defmodule Dolphin.Engine do
       {:ok, :done} -> :ok
       {:ok, :stopped} -> :stopped
       {:error, %Dolphin.Engine.Failure{} = f} -> raise Dolphin.Engine.TaskError, failure: f
-      {:error, %Dolphin.Engine.AllocationError{} = e} -> raise e
+      {:error, %Dolphin.Fleet.AllocationError{} = e} -> raise e
     end
   end
 

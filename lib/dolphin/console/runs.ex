@@ -287,7 +287,7 @@ defmodule Dolphin.Console.Runs do
         send(server, {:ready, self(), run, nil})
         send(server, {:finished, self(), Engine.await(run)})
 
-      {:ended, {:error, %Dolphin.Engine.AllocationError{} = e}} ->
+      {:ended, {:error, %Dolphin.Fleet.AllocationError{} = e}} ->
         send(server, {:start_failed, self(), "no vehicle fits: " <> Exception.message(e)})
 
       {:ended, result} ->

@@ -7,7 +7,7 @@ defmodule Dolphin.Engine.Run do
   # its stop callback — before it exits. A proc_lib process with full :sys
   # support; its :sys parent is its supervisor, handed over by start_link/1.
 
-  alias Dolphin.Engine.{Allocation, Context, On, PlatformTask, Runner, Task}
+  alias Dolphin.Engine.{Context, On, PlatformTask, Runner, Task}
 
   @doc false
   def child_spec(args),
@@ -24,7 +24,7 @@ defmodule Dolphin.Engine.Run do
   def prepare(task, ctx, run, inherit) do
     {tree, _} = Task.number(task, Dolphin.Engine.next_ids(Task.count(task)))
 
-    case Allocation.leaves(tree) do
+    case leaves(tree) do
       [] ->
         {:ok, strip(tree, %{})}
 
@@ -39,6 +39,31 @@ defmodule Dolphin.Engine.Run do
             {:error, error}
         end
     end
+  end
+
+  @doc false
+  # The platform tasks of a numbered tree, in order, with what constrains
+  # them, as the fleet's allocation takes them (Dolphin.Fleet.Allocation.leaf):
+  # the children of `|||` and `all_of` may run at the same time.
+  @spec leaves(Task.t()) :: [Dolphin.Fleet.Allocation.leaf()]
+  def leaves(tree), do: leaves(tree, [], nil)
+
+  defp leaves(%PlatformTask{} = t, path, allowed),
+    do: [%{id: t.id, name: Task.label(t), requirements: PlatformTask.requirements(t), allowed: allowed, path: Enum.reverse(path)}]
+
+  defp leaves(%On{task: t, vehicles: set} = on, path, allowed) do
+    ids = Dolphin.Fleet.VehicleSet.ids(set)
+    allowed = if allowed, do: Enum.filter(allowed, &(&1 in ids)), else: ids
+    leaves(t, [{on.id, :apart, 0} | path], allowed)
+  end
+
+  defp leaves(task, path, allowed) do
+    how = if Task.kind(task) in [:concurrent, :all_of], do: :together, else: :apart
+
+    task
+    |> Task.children()
+    |> Enum.with_index()
+    |> Enum.flat_map(fn {child, i} -> leaves(child, [{task.id, how, i} | path], allowed) end)
   end
 
   defp strip(tree, assignment) do

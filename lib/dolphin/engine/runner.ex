@@ -13,8 +13,7 @@ defmodule Dolphin.Engine.Runner do
   # runs (or {:"$dolphin_started", pid, {:finished, result}} if it ended at once),
   # {:"$dolphin_result", pid, result} as it ends.
 
-  alias Dolphin.Engine.{Cond, Context, Failure, PlatformTask, Task}
-  alias Dolphin.Fleet
+  alias Dolphin.Engine.{Context, Failure, PlatformTask, Task, Watcher}
 
   # Real time a parent waits for a child's initial subtree to start.
   @start_timeout 30_000
@@ -111,6 +110,8 @@ defmodule Dolphin.Engine.Runner do
       order: [],
       # [{key, cond}] in watch order
       watches: [],
+      # what those conditions read, and the vehicle of a platform task
+      watcher: Watcher.new(Context.source(ctx)),
       # key => {ref, token}
       timers: %{},
       # key => {:pending, ref, token, fun} | {:running, pid}
@@ -186,11 +187,11 @@ defmodule Dolphin.Engine.Runner do
           _ -> loop(s)
         end
 
-      {:dolphin, {:vehicle, id}, event} ->
-        update_cache(s, id, event)
+      {:dolphin, {:vehicle_view, id}, {:view, view}} ->
+        s = %{s | watcher: Watcher.update(s.watcher, view)}
 
         s =
-          if s.platform != nil and s.vehicle == id and match?({:vehicle_lost, _}, event),
+          if s.platform != nil and s.vehicle == id and not view.connected?,
             do: feed(s, {:vehicle_lost, id}),
             else: s
 
@@ -332,14 +333,22 @@ defmodule Dolphin.Engine.Runner do
   end
 
   defp effect({:check, key, cond}, s) do
-    case Cond.evaluate(cond) do
-      {:ok, holds} -> feed(s, {:checked, key, holds})
-      {:error, e, _} -> finish(s, {:failed, {:condition_error, cond.source, e}})
+    {result, watcher} = Watcher.evaluate(s.watcher, key, cond)
+    s = %{s | watcher: watcher}
+
+    case result do
+      {:ok, holds} ->
+        s = feed(s, {:checked, key, holds})
+        # What it read stays followed only if the node goes on watching it.
+        if List.keymember?(s.watches, key, 0), do: s, else: %{s | watcher: Watcher.forget(s.watcher, key)}
+
+      {:error, e, _} ->
+        finish(s, {:failed, {:condition_error, cond.source, e}})
     end
   end
 
   defp effect({:watch, key, cond}, s), do: ensure_tick(%{s | watches: s.watches ++ [{key, cond}]})
-  defp effect({:unwatch, key}, s), do: %{s | watches: List.keydelete(s.watches, key, 0)}
+  defp effect({:unwatch, key}, s), do: %{s | watches: List.keydelete(s.watches, key, 0), watcher: Watcher.forget(s.watcher, key)}
 
   defp effect({:timer, key, ms}, s) do
     token = make_ref()
@@ -369,11 +378,13 @@ defmodule Dolphin.Engine.Runner do
 
   defp effect(:platform_start, s) do
     %PlatformTask{platform: platform, spec: spec, vehicle: vehicle} = s.task
-    Fleet.subscribe_vehicle(vehicle)
+    # Its loss ends the task: followed from before the look.
+    {found, watcher} = Watcher.follow(s.watcher, vehicle)
+    s = %{s | watcher: watcher}
 
     opts = [owner: self(), run: s.run.id, task_id: s.id, clock: s.ctx.clock, source: Context.source(s.ctx), vehicle: vehicle]
 
-    case Dolphin.Fleet.Source.vehicle(Context.source(s.ctx), vehicle) do
+    case found do
       {:ok, %{connected?: false}} ->
         feed(s, {:platform_start_failed, {:vehicle_lost, vehicle}})
 
@@ -415,8 +426,11 @@ defmodule Dolphin.Engine.Runner do
           s
 
         {^key, cond} ->
-          case Cond.evaluate(cond) do
-            {:ok, true} -> feed(%{s | watches: List.keydelete(s.watches, key, 0)}, {:condition, key})
+          {result, watcher} = Watcher.evaluate(s.watcher, key, cond)
+          s = %{s | watcher: watcher}
+
+          case result do
+            {:ok, true} -> feed(%{s | watches: List.keydelete(s.watches, key, 0), watcher: Watcher.forget(watcher, key)}, {:condition, key})
             {:ok, false} -> s
             {:error, e, _} -> finish(s, {:failed, {:condition_error, cond.source, e}})
           end
@@ -431,24 +445,6 @@ defmodule Dolphin.Engine.Runner do
   end
 
   defp ensure_tick(s), do: s
-
-  defp update_cache(s, id, event) do
-    case Process.get({:"$dolphin_vehicle", id}) do
-      nil ->
-        :ok
-
-      v ->
-        v =
-          case event do
-            {:state, ^id, changes} -> Dolphin.Fleet.Source.apply_changes(Context.source(s.ctx), v, changes)
-            {:vehicle_lost, ^id} -> %{v | connected?: false}
-            {:vehicle_reconnected, ^id} -> %{v | connected?: true}
-            _ -> v
-          end
-
-        Process.put({:"$dolphin_vehicle", id}, v)
-    end
-  end
 
   # --- user code ---
 

@@ -24,7 +24,7 @@ defmodule Dolphin.Engine.SysTest do
 
   test ":sys.get_state/1 answers on every process of a running task tree", ctx do
     [a, b] = fake_vehicles(ctx, 2, pick: true)
-    low = Cond.new(fn -> Dolphin.Fleet.state(a).battery < 0.3 end, source: "battery(a) < 0.3")
+    low = Cond.new(fn -> Dolphin.Engine.Watcher.vehicle(a).battery < 0.3 end, source: "battery(a) < 0.3")
     tree = sequence([idle(0, name: "warm-up"), until(concurrent([tp("survey"), tp("photos")]), low, name: "until low"), idle(0, name: "after")], name: "main")
 
     {:ok, run} = start(tree)
@@ -50,7 +50,7 @@ defmodule Dolphin.Engine.SysTest do
     me = self()
     :ok = :sys.install(until_pid, {fn acc, event, _name -> send(me, {:sys_event, event}) && acc end, nil})
     TestSource.set(ctx.source, a, battery: 0.2)
-    assert_receive {:sys_event, {:in, {:dolphin, {:vehicle, ^a}, _}}}, 5_000
+    assert_receive {:sys_event, {:in, {:dolphin, {:vehicle_view, ^a}, _}}}, 5_000
     assert {:ok, :done} = await(run, 10_000)
   end
 

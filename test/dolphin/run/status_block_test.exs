@@ -1,7 +1,7 @@
 defmodule Dolphin.Run.StatusBlockTest do
   use ExUnit.Case, async: true
 
-  alias Dolphin.Fleet.Vehicle
+  alias Dolphin.Vehicles.View, as: Vehicle
   alias Dolphin.Run.StatusBlock
 
   doctest StatusBlock
