@@ -430,7 +430,12 @@ defmodule Dolphin.Engine.Runner do
           s = %{s | watcher: watcher}
 
           case result do
-            {:ok, true} -> feed(%{s | watches: List.keydelete(s.watches, key, 0), watcher: Watcher.forget(watcher, key)}, {:condition, key})
+            {:ok, true} ->
+              s = feed(%{s | watches: List.keydelete(s.watches, key, 0)}, {:condition, key})
+              # What it read is let go after the reaction, not before: the
+              # reaction (stopping a subtree, say) is what is waited for.
+              if List.keymember?(s.watches, key, 0), do: s, else: %{s | watcher: Watcher.forget(s.watcher, key)}
+
             {:ok, false} -> s
             {:error, e, _} -> finish(s, {:failed, {:condition_error, cond.source, e}})
           end

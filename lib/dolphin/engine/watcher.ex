@@ -60,11 +60,15 @@ defmodule Dolphin.Engine.Watcher do
   """
   @spec evaluate(t(), term(), Cond.t()) :: {{:ok, boolean()} | {:error, Exception.t(), Exception.stacktrace()}, t()}
   def evaluate(%__MODULE__{} = w, key, %Cond{} = cond) do
-    Process.put(@scope, %{source: w.source, vehicles: w.vehicles, signals: w.signals, read: MapSet.new()})
+    Process.put(@scope, %{source: w.source, vehicles: w.vehicles, signals: w.signals, read: MapSet.new(), fresh: false})
     # Cond.evaluate/1 turns whatever the condition raises or throws into an error result.
     result = Cond.evaluate(cond)
     scope = Process.delete(@scope)
-    {result, sync(%{w | vehicles: scope.vehicles, signals: scope.signals, reads: Map.put(w.reads, key, scope.read)})}
+
+    # Most evaluations read what they read before: nothing to subscribe or let go.
+    if not scope.fresh and Map.get(w.reads, key) == scope.read,
+      do: {result, w},
+      else: {result, sync(%{w | vehicles: scope.vehicles, signals: scope.signals, reads: Map.put(w.reads, key, scope.read)})}
   end
 
   @doc "Forgets what the condition of `key` read (it is no longer watched)."
@@ -134,7 +138,7 @@ defmodule Dolphin.Engine.Watcher do
               reraise e, __STACKTRACE__
           end
 
-        Process.put(@scope, %{scope | vehicles: Map.put(scope.vehicles, id, view), read: MapSet.put(scope.read, {:vehicle, id})})
+        Process.put(@scope, %{scope | vehicles: Map.put(scope.vehicles, id, view), read: MapSet.put(scope.read, {:vehicle, id}), fresh: true})
         view
 
       nil ->
@@ -159,8 +163,12 @@ defmodule Dolphin.Engine.Watcher do
         :ok
 
       scope ->
-        signals = if MapSet.member?(scope.signals, table), do: scope.signals, else: subscribe_signals(scope.signals, table)
-        Process.put(@scope, %{scope | signals: signals, read: MapSet.put(scope.read, {:signals, table})})
+        scope =
+          if MapSet.member?(scope.signals, table),
+            do: scope,
+            else: %{scope | signals: subscribe_signals(scope.signals, table), fresh: true}
+
+        Process.put(@scope, %{scope | read: MapSet.put(scope.read, {:signals, table})})
         :ok
     end
   end
