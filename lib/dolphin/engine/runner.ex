@@ -4,7 +4,9 @@ defmodule Dolphin.Engine.Runner do
   # the node's pure semantics (Dolphin.Engine.Node) and doing their effects.
   # Exit semantics and the start/stop protocol are documented in Dolphin.Engine.
   # A proc_lib process with full :sys support (system messages, debug/trace
-  # hooks), whose :sys parent is its parent node or run.
+  # hooks), whose :sys parent is its parent node or run. One cohesive thing
+  # past 500 lines: the receive loop, the effects, the two-phase stop and the
+  # :sys callbacks all work on the one node state that :sys hands back.
   #
   # Messages (parent -> child): {:"$dolphin_stop", reason} (phase 1: stop what
   # runs under you), {:"$dolphin_report", parent} (phase 2: finish and report),
