@@ -13,7 +13,7 @@ defmodule Dolphin.DSL do
   | --- | --- |
   | `pick(opts)`, `release(set)` | `Dolphin.Script.Statements.pick/1`, `Dolphin.Script.Statements.release/1` |
   | `union/2`, `difference/2`, `intersection/2`, `filter/2` | `Dolphin.Fleet.VehicleSet` |
-  | `battery(v)`, `position(v)`, `altitude(v)`, `relative_altitude(v)`, `mode(v)`, `armed?(v)`, `connected?(v)`, `mission_progress(v)` | `Dolphin.Fleet.state/2` |
+  | `battery(v)`, `position(v)`, `altitude(v)`, `relative_altitude(v)`, `mode(v)`, `armed?(v)`, `connected?(v)`, `mission_progress(v)` | `Dolphin.Engine.Watcher.vehicle/2` |
   | `set_connection_timeout(t)`, `set_connection_timeout(set, t)` | `Dolphin.Script.Statements.set_connection_timeout/1,2` |
   | `idle(d)`, `on(t, set)`, `during(d, t)`, `watch(t, on_error: h)`, `named(t, name)`, `t1 >>> t2`, `t1 \\|\\|\\| t2` | `Dolphin.Engine` |
   | `action do ... end`, `condition(c)`, `until(t, c)`, `wait_for(c)`, `wait_for(c, then: t)`, `one_of do c -> t ... end`, `all_of do ... end` | `Dolphin.Engine` with a `Dolphin.Engine.Cond` |
@@ -61,7 +61,6 @@ defmodule Dolphin.DSL do
   import Dolphin.DSL.Expand
 
   alias Dolphin.Engine
-  alias Dolphin.Fleet
   alias Dolphin.Fleet.VehicleSet
   alias Dolphin.Script.Statements
 
@@ -162,7 +161,7 @@ defmodule Dolphin.DSL do
       message("battery at \#{round(battery(v) * 100)} %")
   """
   @spec battery(vehicle()) :: float() | nil
-  def battery(v), do: Fleet.state(v, :battery).battery
+  def battery(v), do: Dolphin.Engine.Watcher.vehicle(v, :battery).battery
 
   @doc """
   The position of a vehicle: a `Dolphin.Geo.Location` (latitude, longitude,
@@ -171,7 +170,7 @@ defmodule Dolphin.DSL do
       home_pos = position(v)
   """
   @spec position(vehicle()) :: Dolphin.Geo.Location.t() | nil
-  def position(v), do: Fleet.state(v, :position).position
+  def position(v), do: Dolphin.Engine.Watcher.vehicle(v, :position).position
 
   @doc """
   The height of a vehicle above mean sea level, in metres (what missions
@@ -179,14 +178,14 @@ defmodule Dolphin.DSL do
       wait_for(altitude(v) > 1000, then: photos)
   """
   @spec altitude(vehicle()) :: float() | nil
-  def altitude(v), do: with(%{h: h} <- Fleet.state(v, :altitude).position, do: h)
+  def altitude(v), do: with(%{h: h} <- Dolphin.Engine.Watcher.vehicle(v, :altitude).position, do: h)
 
   @doc """
   The height of a vehicle above its home, in metres; #{@unknown}
       wait_for(relative_altitude(v) > 30, then: survey)
   """
   @spec relative_altitude(vehicle()) :: float() | nil
-  def relative_altitude(v), do: Fleet.state(v, :relative_altitude).relative_altitude
+  def relative_altitude(v), do: Dolphin.Engine.Watcher.vehicle(v, :relative_altitude).relative_altitude
 
   @doc """
   The flight mode of a vehicle: `:stabilize`, `:guided`, `:auto`, `:brake`,
@@ -194,7 +193,7 @@ defmodule Dolphin.DSL do
       until(watch_only, mode(v) == :rtl)
   """
   @spec mode(vehicle()) :: atom() | nil
-  def mode(v), do: Fleet.state(v, :mode).mode
+  def mode(v), do: Dolphin.Engine.Watcher.vehicle(v, :mode).mode
 
   @doc """
   Whether a vehicle is armed (`false` until it has reported otherwise).
@@ -202,7 +201,7 @@ defmodule Dolphin.DSL do
       wait_for(not armed?(v), then: swap_battery)
   """
   @spec armed?(vehicle()) :: boolean()
-  def armed?(v), do: Fleet.state(v, :armed?).armed?
+  def armed?(v), do: Dolphin.Engine.Watcher.vehicle(v, :armed?).armed?
 
   @doc """
   Whether a vehicle is heard: `false` once it is silent for longer than its
@@ -214,7 +213,7 @@ defmodule Dolphin.DSL do
       end
   """
   @spec connected?(vehicle()) :: boolean()
-  def connected?(v), do: Fleet.state(v, :connected?).connected?
+  def connected?(v), do: Dolphin.Engine.Watcher.vehicle(v, :connected?).connected?
 
   @doc """
   `{reached, total}`: the last mission item reached (0 before the first) and
@@ -225,7 +224,7 @@ defmodule Dolphin.DSL do
       until(survey, mission_progress(v) >= {5, 0})
   """
   @spec mission_progress(vehicle()) :: {non_neg_integer(), non_neg_integer()} | nil
-  def mission_progress(v), do: Fleet.state(v, :mission_progress).mission_progress
+  def mission_progress(v), do: Dolphin.Engine.Watcher.vehicle(v, :mission_progress).mission_progress
 
   # --- tasks ---
 

@@ -9,7 +9,7 @@ defmodule Dolphin.Engine do
 
       import Dolphin.Engine
       survey = Dolphin.Engine.TestPlatform.task("survey", duration: :infinity)
-      t = sequence([until(survey, fn -> Dolphin.Fleet.state(v).battery < 0.3 end), idle(5_000)])
+      t = sequence([until(survey, fn -> Dolphin.Engine.Watcher.vehicle(v).battery < 0.3 end), idle(5_000)])
       {:ok, :done} = Dolphin.Engine.run(t)
 
   ## Results
@@ -18,7 +18,7 @@ defmodule Dolphin.Engine do
   operator) or `{:failed, %Dolphin.Engine.Failure{}}` — naming the task where
   the failure began, its vehicle and the reason. `run/2` returns
   `{:ok, :done | :stopped}` or `{:error, failure}` (or
-  `{:error, %Dolphin.Engine.AllocationError{}}` when no vehicles fit).
+  `{:error, %Dolphin.Fleet.AllocationError{}}` when no vehicles fit).
   Combinators' semantics are in their modules (`Dolphin.Engine.Until`, ...).
   A child stopped from outside (by the operator) counts as completed for
   its parent.
@@ -43,6 +43,15 @@ defmodule Dolphin.Engine do
       platform's `stop/2` and waits for it (bounded by `stop_timeout_ms`,
       15 s of clock time; then it is killed and the task fails) — for a
       mission, the vehicle holds position.
+
+  Runs and nodes are `:proc_lib` processes with full `:sys` support: each
+  answers system messages in every phase of its life (running, or stopped
+  and waiting for its report), so `:sys.get_state/1`, `:sys.trace/2`,
+  `:sys.install/2` and observer look into any process of a running tree. A
+  run's `:sys` parent is its supervisor, handed to it when it starts (an exit
+  from it stops the tree, then the run exits with the same reason); a node's
+  is its parent node (or run). `:sys.terminate/2` on a node or a run stops
+  its subtree first, like any other way out.
 
   Stopping a subtree (`until`, `during`, `one_of`, a failed sibling in `|||`
   or `all_of`, the operator, the end of `--for`) is a two-phase protocol:
@@ -69,15 +78,19 @@ defmodule Dolphin.Engine do
   ## Conditions
 
   Conditions are closures (`Dolphin.Engine.Cond`) evaluated when their node
-  starts and again on every change of what they read — a vehicle's state
-  event, a signal — plus a slow tick (`tick_ms`, 1 s of clock time) for
-  conditions on anything else. Reaction is thus event-driven: see
+  starts and again on every change of what they read — a vehicle's view
+  (`Dolphin.Vehicles.View`, published whole by the vehicle's owner), a
+  signal — plus a slow tick (`tick_ms`, 1 s of clock time) for conditions
+  on anything else. Each node's `Dolphin.Engine.Watcher` follows exactly
+  the vehicles and signals its conditions read and hands them a snapshot;
+  a frame thus travels link -> vehicle process -> view published -> node,
+  crossing each layer once. Reaction is thus event-driven: see
   `bench/reaction.exs` for the latency from a state change to the stop of
   the task it ends.
 
   ## Allocation
 
-  See `Dolphin.Engine.Allocation`: platform tasks get vehicles among those
+  See `Dolphin.Fleet.Allocation`: platform tasks get vehicles among those
   the script picked and that no other run holds; tasks that may run at the
   same time get distinct vehicles, sequential ones may share, `on/2`
   restricts, requirements are honoured; a real search, with an error naming
@@ -87,7 +100,7 @@ defmodule Dolphin.Engine do
   alias Dolphin.Engine.{Action, AllOf, Concurrent, Cond, Condition, Context, During, Idle, On, OneOf, PlatformTask, Run, Sequence, Task, Until, WaitFor, Watch}
 
   @type task :: Task.t()
-  @type result :: {:ok, :done | :stopped} | {:error, Dolphin.Engine.Failure.t() | Dolphin.Engine.AllocationError.t()}
+  @type result :: {:ok, :done | :stopped} | {:error, Dolphin.Engine.Failure.t() | Dolphin.Fleet.AllocationError.t()}
 
   # --- building tasks ---
 
@@ -223,7 +236,7 @@ defmodule Dolphin.Engine do
   @doc """
   Runs a task; returns `:ok` when it is done (or `:stopped` if the operator
   stopped it), raises `Dolphin.Engine.TaskError` when it fails and
-  `Dolphin.Engine.AllocationError` when no vehicles fit.
+  `Dolphin.Fleet.AllocationError` when no vehicles fit.
   """
   @spec execute!(term(), keyword()) :: :ok | :stopped
   def execute!(task, opts \\ []) do
@@ -231,7 +244,7 @@ defmodule Dolphin.Engine do
       {:ok, :done} -> :ok
       {:ok, :stopped} -> :stopped
       {:error, %Dolphin.Engine.Failure{} = f} -> raise Dolphin.Engine.TaskError, failure: f
-      {:error, %Dolphin.Engine.AllocationError{} = e} -> raise e
+      {:error, %Dolphin.Fleet.AllocationError{} = e} -> raise e
     end
   end
 

@@ -6,11 +6,14 @@ defmodule Dolphin.Fleet do
 
   Vehicles come from a `Dolphin.Fleet.Source` (by default the MAVLink vehicles
   of `Dolphin.Vehicles`; `config :dolphin, vehicle_source: {module, arg}` or
-  the `:source` option change it). The fleet follows the source's events, so
-  it knows every vehicle's type, payloads, position and whether it is
-  connected, and it turns them into `Dolphin.Telemetry` events
+  the `:source` option change it). A vehicle's state belongs to its source;
+  the fleet owns only who is picked, who is busy, the waiting picks and the
+  reservations of runs. It follows the views the source publishes
+  (`Dolphin.Vehicles.View`), keeping the latest one of each vehicle to match
+  picks against, and turns their transitions into `Dolphin.Telemetry` events
   (`vehicle_discovered`, `vehicle_lost`, `vehicle_reconnected`, `mode_changed`,
-  `armed`, `disarmed`, `mission_item_reached`).
+  `armed`, `disarmed`, `mission_item_reached`). It knows nothing of the
+  engine: the engine calls it, never the other way round.
 
   ## Picking
 
@@ -36,7 +39,7 @@ defmodule Dolphin.Fleet do
 
   `reserve/5` (called by the engine when a run starts) gives each platform
   task of the run a vehicle among those the owner picked and that are not
-  busy, using `Dolphin.Engine.Allocation`, and marks them busy until
+  busy, using `Dolphin.Fleet.Allocation`, and marks them busy until
   `unreserve/2`.
   """
 
@@ -46,8 +49,8 @@ defmodule Dolphin.Fleet do
 
   alias Dolphin.{Geo, PubSub, Telemetry}
   alias Dolphin.Geo.Area
-  alias Dolphin.Engine.{Allocation, Cond, Context}
-  alias Dolphin.Fleet.{PickError, Source, Vehicle, VehicleSet}
+  alias Dolphin.Fleet.{Allocation, AllocationError, PickError, Source, VehicleSet}
+  alias Dolphin.Vehicles.View
 
   @types [:uav, :ugv, :usv, :uuv, :other]
   @pick_keys [:count, :type, :payload, :region, :id, :timeout]
@@ -85,8 +88,8 @@ defmodule Dolphin.Fleet do
   @spec set_source(fleet(), Source.t()) :: :ok
   def set_source(fleet \\ __MODULE__, {m, _} = source) when is_atom(m), do: GenServer.call(fleet, {:set_source, source})
 
-  @doc "Every known vehicle with its status: `%{vehicle: Vehicle.t(), picked_by: pid | nil, busy: run_id | nil}`."
-  @spec vehicles(fleet()) :: [%{vehicle: Vehicle.t(), picked_by: pid() | nil, busy: integer() | nil}]
+  @doc "Every known vehicle with its status: `%{vehicle: View.t(), picked_by: pid | nil, busy: run_id | nil}`."
+  @spec vehicles(fleet()) :: [%{vehicle: View.t(), picked_by: pid() | nil, busy: integer() | nil}]
   def vehicles(fleet \\ __MODULE__), do: GenServer.call(fleet, :vehicles)
 
   @doc "Picks vehicles for `owner` (see the module doc). Raises `ArgumentError` for an unknown or malformed option."
@@ -120,61 +123,15 @@ defmodule Dolphin.Fleet do
     do: raise(ArgumentError, "a connection timeout is a positive number of milliseconds, got: #{inspect(ms)}")
 
   @doc false
-  # Allocates vehicles to a run's platform tasks (Dolphin.Engine.Allocation leaves)
+  # Allocates vehicles to a run's platform tasks (Dolphin.Fleet.Allocation leaves)
   # and marks them busy for it. `inherit`: vehicles the run already holds.
   @spec reserve(fleet(), %{id: integer(), pid: pid()}, pid(), [Allocation.leaf()], [non_neg_integer()]) ::
-          {:ok, %{integer() => non_neg_integer()}} | {:error, Dolphin.Engine.AllocationError.t()}
+          {:ok, %{integer() => non_neg_integer()}} | {:error, AllocationError.t()}
   def reserve(fleet, run, owner, leaves, inherit), do: GenServer.call(fleet, {:reserve, run, owner, leaves, inherit}, 60_000)
 
   @doc false
   @spec unreserve(fleet(), integer()) :: :ok
   def unreserve(fleet, run_id), do: GenServer.call(fleet, {:unreserve, run_id})
-
-  @doc """
-  The live state of one vehicle (a one-vehicle set or a system id), from the
-  context's source. Inside a condition being evaluated, the state comes from
-  a cache in the evaluating process, kept up to date by the vehicle's events,
-  and the read is recorded so the condition is evaluated again when the
-  vehicle changes.
-  """
-  @spec state(VehicleSet.t() | non_neg_integer(), atom()) :: Vehicle.t()
-  def state(ref, function \\ :state) do
-    id = VehicleSet.one!(ref, function)
-
-    if Cond.track({:vehicle, id}) do
-      case Process.get({:"$dolphin_vehicle", id}) do
-        nil ->
-          # Subscribed before reading: no change is missed in between.
-          subscribe_vehicle(id)
-          v = fetch!(id)
-          Process.put({:"$dolphin_vehicle", id}, v)
-          v
-
-        v ->
-          v
-      end
-    else
-      fetch!(id)
-    end
-  end
-
-  defp fetch!(id) do
-    case Source.vehicle(Context.source(Context.current()), id) do
-      {:ok, v} -> v
-      {:error, :unknown_vehicle} -> raise ArgumentError, "unknown vehicle #{inspect(id)}"
-    end
-  end
-
-  @doc false
-  # Subscribes the calling process to a vehicle's events, once.
-  def subscribe_vehicle(id) do
-    unless Process.get({:"$dolphin_subscribed", id}) do
-      PubSub.subscribe({:vehicle, id})
-      Process.put({:"$dolphin_subscribed", id}, true)
-    end
-
-    :ok
-  end
 
   @doc false
   # Checks and normalises pick options (caller mistakes raise here, in the caller).
@@ -238,7 +195,7 @@ defmodule Dolphin.Fleet do
       name: name,
       source: nil,
       events: Keyword.get(opts, :events, true),
-      # id => %{vehicle: Vehicle.t(), announced: boolean}
+      # id => %{vehicle: View.t(), announced: boolean}: the latest view published
       vehicles: %{},
       picked: %{},
       # pid => monitor ref (owners, waiting callers, runs)
@@ -256,7 +213,7 @@ defmodule Dolphin.Fleet do
 
   defp use_source(s, source) do
     if is_atom(s.name), do: :persistent_term.put({__MODULE__, s.name}, source)
-    for id <- Map.keys(s.vehicles), do: PubSub.unsubscribe({:vehicle, id})
+    for id <- Map.keys(s.vehicles), do: Source.unsubscribe(id)
     s = %{s | source: source, vehicles: %{}}
     Enum.reduce(Source.list(source), s, &add_vehicle(&2, &1))
   end
@@ -325,22 +282,25 @@ defmodule Dolphin.Fleet do
   @impl true
   def handle_info({:dolphin, :vehicles, {:vehicle_discovered, id}}, s) do
     case s.vehicles do
-      %{^id => _} -> {:noreply, s |> connected(id, true, false) |> serve()}
+      %{^id => _} -> {:noreply, serve(s)}
       _ -> {:noreply, s |> add_vehicle(id) |> serve()}
     end
   end
 
-  def handle_info({:dolphin, :vehicles, {:vehicle_lost, id}}, s), do: {:noreply, connected(s, id, false, true)}
-  def handle_info({:dolphin, :vehicles, {:vehicle_reconnected, id}}, s), do: {:noreply, s |> connected(id, true, true) |> serve()}
+  # The view saying so came first (see Dolphin.Fleet.Source).
+  def handle_info({:dolphin, :vehicles, {:vehicle_lost, id}}, s), do: {:noreply, connected(s, id, false)}
+  def handle_info({:dolphin, :vehicles, {:vehicle_reconnected, id}}, s), do: {:noreply, s |> connected(id, true) |> serve()}
 
-  def handle_info({:dolphin, {:vehicle, id}, {:state, id, changes}}, s) do
+  def handle_info({:dolphin, {:vehicle_view, id}, {:view, %View{id: id} = new}}, s) do
     case s.vehicles do
       %{^id => %{vehicle: old} = entry} ->
-        new = Source.apply_changes(s.source, old, changes)
         entry = announce(s, %{entry | vehicle: new})
         if s.events and entry.announced, do: changed(old, new)
         s = put_in(s.vehicles[id], entry)
-        relevant = old.type != new.type or old.payloads != new.payloads or old.position != new.position
+
+        relevant =
+          old.type != new.type or old.payloads != new.payloads or old.position != new.position or old.connected? != new.connected?
+
         {:noreply, if(relevant and s.waiters != [], do: serve(s), else: s)}
 
       _ ->
@@ -377,36 +337,35 @@ defmodule Dolphin.Fleet do
 
   # --- vehicles ---
 
+  # Subscribed before reading: no view is missed in between.
   defp add_vehicle(s, id) do
+    :ok = Source.subscribe(id)
+
     case Source.vehicle(s.source, id) do
       {:ok, v} ->
-        PubSub.subscribe({:vehicle, id})
         entry = announce(s, %{vehicle: v, announced: false})
         put_in(s.vehicles[id], entry)
 
       {:error, :unknown_vehicle} ->
         # Another source's vehicle (tests run several fleets), or gone already.
+        Source.unsubscribe(id)
         s
     end
   end
 
   # vehicle_discovered once its type is known (the first heartbeat).
-  defp announce(s, %{announced: false, vehicle: %Vehicle{type: type} = v} = entry) when type != nil do
+  defp announce(s, %{announced: false, vehicle: %View{type: type} = v} = entry) when type != nil do
     if s.events, do: Telemetry.emit(:vehicle_discovered, %{vehicle: v.id, type: type})
     %{entry | announced: true}
   end
 
   defp announce(_s, entry), do: entry
 
-  defp connected(s, id, connected?, emit?) do
-    case s.vehicles do
-      %{^id => entry} ->
-        if s.events and emit?, do: Telemetry.emit(if(connected?, do: :vehicle_reconnected, else: :vehicle_lost), %{vehicle: id})
-        put_in(s.vehicles[id], %{entry | vehicle: %{entry.vehicle | connected?: connected?}})
+  defp connected(s, id, connected?) do
+    if s.events and Map.has_key?(s.vehicles, id),
+      do: Telemetry.emit(if(connected?, do: :vehicle_reconnected, else: :vehicle_lost), %{vehicle: id})
 
-      _ ->
-        s
-    end
+    s
   end
 
   defp changed(old, new) do
@@ -484,7 +443,7 @@ defmodule Dolphin.Fleet do
   end
 
   defp forget(s, ids) do
-    Enum.each(ids, &PubSub.unsubscribe({:vehicle, &1}))
+    Enum.each(ids, &Source.unsubscribe/1)
     %{s | vehicles: Map.drop(s.vehicles, ids)}
   end
 
@@ -496,7 +455,7 @@ defmodule Dolphin.Fleet do
     %{s | picked: Enum.reduce(ids, s.picked, &Map.put(&2, &1, w.owner))}
   end
 
-  defp matches?(req, %Vehicle{} = v) do
+  defp matches?(req, %View{} = v) do
     (req.type == nil or v.type in List.wrap(req.type)) and Enum.all?(req.payload, &(&1 in v.payloads)) and
       (req.region == nil or (v.position != nil and Geo.contains?(req.region, v.position))) and (req.id == nil or v.id in req.id)
   end

@@ -4,8 +4,10 @@ defmodule Dolphin.PubSub do
   itself under a topic and receives `{:dolphin, topic, event}` messages. The
   registry monitors subscribers, so one that dies is dropped without help.
 
-  Topics: `{:vehicle, sysid}` (that vehicle's state changes and link events)
-  and `:vehicles` (discoveries, losses and reconnections of every vehicle).
+  Topics: `{:vehicle, sysid}` (that vehicle's state changes and link events),
+  `{:vehicle_view, sysid}` (that vehicle's `Dolphin.Vehicles.View`, whole, on
+  each change), `:vehicles` (discoveries, losses and reconnections of every
+  vehicle) and `{:dolphin_signals, table}` (a script's signals).
   """
 
   @registry __MODULE__

@@ -11,6 +11,8 @@ defmodule Dolphin.Vehicles do
       Dolphin.Vehicles.list()               # [1, 2, 3]
       Dolphin.Vehicles.state(1)             # {:ok, %Dolphin.Vehicles.State{mode: :guided, battery: 0.87, ...}}
       Dolphin.Vehicles.subscribe(1)         # {:dolphin, {:vehicle, 1}, {:state, 1, [battery: 0.86]}}, ...
+      Dolphin.Vehicles.view(1)              # {:ok, %Dolphin.Vehicles.View{battery: 0.86, ...}}
+      Dolphin.Vehicles.subscribe_view(1)    # {:dolphin, {:vehicle_view, 1}, {:view, %Dolphin.Vehicles.View{}}}, ...
       Dolphin.Vehicles.send_message(1, %Dolphin.MAVLink.Ardupilotmega.CommandLong{...})
 
   Commands (`command/3` and the helpers below) follow the MAVLink command
@@ -21,6 +23,17 @@ defmodule Dolphin.Vehicles do
   longer than its timeout: 20 s of `Dolphin.Clock` time by default, set with
   `set_timeout/2` or `config :dolphin, vehicle_timeout_ms:`),
   `{:vehicle_reconnected, sysid}`, and per vehicle `{:state, sysid, changes}`.
+
+  ## One owner of a vehicle's state
+
+  A vehicle's state lives in its process and nowhere else. Besides the raw
+  changes above (for the protocols that follow the vehicle closely), the
+  process publishes a `Dolphin.Vehicles.View` — what the fleet and the
+  engine's conditions read — on topic `{:vehicle_view, sysid}` each time the
+  view changes (`subscribe_view/1`), the view before the loss or
+  reconnection event when the vehicle goes silent or is heard again. A
+  subscriber keeps the latest view it got, or asks `view/1`; nobody rebuilds
+  a vehicle from its changes.
   """
 
   alias Dolphin.CommandError
@@ -63,6 +76,19 @@ defmodule Dolphin.Vehicles do
       _ -> []
     end
   end
+
+  @doc "The latest view of a vehicle (see \"One owner of a vehicle's state\")."
+  @spec view(byte()) :: {:ok, Dolphin.Vehicles.View.t()} | {:error, :unknown_vehicle}
+  def view(sysid) do
+    case call_vehicle(sysid, :view) do
+      {:ok, view} -> {:ok, view}
+      _ -> {:error, :unknown_vehicle}
+    end
+  end
+
+  @doc "Subscribes the caller to a vehicle's views: `{:dolphin, {:vehicle_view, sysid}, {:view, view}}`."
+  @spec subscribe_view(byte()) :: :ok
+  def subscribe_view(sysid), do: PubSub.subscribe({:vehicle_view, sysid})
 
   @doc "The state of a vehicle, plus `lost: boolean`."
   @spec state(byte()) :: {:ok, Dolphin.Vehicles.State.t()} | {:error, :unknown_vehicle}

@@ -2,11 +2,13 @@ defmodule Dolphin.FleetTest do
   use Dolphin.EngineCase, async: false
 
   alias Dolphin.Fleet
-  alias Dolphin.Fleet.{MAVLinkSource, PickError, Vehicle}
+  alias Dolphin.Engine.Watcher
+  alias Dolphin.Fleet.{MAVLinkSource, PickError}
   alias Dolphin.Geo
+  alias Dolphin.Vehicles.View
 
   doctest Dolphin.Fleet.VehicleSet
-  doctest Dolphin.Fleet.Vehicle
+  doctest Dolphin.Vehicles.View
 
   defp pick(ctx, opts, owner \\ self()), do: Fleet.pick(ctx.fleet, owner, opts)
 
@@ -153,33 +155,35 @@ defmodule Dolphin.FleetTest do
   describe "state" do
     test "of one vehicle; a set of another size is a caller mistake", ctx do
       [a, b] = fake_vehicles(ctx, 2, battery: 0.5)
-      assert %Vehicle{battery: 0.5} = Fleet.state(VehicleSet.new(a))
-      assert %Vehicle{battery: 0.5} = Fleet.state(b)
-      assert_raise ArgumentError, ~r/battery needs a one-vehicle set, got: #Vehicles<\[/, fn -> Fleet.state(VehicleSet.new([a, b]), :battery) end
-      assert_raise ArgumentError, ~r/unknown vehicle 77/, fn -> Fleet.state(77) end
+      assert %View{battery: 0.5} = Watcher.vehicle(VehicleSet.new(a))
+      assert %View{battery: 0.5} = Watcher.vehicle(b)
+      assert_raise ArgumentError, ~r/battery needs a one-vehicle set, got: #Vehicles<\[/, fn -> Watcher.vehicle(VehicleSet.new([a, b]), :battery) end
+      assert_raise ArgumentError, ~r/unknown vehicle 77/, fn -> Watcher.vehicle(77) end
     end
   end
 
   describe "the MAVLink source" do
-    test "maps a vehicle's state: type class, payloads, battery, position, progress" do
-      changes = [
-        type: 2,
-        components: MapSet.new([:camera]),
-        battery: 0.42,
-        position: %{lat: 40.1, lon: -7.3, alt: 900.0, relative_alt: 80.0, heading: 90.0},
-        mode: :auto,
-        armed: true,
-        mission: %{current: 3, total: 7, state: :active, reached: 2},
-        landed: :in_air
-      ]
+    test "a vehicle's view of its state: type class, payloads, battery, position, progress" do
+      state = %{
+        Dolphin.Vehicles.State.new(9)
+        | type: 2,
+          components: MapSet.new([:camera]),
+          battery: 0.42,
+          position: %{lat: 40.1, lon: -7.3, alt: 900.0, relative_alt: 80.0, heading: 90.0},
+          mode: :auto,
+          armed: true,
+          mission: %{current: 3, total: 7, state: :active, reached: 2},
+          landed: :in_air
+      }
 
-      v = MAVLinkSource.apply_changes(nil, %Vehicle{id: 9}, changes)
-      assert %Vehicle{type: :uav, payloads: [:camera], battery: 0.42, mode: :auto, armed?: true, mission_progress: {2, 7}, landed: :in_air, relative_altitude: 80.0} = v
+      v = View.of(state, false, [])
+      assert %View{id: 9, type: :uav, payloads: [:camera], battery: 0.42, mode: :auto, armed?: true, mission_progress: {2, 7}, landed: :in_air, relative_altitude: 80.0, connected?: true} = v
       assert %Geo.Location{lat: 40.1, lon: -7.3, h: 900.0} = v.position
-      assert MAVLinkSource.apply_changes(nil, v, type: 11).type == :usv
+      assert View.of(%{state | type: 11}, false, []).type == :usv
+      assert View.of(state, true, [:sidescan]) |> Map.take([:connected?, :payloads]) == %{connected?: false, payloads: [:camera, :sidescan]}
       # No MISSION_CURRENT yet: the progress is unknown, not "nothing reached of no items".
-      assert MAVLinkSource.apply_changes(nil, v, mission: %{current: nil, total: nil, state: nil, reached: nil}).mission_progress == nil
-      assert MAVLinkSource.apply_changes(nil, v, mission: %{current: 0, total: 4, state: :active, reached: nil}).mission_progress == {0, 4}
+      assert View.of(%{state | mission: %{current: nil, total: nil, state: nil, reached: nil}}, false, []).mission_progress == nil
+      assert View.of(%{state | mission: %{current: 0, total: 4, state: :active, reached: nil}}, false, []).mission_progress == {0, 4}
     end
 
     test "an unknown vehicle" do

@@ -7,9 +7,10 @@ defmodule Dolphin.IdsTextTest do
   import Dolphin.Property
 
   alias Dolphin.Console.Format
-  alias Dolphin.Engine.{Allocation, Failure}
+  alias Dolphin.Engine.Failure
   alias Dolphin.Fleet
-  alias Dolphin.Fleet.{PickError, Vehicle}
+  alias Dolphin.Fleet.{Allocation, PickError}
+  alias Dolphin.Vehicles.View
   alias Dolphin.CLI.StatusBlock
 
   # The text names `id` as a decimal number and has no charlist in it.
@@ -49,13 +50,13 @@ defmodule Dolphin.IdsTextTest do
   test "allocation errors name the ids of on/2 and of the candidates as numbers" do
     check(
       forall(id_gen(), fn id ->
-        leaf = %{id: 1, name: "survey", requirements: %{id: id}, allowed: [id], path: [{0, :concurrent, 0}]}
+        leaf = %{id: 1, name: "survey", requirements: %{id: id}, allowed: [id], path: [{0, :together, 0}]}
         assert {:error, e} = Allocation.solve([leaf], [])
         names_id!(e.message, id)
 
         # Two concurrent tasks that can only use the same vehicle.
-        rival = %{leaf | id: 2, name: "map", requirements: %{}, path: [{0, :concurrent, 1}]}
-        assert {:error, e} = Allocation.solve([leaf, rival], [%Vehicle{id: id, type: :uav}])
+        rival = %{leaf | id: 2, name: "map", requirements: %{}, path: [{0, :together, 1}]}
+        assert {:error, e} = Allocation.solve([leaf, rival], [%View{id: id, type: :uav}])
         assert e.message =~ "could use vehicle(s)"
         names_id!(e.message, id)
       end)
@@ -92,7 +93,7 @@ defmodule Dolphin.IdsTextTest do
         tree = Format.task_tree([], [%{run: 1, text: "run 1"}], [%{run: 1, task_id: 5, parent_id: nil, kind: :fly, name: "go", vehicle: id}], %{})
         names_id!(tree, id)
 
-        names_id!(StatusBlock.vehicle_line(%Vehicle{id: id, mission_progress: {0, 0}}, "go"), id)
+        names_id!(StatusBlock.vehicle_line(%View{id: id, mission_progress: {0, 0}}, "go"), id)
         names_id!(Failure.format_reason({:no_such_vehicles, [id]}), id)
         names_id!(Dolphin.CLI.event_text(%{event: :signal_posted, key: :ready, value: [id]}), id)
         names_id!(Dolphin.Console.Runs.result_text({:unexpected, [id]}), id)

@@ -5,7 +5,7 @@ defmodule Dolphin.CLI.StatusBlock do
   and loss each way once measured, and the task it flies — redrawn in place
   under the scrolling log of events.
 
-      iex> v = %Dolphin.Fleet.Vehicle{id: 2, mode: :auto, armed?: true, battery: 0.72, mission_progress: {3, 42}, relative_altitude: 380.4}
+      iex> v = %Dolphin.Vehicles.View{id: 2, mode: :auto, armed?: true, battery: 0.72, mission_progress: {3, 42}, relative_altitude: 380.4}
       iex> Dolphin.CLI.StatusBlock.vehicle_line(v, "Survey Area 1")
       "  2  AUTO      armed     [#######---]  72 %  alt  380 m  item  3/42  Survey Area 1"
       iex> v = %{v | link: %{rtt_ms: 45, loss_in: 0.1, loss_out: 0.12}}
@@ -16,7 +16,7 @@ defmodule Dolphin.CLI.StatusBlock do
   ANSI sequence that replaces a block of `n` lines with a new one.
   """
 
-  alias Dolphin.Fleet.Vehicle
+  alias Dolphin.Vehicles.View, as: Vehicle
 
   @bar 10
 

@@ -289,7 +289,7 @@ defmodule Dolphin.Console.Runs do
         send(server, {:ready, self(), run, nil})
         send(server, {:finished, self(), Engine.await(run)})
 
-      {:ended, {:error, %Dolphin.Engine.AllocationError{} = e}} ->
+      {:ended, {:error, %Dolphin.Fleet.AllocationError{} = e}} ->
         send(server, {:start_failed, self(), %RunError{reason: :no_fit, cause: e}})
 
       {:ended, result} ->

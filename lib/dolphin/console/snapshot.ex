@@ -10,7 +10,7 @@ defmodule Dolphin.Console.Snapshot do
 
   @doc false
   # Every known vehicle: %{id, state (Dolphin.Vehicles.State plus :lost, or
-  # nil for a vehicle of another source), fleet (%Dolphin.Fleet.Vehicle{} or
+  # nil for a vehicle of another source), fleet (%Dolphin.Vehicles.View{} or
   # nil), picked_by, busy, task (the platform task flying it, or nil)}.
   @spec vehicles() :: [map()]
   def vehicles do

@@ -10,10 +10,11 @@ defmodule Dolphin.Engine.Cond do
   The script macros (`until(t, battery(v1) < 0.3)`) build these from the
   expression. The engine evaluates a condition when its task starts, again
   whenever something it read changes — the state of a vehicle it read
-  (`battery/1`, `position/1`, ... record what they read while a condition is
-  evaluated), a signal (`poll/1`) — and on a slow tick for conditions on
-  anything else (time). A closure returning another closure or condition is
-  evaluated through it, so `until(t, my_condition)` works with a variable.
+  (`battery/1`, `position/1`, ...), a signal (`poll/1`): its node's
+  `Dolphin.Engine.Watcher` follows exactly those and hands the condition a
+  snapshot of them — and on a slow tick for conditions on anything else
+  (time). A closure returning another closure or condition is evaluated
+  through it, so `until(t, my_condition)` works with a variable.
 
   ## Unknown values
 
@@ -42,7 +43,6 @@ defmodule Dolphin.Engine.Cond do
 
   @type t :: %__MODULE__{fun: (() -> term()), source: String.t(), meta: map()}
 
-  @deps :"$dolphin_deps"
   # A private atom: no value a script computes can be mistaken for it.
   @unknown :"$dolphin_unknown"
 
@@ -61,22 +61,16 @@ defmodule Dolphin.Engine.Cond do
 
   @doc """
   Evaluates a condition: `{:ok, boolean}`, or `{:error, exception, stacktrace}`
-  if it raised. What it read is recorded (see `track/1`).
+  if it raised (or threw, or exited). Vehicles and signals it reads are read
+  live, unless `Dolphin.Engine.Watcher.evaluate/3` evaluates it on a snapshot.
   """
   @spec evaluate(t()) :: {:ok, boolean()} | {:error, Exception.t(), Exception.stacktrace()}
   def evaluate(%__MODULE__{} = c) do
-    outer = Process.get(@deps)
-    if outer == nil, do: Process.put(@deps, MapSet.new())
-
-    try do
-      {:ok, truthy(value(c.fun.()))}
-    rescue
-      e -> {:error, e, __STACKTRACE__}
-    catch
-      kind, reason -> {:error, %ErlangError{original: {kind, reason}}, __STACKTRACE__}
-    after
-      if outer == nil, do: Process.delete(@deps)
-    end
+    {:ok, truthy(value(c.fun.()))}
+  rescue
+    e -> {:error, e, __STACKTRACE__}
+  catch
+    kind, reason -> {:error, %ErlangError{original: {kind, reason}}, __STACKTRACE__}
   end
 
   defp value(f) when is_function(f, 0), do: value(f.())
@@ -171,23 +165,6 @@ defmodule Dolphin.Engine.Cond do
   @doc "Whether a truth value (see `truth/1`) is true: what `filter/2` keeps and a condition needs to be met."
   @spec met?(term()) :: boolean()
   def met?(v), do: truth(v) == true
-
-  @doc """
-  Called by what conditions read (vehicle state, signals): true when a
-  condition is being evaluated in this process (the reader then keeps a
-  subscription and a cache in the evaluating process). `dep` is recorded.
-  """
-  @spec track(term()) :: boolean()
-  def track(dep) do
-    case Process.get(@deps) do
-      nil ->
-        false
-
-      deps ->
-        Process.put(@deps, MapSet.put(deps, dep))
-        true
-    end
-  end
 
   defimpl Inspect do
     def inspect(%{source: s}, _opts), do: "#Cond<#{s}>"

@@ -14,7 +14,7 @@ defmodule Dolphin.Engine.Failure do
   `{:condition_error, source, exception}`, `{:vehicle_lost, id}`,
   `{:platform_exited, reason}`, `{:stop_timeout, ms}`, `{:stop_failed, reason}`,
   `{:handler_failed, reason}`, `{:crashed, reason}`, a
-  `Dolphin.Engine.AllocationError`; platforms give their own.
+  `Dolphin.Fleet.AllocationError`; platforms give their own.
   """
 
   defstruct task_id: nil, kind: nil, name: nil, vehicle: nil, meta: %{}, reason: nil
@@ -97,15 +97,4 @@ defmodule Dolphin.Engine.TaskError do
 
   @impl true
   def message(%{failure: f}), do: Dolphin.Engine.Failure.message(f)
-end
-
-defmodule Dolphin.Engine.AllocationError do
-  @moduledoc """
-  No allocation of vehicles to the platform tasks of a run exists. `task` is
-  the platform task that cannot be served (with the others that need the
-  vehicles it could use, if any), `message` says why.
-  """
-  defexception [:task_id, :task_name, :message]
-
-  @type t :: %__MODULE__{task_id: integer() | nil, task_name: String.t() | nil, message: String.t()}
 end

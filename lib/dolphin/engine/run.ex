@@ -4,16 +4,18 @@ defmodule Dolphin.Engine.Run do
   # of the root task node, and answers the caller. It lives under
   # Dolphin.Engine.Runs and is linked to its caller: when the caller dies (a
   # script stopped, killed) the run stops its tree — every platform task gets
-  # its stop callback — before it exits.
+  # its stop callback — before it exits. A proc_lib process with full :sys
+  # support; its :sys parent is its supervisor, handed over by start_link/1.
 
-  alias Dolphin.Engine.{Allocation, Context, On, PlatformTask, Runner, Task}
+  alias Dolphin.Engine.{Context, On, PlatformTask, Runner, Task}
 
   @doc false
   def child_spec(args),
     do: %{id: __MODULE__, start: {__MODULE__, :start_link, [args]}, restart: :temporary, shutdown: 120_000}
 
   @doc false
-  def start_link(args), do: :proc_lib.start_link(__MODULE__, :init, [args])
+  # Called in the supervisor's process: self() is the run's parent.
+  def start_link(args), do: :proc_lib.start_link(__MODULE__, :init, [args, self()])
 
   @doc false
   # Numbers a tree with fresh ids, allocates its platform tasks (vehicles of
@@ -22,7 +24,7 @@ defmodule Dolphin.Engine.Run do
   def prepare(task, ctx, run, inherit) do
     {tree, _} = Task.number(task, Dolphin.Engine.next_ids(Task.count(task)))
 
-    case Allocation.leaves(tree) do
+    case leaves(tree) do
       [] ->
         {:ok, strip(tree, %{})}
 
@@ -37,6 +39,31 @@ defmodule Dolphin.Engine.Run do
             {:error, error}
         end
     end
+  end
+
+  @doc false
+  # The platform tasks of a numbered tree, in order, with what constrains
+  # them, as the fleet's allocation takes them (Dolphin.Fleet.Allocation.leaf):
+  # the children of `|||` and `all_of` may run at the same time.
+  @spec leaves(Task.t()) :: [Dolphin.Fleet.Allocation.leaf()]
+  def leaves(tree), do: leaves(tree, [], nil)
+
+  defp leaves(%PlatformTask{} = t, path, allowed),
+    do: [%{id: t.id, name: Task.label(t), requirements: PlatformTask.requirements(t), allowed: allowed, path: Enum.reverse(path)}]
+
+  defp leaves(%On{task: t, vehicles: set} = on, path, allowed) do
+    ids = Dolphin.Fleet.VehicleSet.ids(set)
+    allowed = if allowed, do: Enum.filter(allowed, &(&1 in ids)), else: ids
+    leaves(t, [{on.id, :apart, 0} | path], allowed)
+  end
+
+  defp leaves(task, path, allowed) do
+    how = if Task.kind(task) in [:concurrent, :all_of], do: :together, else: :apart
+
+    task
+    |> Task.children()
+    |> Enum.with_index()
+    |> Enum.flat_map(fn {child, i} -> leaves(child, [{task.id, how, i} | path], allowed) end)
   end
 
   defp strip(tree, assignment) do
@@ -71,12 +98,10 @@ defmodule Dolphin.Engine.Run do
   end
 
   @doc false
-  def init({task, ctx, caller, run_id}) do
+  def init({task, ctx, caller, run_id}, sup) do
     Process.flag(:trap_exit, true)
     Context.put(ctx)
     Process.link(caller)
-    [sup | _] = Process.get(:"$ancestors")
-    sup = if is_atom(sup), do: Process.whereis(sup), else: sup
     run = %{id: run_id, pid: self()}
     Registry.register(Dolphin.Engine.Registry, {:run, run_id}, %{caller: caller, owner: ctx.owner, task: task})
     :proc_lib.init_ack({:ok, self()})
@@ -84,7 +109,7 @@ defmodule Dolphin.Engine.Run do
     case prepare(task, ctx, run, []) do
       {:ok, tree} ->
         case Runner.start_node(tree, ctx, run, nil) do
-          {:ok, root} -> loop(%{run: run, ctx: ctx, caller: caller, sup: sup, root: root, tree: tree})
+          {:ok, root} -> loop(%{run: run, ctx: ctx, caller: caller, sup: sup, root: root, tree: tree, debug: :sys.debug_options([])})
           {:finished, result} -> done(%{run: run, ctx: ctx, caller: caller}, result)
           {:error, reason} -> done(%{run: run, ctx: ctx, caller: caller}, {:failed, Runner.failure(tree, reason)})
         end
@@ -94,8 +119,21 @@ defmodule Dolphin.Engine.Run do
     end
   end
 
-  defp loop(%{root: root, caller: caller, sup: sup} = s) do
+  # Every message is taken in arrival order (each has a clause below), so it
+  # goes through the :sys debug hook first.
+  defp loop(s) do
     receive do
+      {:system, from, request} ->
+        :sys.handle_system_msg(request, from, s.sup, __MODULE__, s.debug, s)
+
+      msg ->
+        s = if s.debug == [], do: s, else: %{s | debug: :sys.handle_debug(s.debug, &write_debug/3, s.run.id, {:in, msg})}
+        handle_msg(msg, s)
+    end
+  end
+
+  defp handle_msg(msg, %{root: root, caller: caller, sup: sup} = s) do
+    case msg do
       {:"$dolphin_result", ^root, result} ->
         done(s, result)
 
@@ -119,6 +157,34 @@ defmodule Dolphin.Engine.Run do
         loop(s)
     end
   end
+
+  # --- :sys callbacks ---
+
+  @doc false
+  def system_continue(_parent, debug, s), do: loop(%{s | debug: debug})
+
+  @doc false
+  # :sys.terminate/2: the tree stops first, as on any other way out.
+  def system_terminate(reason, _parent, _debug, s) do
+    stop_root(s, :shutdown)
+    release(s)
+    exit(reason)
+  end
+
+  @doc false
+  def system_get_state(s), do: {:ok, s}
+
+  @doc false
+  def system_replace_state(fun, s) do
+    s = fun.(s)
+    {:ok, s, s}
+  end
+
+  @doc false
+  def system_code_change(s, _module, _old_vsn, _extra), do: {:ok, s}
+
+  @doc false
+  def write_debug(device, {:in, msg}, run_id), do: IO.write(device, "*DBG* run #{run_id} got #{inspect(msg)}\n")
 
   defp stop_root(s, reason) do
     Runner.stop_node(s.root, reason)

@@ -3,6 +3,10 @@ defmodule Dolphin.Engine.Runner do
   # The process shell of a task node: one process per combinator node, running
   # the node's pure semantics (Dolphin.Engine.Node) and doing their effects.
   # Exit semantics and the start/stop protocol are documented in Dolphin.Engine.
+  # A proc_lib process with full :sys support (system messages, debug/trace
+  # hooks), whose :sys parent is its parent node or run. One cohesive thing
+  # past 500 lines: the receive loop, the effects, the two-phase stop and the
+  # :sys callbacks all work on the one node state that :sys hands back.
   #
   # Messages (parent -> child): {:"$dolphin_stop", reason} (phase 1: stop what
   # runs under you), {:"$dolphin_report", parent} (phase 2: finish and report),
@@ -11,8 +15,7 @@ defmodule Dolphin.Engine.Runner do
   # runs (or {:"$dolphin_started", pid, {:finished, result}} if it ended at once),
   # {:"$dolphin_result", pid, result} as it ends.
 
-  alias Dolphin.Engine.{Cond, Context, Failure, PlatformTask, Task}
-  alias Dolphin.Fleet
+  alias Dolphin.Engine.{Context, Failure, PlatformTask, Task, Watcher}
 
   # Real time a parent waits for a child's initial subtree to start.
   @start_timeout 30_000
@@ -109,6 +112,8 @@ defmodule Dolphin.Engine.Runner do
       order: [],
       # [{key, cond}] in watch order
       watches: [],
+      # what those conditions read, and the vehicle of a platform task
+      watcher: Watcher.new(Context.source(ctx)),
       # key => {ref, token}
       timers: %{},
       # key => {:pending, ref, token, fun} | {:running, pid}
@@ -117,7 +122,9 @@ defmodule Dolphin.Engine.Runner do
       tick: nil,
       acked: false,
       # outcome of the platform stop in phase 1
-      halted: :ok
+      halted: :ok,
+      # :sys debug options (:sys.trace/2, :sys.log/2, ...)
+      debug: :sys.debug_options([])
     }
 
     Registry.register(Dolphin.Engine.Registry, {:task, s.id}, %{run: run.id, parent_id: parent_id, kind: s.kind, name: s.name, vehicle: s.vehicle})
@@ -135,11 +142,23 @@ defmodule Dolphin.Engine.Runner do
     %{s | acked: true}
   end
 
+  # Every message is taken in arrival order (each has a clause below), so it
+  # goes through the :sys debug hook first.
   defp loop(s) do
+    receive do
+      {:system, from, request} ->
+        :sys.handle_system_msg(request, from, s.parent, __MODULE__, s.debug, {:running, s})
+
+      msg ->
+        handle_msg(msg, debug_in(s, msg))
+    end
+  end
+
+  defp handle_msg(msg, s) do
     parent = s.parent
     platform = s.platform
 
-    receive do
+    case msg do
       {:"$dolphin_result", pid, result} ->
         case child_key(s, pid) do
           nil -> loop(s)
@@ -170,11 +189,11 @@ defmodule Dolphin.Engine.Runner do
           _ -> loop(s)
         end
 
-      {:dolphin, {:vehicle, id}, event} ->
-        update_cache(s, id, event)
+      {:dolphin, {:vehicle_view, id}, {:view, view}} ->
+        s = %{s | watcher: Watcher.update(s.watcher, view)}
 
         s =
-          if s.platform != nil and s.vehicle == id and match?({:vehicle_lost, _}, event),
+          if s.platform != nil and s.vehicle == id and not view.connected?,
             do: feed(s, {:vehicle_lost, id}),
             else: s
 
@@ -189,12 +208,7 @@ defmodule Dolphin.Engine.Runner do
         loop(feed(s, {:platform, msg}))
 
       {:"$dolphin_stop", reason} ->
-        s = halt(s, reason)
-
-        receive do
-          {:"$dolphin_report", _} -> finish_stopped(s, reason, true)
-          {:EXIT, ^parent, why} -> finish_stopped(s, {:parent_exit, why}, false)
-        end
+        s |> halt(reason) |> stopped(reason)
 
       {:"$dolphin_report", _} ->
         s |> halt(:stopped) |> finish_stopped(:stopped, true)
@@ -212,6 +226,54 @@ defmodule Dolphin.Engine.Runner do
         loop(s)
     end
   end
+
+  # Phase 1 done: waits for the parent to ask for the report (phase 2), or to die.
+  defp stopped(s, reason) do
+    parent = s.parent
+
+    receive do
+      {:system, from, request} ->
+        :sys.handle_system_msg(request, from, parent, __MODULE__, s.debug, {{:stopped, reason}, s})
+
+      {:"$dolphin_report", _} = msg ->
+        s |> debug_in(msg) |> finish_stopped(reason, true)
+
+      {:EXIT, ^parent, why} = msg ->
+        s |> debug_in(msg) |> finish_stopped({:parent_exit, why}, false)
+    end
+  end
+
+  # --- :sys callbacks ---
+
+  @doc false
+  def system_continue(_parent, debug, {:running, s}), do: loop(%{s | debug: debug})
+  def system_continue(_parent, debug, {{:stopped, reason}, s}), do: stopped(%{s | debug: debug}, reason)
+
+  @doc false
+  # :sys.terminate/2: the subtree stops first, as on any other way out.
+  def system_terminate(reason, _parent, _debug, {_phase, s}) do
+    halt(s, :shutdown)
+    Enum.each(s.order, &collected(s, s.children[&1]))
+    exit(reason)
+  end
+
+  @doc false
+  def system_get_state({_phase, s}), do: {:ok, s}
+
+  @doc false
+  def system_replace_state(fun, {phase, s}) do
+    s = fun.(s)
+    {:ok, s, {phase, s}}
+  end
+
+  @doc false
+  def system_code_change(misc, _module, _old_vsn, _extra), do: {:ok, misc}
+
+  defp debug_in(%{debug: []} = s, _msg), do: s
+  defp debug_in(s, msg), do: %{s | debug: :sys.handle_debug(s.debug, &write_debug/3, {s.kind, s.id}, {:in, msg})}
+
+  @doc false
+  def write_debug(device, {:in, msg}, {kind, id}), do: IO.write(device, "*DBG* task #{id} (#{kind}) got #{inspect(msg)}\n")
 
   defp exited(s, pid, reason) do
     cond do
@@ -273,14 +335,22 @@ defmodule Dolphin.Engine.Runner do
   end
 
   defp effect({:check, key, cond}, s) do
-    case Cond.evaluate(cond) do
-      {:ok, holds} -> feed(s, {:checked, key, holds})
-      {:error, e, _} -> finish(s, {:failed, {:condition_error, cond.source, e}})
+    {result, watcher} = Watcher.evaluate(s.watcher, key, cond)
+    s = %{s | watcher: watcher}
+
+    case result do
+      {:ok, holds} ->
+        s = feed(s, {:checked, key, holds})
+        # What it read stays followed only if the node goes on watching it.
+        if List.keymember?(s.watches, key, 0), do: s, else: %{s | watcher: Watcher.forget(s.watcher, key)}
+
+      {:error, e, _} ->
+        finish(s, {:failed, {:condition_error, cond.source, e}})
     end
   end
 
   defp effect({:watch, key, cond}, s), do: ensure_tick(%{s | watches: s.watches ++ [{key, cond}]})
-  defp effect({:unwatch, key}, s), do: %{s | watches: List.keydelete(s.watches, key, 0)}
+  defp effect({:unwatch, key}, s), do: %{s | watches: List.keydelete(s.watches, key, 0), watcher: Watcher.forget(s.watcher, key)}
 
   defp effect({:timer, key, ms}, s) do
     token = make_ref()
@@ -310,11 +380,13 @@ defmodule Dolphin.Engine.Runner do
 
   defp effect(:platform_start, s) do
     %PlatformTask{platform: platform, spec: spec, vehicle: vehicle} = s.task
-    Fleet.subscribe_vehicle(vehicle)
+    # Its loss ends the task: followed from before the look.
+    {found, watcher} = Watcher.follow(s.watcher, vehicle)
+    s = %{s | watcher: watcher}
 
     opts = [owner: self(), run: s.run.id, task_id: s.id, clock: s.ctx.clock, source: Context.source(s.ctx), vehicle: vehicle]
 
-    case Dolphin.Fleet.Source.vehicle(Context.source(s.ctx), vehicle) do
+    case found do
       {:ok, %{connected?: false}} ->
         feed(s, {:platform_start_failed, {:vehicle_lost, vehicle}})
 
@@ -356,8 +428,16 @@ defmodule Dolphin.Engine.Runner do
           s
 
         {^key, cond} ->
-          case Cond.evaluate(cond) do
-            {:ok, true} -> feed(%{s | watches: List.keydelete(s.watches, key, 0)}, {:condition, key})
+          {result, watcher} = Watcher.evaluate(s.watcher, key, cond)
+          s = %{s | watcher: watcher}
+
+          case result do
+            {:ok, true} ->
+              s = feed(%{s | watches: List.keydelete(s.watches, key, 0)}, {:condition, key})
+              # What it read is let go after the reaction, not before: the
+              # reaction (stopping a subtree, say) is what is waited for.
+              if List.keymember?(s.watches, key, 0), do: s, else: %{s | watcher: Watcher.forget(s.watcher, key)}
+
             {:ok, false} -> s
             {:error, e, _} -> finish(s, {:failed, {:condition_error, cond.source, e}})
           end
@@ -372,24 +452,6 @@ defmodule Dolphin.Engine.Runner do
   end
 
   defp ensure_tick(s), do: s
-
-  defp update_cache(s, id, event) do
-    case Process.get({:"$dolphin_vehicle", id}) do
-      nil ->
-        :ok
-
-      v ->
-        v =
-          case event do
-            {:state, ^id, changes} -> Dolphin.Fleet.Source.apply_changes(Context.source(s.ctx), v, changes)
-            {:vehicle_lost, ^id} -> %{v | connected?: false}
-            {:vehicle_reconnected, ^id} -> %{v | connected?: true}
-            _ -> v
-          end
-
-        Process.put({:"$dolphin_vehicle", id}, v)
-    end
-  end
 
   # --- user code ---
 

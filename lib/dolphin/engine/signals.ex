@@ -79,10 +79,5 @@ defmodule Dolphin.Engine.Signals do
   end
 
   # A condition that reads signals is re-evaluated when they change.
-  defp track(table) do
-    if Dolphin.Engine.Cond.track({:signals, table}) and not Process.get({:"$dolphin_signals", table}, false) do
-      PubSub.subscribe({:dolphin_signals, table})
-      Process.put({:"$dolphin_signals", table}, true)
-    end
-  end
+  defp track(table), do: Dolphin.Engine.Watcher.read_signals(table)
 end

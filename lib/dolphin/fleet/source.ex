@@ -7,20 +7,21 @@ defmodule Dolphin.Fleet.Source do
   `Dolphin.Fleet.MAVLinkSource` (the real vehicles of `Dolphin.Vehicles`) and
   `Dolphin.Fleet.TestSource` (fake vehicles whose state tests set).
 
-  Besides the callbacks, a source publishes on `Dolphin.PubSub`, with the shapes
-  `Dolphin.Vehicles` uses:
+  A source owns its vehicles' state and publishes it on `Dolphin.PubSub`, with
+  the shapes `Dolphin.Vehicles` uses:
 
     * topic `:vehicles`: `{:vehicle_discovered, id}`, `{:vehicle_lost, id}`,
       `{:vehicle_reconnected, id}`;
-    * topic `{:vehicle, id}`: `{:state, id, changes}` (changes: an enumerable of
-      `{field, value}` that `c:apply_changes/3` understands), and again
-      `{:vehicle_lost, id}` and `{:vehicle_reconnected, id}`.
+    * topic `{:vehicle_view, id}`: `{:view, %Dolphin.Vehicles.View{}}`, the
+      whole view each time it changes (a loss or a reconnection too: the view
+      is published before the `:vehicles` event).
 
-  The fleet and every running condition subscribe to these, so reactions follow
-  events, not polling.
+  The fleet follows the vehicles it knows and the engine's condition
+  watchers the vehicles their conditions read, so reactions follow events,
+  not polling.
   """
 
-  alias Dolphin.Fleet.Vehicle
+  alias Dolphin.Vehicles.View
 
   @type t :: {module(), term()}
   @type id :: non_neg_integer()
@@ -28,11 +29,8 @@ defmodule Dolphin.Fleet.Source do
   @doc "The ids of the vehicles known now."
   @callback list(arg :: term()) :: [id()]
 
-  @doc "A vehicle's identity and live state."
-  @callback vehicle(arg :: term(), id()) :: {:ok, Vehicle.t()} | {:error, :unknown_vehicle}
-
-  @doc "Folds the `changes` of a `{:state, id, changes}` event into a vehicle."
-  @callback apply_changes(arg :: term(), Vehicle.t(), changes :: Enumerable.t()) :: Vehicle.t()
+  @doc "A vehicle's latest view."
+  @callback vehicle(arg :: term(), id()) :: {:ok, View.t()} | {:error, :unknown_vehicle}
 
   @doc "Sets after how much clock time without news a vehicle is lost."
   @callback set_timeout(arg :: term(), id(), pos_integer()) :: :ok | {:error, :unknown_vehicle}
@@ -45,9 +43,15 @@ defmodule Dolphin.Fleet.Source do
   @doc false
   def vehicle({m, a}, id), do: m.vehicle(a, id)
   @doc false
-  def apply_changes({m, a}, v, changes), do: m.apply_changes(a, v, changes)
-  @doc false
   def set_timeout({m, a}, id, ms), do: m.set_timeout(a, id, ms)
   @doc false
   def send_message({m, a}, id, msg), do: m.send_message(a, id, msg)
+
+  @doc "Subscribes the caller to a vehicle's views (`{:dolphin, {:vehicle_view, id}, {:view, view}}`), whatever the source."
+  @spec subscribe(id()) :: :ok
+  def subscribe(id), do: Dolphin.PubSub.subscribe({:vehicle_view, id})
+
+  @doc "Undoes `subscribe/1`."
+  @spec unsubscribe(id()) :: :ok
+  def unsubscribe(id), do: Dolphin.PubSub.unsubscribe({:vehicle_view, id})
 end

@@ -2,16 +2,17 @@ defmodule Dolphin.Fleet.TestSource do
   @moduledoc """
   Fake vehicles for tests, benchmarks and dry runs (`mix dolphin.run --fake N`):
   a `Dolphin.Fleet.Source` whose vehicles' state the caller sets, publishing
-  the same `Dolphin.PubSub` events as real vehicles do, so conditions react to
-  them exactly as they react to telemetry.
+  the same `Dolphin.PubSub` events as real vehicles do (a whole
+  `Dolphin.Vehicles.View` on each change), so conditions react to them
+  exactly as they react to telemetry.
 
       {:ok, _} = Dolphin.Fleet.TestSource.start_link(name: :fakes)
       :ok = Dolphin.Fleet.TestSource.add(:fakes, 1, type: :uav, payloads: [:camera])
       {:ok, fleet} = Dolphin.Fleet.start_link(name: :test_fleet, source: Dolphin.Fleet.TestSource.source(:fakes))
-      :ok = Dolphin.Fleet.TestSource.set(:fakes, 1, battery: 0.25)   # {:state, 1, [battery: 0.25]}
-      :ok = Dolphin.Fleet.TestSource.lose(:fakes, 1)                 # {:vehicle_lost, 1}
+      :ok = Dolphin.Fleet.TestSource.set(:fakes, 1, battery: 0.25)   # {:view, %Dolphin.Vehicles.View{battery: 0.25}}
+      :ok = Dolphin.Fleet.TestSource.lose(:fakes, 1)                 # {:view, ...connected?: false}, {:vehicle_lost, 1}
 
-  A vehicle's attributes are the fields of `Dolphin.Fleet.Vehicle` (`type`
+  A vehicle's attributes are the fields of `Dolphin.Vehicles.View` (`type`
   defaults to `:uav`, `battery` to 1.0, `position` to a point near Porto,
   `mission_progress` to `{0, 0}`, no mission; `nil` is a value not reported
   yet); a change is a keyword list of those fields. The state lives in a
@@ -24,10 +25,10 @@ defmodule Dolphin.Fleet.TestSource do
 
   @behaviour Dolphin.Fleet.Source
 
-  alias Dolphin.Fleet.Vehicle
   alias Dolphin.PubSub
+  alias Dolphin.Vehicles.View
 
-  @fields Vehicle.__struct__() |> Map.from_struct() |> Map.keys()
+  @fields View.__struct__() |> Map.from_struct() |> Map.keys()
 
   @doc "Starts a source; options: `:name` (an atom, default `#{inspect(__MODULE__)}`), `:vehicles` (`[{id, attrs}]`)."
   @spec start_link(keyword()) :: GenServer.on_start()
@@ -43,36 +44,43 @@ defmodule Dolphin.Fleet.TestSource do
   @spec source(atom()) :: Dolphin.Fleet.Source.t()
   def source(name \\ __MODULE__), do: {__MODULE__, name}
 
-  @doc "Adds a vehicle and publishes its discovery."
+  @doc "Adds a vehicle (or replaces one) and publishes its view and its discovery."
   @spec add(atom(), non_neg_integer(), keyword()) :: :ok
   def add(name, id, attrs \\ []) when is_integer(id) and id >= 0 do
-    vehicle = struct!(%Vehicle{id: id, type: :uav, battery: 1.0, position: Dolphin.Geo.Location.new(41.1780, -8.5980, 100), mission_progress: {0, 0}}, check!(attrs))
-    :ets.insert(name, {id, %{vehicle | id: id, payloads: Enum.sort(vehicle.payloads)}})
+    vehicle = struct!(%View{id: id, type: :uav, battery: 1.0, position: Dolphin.Geo.Location.new(41.1780, -8.5980, 100), mission_progress: {0, 0}}, check!(attrs))
+    :ok = put(name, %{vehicle | id: id, payloads: Enum.sort(vehicle.payloads)})
     PubSub.publish(:vehicles, {:vehicle_discovered, id})
   end
 
-  @doc "Changes a vehicle's state and publishes `{:state, id, changes}`."
+  @doc "Changes a vehicle's state and publishes its new view."
   @spec set(atom(), non_neg_integer(), keyword()) :: :ok
-  def set(name, id, changes) do
-    changes = check!(changes)
-    :ets.insert(name, {id, apply_changes(name, fetch!(name, id), changes)})
-    PubSub.publish({:vehicle, id}, {:state, id, changes})
-  end
+  def set(name, id, changes), do: put(name, change(fetch!(name, id), check!(changes)))
 
-  @doc "Makes a vehicle silent: it is lost (`{:vehicle_lost, id}` on both topics)."
+  @doc "Makes a vehicle silent: it is lost (its view, then `{:vehicle_lost, id}` on `:vehicles`)."
   @spec lose(atom(), non_neg_integer()) :: :ok
   def lose(name, id) do
-    :ets.insert(name, {id, %{fetch!(name, id) | connected?: false}})
+    :ok = put(name, %{fetch!(name, id) | connected?: false})
     PubSub.publish(:vehicles, {:vehicle_lost, id})
-    PubSub.publish({:vehicle, id}, {:vehicle_lost, id})
   end
 
-  @doc "Brings a lost vehicle back (`{:vehicle_reconnected, id}` on both topics)."
+  @doc "Brings a lost vehicle back (its view, then `{:vehicle_reconnected, id}` on `:vehicles`)."
   @spec reconnect(atom(), non_neg_integer()) :: :ok
   def reconnect(name, id) do
-    :ets.insert(name, {id, %{fetch!(name, id) | connected?: true}})
+    :ok = put(name, %{fetch!(name, id) | connected?: true})
     PubSub.publish(:vehicles, {:vehicle_reconnected, id})
-    PubSub.publish({:vehicle, id}, {:vehicle_reconnected, id})
+  end
+
+  # The table holds each vehicle's one copy of its state; every change is published whole.
+  defp put(name, %View{id: id} = v) do
+    :ets.insert(name, {id, v})
+    PubSub.publish({:vehicle_view, id}, {:view, v})
+  end
+
+  defp change(%View{} = v, changes) do
+    Enum.reduce(changes, v, fn
+      {:payloads, p}, v -> %{v | payloads: Enum.sort(p)}
+      {field, value}, v -> Map.put(v, field, value)
+    end)
   end
 
   @doc "Forgets a vehicle without any event (as a vehicle process that was stopped for good)."
@@ -114,7 +122,7 @@ defmodule Dolphin.Fleet.TestSource do
   # Source callbacks
 
   @impl Dolphin.Fleet.Source
-  def list(name), do: for({id, %Vehicle{}} when is_integer(id) <- :ets.tab2list(name), do: id) |> Enum.sort()
+  def list(name), do: for({id, %View{}} when is_integer(id) <- :ets.tab2list(name), do: id) |> Enum.sort()
 
   @impl Dolphin.Fleet.Source
   def vehicle(name, id) do
@@ -122,15 +130,6 @@ defmodule Dolphin.Fleet.TestSource do
       [{^id, v}] -> {:ok, v}
       [] -> {:error, :unknown_vehicle}
     end
-  end
-
-  @impl Dolphin.Fleet.Source
-  def apply_changes(_name, %Vehicle{} = v, changes) do
-    Enum.reduce(changes, v, fn
-      {:payloads, p}, v -> %{v | payloads: Enum.sort(p)}
-      {field, value}, v when field in @fields and field != :id -> Map.put(v, field, value)
-      _, v -> v
-    end)
   end
 
   @impl Dolphin.Fleet.Source

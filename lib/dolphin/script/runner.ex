@@ -172,7 +172,7 @@ defmodule Dolphin.Script.Runner do
       {:error, %Dolphin.Engine.TaskError{failure: f}} ->
         %Error{kind: :failed, file: script.file, line: line, message: "execute failed: " <> Dolphin.Engine.Failure.message(f), reason: f}
 
-      {:error, %Dolphin.Engine.AllocationError{} = e} ->
+      {:error, %Dolphin.Fleet.AllocationError{} = e} ->
         %Error{kind: :failed, file: script.file, line: line, message: "execute: " <> Exception.message(e), reason: e}
 
       {:error, %Dolphin.Fleet.PickError{} = e} ->

@@ -68,7 +68,7 @@ defmodule Dolphin.Script.Statements do
 
   @doc """
   Runs a task and returns `:ok` when it is done; a failure raises
-  (`Dolphin.Engine.TaskError`, `Dolphin.Engine.AllocationError`) and stops the
+  (`Dolphin.Engine.TaskError`, `Dolphin.Fleet.AllocationError`) and stops the
   script unless a `watch` handles it. A map `%{set => task, _: task}` runs each
   task on its own set (`_`: any picked vehicle), all at the same time.
   """

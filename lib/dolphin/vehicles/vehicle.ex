@@ -1,7 +1,8 @@
 defmodule Dolphin.Vehicles.Vehicle do
   @moduledoc false
   # One process per discovered vehicle: folds its frames into a
-  # Dolphin.Vehicles.State, publishes what changed, watches for silence (lost /
+  # Dolphin.Vehicles.State, publishes what changed (and the new
+  # Dolphin.Vehicles.View when the view changed), watches for silence (lost /
   # reconnected) and asks the vehicle for the telemetry the ground station needs.
   # It holds nothing that the next telemetry does not restore, so a crash only
   # costs the state until the next frames.
@@ -10,7 +11,7 @@ defmodule Dolphin.Vehicles.Vehicle do
   alias Dolphin.{Clock, PubSub}
   alias Dolphin.Link.Connection
   alias Dolphin.MAVLink.Ardupilotmega, as: M
-  alias Dolphin.Vehicles.{CommandProtocol, LinkQuality, MissionProtocol, State}
+  alias Dolphin.Vehicles.{CommandProtocol, LinkQuality, MissionProtocol, State, View}
 
   # Messages asked for by interval (µs of vehicle time) on top of the streams:
   # ArduPilot sends EXTENDED_SYS_STATE only when asked this way.
@@ -68,6 +69,8 @@ defmodule Dolphin.Vehicles.Vehicle do
        # than that does not judge (see :check_link).
        check_due_ms: now + check_period(timeout),
        lost: false,
+       # The view last published (Dolphin.Vehicles.View), nil before the first.
+       view: nil,
        requests_left: @request_tries,
        # Operations under way, by key (a command id, or :mission: one transfer
        # at a time): %{pid, from, monitor, what}; and what waits for each key:
@@ -95,6 +98,7 @@ defmodule Dolphin.Vehicles.Vehicle do
 
   @impl true
   def handle_call(:state, _from, s), do: {:reply, %{s.state | seqs: %{}} |> Map.put(:lost, s.lost), s}
+  def handle_call(:view, _from, s), do: {:reply, s.view || view(s), s}
 
   def handle_call({:set_timeout, ms}, _from, s), do: {:reply, :ok, %{s | timeout_ms: ms}}
 
@@ -159,9 +163,11 @@ defmodule Dolphin.Vehicles.Vehicle do
     last = s.state.link.last_seen_ms
 
     if on_time? and not s.lost and last != nil and now - last > s.timeout_ms do
+      # The view first: whoever hears of the loss finds the view saying so.
+      s = publish_view(%{s | lost: true})
       PubSub.publish(:vehicles, {:vehicle_lost, s.sysid})
       PubSub.publish({:vehicle, s.sysid}, {:vehicle_lost, s.sysid})
-      {:noreply, %{s | lost: true}}
+      {:noreply, s}
     else
       {:noreply, s}
     end
@@ -176,16 +182,33 @@ defmodule Dolphin.Vehicles.Vehicle do
   # The new state, and its changes to the vehicle's subscribers.
   defp publish(s, new) do
     case State.changes(s.state, new) do
-      [] -> :ok
-      changes -> PubSub.publish({:vehicle, s.sysid}, {:state, s.sysid, changes})
-    end
+      [] ->
+        %{s | state: new}
 
-    %{s | state: new}
+      changes ->
+        PubSub.publish({:vehicle, s.sysid}, {:state, s.sysid, changes})
+        publish_view(%{s | state: new})
+    end
   end
+
+  # The view, to its subscribers, when it is not the one they have.
+  defp publish_view(s) do
+    case view(s) do
+      same when same == s.view ->
+        s
+
+      view ->
+        PubSub.publish({:vehicle_view, s.sysid}, {:view, view})
+        %{s | view: view}
+    end
+  end
+
+  defp view(s), do: View.of(s.state, s.lost, Application.get_env(:dolphin, :vehicle_payloads, %{}) |> Map.get(s.sysid, []) |> List.wrap())
 
   # Heard again after a silence: say so, and ask for telemetry again (the
   # vehicle may have rebooted and forgotten the rates).
   defp reconnected(s) do
+    s = publish_view(%{s | lost: false})
     PubSub.publish(:vehicles, {:vehicle_reconnected, s.sysid})
     PubSub.publish({:vehicle, s.sysid}, {:vehicle_reconnected, s.sysid})
     if s.requests_left == 0, do: send(self(), :request_telemetry)

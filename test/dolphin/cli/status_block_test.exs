@@ -1,7 +1,7 @@
 defmodule Dolphin.CLI.StatusBlockTest do
   use ExUnit.Case, async: true
 
-  alias Dolphin.Fleet.Vehicle
+  alias Dolphin.Vehicles.View, as: Vehicle
   alias Dolphin.CLI.StatusBlock
 
   doctest StatusBlock

@@ -4,7 +4,8 @@ defmodule Dolphin.Engine.CombinatorsTest do
 
   import Dolphin.DSL, only: [>>>: 2, |||: 2]
 
-  alias Dolphin.Engine.{AllocationError, Cond}
+  alias Dolphin.Engine.Cond
+  alias Dolphin.Fleet.AllocationError
 
   doctest Dolphin.Engine.Task
   doctest Dolphin.Engine.Cond
@@ -13,7 +14,7 @@ defmodule Dolphin.Engine.CombinatorsTest do
   doctest Dolphin.Telemetry
 
   defp never, do: Cond.new(fn -> false end, source: "never")
-  defp low_battery(v), do: Cond.new(fn -> Dolphin.Fleet.state(v).battery < 0.3 end, source: "battery < 0.3")
+  defp low_battery(v), do: Cond.new(fn -> Dolphin.Engine.Watcher.vehicle(v).battery < 0.3 end, source: "battery < 0.3")
   defp tp(name, opts \\ []), do: TestPlatform.task(name, Keyword.put_new(opts, :notify, self()))
 
   describe "leaves" do

@@ -1,16 +1,19 @@
-defmodule Dolphin.Engine.Allocation do
+defmodule Dolphin.Fleet.Allocation do
   @moduledoc """
   Which vehicle runs each platform task of a run: a pure function, called by
-  the fleet (which knows the vehicles) when a run starts.
+  the fleet (which knows the vehicles) when a run starts, on the leaves the
+  engine describes (`t:leaf/0`).
 
   Constraints:
 
     * a task's requirements (type, payloads, id: see `Dolphin.Engine.Platform`)
-      and its enclosing `on(t, set)` restrictions are honoured;
+      and its `allowed` vehicles (the engine's enclosing `on(t, set)`
+      restrictions) are honoured;
     * tasks that may run at the same time get distinct vehicles: two tasks may
-      run at the same time when their closest common ancestor is `|||`
-      (concurrent) or `all_of`; in a sequence, `one_of`, `until` and the like
-      they may share one.
+      run at the same time when, at the node of the task tree where their
+      paths part, that node's children run `:together` (for the engine: `|||`
+      and `all_of`); where they run `:apart` (a sequence, `one_of`, `until`
+      and the like) they may share one.
 
   This is a real search (backtracking, most constrained task first, vehicles
   already given to a task that cannot run at the same time preferred — so a
@@ -19,55 +22,44 @@ defmodule Dolphin.Engine.Allocation do
   served: the first task, in the script's order, that no allocation of it and
   the tasks before it can satisfy.
 
-      iex> alias Dolphin.Engine.Allocation
-      iex> a = %{id: 1, name: "north", requirements: %{type: :uav}, allowed: nil, path: [{0, :concurrent, 0}]}
-      iex> b = %{id: 2, name: "south", requirements: %{}, allowed: nil, path: [{0, :concurrent, 1}]}
-      iex> vehicles = [%Dolphin.Fleet.Vehicle{id: 1, type: :ugv}, %Dolphin.Fleet.Vehicle{id: 2, type: :uav}]
+      iex> alias Dolphin.Fleet.Allocation
+      iex> a = %{id: 1, name: "north", requirements: %{type: :uav}, allowed: nil, path: [{0, :together, 0}]}
+      iex> b = %{id: 2, name: "south", requirements: %{}, allowed: nil, path: [{0, :together, 1}]}
+      iex> vehicles = [%Dolphin.Vehicles.View{id: 1, type: :ugv}, %Dolphin.Vehicles.View{id: 2, type: :uav}]
       iex> Allocation.solve([a, b], vehicles)
       {:ok, %{1 => 2, 2 => 1}}
   """
 
-  alias Dolphin.Engine.{AllocationError, On, PlatformTask, Task}
-  alias Dolphin.Fleet.{Vehicle, VehicleSet}
+  alias Dolphin.Fleet.{AllocationError, VehicleSet}
+  alias Dolphin.Vehicles.View
 
-  @typedoc "A platform task to place: `path` lists `{node id, kind, child index}` from the root."
-  @type leaf :: %{id: integer(), name: String.t(), requirements: map(), allowed: [non_neg_integer()] | nil, path: [{integer(), atom(), non_neg_integer()}]}
+  @typedoc """
+  A platform task to place: `requirements` (`type`, `payloads`, `id`),
+  `allowed` (the vehicle ids it may use, or nil for any), and `path`, the
+  nodes from the root of its task tree down to it, each as `{node id, how
+  that node's children run (:together | :apart), index of the child taken}`.
+  """
+  @type leaf :: %{
+          id: integer(),
+          name: String.t(),
+          requirements: map(),
+          allowed: [non_neg_integer()] | nil,
+          path: [{integer(), :together | :apart, non_neg_integer()}]
+        }
 
   @budget 200_000
-
-  @doc "The platform tasks of a numbered tree, in order, with what constrains them."
-  @spec leaves(Task.t()) :: [leaf()]
-  def leaves(tree), do: leaves(tree, [], nil)
-
-  defp leaves(%PlatformTask{} = t, path, allowed),
-    do: [%{id: t.id, name: Task.label(t), requirements: PlatformTask.requirements(t), allowed: allowed, path: Enum.reverse(path)}]
-
-  defp leaves(%On{task: t, vehicles: set} = on, path, allowed) do
-    ids = Dolphin.Fleet.VehicleSet.ids(set)
-    allowed = if allowed, do: Enum.filter(allowed, &(&1 in ids)), else: ids
-    leaves(t, [{on.id, :on, 0} | path], allowed)
-  end
-
-  defp leaves(task, path, allowed) do
-    kind = Task.kind(task)
-
-    task
-    |> Task.children()
-    |> Enum.with_index()
-    |> Enum.flat_map(fn {child, i} -> leaves(child, [{task.id, kind, i} | path], allowed) end)
-  end
 
   @doc "Whether two tasks may run at the same time (see the module doc)."
   @spec concurrent?(leaf(), leaf()) :: boolean()
   def concurrent?(%{path: a}, %{path: b}), do: diverge(a, b)
 
   defp diverge([{id, kind, i} | a], [{id, kind, i} | b]), do: diverge(a, b)
-  defp diverge([{id, kind, _} | _], [{id, kind, _} | _]), do: kind in [:concurrent, :all_of]
+  defp diverge([{id, how, _} | _], [{id, how, _} | _]), do: how == :together
   defp diverge(_, _), do: false
 
   @doc "Whether a vehicle satisfies a task's requirements and restrictions."
-  @spec matches?(leaf(), Vehicle.t()) :: boolean()
-  def matches?(%{requirements: req, allowed: allowed}, %Vehicle{} = v) do
+  @spec matches?(leaf(), View.t()) :: boolean()
+  def matches?(%{requirements: req, allowed: allowed}, %View{} = v) do
     (allowed == nil or v.id in allowed) and type_ok?(req[:type], v.type) and
       Enum.all?(List.wrap(req[:payloads]), &(&1 in v.payloads)) and (req[:id] in [nil, v.id])
   end
@@ -79,7 +71,7 @@ defmodule Dolphin.Engine.Allocation do
   An allocation of `vehicles` (in order of preference) to `leaves`:
   `{:ok, %{task_id => vehicle_id}}` or `{:error, %AllocationError{}}`.
   """
-  @spec solve([leaf()], [Vehicle.t()]) :: {:ok, %{integer() => non_neg_integer()}} | {:error, AllocationError.t()}
+  @spec solve([leaf()], [View.t()]) :: {:ok, %{integer() => non_neg_integer()}} | {:error, AllocationError.t()}
   def solve([], _vehicles), do: {:ok, %{}}
 
   def solve(leaves, vehicles) do

@@ -1,19 +1,20 @@
-defmodule Dolphin.Engine.AllocationTest do
+defmodule Dolphin.Fleet.AllocationTest do
   use Dolphin.EngineCase, async: false
 
   import Dolphin.DSL, only: [>>>: 2, |||: 2]
 
-  alias Dolphin.Engine.{Allocation, AllocationError, Task}
-  alias Dolphin.Fleet.Vehicle
+  alias Dolphin.Engine.{Run, Task}
+  alias Dolphin.Fleet.{Allocation, AllocationError}
+  alias Dolphin.Vehicles.View
 
-  doctest Dolphin.Engine.Allocation
+  doctest Dolphin.Fleet.Allocation
 
   defp tp(name, opts \\ []), do: TestPlatform.task(name, opts)
-  defp v(id, type \\ :uav, payloads \\ []), do: %Vehicle{id: id, type: type, payloads: payloads}
+  defp v(id, type \\ :uav, payloads \\ []), do: %View{id: id, type: type, payloads: payloads}
 
   defp solve(task, vehicles) do
     {tree, _} = Task.number(Task.new!(task), 1)
-    leaves = Allocation.leaves(tree)
+    leaves = Run.leaves(tree)
     names = Map.new(leaves, &{&1.id, &1.name})
 
     case Allocation.solve(leaves, vehicles) do

@@ -1,8 +1,13 @@
-defmodule Dolphin.Fleet.Vehicle do
+defmodule Dolphin.Vehicles.View do
   @moduledoc """
-  What the engine knows of one vehicle, whatever its source (see
-  `Dolphin.Fleet.Source`): identity, class, payloads and the live state that
-  conditions read.
+  One vehicle as the rest of the ground station sees it, whatever its source
+  (see `Dolphin.Fleet.Source`): identity, class, payloads and the live state
+  that conditions read and the fleet picks by.
+
+  The vehicle's owner (its process in `Dolphin.Vehicles`, or a fake source)
+  publishes a new view on topic `{:vehicle_view, id}` of `Dolphin.PubSub`
+  each time one of these fields changes, as `{:view, %View{}}`: subscribers
+  take the latest view whole and never rebuild one from changes.
 
   | field | meaning |
   | --- | --- |
@@ -54,9 +59,9 @@ defmodule Dolphin.Fleet.Vehicle do
   The class of a MAV_TYPE number: multirotors, fixed wing, VTOL, helicopters,
   airships are `:uav`; ground rovers `:ugv`; surface boats `:usv`; submarines `:uuv`.
 
-      iex> Dolphin.Fleet.Vehicle.class(2)
+      iex> Dolphin.Vehicles.View.class(2)
       :uav
-      iex> Dolphin.Fleet.Vehicle.class(11)
+      iex> Dolphin.Vehicles.View.class(11)
       :usv
   """
   @spec class(non_neg_integer() | nil) :: class() | nil
@@ -66,4 +71,41 @@ defmodule Dolphin.Fleet.Vehicle do
   def class(11), do: :usv
   def class(12), do: :uuv
   def class(_), do: :other
+
+  @doc """
+  The view of a vehicle's `Dolphin.Vehicles.State`: `lost` says whether it
+  is silent, `payloads` are configured payloads added to its components'.
+
+      iex> st = %{Dolphin.Vehicles.State.new(7) | type: 2, battery: 0.5, position: %{lat: 41.0, lon: -8.0, alt: 120.0, relative_alt: 20, heading: 0}}
+      iex> v = Dolphin.Vehicles.View.of(st, false, [:sidescan])
+      iex> {v.id, v.type, v.battery, v.position.h, v.relative_altitude, v.payloads, v.mission_progress}
+      {7, :uav, 0.5, 120.0, 20.0, [:sidescan], nil}
+  """
+  @spec of(Dolphin.Vehicles.State.t(), boolean(), [atom()]) :: t()
+  def of(state, lost, payloads) do
+    {position, relative} =
+      case state.position do
+        nil -> {nil, nil}
+        p -> {Dolphin.Geo.Location.new(p.lat, p.lon, p.alt), p.relative_alt * 1.0}
+      end
+
+    %__MODULE__{
+      id: state.sysid,
+      type: class(state.type),
+      payloads: Enum.sort(Enum.uniq(Enum.to_list(state.components) ++ payloads)),
+      battery: state.battery,
+      position: position,
+      relative_altitude: relative,
+      mode: state.mode,
+      armed?: state.armed,
+      connected?: not lost,
+      mission_progress: progress(state.mission),
+      landed: state.landed,
+      link: Map.take(Dolphin.Vehicles.State.link_figures(state), [:rtt_ms, :loss_in, :loss_out])
+    }
+  end
+
+  # No MISSION_CURRENT yet: the total is not known, nor is the progress.
+  defp progress(%{total: nil}), do: nil
+  defp progress(m), do: {m.reached || 0, m.total}
 end
