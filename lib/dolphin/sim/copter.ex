@@ -101,6 +101,8 @@ defmodule Dolphin.Sim.Copter do
             # Sent unasked: the heartbeat at 1 Hz, TIMESYNC every 10 s.
             streams: %{0 => 1000, 111 => 10_000},
             due: %{0 => 1000, 111 => 10_000},
+            # The earliest time in `due`, or earlier (see Streams.due/1).
+            next_due: 0,
             gcs_heard_ms: nil,
             failsafe: nil,
             prearm_text_ms: nil,
