@@ -166,6 +166,10 @@ defmodule Dolphin.Sim.Copter do
   defdelegate offset(origin, north, east), to: Geo, as: :tangent_offset
 
   @doc false
+  # Metres on the plane from the vehicle to the point `n`, `e`.
+  def distance_to(c, n, e), do: :math.sqrt((c.n - n) ** 2 + (c.e - e) ** 2)
+
+  @doc false
   def ground(c), do: c.origin.alt
 
   @doc false

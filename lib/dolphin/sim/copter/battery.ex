@@ -5,7 +5,7 @@ defmodule Dolphin.Sim.Copter.Battery do
   # charger, its low and critical warnings, and the battery failsafe
   # (BATT_FS_LOW_ACT / BATT_FS_CRT_ACT) when enabled.
 
-  import Dolphin.Sim.Copter, only: [text: 3, in_air?: 1, home_ne: 1, ne: 3]
+  import Dolphin.Sim.Copter, only: [text: 3, in_air?: 1, home_ne: 1, ne: 3, distance_to: 3]
 
   alias Dolphin.Sim.{Copter, Streams}
   alias Dolphin.Sim.Copter.Modes
@@ -45,7 +45,7 @@ defmodule Dolphin.Sim.Copter.Battery do
 
   def at_home?(c) do
     {hn, he} = home_ne(c)
-    near? = fn {n, e}, r -> :math.sqrt((c.n - n) ** 2 + (c.e - e) ** 2) <= r end
+    near? = fn {n, e}, r -> distance_to(c, n, e) <= r end
     charger = c.config.charger
     c.landed == :on_ground and (near?.({hn, he}, 10) or (charger != nil and near?.(ne(c, charger.lat, charger.lon), 15)))
   end

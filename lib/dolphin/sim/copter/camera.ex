@@ -5,7 +5,7 @@ defmodule Dolphin.Sim.Copter.Camera do
   # camera component when the vehicle has one, else by the autopilot
   # (ArduPilot's camera library).
 
-  import Dolphin.Sim.Copter, only: [say: 3]
+  import Dolphin.Sim.Copter, only: [say: 3, distance_to: 3]
 
   alias Dolphin.Sim.{Copter, Streams}
 
@@ -58,7 +58,7 @@ defmodule Dolphin.Sim.Copter.Camera do
   end
 
   def capture(%{capture: {:distance, every, {n0, e0}}} = c) do
-    if :math.sqrt((c.n - n0) ** 2 + (c.e - e0) ** 2) >= every,
+    if distance_to(c, n0, e0) >= every,
       do: photo(%{c | capture: {:distance, every, {c.n, c.e}}}),
       else: c
   end

@@ -14,7 +14,7 @@ defmodule Dolphin.Sim.Copter.Flight do
   #   {:land, n, e} / {:land_at, n, e} / {:descend}
   #   {:rtl, :climb | :return}
 
-  import Dolphin.Sim.Copter, only: [ground: 1, home_alt: 1, home_ne: 1, in_air?: 1, resolve_alt: 2, ne: 3]
+  import Dolphin.Sim.Copter, only: [ground: 1, home_alt: 1, home_ne: 1, in_air?: 1, resolve_alt: 2, ne: 3, distance_to: 3]
 
   alias Dolphin.Sim.Copter
   alias Dolphin.Sim.Copter.{Mission, Modes}
@@ -101,7 +101,7 @@ defmodule Dolphin.Sim.Copter.Flight do
 
       {:land_at, n, e} ->
         # Fly over the landing point first, then descend.
-        if :math.sqrt((c.n - n) ** 2 + (c.e - e) ** 2) <= c.config.wp_radius,
+        if distance_to(c, n, e) <= c.config.wp_radius,
           do: {%{c | nav: {:land, n, e}, landed: :landing}, land_velocity(c, n, e)},
           else: {c, toward(c, n, e, c.alt)}
 
@@ -115,7 +115,7 @@ defmodule Dolphin.Sim.Copter.Flight do
       {:rtl, :return} ->
         {hn, he} = home_ne(c)
 
-        if :math.sqrt((c.n - hn) ** 2 + (c.e - he) ** 2) <= c.config.wp_radius,
+        if distance_to(c, hn, he) <= c.config.wp_radius,
           do: {%{c | nav: {:land, hn, he}, landed: :landing}, {0.0, 0.0, 0.0}},
           else: {c, toward(c, hn, he, c.alt)}
     end

@@ -5,7 +5,7 @@ defmodule Dolphin.Sim.Copter.Mission do
   # once), when it is reached, and how ArduCopter reports the progress
   # (MISSION_CURRENT, MISSION_ITEM_REACHED, "Mission: 2 WP").
 
-  import Dolphin.Sim.Copter, only: [say: 2, text: 3, in_air?: 1, target_alt: 3, set_home: 2, position: 1, ne: 3]
+  import Dolphin.Sim.Copter, only: [say: 2, text: 3, in_air?: 1, target_alt: 3, set_home: 2, position: 1, ne: 3, distance_to: 3]
 
   alias Dolphin.MAVLink.Ardupilotmega, as: M
   alias Dolphin.Sim.{Copter, MissionServer, Streams}
@@ -148,7 +148,7 @@ defmodule Dolphin.Sim.Copter.Mission do
   # nearest to where it is, then circles from there.
   defp run_item(c, %{command: 18, param3: radius} = item) do
     {n, e, alt} = item_target(c, item)
-    d = :math.sqrt((c.n - n) ** 2 + (c.e - e) ** 2)
+    d = distance_to(c, n, e)
     r = abs(radius)
     {en, ee} = if d > r and d > 0.01, do: {n + (c.n - n) / d * r, e + (c.e - e) / d * r}, else: {c.n, c.e}
     %{c | nav: {:goto, en, ee, alt}}
