@@ -130,6 +130,74 @@ defmodule Dolphin.Geo do
     end
   end
 
+  @typedoc """
+  A tangent plane (see `tangent_plane/1`): the origin and the WGS84 radii of
+  curvature there, computed once.
+  """
+  @type tangent_plane :: %{lat: float(), lon: float(), meridian: float(), prime_vertical: float(), cos_lat: float()}
+
+  @doc """
+  The local tangent plane at `origin` (any map with `:lat` and `:lon` in
+  degrees): a flat north/east frame in metres, scaled by the WGS84 radii of
+  curvature at the origin's latitude.
+
+  It trades the exactness of `offset/4` and `ne_offset/2` for a few
+  multiplications, for code that converts positions many times a second (the
+  simulator, at every step of flight). The two part by about `d² / 10⁷`
+  metres at `d` metres from the origin: 2 cm at 500 m, 2 m at 5 km.
+
+      iex> plane = Dolphin.Geo.tangent_plane(%{lat: 40.444233, lon: -7.375234})
+      iex> {lat, lon} = Dolphin.Geo.from_tangent(plane, 100.0, -50.0)
+      iex> {n, e} = Dolphin.Geo.to_tangent(plane, lat, lon)
+      iex> {Float.round(n, 9), Float.round(e, 9)}
+      {100.0, -50.0}
+  """
+  @spec tangent_plane(%{required(:lat) => number(), required(:lon) => number(), optional(atom()) => term()}) :: tangent_plane()
+  def tangent_plane(%{lat: lat, lon: lon}) when is_number(lat) and is_number(lon) do
+    e2 = @f * (2 - @f)
+    s = :math.sin(plane_radians(lat))
+    w = 1 - e2 * s * s
+    %{lat: lat, lon: lon, meridian: @a * (1 - e2) / :math.pow(w, 1.5), prime_vertical: @a / :math.sqrt(w), cos_lat: :math.cos(plane_radians(lat))}
+  end
+
+  def tangent_plane(origin), do: raise(ArgumentError, "tangent_plane/1 takes a map with :lat and :lon, got: #{inspect(origin)}")
+
+  @doc "`{lat, lon}` of the point `north`, `east` metres from the origin of a tangent plane."
+  @spec from_tangent(tangent_plane(), number(), number()) :: {float(), float()}
+  def from_tangent(%{lat: lat, lon: lon, meridian: m, prime_vertical: n, cos_lat: cos_lat}, north, east) do
+    {lat + plane_degrees(north / m), lon + plane_degrees(east / (n * cos_lat))}
+  end
+
+  @doc "`{north, east}` in metres of the point `lat`, `lon` on a tangent plane: the inverse of `from_tangent/3`."
+  @spec to_tangent(tangent_plane(), number(), number()) :: {float(), float()}
+  def to_tangent(%{lat: lat0, lon: lon0, meridian: m, prime_vertical: n, cos_lat: cos_lat}, lat, lon) do
+    {plane_radians(lat - lat0) * m, plane_radians(lon - lon0) * n * cos_lat}
+  end
+
+  @doc """
+  `point` (any map with `:lat` and `:lon`) moved `north`, `east` metres on
+  its tangent plane (see `tangent_plane/1`); its other fields, a height
+  among them, are kept.
+
+      iex> p = Dolphin.Geo.tangent_offset(%{lat: 40.444233, lon: -7.375234, alt: 820.0}, 1000, 0)
+      iex> {Float.round(p.lat, 6), p.lon, p.alt}
+      {40.453239, -7.375234, 820.0}
+      iex> home = Dolphin.Geo.location(40.444233, -7.375234)
+      iex> Dolphin.Geo.distance(Dolphin.Geo.tangent_offset(home, 300, 400), Dolphin.Geo.offset(home, 300, 400)) < 0.05
+      true
+  """
+  @spec tangent_offset(point, number(), number()) :: point when point: %{required(:lat) => number(), required(:lon) => number(), optional(atom()) => term()}
+  def tangent_offset(point, north, east) when is_number(north) and is_number(east) do
+    {lat, lon} = point |> tangent_plane() |> from_tangent(north, east)
+    %{point | lat: lat, lon: lon}
+  end
+
+  # The tangent plane's conversions keep their own order of operations
+  # (multiply by pi, then divide): positions the simulator has flown are
+  # reproduced to the last bit.
+  defp plane_radians(d), do: d * @pi / 180
+  defp plane_degrees(r), do: r * 180 / @pi
+
   @doc """
   Vincenty's direct problem: the point reached from `p` along the geodesic
   leaving at `azimuth` degrees (clockwise from north) after `distance`

@@ -47,6 +47,7 @@ defmodule Dolphin.Sim do
   `Dolphin.Sim.Faults`), and a vehicle can be made to vanish (`crash/2`).
   """
 
+  alias Dolphin.Geo
   alias Dolphin.Sim.Copter
 
   @default_home %{lat: 40.444233, lon: -7.375234, alt: 820.0}
@@ -301,7 +302,7 @@ defmodule Dolphin.Sim do
         for i <- 0..(count - 1) do
           row = div(i, @per_row)
           column = rem(i, @per_row)
-          Copter.offset(center, -row * @spacing, (column - (columns - 1) / 2) * @spacing)
+          Geo.tangent_offset(center, -row * @spacing, (column - (columns - 1) / 2) * @spacing)
         end
     end
   end

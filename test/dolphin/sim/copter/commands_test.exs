@@ -1,0 +1,69 @@
+defmodule Dolphin.Sim.Copter.CommandsTest do
+  # The simulated copter's command protocol: every command acked, with the
+  # result ArduCopter gives, from the component it was addressed to.
+  use ExUnit.Case, async: true
+
+  alias Dolphin.MAVLink.Ardupilotmega, as: M
+  alias Dolphin.Sim.Copter
+  alias Dolphin.Sim.Copter.Commands
+
+  @home %{lat: 40.444233, lon: -7.375234, alt: 820.0}
+  @gcs {255, 190}
+
+  defp ready(config \\ %{}), do: Copter.new(1, @home, Map.merge(%{ekf_ready_ms: 0}, config)) |> Copter.step(50) |> Copter.flush() |> elem(1)
+  defp in_air(c, fields \\ %{}), do: struct(c, Map.merge(%{mode: :guided, armed: true, landed: :in_air, alt: @home.alt + 20, nav: {:hold, 0.0, 0.0, @home.alt + 20}}, fields))
+
+  # Runs a COMMAND_LONG (`position` nil) or COMMAND_INT; returns the model and the ack's `{compid, result}`.
+  defp run(c, command, params, position \\ nil, compid \\ 1) do
+    params = Enum.map(params ++ List.duplicate(0.0, 7 - length(params)), &(&1 * 1.0))
+    c = Commands.command(c, command, params, position, compid, @gcs)
+    [{from, %M.CommandAck{command: ^command, result: result, target_system: 255, target_component: 190}} | _] = c.out
+    {%{c | out: []}, {from, result}}
+  end
+
+  test "arm, take off in GUIDED, and the take-off refused when not armed or already flying" do
+    {c, {1, 4}} = run(ready(), 22, [0, 0, 0, 0, 0, 0, 10])
+    {c, {1, 0}} = run(c, 176, [1, 4])
+    {c, {1, 0}} = run(c, 400, [1])
+    {c, {1, 0}} = run(c, 22, [0, 0, 0, 0, 0, 0, 10])
+    assert {:spool_up, _, {:climb, +0.0, +0.0, 830.0}} = c.nav
+    assert {_, {1, 4}} = run(in_air(c), 22, [0, 0, 0, 0, 0, 0, 10])
+  end
+
+  test "a COMMAND_INT's point is in its frame: DO_REPOSITION to a point 30 m above home" do
+    p = Copter.offset(@home, 0, 40)
+    {c, {1, 0}} = run(in_air(ready(), %{mode: :loiter}), 192, [5, 1], {6, round(p.lat * 1.0e7), round(p.lon * 1.0e7), 30.0})
+    assert c.mode == :guided and c.speed == 5.0
+    assert {:goto, n, e, 850.0} = c.nav
+    assert_in_delta n, 0.0, 0.01
+    assert_in_delta e, 40.0, 0.01
+
+    # Without bit 0 of p2, only in GUIDED.
+    assert {_, {1, 4}} = run(in_air(ready(), %{mode: :loiter}), 192, [5, 0], {6, round(p.lat * 1.0e7), round(p.lon * 1.0e7), 30.0})
+  end
+
+  test "MISSION_START without a mission fails; SET_MISSION_CURRENT out of range is denied" do
+    assert {_, {1, 4}} = run(ready(), 300, [0, 0])
+    assert {_, {1, 2}} = run(ready(), 224, [3])
+  end
+
+  test "a reboot is refused while armed, and asked of the vehicle process otherwise" do
+    assert {_, {1, 4}} = run(%{ready() | armed: true}, 246, [1])
+    c = Commands.command(ready(), 246, [1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0], nil, 1, @gcs)
+    assert [{1, %M.CommandAck{result: 0}}, {:reboot, nil}] = c.out
+  end
+
+  test "camera commands: to the camera component when there is one, else to the autopilot" do
+    assert {%{photos: 1}, {100, 0}} = run(ready(%{camera: true}), 2000, [0, 0, 1], nil, 100)
+    assert {%{photos: 1}, {1, 0}} = run(ready(), 203, [0, 0, 0, 0, 1])
+    # Addressed to a camera the vehicle does not have: the autopilot answers.
+    assert {%{photos: 1}, {1, 0}} = run(ready(), 2000, [0, 0, 1], nil, 100)
+  end
+
+  test "requests: a known message is sent, an unknown one denied; unknown commands unsupported" do
+    c = Commands.command(ready(), 512, [242.0 | List.duplicate(0.0, 6)], nil, 1, @gcs)
+    assert [{1, %M.CommandAck{result: 0}}, {1, %M.HomePosition{}}] = c.out
+    assert {_, {1, 2}} = run(ready(), 512, [9999])
+    assert {_, {1, 3}} = run(ready(), 31_000, [])
+  end
+end
