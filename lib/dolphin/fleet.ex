@@ -287,6 +287,22 @@ defmodule Dolphin.Fleet do
     end
   end
 
+  # Gone for good (Dolphin.Vehicles.forget/1): heard again, it is discovered
+  # anew. One still picked stays picked, as a lost one does, until released.
+  def handle_info({:dolphin, :vehicles, {:vehicle_forgotten, id}}, s) do
+    case s.vehicles do
+      %{^id => entry} when is_map_key(s.picked, id) ->
+        {:noreply, put_in(s.vehicles[id], %{entry | announced: false, vehicle: %{entry.vehicle | connected?: false}})}
+
+      %{^id => _} ->
+        Source.unsubscribe(id)
+        {:noreply, %{s | vehicles: Map.delete(s.vehicles, id)}}
+
+      _ ->
+        {:noreply, s}
+    end
+  end
+
   # The view saying so came first (see Dolphin.Fleet.Source).
   def handle_info({:dolphin, :vehicles, {:vehicle_lost, id}}, s), do: {:noreply, connected(s, id, false)}
   def handle_info({:dolphin, :vehicles, {:vehicle_reconnected, id}}, s), do: {:noreply, s |> connected(id, true) |> serve()}

@@ -22,7 +22,8 @@ defmodule Dolphin.Vehicles do
   Events: `{:vehicle_discovered, sysid}`, `{:vehicle_lost, sysid}` (silent for
   longer than its timeout: 20 s of `Dolphin.Clock` time by default, set with
   `set_timeout/2` or `config :dolphin, vehicle_timeout_ms:`),
-  `{:vehicle_reconnected, sysid}`, and per vehicle `{:state, sysid, changes}`.
+  `{:vehicle_reconnected, sysid}`, `{:vehicle_forgotten, sysid}` (`forget/1`),
+  and per vehicle `{:state, sysid, changes}`.
 
   ## One owner of a vehicle's state
 
@@ -146,13 +147,19 @@ defmodule Dolphin.Vehicles do
   end
 
   @doc """
-  Forgets a vehicle: its process stops (no "lost" event); it is discovered
-  anew if it speaks again. For vehicles known to be gone for good, such as a
+  Forgets a vehicle: its process stops (no "lost" event, but
+  `{:vehicle_forgotten, sysid}`, and the fleet forgets it unless it is
+  picked); it is discovered anew, with a `vehicle_discovered` event, if it
+  speaks again. For vehicles known to be gone for good, such as a
   finished simulation's.
   """
   @spec forget(byte()) :: :ok
   def forget(sysid) do
-    if pid = whereis(sysid), do: DynamicSupervisor.terminate_child(Dolphin.Vehicles.Supervisor, pid)
+    if pid = whereis(sysid) do
+      DynamicSupervisor.terminate_child(Dolphin.Vehicles.Supervisor, pid)
+      PubSub.publish(:vehicles, {:vehicle_forgotten, sysid})
+    end
+
     :ok
   end
 

@@ -149,6 +149,11 @@ defmodule Dolphin.FleetTest do
       assert_receive {:dolphin, :events, %{event: :vehicle_lost, vehicle: ^id}}, 5_000
       Fleet.release(:fleet_with_events, self(), set)
       assert_receive {:dolphin, :events, %{event: :released, vehicles: [^id]}}
+
+      # Forgotten (a finished simulation's vehicle), then heard again: discovered anew.
+      TestSource.remove(source, id)
+      TestSource.add(source, id, type: :ugv)
+      assert_receive {:dolphin, :events, %{event: :vehicle_discovered, vehicle: ^id, type: :ugv}}, 5_000
     end
   end
 

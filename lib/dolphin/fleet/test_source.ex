@@ -83,11 +83,11 @@ defmodule Dolphin.Fleet.TestSource do
     end)
   end
 
-  @doc "Forgets a vehicle without any event (as a vehicle process that was stopped for good)."
+  @doc "Forgets a vehicle, as `Dolphin.Vehicles.forget/1` does a real one: no \"lost\" event, but `{:vehicle_forgotten, id}`."
   @spec remove(atom(), non_neg_integer()) :: :ok
   def remove(name, id) do
     :ets.delete(name, id)
-    :ok
+    PubSub.publish(:vehicles, {:vehicle_forgotten, id})
   end
 
   @doc "The messages sent to a vehicle with `send_message`, oldest first."
