@@ -85,7 +85,7 @@ defmodule Dolphin.Sim do
 
   Returns the system ids started, or an error that says what was wrong.
   """
-  @spec start(keyword()) :: {:ok, [byte()]} | {:error, String.t()}
+  @spec start(keyword()) :: {:ok, [byte()]} | {:error, Dolphin.Sim.Error.t()}
   def start(opts) do
     with {:ok, gcs} <- gcs(Keyword.get(opts, :gcs)),
          {:ok, sysids} <- sysids(opts),
@@ -110,7 +110,7 @@ defmodule Dolphin.Sim do
 
         case DynamicSupervisor.start_child(Dolphin.Sim.Supervisor, child) do
           {:ok, _pid} -> {:cont, {:ok, [sysid | started]}}
-          {:error, why} -> {:halt, {:error, "simulated vehicle #{sysid}: #{inspect(why)}"}}
+          {:error, why} -> {:halt, {:error, %Dolphin.Sim.Error{reason: :start_failed, message: "simulated vehicle #{sysid}: #{inspect(why)}"}}}
         end
       end)
       |> case do
@@ -125,7 +125,7 @@ defmodule Dolphin.Sim do
   def start!(opts) do
     case start(opts) do
       {:ok, sysids} -> sysids
-      {:error, why} -> raise ArgumentError, why
+      {:error, e} -> raise ArgumentError, Exception.message(e)
     end
   end
 
@@ -167,7 +167,7 @@ defmodule Dolphin.Sim do
   def info(sysid), do: call(sysid, :info)
 
   @doc "Changes the faults of a vehicle's link (see `Dolphin.Sim.Faults`); `%{}` keeps them."
-  @spec set_faults(byte(), map() | keyword()) :: :ok | {:error, :unknown_vehicle | String.t()}
+  @spec set_faults(byte(), map() | keyword()) :: :ok | {:error, :unknown_vehicle | Dolphin.Sim.Error.t()}
   def set_faults(sysid, faults), do: call(sysid, {:faults, faults})
 
   @doc "Sets a vehicle's battery charge (a fraction of full): for tests and demonstrations."
@@ -222,31 +222,31 @@ defmodule Dolphin.Sim do
   defp gcs(endpoint) when is_binary(endpoint) do
     case Dolphin.Link.Endpoint.parse(endpoint) do
       {:ok, %{kind: :udpout, address: address, port: port}} -> {:ok, {address, port}}
-      {:ok, _} -> {:error, "the simulator sends to a ground station: give it udpout:HOST:PORT, not #{endpoint}"}
-      {:error, e} -> {:error, Exception.message(e)}
+      {:ok, _} -> Dolphin.Sim.Error.bad_option("the simulator sends to a ground station: give it udpout:HOST:PORT, not #{endpoint}")
+      {:error, e} -> Dolphin.Sim.Error.bad_option(Exception.message(e))
     end
   end
 
-  defp gcs(nil), do: {:error, "the simulator needs :gcs, where the ground station listens (a port, {address, port} or \"udpout:HOST:PORT\")"}
-  defp gcs(other), do: {:error, "bad :gcs #{inspect(other)}: a port, {address, port} or \"udpout:HOST:PORT\""}
+  defp gcs(nil), do: Dolphin.Sim.Error.bad_option("the simulator needs :gcs, where the ground station listens (a port, {address, port} or \"udpout:HOST:PORT\")")
+  defp gcs(other), do: Dolphin.Sim.Error.bad_option("bad :gcs #{inspect(other)}: a port, {address, port} or \"udpout:HOST:PORT\"")
 
   defp sysids(opts) do
     case Keyword.fetch(opts, :sysids) do
       {:ok, ids} when is_list(ids) and ids != [] ->
         if Enum.all?(ids, &(is_integer(&1) and &1 in 1..254)) and length(Enum.uniq(ids)) == length(ids),
           do: {:ok, ids},
-          else: {:error, "bad :sysids #{inspect(ids, charlists: :as_lists)}: distinct system ids in 1..254"}
+          else: Dolphin.Sim.Error.bad_option("bad :sysids #{inspect(ids, charlists: :as_lists)}: distinct system ids in 1..254")
 
       {:ok, other} ->
-        {:error, "bad :sysids #{inspect(other, charlists: :as_lists)}: a list of system ids"}
+        Dolphin.Sim.Error.bad_option("bad :sysids #{inspect(other, charlists: :as_lists)}: a list of system ids")
 
       :error ->
         count = Keyword.get(opts, :count, 1)
         first = Keyword.get(opts, :first_sysid, 1)
 
         cond do
-          not is_integer(count) or count < 1 -> {:error, "bad :count #{inspect(count)}: at least 1 vehicle"}
-          not is_integer(first) or first < 1 or first + count - 1 > 254 -> {:error, "system ids #{first}..#{first + count - 1} do not fit in 1..254"}
+          not is_integer(count) or count < 1 -> Dolphin.Sim.Error.bad_option("bad :count #{inspect(count)}: at least 1 vehicle")
+          not is_integer(first) or first < 1 or first + count - 1 > 254 -> Dolphin.Sim.Error.bad_option("system ids #{first}..#{first + count - 1} do not fit in 1..254")
           true -> {:ok, Enum.to_list(first..(first + count - 1))}
         end
     end
@@ -258,20 +258,20 @@ defmodule Dolphin.Sim do
 
     case Enum.find(config, fn {_k, v} -> not (is_number(v) or is_boolean(v) or is_atom(v)) end) do
       nil -> {:ok, config}
-      {k, v} -> {:error, "bad #{inspect(k)}: #{inspect(v)}"}
+      {k, v} -> Dolphin.Sim.Error.bad_option("bad #{inspect(k)}: #{inspect(v)}")
     end
   end
 
   defp free(sysids) do
     case Enum.filter(sysids, &whereis/1) do
       [] -> :ok
-      taken -> {:error, "simulated vehicles #{Dolphin.Fleet.VehicleSet.format(taken)} are already running"}
+      taken -> Dolphin.Sim.Error.bad_option("simulated vehicles #{Dolphin.Fleet.VehicleSet.format(taken)} are already running")
     end
   end
 
   defp speedup(nil), do: :ok
   defp speedup(k) when is_number(k) and k > 0, do: Dolphin.Clock.set_speedup(k)
-  defp speedup(k), do: {:error, "bad :speedup #{inspect(k)}: a positive number"}
+  defp speedup(k), do: Dolphin.Sim.Error.bad_option("bad :speedup #{inspect(k)}: a positive number")
 
   # Where the vehicles boot and where they charge, or what is wrong with them.
   defp places(opts, count) do
@@ -279,7 +279,7 @@ defmodule Dolphin.Sim do
     charger = opts[:charger] || opts[:home] || if(opts[:homes], do: hd(homes), else: @default_home)
     {:ok, homes, location(charger)}
   rescue
-    e in ArgumentError -> {:error, Exception.message(e)}
+    e in ArgumentError -> Dolphin.Sim.Error.bad_option(Exception.message(e))
   end
 
   @doc """
@@ -320,7 +320,7 @@ defmodule Dolphin.Sim do
       {:ok, pid} -> {:ok, pid}
       {:error, {:already_started, pid}} -> {:ok, pid}
       {:error, :already_present} -> Supervisor.restart_child(Dolphin.Supervisor, Dolphin.Sim.Supervisor)
-      {:error, why} -> {:error, "cannot start the simulator: #{inspect(why)}"}
+      {:error, why} -> {:error, %Dolphin.Sim.Error{reason: :start_failed, message: "cannot start the simulator: #{inspect(why)}"}}
     end
   end
 end

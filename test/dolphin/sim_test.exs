@@ -8,6 +8,8 @@ defmodule Dolphin.SimTest do
   alias Dolphin.MAVLink.Ardupilotmega, as: M
   alias Dolphin.Test.Wait
 
+  doctest Dolphin.Sim.Error
+
   setup do
     %{port: Dolphin.Test.GroundStation.open()}
   end
@@ -206,9 +208,9 @@ defmodule Dolphin.SimTest do
   end
 
   test "bad options are refused with what was wrong" do
-    assert {:error, "the simulator needs :gcs" <> _} = Sim.start(count: 1)
-    assert {:error, "bad :count 0" <> _} = Sim.start(count: 0, gcs: 14_550)
-    assert {:error, "the simulator sends to a ground station" <> _} = Sim.start(gcs: "udpin:0.0.0.0:14550")
-    assert {:error, "system ids 250..259" <> _} = Sim.start(count: 10, first_sysid: 250, gcs: 14_550)
+    assert {:error, %Sim.Error{reason: :bad_option, message: "the simulator needs :gcs" <> _}} = Sim.start(count: 1)
+    assert {:error, %Sim.Error{message: "bad :count 0" <> _}} = Sim.start(count: 0, gcs: 14_550)
+    assert {:error, %Sim.Error{message: "the simulator sends to a ground station" <> _}} = Sim.start(gcs: "udpin:0.0.0.0:14550")
+    assert {:error, %Sim.Error{message: "system ids 250..259" <> _}} = Sim.start(count: 10, first_sysid: 250, gcs: 14_550)
   end
 end

@@ -14,7 +14,7 @@ defmodule Dolphin.Sim.Local do
   the link's options (`:tlog`, `:forward`). Returns once the fleet knows every
   vehicle (or after 10 s of real time), or an error saying what failed.
   """
-  @spec start(pos_integer(), keyword()) :: {:ok, t()} | {:error, String.t()}
+  @spec start(pos_integer(), keyword()) :: {:ok, t()} | {:error, Dolphin.Sim.Error.t()}
   def start(count, opts \\ []) do
     name = {:dolphin_local_sim, System.unique_integer([:positive])}
     {seed, link_opts} = Keyword.pop(opts, :seed, 1)
@@ -31,13 +31,13 @@ defmodule Dolphin.Sim.Local do
             await_fleet(sysids)
             {:ok, %{link: link, port: port, sysids: sysids}}
 
-          {:error, why} ->
+          {:error, e} ->
             DynamicSupervisor.terminate_child(Dolphin.Link.Supervisor, link)
-            {:error, "--sim: #{why}"}
+            {:error, %{e | message: "--sim: " <> e.message}}
         end
 
       {:error, e} ->
-        {:error, "--sim: cannot open a local link: #{Exception.message(e)}"}
+        {:error, %Dolphin.Sim.Error{reason: :start_failed, message: "--sim: cannot open a local link: #{Exception.message(e)}"}}
     end
   end
 

@@ -105,7 +105,7 @@ defmodule Dolphin.Sim.Vehicle do
   def handle_call({:faults, changes}, _from, s) do
     {:reply, :ok, %{s | faults_out: Faults.update(s.faults_out, changes), faults_in: Faults.update(s.faults_in, changes)}}
   rescue
-    e in ArgumentError -> {:reply, {:error, Exception.message(e)}, s}
+    e in ArgumentError -> {:reply, Dolphin.Sim.Error.bad_option(Exception.message(e)), s}
   end
 
   def handle_call({:set, :battery, fraction}, _from, s), do: {:reply, :ok, update_model(s, &%{&1 | battery: fraction * 1.0})}

@@ -135,7 +135,7 @@ defmodule Mix.Tasks.Dolphin.Console do
     # The console's simulated fleet lives as long as the VM.
     case Dolphin.Sim.Local.start(n, [seed: Keyword.get(opts, :seed, 1)] ++ link_opts) do
       {:ok, sim} -> {:ok, ["#{n} simulated vehicle(s) #{Dolphin.Fleet.VehicleSet.format(sim.sysids)} on 127.0.0.1:#{sim.port}"]}
-      {:error, why} -> {:error, %CommandLineError{reason: :failed, message: why}}
+      {:error, e} -> {:error, %CommandLineError{reason: :failed, message: Exception.message(e), cause: e}}
     end
   end
 

@@ -82,7 +82,7 @@ defmodule Mix.Tasks.Dolphin.Sim do
 
     case Dolphin.Sim.start(Keyword.drop(opts, [:for, :quiet, :camera]) ++ camera) do
       {:ok, sysids} -> sysids
-      {:error, why} -> Mix.raise("mix dolphin.sim: #{why}")
+      {:error, e} -> Mix.raise("mix dolphin.sim: #{Exception.message(e)}")
     end
   end
 
