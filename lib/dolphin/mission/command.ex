@@ -26,6 +26,10 @@ defmodule Dolphin.Mission.Command do
 
   Caller mistakes (a string for a number, an unknown direction, a negative
   photo count...) raise `ArgumentError` naming the command and the value.
+
+  This module is long because it is the whole vocabulary in one place: one
+  documented function (with its `lat, lon, h` twin) per command of Table 2,
+  which is what `h take_off` shows in the console; it computes nothing.
   """
 
   alias Dolphin.Geo.Location

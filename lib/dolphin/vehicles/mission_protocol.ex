@@ -67,6 +67,10 @@ defmodule Dolphin.Vehicles.MissionProtocol do
   `:attempts` timeouts when given. `:total_timeout_ms`, when given, bounds
   the whole transfer.
 
+  It is one state machine over one transfer (upload, download and clear
+  share their timers, budgets, restarts and endings), kept in one module so
+  that every transition can be read beside the others.
+
   The result goes to the caller: `:ok`, `{:ok, items}` (download), or
   `{:error, %Dolphin.MissionError{}}`; progress, if asked for, as
   `{:mission_progress, operation, done, total}` (items sent or received), and
