@@ -57,7 +57,10 @@ defmodule Dolphin.Web do
     * `:tlog` — the run's telemetry log, named on the page;
     * `:origin_ms` — the `Dolphin.Clock` time the run started (the page's
       time zero), default now;
-    * `:owner` — a process: the view stops when it ends.
+    * `:owner` — a process: the view stops when it ends;
+    * `:history` — events that came before (`Dolphin.Telemetry` maps, oldest
+      first), shown as if seen live;
+    * `:name` — a name to register the view under.
 
   It is not linked to the caller: stop it with `stop/1` (or give `:owner`).
   """

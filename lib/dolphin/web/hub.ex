@@ -21,7 +21,7 @@ defmodule Dolphin.Web.Hub do
   @max_clients 100
 
   @doc false
-  def start(opts), do: GenServer.start(__MODULE__, opts)
+  def start(opts), do: GenServer.start(__MODULE__, opts, Keyword.take(opts, [:name]))
 
   @doc false
   # The page now (binary).
@@ -47,6 +47,7 @@ defmodule Dolphin.Web.Hub do
       PubSub.subscribe(:vehicles)
       Telemetry.subscribe()
       live = Live.new(Keyword.get(opts, :origin_ms, Clock.now_ms()), Keyword.take(opts, [:title, :tlog]))
+      live = opts |> Keyword.get(:history, []) |> Enum.reduce(live, &Live.event(&2, &1))
       s = %{listen: listen, port: actual, bind: bind, owner: opts[:owner], live: live, watched: MapSet.new(), dirty: true, page: nil, pieces: [], clients: %{}}
       {:ok, _} = :timer.send_interval(@frame_ms, :frame)
       {:ok, Enum.reduce(Vehicles.list(), s, &watch/2)}
