@@ -16,6 +16,9 @@ defmodule Dolphin.Web do
   ## What it serves
 
     * `GET /` — the page as it is now (it reads well without its script);
+      `/?frames=N`: the page stops following after N frames (a snapshot
+      through the live path, for a headless browser, whose `--dump-dom`
+      would wait for ever on an open stream);
     * `GET /events` — a stream of Server-Sent Events: a `frame` event (one
       line of JSON, `{"pieces": [[id, html], ...]}`) with the parts of the
       page that changed (each section, the legend, the line under the

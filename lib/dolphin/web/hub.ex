@@ -46,7 +46,9 @@ defmodule Dolphin.Web.Hub do
       if owner = opts[:owner], do: Process.monitor(owner)
       PubSub.subscribe(:vehicles)
       Telemetry.subscribe()
-      live = Live.new(Keyword.get(opts, :origin_ms, Clock.now_ms()), Keyword.take(opts, [:title, :tlog]))
+      origin = Keyword.get(opts, :origin_ms, Clock.now_ms())
+      started_at = DateTime.add(DateTime.utc_now(), -Clock.to_real_ms(max(Clock.now_ms() - origin, 0)), :millisecond)
+      live = Live.new(origin, [started_at: started_at] ++ Keyword.take(opts, [:title, :tlog]))
       live = opts |> Keyword.get(:history, []) |> Enum.reduce(live, &Live.event(&2, &1))
       s = %{listen: listen, port: actual, bind: bind, owner: opts[:owner], live: live, watched: MapSet.new(), dirty: true, page: nil, pieces: [], clients: %{}}
       {:ok, _} = :timer.send_interval(@frame_ms, :frame)

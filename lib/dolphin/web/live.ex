@@ -17,13 +17,17 @@ defmodule Dolphin.Web.Live do
   # Events kept: the oldest go beyond this.
   @max_events 5_000
 
-  defstruct origin_ms: 0, title: "Live run", tlog: nil, vehicles: %{}, views: %{}, counts: %{}, events: :queue.new(), n_events: 0, running: %{}
+  defstruct origin_ms: 0, started_at: nil, title: "Live run", tlog: nil, vehicles: %{}, views: %{}, counts: %{}, events: :queue.new(), n_events: 0, running: %{}
 
   @type t :: %__MODULE__{}
 
   @doc false
+  # Options: :title, :tlog (the run's log, named on the page), :started_at
+  # (the wall-clock time of origin_ms, a DateTime: Clock times are not).
   @spec new(integer(), keyword()) :: t()
-  def new(origin_ms, opts \\ []), do: %__MODULE__{origin_ms: origin_ms, title: Keyword.get(opts, :title, "Live run"), tlog: opts[:tlog]}
+  def new(origin_ms, opts \\ []) do
+    %__MODULE__{origin_ms: origin_ms, started_at: opts[:started_at], title: Keyword.get(opts, :title, "Live run"), tlog: opts[:tlog]}
+  end
 
   @doc false
   # A vehicle's new view, seen at clock time now_ms.
@@ -109,13 +113,24 @@ defmodule Dolphin.Web.Live do
       stats: nil
     }
 
-    model = Model.build(log, :queue.to_list(live.events), 0.0)
+    model = %{Model.build(log, :queue.to_list(live.events), 0.0) | started_at: live.started_at}
     info = %{title: live.title, tlog: live.tlog || "none", events: "live", events_skipped: 0}
     page = model |> HTML.page(info) |> IO.iodata_to_binary()
-    page = page |> mark_positions(model) |> String.replace("</style>", css() <> "</style>", global: false)
+
+    page =
+      page
+      |> mark_positions(model)
+      |> String.replace("</style>", css() <> "</style>", global: false)
+      |> String.replace(~r{<p class="files">.*?</p>}s, files(live), global: false)
     [head, summary] = :binary.split(page, ~s(<section id="summary">))
     [tail, ""] = :binary.split(summary, "</body></html>\n")
     IO.iodata_to_binary([head, status(live, model), ~s(<section id="summary">), tail, "<script>", js(), "</script></body></html>\n"])
+  end
+
+  # Where the page's data comes from (the report's line names its files).
+  defp files(live) do
+    log = if live.tlog, do: [~s(; the telemetry log is written to <code title="), HTML.esc(Path.expand(live.tlog)), ~s(">), HTML.esc(Path.basename(live.tlog)), "</code>"], else: []
+    IO.iodata_to_binary([~s(<p class="files">live from the running fleet: the vehicles' state and the run's events), log, "</p>"])
   end
 
   defp chronological(v) do
@@ -188,7 +203,9 @@ defmodule Dolphin.Web.Live do
   # The page follows the run: it listens to /events (Server-Sent Events) and
   # puts each piece it is sent in place; vehicles hidden in the legend stay
   # hidden. A lost stream is retried by the browser; the first frame of each
-  # stream is the whole state.
+  # stream is the whole state. With ?frames=N it stops after N frames: a
+  # snapshot that went through the live path, which a headless browser can
+  # wait for (an open stream keeps its page loading for ever).
   defp js do
     """
     (function(){
@@ -212,14 +229,19 @@ defmodule Dolphin.Web.Live do
         if(el) el.innerHTML = html;
       }
       if(!window.EventSource) return;
+      var limit = +(new URLSearchParams(location.search).get('frames') || 0);
       var source = new EventSource('events');
       source.addEventListener('frame', function(ev){
         var frame = JSON.parse(ev.data);
         frame.pieces.forEach(function(p){ place(p[0], p[1]); });
         hide();
-        document.body.dataset.frames = (+document.body.dataset.frames || 0) + 1;
+        var count = (+document.body.dataset.frames || 0) + 1;
+        document.body.dataset.frames = count;
         var s = document.getElementById('live-state');
-        if(s){ s.textContent = 'live'; s.className = 'live-state'; }
+        if(limit && count >= limit){
+          source.close();
+          if(s){ s.textContent = 'snapshot'; s.className = 'live-state ended'; }
+        } else if(s){ s.textContent = 'live'; s.className = 'live-state'; }
       });
       source.addEventListener('end', function(){
         source.close();
