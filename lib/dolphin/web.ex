@@ -22,8 +22,9 @@ defmodule Dolphin.Web do
     * `GET /events` — a stream of Server-Sent Events: a `frame` event (one
       line of JSON, `{"pieces": [[id, html], ...]}`) with the parts of the
       page that changed (each section, the legend, the line under the
-      heading), at most four times a second, the whole state first; an
-      `end` event when the view stops; a comment line every 15 s;
+      heading), at most four times a second (less when the page takes long
+      to draw), the whole state first; an `end` event when the view stops;
+      a comment line every 15 s;
     * anything else is 404, any method but GET is 405: the page sends no
       commands, it only watches.
 
@@ -100,7 +101,8 @@ defmodule Dolphin.Web do
   @spec url(pid()) :: String.t()
   def url(web) do
     {bind, port} = GenServer.call(web, :where)
-    host = if bind in ["0.0.0.0", "::"], do: "127.0.0.1", else: bind
+    # Listening on every address: this machine's own is one of them.
+    host = %{"0.0.0.0" => "127.0.0.1", "::" => "::1"}[bind] || bind
     host = if String.contains?(host, ":"), do: "[#{host}]", else: host
     "http://#{host}:#{port}/"
   end

@@ -11,8 +11,12 @@ defmodule Dolphin.Web.Hub do
   alias Dolphin.Web.{Connection, Error, Live}
 
   # How often (real milliseconds) clients are sent what changed: a page
-  # redrawn faster than this would only cost the browser.
+  # redrawn faster than this would only cost the browser. A page that takes
+  # long to draw (a long run, near the model's bounds: ~150 ms) is drawn
+  # less often, so that the view takes at most a fifth of a core from the
+  # fleet: the next frame waits this many times the last drawing's time.
   @frame_ms 250
+  @frame_cost 4
   # A client with more frames than this waiting in its connection's mailbox
   # is not sent more: it is behind (a slow network, a stalled browser). What
   # it missed it gets whole once it has caught up, from what it was last sent.
@@ -51,7 +55,7 @@ defmodule Dolphin.Web.Hub do
       live = Live.new(origin, [started_at: started_at] ++ Keyword.take(opts, [:title, :tlog]))
       live = opts |> Keyword.get(:history, []) |> Enum.reduce(live, &Live.event(&2, &1))
       s = %{listen: listen, port: actual, bind: bind, owner: opts[:owner], live: live, watched: MapSet.new(), dirty: true, page: nil, pieces: [], clients: %{}}
-      {:ok, _} = :timer.send_interval(@frame_ms, :frame)
+      Process.send_after(self(), :frame, @frame_ms)
       {:ok, Enum.reduce(Vehicles.list(), s, &watch/2)}
     else
       {:error, %Error{} = e} -> {:stop, {:shutdown, e}}
@@ -142,8 +146,17 @@ defmodule Dolphin.Web.Hub do
 
   def handle_info({:dolphin, :events, event}, s), do: {:noreply, %{s | live: Live.event(s.live, event), dirty: true}}
 
-  def handle_info(:frame, %{dirty: true} = s) when s.clients != %{}, do: {:noreply, push(render(s))}
-  def handle_info(:frame, s), do: {:noreply, s}
+  def handle_info(:frame, %{dirty: true} = s) when s.clients != %{} do
+    started = System.monotonic_time(:millisecond)
+    s = push(render(s))
+    Process.send_after(self(), :frame, max(@frame_ms, @frame_cost * (System.monotonic_time(:millisecond) - started)))
+    {:noreply, s}
+  end
+
+  def handle_info(:frame, s) do
+    Process.send_after(self(), :frame, @frame_ms)
+    {:noreply, s}
+  end
 
   def handle_info({:DOWN, _ref, :process, pid, _why}, %{owner: pid} = s), do: {:stop, :normal, s}
   def handle_info({:DOWN, _ref, :process, pid, _why}, s), do: {:noreply, %{s | clients: Map.delete(s.clients, pid)}}
