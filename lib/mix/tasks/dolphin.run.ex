@@ -76,6 +76,16 @@ defmodule Mix.Tasks.Dolphin.Run do
   are used (`config :dolphin, links: [...]`), or if there are none the ground
   station listens on `Dolphin.Link.default_endpoint/0` (`udpin:0.0.0.0:14550`).
 
+  ## Watching a run in the browser
+
+      mix dolphin.run examples/two_vehicles.exs --sim 2 --speedup 5 --web 8080 --report run.html
+
+  prints `live view: http://127.0.0.1:8080/`: the flight report's page
+  (`Dolphin.Report`), kept up to date while the script runs (`Dolphin.Web`:
+  vehicles moving on the map, task bars growing, what each vehicle does
+  now). When the run ends, `--report` writes the report of the whole run
+  and prints where.
+
   ## Interrupting a run
 
   Ctrl-C (SIGINT) or SIGTERM stops the script the way `--for` does: running
