@@ -17,9 +17,10 @@ defmodule Dolphin.Web.Connection do
   @ping_ms 15_000
 
   @doc false
-  # A process for an accepted socket; it starts once given the socket.
-  @spec start(:gen_tcp.socket(), pid()) :: pid()
-  def start(_socket, hub) do
+  # A process for a client of `hub`; it starts once given its socket
+  # ({:go, socket}, after the socket was handed over to it).
+  @spec start(pid()) :: pid()
+  def start(hub) do
     spawn(fn ->
       receive do
         {:go, socket} -> serve(socket, hub)

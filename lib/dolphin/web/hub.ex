@@ -89,7 +89,7 @@ defmodule Dolphin.Web.Hub do
   defp accept(listen, hub) do
     case :gen_tcp.accept(listen) do
       {:ok, socket} ->
-        pid = Connection.start(socket, hub)
+        pid = Connection.start(hub)
         if :gen_tcp.controlling_process(socket, pid) == :ok, do: send(pid, {:go, socket}), else: :gen_tcp.close(socket)
         accept(listen, hub)
 
