@@ -40,7 +40,8 @@ defmodule Dolphin.Console do
       `hold/2`, `rtl/2`, `land/2`, `upload/3`, `download/2`;
     * watching: `watch/2` (a live ticker), `messages/1` (STATUSTEXTs),
       `events/2` (the last events, `Dolphin.Telemetry`);
-    * `answer/2` — answers a script's `ask`.
+    * `answer/2` — answers a script's `ask`;
+    * `web/2` — a live view of the fleet in the browser (`Dolphin.Web`).
 
   Altitudes given to `takeoff/3` and `goto/5` are metres above home (as
   QGroundControl's), unlike the script language's, which are above mean sea
@@ -53,7 +54,7 @@ defmodule Dolphin.Console do
   """
 
   alias Dolphin.{Engine, Mission}
-  alias Dolphin.Console.{Check, Format, Runs, Snapshot, Vehicle}
+  alias Dolphin.Console.{Check, Events, Format, Runs, Snapshot, Vehicle}
 
   @type vehicle_id :: non_neg_integer()
 
@@ -308,4 +309,49 @@ defmodule Dolphin.Console do
   """
   @spec events(pos_integer(), keyword()) :: printed()
   defdelegate events(n \\ 20, opts \\ []), to: Vehicle
+
+  @web Dolphin.Console.Web
+
+  @doc """
+  Serves a live view of the fleet and its runs (`Dolphin.Web`: the flight
+  report's page, kept up to date) on `http://127.0.0.1:PORT/` (0: a free
+  port) until `web(:stop)`; the events the console remembers come first.
+  Option: `bind: "0.0.0.0"` to listen on another address. One at a time.
+  """
+  @spec web(:inet.port_number() | :stop, keyword()) :: printed()
+  def web(port_or_stop, opts \\ [])
+
+  def web(:stop, _opts) do
+    case Process.whereis(@web) do
+      nil -> say("no live view to stop")
+      pid ->
+        Dolphin.Web.stop(pid)
+        say("live view stopped")
+    end
+
+    done()
+  end
+
+  def web(port, opts) when is_integer(port) and port in 0..65_535 do
+    with {:ok, opts} <- Check.options(opts, [:bind]),
+         true <- is_binary(Keyword.get(opts, :bind, "")) || {:error, "bind: takes an address as text (\"0.0.0.0\"), got #{inspect(opts[:bind])}"},
+         nil <- Process.whereis(@web) do
+      start = [port: port, name: @web, title: "Live: the fleet", origin_ms: Events.origin_ms(), history: Events.last(1_000)] ++ opts
+
+      case Dolphin.Web.start(start) do
+        {:ok, pid} -> say("live view: #{Dolphin.Web.url(pid)} (web(:stop) stops it)")
+        {:error, e} -> say("web: " <> Exception.message(e))
+      end
+    else
+      {:error, why} -> say("web: " <> why_text(why))
+      pid when is_pid(pid) -> say("a live view is already served at #{Dolphin.Web.url(pid)} (web(:stop) stops it)")
+    end
+
+    done()
+  end
+
+  def web(other, _opts) do
+    say("web: give a TCP port (0..65535; 0 picks a free one) or :stop, got #{inspect(other)}")
+    done()
+  end
 end

@@ -20,17 +20,22 @@ defmodule Dolphin.Test.Browser do
   @spec available?() :: boolean()
   def available?, do: executable() != nil
 
-  @doc "The DOM of `file` once loaded, serialised; `profile` is a directory of the test's own."
-  @spec dump_dom(Path.t(), Path.t()) :: String.t()
-  def dump_dom(file, profile), do: run(["--dump-dom", url(file)], profile)
+  @doc """
+  The DOM of `file` (or an `http://` address) once loaded, serialised;
+  `profile` is a directory of the test's own; `args`, more of Chromium's
+  options (`--virtual-time-budget=MS`: let the page's scripts run that long).
+  """
+  @spec dump_dom(Path.t(), Path.t(), [String.t()]) :: String.t()
+  def dump_dom(file, profile, args \\ []), do: run(args ++ ["--dump-dom", url(file)], profile)
 
-  @doc "A screenshot of `file` (PNG) at `width` x `height` into `png`."
-  @spec screenshot(Path.t(), Path.t(), Path.t(), {pos_integer(), pos_integer()}) :: :ok
-  def screenshot(file, png, profile, {width, height} \\ {1400, 1000}) do
-    run(["--screenshot=#{png}", "--window-size=#{width},#{height}", "--hide-scrollbars", url(file)], profile)
+  @doc "A screenshot of `file` (or an `http://` address; PNG) at `width` x `height` into `png`."
+  @spec screenshot(Path.t(), Path.t(), Path.t(), {pos_integer(), pos_integer()}, [String.t()]) :: :ok
+  def screenshot(file, png, profile, {width, height} \\ {1400, 1000}, args \\ []) do
+    run(args ++ ["--screenshot=#{png}", "--window-size=#{width},#{height}", "--hide-scrollbars", url(file)], profile)
     :ok
   end
 
+  defp url("http://" <> _ = address), do: address
   defp url(file), do: "file://" <> Path.expand(file)
 
   # --no-sandbox: Chromium's sandbox refuses to start as root (CI, containers).

@@ -12,11 +12,18 @@ defmodule Dolphin.CLI.Run do
 
   Options: those of `mix dolphin.run`, parsed (`:connect`, `:sim`, `:sitl`,
   `:sitl_bin`, `:sitl_defaults`, `:fake`, `:seed`, `:speedup`, `:for` and
-  `:for_ms`, `:events`, `:tlog`, `:no_tlog`, `:forward`, `:quiet`), and
+  `:for_ms`, `:events`, `:tlog`, `:no_tlog`, `:forward`, `:quiet`, `:report`,
+  `:web`, `:web_bind`), and
   `:out`, `:err` (devices, default `:stdio` and `:stderr`), `:plain` (never
   the status block), `:ask` (the script's `ask/1`), `:signals` (SIGINT and
   SIGTERM stop the script, `Dolphin.CLI.Signals`) and `:sitl_extra` (more
   options of `Dolphin.SITL.start/2`).
+
+  With `:report`, the flight report (`Dolphin.Report`) of the run's
+  telemetry log and events file is written when the run has ended, and
+  where is said on `:out` (a report that cannot be made is said on `:err`;
+  the outcome stays the run's). With `:web`, a live view (`Dolphin.Web`)
+  serves the run's page while it goes on.
 
   ## Outcomes
 
@@ -51,23 +58,65 @@ defmodule Dolphin.CLI.Run do
     origin = Dolphin.Clock.now_ms()
     Process.put(@cleanup, [])
     catch_signals(opts)
+    opts = Keyword.put(opts, :tlog, Vehicles.tlog_path(opts, script.file))
 
-    try do
-      opts = Keyword.put(opts, :tlog, Vehicles.tlog_path(opts, script.file))
-
-      with {:ok, renderer} <- start_outputs(opts, origin, out),
-           :ok <- Vehicles.start(opts, out, &defer(&1, :vehicles)) do
-        {result, signal} = run_until_signal(script, opts, renderer)
-        # The log and the status block end before the summary is printed below them.
+    outcome =
+      try do
+        with {:ok, renderer} <- start_outputs(opts, origin, out),
+             :ok <- start_web(opts, origin, out, script),
+             :ok <- Vehicles.start(opts, out, &defer(&1, :vehicles)) do
+          {result, signal} = run_until_signal(script, opts, renderer)
+          # The log and the status block end before the summary is printed below them.
+          stop_outputs()
+          summary(result, Keyword.put(opts, :signal, signal), out, err)
+        end
+      after
+        # The outputs stop first (they show the run, not its teardown); then
+        # the last started is the first stopped: the simulator before its link.
         stop_outputs()
-        summary(result, Keyword.put(opts, :signal, signal), out, err)
+        Enum.each(Process.delete(@cleanup), fn {_, fun} -> fun.() end)
+        Dolphin.Clock.set_speedup(previous_speedup)
       end
-    after
-      # The outputs stop first (they show the run, not its teardown); then
-      # the last started is the first stopped: the simulator before its link.
-      stop_outputs()
-      Enum.each(Process.delete(@cleanup), fn {_, fun} -> fun.() end)
-      Dolphin.Clock.set_speedup(previous_speedup)
+
+    write_report(outcome, script, opts, out, err)
+    outcome
+  end
+
+  # --report: once the vehicles and their links are stopped (the telemetry
+  # log is whole) and the events file is closed. A report that cannot be
+  # made is said on `err`; the run's outcome stays what it was.
+  defp write_report({:error, _}, _script, _opts, _out, _err), do: :ok
+
+  defp write_report(_outcome, script, opts, out, err) do
+    if path = opts[:report] do
+      case Dolphin.Report.write(opts[:tlog], opts[:events], path, title: "Flight report: " <> Path.basename(script.file)) do
+        {:ok, summary} -> IO.puts(out, "flight report: #{Path.expand(path)} (#{length(summary.vehicles)} vehicle(s), #{Format.seconds(round(summary.span_s * 1000))} of clock time)")
+        {:error, e} -> IO.puts(err, "no flight report: #{Exception.message(e)}")
+      end
+    end
+
+    :ok
+  end
+
+  # --web PORT: the live view (Dolphin.Web) from the start of the run to the
+  # end of its outputs; the run's process owns it.
+  defp start_web(opts, origin, out, script) do
+    case opts[:web] do
+      nil ->
+        :ok
+
+      port ->
+        bind = opts[:web_bind] || "127.0.0.1"
+
+        case Dolphin.Web.start(port: port, bind: bind, title: "Live: " <> Path.basename(script.file), tlog: opts[:tlog], origin_ms: origin, owner: self()) do
+          {:ok, web} ->
+            defer(fn -> Dolphin.Web.stop(web) end, :output)
+            unless opts[:quiet], do: IO.puts(out, "live view: #{Dolphin.Web.url(web)}")
+            :ok
+
+          {:error, e} ->
+            {:error, %StartError{option: "--web #{port}", reason: e}}
+        end
     end
   end
 

@@ -42,6 +42,15 @@ defmodule Mix.Tasks.Dolphin.Run do
     * `--no-tlog` — no telemetry log
     * `--forward ENDPOINT` — copy all traffic to a `udpout` endpoint (QGroundControl); repeatable
     * `--quiet` — print only the script's messages, errors and the summary
+    * `--report FILE` — when the run has ended, write its flight report
+      (`Dolphin.Report`: HTML, from the run's telemetry log and its
+      `--events` file when given) to FILE, and say where; not with
+      `--no-tlog` or `--fake` (no telemetry log to make it from)
+    * `--web PORT` — serve a live view of the run (`Dolphin.Web`: the flight
+      report's page, updated as the vehicles fly) on `http://127.0.0.1:PORT/`
+      while it goes on (0: a free port, printed); read-only
+    * `--web-bind ADDRESS` — listen on ADDRESS instead of 127.0.0.1
+      (`0.0.0.0`: from other machines too)
 
   ## Output
 
@@ -67,6 +76,16 @@ defmodule Mix.Tasks.Dolphin.Run do
   are used (`config :dolphin, links: [...]`), or if there are none the ground
   station listens on `Dolphin.Link.default_endpoint/0` (`udpin:0.0.0.0:14550`).
 
+  ## Watching a run in the browser
+
+      mix dolphin.run examples/two_vehicles.exs --sim 2 --speedup 5 --web 8080 --report run.html
+
+  prints `live view: http://127.0.0.1:8080/`: the flight report's page
+  (`Dolphin.Report`), kept up to date while the script runs (`Dolphin.Web`:
+  vehicles moving on the map, task bars growing, what each vehicle does
+  now). When the run ends, `--report` writes the report of the whole run
+  and prints where.
+
   ## Interrupting a run
 
   Ctrl-C (SIGINT) or SIGTERM stops the script the way `--for` does: running
@@ -82,9 +101,9 @@ defmodule Mix.Tasks.Dolphin.Run do
   0 — the script completed (or `--for` ended it); 1 — the script failed
   (could not compile, a task failed, `halt`, a pick timed out: the message
   says what, where and why) or its vehicles could not be started (a port in
-  use, a SITL binary missing); 2 — bad usage (an unknown option, a bad
-  endpoint, no such script); 130 — Ctrl-C (SIGINT) stopped
-  it; 143 — SIGTERM stopped it (128 + the signal's number, as a shell says).
+  use, a SITL binary missing, the `--web` port in use); 2 — bad usage (an
+  unknown option, a bad endpoint, no such script); 130 — Ctrl-C (SIGINT)
+  stopped it; 143 — SIGTERM stopped it (128 + the signal's number, as a shell says).
   """
 
   use Mix.Task
@@ -105,10 +124,13 @@ defmodule Mix.Tasks.Dolphin.Run do
     tlog: :string,
     no_tlog: :boolean,
     forward: :keep,
-    quiet: :boolean
+    quiet: :boolean,
+    report: :string,
+    web: :integer,
+    web_bind: :string
   ]
 
-  @usage "usage: mix dolphin.run SCRIPT [--connect ENDPOINT]... [--sim N | --sitl N | --fake N] [--speedup K] [--for DURATION] [--events FILE] [--tlog FILE | --no-tlog] [--forward ENDPOINT]... [--quiet]"
+  @usage "usage: mix dolphin.run SCRIPT [--connect ENDPOINT]... [--sim N | --sitl N | --fake N] [--speedup K] [--for DURATION] [--events FILE] [--tlog FILE | --no-tlog] [--forward ENDPOINT]... [--quiet] [--report FILE] [--web PORT [--web-bind ADDRESS]]"
 
   @impl Mix.Task
   def run(argv) do
@@ -204,6 +226,8 @@ defmodule Mix.Tasks.Dolphin.Run do
              :ok <- exclusive(opts),
              :ok <- speedup(opts[:speedup]),
              :ok <- endpoints(opts),
+             :ok <- web(opts),
+             :ok <- report(opts),
              {:ok, for_ms} <- duration(opts[:for]),
              :ok <- readable(file) do
           {:ok, file, Keyword.put(opts, :for_ms, for_ms)}
@@ -246,6 +270,24 @@ defmodule Mix.Tasks.Dolphin.Run do
         {:error, why} -> {:halt, usage_error("--#{key} #{ep}: #{if is_exception(why), do: Exception.message(why), else: why}")}
       end
     end)
+  end
+
+  defp web(opts) do
+    cond do
+      opts[:web] && opts[:web] not in 0..65_535 -> usage_error("--web takes a TCP port (0..65535), got #{opts[:web]}")
+      opts[:web_bind] && !opts[:web] -> usage_error("--web-bind goes with --web PORT")
+      opts[:web_bind] && match?({:error, _}, :inet.parse_strict_address(String.to_charlist(opts[:web_bind]))) -> usage_error("--web-bind takes an IP address, got #{inspect(opts[:web_bind])}")
+      true -> :ok
+    end
+  end
+
+  defp report(opts) do
+    cond do
+      !opts[:report] -> :ok
+      opts[:no_tlog] -> usage_error("--report is made from the run's telemetry log: not with --no-tlog")
+      opts[:fake] -> usage_error("--report is made from the run's telemetry log, and fake vehicles write none: not with --fake")
+      true -> :ok
+    end
   end
 
   defp speedup(nil), do: :ok

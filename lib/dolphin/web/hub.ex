@@ -1,0 +1,199 @@
+defmodule Dolphin.Web.Hub do
+  @moduledoc false
+  # One live view's server process: owns the listening socket (its acceptor
+  # is linked: shared fate), the bounded model of the run (Web.Live) fed by
+  # the vehicles' views and the events, and the list of connected clients,
+  # to each of which it sends what changed since what that client last got.
+
+  use GenServer
+
+  alias Dolphin.{Clock, PubSub, Telemetry, Vehicles}
+  alias Dolphin.Web.{Connection, Error, Live}
+
+  # How often (real milliseconds) clients are sent what changed: a page
+  # redrawn faster than this would only cost the browser. A page that takes
+  # long to draw (a long run, near the model's bounds: ~150 ms) is drawn
+  # less often, so that the view takes at most a fifth of a core from the
+  # fleet: the next frame waits this many times the last drawing's time.
+  @frame_ms 250
+  @frame_cost 4
+  # A client with more frames than this waiting in its connection's mailbox
+  # is not sent more: it is behind (a slow network, a stalled browser). What
+  # it missed it gets whole once it has caught up, from what it was last sent.
+  @max_queue 4
+  # Clients at once; more are answered 503.
+  @max_clients 100
+
+  @doc false
+  def start(opts), do: GenServer.start(__MODULE__, opts, Keyword.take(opts, [:name]))
+
+  @doc false
+  # The page now (binary).
+  @spec page(pid()) :: binary()
+  def page(hub), do: GenServer.call(hub, :page, 15_000)
+
+  @doc false
+  # Registers the calling connection; the whole state to send it first.
+  @spec subscribe(pid()) :: {:ok, [{String.t(), binary()}]} | {:error, :busy}
+  def subscribe(hub), do: GenServer.call(hub, {:subscribe, self()}, 15_000)
+
+  @impl true
+  def init(opts) do
+    port = Keyword.fetch!(opts, :port)
+    bind = Keyword.get(opts, :bind, "127.0.0.1")
+
+    with {:ok, ip} <- address(bind, port),
+         {:ok, listen} <- listen(ip, port, bind) do
+      {:ok, actual} = :inet.port(listen)
+      hub = self()
+      spawn_link(fn -> accept(listen, hub) end)
+      if owner = opts[:owner], do: Process.monitor(owner)
+      PubSub.subscribe(:vehicles)
+      Telemetry.subscribe()
+      origin = Keyword.get(opts, :origin_ms, Clock.now_ms())
+      started_at = DateTime.add(DateTime.utc_now(), -Clock.to_real_ms(max(Clock.now_ms() - origin, 0)), :millisecond)
+      live = Live.new(origin, [started_at: started_at] ++ Keyword.take(opts, [:title, :tlog]))
+      live = opts |> Keyword.get(:history, []) |> Enum.reduce(live, &Live.event(&2, &1))
+      s = %{listen: listen, port: actual, bind: bind, owner: opts[:owner], live: live, watched: MapSet.new(), dirty: true, page: nil, pieces: [], clients: %{}}
+      Process.send_after(self(), :frame, @frame_ms)
+      {:ok, Enum.reduce(Vehicles.list(), s, &watch/2)}
+    else
+      {:error, %Error{} = e} -> {:stop, {:shutdown, e}}
+    end
+  end
+
+  defp address(bind, port) when is_binary(bind) do
+    case :inet.parse_strict_address(String.to_charlist(bind)) do
+      {:ok, ip} -> {:ok, ip}
+      {:error, _} -> {:error, %Error{reason: :bad_address, address: bind, port: port}}
+    end
+  end
+
+  defp listen(ip, port, bind) do
+    family = if tuple_size(ip) == 8, do: [:inet6], else: []
+    # send_timeout: a client that stops reading costs its own connection
+    # (closed after this), never the hub, which only ever casts to it.
+    options = family ++ [:binary, ip: ip, packet: :http_bin, active: false, reuseaddr: true, backlog: 128, send_timeout: 5_000, send_timeout_close: true]
+
+    case :gen_tcp.listen(port, options) do
+      {:ok, listen} -> {:ok, listen}
+      {:error, :eaddrinuse} -> {:error, %Error{reason: :address_in_use, address: bind, port: port}}
+      {:error, :eaddrnotavail} -> {:error, %Error{reason: :address_not_available, address: bind, port: port}}
+      {:error, :eacces} -> {:error, %Error{reason: :permission_denied, address: bind, port: port}}
+      {:error, why} -> {:error, %Error{reason: why, address: bind, port: port}}
+    end
+  end
+
+  # The acceptor: each client gets a process of its own. It ends when the
+  # hub's socket closes (the hub stopped).
+  defp accept(listen, hub) do
+    case :gen_tcp.accept(listen) do
+      {:ok, socket} ->
+        pid = Connection.start(hub)
+        if :gen_tcp.controlling_process(socket, pid) == :ok, do: send(pid, {:go, socket}), else: :gen_tcp.close(socket)
+        accept(listen, hub)
+
+      {:error, :closed} ->
+        :ok
+
+      {:error, _too_many_files_or_such} ->
+        # Out of descriptors: wait for some to be freed rather than spin.
+        Process.sleep(100)
+        accept(listen, hub)
+    end
+  end
+
+  # Views of a vehicle from now on (once: a vehicle forgotten and found
+  # again is discovered again), and the one it has now.
+  defp watch(id, s) do
+    if MapSet.member?(s.watched, id) do
+      s
+    else
+      Vehicles.subscribe_view(id)
+
+      case Vehicles.view(id) do
+        {:ok, view} -> %{s | live: Live.view(s.live, view, Clock.now_ms()), watched: MapSet.put(s.watched, id), dirty: true}
+        {:error, :unknown_vehicle} -> %{s | watched: MapSet.put(s.watched, id)}
+      end
+    end
+  end
+
+  @impl true
+  def handle_call(:page, _from, s) do
+    s = render(s)
+    {:reply, s.page, s}
+  end
+
+  def handle_call(:port, _from, s), do: {:reply, s.port, s}
+  def handle_call(:where, _from, s), do: {:reply, {s.bind, s.port}, s}
+
+  def handle_call({:subscribe, pid}, _from, s) do
+    if map_size(s.clients) >= @max_clients do
+      {:reply, {:error, :busy}, s}
+    else
+      s = render(s)
+      Process.monitor(pid)
+      {:reply, {:ok, s.pieces}, %{s | clients: Map.put(s.clients, pid, Map.new(s.pieces))}}
+    end
+  end
+
+  @impl true
+  def handle_info({:dolphin, :vehicles, {:vehicle_discovered, id}}, s), do: {:noreply, watch(id, s)}
+
+  def handle_info({:dolphin, {:vehicle_view, _id}, {:view, view}}, s) do
+    {:noreply, %{s | live: Live.view(s.live, view, Clock.now_ms()), dirty: true}}
+  end
+
+  def handle_info({:dolphin, :events, event}, s), do: {:noreply, %{s | live: Live.event(s.live, event), dirty: true}}
+
+  def handle_info(:frame, %{dirty: true} = s) when s.clients != %{} do
+    started = System.monotonic_time(:millisecond)
+    s = push(render(s))
+    Process.send_after(self(), :frame, max(@frame_ms, @frame_cost * (System.monotonic_time(:millisecond) - started)))
+    {:noreply, s}
+  end
+
+  def handle_info(:frame, s) do
+    Process.send_after(self(), :frame, @frame_ms)
+    {:noreply, s}
+  end
+
+  def handle_info({:DOWN, _ref, :process, pid, _why}, %{owner: pid} = s), do: {:stop, :normal, s}
+  def handle_info({:DOWN, _ref, :process, pid, _why}, s), do: {:noreply, %{s | clients: Map.delete(s.clients, pid)}}
+
+  def handle_info(_other, s), do: {:noreply, s}
+
+  @impl true
+  def terminate(_reason, s), do: :gen_tcp.close(s.listen)
+
+  defp render(%{dirty: false, page: page} = s) when page != nil, do: s
+
+  defp render(s) do
+    page = Live.page(s.live, Clock.now_ms())
+    %{s | page: page, pieces: Live.pieces(page), dirty: false}
+  end
+
+  # Each client gets the pieces that differ from what it was last sent; one
+  # that is behind gets nothing now, and all it missed at a later frame.
+  defp push(s) do
+    clients =
+      Map.new(s.clients, fn {pid, sent} ->
+        case Process.info(pid, :message_queue_len) do
+          {:message_queue_len, n} when n <= @max_queue ->
+            case for({id, html} <- s.pieces, Map.get(sent, id) != html, do: {id, html}) do
+              [] ->
+                {pid, sent}
+
+              changed ->
+                send(pid, {:web_frame, changed})
+                {pid, Map.merge(sent, Map.new(changed))}
+            end
+
+          _behind_or_gone ->
+            {pid, sent}
+        end
+      end)
+
+    %{s | clients: clients}
+  end
+end

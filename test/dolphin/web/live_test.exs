@@ -1,0 +1,75 @@
+defmodule Dolphin.Web.LiveTest do
+  use ExUnit.Case, async: true
+
+  alias Dolphin.Vehicles.View
+  alias Dolphin.Web.Live
+
+  defp view(id, lat, opts \\ []) do
+    struct(%View{id: id, type: :uav, battery: 0.9, position: Dolphin.Geo.location(lat, -7.375, 820), relative_altitude: 15.0, mode: :guided, armed?: true}, opts)
+  end
+
+  # The vehicle flies north one position per clock second.
+  defp fly(live, id, n, from \\ 0) do
+    Enum.reduce(from..(from + n - 1), live, fn i, live -> Live.view(live, view(id, 40.44 + i / 100_000), i * 1000) end)
+  end
+
+  test "keeps a bounded track: past its bound, every other position, the first and the last kept" do
+    live = fly(Live.new(0), 1, 10_000)
+    positions = live.vehicles[1].positions
+    assert length(positions) <= 4_000
+    assert live.counts[1] == length(positions)
+    # Newest first (times in clock microseconds, as a log's): the last position seen and the very first are both there.
+    assert {9_999_000_000, lat_last, _, _, _, _} = hd(positions)
+    assert lat_last == round((40.44 + 9_999 / 100_000) * 1.0e7)
+    assert {0, _, _, _, _, _} = List.last(positions)
+  end
+
+  test "a view that does not move adds no position; battery, mode and arming only when they change" do
+    live = Live.new(0) |> Live.view(view(1, 40.44), 1000) |> Live.view(view(1, 40.44), 2000) |> Live.view(view(1, 40.44, battery: 0.5, mode: :rtl), 3000)
+    v = live.vehicles[1]
+    assert length(v.positions) == 1
+    assert [{3_000_000, 50}, {1_000_000, 90}] = v.battery
+    assert [{3_000_000, :rtl}, {1_000_000, :guided}] = v.modes
+    assert [{1_000_000, true}] = v.arming
+  end
+
+  test "keeps the last events, and the task each vehicle flies now" do
+    live = Enum.reduce(1..5_100, Live.new(0), fn i, live -> Live.event(live, %{event: :message, at_ms: i, text: "m#{i}", run: 1}) end)
+    assert live.n_events == 5_000
+    assert %{"text" => "m101"} = :queue.head(live.events)
+
+    live = Live.event(live, %{event: :task_started, at_ms: 6000, run: 1, task_id: 7, parent_id: nil, kind: :mission, name: "North", vehicle: 1})
+    assert live.running == %{1 => {7, "mission", "North"}}
+    live = Live.event(live, %{event: :task_finished, at_ms: 7000, run: 1, task_id: 7, result: :done})
+    assert live.running == %{}
+  end
+
+  test "the page is the report's, with the vehicles now and a dot where each one is; its pieces are its changing parts" do
+    live =
+      Live.new(0, title: "Live <test>", tlog: "logs/run.tlog", started_at: ~U[2026-01-02 03:04:05Z])
+      |> fly(1, 20)
+      |> fly(2, 10)
+      |> Live.event(%{event: :task_started, at_ms: 5000, run: 1, task_id: 3, parent_id: nil, kind: :mission, name: "North", vehicle: 1})
+
+    page = Live.page(live, 30_000)
+    assert page =~ "<h1>Live &lt;test&gt;</h1>"
+    assert page =~ "started 2026-01-02 03:04:05Z"
+    assert page =~ "the telemetry log is written to <code"
+    assert page =~ ~s(<tr class="v-1 live-vehicle" data-vehicle="1" data-lat="40.4401900")
+    assert page =~ "3 mission “North”"
+    assert page =~ ~s(<circle class="now v-1" data-vehicle="1")
+    assert page =~ ~s(<circle class="now v-2" data-vehicle="2")
+    assert page =~ ~s(data-name="North" data-kind="mission" data-result="unfinished")
+
+    pieces = Live.pieces(page)
+    assert Enum.map(pieces, &elem(&1, 0)) == ~w(when legend live-status summary map-section timeline-section plots)
+    # Each piece is what its element holds: put back in place, it is the page again.
+    for {id, html} <- pieces, id not in ["when", "legend"], do: assert(page =~ ~s(<section id="#{id}">) <> html <> "</section>")
+  end
+
+  test "a page with no vehicle yet" do
+    page = Live.page(Live.new(0), 0)
+    assert page =~ ~s(<section id="live-status">)
+    assert length(Live.pieces(page)) == 7
+  end
+end
