@@ -13,7 +13,8 @@ defmodule Dolphin.Mission.Resume do
     * then it flies the items from `resume_seq` on, as they were: the first
       navigation item after the one reached (a take-off excepted). The
       commands in between (camera, speed) ran as the first vehicle left the
-      item it reached: photos are not taken again;
+      item it reached: photos are not taken again. With nothing reached,
+      everything after the mission's take-off is flown;
     * a survey pass half flown is flown again whole: when the first item
       left ends a pass of `survey_area`, the new vehicle starts at that
       pass's beginning. A survey thus goes on with the passes not flown.
@@ -50,7 +51,7 @@ defmodule Dolphin.Mission.Resume do
     items = Mission.to_items(mission)
 
     with :ok <- no_jumps(mission, items),
-         {:ok, seq} <- resume_seq(mission, items, reached || 0) do
+         {:ok, seq} <- resume_seq(mission, items, reached) do
       left = Enum.filter(items, &(&1.seq >= seq))
       takeoff = Enum.find(items, &(&1.command == @takeoff)) || Enum.find(left, &positioned?/1)
       height = if takeoff, do: takeoff.z, else: at.h
@@ -72,6 +73,14 @@ defmodule Dolphin.Mission.Resume do
     if Enum.any?(items, &(&1.command == jump)),
       do: {:error, "mission #{inspect(mission.name)} has jumps (DO_JUMP): it cannot be resumed on another vehicle"},
       else: :ok
+  end
+
+  # Nothing reached: the take-off was not even done, nor what follows it.
+  defp resume_seq(mission, items, nil) do
+    case Enum.find(items, &(&1.seq > 0 and &1.command != @takeoff)) do
+      nil -> {:error, "mission #{inspect(mission.name)} has nothing to fly but its take-off"}
+      %{seq: seq} -> {:ok, seq}
+    end
   end
 
   defp resume_seq(mission, items, reached) do
