@@ -80,7 +80,8 @@ defmodule Dolphin.Mission.ReassignTest do
 
     # Two copters, picked; returns the first one's home.
     defp start_fleet(port) do
-      {:ok, ids} = Sim.start(gcs: port, count: 2, speedup: @speedup, ekf_ready_ms: 5_000)
+      # The battery failsafe on (RTL when low), as a fleet would fly.
+      {:ok, ids} = Sim.start(gcs: port, count: 2, speedup: @speedup, ekf_ready_ms: 5_000, battery_failsafe: :rtl)
       Wait.until(fn -> Enum.all?(ids, &match?({:ok, %{home: %{}}}, Vehicles.state(&1))) end, 1_500, fn -> "homes of #{inspect(ids)}" end)
       for id <- ids, do: {:ok, _} = Dolphin.Fleet.pick(Dolphin.Fleet, self(), id: id)
       {:ok, %{home: h}} = Vehicles.state(1)
@@ -108,6 +109,7 @@ defmodule Dolphin.Mission.ReassignTest do
       case how do
         :crash -> :ok = Sim.crash(1)
         :silence -> :ok = Sim.set_faults(1, silence: true)
+        :battery -> :ok = Sim.set_battery(1, 0.15)
       end
 
       result = Engine.await(run, 120_000)
@@ -169,6 +171,15 @@ defmodule Dolphin.Mission.ReassignTest do
         end),
         numtests: 10
       )
+    end
+
+    test "a battery failsafe (the copter leaves AUTO for RTL) hands the survey over too", %{port: port} do
+      {result, events} = fly_and_kill(port, 4, :battery)
+      assert {:ok, :done} = result
+      covered_once!(4, events)
+      # The first copter went home by itself: the failure said why.
+      assert [%{reason: reason}] = for(%{event: :task_finished, vehicle: 1, result: :failed} = e <- events, do: e)
+      assert reason =~ "left AUTO for RTL"
     end
 
     test "a silenced copter heard again after its survey was taken over is held, not sent back into it", %{port: port} do
