@@ -27,9 +27,10 @@ defmodule Dolphin.Mission.Resume do
       iex> alias Dolphin.Mission.Command, as: C
       iex> home = Dolphin.Geo.location(40.444233, -7.375234, 820)
       iex> m = Mission.new("Survey", [C.home(home), C.take_off(Dolphin.Geo.location(40.444233, -7.375234, 850)), C.survey_area(100, 90, 30)])
-      iex> # Items 1: take-off, 2..7: three passes (2-3, 4-5, 6-7). Item 4 reached: half of the second pass.
+      iex> # Item 1: the take-off; 2..7: three passes (2-3, 4-5, 6-7). Reached 4: the
+      iex> # second pass begun, not flown: it is flown again from 4.
       iex> {:ok, resumed, 4} = Dolphin.Mission.Resume.resume(m, 4, Dolphin.Geo.location(40.4443, -7.3753, 820))
-      iex> # Reached 4 (a pass's start): 5 ends that pass, so the pass is flown again from 4.
+      iex> # Home, the take-off, then items 4..7.
       iex> Mission.item_count(resumed)
       6
   """
