@@ -46,7 +46,9 @@ defmodule Dolphin.Engine.Reassign do
   defp candidate(leaf, ctx, run, set, failed) do
     requirements = PlatformTask.requirements(leaf)
     running = for %{vehicle: v} when v != nil <- Dolphin.Engine.tasks(), do: v
-    allowed = set && VehicleSet.ids(set)
+    allowed = if set, do: VehicleSet.ids(set)
+    # The task as the allocation describes one (Dolphin.Fleet.Allocation.leaf).
+    described = %{id: leaf.id, name: PlatformTask.label(leaf), requirements: requirements, allowed: allowed, path: []}
 
     found =
       for %{vehicle: view, picked_by: by, busy: busy} <- Dolphin.Fleet.vehicles(ctx.fleet),
@@ -54,7 +56,7 @@ defmodule Dolphin.Engine.Reassign do
           view.connected?,
           (by == ctx.owner and busy == nil) or busy == run,
           view.id not in running,
-          Allocation.matches?(%{requirements: requirements, allowed: allowed}, view),
+          Allocation.matches?(described, view),
           do: view.id
 
     case Enum.sort(found) do
