@@ -182,6 +182,25 @@ defmodule Dolphin.Mission.ReassignTest do
       assert reason =~ "left AUTO for RTL"
     end
 
+    test "a copter that will not arm (its position estimate never ready) hands the survey over before it flies", %{port: port} do
+      # Vehicle 1 never has a position estimate (nor a home): it is never ready to arm.
+      {:ok, [1]} = Sim.start(gcs: port, sysids: [1], speedup: @speedup, ekf_ready_ms: 100_000_000, home: Dolphin.Geo.location(40.4446, -7.3752, 820))
+      {:ok, [2]} = Sim.start(gcs: port, sysids: [2], speedup: @speedup, ekf_ready_ms: 5_000)
+      Wait.until(fn -> match?({:ok, _}, Vehicles.state(1)) and match?({:ok, %{home: %{}}}, Vehicles.state(2)) end, 1_500, fn -> "vehicles 1 and 2" end)
+      for id <- [1, 2], do: {:ok, _} = Dolphin.Fleet.pick(Dolphin.Fleet, self(), id: id)
+      {:ok, %{home: h}} = Vehicles.state(2)
+      home = Dolphin.Geo.location(h.lat, h.lon, h.alt)
+      Telemetry.subscribe()
+      assert {:ok, :done} = Engine.run(Engine.reassign(Engine.on(plain_survey(home), [1]), from: [1, 2]))
+      events = flush_events()
+      # Nothing was reached: vehicle 2 takes off, then flies everything after the take-off (items 2..8).
+      assert [%{from: 1, to: 2, resume_seq: 2}] = for(%{event: :task_reassigned} = e <- events, do: e)
+      assert [%{reason: reason}] = for(%{event: :task_finished, vehicle: 1, result: :failed} = e <- events, do: e)
+      assert reason =~ "arm"
+      refute Enum.any?(events, &match?(%{event: :mission_item_reached, vehicle: 1}, &1))
+      assert Enum.sort(for %{event: :mission_item_reached, vehicle: 2, seq: s} <- events, do: s) == Enum.to_list(1..8)
+    end
+
     test "a silenced copter heard again after its survey was taken over is held, not sent back into it", %{port: port} do
       {result, events} = fly_and_kill(port, 3, :silence)
       assert {:ok, :done} = result
