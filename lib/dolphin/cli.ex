@@ -39,7 +39,9 @@ defmodule Dolphin.CLI do
     :disarmed,
     :mission_uploaded,
     :mission_item_reached,
-    :condition_met
+    :condition_met,
+    :task_reassigned,
+    :vehicle_returned
   ]
 
   @doc """
@@ -109,6 +111,11 @@ defmodule Dolphin.CLI do
   # "stopped (the run's time (--for) is over)": the result is not said twice.
   def event_text(%{event: :task_finished} = e),
     do: "task #{e.task_id} #{e.kind} #{inspect(cut(e.name, 60))}#{on_vehicle(e)}: #{e.result}" <> because(e.reason)
+
+  def event_text(%{event: :task_reassigned} = e), do: "task #{e.task_id}: vehicle #{e.from} failed it; vehicle #{e.to} takes it over from item #{e.resume_seq}"
+
+  def event_text(%{event: :vehicle_returned} = e),
+    do: "vehicle #{e.vehicle} is back, its task #{e.task_id} taken over: " <> if(e.held, do: "holding", else: "could not be made to hold")
 
   def event_text(%{event: :condition_met} = e),
     do: "task #{e.task_id}: #{e.condition} holds" <> if(Map.get(e, :branch), do: " (branch #{e.branch})", else: "")

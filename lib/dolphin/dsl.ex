@@ -15,7 +15,7 @@ defmodule Dolphin.DSL do
   | `union/2`, `difference/2`, `intersection/2`, `filter/2` | `Dolphin.Fleet.VehicleSet` |
   | `battery(v)`, `position(v)`, `altitude(v)`, `relative_altitude(v)`, `mode(v)`, `armed?(v)`, `connected?(v)`, `mission_progress(v)` | `Dolphin.Engine.Watcher.vehicle/2` |
   | `set_connection_timeout(t)`, `set_connection_timeout(set, t)` | `Dolphin.Script.Statements.set_connection_timeout/1,2` |
-  | `idle(d)`, `on(t, set)`, `during(d, t)`, `watch(t, on_error: h)`, `named(t, name)`, `t1 >>> t2`, `t1 \\|\\|\\| t2` | `Dolphin.Engine` |
+  | `idle(d)`, `on(t, set)`, `during(d, t)`, `watch(t, on_error: h)`, `reassign(t)`, `reassign(t, from: set)`, `named(t, name)`, `t1 >>> t2`, `t1 \\|\\|\\| t2` | `Dolphin.Engine` |
   | `action do ... end`, `condition(c)`, `until(t, c)`, `wait_for(c)`, `wait_for(c, then: t)`, `one_of do c -> t ... end`, `all_of do ... end` | `Dolphin.Engine` with a `Dolphin.Engine.Cond` |
   | `execute(t)`, `execute(%{v1 => t1, _: t2})`, `execute action do ... end` | `Dolphin.Script.Statements.execute/1` |
   | `forever do ... end`, `forever(state, fn s -> ... end)`, `repeat(n) do ... end` | `Dolphin.Script.Statements.forever/1,2`, `Dolphin.Script.Statements.repeat/2` |
@@ -264,6 +264,21 @@ defmodule Dolphin.DSL do
       end)
   """
   defdelegate watch(t, opts), to: Engine
+
+  @doc """
+  `t` whose missions are taken over by another vehicle when theirs is lost
+  or fails them (a battery failsafe, a refused arm): the mission is resumed
+  by the first free vehicle of `from:` (default: the vehicles the script
+  picked) that meets its requirements, from the first item not reached — a
+  take-off where it stands, then the rest; a survey goes on with the passes
+  not flown. Same as `watch(t, on_error: :reassign, from: set)`; see
+  `Dolphin.Engine.Watch`.
+
+      team = pick(count: 3, type: :uav)
+      execute reassign(survey_north, from: team) ||| reassign(survey_south, from: team)
+  """
+  defdelegate reassign(t), to: Engine
+  defdelegate reassign(t, opts), to: Engine
 
   @doc """
   `t` with a name, shown in events, errors and the console.

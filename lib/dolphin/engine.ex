@@ -156,15 +156,37 @@ defmodule Dolphin.Engine do
   @spec all_of([{Cond.t() | (() -> term()), term()}], keyword()) :: AllOf.t()
   def all_of(branches, opts \\ []), do: build(%AllOf{branches: branches!(branches, :all_of)}, opts)
 
-  @doc "`t`, whose failure is handled by `on_error:` (`:ignore`, `:propagate` or a function of the failure)."
+  @doc """
+  `t`, whose failure is handled by `on_error:` (`:ignore`, `:propagate`,
+  `:reassign` or a function of the failure); with `:reassign`, `from:` (a
+  vehicle set or ids) limits the vehicles that may take a task over. See
+  `Dolphin.Engine.Watch`.
+  """
   @spec watch(term(), keyword()) :: Watch.t()
   def watch(task, opts \\ []) do
     {on_error, opts} = Keyword.pop(opts, :on_error, :propagate)
+    {from, opts} = Keyword.pop(opts, :from)
 
-    unless on_error in [:ignore, :propagate] or is_function(on_error, 1),
-      do: raise(ArgumentError, "on_error must be :ignore, :propagate or a function of one argument, got: #{inspect(on_error)}")
+    unless on_error in [:ignore, :propagate, :reassign] or is_function(on_error, 1),
+      do: raise(ArgumentError, "on_error must be :ignore, :propagate, :reassign or a function of one argument, got: #{inspect(on_error)}")
 
-    build(%Watch{task: Task.new!(task), on_error: on_error}, opts)
+    if from != nil and on_error != :reassign,
+      do: raise(ArgumentError, "watch: from: goes with on_error: :reassign, got on_error: #{inspect(on_error)}")
+
+    build(%Watch{task: Task.new!(task), on_error: on_error, from: from && Dolphin.Fleet.VehicleSet.new(from)}, opts)
+  end
+
+  @doc """
+  `watch(t, on_error: :reassign, from: set)`: a mission of `t` whose vehicle
+  is lost (or fails it: a failsafe, a refused arm) is resumed by another
+  vehicle of `set` (default: any the script picked). See `Dolphin.Engine.Watch`.
+  """
+  @spec reassign(term(), keyword()) :: Watch.t()
+  def reassign(task, opts \\ []) do
+    unless Keyword.keyword?(opts) and Keyword.keys(opts) -- [:from, :name, :meta] == [],
+      do: raise(ArgumentError, "reassign takes from: (a vehicle set or ids), got: #{inspect(opts)}")
+
+    watch(task, [on_error: :reassign] ++ opts)
   end
 
   @doc "A task of a platform (see `Dolphin.Engine.Platform`); `spec` is the platform's description of it."

@@ -13,7 +13,7 @@ defmodule Dolphin.CLITest do
         vehicle: 1, type: :uav, mode: :guided, seq: 2, name: "Survey", items: 5, duration_ms: 30, retransmissions: 0,
         vehicles: [1, 2], requirement: "1 vehicle", reason: "why", run: 7, allocation: %{"8" => 1}, task_id: 8,
         parent_id: nil, kind: :mission, progress: %{current: 1, total: 3}, result: :done, condition: "battery(v) < 0.3",
-        branch: nil, text: "hello", key: :k, value: 1, script: "x.exs"
+        branch: nil, text: "hello", key: :k, value: 1, script: "x.exs", from: 1, to: 3, resume_seq: 6, held: true
       }
 
       for {name, fields} <- Dolphin.Telemetry.catalogue() do
@@ -33,6 +33,9 @@ defmodule Dolphin.CLITest do
                ~s[task 4 mission "Survey": stopped (the script halted)]
 
       assert CLI.event_text(%{event: :mode_changed, vehicle: 2, mode: :rtl}) == "vehicle 2 mode RTL"
+
+      assert CLI.event_text(%{event: :task_reassigned, run: 7, task_id: 5, from: 1, to: 3, resume_seq: 6}) ==
+               "task 5: vehicle 1 failed it; vehicle 3 takes it over from item 6"
       assert CLI.event_text(%{event: :allocated, run: 7, allocation: %{"8" => 1, "9" => 2}}) == "run 7: task 8 on vehicle 1, task 9 on vehicle 2"
     end
 

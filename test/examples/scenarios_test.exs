@@ -90,6 +90,30 @@ defmodule Dolphin.Examples.ScenariosTest do
     assert [%{"items" => 42} | _] = events(all, "mission_uploaded") |> Enum.filter(&(&1["name"] == "Survey Area 1"))
   end
 
+  test "resilient_survey.exs: the north copter destroyed half-way, the one standing by flies the passes not flown, each once", %{tmp_dir: dir} do
+    {code, output, all} = run_example(dir, "resilient_survey", 3)
+    assert code == 0, output
+    assert output =~ "both surveys complete"
+
+    started = fn name -> all |> events("task_started") |> Enum.filter(&(&1["kind"] == "mission" and &1["name"] == name)) end
+    [%{"vehicle" => north}, %{"vehicle" => standby}] = started.("Survey North")
+    [%{"vehicle" => south}] = started.("Survey South")
+    assert [%{"from" => ^north, "to" => ^standby, "resume_seq" => resume}] = events(all, "task_reassigned")
+    assert standby not in [north, south]
+    assert [%{"vehicle" => ^standby}] = tasks(all, "done", "Survey North")
+    assert [%{"vehicle" => ^south}] = tasks(all, "done", "Survey South")
+
+    # Survey North's items: 1 take-off, 2..13 six passes, 14 the landing. The
+    # standby's item s (from 2, after its take-off) is the survey's s - 2 + resume.
+    reached = fn v -> for %{"event" => "mission_item_reached", "vehicle" => ^v, "seq" => s} <- all, do: s end
+    first = MapSet.new(reached.(north))
+    second = MapSet.new(for s <- reached.(standby), s >= 2, do: s - 2 + resume)
+
+    for a <- 2..12//2 do
+      assert Enum.count([first, second], &(a in &1 and (a + 1) in &1)) == 1, "pass #{a}-#{a + 1}: #{inspect({first, resume, second})}"
+    end
+  end
+
   # The areas of examples/relay_continuous.exs: 300 m north and south of the
   # base, watched at 870 m (50 m up) circling with a 30 m radius.
   @relay_areas [

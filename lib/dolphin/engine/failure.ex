@@ -14,12 +14,26 @@ defmodule Dolphin.Engine.Failure do
   `{:condition_error, source, exception}`, `{:vehicle_lost, id}`,
   `{:platform_exited, reason}`, `{:stop_timeout, ms}`, `{:stop_failed, reason}`,
   `{:handler_failed, reason}`, `{:crashed, reason}`, a
-  `Dolphin.Fleet.AllocationError`; platforms give their own.
+  `Dolphin.Fleet.AllocationError`, `{:not_reassigned, reason, why}` (a
+  `reassign` that found no vehicle to take the task over); platforms give
+  their own, `{:vehicle_fault, text}` for a failure the vehicle caused (a
+  failsafe, a refused arm: `reassign` takes those over).
+
+  `progress` is the last progress a platform task reported before it failed
+  (nil if none): where another vehicle may take it over.
   """
 
-  defstruct task_id: nil, kind: nil, name: nil, vehicle: nil, meta: %{}, reason: nil
+  defstruct task_id: nil, kind: nil, name: nil, vehicle: nil, meta: %{}, reason: nil, progress: nil
 
-  @type t :: %__MODULE__{task_id: integer() | nil, kind: atom(), name: String.t() | nil, vehicle: non_neg_integer() | nil, meta: map(), reason: term()}
+  @type t :: %__MODULE__{
+          task_id: integer() | nil,
+          kind: atom(),
+          name: String.t() | nil,
+          vehicle: non_neg_integer() | nil,
+          meta: map(),
+          reason: term(),
+          progress: map() | nil
+        }
 
   @doc "A one-line explanation."
   @spec message(t()) :: String.t()
@@ -38,6 +52,8 @@ defmodule Dolphin.Engine.Failure do
   def format_reason({:throw, value}), do: "threw #{inspect(value)}"
   def format_reason({:condition_error, source, e}), do: "condition `#{source}` raised #{format_exception(e)}"
   def format_reason({:vehicle_lost, id}), do: "vehicle #{id} lost"
+  def format_reason({:vehicle_fault, text}), do: text
+  def format_reason({:not_reassigned, reason, why}), do: "#{format_reason(reason)}; no other vehicle could take it over: #{why}"
   def format_reason({:platform_exited, reason}), do: "its process #{exit_words(reason)} without reporting"
   def format_reason({:stop_timeout, ms}), do: "did not stop within #{ms} ms of clock time (killed)"
   def format_reason({:stop_failed, reason}), do: "could not be stopped: #{format_reason(reason)}"

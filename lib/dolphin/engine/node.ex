@@ -9,6 +9,7 @@ defmodule Dolphin.Engine.Node do
   #
   #   {:start, key, task}        start a child (its whole initial subtree starts before the next effect)
   #   {:start_new, key, task}    same for a task made at run time (numbered and allocated first)
+  #   {:start_new, key, task, vs} same, vehicles `vs` of the run usable besides the node's own
   #   {:stop, [key], reason}     stop children: all at once, then their results in this order
   #   {:check, key, cond}        evaluate now -> {:checked, key, boolean}
   #   {:watch, key, cond}        evaluate on every change -> {:condition, key} once it holds
@@ -20,7 +21,7 @@ defmodule Dolphin.Engine.Node do
   #   :platform_start            (platform tasks) -> {:platform, msg}, {:platform_exit, reason},
   #                              {:platform_start_failed, reason}, {:vehicle_lost, id}
   #   {:platform_stop, reason}   (platform tasks) bounded stop callback
-  #   {:emit, event, fields}     a Dolphin.Telemetry event (run and task_id added)
+  #   {:emit, event, fields}     a Dolphin.Telemetry event (run and task_id added, unless given)
   #   :continue                  -> :continue at once (to do things one at a time)
   #   {:finish, result}          :done | {:failed, reason}
   #

@@ -65,7 +65,34 @@ defmodule Dolphin.Engine.Platform do
   @doc "Stops the task's process; returns when its vehicle is safe. See the module doc."
   @callback stop(pid(), reason :: term()) :: :ok | {:error, term()}
 
-  @optional_callbacks kind: 1
+  @doc """
+  Whether a failure reason is the vehicle's doing (lost, a failsafe, a
+  refused arm) rather than the task's: `reassign` hands only those over to
+  another vehicle. Without it, only `{:vehicle_lost, id}` is.
+  """
+  @callback vehicle_fault?(reason :: term()) :: boolean()
+
+  @doc """
+  The task as another vehicle (`to`) goes on with it where the failed one
+  (`from`) left it, from the last `progress` it reported (nil if none):
+  `{:ok, spec, resume_seq}` (the point it goes on from, for the
+  `task_reassigned` event), or `{:error, why}` (text). Called in a helper
+  process of the engine. Without it, `reassign` cannot hand the platform's
+  tasks over.
+  """
+  @callback resume(spec(), progress :: map() | nil, from :: non_neg_integer(), to :: non_neg_integer()) ::
+              {:ok, spec(), non_neg_integer()} | {:error, String.t()}
+
+  @doc """
+  The task of the lost `vehicle` went to another vehicle: should it be heard
+  again, it must not go on with the task (a MAVLink vehicle that was only out
+  of range still flies its mission) but be made safe and reported. Options:
+  `:run`, `:task_id` (the failed task), `:owner` (the script: nothing is
+  watched once it has ended).
+  """
+  @callback abandoned(vehicle :: non_neg_integer(), opts :: keyword()) :: :ok
+
+  @optional_callbacks kind: 1, vehicle_fault?: 1, resume: 4, abandoned: 2
 
   @doc "Reports progress (a map, shown in `task_progress` events) to the engine."
   @spec progress(pid(), map()) :: :ok

@@ -25,17 +25,23 @@ defmodule Dolphin.Engine.PlatformTask do
   @doc false
   def requirements(%__MODULE__{platform: p, spec: spec}), do: p.requirements(spec) |> Map.new()
 
+  # The node's state: the task and the last progress it reported, which a
+  # failure carries (where another vehicle may take the task over).
   @impl true
-  def init(task), do: {[:platform_start], task}
+  def init(task), do: {[:platform_start], %{task: task, progress: nil}}
 
   @impl true
-  def handle({:platform, :done}, t), do: {[{:finish, :done}], t}
-  def handle({:platform, {:failed, reason}}, t), do: {[{:finish, {:failed, reason}}], t}
-  def handle({:platform, {:progress, info}}, t), do: {[{:emit, :task_progress, %{vehicle: t.vehicle, progress: info}}], t}
-  def handle({:platform, _other}, t), do: {[], t}
-  def handle({:platform_start_failed, reason}, t), do: {[{:finish, {:failed, reason}}], t}
-  def handle({:platform_exit, reason}, t), do: {[{:finish, {:failed, {:platform_exited, reason}}}], t}
+  def handle({:platform, :done}, st), do: {[{:finish, :done}], st}
+  def handle({:platform, {:failed, reason}}, st), do: fail(st, reason)
+  def handle({:platform, {:progress, info}}, st), do: {[{:emit, :task_progress, %{vehicle: st.task.vehicle, progress: info}}], %{st | progress: info}}
+  def handle({:platform, _other}, st), do: {[], st}
+  def handle({:platform_start_failed, reason}, st), do: fail(st, reason)
+  def handle({:platform_exit, reason}, st), do: fail(st, {:platform_exited, reason})
 
-  def handle({:vehicle_lost, id}, t),
-    do: {[{:platform_stop, {:vehicle_lost, id}}, {:finish, {:failed, {:vehicle_lost, id}}}], t}
+  def handle({:vehicle_lost, id}, st) do
+    {effects, st} = fail(st, {:vehicle_lost, id})
+    {[{:platform_stop, {:vehicle_lost, id}} | effects], st}
+  end
+
+  defp fail(st, reason), do: {[{:finish, {:failed, %{Dolphin.Engine.Runner.failure(st.task, reason) | progress: st.progress}}}], st}
 end

@@ -313,10 +313,14 @@ defmodule Dolphin.Engine.Runner do
     end
   end
 
-  defp effect({:start_new, key, value}, s) do
+  defp effect({:start_new, key, value}, s), do: effect({:start_new, key, value, []}, s)
+
+  # `also`: vehicles this run holds that the new task may use besides the
+  # node's own (a `reassign` hands a task over to one of them).
+  defp effect({:start_new, key, value, also}, s) do
     task = Task.new!(value)
 
-    case Dolphin.Engine.Run.prepare(task, s.ctx, s.run, vehicles_in(s.task)) do
+    case Dolphin.Engine.Run.prepare(task, s.ctx, s.run, Enum.uniq(vehicles_in(s.task) ++ also)) do
       {:ok, task} -> effect({:start, key, task}, s)
       {:error, reason} -> feed(s, {:finished, key, {:failed, failure(task, reason)}})
     end
@@ -592,7 +596,7 @@ defmodule Dolphin.Engine.Runner do
   end
 
   defp emit(s, event, fields),
-    do: Dolphin.Telemetry.emit(event, Map.merge(fields, %{run: s.run.id, task_id: s.id}), s.ctx.clock.now_ms())
+    do: Dolphin.Telemetry.emit(event, Map.merge(%{run: s.run.id, task_id: s.id}, fields), s.ctx.clock.now_ms())
 
   defp vehicles_in(task), do: for(%PlatformTask{vehicle: v} when v != nil <- Task.flatten(task), do: v) |> Enum.uniq()
 end

@@ -17,7 +17,7 @@ defmodule Dolphin.Engine.Task do
   | `Dolphin.Engine.WaitFor` | `wait_for(c)`, `wait_for(c, then: t)` | `t`, if any |
   | `Dolphin.Engine.OneOf` | `one_of([{c1, t1}, ...])` | the branches' tasks |
   | `Dolphin.Engine.AllOf` | `all_of([{c1, t1}, ...])` | the branches' tasks |
-  | `Dolphin.Engine.Watch` | `watch(t, on_error: ...)` | `t` |
+  | `Dolphin.Engine.Watch` | `watch(t, on_error: ...)`, `reassign(t)` | `t` |
 
   Every struct has `id` (given when a run starts: tasks are values, the same
   one may run many times), `name` (optional, see `Dolphin.Engine.named/2`)
@@ -137,6 +137,8 @@ defmodule Dolphin.Engine.Task do
   defp fmt(%WaitFor{cond: c, then: t}, _), do: "wait_for(#{c.source}, then: #{fmt(t, 0)})"
   defp fmt(%OneOf{branches: bs}, _), do: "one_of(" <> Enum.map_join(bs, "; ", fn {c, t} -> "#{c.source} -> #{fmt(t, 0)}" end) <> ")"
   defp fmt(%AllOf{branches: bs}, _), do: "all_of(" <> Enum.map_join(bs, "; ", fn {c, t} -> "#{c.source} -> #{fmt(t, 0)}" end) <> ")"
+  defp fmt(%Watch{task: t, on_error: :reassign, from: nil}, _), do: "reassign(#{fmt(t, 0)})"
+  defp fmt(%Watch{task: t, on_error: :reassign, from: set}, _), do: "reassign(#{fmt(t, 0)}, from: #{Dolphin.Fleet.VehicleSet.format(set)})"
   defp fmt(%Watch{task: t, on_error: e}, _), do: "watch(#{fmt(t, 0)}, on_error: #{if is_function(e), do: "fn", else: inspect(e)})"
 
   defp paren(s, true), do: "(" <> s <> ")"

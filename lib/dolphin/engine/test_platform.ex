@@ -16,6 +16,9 @@ defmodule Dolphin.Engine.TestPlatform do
   `:started`, `:stopped`, `:finished` and `:abandoned` — the leaf died
   without stopping it — with `info` a map of `name`, `vehicle`, `task_id`,
   `pid`, `reason`, `at` (`System.monotonic_time/0` when it happened)).
+
+  Under `reassign`, a task whose fake vehicle is lost (or that fails with
+  `{:vehicle_fault, text}`) runs again whole on another one.
   """
 
   use GenServer, restart: :temporary
@@ -52,6 +55,16 @@ defmodule Dolphin.Engine.TestPlatform do
 
   @impl Dolphin.Engine.Platform
   def requirements(t), do: %{type: t.type, payloads: t.payloads, id: t.id}
+
+  # A fake vehicle's failure `{:vehicle_fault, text}` is its own, as a mission's failsafe is.
+  @impl Dolphin.Engine.Platform
+  def vehicle_fault?({:vehicle_fault, _text}), do: true
+  def vehicle_fault?(_reason), do: false
+
+  # Taken over, a test task runs again whole, as it was written (it has no
+  # items to skip); its `resume_seq` is the `:reached` of its last progress, or 0.
+  @impl Dolphin.Engine.Platform
+  def resume(%__MODULE__{} = t, progress, _from, _to), do: {:ok, t, (progress && progress[:reached]) || 0}
 
   @impl Dolphin.Engine.Platform
   def start(%__MODULE__{} = t, vehicle, opts), do: GenServer.start_link(__MODULE__, {t, vehicle, Map.new(opts)})

@@ -258,6 +258,8 @@ defmodule Dolphin.Mission.Executor do
 
   defp answered(:guided, :ok, data), do: next(:arm, data)
   defp answered(:arm, :ok, data), do: next(:start, data)
+  # The autopilot would not arm (not ready, a failed check): the vehicle's own fault.
+  defp answered(:arm, {:error, e}, data), do: fail(:arm, data, {:vehicle_fault, Exception.message(e)})
   defp answered(:start, :ok, data), do: next(:flying, data)
   defp answered(state, {:error, e}, data), do: fail(state, data, Exception.message(e))
 
@@ -350,7 +352,9 @@ defmodule Dolphin.Mission.Executor do
 
       # Left to what took it (a failsafe's RTL or LAND, the pilot): never overridden.
       {:left, why} ->
-        fail(:flying, data, why <> Dolphin.ManoeuvreError.says(Dolphin.Vehicles.State.texts_since(data.flight_texts, st.status_texts), []), hold: false)
+        fail(:flying, data, {:vehicle_fault, why <> Dolphin.ManoeuvreError.says(Dolphin.Vehicles.State.texts_since(data.flight_texts, st.status_texts), [])},
+          hold: false
+        )
 
       # A landing mission's disarm comes before its last report (ArduPilot
       # reports the final item after "Disarming motors"): the reports are

@@ -51,6 +51,22 @@ defmodule Dolphin.Mission.Items do
     items
   end
 
+  @doc false
+  # Which items each command gave: `{kind, first seq, count}` in order (home,
+  # item 0, excluded). Dolphin.Mission.Resume needs a survey's passes.
+  @spec spans(Mission.t()) :: [{atom(), pos_integer(), non_neg_integer()}]
+  def spans(%Mission{} = mission) do
+    home = home!(mission)
+
+    {spans, {_state, _next}} =
+      Enum.map_reduce(mission.commands, {%{home: home, prev: home, photo: 0}, 1}, fn %Command{kind: kind} = c, {state, next} ->
+        {items, state} = items(c, state)
+        {{kind, next, length(items)}, {state, next + length(items)}}
+      end)
+
+    spans
+  end
+
   # Without a home, the original plugin used the first absolute position of the mission.
   defp home!(%Mission{home: %Location{} = home}), do: home
 

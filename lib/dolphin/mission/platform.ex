@@ -36,12 +36,19 @@ defmodule Dolphin.Mission.Platform do
 
   Requirements: a mission that takes off needs a `:uav`; one that takes photos
   needs a vehicle with the `:camera` payload.
+
+  Taken over by another vehicle (`reassign`), a mission goes on where its
+  first vehicle left it (`Dolphin.Mission.Resume`): the vehicle lost, a
+  failsafe taking it out of AUTO, a refused arm count as the vehicle's
+  failures. A lost vehicle heard again after its mission was taken over is
+  made to hold (a vehicle that was only out of range still flies it) and a
+  `vehicle_returned` event says so.
   """
 
   @behaviour Dolphin.Engine.Platform
 
-  alias Dolphin.Mission
-  alias Dolphin.Mission.Executor
+  alias Dolphin.{Mission, PubSub, Telemetry, Vehicles}
+  alias Dolphin.Mission.{Executor, Resume}
 
   defimpl Dolphin.Engine.Taskable, for: Dolphin.Mission do
     def to_task(mission), do: Dolphin.Engine.platform_task(Dolphin.Mission.Platform, mission)
@@ -65,6 +72,68 @@ defmodule Dolphin.Mission.Platform do
 
   @impl true
   def start(%Mission{} = mission, vehicle, opts), do: Executor.start_link(mission, vehicle, opts)
+
+  @impl true
+  def vehicle_fault?({:vehicle_lost, _}), do: true
+  def vehicle_fault?({:vehicle_fault, _text}), do: true
+  def vehicle_fault?(_reason), do: false
+
+  @impl true
+  def resume(%Mission{} = mission, progress, from, to) do
+    # The items the first vehicle flew were made with its home (when the mission has none).
+    with {:ok, mission} <- with_home(mission, from),
+         {:ok, at} <- standing(to) do
+      Resume.resume(mission, progress && progress[:reached], at)
+    end
+  end
+
+  @impl true
+  def abandoned(vehicle, opts) do
+    owner = Keyword.fetch!(opts, :owner)
+    me = self()
+    # Unlinked: it outlives the task that gave the mission away, until the script ends.
+    pid = :proc_lib.spawn(fn -> guard(vehicle, owner, opts, me) end)
+    receive do: ({:"$dolphin_guarding", ^pid} -> :ok)
+  end
+
+  defp with_home(%Mission{home: %Dolphin.Geo.Location{}} = mission, _from), do: {:ok, mission}
+
+  defp with_home(mission, from) do
+    case Vehicles.state(from) do
+      {:ok, %{home: %{lat: lat, lon: lon, alt: alt}}} -> {:ok, Mission.put_home(mission, Dolphin.Geo.location(lat, lon, alt))}
+      _ -> {:error, "the home of vehicle #{from}, which its items were made from, is not known"}
+    end
+  end
+
+  defp standing(vehicle) do
+    case Vehicles.state(vehicle) do
+      {:ok, %{position: %{lat: lat, lon: lon, alt: alt}}} -> {:ok, Dolphin.Geo.location(lat, lon, alt)}
+      _ -> {:error, "the position of vehicle #{vehicle} is not known"}
+    end
+  end
+
+  # Waits for the vehicle to be heard again (as long as the script runs), then holds it.
+  defp guard(vehicle, owner, opts, caller) do
+    ref = Process.monitor(owner)
+    PubSub.subscribe({:vehicle, vehicle})
+    send(caller, {:"$dolphin_guarding", self()})
+    await_return(vehicle, ref, opts)
+  end
+
+  defp await_return(vehicle, ref, opts) do
+    receive do
+      {:dolphin, {:vehicle, ^vehicle}, {:vehicle_reconnected, ^vehicle}} ->
+        held = Dolphin.Vehicles.Manoeuvres.hold(vehicle) == :ok
+        Telemetry.emit(:vehicle_returned, %{run: opts[:run], task_id: opts[:task_id], vehicle: vehicle, held: held})
+
+      {:DOWN, ^ref, :process, _, _} ->
+        :ok
+
+      # The vehicle's other news (none while it is lost).
+      _other ->
+        await_return(vehicle, ref, opts)
+    end
+  end
 
   @impl true
   def stop(pid, reason) do
