@@ -1,0 +1,76 @@
+defmodule Dolphin.Check.Flight do
+  @moduledoc false
+  # A mission "flown" by a pre-flight check's stand-in vehicle: it passes the
+  # mission's estimated time on the check's clock, draining the vehicle's
+  # battery as the estimate says (so that `until(..., battery(v) < 0.3)` and
+  # the like react as they would), then completes — or, for a mission that
+  # never ends by itself, keeps hovering until stopped. Stopped, it answers
+  # at once, as Dolphin.Mission.Executor's stop does (a call {:stop, reason}).
+
+  use GenServer, restart: :temporary
+
+  alias Dolphin.Fleet.TestSource
+
+  # Clock time between two battery updates.
+  @tick_ms 10_000
+  # Hovering drain per second (Dolphin.Check.Mission's model: 30 A of 3300 mAh).
+  @hover_per_s 30.0 / 3.6 / 3300.0
+
+  @spec start_link(map()) :: GenServer.on_start()
+  def start_link(args), do: GenServer.start_link(__MODULE__, args)
+
+  @impl true
+  def init(args) do
+    # Linked to the engine's leaf: its exit is ours.
+    {:ok, view} = TestSource.vehicle(args.test, args.vehicle)
+    clock = args.clock || Dolphin.Check.Clock
+    e = args.estimate
+    start_battery = view.battery || 1.0
+    rate = if e && e.time_s > 0, do: e.battery_used / e.time_s, else: @hover_per_s
+    finite? = e != nil and match?({kind, _} when kind in [:landing, :reached], e.ending)
+    s = %{args | clock: clock} |> Map.merge(%{started: clock.now_ms(), battery: start_battery, rate: rate, finite?: finite?, time_s: (e && e.time_s) || 0.0})
+    clock.send_after(self(), :tick, min(@tick_ms, round(s.time_s * 1000)))
+    {:ok, s}
+  end
+
+  @impl true
+  def handle_info(:tick, s) do
+    elapsed_s = (s.clock.now_ms() - s.started) / 1000
+
+    cond do
+      s.finite? and elapsed_s >= s.time_s ->
+        drain(s, s.time_s)
+        if s.estimate, do: Dolphin.Check.Recorder.problems(s.recorder, s.estimate.energy, s.estimate.line)
+        Dolphin.Check.Recorder.landed(s.recorder, s.vehicle, s.estimate.lands?)
+        Dolphin.Engine.Platform.done(s.owner)
+        {:stop, :normal, s}
+
+      true ->
+        drain(s, elapsed_s)
+        s.clock.send_after(self(), :tick, @tick_ms)
+        {:noreply, s}
+    end
+  end
+
+  def handle_info(_other, s), do: {:noreply, s}
+
+  @impl true
+  def handle_call({:stop, _reason}, _from, s) do
+    left = drain(s, (s.clock.now_ms() - s.started) / 1000)
+    # Cut short: the pack running out before the stop is still an error.
+    if s.estimate && left <= 0.0,
+      do: Dolphin.Check.Recorder.problems(s.recorder, Enum.filter(s.estimate.energy, &(elem(&1, 1) == :energy)), s.estimate.line)
+
+    Dolphin.Check.Recorder.landed(s.recorder, s.vehicle, false)
+    {:stop, :normal, :ok, s}
+  end
+
+  # Past the mission's end an endless one hovers.
+  defp drain(s, elapsed_s) do
+    flying = min(elapsed_s, s.time_s)
+    used = s.rate * flying + @hover_per_s * max(elapsed_s - s.time_s, 0.0)
+    left = max(s.battery - used, 0.0)
+    TestSource.set(s.test, s.vehicle, battery: left)
+    left
+  end
+end
