@@ -169,31 +169,48 @@ defmodule Dolphin.Check do
 
     case Dolphin.Script.await(pid, real) do
       {:error, :timeout} ->
-        line = code_line(pid)
+        where = code_place(pid)
         Dolphin.Script.stop(pid, :check_horizon)
         _ = Dolphin.Script.await(pid, 30_000)
-        {:running, line}
+        where
 
       result ->
         result
     end
   end
 
-  defp code_line(runner) do
+  # Where the script's code is: its line, and whether it waits in a pick
+  # (the fleet's pick timeouts run on the real clock, not the check's: a
+  # pick still waiting at the horizon is one the described fleet never serves).
+  defp code_place(runner) do
     with %{code: code} when is_pid(code) <- :sys.get_state(runner),
-         {:dictionary, dict} <- Process.info(code, :dictionary) do
-      Keyword.get(dict, :"$dolphin_line")
+         {:dictionary, dict} <- Process.info(code, :dictionary),
+         {:current_stacktrace, stack} <- Process.info(code, :current_stacktrace) do
+      line = Keyword.get(dict, :"$dolphin_line")
+      if Enum.any?(stack, &match?({m, :pick, _, _} when m in [Dolphin.Fleet, Dolphin.Script.Statements], &1)), do: {:pick_waiting, line}, else: {:running, line}
     else
-      _ -> nil
+      _ -> {:running, nil}
     end
   catch
-    :exit, _ -> nil
+    :exit, _ -> {:running, nil}
   end
 
   defp outcome_findings({:ok, _summary}, _file, _horizon), do: []
 
+  defp outcome_findings({:pick_waiting, line}, file, _horizon) do
+    [%Finding{severity: :error, kind: :pick, file: file, line: line, message: "no vehicle of the fleet can serve this pick (#{source_line(file, line)}): none has the type, payload, id or place it asks for, or they are all taken"}]
+  end
+
   defp outcome_findings({:running, line}, file, horizon) do
     [%Finding{severity: :note, kind: :waiting, file: file, line: line, message: "the script was still running after #{div(horizon, 60_000)} min of clock time in the dry run (a condition never met with the fleet's values, or a loop): what it did until then is checked"}]
+  end
+
+  defp source_line(file, line) do
+    with true <- is_integer(line), {:ok, text} <- File.read(file), text when is_binary(text) <- text |> String.split("\n") |> Enum.at(line - 1) do
+      "`" <> String.trim(text) <> "`"
+    else
+      _ -> "line #{inspect(line)}"
+    end
   end
 
   defp outcome_findings({:error, %Dolphin.Script.Error{} = e}, _file, _horizon) do

@@ -11,7 +11,7 @@ defmodule Dolphin.Check.Finding do
 
       iex> f = %Dolphin.Check.Finding{severity: :error, kind: :too_far, file: "s.exs", line: 4, message: "mission \\"M\\": item 2 is 2400 m from home (limit 1000 m)"}
       iex> Dolphin.Check.Finding.format(f)
-      ~s(s.exs:4: error: mission "M": item 2 is 2400 m from home (limit 1000 m))
+      ~S|s.exs:4: error: mission "M": item 2 is 2400 m from home (limit 1000 m)|
   """
 
   defstruct [:severity, :kind, :file, :line, :message]

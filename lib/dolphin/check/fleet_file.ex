@@ -47,7 +47,7 @@ defmodule Dolphin.Check.FleetFile do
   defp decode(text) do
     {:ok, :jiffy.decode(text, [:return_maps])}
   catch
-    :error, {:error, {pos, why}} -> {:error, "#{why} at byte #{pos}"}
+    :error, {pos, why} when is_integer(pos) -> {:error, "#{why} at byte #{pos}"}
     :throw, {:error, {pos, why}} -> {:error, "#{why} at byte #{pos}"}
   end
 
