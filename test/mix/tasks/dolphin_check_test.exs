@@ -28,6 +28,17 @@ defmodule Mix.Tasks.Dolphin.CheckTest do
     assert %{"ok" => false, "findings" => [%{"kind" => "pick", "line" => 3} | _]} = :jiffy.decode(out, [:return_maps])
   end
 
+  test "mix dolphin.run checks first and refuses to fly on errors" do
+    {:ok, out} = StringIO.open("")
+    {:ok, err} = StringIO.open("")
+    assert 1 = Mix.Tasks.Dolphin.Run.main([Path.join(@dir, "bad_mission.exs"), "--sim", "1", "--no-tlog"], out: out, err: err, plain: true)
+    {_, text} = StringIO.contents(out)
+    assert text =~ "bad_mission.exs:17: error: no vehicle of the fleet can serve this pick"
+    assert text =~ "the pre-flight check found errors: nothing flies (--no-check to fly anyway)"
+    # Nothing was started.
+    assert Dolphin.Vehicles.list() == []
+  end
+
   test "exit 2 on bad usage" do
     assert {2, _, err} = main(["nope.exs"])
     assert err =~ "no such script: nope.exs"
