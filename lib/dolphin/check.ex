@@ -15,7 +15,7 @@ defmodule Dolphin.Check do
     * the script compiles (a syntax error, an unknown word);
     * it is run dry: against stand-ins for the described fleet
       (`Dolphin.Check.FleetFile`, or the vehicles of `--sim N`), on a clock
-      10,000 times faster than real time, with the real fleet's picks and the
+      2,000 times faster than real time, with the real fleet's picks and the
       engine's allocation — so a `pick` that nothing can serve, or a
       concurrent composition without enough distinct vehicles, fails as it
       would in flight, and is reported with its line and why;
@@ -45,7 +45,9 @@ defmodule Dolphin.Check do
   the simulator's home), `:max_distance` (metres from home, default 12,000),
   `:max_height` (metres above home, default 500: the report's scenarios fly
   380 m above home and survey up to 10 km away), `:horizon_ms` (clock
-  time the dry run may last, default 4 hours).
+  time the dry run may last, default an hour), `:energy` (the severity of a
+  pack that would run empty: `:error`, the default, or `:warning` — what
+  `mix dolphin.run` uses for simulated vehicles, which fly on at 0 %).
   """
 
   alias Dolphin.Check.{Finding, Recorder, Source}
@@ -56,7 +58,7 @@ defmodule Dolphin.Check do
   @type t :: %__MODULE__{file: String.t(), findings: [Finding.t()], missions: [map()]}
 
   @sim_home %Dolphin.Geo.Location{lat: 40.444233, lon: -7.375234, h: 820.0}
-  @horizon_ms 4 * 3_600_000
+  @horizon_ms 3_600_000
   # The report's scenarios fly 380 m above home and survey up to 10 km away.
   @max_distance 12_000
   @max_height 500
@@ -147,7 +149,7 @@ defmodule Dolphin.Check do
     try do
       outcome = script_outcome(script, fleet_name, horizon)
       {findings, missions} = Recorder.results(recorder)
-      all = findings ++ outcome_findings(outcome, script.file, horizon)
+      all = energy_severity(findings, Keyword.get(opts, :energy, :error)) ++ outcome_findings(outcome, script.file, horizon)
       %__MODULE__{file: script.file, findings: Enum.sort_by(all, &severity_rank(&1.severity)), missions: missions}
     after
       for pid <- [fleet, recorder, ts] do
@@ -156,6 +158,9 @@ defmodule Dolphin.Check do
       end
     end
   end
+
+  defp energy_severity(findings, :error), do: findings
+  defp energy_severity(findings, severity), do: Enum.map(findings, &if(&1.kind == :energy, do: %{&1 | severity: severity}, else: &1))
 
   defp severity_rank(:error), do: 0
   defp severity_rank(:warning), do: 1
@@ -205,14 +210,6 @@ defmodule Dolphin.Check do
     [%Finding{severity: :note, kind: :waiting, file: file, line: line, message: "the script was still running after #{div(horizon, 60_000)} min of clock time in the dry run (a condition never met with the fleet's values, or a loop): what it did until then is checked"}]
   end
 
-  defp source_line(file, line) do
-    with true <- is_integer(line), {:ok, text} <- File.read(file), text when is_binary(text) <- text |> String.split("\n") |> Enum.at(line - 1) do
-      "`" <> String.trim(text) <> "`"
-    else
-      _ -> "line #{inspect(line)}"
-    end
-  end
-
   defp outcome_findings({:error, %Dolphin.Script.Error{} = e}, _file, _horizon) do
     {severity, kind} =
       case e.reason do
@@ -223,5 +220,13 @@ defmodule Dolphin.Check do
       end
 
     [%Finding{severity: severity, kind: kind, file: e.file, line: e.line, message: "in the dry run: " <> e.message}]
+  end
+
+  defp source_line(file, line) do
+    with true <- is_integer(line), {:ok, text} <- File.read(file), text when is_binary(text) <- text |> String.split("\n") |> Enum.at(line - 1) do
+      "`" <> String.trim(text) <> "`"
+    else
+      _ -> "line #{inspect(line)}"
+    end
   end
 end

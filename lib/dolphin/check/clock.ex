@@ -1,20 +1,20 @@
 defmodule Dolphin.Check.Clock do
   @moduledoc false
-  # The pre-flight check's time source: its own fast clock (10,000 times
+  # The pre-flight check's time source: its own fast clock (2,000 times
   # real time), independent of `Dolphin.Clock`'s speed-up, so that a dry run
   # of a script's pauses, waits and flights takes a moment and leaves the
   # speed-up of a run that follows untouched.
 
   @behaviour Dolphin.Engine.TimeSource
 
-  @speedup 10_000
+  @speedup 2_000
 
   @doc false
   @spec speedup() :: pos_integer()
   def speedup, do: @speedup
 
   @impl true
-  def now_ms, do: System.monotonic_time(:microsecond) * @speedup |> div(1000)
+  def now_ms, do: div(System.monotonic_time(:microsecond) * @speedup, 1000)
 
   @impl true
   def send_after(pid, msg, ms), do: Process.send_after(pid, msg, to_real(ms))

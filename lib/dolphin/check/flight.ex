@@ -1,8 +1,8 @@
 defmodule Dolphin.Check.Flight do
   @moduledoc false
   # A mission "flown" by a pre-flight check's stand-in vehicle: it passes the
-  # mission's estimated time on the check's clock, draining the vehicle's
-  # battery as the estimate says (so that `until(..., battery(v) < 0.3)` and
+  # mission's estimated time on the check's clock, tick by tick, draining the
+  # vehicle's battery as the estimate says (so that `until(..., battery(v) < 0.3)` and
   # the like react as they would), then completes — or, for a mission that
   # never ends by itself, keeps hovering until stopped. Stopped, it answers
   # at once, as Dolphin.Mission.Executor's stop does (a call {:stop, reason}).
@@ -28,20 +28,25 @@ defmodule Dolphin.Check.Flight do
     start_battery = view.battery || 1.0
     rate = if e && e.time_s > 0, do: e.battery_used / e.time_s, else: @hover_per_s
     finite? = e != nil and match?({kind, _} when kind in [:landing, :reached], e.ending)
-    s = %{args | clock: clock} |> Map.merge(%{started: clock.now_ms(), battery: start_battery, rate: rate, finite?: finite?, time_s: (e && e.time_s) || 0.0})
+    airborne? = (view.relative_altitude || 0.0) > 1.0
+    s = %{args | clock: clock} |> Map.merge(%{elapsed_s: 0.0, battery: start_battery, rate: rate, finite?: finite?, time_s: (e && e.time_s) || 0.0, airborne?: airborne?})
     clock.send_after(self(), :tick, min(@tick_ms, round(s.time_s * 1000)))
     {:ok, s}
   end
 
   @impl true
+  # The flight's time moves by whole ticks, not by the clock's reading: at
+  # the check's speed-up a millisecond of real delay is seconds of clock
+  # time, and the battery a condition saw must be the one a stop leaves.
   def handle_info(:tick, s) do
-    elapsed_s = (s.clock.now_ms() - s.started) / 1000
+    elapsed_s = if s.finite?, do: min(s.elapsed_s + @tick_ms / 1000, s.time_s), else: s.elapsed_s + @tick_ms / 1000
+    s = %{s | elapsed_s: elapsed_s}
 
     cond do
       s.finite? and elapsed_s >= s.time_s ->
         drain(s, s.time_s)
         if s.estimate, do: Dolphin.Check.Recorder.problems(s.recorder, s.estimate.energy, s.estimate.line)
-        Dolphin.Check.Recorder.landed(s.recorder, s.vehicle, s.estimate.lands?)
+        left_at(s, s.time_s)
         Dolphin.Engine.Platform.done(s.owner)
         {:stop, :normal, s}
 
@@ -56,13 +61,24 @@ defmodule Dolphin.Check.Flight do
 
   @impl true
   def handle_call({:stop, _reason}, _from, s) do
-    left = drain(s, (s.clock.now_ms() - s.started) / 1000)
+    left = drain(s, s.elapsed_s)
     # Cut short: the pack running out before the stop is still an error.
     if s.estimate && left <= 0.0,
       do: Dolphin.Check.Recorder.problems(s.recorder, Enum.filter(s.estimate.energy, &(elem(&1, 1) == :energy)), s.estimate.line)
 
-    Dolphin.Check.Recorder.landed(s.recorder, s.vehicle, false)
+    left_at(s, s.elapsed_s)
     {:stop, :normal, :ok, s}
+  end
+
+  # Where the flight is after `elapsed_s`: the last point of the estimate's
+  # path reached by then (the vehicle holds there when stopped).
+  defp left_at(%{estimate: nil} = s, _elapsed_s), do: Dolphin.Check.Recorder.ended(s.recorder, s.vehicle, nil, false)
+
+  defp left_at(s, elapsed_s) do
+    e = s.estimate
+    {_, at, airborne?} = e.path |> Enum.take_while(fn {t, _, _} -> t <= elapsed_s end) |> List.last() || {0.0, e.start_at, s.airborne?}
+    if at, do: TestSource.set(s.test, s.vehicle, position: at, relative_altitude: if(airborne?, do: 20.0, else: 0.0))
+    Dolphin.Check.Recorder.ended(s.recorder, s.vehicle, at, airborne?)
   end
 
   # Past the mission's end an endless one hovers.

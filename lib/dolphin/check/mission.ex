@@ -37,7 +37,15 @@ defmodule Dolphin.Check.Mission do
   @absolute_frames [0, 5]
   @relative_frames [3, 6]
 
-  @type vehicle :: %{id: non_neg_integer(), payloads: [atom()], battery: float() | nil, position: Location.t() | nil, airborne?: boolean()}
+  # position: its home; at: where it is now (nil: at home).
+  @type vehicle :: %{
+          required(:id) => non_neg_integer(),
+          required(:payloads) => [atom()],
+          required(:battery) => float() | nil,
+          required(:position) => Location.t() | nil,
+          required(:airborne?) => boolean(),
+          optional(:at) => Location.t() | nil
+        }
   @type limits :: %{max_distance: number(), max_height: number()}
   @type problem :: {:error | :warning | :note, atom(), String.t()}
   @type estimate :: %{
@@ -207,7 +215,8 @@ defmodule Dolphin.Check.Mission do
   @spec estimate(String.t(), vehicle(), [struct()]) :: map()
   def estimate(name, vehicle, [home | _] = items) do
     home_loc = location(home, nil)
-    start = %{at: home_loc, airborne?: vehicle.airborne?, speed: @cruise, length: 0.0, time: 0.0, used: 0.0, empty_at: nil}
+    # Where the vehicle is when the mission starts: where the last one left it, else at home.
+    start = %{at: Map.get(vehicle, :at) || home_loc, airborne?: vehicle.airborne?, speed: @cruise, length: 0.0, time: 0.0, used: 0.0, empty_at: nil, path: []}
     flown = Enum.reduce(flight_order(items), start, fn item, acc -> step(item, home_loc, acc, vehicle.battery) end)
     {back_time, back_used, back_length} = if flown.airborne?, do: leg(flown.at, %{home_loc | h: flown.at.h}, flown.speed) |> land(flown.at.h, home_loc), else: {0.0, 0.0, 0.0}
     ending = M.ending(items)
@@ -225,6 +234,8 @@ defmodule Dolphin.Check.Mission do
       home_length_m: back_length,
       home_time_s: back_time,
       empty_at: flown.empty_at,
+      start_at: start.at,
+      path: Enum.reverse(flown.path),
       empty_home: vehicle.battery != nil and flown.empty_at == nil and flown.used + back_used > vehicle.battery
     }
   end
@@ -325,7 +336,7 @@ defmodule Dolphin.Check.Mission do
   defp add(acc, item, time, amp_seconds, length, start) do
     used = acc.used + amp_seconds / 3.6 / @capacity_mah
     empty_at = if acc.empty_at == nil and start != nil and used > start, do: item.seq, else: acc.empty_at
-    %{acc | time: acc.time + time, used: used, length: acc.length + length, empty_at: empty_at}
+    %{acc | time: acc.time + time, used: used, length: acc.length + length, empty_at: empty_at, path: [{acc.time + time, acc.at, acc.airborne?} | acc.path]}
   end
 
   # --- items ---

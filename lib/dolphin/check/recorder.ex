@@ -20,8 +20,9 @@ defmodule Dolphin.Check.Recorder do
   @spec problems(pid(), [Dolphin.Check.Mission.problem()], pos_integer() | nil) :: :ok
   def problems(recorder, problems, line), do: GenServer.call(recorder, {:problems, problems, line})
 
-  @spec landed(pid(), non_neg_integer(), boolean()) :: :ok
-  def landed(recorder, vehicle, landed?), do: GenServer.cast(recorder, {:landed, vehicle, landed?})
+  # Where a flight left its vehicle, and whether in the air.
+  @spec ended(pid(), non_neg_integer(), Dolphin.Geo.Location.t() | nil, boolean()) :: :ok
+  def ended(recorder, vehicle, at, airborne?), do: GenServer.cast(recorder, {:ended, vehicle, at, airborne?})
 
   # {findings, estimates}, in the order the missions started.
   @spec results(pid()) :: {[Finding.t()], [map()]}
@@ -37,7 +38,7 @@ defmodule Dolphin.Check.Recorder do
   def handle_call({:mission, mission, id, line}, _from, s) do
     fleet = Map.get(s.vehicles, id, %{payloads: [], home: nil, airborne?: false})
     battery = case TestSource.vehicle(s.test, id), do: ({:ok, view} -> view.battery; _ -> nil)
-    vehicle = %{id: id, payloads: fleet.payloads, battery: battery, position: fleet.home, airborne?: fleet.airborne?}
+    vehicle = %{id: id, payloads: fleet.payloads, battery: battery, position: fleet.home, airborne?: fleet.airborne?, at: Map.get(fleet, :at)}
     {problems, energy, estimate} = Dolphin.Check.Mission.check(mission, vehicle, s.limits)
     estimate = estimate && Map.merge(estimate, %{line: line, energy: energy})
     estimates = if estimate, do: [estimate | s.estimates], else: s.estimates
@@ -53,8 +54,8 @@ defmodule Dolphin.Check.Recorder do
     do: for({severity, kind, message} <- problems, do: %Finding{severity: severity, kind: kind, file: file, line: line, message: message})
 
   @impl true
-  def handle_cast({:landed, id, landed?}, s) do
-    vehicles = Map.update(s.vehicles, id, %{payloads: [], home: nil, airborne?: not landed?}, &%{&1 | airborne?: not landed?})
+  def handle_cast({:ended, id, at, airborne?}, s) do
+    vehicles = Map.update(s.vehicles, id, %{payloads: [], home: nil, airborne?: airborne?, at: at}, &Map.merge(&1, %{airborne?: airborne?, at: at}))
     {:noreply, %{s | vehicles: vehicles}}
   end
 end

@@ -44,7 +44,9 @@ defmodule Dolphin.CLI.Run do
   @doc """
   The pre-flight check (`Dolphin.Check`) that `mix dolphin.run` makes before
   it starts any vehicle: for `--sim N` and `--sitl N`, with N simulated
-  copters as the fleet. Its findings are printed on `out` (nothing when there
+  copters as the fleet. A pack that would run empty is a warning here, not
+  an error: the estimate is the simulator's model, and simulated copters
+  (and SITL, with its own battery model) fly on at 0 %. Its findings are printed on `out` (nothing when there
   are none); `:refused` when it found errors. Skipped (`:ok`) with `--fake`
   (test-platform tasks, no missions), with `--connect` or configured links
   (the fleet is known only once connected: `mix dolphin.check --connect`
@@ -59,7 +61,7 @@ defmodule Dolphin.CLI.Run do
         :ok
 
       true ->
-        report = Dolphin.Check.run(file, sim: n)
+        report = Dolphin.Check.run(file, sim: n, energy: :warning)
         if report.findings != [] and !opts[:quiet], do: IO.write(out, Enum.map(report.findings, &(Dolphin.Check.Finding.format(&1) <> "\n")))
 
         if Dolphin.Check.errors?(report) do
