@@ -62,9 +62,14 @@ defmodule Dolphin.CLI.Run do
 
       true ->
         report = Dolphin.Check.run(file, sim: n, energy: :warning)
-        if report.findings != [] and !opts[:quiet], do: IO.write(out, Enum.map(report.findings, &(Dolphin.Check.Finding.format(&1) <> "\n")))
+        errors? = Dolphin.Check.errors?(report)
 
-        if Dolphin.Check.errors?(report) do
+        if report.findings != [] and (errors? or !opts[:quiet]) do
+          IO.write(out, Enum.map(report.findings, &(Dolphin.Check.Finding.format(&1) <> "\n")))
+          if !errors?, do: IO.puts(out, "the pre-flight check found no error: flying")
+        end
+
+        if errors? do
           IO.puts(out, "the pre-flight check found errors: nothing flies (--no-check to fly anyway)")
           :refused
         else
