@@ -29,6 +29,11 @@ defmodule Mix.Tasks.Dolphin.Check do
       level]`, its home) are required; `type` defaults to `"uav"`,
       `payloads` to none, `battery` (0.0..1.0) to 1.0, `airborne` to false
       (see `Dolphin.Check.FleetFile`)
+    * `--connect ENDPOINT` — the live fleet: the vehicles that report on
+      this link (`udpin:0.0.0.0:14550`, `udpout:HOST:PORT`, `tcp:HOST:PORT`;
+      repeatable) within `--wait`, as they are now (their position taken as
+      their home); nothing is sent to them (`Dolphin.Check.LiveFleet`)
+    * `--wait SECONDS` — how long `--connect` listens for vehicles (default 5)
     * `--max-distance M` — no mission item further than M metres from home (default 12000)
     * `--max-height M` — no mission item higher than M metres above home (default 500)
     * `--json` — the report as one JSON object (`file`, `ok`, `findings`:
@@ -39,15 +44,17 @@ defmodule Mix.Tasks.Dolphin.Check do
   ## Exit status
 
   0 — no error (warnings and notes may remain); 1 — the check found errors;
-  2 — bad usage (an unknown option, no such script, a bad fleet file).
+  2 — bad usage (an unknown option, no such script, a bad fleet file);
+  with `--connect`, 1 also when the link cannot be opened or no vehicle
+  reported its position in time.
   """
 
   use Mix.Task
 
   alias Dolphin.CLI.UsageError
 
-  @switches [sim: :integer, fleet: :string, max_distance: :float, max_height: :float, json: :boolean]
-  @usage "usage: mix dolphin.check SCRIPT [--sim N | --fleet FILE] [--max-distance M] [--max-height M] [--json]"
+  @switches [sim: :integer, fleet: :string, connect: :keep, wait: :float, max_distance: :float, max_height: :float, json: :boolean]
+  @usage "usage: mix dolphin.check SCRIPT [--sim N | --fleet FILE | --connect ENDPOINT... [--wait SECONDS]] [--max-distance M] [--max-height M] [--json]"
 
   @impl Mix.Task
   def run(argv) do
@@ -67,15 +74,36 @@ defmodule Mix.Tasks.Dolphin.Check do
     err = Keyword.get(io, :err, :stderr)
 
     with {:ok, file, opts} <- parse(argv),
-         {:ok, check_opts} <- fleet(opts) do
-      Mix.Task.run("app.start")
+         {:ok, check_opts} <- fleet(opts),
+         {:ok, check_opts} <- live_fleet(opts, check_opts, err) do
       report = Dolphin.Check.run(file, check_opts)
       if opts[:json], do: IO.puts(out, :jiffy.encode(Dolphin.Check.to_map(report), [:pretty])), else: IO.write(out, Dolphin.Check.format(report))
       if Dolphin.Check.errors?(report), do: 1, else: 0
     else
+      {:error, %Dolphin.CLI.StartError{} = e} ->
+        IO.puts(err, "mix dolphin.check: #{Exception.message(e)}")
+        1
+
       {:error, e} ->
         IO.puts(err, "mix dolphin.check: #{Exception.message(e)}\n#{@usage}")
         2
+    end
+  end
+
+  # The application is up from here (links and vehicles for --connect; the
+  # dry run's fleet and pub/sub either way).
+  defp live_fleet(opts, check_opts, err) do
+    Mix.Task.run("app.start")
+
+    case Keyword.get_values(opts, :connect) do
+      [] ->
+        {:ok, check_opts}
+
+      endpoints ->
+        with {:ok, vehicles, skipped} <- Dolphin.Check.LiveFleet.gather(endpoints, round(Keyword.get(opts, :wait, 5.0) * 1000)) do
+          if skipped != [], do: IO.puts(err, "mix dolphin.check: left out (no position reported): vehicle(s) #{Enum.join(skipped, ", ")}")
+          {:ok, [fleet: vehicles] ++ Keyword.drop(check_opts, [:sim])}
+        end
     end
   end
 
@@ -86,7 +114,9 @@ defmodule Mix.Tasks.Dolphin.Check do
     case OptionParser.parse(argv, strict: @switches) do
       {opts, [file], []} ->
         cond do
-          opts[:sim] && opts[:fleet] -> usage_error("--sim and --fleet do not go together")
+          Enum.count([opts[:sim], opts[:fleet], opts[:connect]], & &1) > 1 -> usage_error("only one of --sim, --fleet and --connect")
+          opts[:wait] != nil and opts[:wait] < 0 -> usage_error("--wait is a number of seconds, got #{opts[:wait]}")
+          (bad = bad_endpoint(opts)) != nil -> usage_error(bad)
           opts[:sim] != nil and opts[:sim] < 1 -> usage_error("--sim must be a positive number of vehicles, got #{opts[:sim]}")
           Enum.any?([:max_distance, :max_height], &(opts[&1] != nil and opts[&1] <= 0)) -> usage_error("--max-distance and --max-height are positive numbers of metres")
           not File.regular?(file) -> usage_error("no such script: #{file}")
@@ -102,6 +132,15 @@ defmodule Mix.Tasks.Dolphin.Check do
       {_, _, [{switch, value} | _]} ->
         usage_error("bad option #{switch}#{if value, do: " " <> value, else: ""}")
     end
+  end
+
+  defp bad_endpoint(opts) do
+    Enum.find_value(Keyword.get_values(opts, :connect), fn ep ->
+      case Dolphin.Link.Endpoint.parse(ep) do
+        {:ok, _} -> nil
+        {:error, why} -> "--connect #{ep}: #{if is_exception(why), do: Exception.message(why), else: why}"
+      end
+    end)
   end
 
   defp fleet(opts) do

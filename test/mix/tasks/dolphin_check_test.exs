@@ -39,12 +39,40 @@ defmodule Mix.Tasks.Dolphin.CheckTest do
     assert Dolphin.Vehicles.list() == []
   end
 
+  describe "--connect" do
+    setup do
+      on_exit(&Dolphin.Test.GroundStation.forget_vehicles/0)
+    end
+
+    test "checks against the vehicles that answer on the link, then lets them go" do
+      {:ok, socket} = :gen_udp.open(0, ip: {127, 0, 0, 1})
+      {:ok, port} = :inet.port(socket)
+      :ok = :gen_udp.close(socket)
+      {:ok, [221]} = Dolphin.Sim.start(count: 1, first_sysid: 221, gcs: port)
+
+      assert {0, out, _} = main([Path.join(@dir, "ok.exs"), "--connect", "udpin:127.0.0.1:#{port}", "--wait", "3"])
+      assert out =~ ~s(mission "Hop" on vehicle 221)
+      # The link is closed and the vehicle forgotten: the stand-in had its id.
+      assert Dolphin.Vehicles.whereis(221) == nil
+    end
+
+    test "no vehicle answering is a failure that says so" do
+      {:ok, socket} = :gen_udp.open(0, ip: {127, 0, 0, 1})
+      {:ok, port} = :inet.port(socket)
+      :ok = :gen_udp.close(socket)
+      assert {1, "", err} = main([Path.join(@dir, "ok.exs"), "--connect", "udpin:127.0.0.1:#{port}", "--wait", "0.2"])
+      assert err =~ "no vehicle reported its position within"
+    end
+  end
+
   test "exit 2 on bad usage" do
     assert {2, _, err} = main(["nope.exs"])
     assert err =~ "no such script: nope.exs"
     assert {2, _, err} = main([Path.join(@dir, "ok.exs"), "--sim", "1", "--fleet", "x.json"])
-    assert err =~ "do not go together"
+    assert err =~ "only one of --sim, --fleet and --connect"
     assert {2, _, _} = main([Path.join(@dir, "ok.exs"), "--bogus"])
+    assert {2, _, err} = main([Path.join(@dir, "ok.exs"), "--connect", "carrier-pigeon:1"])
+    assert err =~ "--connect carrier-pigeon:1"
     assert {2, _, err} = main([Path.join(@dir, "ok.exs"), "--fleet", Path.join(@dir, "ok.exs")])
     assert err =~ "fleet file"
   end
