@@ -55,6 +55,12 @@ defmodule Dolphin.Check do
 
   defstruct file: nil, findings: [], missions: []
 
+  @typedoc """
+  A check's report: its findings (errors first) and, for each mission the
+  dry run started, its estimate — `mission` (name), `vehicle`, `line`,
+  `length_m`, `time_s`, `battery_used` (fraction of a pack),
+  `battery_start` (the charge it started with), `ending` (`Dolphin.Mission.ending/1`).
+  """
   @type t :: %__MODULE__{file: String.t(), findings: [Finding.t()], missions: [map()]}
 
   @sim_home %Dolphin.Geo.Location{lat: 40.444233, lon: -7.375234, h: 820.0}

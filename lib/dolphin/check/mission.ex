@@ -218,7 +218,8 @@ defmodule Dolphin.Check.Mission do
     # Where the vehicle is when the mission starts: where the last one left it, else at home.
     start = %{at: Map.get(vehicle, :at) || home_loc, airborne?: vehicle.airborne?, speed: @cruise, length: 0.0, time: 0.0, used: 0.0, empty_at: nil, path: []}
     flown = Enum.reduce(flight_order(items), start, fn item, acc -> step(item, home_loc, acc, vehicle.battery) end)
-    {back_time, back_used, back_length} = if flown.airborne?, do: leg(flown.at, %{home_loc | h: flown.at.h}, flown.speed) |> land(flown.at.h, home_loc), else: {0.0, 0.0, 0.0}
+    {back_time, back_as, back_length} = if flown.airborne?, do: leg(flown.at, %{home_loc | h: flown.at.h}, flown.speed) |> land(flown.at.h, home_loc), else: {0.0, 0.0, 0.0}
+    back_used = fraction(back_as)
     ending = M.ending(items)
 
     %{
@@ -333,8 +334,11 @@ defmodule Dolphin.Check.Mission do
   # Amp-seconds per second at a horizontal and climb speed (Battery.step/2).
   defp amps(v, vz), do: @hover_current * (1.0 + 0.1 * v / 10 + 0.2 * max(vz, 0) / 2.5)
 
+  # Amp-seconds as a fraction of the pack (mAh = A·s / 3.6).
+  defp fraction(amp_seconds), do: amp_seconds / 3.6 / @capacity_mah
+
   defp add(acc, item, time, amp_seconds, length, start) do
-    used = acc.used + amp_seconds / 3.6 / @capacity_mah
+    used = acc.used + fraction(amp_seconds)
     empty_at = if acc.empty_at == nil and start != nil and used > start, do: item.seq, else: acc.empty_at
     %{acc | time: acc.time + time, used: used, length: acc.length + length, empty_at: empty_at, path: [{acc.time + time, acc.at, acc.airborne?} | acc.path]}
   end

@@ -41,7 +41,8 @@ defmodule Dolphin.Check.Recorder do
     vehicle = %{id: id, payloads: fleet.payloads, battery: battery, position: fleet.home, airborne?: fleet.airborne?, at: Map.get(fleet, :at)}
     {problems, energy, estimate} = Dolphin.Check.Mission.check(mission, vehicle, s.limits)
     estimate = estimate && Map.merge(estimate, %{line: line, energy: energy})
-    estimates = if estimate, do: [estimate | s.estimates], else: s.estimates
+    # What the report keeps of an estimate (the flight needs the rest).
+    estimates = if estimate, do: [Map.take(estimate, [:mission, :vehicle, :line, :length_m, :time_s, :battery_used, :battery_start, :ending]) | s.estimates], else: s.estimates
     {:reply, estimate, %{s | findings: Enum.reverse(findings(problems, s.file, line)) ++ s.findings, estimates: estimates}}
   end
 
