@@ -63,8 +63,7 @@ defmodule Dolphin.Check.Flight do
   def handle_call({:stop, _reason}, _from, s) do
     left = drain(s, s.elapsed_s)
     # Cut short: the pack running out before the stop is still an error.
-    if s.estimate && left <= 0.0,
-      do: Dolphin.Check.Recorder.problems(s.recorder, Enum.filter(s.estimate.energy, &(elem(&1, 1) == :energy)), s.estimate.line)
+    if s.estimate && left <= 0.0, do: Dolphin.Check.Recorder.problems(s.recorder, [empty_before_stop(s)], s.estimate.line)
 
     left_at(s, s.elapsed_s)
     {:stop, :normal, :ok, s}
@@ -76,9 +75,26 @@ defmodule Dolphin.Check.Flight do
 
   defp left_at(s, elapsed_s) do
     e = s.estimate
-    {_, at, airborne?} = e.path |> Enum.take_while(fn {t, _, _} -> t <= elapsed_s end) |> List.last() || {0.0, e.start_at, s.airborne?}
+    {_, at, airborne?, _} = e.path |> Enum.take_while(fn {t, _, _, _} -> t <= elapsed_s end) |> List.last() || {0.0, e.start_at, s.airborne?, 0}
     if at, do: TestSource.set(s.test, s.vehicle, position: at, relative_altitude: if(airborne?, do: 20.0, else: 0.0))
     Dolphin.Check.Recorder.ended(s.recorder, s.vehicle, at, airborne?)
+  end
+
+  defp empty_before_stop(%{estimate: e} = s) do
+    empty_s = if s.rate * s.time_s >= s.battery, do: s.battery / s.rate, else: s.time_s + (s.battery - s.rate * s.time_s) / @hover_per_s
+    # The item it would be flying to then, if it is still on its first way through.
+    seq = if empty_s <= s.time_s, do: Enum.find_value(e.path, fn {end_s, _, _, seq} -> if end_s >= empty_s, do: seq end)
+
+    where =
+      case {seq, e.ending} do
+        {seq, _} when is_integer(seq) and seq > 0 -> " (on its way to item #{seq})"
+        {_, {:loops_forever, _}} -> " (going round its loop)"
+        {_, {:loiter_forever, seq}} -> " (loitering at item #{seq})"
+        _ -> ""
+      end
+
+    {:error, :energy,
+     "mission #{inspect(e.mission)} on vehicle #{s.vehicle}: starting with #{round(s.battery * 100)} %, the pack would be empty after #{round(empty_s)} s of flight#{where}, before anything stopped it"}
   end
 
   # Past the mission's end an endless one hovers.

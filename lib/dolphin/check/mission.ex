@@ -340,7 +340,7 @@ defmodule Dolphin.Check.Mission do
   defp add(acc, item, time, amp_seconds, length, start) do
     used = acc.used + fraction(amp_seconds)
     empty_at = if acc.empty_at == nil and start != nil and used > start, do: item.seq, else: acc.empty_at
-    %{acc | time: acc.time + time, used: used, length: acc.length + length, empty_at: empty_at, path: [{acc.time + time, acc.at, acc.airborne?} | acc.path]}
+    %{acc | time: acc.time + time, used: used, length: acc.length + length, empty_at: empty_at, path: [{acc.time + time, acc.at, acc.airborne?, item.seq} | acc.path]}
   end
 
   # --- items ---
