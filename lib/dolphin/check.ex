@@ -6,7 +6,10 @@ defmodule Dolphin.Check do
   severity, what).
 
       {:ok, fleet} = Dolphin.Check.FleetFile.read("fleet.json")
-      report = Dolphin.Check.run("examples/two_vehicles.exs", fleet: fleet)
+      report = Dolphin.Check.run("examples/search_and_signal.exs", fleet: fleet)
+      IO.write(Dolphin.Check.format(report))
+      # examples/search_and_signal.exs:46: mission "Search east" on vehicle 1: 1397 m, 177 s, 49 % of a pack, starting with 100 %
+      # ...
       Dolphin.Check.errors?(report)
       #=> false
 

@@ -6,7 +6,8 @@ defmodule Dolphin.Check.Finding do
   naming the rule: `:compile`, `:position`, `:below_ground`, `:too_far`,
   `:too_high`, `:no_take_off`, `:loiter_radius`, `:speed`, `:jump`,
   `:no_camera`, `:pick`, `:allocation`, `:script`, `:energy`,
-  `:low_reserve`, `:endless`, `:waiting`), where (`file`, `line`, nil when
+  `:low_reserve`, `:endless`, `:waiting`, `:mission` — a mission whose
+  items cannot be made at all), where (`file`, `line`, nil when
   unknown) and a `message` that says what is wrong.
 
       iex> f = %Dolphin.Check.Finding{severity: :error, kind: :too_far, file: "s.exs", line: 4, message: "mission \\"M\\": item 2 is 2400 m from home (limit 1000 m)"}

@@ -75,7 +75,8 @@ defmodule Dolphin.Check.Mission do
         {validity(name, items, vehicle, limits) ++ endless(name, estimate), energy(name, estimate, items, vehicle), Map.drop(estimate, [:empty_at, :empty_home])}
 
       {:error, message} ->
-        {[{:error, :jump, "mission #{inspect(mission.name)}: #{message}"}], [], nil}
+        kind = if message =~ "jump", do: :jump, else: :mission
+        {[{:error, kind, "mission #{inspect(mission.name)}: #{message}"}], [], nil}
     end
   end
 
@@ -108,7 +109,7 @@ defmodule Dolphin.Check.Mission do
         [{:error, :position, "#{what} is not on Earth (latitude #{lat}, longitude #{lon})"}]
 
       item.seq > 0 and lat == 0 and lon == 0 ->
-        [{:error, :position, "#{what} is at latitude 0, longitude 0 (a position never set?)"}]
+        [{:warning, :position, "#{what} is at latitude 0, longitude 0, which ArduPilot takes as \"where the vehicle is\" (if a position was meant, it was never set)"}]
 
       item.seq == 0 ->
         []

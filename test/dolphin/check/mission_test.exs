@@ -58,10 +58,15 @@ defmodule Dolphin.Check.MissionTest do
     assert message =~ "flies until stopped"
   end
 
+  test "a mission with no home to take is an error" do
+    m = Mission.new("Nowhere", [C.move(10, 0, 20)])
+    assert {[{:error, :mission, "mission \"Nowhere\": " <> _}], [], nil} = Check.check(m, vehicle(1.0), @limits)
+  end
+
   test "a position off the Earth is an error" do
     m = Mission.new("Off", [C.home(@home), C.take_off(@up), C.item(:mav_cmd_nav_waypoint, frame: 5, x: 950_000_000, y: -70_000_000, z: 130), C.item(:mav_cmd_nav_waypoint, frame: 6, x: 0, y: 0, z: 30)])
     assert {problems, _, _} = Check.check(m, vehicle(1.0), %{max_distance: 1.0e9, max_height: 1.0e9})
     assert Enum.any?(problems, &match?({:error, :position, "mission \"Off\" on vehicle 7: item 2 (NAV_WAYPOINT) is not on Earth" <> _}, &1))
-    assert Enum.any?(problems, &match?({:error, :position, "mission \"Off\" on vehicle 7: item 3 (NAV_WAYPOINT) is at latitude 0, longitude 0" <> _}, &1))
+    assert Enum.any?(problems, &match?({:warning, :position, "mission \"Off\" on vehicle 7: item 3 (NAV_WAYPOINT) is at latitude 0, longitude 0" <> _}, &1))
   end
 end
