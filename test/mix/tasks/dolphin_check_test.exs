@@ -39,6 +39,16 @@ defmodule Mix.Tasks.Dolphin.CheckTest do
     assert Dolphin.Vehicles.list() == []
   end
 
+  test "mix dolphin.run takes --no-check" do
+    assert {:ok, _, opts} = Mix.Tasks.Dolphin.Run.parse([Path.join(@dir, "ok.exs"), "--sim", "1", "--no-check"])
+    assert opts[:no_check]
+    {:ok, out} = StringIO.open("")
+    # --fake tries a script's logic on the test platform: no missions, no check.
+    assert :ok = Dolphin.CLI.Run.check(Path.join(@dir, "bad_mission.exs"), [fake: 1], out)
+    assert :ok = Dolphin.CLI.Run.check(Path.join(@dir, "bad_mission.exs"), [sim: 1, no_check: true], out)
+    assert {_, ""} = StringIO.contents(out)
+  end
+
   describe "--connect" do
     setup do
       on_exit(&Dolphin.Test.GroundStation.forget_vehicles/0)
