@@ -138,7 +138,7 @@ defmodule Mix.Tasks.Dolphin.Check do
     Enum.find_value(Keyword.get_values(opts, :connect), fn ep ->
       case Dolphin.Link.Endpoint.parse(ep) do
         {:ok, _} -> nil
-        {:error, why} -> "--connect #{ep}: #{if is_exception(why), do: Exception.message(why), else: why}"
+        {:error, e} -> "--connect #{ep}: #{Exception.message(e)}"
       end
     end)
   end
