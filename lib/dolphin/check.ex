@@ -41,7 +41,8 @@ defmodule Dolphin.Check do
   Stand-in flights drain the battery as estimated, so conditions such as
   `until(survey, battery(v) < 0.3)` end them as they would in flight. What
   the dry run cannot decide (a condition never met with the fleet's values,
-  a script still running at the horizon, an `ask`) is a note, not an error.
+  a script still running at the horizon, an `ask`, which the dry run answers
+  with nothing) is a note, not an error.
 
   Options of `run/2`: `:fleet` (the vehicles, as `Dolphin.Check.FleetFile`
   gives them; default one camera-carrying UAV per `:sim`, default 1, at
@@ -156,7 +157,7 @@ defmodule Dolphin.Check do
     {:ok, fleet} = Dolphin.Fleet.start_link(name: fleet_name, source: {Source, %{test: test, recorder: recorder}})
 
     try do
-      outcome = script_outcome(script, fleet_name, horizon)
+      outcome = script_outcome(script, fleet_name, horizon, recorder)
       {findings, missions} = Recorder.results(recorder)
       all = energy_severity(findings, Keyword.get(opts, :energy, :error)) ++ outcome_findings(outcome, script.file, horizon)
       %__MODULE__{file: script.file, findings: Enum.sort_by(all, &severity_rank(&1.severity)), missions: missions}
@@ -177,8 +178,15 @@ defmodule Dolphin.Check do
 
   # Runs the script on the check's clock until it ends or the horizon; a
   # script still running then is stopped, and where it was is a note.
-  defp script_outcome(script, fleet, horizon) do
-    {:ok, pid} = Dolphin.Script.start(script, fleet: fleet, clock: Dolphin.Check.Clock, ask: fn _ -> nil end, output: fn _ -> :ok end)
+  defp script_outcome(script, fleet, horizon, recorder) do
+    # `ask` runs in the script's process: the script's frame in its stack is the question's line.
+    ask = fn prompt ->
+      note = {:note, :ask, "the script asks #{inspect(prompt)}: the dry run answered nothing (end of input), and what follows depends on the answer"}
+      Recorder.problems(recorder, [note], caller_line(script.file) || Dolphin.Script.Statements.__line__())
+      nil
+    end
+
+    {:ok, pid} = Dolphin.Script.start(script, fleet: fleet, clock: Dolphin.Check.Clock, ask: ask, output: fn _ -> :ok end)
     real = div(horizon, Dolphin.Check.Clock.speedup())
 
     case Dolphin.Script.await(pid, real) do
@@ -191,6 +199,11 @@ defmodule Dolphin.Check do
       result ->
         result
     end
+  end
+
+  defp caller_line(file) do
+    {:current_stacktrace, stack} = Process.info(self(), :current_stacktrace)
+    Enum.find_value(stack, fn {_m, _f, _a, where} -> if to_string(where[:file]) == file, do: where[:line] end)
   end
 
   # Where the script's code is: its line, and whether it waits in a pick

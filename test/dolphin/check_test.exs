@@ -93,6 +93,13 @@ defmodule Dolphin.CheckTest do
     assert %{severity: :note, line: 4} = finding(report, :waiting)
   end
 
+  test "a question to the operator is a note with its line", %{fleet: fleet} do
+    report = check("asks.exs", fleet)
+    refute Check.errors?(report)
+    assert %{severity: :note, line: 3, message: message} = finding(report, :ask)
+    assert message =~ ~S|asks "Fly the survey? (y/n)"|
+  end
+
   test "the JSON form names each finding" , %{fleet: fleet} do
     map = "bad_mission.exs" |> check(fleet) |> Check.to_map()
     json = :jiffy.decode(:jiffy.encode(map), [:return_maps])

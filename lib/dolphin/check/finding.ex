@@ -6,7 +6,7 @@ defmodule Dolphin.Check.Finding do
   naming the rule: `:compile`, `:position`, `:below_ground`, `:too_far`,
   `:too_high`, `:no_take_off`, `:loiter_radius`, `:speed`, `:jump`,
   `:no_camera`, `:pick`, `:allocation`, `:script`, `:energy`,
-  `:low_reserve`, `:endless`, `:waiting`, `:mission` — a mission whose
+  `:low_reserve`, `:endless`, `:waiting`, `:ask`, `:mission` — a mission whose
   items cannot be made at all), where (`file`, `line`, nil when
   unknown) and a `message` that says what is wrong.
 
