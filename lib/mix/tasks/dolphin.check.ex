@@ -14,6 +14,12 @@ defmodule Mix.Tasks.Dolphin.Check do
   then notes), then one line per mission (length, time, battery use) and a
   summary.
 
+  The script runs dry for at most an hour of clock time (a few seconds):
+  what it has not reached by then is a note. A pack that would run empty
+  is an error here; `mix dolphin.run --sim N`, which runs the same check
+  before it flies, shows it as a warning, since simulated copters fly on at
+  0 %. Severities, kinds and the estimate: `Dolphin.Check`.
+
   ## Options
 
     * `--sim N` — the fleet is N simulated ArduCopters (as `mix dolphin.run
