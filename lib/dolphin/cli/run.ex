@@ -48,6 +48,43 @@ defmodule Dolphin.CLI.Run do
   # way still stops all it started.
   @cleanup :dolphin_cli_run_cleanup
 
+  @doc """
+  The pre-flight check (`Dolphin.Check`) that `mix dolphin.run` makes before
+  it starts any vehicle: for `--sim N` and `--sitl N`, with N simulated
+  copters as the fleet. A pack that would run empty is a warning here, not
+  an error: the estimate is the simulator's model, and simulated copters
+  (and SITL, with its own battery model) fly on at 0 %. Its findings are printed on `out` (nothing when there
+  are none); `:refused` when it found errors. Skipped (`:ok`) with `--fake`
+  (test-platform tasks, no missions), with `--connect` or configured links
+  (the fleet is known only once connected: `mix dolphin.check --connect`
+  checks against it) and with `--no-check`.
+  """
+  @spec check(Path.t(), keyword(), IO.device()) :: :ok | :refused
+  def check(file, opts, out) do
+    n = opts[:sim] || opts[:sitl]
+
+    cond do
+      opts[:no_check] || opts[:fake] || n == nil ->
+        :ok
+
+      true ->
+        report = Dolphin.Check.run(file, sim: n, energy: :warning)
+        errors? = Dolphin.Check.errors?(report)
+
+        if report.findings != [] and (errors? or !opts[:quiet]) do
+          IO.write(out, Enum.map(report.findings, &(Dolphin.Check.Finding.format(&1) <> "\n")))
+          if !errors?, do: IO.puts(out, "the pre-flight check found no error: flying")
+        end
+
+        if errors? do
+          IO.puts(out, "the pre-flight check found errors: nothing flies (--no-check to fly anyway)")
+          :refused
+        else
+          :ok
+        end
+    end
+  end
+
   @doc "Runs `script` (see the options above) and says how it ended."
   @spec run(Dolphin.Script.t(), keyword()) :: outcome()
   def run(script, opts) do

@@ -71,7 +71,19 @@ defmodule Dolphin.Mission.Platform do
   end
 
   @impl true
-  def start(%Mission{} = mission, vehicle, opts), do: Executor.start_link(mission, vehicle, opts)
+  def start(%Mission{} = mission, vehicle, opts) do
+    case opts[:source] do
+      # A source of stand-in vehicles (the pre-flight check's dry run,
+      # `Dolphin.Check`) flies missions itself: nothing is sent to a vehicle.
+      {module, arg} when is_atom(module) ->
+        if function_exported?(module, :start_mission, 4),
+          do: module.start_mission(arg, mission, vehicle, opts),
+          else: Executor.start_link(mission, vehicle, opts)
+
+      _ ->
+        Executor.start_link(mission, vehicle, opts)
+    end
+  end
 
   @impl true
   def vehicle_fault?({:vehicle_lost, _}), do: true

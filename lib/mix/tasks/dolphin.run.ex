@@ -9,7 +9,10 @@ defmodule Mix.Tasks.Dolphin.Run do
       mix dolphin.run logic.exs --fake 3 --for 10m
 
   The script is read and compiled first: a syntax error or an unknown word is
-  reported with file and line before anything is sent to a vehicle.
+  reported with file and line before anything is sent to a vehicle. With
+  `--sim N` or `--sitl N` the pre-flight check of `mix dolphin.check` runs
+  next, against N simulated copters, and the run refuses to fly (exit 1) if
+  it finds errors (`Dolphin.CLI.Run.check/3`; `--no-check` skips it).
 
   Under IEx (`iex -S mix dolphin.run SCRIPT ...`) the script runs in the
   background and the console stays usable: `Dolphin.Console`'s `vehicles()`,
@@ -51,6 +54,7 @@ defmodule Mix.Tasks.Dolphin.Run do
       while it goes on (0: a free port, printed); read-only
     * `--web-bind ADDRESS` — listen on ADDRESS instead of 127.0.0.1
       (`0.0.0.0`: from other machines too)
+    * `--no-check` — fly without the pre-flight check (`mix dolphin.check`)
 
   ## Output
 
@@ -99,7 +103,7 @@ defmodule Mix.Tasks.Dolphin.Run do
   ## Exit status
 
   0 — the script completed (or `--for` ended it); 1 — the script failed
-  (could not compile, a task failed, `halt`, a pick timed out: the message
+  (could not compile, the pre-flight check found errors, a task failed, `halt`, a pick timed out: the message
   says what, where and why) or its vehicles could not be started (a port in
   use, a SITL binary missing, the `--web` port in use); 2 — bad usage (an
   unknown option, a bad endpoint, no such script); 130 — Ctrl-C (SIGINT)
@@ -127,10 +131,11 @@ defmodule Mix.Tasks.Dolphin.Run do
     quiet: :boolean,
     report: :string,
     web: :integer,
-    web_bind: :string
+    web_bind: :string,
+    no_check: :boolean
   ]
 
-  @usage "usage: mix dolphin.run SCRIPT [--connect ENDPOINT]... [--sim N | --sitl N | --fake N] [--speedup K] [--for DURATION] [--events FILE] [--tlog FILE | --no-tlog] [--forward ENDPOINT]... [--quiet] [--report FILE] [--web PORT [--web-bind ADDRESS]]"
+  @usage "usage: mix dolphin.run SCRIPT [--connect ENDPOINT]... [--sim N | --sitl N | --fake N] [--speedup K] [--for DURATION] [--events FILE] [--tlog FILE | --no-tlog] [--forward ENDPOINT]... [--quiet] [--report FILE] [--web PORT [--web-bind ADDRESS]] [--no-check]"
 
   @impl Mix.Task
   def run(argv) do
@@ -192,7 +197,9 @@ defmodule Mix.Tasks.Dolphin.Run do
           Mix.Task.run("app.start")
           run_opts = opts ++ Keyword.take(io, [:out, :err, :plain, :ask, :signals]) ++ [sitl_extra: Keyword.get(io, :sitl, [])]
 
-          case Run.run(script, run_opts) do
+          # Nothing is started when the pre-flight check refuses.
+          case Run.check(file, opts, Keyword.get(io, :out, :stdio)) == :ok and Run.run(script, run_opts) do
+            false -> 1
             :completed -> 0
             :stopped -> 0
             {:stopped, signal} -> Signals.status(signal)

@@ -1,0 +1,254 @@
+defmodule Dolphin.Check do
+  @moduledoc """
+  The pre-flight check of a script (`mix dolphin.check`, and the first step
+  of `mix dolphin.run`): before any vehicle is commanded, it says what would
+  go wrong, one finding per line (`Dolphin.Check.Finding`: file:line,
+  severity, what).
+
+      {:ok, fleet} = Dolphin.Check.FleetFile.read("fleet.json")
+      report = Dolphin.Check.run("examples/search_and_signal.exs", fleet: fleet)
+      IO.write(Dolphin.Check.format(report))
+      # examples/search_and_signal.exs:46: mission "Search east" on vehicle 1: 1397 m, 177 s, 49 % of a pack, starting with 100 %
+      # ...
+      Dolphin.Check.errors?(report)
+      #=> false
+
+  What is checked:
+
+    * the script compiles (a syntax error, an unknown word);
+    * it is run dry: against stand-ins for the described fleet
+      (`Dolphin.Check.FleetFile`, or the vehicles of `--sim N`), on a clock
+      2,000 times faster than real time, with the real fleet's picks and the
+      engine's allocation — so a `pick` that nothing can serve, or a
+      concurrent composition without enough distinct vehicles, fails as it
+      would in flight, and is reported with its line and why;
+    * every mission a task would fly, as it is sent (`Dolphin.Mission.to_items/2`):
+      positions on Earth, heights not below the home's ground, no item
+      beyond `:max_distance` from home or `:max_height` above it, a take-off
+      before the first waypoint for a vehicle on the ground, loiter radii
+      and speeds ArduCopter takes, jumps to existing items, photos only on a
+      vehicle with a camera;
+    * energy and time: each mission's length, flight time and battery use,
+      from the simulated ArduCopter's model (cruise 10 m/s, climb 2.5 m/s,
+      descent 1.5 m/s, 30 A hovering times effort, a 3300 mAh pack), against
+      the battery the vehicle has when the mission starts in the dry run
+      (its fleet value, less what earlier missions used — so after
+      `wait_for(battery(v) >= 0.9, ...)` the mission starts with what the
+      condition let through); a mission whose pack would be empty is
+      reported with the item where it would be, one that could not come
+      back home too.
+
+  Stand-in flights drain the battery as estimated, so conditions such as
+  `until(survey, battery(v) < 0.3)` end them as they would in flight. What
+  the dry run cannot decide (a condition never met with the fleet's values,
+  a script still running at the horizon, an `ask`, which the dry run answers
+  with nothing) is a note, not an error.
+
+  Options of `run/2`: `:fleet` (the vehicles, as `Dolphin.Check.FleetFile`
+  gives them; default one camera-carrying UAV per `:sim`, default 1, at
+  the simulator's home), `:max_distance` (metres from home, default 12,000),
+  `:max_height` (metres above home, default 500: the report's scenarios fly
+  380 m above home and survey up to 10 km away), `:horizon_ms` (clock
+  time the dry run may last, default an hour), `:energy` (the severity of a
+  pack that would run empty: `:error`, the default, or `:warning` — what
+  `mix dolphin.run` uses for simulated vehicles, which fly on at 0 %).
+  """
+
+  alias Dolphin.Check.{Finding, Recorder, Source}
+  alias Dolphin.Fleet.TestSource
+
+  defstruct file: nil, findings: [], missions: []
+
+  @typedoc """
+  A check's report: its findings (errors first) and, for each mission the
+  dry run started, its estimate — `mission` (name), `vehicle`, `line`,
+  `length_m`, `time_s`, `battery_used` (fraction of a pack),
+  `battery_start` (the charge it started with), `ending` (`Dolphin.Mission.ending/1`).
+  """
+  @type t :: %__MODULE__{file: String.t(), findings: [Finding.t()], missions: [map()]}
+
+  @sim_home %Dolphin.Geo.Location{lat: 40.444233, lon: -7.375234, h: 820.0}
+  @horizon_ms 3_600_000
+  # The report's scenarios fly 380 m above home and survey up to 10 km away.
+  @max_distance 12_000
+  @max_height 500
+
+  @doc "Checks the script at `path` (see the module doc for options); the findings, errors first."
+  @spec run(Path.t(), keyword()) :: t()
+  def run(path, opts \\ []) do
+    case Dolphin.Script.compile(path) do
+      {:ok, script} ->
+        try do
+          dry_run(script, opts)
+        after
+          Dolphin.Script.purge(script)
+        end
+
+      {:error, e} ->
+        %__MODULE__{file: path, findings: [%Finding{severity: :error, kind: :compile, file: e.file, line: e.line, message: e.message}]}
+    end
+  end
+
+  @doc "The stand-in fleet of `--sim N`: N UAVs with a camera, full, on the ground at the simulator's home."
+  @spec sim_fleet(pos_integer()) :: [Dolphin.Check.FleetFile.vehicle()]
+  def sim_fleet(n), do: for(id <- 1..n, do: %{id: id, type: :uav, payloads: [:camera], battery: 1.0, position: @sim_home, airborne?: false})
+
+  @doc "Whether the report has an error."
+  @spec errors?(t()) :: boolean()
+  def errors?(%__MODULE__{findings: findings}), do: Enum.any?(findings, &(&1.severity == :error))
+
+  @doc "The report as text: one line per finding, then one per mission estimate and a summary line."
+  @spec format(t()) :: String.t()
+  def format(%__MODULE__{} = r) do
+    findings = Enum.map(r.findings, &(Finding.format(&1) <> "\n"))
+
+    missions =
+      for m <- r.missions do
+        where = Enum.reject([r.file && Path.relative_to_cwd(r.file), m.line], &is_nil/1) |> Enum.join(":")
+        start = if m.battery_start, do: ", starting with #{round(m.battery_start * 100)} %", else: ""
+        "#{where}: mission #{inspect(m.mission)} on vehicle #{m.vehicle}: #{round(m.length_m)} m, #{round(m.time_s)} s, #{round(m.battery_used * 100)} % of a pack#{start}\n"
+      end
+
+    count = fn sev -> Enum.count(r.findings, &(&1.severity == sev)) end
+    summary = "#{Path.relative_to_cwd(r.file || "script")}: #{count.(:error)} error(s), #{count.(:warning)} warning(s), #{count.(:note)} note(s); #{length(r.missions)} mission(s) checked\n"
+    IO.iodata_to_binary([findings, missions, summary])
+  end
+
+  @doc "The report as a JSON-ready map (binary keys)."
+  @spec to_map(t()) :: map()
+  def to_map(%__MODULE__{} = r) do
+    %{
+      "file" => r.file,
+      "ok" => not errors?(r),
+      "findings" => Enum.map(r.findings, &Finding.to_map/1),
+      "missions" =>
+        Enum.map(r.missions, fn m ->
+          %{
+            "mission" => m.mission,
+            "vehicle" => m.vehicle,
+            "line" => m.line,
+            "length_m" => Float.round(m.length_m * 1.0, 1),
+            "time_s" => Float.round(m.time_s * 1.0, 1),
+            "battery_used" => Float.round(m.battery_used * 1.0, 3),
+            "battery_start" => m.battery_start,
+            "ending" => m.ending |> elem(0) |> Atom.to_string()
+          }
+        end)
+    }
+  end
+
+  # --- the dry run ---
+
+  defp dry_run(script, opts) do
+    vehicles = Keyword.get_lazy(opts, :fleet, fn -> sim_fleet(Keyword.get(opts, :sim, 1)) end)
+    limits = %{max_distance: Keyword.get(opts, :max_distance, @max_distance), max_height: Keyword.get(opts, :max_height, @max_height)}
+    horizon = Keyword.get(opts, :horizon_ms, @horizon_ms)
+    n = System.unique_integer([:positive])
+    test = :"dolphin_check_vehicles_#{n}"
+    fleet_name = :"dolphin_check_fleet_#{n}"
+
+    {:ok, ts} = TestSource.start_link(name: test)
+    by_id = Map.new(vehicles, &{&1.id, %{payloads: &1.payloads, home: &1.position, airborne?: &1.airborne?}})
+    {:ok, recorder} = Recorder.start_link(%{test: test, file: script.file, limits: limits, vehicles: by_id})
+
+    for v <- vehicles,
+        do: TestSource.add(test, v.id, type: v.type, payloads: v.payloads, battery: v.battery, position: v.position, relative_altitude: if(v.airborne?, do: 20.0, else: 0.0))
+
+    {:ok, fleet} = Dolphin.Fleet.start_link(name: fleet_name, source: {Source, %{test: test, recorder: recorder}})
+
+    try do
+      outcome = script_outcome(script, fleet_name, horizon, recorder)
+      {findings, missions} = Recorder.results(recorder)
+      all = energy_severity(findings, Keyword.get(opts, :energy, :error)) ++ outcome_findings(outcome, script.file, horizon)
+      %__MODULE__{file: script.file, findings: Enum.sort_by(all, &severity_rank(&1.severity)), missions: missions}
+    after
+      for pid <- [fleet, recorder, ts] do
+        Process.unlink(pid)
+        GenServer.stop(pid)
+      end
+    end
+  end
+
+  defp energy_severity(findings, :error), do: findings
+  defp energy_severity(findings, severity), do: Enum.map(findings, &if(&1.kind == :energy, do: %{&1 | severity: severity}, else: &1))
+
+  defp severity_rank(:error), do: 0
+  defp severity_rank(:warning), do: 1
+  defp severity_rank(:note), do: 2
+
+  # Runs the script on the check's clock until it ends or the horizon; a
+  # script still running then is stopped, and where it was is a note.
+  defp script_outcome(script, fleet, horizon, recorder) do
+    # `ask` runs in the script's process: the script's frame in its stack is the question's line.
+    ask = fn prompt ->
+      note = {:note, :ask, "the script asks #{inspect(prompt)}: the dry run answered nothing (end of input), and what follows depends on the answer"}
+      Recorder.problems(recorder, [note], caller_line(script.file) || Dolphin.Script.Statements.__line__())
+      nil
+    end
+
+    {:ok, pid} = Dolphin.Script.start(script, fleet: fleet, clock: Dolphin.Check.Clock, ask: ask, output: fn _ -> :ok end)
+    real = div(horizon, Dolphin.Check.Clock.speedup())
+
+    case Dolphin.Script.await(pid, real) do
+      {:error, :timeout} ->
+        where = code_place(pid)
+        Dolphin.Script.stop(pid, :check_horizon)
+        _ = Dolphin.Script.await(pid, 30_000)
+        where
+
+      result ->
+        result
+    end
+  end
+
+  defp caller_line(file) do
+    {:current_stacktrace, stack} = Process.info(self(), :current_stacktrace)
+    Enum.find_value(stack, fn {_m, _f, _a, where} -> if to_string(where[:file]) == file, do: where[:line] end)
+  end
+
+  # Where the script's code is: its line, and whether it waits in a pick
+  # (the fleet's pick timeouts run on the real clock, not the check's: a
+  # pick still waiting at the horizon is one the described fleet never serves).
+  defp code_place(runner) do
+    with %{code: code} when is_pid(code) <- :sys.get_state(runner),
+         {:dictionary, dict} <- Process.info(code, :dictionary),
+         {:current_stacktrace, stack} <- Process.info(code, :current_stacktrace) do
+      line = Keyword.get(dict, :"$dolphin_line")
+      if Enum.any?(stack, &match?({m, :pick, _, _} when m in [Dolphin.Fleet, Dolphin.Script.Statements], &1)), do: {:pick_waiting, line}, else: {:running, line}
+    else
+      _ -> {:running, nil}
+    end
+  catch
+    :exit, _ -> {:running, nil}
+  end
+
+  defp outcome_findings({:ok, _summary}, _file, _horizon), do: []
+
+  defp outcome_findings({:pick_waiting, line}, file, _horizon) do
+    [%Finding{severity: :error, kind: :pick, file: file, line: line, message: "no vehicle of the fleet can serve this pick (#{source_line(file, line)}): none has the type, payload, id or place it asks for, or they are all taken"}]
+  end
+
+  defp outcome_findings({:running, line}, file, horizon) do
+    [%Finding{severity: :note, kind: :waiting, file: file, line: line, message: "the script was still running after #{div(horizon, 60_000)} min of clock time in the dry run (a condition never met with the fleet's values, or a loop): what it did until then is checked"}]
+  end
+
+  defp outcome_findings({:error, %Dolphin.Script.Error{} = e}, _file, _horizon) do
+    {severity, kind} =
+      case e.reason do
+        %Dolphin.Fleet.PickError{} -> {:error, :pick}
+        %Dolphin.Fleet.AllocationError{} -> {:error, :allocation}
+        _ when e.kind == :halted -> {:warning, :script}
+        _ -> {:error, :script}
+      end
+
+    [%Finding{severity: severity, kind: kind, file: e.file, line: e.line, message: "in the dry run: " <> e.message}]
+  end
+
+  defp source_line(file, line) do
+    with true <- is_integer(line), {:ok, text} <- File.read(file), text when is_binary(text) <- text |> String.split("\n") |> Enum.at(line - 1) do
+      "`" <> String.trim(text) <> "`"
+    else
+      _ -> "line #{inspect(line)}"
+    end
+  end
+end

@@ -1,0 +1,108 @@
+defmodule Dolphin.Check.Flight do
+  @moduledoc false
+  # A mission "flown" by a pre-flight check's stand-in vehicle: it passes the
+  # mission's estimated time on the check's clock, tick by tick, draining the
+  # vehicle's battery as the estimate says (so that `until(..., battery(v) < 0.3)` and
+  # the like react as they would), then completes — or, for a mission that
+  # never ends by itself, keeps hovering until stopped. Stopped, it answers
+  # at once, as Dolphin.Mission.Executor's stop does (a call {:stop, reason}).
+
+  use GenServer, restart: :temporary
+
+  alias Dolphin.Fleet.TestSource
+
+  # Clock time between two battery updates.
+  @tick_ms 10_000
+  # Hovering drain per second (Dolphin.Check.Mission's model: 30 A of 3300 mAh).
+  @hover_per_s 30.0 / 3.6 / 3300.0
+
+  @spec start_link(map()) :: GenServer.on_start()
+  def start_link(args), do: GenServer.start_link(__MODULE__, args)
+
+  @impl true
+  def init(args) do
+    # Linked to the engine's leaf: its exit is ours.
+    {:ok, view} = TestSource.vehicle(args.test, args.vehicle)
+    clock = args.clock || Dolphin.Check.Clock
+    e = args.estimate
+    start_battery = view.battery || 1.0
+    rate = if e && e.time_s > 0, do: e.battery_used / e.time_s, else: @hover_per_s
+    finite? = e != nil and match?({kind, _} when kind in [:landing, :reached], e.ending)
+    airborne? = (view.relative_altitude || 0.0) > 1.0
+    s = %{args | clock: clock} |> Map.merge(%{elapsed_s: 0.0, battery: start_battery, rate: rate, finite?: finite?, time_s: (e && e.time_s) || 0.0, airborne?: airborne?})
+    clock.send_after(self(), :tick, min(@tick_ms, round(s.time_s * 1000)))
+    {:ok, s}
+  end
+
+  @impl true
+  # The flight's time moves by whole ticks, not by the clock's reading: at
+  # the check's speed-up a millisecond of real delay is seconds of clock
+  # time, and the battery a condition saw must be the one a stop leaves.
+  def handle_info(:tick, s) do
+    elapsed_s = if s.finite?, do: min(s.elapsed_s + @tick_ms / 1000, s.time_s), else: s.elapsed_s + @tick_ms / 1000
+    s = %{s | elapsed_s: elapsed_s}
+
+    cond do
+      s.finite? and elapsed_s >= s.time_s ->
+        drain(s, s.time_s)
+        if s.estimate, do: Dolphin.Check.Recorder.problems(s.recorder, s.estimate.energy, s.estimate.line)
+        left_at(s, s.time_s)
+        Dolphin.Engine.Platform.done(s.owner)
+        {:stop, :normal, s}
+
+      true ->
+        drain(s, elapsed_s)
+        s.clock.send_after(self(), :tick, @tick_ms)
+        {:noreply, s}
+    end
+  end
+
+  def handle_info(_other, s), do: {:noreply, s}
+
+  @impl true
+  def handle_call({:stop, _reason}, _from, s) do
+    left = drain(s, s.elapsed_s)
+    # Cut short: the pack running out before the stop is still an error.
+    if s.estimate && left <= 0.0, do: Dolphin.Check.Recorder.problems(s.recorder, [empty_before_stop(s)], s.estimate.line)
+
+    left_at(s, s.elapsed_s)
+    {:stop, :normal, :ok, s}
+  end
+
+  # Where the flight is after `elapsed_s`: the last point of the estimate's
+  # path reached by then (the vehicle holds there when stopped).
+  defp left_at(%{estimate: nil} = s, _elapsed_s), do: Dolphin.Check.Recorder.ended(s.recorder, s.vehicle, nil, false)
+
+  defp left_at(s, elapsed_s) do
+    e = s.estimate
+    {_, at, airborne?, _} = e.path |> Enum.take_while(fn {t, _, _, _} -> t <= elapsed_s end) |> List.last() || {0.0, e.start_at, s.airborne?, 0}
+    if at, do: TestSource.set(s.test, s.vehicle, position: at, relative_altitude: if(airborne?, do: 20.0, else: 0.0))
+    Dolphin.Check.Recorder.ended(s.recorder, s.vehicle, at, airborne?)
+  end
+
+  defp empty_before_stop(%{estimate: e} = s) do
+    empty_s = if s.rate * s.time_s >= s.battery, do: s.battery / s.rate, else: s.time_s + (s.battery - s.rate * s.time_s) / @hover_per_s
+    # The item it would be flying to then, if it is still on its first way through.
+    seq = if empty_s <= s.time_s, do: Enum.find_value(e.path, fn {end_s, _, _, seq} -> if end_s >= empty_s, do: seq end)
+
+    where =
+      case {seq, e.ending} do
+        {seq, _} when is_integer(seq) and seq > 0 -> " (on its way to item #{seq})"
+        {_, {:loops_forever, _}} -> " (going round its loop)"
+        {_, {:loiter_forever, seq}} -> " (loitering at item #{seq})"
+        _ -> ""
+      end
+
+    {:error, :energy,
+     "mission #{inspect(e.mission)} on vehicle #{s.vehicle}: starting with #{round(s.battery * 100)} %, the pack would be empty after #{round(empty_s)} s of flight#{where}, before anything stopped it"}
+  end
+
+  # Past the mission's end an endless one hovers.
+  defp drain(s, elapsed_s) do
+    flying = min(elapsed_s, s.time_s)
+    used = s.rate * flying + @hover_per_s * max(elapsed_s - s.time_s, 0.0)
+    left = max(s.battery - used, 0.0)
+    TestSource.set(s.test, s.vehicle, battery: left)
+    left
+  end
+end

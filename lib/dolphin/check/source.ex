@@ -1,0 +1,48 @@
+defmodule Dolphin.Check.Source do
+  @moduledoc false
+  # The vehicles of a pre-flight check: stand-ins for the described fleet
+  # (a `Dolphin.Fleet.TestSource` holds their views, so picks, allocation and
+  # conditions see them as they see real vehicles) that fly no mission.
+  # `Dolphin.Mission.Platform` hands a mission to `start_mission/4` when the
+  # run's source has it: the mission is checked and estimated
+  # (Dolphin.Check.Recorder) and a `Dolphin.Check.Flight` passes its time.
+
+  @behaviour Dolphin.Fleet.Source
+
+  alias Dolphin.Fleet.TestSource
+
+  @type arg :: %{test: atom(), recorder: pid()}
+
+  @impl true
+  def list(%{test: t}), do: TestSource.list(t)
+
+  @impl true
+  def vehicle(%{test: t}, id), do: TestSource.vehicle(t, id)
+
+  @impl true
+  def set_timeout(%{test: t}, id, ms), do: TestSource.set_timeout(t, id, ms)
+
+  @impl true
+  def send_message(%{test: t}, id, message), do: TestSource.send_message(t, id, message)
+
+  @doc false
+  # Called by Dolphin.Mission.Platform.start/3 in the engine's leaf process,
+  # whose context names the script's code process (the line it is at).
+  @spec start_mission(arg(), Dolphin.Mission.t(), non_neg_integer(), keyword()) :: {:ok, pid()}
+  def start_mission(%{test: t, recorder: recorder}, mission, vehicle, opts) do
+    line = script_line(Dolphin.Engine.Context.current().owner)
+    estimate = Dolphin.Check.Recorder.mission(recorder, mission, vehicle, line)
+    Dolphin.Check.Flight.start_link(%{test: t, recorder: recorder, vehicle: vehicle, estimate: estimate, owner: opts[:owner], clock: opts[:clock]})
+  end
+
+  # The script line its code process is at (`execute` waits there), read
+  # from its process dictionary (Dolphin.Script.Statements.__line__/1).
+  defp script_line(pid) when is_pid(pid) do
+    case Process.info(pid, :dictionary) do
+      {:dictionary, dict} -> Keyword.get(dict, :"$dolphin_line")
+      nil -> nil
+    end
+  end
+
+  defp script_line(_), do: nil
+end

@@ -1,0 +1,168 @@
+defmodule Mix.Tasks.Dolphin.Check do
+  @shortdoc "Checks a Dolphin script before anything flies"
+
+  @moduledoc """
+  A pre-flight check of a script (`Dolphin.Check`): it compiles, runs dry
+  against stand-ins for the fleet, and checks every mission it would fly,
+  every pick and allocation, and each mission's battery use — before any
+  vehicle is commanded.
+
+      mix dolphin.check examples/two_vehicles.exs --sim 2
+      mix dolphin.check survey.exs --fleet fleet.json --max-distance 800 --json
+
+  One line per finding, `FILE:LINE: SEVERITY: what` (errors, then warnings,
+  then notes), then one line per mission (length, time, battery use) and a
+  summary.
+
+  The script runs dry for at most an hour of clock time (a few seconds):
+  what it has not reached by then is a note. A pack that would run empty
+  is an error here; `mix dolphin.run --sim N`, which runs the same check
+  before it flies, shows it as a warning, since simulated copters fly on at
+  0 %. Severities, kinds and the estimate: `Dolphin.Check`.
+
+  ## Options
+
+    * `--sim N` — the fleet is N simulated ArduCopters (as `mix dolphin.run
+      --sim N` starts them): UAVs with a camera, full, on the ground at the
+      simulator's home (the default: `--sim 1`)
+    * `--fleet FILE` — the fleet described in a JSON file:
+
+          {"vehicles": [{"id": 1, "type": "uav", "payloads": ["camera"],
+                         "battery": 1.0, "position": [40.444233, -7.375234, 820],
+                         "airborne": false}]}
+
+      `id` (system id) and `position` (`[lat, lon, height above sea
+      level]`, its home) are required; `type` defaults to `"uav"`,
+      `payloads` to none, `battery` (0.0..1.0) to 1.0, `airborne` to false
+      (see `Dolphin.Check.FleetFile`)
+    * `--connect ENDPOINT` — the live fleet: the vehicles that report on
+      this link (`udpin:0.0.0.0:14550`, `udpout:HOST:PORT`, `tcp:HOST:PORT`;
+      repeatable) within `--wait`, as they are now (their position taken as
+      their home); nothing is sent to them (`Dolphin.Check.LiveFleet`)
+    * `--wait SECONDS` — how long `--connect` listens for vehicles (default 5)
+    * `--max-distance M` — no mission item further than M metres from home (default 12000)
+    * `--max-height M` — no mission item higher than M metres above home (default 500)
+    * `--json` — the report as one JSON object (`file`, `ok`, `findings`:
+      `severity`, `kind`, `file`, `line`, `message`; `missions`: `mission`,
+      `vehicle`, `line`, `length_m`, `time_s`, `battery_used`,
+      `battery_start`, `ending`)
+
+  ## Exit status
+
+  0 — no error (warnings and notes may remain); 1 — the check found errors;
+  2 — bad usage (an unknown option, no such script, a bad fleet file);
+  with `--connect`, 1 also when the link cannot be opened or no vehicle
+  reported its position in time.
+  """
+
+  use Mix.Task
+
+  alias Dolphin.CLI.UsageError
+
+  @switches [sim: :integer, fleet: :string, connect: :keep, wait: :float, max_distance: :float, max_height: :float, json: :boolean]
+  @usage "usage: mix dolphin.check SCRIPT [--sim N | --fleet FILE | --connect ENDPOINT... [--wait SECONDS]] [--max-distance M] [--max-height M] [--json]"
+
+  @impl Mix.Task
+  def run(argv) do
+    case main(argv) do
+      0 -> :ok
+      code -> exit({:shutdown, code})
+    end
+  end
+
+  @doc """
+  Does the work of the task and returns the exit status. `io`: `:out` and
+  `:err` (devices, default `:stdio` and `:stderr`).
+  """
+  @spec main([String.t()], keyword()) :: 0 | 1 | 2
+  def main(argv, io \\ []) do
+    out = Keyword.get(io, :out, :stdio)
+    err = Keyword.get(io, :err, :stderr)
+
+    with {:ok, file, opts} <- parse(argv),
+         {:ok, check_opts} <- fleet(opts),
+         {:ok, check_opts} <- live_fleet(opts, check_opts, err) do
+      report = Dolphin.Check.run(file, check_opts)
+      if opts[:json], do: IO.puts(out, :jiffy.encode(Dolphin.Check.to_map(report), [:pretty])), else: IO.write(out, Dolphin.Check.format(report))
+      if Dolphin.Check.errors?(report), do: 1, else: 0
+    else
+      {:error, %Dolphin.CLI.StartError{} = e} ->
+        IO.puts(err, "mix dolphin.check: #{Exception.message(e)}")
+        1
+
+      {:error, e} ->
+        IO.puts(err, "mix dolphin.check: #{Exception.message(e)}\n#{@usage}")
+        2
+    end
+  end
+
+  # The application is up from here (links and vehicles for --connect; the
+  # dry run's fleet and pub/sub either way).
+  defp live_fleet(opts, check_opts, err) do
+    Mix.Task.run("app.start")
+
+    case Keyword.get_values(opts, :connect) do
+      [] ->
+        {:ok, check_opts}
+
+      endpoints ->
+        with {:ok, vehicles, skipped} <- Dolphin.Check.LiveFleet.gather(endpoints, round(Keyword.get(opts, :wait, 5.0) * 1000)) do
+          if skipped != [], do: IO.puts(err, "mix dolphin.check: left out (no position reported): vehicle(s) #{Enum.join(skipped, ", ")}")
+          {:ok, [fleet: vehicles] ++ Keyword.drop(check_opts, [:sim])}
+        end
+    end
+  end
+
+  @doc false
+  # The script and the options of a command line, checked.
+  @spec parse([String.t()]) :: {:ok, Path.t(), keyword()} | {:error, UsageError.t()}
+  def parse(argv) do
+    case OptionParser.parse(argv, strict: @switches) do
+      {opts, [file], []} ->
+        cond do
+          Enum.count([opts[:sim], opts[:fleet], opts[:connect]], & &1) > 1 -> usage_error("only one of --sim, --fleet and --connect")
+          opts[:wait] != nil and opts[:wait] < 0 -> usage_error("--wait is a number of seconds, got #{opts[:wait]}")
+          (bad = bad_endpoint(opts)) != nil -> usage_error(bad)
+          opts[:sim] != nil and opts[:sim] < 1 -> usage_error("--sim must be a positive number of vehicles, got #{opts[:sim]}")
+          Enum.any?([:max_distance, :max_height], &(opts[&1] != nil and opts[&1] <= 0)) -> usage_error("--max-distance and --max-height are positive numbers of metres")
+          not File.regular?(file) -> usage_error("no such script: #{file}")
+          true -> {:ok, file, opts}
+        end
+
+      {_, [], []} ->
+        usage_error("no script given")
+
+      {_, [_, extra | _], []} ->
+        usage_error("one script at a time (unexpected #{inspect(extra)})")
+
+      {_, _, [{switch, value} | _]} ->
+        usage_error("bad option #{switch}#{if value, do: " " <> value, else: ""}")
+    end
+  end
+
+  defp bad_endpoint(opts) do
+    Enum.find_value(Keyword.get_values(opts, :connect), fn ep ->
+      case Dolphin.Link.Endpoint.parse(ep) do
+        {:ok, _} -> nil
+        {:error, e} -> "--connect #{ep}: #{Exception.message(e)}"
+      end
+    end)
+  end
+
+  defp fleet(opts) do
+    limits = Keyword.take(opts, [:max_distance, :max_height])
+
+    case opts[:fleet] do
+      nil ->
+        {:ok, [sim: Keyword.get(opts, :sim, 1)] ++ limits}
+
+      path ->
+        case Dolphin.Check.FleetFile.read(path) do
+          {:ok, vehicles} -> {:ok, [fleet: vehicles] ++ limits}
+          {:error, e} -> {:error, e}
+        end
+    end
+  end
+
+  defp usage_error(message), do: {:error, %UsageError{message: message}}
+end

@@ -1,0 +1,72 @@
+defmodule Dolphin.Check.MissionTest do
+  use ExUnit.Case, async: true
+
+  alias Dolphin.Check.Mission, as: Check
+  alias Dolphin.Mission
+  alias Dolphin.Mission.Command, as: C
+
+  @home Dolphin.Geo.location(40.0, -7.0, 100)
+  @up Dolphin.Geo.location(40.0, -7.0, 130)
+  @limits %{max_distance: 5_000, max_height: 200}
+
+  # Take off 30 m, 1 km north, back and land: by the simulator's model
+  # 15 s climbing at 36 A, 100 s out and 100 s back at 33 A, 20 s down at 30 A.
+  defp out_and_back do
+    Mission.new("Out and back", [C.home(@home), C.take_off(@up), C.move(1000, 0, 0), C.return_home_and_land()])
+  end
+
+  defp vehicle(battery, opts \\ []), do: Map.merge(%{id: 7, payloads: [], battery: battery, position: nil, airborne?: false}, Map.new(opts))
+
+  test "length, time and battery use follow the simulator's numbers" do
+    assert {[], [], e} = Check.check(out_and_back(), vehicle(1.0), @limits)
+    assert_in_delta e.length_m, 2060, 1
+    assert_in_delta e.time_s, 235, 0.5
+    assert_in_delta e.battery_used, (36 * 15 + 33 * 200 + 30 * 20) / 3.6 / 3300, 0.001
+    assert e.ending == {:landing, 3}
+    assert e.lands?
+  end
+
+  test "a pack too small is an error at the item where it would be empty" do
+    assert {[], [{:error, :energy, message}], _} = Check.check(out_and_back(), vehicle(0.5), @limits)
+    assert message =~ "starting with 50 %: the pack would be empty at item 3 (NAV_LAND)"
+  end
+
+  test "a thin reserve once home is a warning" do
+    assert {[], [{:warning, :low_reserve, message}], _} = Check.check(out_and_back(), vehicle(0.7), @limits)
+    assert message =~ "5 % left once home"
+  end
+
+  test "a mission that does not come back is charged the way home" do
+    away = Mission.new("Away", [C.home(@home), C.take_off(@up), C.move(1000, 0, 0)])
+    assert {[], [{:error, :energy, message}], e} = Check.check(away, vehicle(0.4), @limits)
+    assert message =~ "it cannot come home"
+    refute e.lands?
+  end
+
+  test "a vehicle already flying needs no take-off, and starts from where it is" do
+    there = Dolphin.Geo.offset(@home, 1000, 0, 30)
+    back = Mission.new("Back", [C.home(@home), C.return_home_and_land()])
+    assert {[], [], e} = Check.check(back, vehicle(1.0, airborne?: true, at: there), @limits)
+    assert_in_delta e.length_m, 1030, 1
+    assert {[{:error, :no_take_off, _}], _, _} = Check.check(Mission.new("M", [C.home(@home), C.move(10, 0, 20)]), vehicle(1.0), @limits)
+    assert {[], _, _} = Check.check(Mission.new("M", [C.home(@home), C.move(10, 0, 20)]), vehicle(1.0, airborne?: true), @limits)
+  end
+
+  test "an endless mission is a note" do
+    m = Mission.new("Stay", [C.home(@home), C.take_off(@up), C.move_and_loiter_pos(10, 0, 0)])
+    assert {[{:note, :endless, message}], [], %{ending: {:loiter_forever, 2}}} = Check.check(m, vehicle(1.0), @limits)
+    assert message =~ "flies until stopped"
+  end
+
+  test "a mission with no home to take is an error" do
+    m = Mission.new("Nowhere", [C.move(10, 0, 20)])
+    assert {[{:error, :mission, "mission \"Nowhere\": " <> _}], [], nil} = Check.check(m, vehicle(1.0), @limits)
+  end
+
+  test "a position off the Earth is an error" do
+    m = Mission.new("Off", [C.home(@home), C.take_off(@up), C.item(:mav_cmd_nav_waypoint, frame: 5, x: 950_000_000, y: -70_000_000, z: 130), C.item(:mav_cmd_nav_waypoint, frame: 6, x: 0, y: 0, z: 30)])
+    assert {problems, _, _} = Check.check(m, vehicle(1.0), %{max_distance: 1.0e9, max_height: 1.0e9})
+    assert Enum.any?(problems, &match?({:error, :position, "mission \"Off\" on vehicle 7: item 2 (NAV_WAYPOINT) is not on Earth" <> _}, &1))
+    assert Enum.any?(problems, &match?({:warning, :position, "mission \"Off\" on vehicle 7: item 3 (NAV_WAYPOINT) is at latitude 0, longitude 0" <> _}, &1))
+  end
+end

@@ -1,0 +1,119 @@
+defmodule Dolphin.CheckTest do
+  # Not async: the stand-in vehicles publish on the shared pub/sub topics.
+  use ExUnit.Case
+
+  alias Dolphin.Check
+  alias Dolphin.Check.{FleetFile, FleetFileError}
+
+  doctest Dolphin.Check.Finding
+  doctest Dolphin.Check.FleetFile
+  doctest Dolphin.Check.FleetFileError
+
+  @dir "test/fixtures/check"
+
+  setup_all do
+    {:ok, fleet} = FleetFile.read(Path.join(@dir, "fleet.json"))
+    %{fleet: fleet}
+  end
+
+  defp check(name, fleet, opts \\ []), do: Check.run(Path.join(@dir, name), [fleet: fleet] ++ opts)
+  defp kinds(report, severity \\ :error), do: for(f <- report.findings, f.severity == severity, uniq: true, do: f.kind)
+  defp finding(report, kind), do: Enum.find(report.findings, &(&1.kind == kind))
+
+  test "a sound script has no error, and its mission is estimated", %{fleet: fleet} do
+    report = check("ok.exs", fleet)
+    refute Check.errors?(report), Check.format(report)
+    assert [%{mission: "Hop", length_m: length, time_s: time, battery_used: used, line: 14}] = report.missions
+    assert length > 200 and time > 20 and used > 0 and used < 0.2
+    assert Check.format(report) =~ "0 error(s)"
+  end
+
+  test "a script that does not compile is an error with its line", %{fleet: fleet} do
+    report = check("unknown_word.exs", fleet)
+    assert %{severity: :error, line: 3, message: message} = finding(report, :compile)
+    assert message =~ "pik/1"
+  end
+
+  test "every kind of mission fault is found, with the script line", %{fleet: fleet} do
+    report = check("bad_mission.exs", fleet, max_distance: 5_000, max_height: 300)
+    assert Enum.sort(kinds(report)) -- [:allocation, :script, :energy] == Enum.sort([:below_ground, :too_far, :too_high, :no_take_off, :loiter_radius, :speed])
+    assert finding(report, :below_ground).line == 18
+    assert finding(report, :too_far).message =~ "limit 5000 m"
+  end
+
+  test "photos on a vehicle without a camera are an error" do
+    home = Dolphin.Geo.location(40.0, -7.0, 100)
+    mission = Dolphin.Mission.new("P", [Dolphin.Mission.Command.home(home), Dolphin.Mission.Command.take_off(home, 130), Dolphin.Mission.Command.capture_photo()])
+    vehicle = %{id: 5, payloads: [], battery: 1.0, position: nil, airborne?: false}
+    assert {[{:error, :no_camera, message}], _energy, %{}} = Dolphin.Check.Mission.check(mission, vehicle, %{max_distance: 1000, max_height: 100})
+    assert message =~ "vehicle 5 has no camera"
+  end
+
+  test "a jump to a missing item is an error" do
+    mission = Dolphin.Mission.new("J", [Dolphin.Mission.Command.home(Dolphin.Geo.location(40.0, -7.0, 100)), Dolphin.Mission.Command.jump_to_item(9)])
+    vehicle = %{id: 1, payloads: [], battery: 1.0, position: nil, airborne?: true}
+    assert {[{:error, :jump, message}], [], nil} = Dolphin.Check.Mission.check(mission, vehicle, %{max_distance: 1000, max_height: 100})
+    assert message =~ "9"
+  end
+
+  test "a pick nothing can serve is an error that says which and why", %{fleet: fleet} do
+    report = check("no_pick.exs", fleet, horizon_ms: 600_000)
+    assert %{severity: :error, line: 3, message: message} = finding(report, :pick)
+    assert message =~ "thermal_camera"
+  end
+
+  test "a composition with more tasks than vehicles cannot be allocated", %{fleet: fleet} do
+    report = check("too_few.exs", fleet)
+    assert Check.errors?(report)
+    assert Enum.any?(report.findings, &(&1.kind in [:allocation, :script] and &1.line == 12)), Check.format(report)
+  end
+
+  test "a mission the pack cannot fly is reported with the item where it would be empty", %{fleet: fleet} do
+    fleet = Enum.map(fleet, &%{&1 | battery: 0.5})
+    report = check("low_battery.exs", fleet)
+    assert %{severity: :error, line: 15, message: message} = finding(report, :energy)
+    assert message =~ "starting with 50 %"
+    assert message =~ ~r/empty at item \d|cannot come home/
+  end
+
+  test "a flight cut short before the pack runs out is no error; one that runs it out before its stop is", %{fleet: fleet} do
+    report = check("cut_short.exs", fleet)
+    assert [%{mission: "Long", battery_start: 1.0}, %{mission: "Back", battery_start: back}, %{mission: "Long"} | _] = report.missions
+    # The stop came on the condition (how far below 60 % depends on the machine's load).
+    assert back < 0.6
+    assert [%{line: 23, message: message}] = Enum.filter(report.findings, &(&1.kind == :energy))
+    assert message =~ "the pack would be empty after"
+    assert message =~ "before anything stopped it"
+  end
+
+  test "a condition never met with the fleet's values is a note, not an error", %{fleet: fleet} do
+    fleet = Enum.map(fleet, &%{&1 | battery: 0.5})
+    report = check("waits.exs", fleet, horizon_ms: 600_000)
+    refute Check.errors?(report)
+    assert %{severity: :note, line: 4} = finding(report, :waiting)
+  end
+
+  test "a question to the operator is a note with its line", %{fleet: fleet} do
+    report = check("asks.exs", fleet)
+    refute Check.errors?(report)
+    assert %{severity: :note, line: 3, message: message} = finding(report, :ask)
+    assert message =~ ~S|asks "Fly the survey? (y/n)"|
+  end
+
+  test "the JSON form names each finding" , %{fleet: fleet} do
+    map = "bad_mission.exs" |> check(fleet) |> Check.to_map()
+    json = :jiffy.decode(:jiffy.encode(map), [:return_maps])
+    assert json["ok"] == false
+    assert Enum.any?(json["findings"], &(&1["kind"] == "no_take_off" and &1["line"] == 18 and &1["severity"] == "error"))
+  end
+
+  describe "fleet files" do
+    test "bad ones say what is wrong and where" do
+      assert {:error, %FleetFileError{message: "vehicle #1: \"position\" is missing" <> _}} = FleetFile.parse(~s({"vehicles":[{"id":1}]}))
+      assert {:error, %FleetFileError{message: "vehicle #2: id 1 is given twice"}} = FleetFile.parse(~s({"vehicles":[{"id":1,"position":[1,2,3]},{"id":1,"position":[1,2,3]}]}))
+      assert {:error, %FleetFileError{message: "not JSON" <> _}} = FleetFile.parse("{")
+      assert {:error, %FleetFileError{message: "vehicle #1: \"battery\" must be" <> _}} = FleetFile.parse(~s({"vehicles":[{"id":1,"battery":2,"position":[1,2,3]}]}))
+      assert {:error, %FleetFileError{message: "vehicle #1: unknown type \"submarine_zz\""}} = FleetFile.parse(~s({"vehicles":[{"id":1,"type":"submarine_zz","position":[1,2,3]}]}))
+    end
+  end
+end

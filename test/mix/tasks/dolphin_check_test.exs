@@ -1,0 +1,89 @@
+defmodule Mix.Tasks.Dolphin.CheckTest do
+  use ExUnit.Case
+
+  alias Mix.Tasks.Dolphin.Check, as: Task
+
+  @dir "test/fixtures/check"
+
+  defp main(argv) do
+    {:ok, out} = StringIO.open("")
+    {:ok, err} = StringIO.open("")
+    code = Task.main(argv, out: out, err: err)
+    {code, StringIO.flush(out), StringIO.flush(err)}
+  end
+
+  test "exit 0 and a summary for a sound script" do
+    assert {0, out, ""} = main([Path.join(@dir, "ok.exs"), "--fleet", Path.join(@dir, "fleet.json")])
+    assert out =~ ~s(mission "Hop" on vehicle)
+    assert out =~ "0 error(s)"
+  end
+
+  test "exit 1 with one line per finding, file:line: severity" do
+    assert {1, out, _} = main([Path.join(@dir, "bad_mission.exs"), "--fleet", Path.join(@dir, "fleet.json")])
+    assert out =~ "bad_mission.exs:18: error: mission \"Bad\" on vehicle 212: no take-off"
+  end
+
+  test "--json gives one object" do
+    assert {1, out, _} = main([Path.join(@dir, "no_pick.exs"), "--sim", "1", "--json"])
+    assert %{"ok" => false, "findings" => [%{"kind" => "pick", "line" => 3} | _]} = :jiffy.decode(out, [:return_maps])
+  end
+
+  test "mix dolphin.run checks first and refuses to fly on errors" do
+    {:ok, out} = StringIO.open("")
+    {:ok, err} = StringIO.open("")
+    assert 1 = Mix.Tasks.Dolphin.Run.main([Path.join(@dir, "bad_mission.exs"), "--sim", "1", "--no-tlog"], out: out, err: err, plain: true)
+    {_, text} = StringIO.contents(out)
+    assert text =~ "bad_mission.exs:17: error: no vehicle of the fleet can serve this pick"
+    assert text =~ "the pre-flight check found errors: nothing flies (--no-check to fly anyway)"
+    # Nothing was started.
+    assert Dolphin.Vehicles.list() == []
+  end
+
+  test "mix dolphin.run takes --no-check" do
+    assert {:ok, _, opts} = Mix.Tasks.Dolphin.Run.parse([Path.join(@dir, "ok.exs"), "--sim", "1", "--no-check"])
+    assert opts[:no_check]
+    {:ok, out} = StringIO.open("")
+    # --fake tries a script's logic on the test platform: no missions, no check.
+    assert :ok = Dolphin.CLI.Run.check(Path.join(@dir, "bad_mission.exs"), [fake: 1], out)
+    assert :ok = Dolphin.CLI.Run.check(Path.join(@dir, "bad_mission.exs"), [sim: 1, no_check: true], out)
+    assert {_, ""} = StringIO.contents(out)
+  end
+
+  describe "--connect" do
+    setup do
+      on_exit(&Dolphin.Test.GroundStation.forget_vehicles/0)
+    end
+
+    test "checks against the vehicles that answer on the link, then lets them go" do
+      {:ok, socket} = :gen_udp.open(0, ip: {127, 0, 0, 1})
+      {:ok, port} = :inet.port(socket)
+      :ok = :gen_udp.close(socket)
+      {:ok, [221]} = Dolphin.Sim.start(count: 1, first_sysid: 221, gcs: port)
+
+      assert {0, out, _} = main([Path.join(@dir, "ok.exs"), "--connect", "udpin:127.0.0.1:#{port}", "--wait", "3"])
+      assert out =~ ~s(mission "Hop" on vehicle 221)
+      # The link is closed and the vehicle forgotten: the stand-in had its id.
+      assert Dolphin.Vehicles.whereis(221) == nil
+    end
+
+    test "no vehicle answering is a failure that says so" do
+      {:ok, socket} = :gen_udp.open(0, ip: {127, 0, 0, 1})
+      {:ok, port} = :inet.port(socket)
+      :ok = :gen_udp.close(socket)
+      assert {1, "", err} = main([Path.join(@dir, "ok.exs"), "--connect", "udpin:127.0.0.1:#{port}", "--wait", "0.2"])
+      assert err =~ "no vehicle reported its position within"
+    end
+  end
+
+  test "exit 2 on bad usage" do
+    assert {2, _, err} = main(["nope.exs"])
+    assert err =~ "no such script: nope.exs"
+    assert {2, _, err} = main([Path.join(@dir, "ok.exs"), "--sim", "1", "--fleet", "x.json"])
+    assert err =~ "only one of --sim, --fleet and --connect"
+    assert {2, _, _} = main([Path.join(@dir, "ok.exs"), "--bogus"])
+    assert {2, _, err} = main([Path.join(@dir, "ok.exs"), "--connect", "carrier-pigeon:1"])
+    assert err =~ "--connect carrier-pigeon:1"
+    assert {2, _, err} = main([Path.join(@dir, "ok.exs"), "--fleet", Path.join(@dir, "ok.exs")])
+    assert err =~ "fleet file"
+  end
+end
