@@ -117,27 +117,17 @@ defmodule Mix.Tasks.Dolphin.Check do
   # The script and the options of a command line, checked.
   @spec parse([String.t()]) :: {:ok, Path.t(), keyword()} | {:error, UsageError.t()}
   def parse(argv) do
-    case OptionParser.parse(argv, strict: @switches) do
-      {opts, [file], []} ->
-        cond do
-          Enum.count([opts[:sim], opts[:fleet], opts[:connect]], & &1) > 1 -> usage_error("only one of --sim, --fleet and --connect")
-          opts[:wait] != nil and opts[:wait] < 0 -> usage_error("--wait is a number of seconds, got #{opts[:wait]}")
-          (bad = bad_endpoint(opts)) != nil -> usage_error(bad)
-          opts[:sim] != nil and opts[:sim] < 1 -> usage_error("--sim must be a positive number of vehicles, got #{opts[:sim]}")
-          Enum.any?([:max_distance, :max_height], &(opts[&1] != nil and opts[&1] <= 0)) -> usage_error("--max-distance and --max-height are positive numbers of metres")
-          not File.regular?(file) -> usage_error("no such script: #{file}")
-          true -> {:ok, file, opts}
-        end
-
-      {_, [], []} ->
-        usage_error("no script given")
-
-      {_, [_, extra | _], []} ->
-        usage_error("one script at a time (unexpected #{inspect(extra)})")
-
-      {_, _, [{switch, value} | _]} ->
-        usage_error("bad option #{switch}#{if value, do: " " <> value, else: ""}")
-    end
+    UsageError.parse_script(argv, @switches, fn file, opts ->
+      cond do
+        Enum.count([opts[:sim], opts[:fleet], opts[:connect]], & &1) > 1 -> usage_error("only one of --sim, --fleet and --connect")
+        opts[:wait] != nil and opts[:wait] < 0 -> usage_error("--wait is a number of seconds, got #{opts[:wait]}")
+        (bad = bad_endpoint(opts)) != nil -> usage_error(bad)
+        opts[:sim] != nil and opts[:sim] < 1 -> usage_error("--sim must be a positive number of vehicles, got #{opts[:sim]}")
+        Enum.any?([:max_distance, :max_height], &(opts[&1] != nil and opts[&1] <= 0)) -> usage_error("--max-distance and --max-height are positive numbers of metres")
+        not File.regular?(file) -> usage_error("no such script: #{file}")
+        true -> {:ok, file, opts}
+      end
+    end)
   end
 
   defp bad_endpoint(opts) do
@@ -164,5 +154,5 @@ defmodule Mix.Tasks.Dolphin.Check do
     end
   end
 
-  defp usage_error(message), do: {:error, %UsageError{message: message}}
+  defp usage_error(message), do: UsageError.error(message)
 end

@@ -225,33 +225,23 @@ defmodule Mix.Tasks.Dolphin.Run do
   # parse, the script is a file), with the duration of --for as :for_ms.
   @spec parse([String.t()]) :: {:ok, Path.t(), keyword()} | {:error, UsageError.t()}
   def parse(argv) do
-    case OptionParser.parse(argv, strict: @switches) do
-      {opts, [file], []} ->
-        with :ok <- positive(opts, :sim),
-             :ok <- positive(opts, :sitl),
-             :ok <- positive(opts, :fake),
-             :ok <- exclusive(opts),
-             :ok <- speedup(opts[:speedup]),
-             :ok <- endpoints(opts),
-             :ok <- web(opts),
-             :ok <- report(opts),
-             {:ok, for_ms} <- duration(opts[:for]),
-             :ok <- readable(file) do
-          {:ok, file, Keyword.put(opts, :for_ms, for_ms)}
-        end
-
-      {_, [], []} ->
-        usage_error("no script given")
-
-      {_, [_, extra | _], []} ->
-        usage_error("one script at a time (unexpected #{inspect(extra)})")
-
-      {_, _, [{switch, value} | _]} ->
-        usage_error("bad option #{switch}#{if value, do: " " <> value, else: ""}")
-    end
+    UsageError.parse_script(argv, @switches, fn file, opts ->
+      with :ok <- positive(opts, :sim),
+           :ok <- positive(opts, :sitl),
+           :ok <- positive(opts, :fake),
+           :ok <- exclusive(opts),
+           :ok <- speedup(opts[:speedup]),
+           :ok <- endpoints(opts),
+           :ok <- web(opts),
+           :ok <- report(opts),
+           {:ok, for_ms} <- duration(opts[:for]),
+           :ok <- readable(file) do
+        {:ok, file, Keyword.put(opts, :for_ms, for_ms)}
+      end
+    end)
   end
 
-  defp usage_error(message), do: {:error, %UsageError{message: message}}
+  defp usage_error(message), do: UsageError.error(message)
 
   defp positive(opts, key) do
     case opts[key] do
