@@ -159,7 +159,9 @@ defmodule Dolphin.Check do
     try do
       outcome = script_outcome(script, fleet_name, horizon, recorder)
       {findings, missions} = Recorder.results(recorder)
-      all = energy_severity(findings, Keyword.get(opts, :energy, :error)) ++ outcome_findings(outcome, script.file, horizon)
+      # After an `ask` (answered nil here) what the script does is not the dry run's to judge.
+      asked? = Enum.any?(findings, &(&1.kind == :ask))
+      all = energy_severity(findings, Keyword.get(opts, :energy, :error)) ++ outcome_findings(outcome, script.file, horizon, asked?)
       %__MODULE__{file: script.file, findings: Enum.sort_by(all, &severity_rank(&1.severity)), missions: missions}
     after
       for pid <- [fleet, recorder, ts] do
@@ -222,26 +224,27 @@ defmodule Dolphin.Check do
     :exit, _ -> {:running, nil}
   end
 
-  defp outcome_findings({:ok, _summary}, _file, _horizon), do: []
+  defp outcome_findings({:ok, _summary}, _file, _horizon, _asked?), do: []
 
-  defp outcome_findings({:pick_waiting, line}, file, _horizon) do
+  defp outcome_findings({:pick_waiting, line}, file, _horizon, _asked?) do
     [%Finding{severity: :error, kind: :pick, file: file, line: line, message: "no vehicle of the fleet can serve this pick (#{source_line(file, line)}): none has the type, payload, id or place it asks for, or they are all taken"}]
   end
 
-  defp outcome_findings({:running, line}, file, horizon) do
+  defp outcome_findings({:running, line}, file, horizon, _asked?) do
     [%Finding{severity: :note, kind: :waiting, file: file, line: line, message: "the script was still running after #{div(horizon, 60_000)} min of clock time in the dry run (a condition never met with the fleet's values, or a loop): what it did until then is checked"}]
   end
 
-  defp outcome_findings({:error, %Dolphin.Script.Error{} = e}, _file, _horizon) do
-    {severity, kind} =
+  defp outcome_findings({:error, %Dolphin.Script.Error{} = e}, _file, _horizon, asked?) do
+    {severity, kind, after_ask} =
       case e.reason do
-        %Dolphin.Fleet.PickError{} -> {:error, :pick}
-        %Dolphin.Fleet.AllocationError{} -> {:error, :allocation}
-        _ when e.kind == :halted -> {:warning, :script}
-        _ -> {:error, :script}
+        %Dolphin.Fleet.PickError{} -> {:error, :pick, ""}
+        %Dolphin.Fleet.AllocationError{} -> {:error, :allocation, ""}
+        _ when e.kind == :halted -> {:warning, :script, ""}
+        _ when asked? -> {:note, :script, " (after an `ask` the dry run could not answer)"}
+        _ -> {:error, :script, ""}
       end
 
-    [%Finding{severity: severity, kind: kind, file: e.file, line: e.line, message: "in the dry run: " <> e.message}]
+    [%Finding{severity: severity, kind: kind, file: e.file, line: e.line, message: "in the dry run#{after_ask}: " <> e.message}]
   end
 
   defp source_line(file, line) do

@@ -277,8 +277,7 @@ defmodule Dolphin.DSL do
       team = pick(count: 3, type: :uav)
       execute reassign(survey_north, from: team) ||| reassign(survey_south, from: team)
   """
-  defdelegate reassign(t), to: Engine
-  defdelegate reassign(t, opts), to: Engine
+  defdelegate reassign(t, opts \\ []), to: Engine
 
   @doc """
   `t` with a name, shown in events, errors and the console.

@@ -100,6 +100,13 @@ defmodule Dolphin.CheckTest do
     assert message =~ ~S|asks "Fly the survey? (y/n)"|
   end
 
+  test "what a script does with an answer the dry run could not give is a note, not an error", %{fleet: fleet} do
+    report = check("asks_then_uses.exs", fleet)
+    refute Check.errors?(report)
+    assert %{severity: :note, line: 4, message: message} = finding(report, :script)
+    assert message =~ "after an `ask` the dry run could not answer"
+  end
+
   test "the JSON form names each finding" , %{fleet: fleet} do
     map = "bad_mission.exs" |> check(fleet) |> Check.to_map()
     json = :jiffy.decode(:jiffy.encode(map), [:return_maps])
