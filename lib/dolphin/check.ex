@@ -79,7 +79,7 @@ defmodule Dolphin.Check do
     case Dolphin.Script.compile(path) do
       {:ok, script} ->
         try do
-          dry_run(script, opts)
+          check_script(script, opts)
         after
           Dolphin.Script.purge(script)
         end
@@ -88,6 +88,14 @@ defmodule Dolphin.Check do
         %__MODULE__{file: path, findings: [%Finding{severity: :error, kind: :compile, file: e.file, line: e.line, message: e.message}]}
     end
   end
+
+  @doc """
+  Checks a script compiled already (`Dolphin.Script.compile/1`: `mix
+  dolphin.run` checks the script it is about to fly, compiled once); the
+  caller purges it. Options as `run/2`'s.
+  """
+  @spec check_script(Dolphin.Script.t(), keyword()) :: t()
+  def check_script(%Dolphin.Script{} = script, opts \\ []), do: dry_run(script, opts)
 
   @doc "The stand-in fleet of `--sim N`: N UAVs with a camera, full, on the ground at the simulator's home."
   @spec sim_fleet(pos_integer()) :: [Dolphin.Check.FleetFile.vehicle()]

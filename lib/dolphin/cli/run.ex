@@ -59,8 +59,8 @@ defmodule Dolphin.CLI.Run do
   (the fleet is known only once connected: `mix dolphin.check --connect`
   checks against it) and with `--no-check`.
   """
-  @spec check(Path.t(), keyword(), IO.device()) :: :ok | :refused
-  def check(file, opts, out) do
+  @spec check(Dolphin.Script.t(), keyword(), IO.device()) :: :ok | :refused
+  def check(script, opts, out) do
     n = opts[:sim] || opts[:sitl]
 
     cond do
@@ -68,7 +68,7 @@ defmodule Dolphin.CLI.Run do
         :ok
 
       true ->
-        report = Dolphin.Check.run(file, sim: n, energy: :warning)
+        report = Dolphin.Check.check_script(script, sim: n, energy: :warning)
         errors? = Dolphin.Check.errors?(report)
 
         if report.findings != [] and (errors? or !opts[:quiet]) do

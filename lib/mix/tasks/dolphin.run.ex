@@ -198,7 +198,7 @@ defmodule Mix.Tasks.Dolphin.Run do
           run_opts = opts ++ Keyword.take(io, [:out, :err, :plain, :ask, :signals]) ++ [sitl_extra: Keyword.get(io, :sitl, [])]
 
           # Nothing is started when the pre-flight check refuses.
-          case Run.check(file, opts, Keyword.get(io, :out, :stdio)) == :ok and Run.run(script, run_opts) do
+          case Run.check(script, opts, Keyword.get(io, :out, :stdio)) == :ok and Run.run(script, run_opts) do
             false -> 1
             :completed -> 0
             :stopped -> 0

@@ -44,8 +44,10 @@ defmodule Mix.Tasks.Dolphin.CheckTest do
     assert opts[:no_check]
     {:ok, out} = StringIO.open("")
     # --fake tries a script's logic on the test platform: no missions, no check.
-    assert :ok = Dolphin.CLI.Run.check(Path.join(@dir, "bad_mission.exs"), [fake: 1], out)
-    assert :ok = Dolphin.CLI.Run.check(Path.join(@dir, "bad_mission.exs"), [sim: 1, no_check: true], out)
+    {:ok, script} = Dolphin.Script.compile(Path.join(@dir, "bad_mission.exs"))
+    assert :ok = Dolphin.CLI.Run.check(script, [fake: 1], out)
+    assert :ok = Dolphin.CLI.Run.check(script, [sim: 1, no_check: true], out)
+    Dolphin.Script.purge(script)
     assert {_, ""} = StringIO.contents(out)
   end
 
