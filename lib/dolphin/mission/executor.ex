@@ -148,7 +148,7 @@ defmodule Dolphin.Mission.Executor do
 
   def handle_event(:info, {:dolphin, {:vehicle, id}, {:state, id, changes}}, state, data) when state in [:start, :flying] do
     data = %{data | flight: Flight.changes(data.flight, changes)}
-    if state == :flying, do: follow(data), else: {:keep_state, data}
+    if state == :flying, do: follow(data), else: {:keep_state, observe(data)}
   end
 
   def handle_event(:info, {:dolphin, _topic, _event}, _state, _data), do: :keep_state_and_data
@@ -335,6 +335,14 @@ defmodule Dolphin.Mission.Executor do
       {:ok, st} -> judge(data, st)
       # Lost: the engine stops us with {:vehicle_lost, id}.
       {:error, _} -> {:keep_state, data}
+    end
+  end
+
+  # While MISSION_START's answer is awaited, what the vehicle shows is kept for the judging.
+  defp observe(data) do
+    case Vehicles.state(data.vehicle) do
+      {:ok, st} -> %{data | flight: Flight.observe(data.flight, st)}
+      {:error, _} -> data
     end
   end
 

@@ -41,17 +41,8 @@ defmodule Dolphin.Mission.Executor.Flight do
   @spec judge(t(), map()) :: {verdict(), map() | nil, t()}
   def judge(f, st) do
     mission = st.mission
-    # The mission counts as running once the vehicle reports it active in AUTO,
-    # or reports an item of it reached (progress restarts at every upload): a
-    # mission that ends in the loop that starts it is only ever reported
-    # COMPLETE, as ArduCopter sends the latest MISSION_CURRENT only. Before
-    # that, the state still describes the previous mission.
-    active = f.active or (st.mode == :auto and mission.state == :active) or mission.reached != nil
-    # Reports travel separately (mode and armed bit with the 1 Hz heartbeat,
-    # the mission state with MISSION_CURRENT): leaving AUTO or disarming counts
-    # only once the heartbeat has shown AUTO, or armed, during this mission.
-    f = %{f | active: active, armed_seen: f.armed_seen or (active and st.armed), auto_seen: f.auto_seen or (active and st.mode == :auto)}
-    f = %{f | on_land_item: f.on_land_item or (active and st.armed and on_land_item?(f, mission))}
+    f = observe(f, st)
+    active = f.active
     # After its final landing ArduCopter resets the mission to item 1, often
     # before the heartbeat shows the disarm: that is no progress of this mission.
     {progress, f} = if f.on_land_item and not on_land_item?(f, mission), do: {nil, f}, else: progress(f, mission)
@@ -75,6 +66,26 @@ defmodule Dolphin.Mission.Executor.Flight do
       true ->
         {:flying, progress, f}
     end
+  end
+
+  @doc false
+  # What a state of the vehicle shows of the flight, judged or not: a short
+  # mission may be flown, even landed, while MISSION_START's answer is still
+  # on its way, and what was seen then counts.
+  @spec observe(t(), map()) :: t()
+  def observe(f, st) do
+    mission = st.mission
+    # The mission counts as running once the vehicle reports it active in AUTO,
+    # or reports an item of it reached (progress restarts at every upload): a
+    # mission that ends in the loop that starts it is only ever reported
+    # COMPLETE, as ArduCopter sends the latest MISSION_CURRENT only. Before
+    # that, the state still describes the previous mission.
+    active = f.active or (st.mode == :auto and mission.state == :active) or mission.reached != nil
+    # Reports travel separately (mode and armed bit with the 1 Hz heartbeat,
+    # the mission state with MISSION_CURRENT): leaving AUTO or disarming counts
+    # only once the heartbeat has shown AUTO, or armed, during this mission.
+    f = %{f | active: active, armed_seen: f.armed_seen or (active and st.armed), auto_seen: f.auto_seen or (active and st.mode == :auto)}
+    %{f | on_land_item: f.on_land_item or (active and st.armed and on_land_item?(f, mission))}
   end
 
   @doc false

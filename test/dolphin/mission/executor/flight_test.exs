@@ -82,4 +82,24 @@ defmodule Dolphin.Mission.Executor.FlightTest do
     s = st(%{mode: :auto, armed: true, landed: :in_air, mission: %{state: :complete, current: 2, reached: 2}})
     assert {:flying, _, _} = Flight.judge(Flight.new(:forever), s)
   end
+
+  test "what was seen before the judging began counts: a short landing mission flown while MISSION_START's answer was awaited" do
+    flight =
+      Enum.reduce(
+        [
+          st(%{mode: :auto, armed: true, landed: :in_air, mission: %{state: :active, current: 1, total: 2}}),
+          st(%{mode: :auto, armed: true, landed: :landing, mission: %{state: :active, current: 2, reached: 1, total: 2}})
+        ],
+        Flight.new({:landing, 2}),
+        &Flight.observe(&2, &1)
+      )
+
+    # Judged first once landed, disarmed, the mission reset to item 1.
+    landed = st(%{mode: :auto, armed: false, landed: :on_ground, mission: %{state: :active, current: 1, reached: 1, total: 2}})
+    assert {:done, _, _} = Flight.judge(flight, landed)
+    # Seen armed only before its land item: landed short of the mission's end.
+    early = Flight.observe(Flight.new({:landing, 2}), st(%{mode: :auto, armed: true, landed: :in_air, mission: %{state: :active, current: 1, total: 2}}))
+    assert {:check_landed, _, early} = Flight.judge(early, landed)
+    assert {:failed, _} = Flight.landed(early, landed)
+  end
 end
