@@ -12,7 +12,7 @@ bootstrap:
 	@scripts/bootstrap
 
 test: bootstrap
-	MIX_ENV=test mix test $(ARGS)
+	@scripts/test $(ARGS)
 
 run: bootstrap
 	@scripts/demo
