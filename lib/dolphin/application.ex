@@ -14,6 +14,12 @@ defmodule Dolphin.Application do
       Dolphin.PubSub,
       # Vehicles before links: a link routes frames to vehicles from its first datagram.
       {DynamicSupervisor, name: Dolphin.Vehicles.Supervisor, strategy: :one_for_one},
+      # Several ground stations (Dolphin.Cluster): the :pg scope of their
+      # groups, this node's station, and the mirror of other stations'
+      # vehicles, whose routes Dolphin.Vehicles reads (so before the fleet).
+      %{id: :cluster_scope, start: {:pg, :start_link, [Dolphin.Cluster.Scope]}},
+      Dolphin.Cluster.Station,
+      Dolphin.Cluster.Mirror,
       {DynamicSupervisor, name: Dolphin.Link.Supervisor, strategy: :one_for_one},
       # The configured links, once the tree they live in is up; a bad endpoint
       # in the configuration stops the start with the reason.
