@@ -87,13 +87,22 @@ defmodule Dolphin.Cluster.Choice do
 
   defp score(h), do: {loss(h.link), rtt(h.link)}
 
+  # Only measured figures of both can take a fresh station's place: a link
+  # not measured yet is no evidence against it.
   defp clearly_better?(h, current) do
     {loss_a, loss_b} = {loss(h.link), loss(current.link)}
     {rtt_a, rtt_b} = {rtt(h.link), rtt(current.link)}
+    measured? = fn a, b -> a != nil and b != nil end
 
-    loss_a + @loss_margin <= loss_b or
-      (abs(loss_a - loss_b) < @loss_margin and rtt_a + @rtt_margin_ms <= rtt_b and rtt_a * 2 <= rtt_b)
+    cond do
+      measured?.(measured_loss(h.link), measured_loss(current.link)) and loss_a + @loss_margin <= loss_b -> true
+      not measured?.(measured_rtt(h.link), measured_rtt(current.link)) -> false
+      true -> abs(loss_a - loss_b) < @loss_margin and rtt_a + @rtt_margin_ms <= rtt_b and rtt_a * 2 <= rtt_b
+    end
   end
+
+  defp measured_loss(link), do: if(loss(link) == 1.0 and not is_number(Map.get(link, :loss_in)), do: nil, else: loss(link))
+  defp measured_rtt(link), do: Map.get(link, :rtt_ms)
 
   # Unmeasured counts as worst, so that a measured link is preferred.
   defp loss(%{loss_in: a, loss_out: b}) when is_number(a) and is_number(b), do: max(a, b)
