@@ -35,6 +35,7 @@ defmodule Dolphin.CLI do
     :station_left,
     :station_changed,
     :vehicle_conflict,
+    :claim_conflict,
     :picked,
     :released,
     :pick_failed,
@@ -98,6 +99,9 @@ defmodule Dolphin.CLI do
   def event_text(%{event: :station_joined} = e), do: "ground station #{e.station} joined (#{e.vehicles} vehicle(s))"
   def event_text(%{event: :station_left} = e), do: "ground station #{e.station} left: #{e.reason}"
   def event_text(%{event: :station_changed} = e), do: "vehicle #{e.vehicle} now through #{e.to} (was #{e.from}: #{e.reason})"
+
+  def event_text(%{event: :claim_conflict} = e),
+    do: "vehicle #{e.vehicle} was claimed on both sides of a netsplit: #{e.kept}'s claim kept, #{e.dropped}'s dropped"
 
   def event_text(%{event: :vehicle_conflict} = e),
     do: "vehicle #{e.vehicle}: #{Enum.join(e.stations, " and ")} hear two different vehicles (#{e.reason}); following #{hd(e.stations)} only"
