@@ -96,7 +96,7 @@ defmodule Dolphin.CLI do
   def event_text(%{event: :vehicle_discovered} = e), do: "vehicle #{e.vehicle} discovered (#{e.type || "type unknown"})"
   def event_text(%{event: :vehicle_lost} = e), do: "vehicle #{e.vehicle} lost"
   def event_text(%{event: :vehicle_reconnected} = e), do: "vehicle #{e.vehicle} reconnected"
-  def event_text(%{event: :station_joined} = e), do: "ground station #{e.station} joined (#{e.vehicles} vehicle(s))"
+  def event_text(%{event: :station_joined} = e), do: "ground station #{e.station} joined (#{e.heard} vehicle(s))"
   def event_text(%{event: :station_left} = e), do: "ground station #{e.station} left: #{e.reason}"
   def event_text(%{event: :station_changed} = e), do: "vehicle #{e.vehicle} now through #{e.to} (was #{e.from}: #{e.reason})"
 

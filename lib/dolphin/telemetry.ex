@@ -4,7 +4,7 @@ defmodule Dolphin.Telemetry do
     {:vehicle_discovered, [:vehicle, :type], "a vehicle was heard for the first time; `type` is `uav`, `ugv`, `usv`, `uuv`, `other` or null while unknown"},
     {:vehicle_lost, [:vehicle], "a vehicle was silent for longer than its connection timeout"},
     {:vehicle_reconnected, [:vehicle], "a lost vehicle was heard again"},
-    {:station_joined, [:station, :vehicles], "a controller began to follow the ground station on node `station`, which hears `vehicles` vehicles (`Dolphin.Cluster`)"},
+    {:station_joined, [:station, :heard], "a controller began to follow the ground station on node `station`, which hears `heard` vehicles (`Dolphin.Cluster`)"},
     {:station_left, [:station, :reason], "the ground station on node `station` left (its node went down, was cut off, or its station ended); `reason` says which"},
     {:station_changed, [:vehicle, :from, :to, :reason], "a vehicle is now reached through the ground station on node `to` instead of `from` (failover; its tasks go on)"},
     {:vehicle_conflict, [:vehicle, :stations, :reason], "two ground stations (`stations`, node names, the followed one first) hear one system id with different vehicles behind it; the vehicle is not merged"},

@@ -250,7 +250,7 @@ defmodule Dolphin.Cluster.Mirror do
         {:ok, %{speedup: k} = hello} ->
           if k == Clock.speedup() do
             s = %{s | stations: Map.put(s.stations, station, %{node: node(station), monitor: Process.monitor(station)})}
-            Telemetry.emit(:station_joined, %{station: node(station), vehicles: length(hello.vehicles)})
+            Telemetry.emit(:station_joined, %{station: node(station), heard: length(hello.vehicles)})
             s = Enum.reduce(hello.vehicles, s, fn {id, pid, view}, s -> hear(s, id, station, pid, view) end)
             answer_waiters(s, node(station))
           else
