@@ -30,7 +30,7 @@ defmodule Dolphin.Test.Cluster do
 
     on_exit(fn ->
       Dolphin.Test.GroundStation.forget_vehicles()
-      for node <- Node.list(), do: Dolphin.Cluster.Mirror.unfollow(node)
+      for node <- Dolphin.Cluster.Mirror.joined(), do: Dolphin.Cluster.Mirror.unfollow(node)
     end)
 
     node()

@@ -30,8 +30,9 @@ defmodule Dolphin.Cluster.Mirror do
       `vehicle_conflict` event, and the first station stays the only route
       while the conflict stands.
 
-  It follows stations only once `Dolphin.Cluster.join/2` has enabled it
-  (`follow/2`); a node that only serves as a station mirrors nobody.
+  It follows only the stations of the nodes joined with
+  `Dolphin.Cluster.join/2` (`follow/2`); a node that only serves as a
+  station mirrors nobody.
   """
 
   use GenServer
@@ -43,6 +44,7 @@ defmodule Dolphin.Cluster.Mirror do
 
   @table Dolphin.Cluster.Routes
   @reconnect_every_ms 1_000
+  @stale_floor_ms 250
 
   @doc false
   def start_link(opts), do: GenServer.start_link(__MODULE__, opts, name: __MODULE__)
@@ -89,6 +91,10 @@ defmodule Dolphin.Cluster.Mirror do
   @spec unfollow(node()) :: :ok
   def unfollow(node), do: GenServer.call(__MODULE__, {:unfollow, node})
 
+  @doc "The nodes joined (followed, and reconnected to when they go away)."
+  @spec joined() :: [node()]
+  def joined, do: GenServer.call(__MODULE__, :joined)
+
   @doc "The stations followed now: `%{station_pid => node}`."
   @spec stations() :: %{pid() => node()}
   def stations, do: GenServer.call(__MODULE__, :stations)
@@ -109,8 +115,9 @@ defmodule Dolphin.Cluster.Mirror do
   end
 
   @doc false
-  # Forgets a remote vehicle here (Dolphin.Vehicles.forget/1): it is
-  # discovered anew if a station speaks of it again.
+  # Forgets a remote vehicle here (Dolphin.Vehicles.forget/1): it comes
+  # back when a station tells of it anew (its discovery there, or the
+  # station joined again).
   @spec forget(byte()) :: :ok
   def forget(id), do: GenServer.call(__MODULE__, {:forget, id})
 
@@ -150,7 +157,9 @@ defmodule Dolphin.Cluster.Mirror do
     end
   end
 
+  # Its stations stay followed while connected: they leave as any station does.
   def handle_call({:unfollow, node}, _from, s), do: {:reply, :ok, %{s | joined: MapSet.delete(s.joined, node)}}
+  def handle_call(:joined, _from, s), do: {:reply, Enum.sort(s.joined), s}
   def handle_call(:stations, _from, s), do: {:reply, Map.new(s.stations, fn {pid, st} -> {pid, st.node} end), s}
 
   def handle_call(:routes, _from, s) do
@@ -240,10 +249,11 @@ defmodule Dolphin.Cluster.Mirror do
   defp subscribe_all(%{enabled: false} = s), do: s
   defp subscribe_all(s), do: Enum.reduce(:pg.get_members(Dolphin.Cluster.scope(), :stations), s, &subscribe(&2, &1))
 
-  # A station of another node, not yet followed: subscribed to, if it runs
-  # at this node's speed-up.
+  # A station of a joined node, not yet followed: subscribed to, if it runs
+  # at this node's speed-up. (Other nodes of the cluster are not followed
+  # unless joined too.)
   defp subscribe(s, station) do
-    if node(station) == node() or Map.has_key?(s.stations, station) or not s.enabled do
+    if not MapSet.member?(s.joined, node(station)) or Map.has_key?(s.stations, station) or not s.enabled do
       s
     else
       case Station.subscribe(station, self()) do
@@ -374,7 +384,7 @@ defmodule Dolphin.Cluster.Mirror do
   # The choice made again for one vehicle, and what it changes published.
   defp decide(s, id, v, why) do
     hearings = if v.conflict, do: Map.delete(v.hearings, v.conflict.other), else: v.hearings
-    chosen = Choice.choose(hearings, v.chosen, stale_ms: s.stale_ms, pinned: v.conflict != nil)
+    chosen = Choice.choose(hearings, v.chosen, stale_ms: stale_ms(s), pinned: v.conflict != nil)
     lost = Choice.lost?(hearings)
     old = v
 
@@ -389,6 +399,11 @@ defmodule Dolphin.Cluster.Mirror do
         s
     end
   end
+
+  # Stale after stale_ms of clock time, but never under @stale_floor_ms of
+  # real time: stations report ages that often, and a pause of this host or
+  # of the network does not get shorter with the speed-up.
+  defp stale_ms(s), do: max(s.stale_ms, round(@stale_floor_ms * Clock.speedup()))
 
   defp announce(id, old, v, why) do
     h = v.hearings[v.chosen]

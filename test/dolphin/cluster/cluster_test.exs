@@ -110,19 +110,22 @@ defmodule Dolphin.ClusterTest do
     Cluster.await_vehicles([21])
     :ok = Dolphin.Cluster.join(gs2.node)
     Wait.until(fn -> match?(%{21 => %{stations: [_, _]}}, Dolphin.Cluster.Mirror.routes()) end, 20_000, fn -> "vehicle 21 heard by both" end)
-    gs1_node = gs1.node
-    assert %{21 => %{chosen: ^gs1_node}} = Dolphin.Cluster.Mirror.routes()
 
     Telemetry.subscribe()
     Vehicles.subscribe(:all)
     {:ok, run} = Dolphin.Script.start(hop_script([21]))
     Wait.until(fn -> in_air?(21) end, 30_000, fn -> "vehicle 21 in the air" end)
-    :ok = Dolphin.Test.Splitter.cut(splitter, 0)
+    # The path of the station chosen now dies (which one it is depends on
+    # the links' figures: both are good).
+    %{21 => %{chosen: first}} = Dolphin.Cluster.Mirror.routes()
+    {side, other} = if first == gs1.node, do: {0, gs2.node}, else: {1, gs1.node}
+    flush()
+    :ok = Dolphin.Test.Splitter.cut(splitter, side)
 
     assert {:ok, %{result: :done}} = Dolphin.Script.await(run, 60_000)
     events = flush()
-    gs2_node = gs2.node
-    assert Enum.any?(events, &match?(%{event: :station_changed, vehicle: 21, from: ^gs1_node, to: ^gs2_node}, &1)), inspect(events)
+    assert Enum.any?(events, &match?(%{event: :station_changed, vehicle: 21, from: ^first, to: ^other}, &1)), inspect(events)
+    assert %{21 => %{chosen: ^other}} = Dolphin.Cluster.Mirror.routes()
     refute Enum.any?(events, &match?(%{event: :vehicle_lost, vehicle: 21}, &1))
     refute_received {:dolphin, :vehicles, {:vehicle_lost, 21}}
   end
