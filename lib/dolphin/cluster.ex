@@ -35,7 +35,8 @@ defmodule Dolphin.Cluster do
   Starts distribution on this node as `name` (`:shortnames` for `--sname`,
   `:longnames` for `--name`), with `cookie` when given; starts EPMD first if
   none runs (bound to `ERL_EPMD_ADDRESS` when set, as EPMD itself reads it).
-  A node already alive under that name is fine.
+  A node that is distributed already (`iex --sname op -S mix ...`) keeps
+  the name it has.
   """
   @spec start_node(String.t(), :shortnames | :longnames, String.t() | nil) :: {:ok, node()} | {:error, Error.t()}
   def start_node(name, type, cookie \\ nil) when type in [:shortnames, :longnames] do
