@@ -60,6 +60,14 @@ defmodule Dolphin.Cluster.CLITest do
     assert text(err) =~ "--sname and --name do not go together"
   end
 
+  test "mix dolphin.console takes --join on a node that has a name (iex --sname), and checks it" do
+    # This VM is the distributed node ctl@127.0.0.1, as under `iex --sname`.
+    assert {:ok, opts} = Mix.Tasks.Dolphin.Console.parse(~w(--join gs1@127.0.0.1 --join gs2@127.0.0.1))
+    assert Keyword.get_values(opts, :join) == ["gs1@127.0.0.1", "gs2@127.0.0.1"]
+    assert {:error, e} = Mix.Tasks.Dolphin.Console.parse(~w(--join gs1))
+    assert Exception.message(e) =~ ~s(--join takes a node name NAME@HOST, got "gs1")
+  end
+
   test "joining an unreachable node: exit 1, cannot reach it" do
     script = Path.expand("../../../examples/single_vehicle.exs", __DIR__)
     {out, err} = io()
