@@ -10,10 +10,13 @@ defmodule Dolphin do
   │                              (each runs its command and mission protocols as :gen_statem)
   ├─ Dolphin.Link.Supervisor     one Dolphin.Link.Connection per endpoint (owns its socket)
   ├─ configured links            (connects `config :dolphin, links:` and goes away)
+  ├─ Dolphin.Cluster.Scope       the :pg scope of a cluster of ground stations (Dolphin.Cluster)
+  ├─ Dolphin.Cluster.Mirror      other stations' vehicles, routed and published here once joined
   ├─ Dolphin.Fleet               who is available, picked, busy; waiting picks
   ├─ Dolphin.Engine.Supervisor   registry of runs and task nodes; one process tree per run
   │                              (a node per combinator; a Dolphin.Mission.Executor per flying mission)
   ├─ Dolphin.Console.Supervisor  the IEx console's event store and background runs
+  ├─ Dolphin.Cluster.Station     this node's vehicles, told to the controllers that joined it
   └─ Dolphin.Sim.Supervisor      simulated vehicles, added when `Dolphin.Sim.start/1` asks for them
   ```
 
@@ -23,6 +26,7 @@ defmodule Dolphin do
   - `Dolphin.Fleet`, `Dolphin.Engine`, `Dolphin.Script` — picking vehicles, running task trees, scripts.
   - `Dolphin.Mission` — missions as data; `Dolphin.Mission.Platform` flies them as tasks.
   - `Dolphin.Sim` — simulated ArduCopters speaking MAVLink over UDP.
+  - `Dolphin.Cluster` — several ground stations, one fleet (distributed Erlang; `docs/cluster.md`).
   - `Dolphin.Clock` — the time source with a speed-up factor; `Dolphin.Telemetry` — the events.
 
   A link decodes and casts each frame to its vehicle's process and never waits

@@ -14,6 +14,11 @@ defmodule Dolphin.Application do
       Dolphin.PubSub,
       # Vehicles before links: a link routes frames to vehicles from its first datagram.
       {DynamicSupervisor, name: Dolphin.Vehicles.Supervisor, strategy: :one_for_one},
+      # Several ground stations (Dolphin.Cluster): the :pg scope of their
+      # groups, and the mirror of other stations' vehicles, whose routes
+      # Dolphin.Vehicles reads (so before the fleet).
+      %{id: :cluster_scope, start: {:pg, :start_link, [Dolphin.Cluster.Scope]}},
+      Dolphin.Cluster.Mirror,
       {DynamicSupervisor, name: Dolphin.Link.Supervisor, strategy: :one_for_one},
       # The configured links, once the tree they live in is up; a bad endpoint
       # in the configuration stops the start with the reason.
@@ -22,7 +27,11 @@ defmodule Dolphin.Application do
       Dolphin.Fleet,
       Dolphin.Engine.Supervisor,
       # The IEx console's event store and background runs (Dolphin.Console).
-      Dolphin.Console.Supervisor
+      Dolphin.Console.Supervisor,
+      # This node's station for other nodes' controllers: last, as nothing
+      # here depends on it (its crash restarts only itself; controllers
+      # subscribe again when it rejoins its group).
+      Dolphin.Cluster.Station
     ]
 
     # rest_for_one: everything after a crashed child depends on it. A crashed

@@ -31,6 +31,11 @@ defmodule Dolphin.CLI do
     :vehicle_discovered,
     :vehicle_lost,
     :vehicle_reconnected,
+    :station_joined,
+    :station_left,
+    :station_changed,
+    :vehicle_conflict,
+    :claim_conflict,
     :picked,
     :released,
     :pick_failed,
@@ -91,6 +96,16 @@ defmodule Dolphin.CLI do
   def event_text(%{event: :vehicle_discovered} = e), do: "vehicle #{e.vehicle} discovered (#{e.type || "type unknown"})"
   def event_text(%{event: :vehicle_lost} = e), do: "vehicle #{e.vehicle} lost"
   def event_text(%{event: :vehicle_reconnected} = e), do: "vehicle #{e.vehicle} reconnected"
+  def event_text(%{event: :station_joined} = e), do: "ground station #{e.station} joined (#{e.heard} vehicle(s))"
+  def event_text(%{event: :station_left} = e), do: "ground station #{e.station} left: #{e.reason}"
+  def event_text(%{event: :station_changed} = e), do: "vehicle #{e.vehicle} now through #{e.to} (was #{e.from}: #{e.reason})"
+
+  def event_text(%{event: :claim_conflict} = e),
+    do: "vehicle #{e.vehicle} was claimed on both sides of a netsplit: #{e.kept}'s claim kept, #{e.dropped}'s dropped"
+
+  def event_text(%{event: :vehicle_conflict} = e),
+    do: "vehicle #{e.vehicle}: #{Enum.join(e.stations, " and ")} hear two different vehicles (#{e.reason}); following #{hd(e.stations)} only"
+
   def event_text(%{event: :mode_changed} = e), do: "vehicle #{e.vehicle} mode #{Format.mode(e.mode)}"
   def event_text(%{event: :armed} = e), do: "vehicle #{e.vehicle} armed"
   def event_text(%{event: :disarmed} = e), do: "vehicle #{e.vehicle} disarmed"

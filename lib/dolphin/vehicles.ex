@@ -51,9 +51,12 @@ defmodule Dolphin.Vehicles do
   @doc "The system ids of the known vehicles, ascending."
   @spec list() :: [byte()]
   def list do
-    Dolphin.Registry
-    |> Registry.select([{{{:vehicle, :"$1"}, :_, :_}, [], [:"$1"]}])
-    |> Enum.sort()
+    local = Registry.select(Dolphin.Registry, [{{{:vehicle, :"$1"}, :_, :_}, [], [:"$1"]}])
+
+    case Dolphin.Cluster.Mirror.ids() do
+      [] -> Enum.sort(local)
+      remote -> Enum.sort(Enum.uniq(local ++ remote))
+    end
   end
 
   @doc "Whether a vehicle has been heard and has booted (`Dolphin.Vehicles.State.ready?/1`)."
@@ -81,9 +84,19 @@ defmodule Dolphin.Vehicles do
   @doc "The latest view of a vehicle (see \"One owner of a vehicle's state\")."
   @spec view(byte()) :: {:ok, Dolphin.Vehicles.View.t()} | {:error, :unknown_vehicle}
   def view(sysid) do
-    case call_vehicle(sysid, :view) do
-      {:ok, view} -> {:ok, view}
-      _ -> {:error, :unknown_vehicle}
+    case local(sysid) do
+      nil ->
+        # A vehicle of another station: the mirror has its latest view.
+        case Dolphin.Cluster.Mirror.view(sysid) do
+          {:ok, view} -> {:ok, view}
+          :error -> {:error, :unknown_vehicle}
+        end
+
+      pid ->
+        case call_pid(sysid, pid, :view, 5_000, 0) do
+          {:ok, view} -> {:ok, view}
+          _ -> {:error, :unknown_vehicle}
+        end
     end
   end
 
@@ -105,11 +118,30 @@ defmodule Dolphin.Vehicles do
   defp call_vehicle(sysid, request, timeout \\ 5_000) do
     case whereis(sysid) do
       nil -> :no_vehicle
-      pid -> {:ok, GenServer.call(pid, request, timeout)}
+      pid -> call_pid(sysid, pid, request, timeout, 1)
     end
-  catch
-    :exit, _ -> :gone
   end
+
+  # A vehicle of another ground station (Dolphin.Cluster) whose node went
+  # away during the call may be heard by another station: the call is made
+  # once more on the route the mirror has now, so that a failover does not
+  # fail the task that was using the vehicle.
+  defp call_pid(sysid, pid, request, timeout, retries) do
+    {:ok, GenServer.call(pid, request, timeout)}
+  catch
+    :exit, reason ->
+      with true <- retries > 0 and node(pid) != node() and node_gone?(reason),
+           new when is_pid(new) and new != pid <- Dolphin.Cluster.Mirror.reroute(sysid, pid) do
+        call_pid(sysid, new, request, timeout, retries - 1)
+      else
+        _ -> :gone
+      end
+  end
+
+  defp node_gone?({reason, {GenServer, :call, _}}), do: node_gone?(reason)
+  defp node_gone?({:nodedown, _node}), do: true
+  defp node_gone?(:noconnection), do: true
+  defp node_gone?(_reason), do: false
 
   @doc "Sends a message to a vehicle through the link it was last heard on."
   @spec send_message(byte(), struct()) :: :ok | {:error, :unknown_vehicle}
@@ -137,9 +169,15 @@ defmodule Dolphin.Vehicles do
   def subscribe(:all), do: PubSub.subscribe(:vehicles)
   def subscribe(sysid), do: PubSub.subscribe({:vehicle, sysid})
 
-  @doc "The process of a vehicle, or nil."
+  @doc """
+  The process of a vehicle, or nil: this node's own, else (in a cluster of
+  ground stations, `Dolphin.Cluster`) the vehicle's process on the station
+  chosen to reach it.
+  """
   @spec whereis(byte()) :: pid() | nil
-  def whereis(sysid) do
+  def whereis(sysid), do: local(sysid) || Dolphin.Cluster.Mirror.route(sysid)
+
+  defp local(sysid) do
     case Registry.lookup(Dolphin.Registry, {:vehicle, sysid}) do
       [{pid, _}] -> pid
       [] -> nil
@@ -155,11 +193,13 @@ defmodule Dolphin.Vehicles do
   """
   @spec forget(byte()) :: :ok
   def forget(sysid) do
-    if pid = whereis(sysid) do
+    if pid = local(sysid) do
       DynamicSupervisor.terminate_child(Dolphin.Vehicles.Supervisor, pid)
       PubSub.publish(:vehicles, {:vehicle_forgotten, sysid})
     end
 
+    # Another station's vehicle is forgotten here only (its station keeps it).
+    if Dolphin.Cluster.Mirror.route(sysid), do: Dolphin.Cluster.Mirror.forget(sysid)
     :ok
   end
 
@@ -370,7 +410,7 @@ defmodule Dolphin.Vehicles do
   # vehicle on its first HEARTBEAT from a vehicle component.
   @spec route(Frame.t(), term()) :: :ok
   def route(%Frame{sysid: sysid} = frame, link) do
-    case whereis(sysid) do
+    case local(sysid) do
       nil -> discover(frame, link)
       pid -> GenServer.cast(pid, {:frame, frame, link})
     end

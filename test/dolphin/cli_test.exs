@@ -13,7 +13,8 @@ defmodule Dolphin.CLITest do
         vehicle: 1, type: :uav, mode: :guided, seq: 2, name: "Survey", items: 5, duration_ms: 30, retransmissions: 0,
         vehicles: [1, 2], requirement: "1 vehicle", reason: "why", run: 7, allocation: %{"8" => 1}, task_id: 8,
         parent_id: nil, kind: :mission, progress: %{current: 1, total: 3}, result: :done, condition: "battery(v) < 0.3",
-        branch: nil, text: "hello", key: :k, value: 1, script: "x.exs", from: 1, to: 3, resume_seq: 6, held: true
+        branch: nil, text: "hello", key: :k, value: 1, script: "x.exs", from: 1, to: 3, resume_seq: 6, held: true,
+        station: :"gs1@host", heard: 2, stations: [:"gs1@host", :"gs2@host"], kept: :"gs1@host", dropped: :"gs2@host"
       }
 
       for {name, fields} <- Dolphin.Telemetry.catalogue() do

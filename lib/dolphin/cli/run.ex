@@ -13,7 +13,7 @@ defmodule Dolphin.CLI.Run do
   Options: those of `mix dolphin.run`, parsed (`:connect`, `:sim`, `:sitl`,
   `:sitl_bin`, `:sitl_defaults`, `:fake`, `:seed`, `:speedup`, `:for` and
   `:for_ms`, `:events`, `:tlog`, `:no_tlog`, `:forward`, `:quiet`, `:report`,
-  `:web`, `:web_bind`), and
+  `:web`, `:web_bind`, `:sname`, `:name`, `:cookie`, `:join`), and
   `:out`, `:err` (devices, default `:stdio` and `:stderr`), `:plain` (never
   the status block), `:ask` (the script's `ask/1`), `:signals` (SIGINT and
   SIGTERM stop the script, `Dolphin.CLI.Signals`) and `:sitl_extra` (more
@@ -101,6 +101,7 @@ defmodule Dolphin.CLI.Run do
       try do
         with {:ok, renderer} <- start_outputs(opts, origin, out),
              :ok <- start_web(opts, origin, out, script),
+             :ok <- join_cluster(opts, out),
              :ok <- Vehicles.start(opts, out, &defer(&1, :vehicles)) do
           {result, signal} = run_until_signal(script, opts, renderer)
           # The log and the status block end before the summary is printed below them.
@@ -154,6 +155,20 @@ defmodule Dolphin.CLI.Run do
           {:error, e} ->
             {:error, %StartError{option: "--web #{port}", reason: e}}
         end
+    end
+  end
+
+  # --sname/--name and --join: distribution, then the stations joined (the
+  # speed-up agreed with them); they are let go again when the run ends.
+  defp join_cluster(opts, out) do
+    case Dolphin.CLI.Cluster.start(opts, opts[:speedup]) do
+      {:ok, lines} ->
+        for node <- Dolphin.CLI.Cluster.joins(opts), do: defer(fn -> Dolphin.Cluster.Mirror.unfollow(String.to_atom(node)) end, :vehicles)
+        unless opts[:quiet], do: Enum.each(lines, &IO.puts(out, &1))
+        :ok
+
+      {:error, e} ->
+        {:error, e}
     end
   end
 

@@ -21,7 +21,8 @@ defmodule Dolphin.CLI.Vehicles do
         n = opts[:sim] -> start_sim(n, opts, link_opts, out, defer)
         n = opts[:sitl] -> start_sitl(n, opts, link_opts, out, defer)
         n = opts[:fake] -> start_fake(n, out, defer)
-        opts[:connect] != nil or Application.get_env(:dolphin, :links, []) != [] -> :ok
+        # Joined stations bring the vehicles: no default link then.
+        opts[:connect] != nil or opts[:join] != nil or Application.get_env(:dolphin, :links, []) != [] -> :ok
         true -> listen_default(link_opts, out, defer)
       end
     end

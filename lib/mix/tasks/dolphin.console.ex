@@ -34,7 +34,14 @@ defmodule Mix.Tasks.Dolphin.Console do
     * `--forward ENDPOINT` — copy all traffic to a `udpout` endpoint
       (QGroundControl); repeatable
 
-  With neither `--connect` nor `--sim`, the links of the configuration are
+    * `--sname NAME`, `--name NAME@HOST`, `--cookie C` — make this a node of a
+      cluster of ground stations (or start IEx itself with `iex --sname op`)
+    * `--join NODE` — see the vehicles of the ground station `NODE` (`mix
+      dolphin.station`) too, as one fleet (`Dolphin.Cluster`); repeatable:
+
+          iex --sname op -S mix dolphin.console --join gs1@myhost --join gs2@myhost
+
+  With neither `--connect` nor `--sim` (nor `--join`), the links of the configuration are
   used (`config :dolphin, links: [...]`), or if there are none the ground
   station listens on `Dolphin.Link.default_endpoint/0` (`udpin:0.0.0.0:14550`).
   """
@@ -43,9 +50,10 @@ defmodule Mix.Tasks.Dolphin.Console do
 
   alias Dolphin.CommandLineError
 
-  @switches [connect: :keep, sim: :integer, sitl: :integer, sitl_bin: :string, sitl_defaults: :keep, seed: :integer, speedup: :float, tlog: :string, forward: :keep]
+  @switches [connect: :keep, sim: :integer, sitl: :integer, sitl_bin: :string, sitl_defaults: :keep, seed: :integer, speedup: :float, tlog: :string, forward: :keep] ++
+              Dolphin.CLI.Cluster.switches()
 
-  @usage "usage: iex -S mix dolphin.console [--connect ENDPOINT]... [--sim N | --sitl N] [--speedup K] [--seed N] [--tlog FILE] [--forward ENDPOINT]..."
+  @usage "usage: iex -S mix dolphin.console [--connect ENDPOINT]... [--sim N | --sitl N] [--speedup K] [--seed N]  [--tlog FILE] [--forward ENDPOINT]... [--sname NAME | --name NAME@HOST] [--cookie C] [--join NODE]..."
 
   @impl Mix.Task
   def run(argv) do
@@ -85,6 +93,8 @@ defmodule Mix.Tasks.Dolphin.Console do
           opts[:sitl] != nil and opts[:sitl] < 1 -> {:error, "--sitl must be a positive number of vehicles, got #{opts[:sitl]}"}
           opts[:sim] != nil and opts[:sitl] != nil -> {:error, "--sim and --sitl do not go together"}
           opts[:speedup] != nil and opts[:speedup] <= 0 -> {:error, "--speedup must be positive, got #{opts[:speedup]}"}
+          # `iex --sname op -S mix dolphin.console --join ...`: the node has its name already.
+          (problem = Dolphin.CLI.Cluster.check(opts, Node.alive?())) != :ok -> problem
           true -> {:ok, opts}
         end
 
@@ -107,9 +117,18 @@ defmodule Mix.Tasks.Dolphin.Console do
     link_opts = Enum.reject([tlog: opts[:tlog], forward: Keyword.get_values(opts, :forward)], fn {_, v} -> v in [nil, []] end)
     endpoints = Keyword.get_values(opts, :connect)
 
-    with {:ok, lines} <- connect_all(endpoints, link_opts),
+    with {:ok, cluster} <- join(opts),
+         {:ok, lines} <- connect_all(endpoints, link_opts),
          {:ok, more} <- vehicles(opts, endpoints, link_opts) do
-      {:ok, banner(lines ++ more)}
+      {:ok, banner(cluster ++ lines ++ more)}
+    end
+  end
+
+  # --sname/--name and --join (Dolphin.Cluster): the joined stations' vehicles are the console's too.
+  defp join(opts) do
+    case Dolphin.CLI.Cluster.start(opts, opts[:speedup]) do
+      {:ok, lines} -> {:ok, lines}
+      {:error, e} -> {:error, %CommandLineError{reason: :failed, message: Exception.message(e), cause: e}}
     end
   end
 
@@ -117,7 +136,8 @@ defmodule Mix.Tasks.Dolphin.Console do
     cond do
       n = opts[:sim] -> start_sim(n, opts, link_opts)
       n = opts[:sitl] -> start_sitl(n, opts, link_opts)
-      endpoints != [] or Application.get_env(:dolphin, :links, []) != [] -> {:ok, []}
+      # Joined stations bring the vehicles: no default link then.
+      endpoints != [] or opts[:join] != nil or Application.get_env(:dolphin, :links, []) != [] -> {:ok, []}
       true -> connect_all([Dolphin.Link.default_endpoint()], link_opts)
     end
   end

@@ -55,6 +55,21 @@ defmodule Mix.Tasks.Dolphin.Run do
     * `--web-bind ADDRESS` — listen on ADDRESS instead of 127.0.0.1
       (`0.0.0.0`: from other machines too)
     * `--no-check` — fly without the pre-flight check (`mix dolphin.check`)
+    * `--sname NAME`, `--name NAME@HOST` — make this a node of a cluster of
+      ground stations (`Dolphin.Cluster`; short or long names, as `erl`)
+    * `--cookie C` — the cluster's cookie (else `~/.erlang.cookie`)
+    * `--join NODE` — fly the vehicles of the ground station `NODE`
+      (`mix dolphin.station`) too, as one fleet; repeatable. Without
+      `--speedup` the run adopts the stations' speed-up; with another one it
+      refuses (exit 1). Unreachable or refusing nodes end the run (exit 1).
+
+  ## Several ground stations
+
+      mix dolphin.station --sname gs1 --sim 2 --speedup 10            # terminal 1
+      mix dolphin.station --sname gs2 --sim 2 --first-sysid 11 --speedup 10   # terminal 2
+      mix dolphin.run examples/two_vehicles.exs --sname ctl --join gs1@$(hostname -s) --join gs2@$(hostname -s)
+
+  See `docs/cluster.md`.
 
   ## Output
 
@@ -133,9 +148,9 @@ defmodule Mix.Tasks.Dolphin.Run do
     web: :integer,
     web_bind: :string,
     no_check: :boolean
-  ]
+  ] ++ Dolphin.CLI.Cluster.switches()
 
-  @usage "usage: mix dolphin.run SCRIPT [--connect ENDPOINT]... [--sim N | --sitl N | --fake N] [--speedup K] [--for DURATION] [--events FILE] [--tlog FILE | --no-tlog] [--forward ENDPOINT]... [--quiet] [--report FILE] [--web PORT [--web-bind ADDRESS]] [--no-check]"
+  @usage "usage: mix dolphin.run SCRIPT [--connect ENDPOINT]... [--sim N | --sitl N | --fake N] [--speedup K] [--for DURATION] [--events FILE] [--tlog FILE | --no-tlog] [--forward ENDPOINT]... [--quiet] [--report FILE] [--web PORT [--web-bind ADDRESS]] [--no-check] [--sname NAME | --name NAME@HOST] [--cookie C] [--join NODE]..."
 
   @impl Mix.Task
   def run(argv) do
@@ -234,6 +249,7 @@ defmodule Mix.Tasks.Dolphin.Run do
            :ok <- endpoints(opts),
            :ok <- web(opts),
            :ok <- report(opts),
+           :ok <- cluster(opts),
            {:ok, for_ms} <- duration(opts[:for]),
            :ok <- readable(file) do
         {:ok, file, Keyword.put(opts, :for_ms, for_ms)}
@@ -284,6 +300,13 @@ defmodule Mix.Tasks.Dolphin.Run do
       opts[:no_tlog] -> usage_error("--report is made from the run's telemetry log: not with --no-tlog")
       opts[:fake] -> usage_error("--report is made from the run's telemetry log, and fake vehicles write none: not with --fake")
       true -> :ok
+    end
+  end
+
+  defp cluster(opts) do
+    case Dolphin.CLI.Cluster.check(opts) do
+      :ok -> :ok
+      {:error, message} -> usage_error(message)
     end
   end
 

@@ -1,0 +1,473 @@
+defmodule Dolphin.Cluster.Mirror do
+  @moduledoc """
+  The controller side of a cluster of ground stations: makes the vehicles of
+  the joined stations (`Dolphin.Cluster.Station` on other nodes) appear on
+  this node as if they were its own, so that the fleet, the engine, the
+  mission executor, the console and the live view work unchanged.
+
+  For each remote vehicle it keeps which stations hear it (their vehicle
+  process, latest view, how long ago they heard it, their link figures),
+  chooses one (`Dolphin.Cluster.Choice`) and:
+
+    * routes: `Dolphin.Vehicles.whereis/1` falls back to the chosen station's
+      vehicle process (`route/1`, read from an ETS table this process owns;
+      a local vehicle of the same id always wins), `Dolphin.Vehicles.list/0`
+      includes the mirrored ids, `Dolphin.Vehicles.view/1` returns the
+      mirrored view;
+    * publishes on this node's `Dolphin.PubSub` exactly what a local vehicle
+      would: `{:vehicle_view, id}` `{:view, view}` for each new view of the
+      chosen station, `{:vehicle, id}` `{:state, id, changes}`, and on
+      `:vehicles` `{:vehicle_discovered | :vehicle_lost |
+      :vehicle_reconnected | :vehicle_forgotten, id}`;
+    * fails over: when the chosen station's node goes down, or it stops
+      hearing the vehicle while another station hears it, the route moves to
+      the other (`station_changed` event) without any `vehicle_lost`; a
+      vehicle no station hears any more is lost (at once when its last
+      station's node goes down, else when the station's own vehicle times
+      out), and reconnected when a station hears it again;
+    * refuses to merge two vehicles: two stations whose views of one system
+      id disagree (`Dolphin.Cluster.Choice.conflict/2`) raise a
+      `vehicle_conflict` event, and the first station stays the only route
+      while the conflict stands.
+
+  It follows only the stations of the nodes joined with
+  `Dolphin.Cluster.join/2` (`follow/2`); a node that only serves as a
+  station mirrors nobody.
+  """
+
+  use GenServer
+  require Logger
+
+  alias Dolphin.{Clock, PubSub, Telemetry}
+  alias Dolphin.Cluster.{Choice, Station}
+  alias Dolphin.Vehicles.View
+
+  @table Dolphin.Cluster.Routes
+  @reconnect_every_ms 1_000
+  @stale_floor_ms 250
+
+  @doc false
+  def start_link(opts), do: GenServer.start_link(__MODULE__, opts, name: __MODULE__)
+
+  @doc "The process a remote vehicle's commands go to (its chosen station's), or nil."
+  @spec route(byte()) :: pid() | nil
+  def route(id) do
+    case lookup(id) do
+      [{_, pid, _view}] -> pid
+      _ -> nil
+    end
+  end
+
+  @doc "The mirrored view of a remote vehicle."
+  @spec view(byte()) :: {:ok, View.t()} | :error
+  def view(id) do
+    case lookup(id) do
+      [{_, _pid, view}] -> {:ok, view}
+      _ -> :error
+    end
+  end
+
+  @doc "The system ids of the remote vehicles mirrored here."
+  @spec ids() :: [byte()]
+  def ids do
+    if :ets.whereis(@table) == :undefined, do: [], else: :ets.select(@table, [{{:"$1", :_, :_}, [], [:"$1"]}])
+  end
+
+  defp lookup(id) do
+    :ets.lookup(@table, id)
+  rescue
+    ArgumentError -> []
+  end
+
+  @doc """
+  Follows the stations of `node` from now on (and reconnects to it whenever
+  it goes away); returns once one of them is subscribed to, or with
+  `{:error, :no_station}` when none showed up within `timeout_ms`.
+  """
+  @spec follow(node(), non_neg_integer()) :: :ok | {:error, :no_station}
+  def follow(node, timeout_ms \\ 5_000), do: GenServer.call(__MODULE__, {:follow, node, timeout_ms}, timeout_ms + 5_000)
+
+  @doc "Stops following `node` (no more reconnection attempts; its vehicles stay until it leaves)."
+  @spec unfollow(node()) :: :ok
+  def unfollow(node), do: GenServer.call(__MODULE__, {:unfollow, node})
+
+  @doc "The nodes joined (followed, and reconnected to when they go away)."
+  @spec joined() :: [node()]
+  def joined, do: GenServer.call(__MODULE__, :joined)
+
+  @doc "The stations followed now: `%{station_pid => node}`."
+  @spec stations() :: %{pid() => node()}
+  def stations, do: GenServer.call(__MODULE__, :stations)
+
+  @doc "Which stations hear each mirrored vehicle and which is chosen: `%{id => %{chosen: node, stations: [node], lost: boolean}}`."
+  @spec routes() :: %{byte() => map()}
+  def routes, do: GenServer.call(__MODULE__, :routes)
+
+  @doc false
+  # Called after a call to `dead` exited for want of its node: the route
+  # now, or nil. Settles the node's departure at once if this process has
+  # not heard of it yet.
+  @spec reroute(byte(), pid()) :: pid() | nil
+  def reroute(id, dead) do
+    GenServer.call(__MODULE__, {:reroute, id, dead}, 10_000)
+  catch
+    :exit, _ -> nil
+  end
+
+  @doc false
+  # Forgets a remote vehicle here (Dolphin.Vehicles.forget/1): it comes
+  # back when a station tells of it anew (its discovery there, or the
+  # station joined again).
+  @spec forget(byte()) :: :ok
+  def forget(id), do: GenServer.call(__MODULE__, {:forget, id})
+
+  # --- the process -------------------------------------------------------------
+
+  @impl true
+  def init(opts) do
+    :ets.new(@table, [:named_table, :protected, :set, read_concurrency: true])
+
+    {:ok,
+     %{
+       enabled: false,
+       pg_ref: nil,
+       # Nodes joined (followed): reconnected to when they go away.
+       joined: MapSet.new(),
+       # Joins waiting for a station of their node: node => [{from, timer}].
+       waiting: %{},
+       # station pid => %{node, monitor}
+       stations: %{},
+       # id => %{hearings: %{station => hearing}, chosen, lost, conflict}
+       vehicles: %{},
+       stale_ms: Keyword.get(opts, :stale_ms, Choice.stale_ms())
+     }}
+  end
+
+  @impl true
+  def handle_call({:follow, node, timeout_ms}, from, s) do
+    s = enable(s)
+    s = %{s | joined: MapSet.put(s.joined, node)}
+    s = subscribe_all(s)
+
+    if Enum.any?(s.stations, fn {_pid, st} -> st.node == node end) do
+      {:reply, :ok, s}
+    else
+      timer = Process.send_after(self(), {:follow_timeout, node, from}, timeout_ms)
+      {:noreply, update_in(s.waiting, &Map.update(&1, node, [{from, timer}], fn l -> [{from, timer} | l] end))}
+    end
+  end
+
+  # Its stations stay followed while connected: they leave as any station does.
+  def handle_call({:unfollow, node}, _from, s), do: {:reply, :ok, %{s | joined: MapSet.delete(s.joined, node)}}
+  def handle_call(:joined, _from, s), do: {:reply, Enum.sort(s.joined), s}
+  def handle_call(:stations, _from, s), do: {:reply, Map.new(s.stations, fn {pid, st} -> {pid, st.node} end), s}
+
+  def handle_call(:routes, _from, s) do
+    routes =
+      Map.new(s.vehicles, fn {id, v} ->
+        {id, %{chosen: v.chosen && node(v.chosen), stations: v.hearings |> Map.keys() |> Enum.map(&node/1) |> Enum.sort(), lost: v.lost}}
+      end)
+
+    {:reply, routes, s}
+  end
+
+  def handle_call({:reroute, id, dead}, _from, s) do
+    s = if node(dead) in Node.list(), do: s, else: node_gone(s, node(dead), "its node is not connected")
+
+    case s.vehicles do
+      %{^id => %{lost: false}} -> {:reply, route(id), s}
+      _ -> {:reply, nil, s}
+    end
+  end
+
+  def handle_call({:forget, id}, _from, s) do
+    if Map.has_key?(s.vehicles, id) do
+      :ets.delete(@table, id)
+      unless local?(id), do: PubSub.publish(:vehicles, {:vehicle_forgotten, id})
+    end
+
+    {:reply, :ok, %{s | vehicles: Map.delete(s.vehicles, id)}}
+  end
+
+  @impl true
+  def handle_info({ref, :join, :stations, pids}, %{pg_ref: ref} = s), do: {:noreply, Enum.reduce(pids, s, &subscribe(&2, &1))}
+  def handle_info({ref, :leave, :stations, _pids}, %{pg_ref: ref} = s), do: {:noreply, s}
+
+  def handle_info({:dolphin_station, station, event}, s) do
+    if Map.has_key?(s.stations, station), do: {:noreply, station_event(s, station, event)}, else: {:noreply, s}
+  end
+
+  def handle_info({:DOWN, _ref, :process, station, reason}, s) do
+    case Map.fetch(s.stations, station) do
+      {:ok, _} -> {:noreply, station_gone(s, station, down_words(reason))}
+      :error -> {:noreply, s}
+    end
+  end
+
+  def handle_info({:nodedown, node, _info}, s) do
+    s = node_gone(s, node, "its node went down")
+    if MapSet.member?(s.joined, node), do: Process.send_after(self(), {:reconnect, node}, @reconnect_every_ms)
+    {:noreply, s}
+  end
+
+  def handle_info({:nodeup, _node, _info}, s), do: {:noreply, subscribe_all(s)}
+
+  # A joined node that went away is tried again until it answers; :pg then
+  # tells of its station, and the station's vehicles come back.
+  def handle_info({:reconnect, node}, s) do
+    if MapSet.member?(s.joined, node) and node not in Node.list() do
+      unless Node.connect(node) == true, do: Process.send_after(self(), {:reconnect, node}, @reconnect_every_ms)
+    end
+
+    {:noreply, s}
+  end
+
+  def handle_info({:follow_timeout, node, from}, s) do
+    case Map.get(s.waiting, node, []) do
+      [] ->
+        {:noreply, s}
+
+      waiters ->
+        {mine, rest} = Enum.split_with(waiters, fn {f, _} -> f == from end)
+        if mine != [], do: GenServer.reply(from, {:error, :no_station})
+        {:noreply, %{s | waiting: if(rest == [], do: Map.delete(s.waiting, node), else: Map.put(s.waiting, node, rest))}}
+    end
+  end
+
+  def handle_info(_other, s), do: {:noreply, s}
+
+  # --- stations ------------------------------------------------------------------
+
+  defp enable(%{enabled: true} = s), do: s
+
+  defp enable(s) do
+    {ref, _pids} = :pg.monitor(Dolphin.Cluster.scope(), :stations)
+    :ok = :net_kernel.monitor_nodes(true, node_type: :visible)
+    %{s | enabled: true, pg_ref: ref}
+  end
+
+  defp subscribe_all(%{enabled: false} = s), do: s
+  defp subscribe_all(s), do: Enum.reduce(:pg.get_members(Dolphin.Cluster.scope(), :stations), s, &subscribe(&2, &1))
+
+  # A station of a joined node, not yet followed: subscribed to, if it runs
+  # at this node's speed-up. (Other nodes of the cluster are not followed
+  # unless joined too.)
+  defp subscribe(s, station) do
+    if not MapSet.member?(s.joined, node(station)) or Map.has_key?(s.stations, station) or not s.enabled do
+      s
+    else
+      case Station.subscribe(station, self()) do
+        {:ok, %{speedup: k} = hello} ->
+          if k == Clock.speedup() do
+            s = %{s | stations: Map.put(s.stations, station, %{node: node(station), monitor: Process.monitor(station)})}
+            Telemetry.emit(:station_joined, %{station: node(station), heard: length(hello.vehicles)})
+            s = Enum.reduce(hello.vehicles, s, fn {id, pid, view}, s -> hear(s, id, station, pid, view) end)
+            answer_waiters(s, node(station))
+          else
+            Logger.warning("not following the ground station on #{node(station)}: it runs at speed-up #{k}, this node at #{Clock.speedup()}")
+            s
+          end
+
+        {:error, _} ->
+          s
+      end
+    end
+  end
+
+  defp answer_waiters(s, node) do
+    for {from, timer} <- Map.get(s.waiting, node, []) do
+      Process.cancel_timer(timer)
+      GenServer.reply(from, :ok)
+    end
+
+    %{s | waiting: Map.delete(s.waiting, node)}
+  end
+
+  defp node_gone(s, node, why) do
+    s.stations
+    |> Enum.filter(fn {_pid, st} -> st.node == node end)
+    |> Enum.reduce(s, fn {station, _}, s -> station_gone(s, station, why) end)
+  end
+
+  # A station that left: every vehicle it heard is decided again without it.
+  defp station_gone(s, station, why) do
+    {st, stations} = Map.pop(s.stations, station)
+    Process.demonitor(st.monitor, [:flush])
+    Telemetry.emit(:station_left, %{station: st.node, reason: why})
+    s = %{s | stations: stations}
+
+    Enum.reduce(s.vehicles, s, fn {id, v}, s ->
+      if Map.has_key?(v.hearings, station) do
+        v = %{v | hearings: Map.delete(v.hearings, station), conflict: drop_conflict(v.conflict, station)}
+        decide(s, id, v, "#{st.node} left: #{why}")
+      else
+        s
+      end
+    end)
+  end
+
+  defp down_words(:noconnection), do: "its node is unreachable"
+  defp down_words(reason), do: "its process ended (#{inspect(reason)})"
+
+  defp station_event(s, station, {:discovered, id, pid, view}), do: hear(s, id, station, pid, view)
+  defp station_event(s, station, {:view, id, view}), do: update_hearing(s, id, station, &%{&1 | view: view}, :view)
+
+  defp station_event(s, station, {:state, id, changes}) do
+    case s.vehicles do
+      %{^id => %{chosen: ^station}} -> unless local?(id), do: PubSub.publish({:vehicle, id}, {:state, id, changes})
+      _ -> :ok
+    end
+
+    s
+  end
+
+  defp station_event(s, station, {event, id}) when event in [:lost, :reconnected], do: update_hearing(s, id, station, & &1, event)
+
+  defp station_event(s, station, {:forgotten, id}) do
+    case s.vehicles do
+      %{^id => v} -> decide(s, id, %{v | hearings: Map.delete(v.hearings, station), conflict: drop_conflict(v.conflict, station)}, "forgotten by #{node(station)}")
+      _ -> s
+    end
+  end
+
+  defp station_event(s, station, {:heard, heard}) do
+    Enum.reduce(heard, s, fn {id, {age, link}}, s ->
+      update_hearing(s, id, station, &%{&1 | age_ms: age, link: link}, :heard)
+    end)
+  end
+
+  defp station_event(s, _station, _other), do: s
+
+  # A vehicle a station tells of for the first time (or with a new process).
+  defp hear(s, id, station, pid, view) do
+    v = Map.get(s.vehicles, id, %{hearings: %{}, chosen: nil, lost: nil, conflict: nil})
+    hearing = %{pid: pid, view: view, age_ms: nil, link: view.link}
+    v = %{v | hearings: Map.put(v.hearings, station, hearing)}
+    decide(s, id, check_conflict(v, id, station), "heard by #{node(station)}")
+  end
+
+  defp update_hearing(s, id, station, fun, why) do
+    with %{^id => v} <- s.vehicles, %{^station => h} <- v.hearings do
+      v = %{v | hearings: Map.put(v.hearings, station, fun.(h))}
+      v = if why == :view, do: check_conflict(v, id, station), else: v
+      s = decide(s, id, v, why)
+      # A new view of the chosen station, once the choice is settled.
+      if why == :view and s.vehicles[id].chosen == station and not s.vehicles[id].lost, do: publish_view(id, v.hearings[station].pid, h_view(s, id, station))
+      s
+    else
+      _ -> s
+    end
+  end
+
+  defp h_view(s, id, station), do: s.vehicles[id].hearings[station].view
+
+  # Two stations whose views of one id are two different vehicles: the first
+  # one (the chosen) keeps the vehicle, the other is never chosen while it
+  # stands.
+  defp check_conflict(%{conflict: nil, chosen: chosen} = v, id, station) when chosen != nil and chosen != station do
+    with %{^chosen => first} <- v.hearings,
+         {:conflict, why} <- Choice.conflict(first.view, v.hearings[station].view) do
+      Telemetry.emit(:vehicle_conflict, %{vehicle: id, stations: [node(chosen), node(station)], reason: why})
+      Logger.warning("vehicle #{id}: #{node(chosen)} and #{node(station)} hear two different vehicles (#{why}); following #{node(chosen)} only")
+      %{v | conflict: %{first: chosen, other: station}}
+    else
+      _ -> v
+    end
+  end
+
+  defp check_conflict(v, _id, _station), do: v
+
+  defp drop_conflict(%{first: s}, s), do: nil
+  defp drop_conflict(%{other: s}, s), do: nil
+  defp drop_conflict(conflict, _station), do: conflict
+
+  # The choice made again for one vehicle, and what it changes published.
+  defp decide(s, id, v, why) do
+    hearings = if v.conflict, do: Map.delete(v.hearings, v.conflict.other), else: v.hearings
+    chosen = Choice.choose(hearings, v.chosen, stale_ms: stale_ms(s), pinned: v.conflict != nil)
+    lost = Choice.lost?(hearings)
+    old = v
+
+    cond do
+      hearings == %{} and old.chosen == nil ->
+        %{s | vehicles: Map.put(s.vehicles, id, v)}
+
+      true ->
+        v = %{v | chosen: chosen || old.chosen, lost: lost}
+        s = %{s | vehicles: Map.put(s.vehicles, id, v)}
+        announce(id, old, v, why)
+        s
+    end
+  end
+
+  # Stale after stale_ms of clock time, but never under @stale_floor_ms of
+  # real time: stations report ages that often, and a pause of this host or
+  # of the network does not get shorter with the speed-up.
+  defp stale_ms(s), do: max(s.stale_ms, round(@stale_floor_ms * Clock.speedup()))
+
+  defp announce(id, old, v, why) do
+    h = v.hearings[v.chosen]
+
+    cond do
+      old.chosen == nil ->
+        # New here: the route and view first, then the news.
+        publish_view(id, h.pid, view_of(h, v.lost))
+        unless local?(id), do: PubSub.publish(:vehicles, {:vehicle_discovered, id})
+
+      old.chosen != v.chosen ->
+        Telemetry.emit(:station_changed, %{vehicle: id, from: node(old.chosen), to: node(v.chosen), reason: reason_words(why)})
+        publish_view(id, h.pid, view_of(h, v.lost))
+
+      true ->
+        :ok
+    end
+
+    cond do
+      old.lost == false and v.lost ->
+        # The view first: whoever hears of the loss finds the view saying so.
+        last = if h, do: h.view, else: elem(view(id), 1)
+        publish_view(id, route(id), %{last | connected?: false})
+        lost_or_back(id, :vehicle_lost)
+
+      old.lost == true and not v.lost ->
+        publish_view(id, h.pid, h.view)
+        lost_or_back(id, :vehicle_reconnected)
+
+      true ->
+        :ok
+    end
+  end
+
+  defp reason_words(why) when is_binary(why), do: why
+  defp reason_words(:heard), do: "the station that had it stopped hearing it"
+  defp reason_words(why), do: to_string(why)
+
+  defp view_of(nil, _lost), do: nil
+  defp view_of(h, true), do: %{h.view | connected?: false}
+  defp view_of(h, false), do: h.view
+
+  defp lost_or_back(id, event) do
+    unless local?(id) do
+      PubSub.publish(:vehicles, {event, id})
+      PubSub.publish({:vehicle, id}, {event, id})
+    end
+  end
+
+  # Every local publication of a remote vehicle's view goes through here:
+  # the route table first (whoever hears of the view finds it in view/1),
+  # then the subscribers, unless a local vehicle of that id owns the topic.
+  defp publish_view(_id, _pid, nil), do: :ok
+
+  defp publish_view(id, pid, view) do
+    case lookup(id) do
+      [{^id, ^pid, ^view}] ->
+        :ok
+
+      _ ->
+        :ets.insert(@table, {id, pid, view})
+        unless local?(id), do: PubSub.publish({:vehicle_view, id}, {:view, view})
+    end
+  end
+
+  defp local?(id), do: Registry.lookup(Dolphin.Registry, {:vehicle, id}) != []
+end

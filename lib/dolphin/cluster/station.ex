@@ -1,0 +1,184 @@
+defmodule Dolphin.Cluster.Station do
+  @moduledoc """
+  The station side of a cluster of ground stations: one process per node,
+  member of the `:stations` group of the `Dolphin.Cluster` `:pg` scope, that
+  tells subscribed controllers (`Dolphin.Cluster.Mirror` processes on other
+  nodes) about the vehicles this node hears.
+
+  It costs nothing while no controller is subscribed: only then does it
+  follow the local vehicles (topic `:vehicles`, and each vehicle's
+  `{:vehicle_view, id}` and `{:vehicle, id}`). Vehicles that this node only
+  mirrors from other stations are never passed on (no loops between nodes).
+
+  Messages to each subscriber, `{:dolphin_station, station_pid, event}`:
+
+    * `{:hello, info}` — on subscription: `%{node, speedup, vehicles: [{id, vehicle_pid, view}]}`;
+    * `{:discovered, id, vehicle_pid, view}`, `{:lost, id}`,
+      `{:reconnected, id}`, `{:forgotten, id}`;
+    * `{:view, id, view}` — each new view of a vehicle, whole, as soon as
+      it is published here (not batched: a controller's conditions react to
+      it, and one message per view keeps the latency to the network's);
+    * `{:state, id, changes}` — the vehicle's raw state changes (the
+      mission executor follows them);
+    * `{:heard, %{id => {age_ms, link}}}` — every `:heard_every_ms` of real
+      time: how long ago (clock ms) each vehicle's last frame came and its
+      link figures, so that a controller tells a stale station (it stops
+      hearing a vehicle) from a quiet vehicle.
+  """
+
+  use GenServer
+
+  alias Dolphin.{Clock, PubSub, Vehicles}
+
+  @heard_every_ms 250
+
+  @doc false
+  def start_link(opts), do: GenServer.start_link(__MODULE__, opts, name: __MODULE__)
+
+  @doc """
+  Subscribes `mirror` (a pid, usually on another node) to `station`; the
+  station monitors it and answers with its `{:hello, info}` as the reply.
+  """
+  @spec subscribe(pid(), pid()) :: {:ok, map()} | {:error, term()}
+  def subscribe(station, mirror) do
+    GenServer.call(station, {:subscribe, mirror}, 10_000)
+  catch
+    :exit, reason -> {:error, reason}
+  end
+
+  @impl true
+  def init(opts) do
+    :ok = :pg.join(Dolphin.Cluster.scope(), :stations, self())
+    {:ok, %{subscribers: %{}, vehicles: %{}, heard_every_ms: Keyword.get(opts, :heard_every_ms, @heard_every_ms), timer: nil}}
+  end
+
+  @impl true
+  def handle_call({:subscribe, mirror}, _from, s) do
+    s = if s.subscribers == %{}, do: follow(s), else: s
+    s = if Map.has_key?(s.subscribers, mirror), do: s, else: put_in(s.subscribers[mirror], Process.monitor(mirror))
+    vehicles = for {id, pid} <- s.vehicles, {:ok, view} <- [Vehicles.view(id)], do: {id, pid, view}
+    {:reply, {:ok, %{node: node(), speedup: Clock.speedup(), vehicles: vehicles}}, s}
+  end
+
+  @impl true
+  def handle_info({:dolphin, :vehicles, {:vehicle_discovered, id}}, s) do
+    case local(id) do
+      nil ->
+        {:noreply, s}
+
+      pid ->
+        s = watch(s, id, pid)
+        tell(s, {:discovered, id, pid, local_view(id)})
+        {:noreply, s}
+    end
+  end
+
+  def handle_info({:dolphin, :vehicles, {:vehicle_forgotten, id}}, s) do
+    if Map.has_key?(s.vehicles, id) do
+      PubSub.unsubscribe({:vehicle_view, id})
+      PubSub.unsubscribe({:vehicle, id})
+      tell(s, {:forgotten, id})
+    end
+
+    {:noreply, %{s | vehicles: Map.delete(s.vehicles, id)}}
+  end
+
+  def handle_info({:dolphin, :vehicles, {event, id}}, s) when event in [:vehicle_lost, :vehicle_reconnected] do
+    if Map.has_key?(s.vehicles, id), do: tell(s, {if(event == :vehicle_lost, do: :lost, else: :reconnected), id})
+    {:noreply, s}
+  end
+
+  def handle_info({:dolphin, {:vehicle_view, id}, {:view, view}}, s) do
+    if Map.has_key?(s.vehicles, id), do: tell(s, {:view, id, view})
+    {:noreply, s}
+  end
+
+  def handle_info({:dolphin, {:vehicle, id}, {:state, id, changes}}, s) do
+    if Map.has_key?(s.vehicles, id), do: tell(s, {:state, id, changes})
+    {:noreply, s}
+  end
+
+  def handle_info(:heard, %{subscribers: subs} = s) when subs == %{}, do: {:noreply, %{s | timer: nil}}
+
+  def handle_info(:heard, s) do
+    now = Clock.now_ms()
+    # A restarted vehicle process has a new pid: the controllers learn it here.
+    s = refresh_pids(s)
+
+    heard =
+      for {id, _pid} <- s.vehicles, {:ok, st} <- [Vehicles.state(id)], into: %{} do
+        age = if st.link.last_seen_ms, do: max(now - st.link.last_seen_ms, 0)
+        {id, {age, Map.take(Dolphin.Vehicles.State.link_figures(st), [:rtt_ms, :loss_in, :loss_out])}}
+      end
+
+    tell(s, {:heard, heard})
+    {:noreply, %{s | timer: Process.send_after(self(), :heard, s.heard_every_ms)}}
+  end
+
+  def handle_info({:DOWN, _ref, :process, pid, _reason}, s) do
+    s = %{s | subscribers: Map.delete(s.subscribers, pid)}
+    {:noreply, if(s.subscribers == %{}, do: unfollow(s), else: s)}
+  end
+
+  def handle_info({:dolphin, _topic, _event}, s), do: {:noreply, s}
+
+  # The first subscriber: follow every local vehicle from now on.
+  defp follow(s) do
+    PubSub.subscribe(:vehicles)
+    s = Enum.reduce(Vehicles.list(), s, fn id, s -> if pid = local(id), do: watch(s, id, pid), else: s end)
+    %{s | timer: s.timer || Process.send_after(self(), :heard, s.heard_every_ms)}
+  end
+
+  # The last one went: nobody to tell, nothing to follow.
+  defp unfollow(s) do
+    PubSub.unsubscribe(:vehicles)
+
+    for {id, _} <- s.vehicles do
+      PubSub.unsubscribe({:vehicle_view, id})
+      PubSub.unsubscribe({:vehicle, id})
+    end
+
+    %{s | vehicles: %{}}
+  end
+
+  defp watch(s, id, pid) do
+    unless Map.has_key?(s.vehicles, id) do
+      PubSub.subscribe({:vehicle_view, id})
+      PubSub.subscribe({:vehicle, id})
+    end
+
+    put_in(s.vehicles[id], pid)
+  end
+
+  defp refresh_pids(s) do
+    Enum.reduce(s.vehicles, s, fn {id, pid}, s ->
+      case local(id) do
+        ^pid -> s
+        nil -> s
+        new ->
+          tell(s, {:discovered, id, new, local_view(id)})
+          put_in(s.vehicles[id], new)
+      end
+    end)
+  end
+
+  defp local_view(id) do
+    case Vehicles.view(id) do
+      {:ok, view} -> view
+      _ -> %Vehicles.View{id: id}
+    end
+  end
+
+  # Only this node's own vehicle processes, never a route to another station's.
+  defp local(id) do
+    case Registry.lookup(Dolphin.Registry, {:vehicle, id}) do
+      [{pid, _}] -> pid
+      [] -> nil
+    end
+  end
+
+  defp tell(s, event) do
+    for {mirror, _ref} <- s.subscribers, do: send(mirror, {:dolphin_station, self(), event})
+    s
+  end
+end

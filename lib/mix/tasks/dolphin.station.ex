@@ -1,0 +1,191 @@
+defmodule Mix.Tasks.Dolphin.Station do
+  @shortdoc "Runs a ground-station node of a cluster: links and vehicles, no script"
+
+  @moduledoc """
+  Runs a ground station that other nodes join (`Dolphin.Cluster`): it opens
+  its links, hears its vehicles and serves them to every controller that
+  joins it (`mix dolphin.run SCRIPT --join NODE`, `mix dolphin.console
+  --join NODE`), until it is stopped (Ctrl-C or SIGTERM). It prints the
+  vehicles it hears as they come and go.
+
+      mix dolphin.station --sname gs1 --connect udpin:0.0.0.0:14550
+      mix dolphin.station --sname gs1 --cookie secret --sim 3 --speedup 10
+      mix dolphin.station --name gs2@10.0.0.2 --cookie secret --connect udpin:0.0.0.0:14551
+
+  ## Options
+
+    * `--sname NAME` or `--name NAME@HOST` (one is required) — the node's
+      name, short or long (as `erl -sname` / `-name`); controllers join it
+      by this name
+    * `--cookie C` — the cluster's cookie (else `~/.erlang.cookie`)
+    * `--connect ENDPOINT` — a link to vehicles (`udpin:0.0.0.0:14550`,
+      `udpout:HOST:PORT`, `tcp:HOST:PORT`); repeatable
+    * `--sim N` — also start N simulated vehicles (`Dolphin.Sim`) on a local
+      link, with system ids from `--first-sysid` (default 1): give each
+      station of one machine its own range
+    * `--speedup K` — run K times faster than real time; every node of the
+      cluster runs at the same speed-up (a controller adopts it)
+    * `--seed N` — the simulator's seed
+    * `--tlog FILE` — record every MAVLink frame of the links
+
+  With neither `--connect` nor `--sim`, the station listens on
+  `Dolphin.Link.default_endpoint/0`.
+
+  ## Exit status
+
+  0 — stopped (Ctrl-C or SIGTERM); 1 — it could not start (distribution,
+  a port in use); 2 — bad usage (no `--sname`/`--name`, an unknown option).
+  """
+
+  use Mix.Task
+
+  alias Dolphin.CLI.{Signals, StartError, UsageError}
+
+  @switches [sname: :string, name: :string, cookie: :string, connect: :keep, sim: :integer, first_sysid: :integer, speedup: :float, seed: :integer, tlog: :string]
+
+  @usage "usage: mix dolphin.station (--sname NAME | --name NAME@HOST) [--cookie C] [--connect ENDPOINT]... [--sim N [--first-sysid ID]] [--speedup K] [--seed N] [--tlog FILE]"
+
+  @impl Mix.Task
+  def run(argv) do
+    case main(argv, signals: true) do
+      0 -> :ok
+      code -> exit({:shutdown, code})
+    end
+  end
+
+  @doc """
+  Does the work of the task and returns the exit status. `io` options:
+  `:out`, `:err` (devices), `:signals` (SIGINT and SIGTERM stop the
+  station), `:ready` (a pid told `{Mix.Tasks.Dolphin.Station, :ready,
+  node}` once the station runs). The station also stops on a
+  `{Mix.Tasks.Dolphin.Station, :stop}` message to the calling process.
+  """
+  @spec main([String.t()], keyword()) :: 0 | 1 | 2
+  def main(argv, io \\ []) do
+    out = Keyword.get(io, :out, :stdio)
+    err = Keyword.get(io, :err, :stderr)
+
+    case parse(argv) do
+      {:ok, opts} ->
+        Mix.Task.run("app.start")
+        serve(opts, io, out, err)
+
+      {:error, e} ->
+        IO.puts(err, "mix dolphin.station: #{Exception.message(e)}\n#{@usage}")
+        2
+    end
+  end
+
+  @doc false
+  # The options of a command line, checked.
+  @spec parse([String.t()]) :: {:ok, keyword()} | {:error, UsageError.t()}
+  def parse(argv) do
+    case OptionParser.parse(argv, strict: @switches) do
+      {opts, [], []} ->
+        cond do
+          opts[:sname] == nil and opts[:name] == nil -> UsageError.error("a station needs a node name: give --sname NAME or --name NAME@HOST")
+          (problem = Dolphin.CLI.Cluster.check(opts)) != :ok -> UsageError.error(elem(problem, 1))
+          opts[:sim] != nil and opts[:sim] < 1 -> UsageError.error("--sim must be a positive number of vehicles, got #{opts[:sim]}")
+          opts[:first_sysid] != nil and opts[:sim] == nil -> UsageError.error("--first-sysid goes with --sim")
+          opts[:first_sysid] != nil and opts[:first_sysid] not in 1..255 -> UsageError.error("--first-sysid must be a system id 1..255, got #{opts[:first_sysid]}")
+          opts[:speedup] != nil and opts[:speedup] <= 0 -> UsageError.error("--speedup must be positive, got #{opts[:speedup]}")
+          bad = Enum.find(Keyword.get_values(opts, :connect), &match?({:error, _}, Dolphin.Link.Endpoint.parse(&1))) -> UsageError.error("--connect #{bad}: not an endpoint")
+          true -> {:ok, opts}
+        end
+
+      {_, [arg | _], []} ->
+        UsageError.error("unexpected argument #{inspect(arg)} (a station runs no script: mix dolphin.run SCRIPT --join NODE does)")
+
+      {_, _, [{switch, value} | _]} ->
+        UsageError.error("bad option #{switch}#{if value, do: " " <> value, else: ""}")
+    end
+  end
+
+  defp serve(opts, io, out, err) do
+    previous = Dolphin.Clock.speedup()
+    if k = opts[:speedup], do: Dolphin.Clock.set_speedup(k)
+    Process.put(:dolphin_station_cleanup, [])
+    Dolphin.Vehicles.subscribe(:all)
+
+    try do
+      with {:ok, lines} <- Dolphin.CLI.Cluster.start(opts, nil),
+           {:ok, more} <- links(opts),
+           {:ok, sims} <- sims(opts) do
+        k = Dolphin.Clock.speedup()
+        IO.puts(out, "ground station #{node()} (#{if k == 1, do: "real time", else: "speed-up #{Dolphin.Console.Format.num(k / 1)}x"}); Ctrl-C stops it")
+        Enum.each(Enum.drop(lines, 1) ++ more ++ sims, &IO.puts(out, "  " <> &1))
+        if pid = io[:ready], do: send(pid, {__MODULE__, :ready, node()})
+        if io[:signals], do: Signals.catch_signals(self())
+        wait(out)
+        if io[:signals], do: Signals.release_signals()
+        0
+      else
+        {:error, e} ->
+          IO.puts(err, "mix dolphin.station: #{Exception.message(e)}")
+          1
+      end
+    after
+      Dolphin.PubSub.unsubscribe(:vehicles)
+      Enum.each(Process.delete(:dolphin_station_cleanup), & &1.())
+      Dolphin.Clock.set_speedup(previous)
+    end
+  end
+
+  # Until stopped, the vehicles as they come and go.
+  defp wait(out) do
+    receive do
+      {:dolphin, :vehicles, {event, id}} ->
+        if event in [:vehicle_discovered, :vehicle_lost, :vehicle_reconnected, :vehicle_forgotten],
+          do: IO.puts(out, "vehicle #{id} #{event |> Atom.to_string() |> String.replace_prefix("vehicle_", "")}")
+
+        wait(out)
+
+      {:dolphin_signal, sig} ->
+        IO.puts(out, "#{Signals.name(sig)}: the station stops")
+
+      {__MODULE__, :stop} ->
+        IO.puts(out, "the station stops")
+    end
+  end
+
+  defp links(opts) do
+    endpoints = Keyword.get_values(opts, :connect)
+    endpoints = if endpoints == [] and opts[:sim] == nil, do: [Dolphin.Link.default_endpoint()], else: endpoints
+    link_opts = if opts[:tlog], do: [tlog: opts[:tlog]], else: []
+
+    Enum.reduce_while(endpoints, {:ok, []}, fn ep, {:ok, lines} ->
+      case Dolphin.Link.connect(ep, link_opts) do
+        {:ok, pid} ->
+          defer(fn -> DynamicSupervisor.terminate_child(Dolphin.Link.Supervisor, pid) end)
+          {:cont, {:ok, lines ++ ["link #{ep}"]}}
+
+        {:error, why} ->
+          {:halt, {:error, %StartError{option: "--connect #{ep}", reason: why}}}
+      end
+    end)
+  end
+
+  defp sims(opts) do
+    case opts[:sim] do
+      nil ->
+        {:ok, []}
+
+      n ->
+        name = {:dolphin_station_sim, System.unique_integer([:positive])}
+        link_opts = if opts[:tlog] && opts[:connect] == nil, do: [tlog: opts[:tlog]], else: []
+
+        with {:ok, link} <- Dolphin.Link.connect("udpin:127.0.0.1:0", [name: name] ++ link_opts),
+             _ = defer(fn -> DynamicSupervisor.terminate_child(Dolphin.Link.Supervisor, link) end),
+             port = Dolphin.Link.Connection.port(name),
+             sim_opts = [count: n, first_sysid: Keyword.get(opts, :first_sysid, 1), gcs: {{127, 0, 0, 1}, port}, speedup: Dolphin.Clock.speedup(), seed: Keyword.get(opts, :seed, 1), camera: true],
+             {:ok, sysids} <- Dolphin.Sim.start(sim_opts) do
+          defer(fn -> Enum.each(sysids, &Dolphin.Sim.stop/1) end)
+          {:ok, ["#{n} simulated vehicle(s) #{Dolphin.Fleet.VehicleSet.format(sysids)} on 127.0.0.1:#{port}"]}
+        else
+          {:error, e} -> {:error, %StartError{option: "--sim #{n}", reason: e}}
+        end
+    end
+  end
+
+  defp defer(fun), do: Process.put(:dolphin_station_cleanup, [fun | Process.get(:dolphin_station_cleanup)])
+end

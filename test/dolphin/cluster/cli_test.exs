@@ -1,0 +1,143 @@
+defmodule Dolphin.Cluster.CLITest do
+  # The cluster's command lines (mix dolphin.station, dolphin.run --join)
+  # and bad input when joining, with :peer stations (Dolphin.Test.Cluster).
+  # Distribution and the clock are global: not async.
+  use ExUnit.Case, async: false
+
+  @moduletag :cluster
+  @moduletag :capture_log
+  @moduletag timeout: 120_000
+
+  alias Dolphin.Test.{Cluster, Wait}
+  alias Mix.Tasks.Dolphin.{Run, Station}
+
+  @speedup 50
+
+  setup do
+    Dolphin.Clock.set_speedup(@speedup)
+    Cluster.start_controller()
+    Dolphin.Fleet.set_source({Dolphin.Fleet.MAVLinkSource, nil})
+    :ok
+  end
+
+  defp io do
+    {:ok, out} = StringIO.open("")
+    {:ok, err} = StringIO.open("")
+    {out, err}
+  end
+
+  defp text(device), do: device |> StringIO.contents() |> elem(1)
+
+  test "mix dolphin.station serves its vehicles, prints them, and stops when told" do
+    {out, err} = io()
+    me = self()
+    task = Task.async(fn -> Station.main(~w(--sname gsx --sim 1 --first-sysid 40 --speedup 50), out: out, err: err, ready: me) end)
+    assert_receive {Station, :ready, _node}, 20_000
+    assert text(out) =~ "ground station"
+    assert text(out) =~ "1 simulated vehicle(s) [40]"
+    Wait.until(fn -> text(out) =~ "vehicle 40 discovered" end, 10_000, fn -> text(out) end)
+    send(task.pid, {Station, :stop})
+    assert Task.await(task, 20_000) == 0
+    assert text(err) == ""
+  end
+
+  test "usage errors exit with 2 and say what is wrong" do
+    {out, err} = io()
+    assert Station.main(~w(--sim 1), out: out, err: err) == 2
+    assert text(err) =~ "a station needs a node name: give --sname NAME or --name NAME@HOST"
+
+    script = Path.expand("../../../examples/single_vehicle.exs", __DIR__)
+    {out, err} = io()
+    assert Run.main([script, "--join", "gs1@127.0.0.1"], out: out, err: err) == 2
+    assert text(err) =~ "--join needs this node to have a name: give --sname NAME or --name NAME@HOST"
+
+    {out, err} = io()
+    assert Run.main([script, "--sname", "ctl", "--join", "gs1"], out: out, err: err) == 2
+    assert text(err) =~ ~s(--join takes a node name NAME@HOST, got "gs1")
+
+    {out, err} = io()
+    assert Run.main([script, "--sname", "a", "--name", "b@h"], out: out, err: err) == 2
+    assert text(err) =~ "--sname and --name do not go together"
+  end
+
+  test "mix dolphin.console takes --join on a node that has a name (iex --sname), and checks it" do
+    # This VM is the distributed node ctl@127.0.0.1, as under `iex --sname`.
+    assert {:ok, opts} = Mix.Tasks.Dolphin.Console.parse(~w(--join gs1@127.0.0.1 --join gs2@127.0.0.1))
+    assert Keyword.get_values(opts, :join) == ["gs1@127.0.0.1", "gs2@127.0.0.1"]
+    assert {:error, e} = Mix.Tasks.Dolphin.Console.parse(~w(--join gs1))
+    assert Exception.message(e) =~ ~s(--join takes a node name NAME@HOST, got "gs1")
+  end
+
+  test "joining an unreachable node: exit 1, cannot reach it" do
+    script = Path.expand("../../../examples/single_vehicle.exs", __DIR__)
+    {out, err} = io()
+    assert Run.main([script, "--sname", "ctl", "--join", "nobody@127.0.0.1", "--no-tlog", "--quiet"], out: out, err: err) == 1
+    assert text(err) =~ "--join nobody@127.0.0.1: cannot reach nobody@127.0.0.1: no node named nobody is registered with EPMD on 127.0.0.1"
+  end
+
+  test "a wrong cookie: the connection is refused, and the cookie is named as the likely cause" do
+    gs = Cluster.start_node("gsc", cookie: :not_the_same)
+    assert {:error, %Dolphin.Cluster.Error{reason: :refused} = e} = Dolphin.Cluster.join(gs.node)
+    assert Exception.message(e) =~ "cannot reach gsc@127.0.0.1: the connection was refused (the cookies may differ; a node cannot tell for sure)"
+  end
+
+  test "a node at another speed-up is refused, naming both; without one of its own it adopts the station's" do
+    gs = Cluster.start_station("gs1", speedup: 40)
+    assert {:error, %Dolphin.Cluster.Error{reason: :speedup} = e} = Dolphin.Cluster.join(gs.node, speedup: 50)
+    assert Exception.message(e) =~ "gs1@127.0.0.1 runs at speed-up 40, this node was asked for 50"
+    assert :ok = Dolphin.Cluster.join(gs.node)
+    assert Dolphin.Clock.speedup() == 40
+  end
+
+  @tag :tmp_dir
+  test "mix dolphin.run --join flies a station's vehicle and records its events", %{tmp_dir: dir} do
+    gs = Cluster.start_station("gs1", sysids: [7])
+    script = Path.join(dir, "hop.exs")
+
+    File.write!(script, """
+    use Dolphin.Script
+    v = pick(id: 7, timeout: seconds(60))
+    execute wait_for(position(v) != nil)
+    h = position(v)
+    hop =
+      mission "Hop" do
+        home h
+        take_off %{h | h: h.h + 10}
+        return_home_and_land()
+      end
+    execute on(hop, v)
+    """)
+
+    events = Path.join(dir, "events.jsonl")
+    {out, err} = io()
+    code = Run.main([script, "--sname", "ctl", "--join", Atom.to_string(gs.node), "--events", events, "--no-tlog"], out: out, err: err, plain: true)
+    assert code == 0, text(out) <> text(err)
+    assert text(out) =~ "joined gs1@127.0.0.1: 1 vehicle(s)"
+    lines = File.read!(events)
+    assert lines =~ ~s("event":"station_joined")
+    assert lines =~ ~s("event":"armed","vehicle":7)
+    assert lines =~ ~s("event":"script_finished","reason":null,"result":"done")
+  end
+
+  test "two stations claiming one system id with different vehicles: a conflict is reported, the vehicle is not merged" do
+    here = %{lat: 40.444233, lon: -7.375234, alt: 820.0}
+    there = %{lat: 40.454233, lon: -7.375234, alt: 820.0}
+    gs1 = Cluster.start_station("gs1", sysids: [30], sim: [home: here])
+    gs2 = Cluster.start_station("gs2", sysids: [30], sim: [home: there])
+    Dolphin.Telemetry.subscribe()
+    :ok = Dolphin.Cluster.join(gs1.node)
+    Cluster.await_vehicles([30])
+    :ok = Dolphin.Cluster.join(gs2.node)
+
+    assert_receive {:dolphin, :events, %{event: :vehicle_conflict, vehicle: 30, stations: [first, second], reason: why}}, 20_000
+    assert {first, second} == {gs1.node, gs2.node}
+    assert why =~ "m apart"
+    assert node(Dolphin.Vehicles.whereis(30)) == gs1.node
+
+    # It stays with the first station, however long the other hears it.
+    Process.sleep(Dolphin.Clock.to_real_ms(5_000))
+    refute_received {:dolphin, :events, %{event: :station_changed, vehicle: 30}}
+    {:ok, view} = Dolphin.Vehicles.view(30)
+    assert Dolphin.Geo.distance(view.position, Dolphin.Geo.location(here.lat, here.lon)) < 50
+  end
+end

@@ -1,0 +1,163 @@
+defmodule Dolphin.ClusterTest do
+  # Ground stations on :peer nodes, this node their controller (see
+  # Dolphin.Test.Cluster). Distribution, the clock and the fleet are global: not async.
+  use ExUnit.Case, async: false
+
+  @moduletag :cluster
+  @moduletag timeout: 120_000
+
+  alias Dolphin.{Telemetry, Vehicles}
+  alias Dolphin.Test.{Cluster, Wait}
+
+  @speedup 50
+
+  setup do
+    Dolphin.Clock.set_speedup(@speedup)
+    Cluster.start_controller()
+    Dolphin.Fleet.set_source({Dolphin.Fleet.MAVLinkSource, nil})
+    :ok
+  end
+
+  defp hop_script(ids) do
+    missions =
+      for {id, i} <- Enum.with_index(ids, 1) do
+        """
+        v#{i} = pick(id: #{id}, timeout: seconds(60))
+        execute wait_for(position(v#{i}) != nil)
+        h#{i} = position(v#{i})
+        hop#{i} =
+          mission "Hop #{id}" do
+            home h#{i}
+            take_off %{h#{i} | h: h#{i}.h + 15}
+            move 30, 0, 0
+            return_home_and_land()
+          end
+        """
+      end
+
+    tasks = Enum.map_join(1..length(ids), ", ", &"v#{&1} => hop#{&1}")
+    {:ok, script} = Dolphin.Script.compile_string("use Dolphin.Script\n" <> Enum.join(missions) <> "execute %{#{tasks}}\n", "hops.exs")
+    script
+  end
+
+  test "a script on the controller flies vehicles of two stations to completion" do
+    gs1 = Cluster.start_station("gs1", sysids: [1])
+    gs2 = Cluster.start_station("gs2", sysids: [11])
+    assert :ok = Dolphin.Cluster.join(gs1.node)
+    assert :ok = Dolphin.Cluster.join(gs2.node)
+    Cluster.await_vehicles([1, 11])
+    assert [1, 11] = Vehicles.list()
+    assert node(Vehicles.whereis(1)) == gs1.node
+    assert node(Vehicles.whereis(11)) == gs2.node
+
+    Telemetry.subscribe()
+    assert {:ok, %{result: :done}} = Dolphin.Script.run(hop_script([1, 11]))
+    # The controller's events come from both stations' vehicles.
+    events = flush()
+    for id <- [1, 11], do: assert(Enum.any?(events, &match?(%{event: :armed, vehicle: ^id}, &1)))
+  end
+
+  defp in_air?(id), do: match?({:ok, %{relative_altitude: h}} when is_number(h) and h > 5, Vehicles.view(id))
+
+  test "a station killed mid-mission: its vehicle is lost on the controller, its task fails and a watch handles it" do
+    gs1 = Cluster.start_station("gs1", sysids: [1])
+    gs2 = Cluster.start_station("gs2", sysids: [11])
+    :ok = Dolphin.Cluster.join(gs1.node)
+    :ok = Dolphin.Cluster.join(gs2.node)
+    Cluster.await_vehicles([1, 11])
+
+    {:ok, script} =
+      Dolphin.Script.compile_string(
+        """
+        use Dolphin.Script
+        v = pick(id: 11, timeout: seconds(60))
+        execute wait_for(position(v) != nil)
+        h = position(v)
+        far =
+          mission "Far" do
+            home h
+            take_off %{h | h: h.h + 15}
+            move 2000, 0, 0
+            return_home_and_land()
+          end
+        execute watch(on(far, v), on_error: fn failure -> message("handled: " <> Dolphin.Engine.Failure.message(failure)) end)
+        message("after the watch")
+        """,
+        "far.exs"
+      )
+
+    Telemetry.subscribe()
+    Vehicles.subscribe(:all)
+    {:ok, run} = Dolphin.Script.start(script)
+    Wait.until(fn -> in_air?(11) end, 30_000, fn -> "vehicle 11 in the air" end)
+    :peer.stop(gs2.peer)
+
+    assert_receive {:dolphin, :vehicles, {:vehicle_lost, 11}}, 10_000
+    assert {:ok, %{result: :done}} = Dolphin.Script.await(run, 30_000)
+    texts = for %{event: :message, text: t} <- flush(), do: t
+    assert Enum.any?(texts, &(&1 =~ ~r/^handled: .*11.*lost/)), inspect(texts)
+    assert "after the watch" in texts
+    # The other station's vehicle is still there.
+    assert {:ok, %{connected?: true}} = Vehicles.view(1)
+  end
+
+  test "a vehicle heard by two stations whose first path dies mid-mission fails over and its mission completes" do
+    gs1 = Cluster.start_station("gs1")
+    gs2 = Cluster.start_station("gs2")
+    {splitter, port} = Dolphin.Test.Splitter.start([gs1.port, gs2.port])
+    {:ok, [21]} = Dolphin.Sim.start(gcs: port, sysids: [21], speedup: @speedup)
+    :ok = Dolphin.Cluster.join(gs1.node)
+    Cluster.await_vehicles([21])
+    :ok = Dolphin.Cluster.join(gs2.node)
+    Wait.until(fn -> match?(%{21 => %{stations: [_, _]}}, Dolphin.Cluster.Mirror.routes()) end, 20_000, fn -> "vehicle 21 heard by both" end)
+
+    Telemetry.subscribe()
+    Vehicles.subscribe(:all)
+    {:ok, run} = Dolphin.Script.start(hop_script([21]))
+    Wait.until(fn -> in_air?(21) end, 30_000, fn -> "vehicle 21 in the air" end)
+    # The path of the station chosen now dies (which one it is depends on
+    # the links' figures: both are good).
+    %{21 => %{chosen: first}} = Dolphin.Cluster.Mirror.routes()
+    {side, other} = if first == gs1.node, do: {0, gs2.node}, else: {1, gs1.node}
+    flush()
+    :ok = Dolphin.Test.Splitter.cut(splitter, side)
+
+    assert {:ok, %{result: :done}} = Dolphin.Script.await(run, 60_000)
+    events = flush()
+    assert Enum.any?(events, &match?(%{event: :station_changed, vehicle: 21, from: ^first, to: ^other}, &1)), inspect(events)
+    assert %{21 => %{chosen: ^other}} = Dolphin.Cluster.Mirror.routes()
+    refute Enum.any?(events, &match?(%{event: :vehicle_lost, vehicle: 21}, &1))
+    refute_received {:dolphin, :vehicles, {:vehicle_lost, 21}}
+  end
+
+  test "a netsplit: the station's vehicles are lost at once, and reconnected when the nodes meet again" do
+    gs1 = Cluster.start_station("gs1", sysids: [1, 2])
+    :ok = Dolphin.Cluster.join(gs1.node)
+    Cluster.await_vehicles([1, 2])
+    Vehicles.subscribe(:all)
+    Telemetry.subscribe()
+
+    true = :erlang.disconnect_node(gs1.node)
+    assert_receive {:dolphin, :vehicles, {:vehicle_lost, 1}}, 5_000
+    assert_receive {:dolphin, :vehicles, {:vehicle_lost, 2}}, 5_000
+    assert {:ok, %{connected?: false}} = Vehicles.view(1)
+
+    # The mirror connects again by itself; the station's vehicles come back.
+    assert_receive {:dolphin, :vehicles, {:vehicle_reconnected, 1}}, 15_000
+    assert_receive {:dolphin, :vehicles, {:vehicle_reconnected, 2}}, 5_000
+    assert {:ok, %{connected?: true}} = Vehicles.view(1)
+    assert node(Vehicles.whereis(1)) == gs1.node
+    assert {:ok, _} = Vehicles.state(2)
+    events = flush()
+    assert Enum.any?(events, &match?(%{event: :station_left}, &1))
+    assert Enum.count(events, &match?(%{event: :station_joined}, &1)) == 1
+  end
+
+  defp flush(acc \\ []) do
+    receive do
+      {:dolphin, :events, e} -> flush([e | acc])
+    after
+      0 -> Enum.reverse(acc)
+    end
+  end
+end

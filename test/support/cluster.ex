@@ -1,0 +1,162 @@
+defmodule Dolphin.Test.Cluster do
+  @moduledoc """
+  Ground-station nodes for cluster tests: the test node becomes the
+  controller (`ctl@127.0.0.1`, distribution bound to 127.0.0.1), stations
+  are `:peer` nodes on 127.0.0.1 with the test's code path, Dolphin started,
+  a UDP link on an ephemeral port and simulated vehicles. Every peer is
+  stopped and every vehicle forgotten when the test ends.
+
+  Peers are controlled over their standard I/O (`connection: :standard_io`),
+  not over distribution: a test can cut the distribution connection
+  (`:erlang.disconnect_node/1`, a netsplit) and still drive the peer.
+  """
+
+  import ExUnit.Callbacks, only: [on_exit: 1]
+
+  @cookie :dolphin_cluster_test
+
+  @doc "The cookie of the test cluster."
+  def cookie, do: @cookie
+
+  @doc "Makes the test node a distributed node on 127.0.0.1 (once; it stays so)."
+  def start_controller do
+    unless Node.alive?() do
+      ensure_epmd()
+      :ok = :application.set_env(:kernel, :inet_dist_use_interface, {127, 0, 0, 1})
+      {:ok, _} = Node.start(:"ctl@127.0.0.1", :longnames)
+    end
+
+    Node.set_cookie(@cookie)
+
+    on_exit(fn ->
+      Dolphin.Test.GroundStation.forget_vehicles()
+      for node <- Dolphin.Cluster.Mirror.joined(), do: Dolphin.Cluster.Mirror.unfollow(node)
+    end)
+
+    node()
+  end
+
+  defp ensure_epmd do
+    case :erl_epmd.names(~c"127.0.0.1") do
+      {:ok, _} ->
+        :ok
+
+      {:error, _} ->
+        {_, 0} = System.cmd("epmd", ["-daemon"], env: [{"ERL_EPMD_ADDRESS", "127.0.0.1"}])
+        Dolphin.Test.Wait.until(fn -> match?({:ok, _}, :erl_epmd.names(~c"127.0.0.1")) end, 5_000, fn -> "epmd on 127.0.0.1" end)
+    end
+  end
+
+  @doc """
+  Starts a peer node `NAME@127.0.0.1` with Dolphin running (at the test's
+  speed-up) and returns `%{peer, node}`. Options: `:cookie` (default the
+  test cluster's), `:speedup` (default the controller's).
+  """
+  def start_node(name, opts \\ []) do
+    cookie = Keyword.get(opts, :cookie, @cookie)
+    paths = Enum.flat_map(:code.get_path(), &[~c"-pa", &1])
+    args = [~c"-setcookie", Atom.to_charlist(cookie), ~c"-kernel", ~c"inet_dist_use_interface", ~c"{127,0,0,1}", ~c"-kernel", ~c"logger_level", ~c"error"] ++ paths
+
+    {:ok, peer, node} =
+      :peer.start(%{name: String.to_atom(name), host: ~c"127.0.0.1", longnames: true, args: args, connection: :standard_io, wait_boot: 60_000})
+
+    on_exit(fn ->
+      try do
+        :peer.stop(peer)
+      catch
+        _, _ -> :ok
+      end
+    end)
+
+    {:ok, _} = call(peer, Application, :ensure_all_started, [:elixir])
+    {:ok, _} = call(peer, Application, :ensure_all_started, [:logger])
+    :ok = call(peer, Logger, :configure, [[level: :error]])
+    {:ok, _} = call(peer, Application, :ensure_all_started, [:dolphin])
+    :ok = call(peer, Dolphin.Clock, :set_speedup, [Keyword.get(opts, :speedup, Dolphin.Clock.speedup())])
+    %{peer: peer, node: node}
+  end
+
+  @doc """
+  A station: a peer node with a link on 127.0.0.1 and, with `:sysids`,
+  simulated vehicles of those system ids sending to it (`:sim` options
+  are passed to `Dolphin.Sim.start/1`). Returns `%{peer, node, port}`.
+  """
+  def start_station(name, opts \\ []) do
+    station = start_node(name, opts)
+    {:ok, _} = call(station.peer, Dolphin.Link, :connect, ["udpin:127.0.0.1:0", [name: "gs"]])
+    port = call(station.peer, Dolphin.Link.Connection, :port, ["gs"])
+
+    if ids = opts[:sysids] do
+      sim = Keyword.merge([gcs: port, sysids: ids, speedup: Dolphin.Clock.speedup()], Keyword.get(opts, :sim, []))
+      {:ok, ^ids} = call(station.peer, Dolphin.Sim, :start, [sim])
+    end
+
+    Map.put(station, :port, port)
+  end
+
+  @doc "Calls `m.f(a)` on a peer."
+  def call(peer, m, f, a, timeout \\ 30_000), do: :peer.call(peer, m, f, a, timeout)
+
+  @doc "Waits until the controller sees `ids` connected, each with a position."
+  def await_vehicles(ids, timeout \\ 20_000) do
+    Dolphin.Test.Wait.until(
+      fn -> Enum.all?(ids, fn id -> match?({:ok, %{connected?: true, position: %{}}}, Dolphin.Vehicles.view(id)) end) end,
+      timeout,
+      fn -> "vehicles #{inspect(ids)} on the controller; it sees #{inspect(Dolphin.Vehicles.list())}" end
+    )
+  end
+end
+
+defmodule Dolphin.Test.Splitter do
+  @moduledoc """
+  One vehicle heard by two ground stations: a UDP relay on 127.0.0.1 that
+  the vehicle sends to, copying each of its datagrams to two station ports
+  (from a socket per side, so that each station's answers come back on its
+  side) and each station's answers to the vehicle. `cut/2` drops one side's
+  traffic both ways, as a radio that dies.
+  """
+
+  use GenServer
+
+  @doc "Starts the relay to `ports` (two station ports); returns `{pid, port the vehicle sends to}`."
+  def start(ports) do
+    {:ok, pid} = GenServer.start(__MODULE__, ports)
+    ExUnit.Callbacks.on_exit(fn -> if Process.alive?(pid), do: GenServer.stop(pid) end)
+    {pid, GenServer.call(pid, :port)}
+  end
+
+  @doc "Cuts side `i` (0 or 1): nothing more passes through it, either way."
+  def cut(pid, i), do: GenServer.call(pid, {:cut, i})
+
+  @impl true
+  def init(ports) do
+    {:ok, vehicle_side} = :gen_udp.open(0, [:binary, ip: {127, 0, 0, 1}, active: true])
+
+    sides =
+      for {port, i} <- Enum.with_index(ports), into: %{} do
+        {:ok, socket} = :gen_udp.open(0, [:binary, ip: {127, 0, 0, 1}, active: true])
+        {i, %{socket: socket, port: port, cut: false}}
+      end
+
+    {:ok, %{vehicle_side: vehicle_side, vehicle: nil, sides: sides}}
+  end
+
+  @impl true
+  def handle_call(:port, _from, s), do: {:reply, elem(:inet.port(s.vehicle_side), 1), s}
+  def handle_call({:cut, i}, _from, s), do: {:reply, :ok, put_in(s.sides[i].cut, true)}
+
+  @impl true
+  def handle_info({:udp, socket, ip, port, data}, %{vehicle_side: socket} = s) do
+    for {_i, side} <- s.sides, not side.cut, do: :gen_udp.send(side.socket, {127, 0, 0, 1}, side.port, data)
+    {:noreply, %{s | vehicle: {ip, port}}}
+  end
+
+  def handle_info({:udp, socket, _ip, _port, data}, s) do
+    case Enum.find(s.sides, fn {_i, side} -> side.socket == socket end) do
+      {_i, %{cut: false}} when s.vehicle != nil -> :gen_udp.send(s.vehicle_side, elem(s.vehicle, 0), elem(s.vehicle, 1), data)
+      _ -> :ok
+    end
+
+    {:noreply, s}
+  end
+end
