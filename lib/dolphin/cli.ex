@@ -31,6 +31,7 @@ defmodule Dolphin.CLI do
     :vehicle_discovered,
     :vehicle_lost,
     :vehicle_reconnected,
+    :path_changed,
     :picked,
     :released,
     :pick_failed,
@@ -91,6 +92,9 @@ defmodule Dolphin.CLI do
   def event_text(%{event: :vehicle_discovered} = e), do: "vehicle #{e.vehicle} discovered (#{e.type || "type unknown"})"
   def event_text(%{event: :vehicle_lost} = e), do: "vehicle #{e.vehicle} lost"
   def event_text(%{event: :vehicle_reconnected} = e), do: "vehicle #{e.vehicle} reconnected"
+
+  def event_text(%{event: :path_changed} = e),
+    do: "vehicle #{e.vehicle}: now through #{e.to} (#{e.from} #{if e.reason in [:silent, "silent"], do: "went silent", else: "is worse"})"
   def event_text(%{event: :mode_changed} = e), do: "vehicle #{e.vehicle} mode #{Format.mode(e.mode)}"
   def event_text(%{event: :armed} = e), do: "vehicle #{e.vehicle} armed"
   def event_text(%{event: :disarmed} = e), do: "vehicle #{e.vehicle} disarmed"

@@ -4,6 +4,8 @@ defmodule Dolphin.Telemetry do
     {:vehicle_discovered, [:vehicle, :type], "a vehicle was heard for the first time; `type` is `uav`, `ugv`, `usv`, `uuv`, `other` or null while unknown"},
     {:vehicle_lost, [:vehicle], "a vehicle was silent for longer than its connection timeout"},
     {:vehicle_reconnected, [:vehicle], "a lost vehicle was heard again"},
+    {:path_changed, [:vehicle, :from, :to, :reason],
+     "the vehicle is now sent to on another of the links it is heard on: `from` and `to` are the links' names, `reason` is `silent` (the path in use went silent) or `better` (the other is clearly less lossy or quicker)"},
     {:mode_changed, [:vehicle, :mode], "the vehicle reported another flight mode"},
     {:armed, [:vehicle], "the vehicle reported it is armed"},
     {:disarmed, [:vehicle], "the vehicle reported it is disarmed"},

@@ -111,7 +111,23 @@ defmodule Dolphin.Vehicles do
     :exit, _ -> :gone
   end
 
-  @doc "Sends a message to a vehicle through the link it was last heard on."
+  @doc """
+  The paths to a vehicle (see "Paths"), the one in use first: `via` (the
+  link's name), `state` (`:active`, `:standby` or `:silent`), `loss` (towards
+  the ground station, from the sequence numbers; nil until measured),
+  `rtt_ms` (nil until measured), `last_heard_ms` (clock time), `frames`
+  (received on that path, copies included), `in_use?`. `[]` for a vehicle
+  not known.
+  """
+  @spec paths(byte()) :: [Dolphin.Vehicles.Paths.summary()]
+  def paths(sysid) do
+    case call_vehicle(sysid, :paths) do
+      {:ok, paths} -> paths
+      _ -> []
+    end
+  end
+
+  @doc "Sends a message to a vehicle on the path in use."
   @spec send_message(byte(), struct()) :: :ok | {:error, :unknown_vehicle}
   def send_message(sysid, message) do
     case whereis(sysid) do
