@@ -34,9 +34,10 @@ defmodule Dolphin.Vehicles.Paths do
   station up). The path in use is, among the paths not silent, the one with
   the lowest loss (round-trip loss once measured, else the loss towards the
   ground station, else none), then the lowest round trip; another path takes
-  over from one still heard only when it is clearly better (5 points less
-  loss, or as lossy and a round trip under two thirds), so that two equal
-  radios do not take turns. When every path is silent the path in use stays
+  over from one still heard only when it has been clearly better for 2 s of
+  real time (5 points less loss and two more of the latest 20 TIMESYNCs
+  answered; or as lossy, and a round trip under two thirds and 20 ms less),
+  so that two equal radios whose figures wobble do not take turns. When every path is silent the path in use stays
   (the vehicle, or this host, is silent: no path is better than another).
 
       iex> alias Dolphin.Vehicles.Paths
@@ -56,10 +57,13 @@ defmodule Dolphin.Vehicles.Paths do
   # half the sequence space, so that a wrap never matches an old frame.
   @dedup_depth 128
   @loss_margin 0.05
+  @more_lost 2
   @rtt_ratio 1.5
-  @rtt_margin_ms 10
+  @rtt_margin_ms 20
+  # How long (real ms) another path must stay clearly better before it takes over.
+  @better_for_real_ms 2_000
 
-  defstruct paths: %{}, in_use: nil, recent: %{}, fresh: %{}
+  defstruct paths: %{}, in_use: nil, recent: %{}, fresh: %{}, challenger: nil
 
   @typedoc "A path's name: the name of the link it is heard on."
   @type via :: term()
@@ -68,7 +72,8 @@ defmodule Dolphin.Vehicles.Paths do
           paths: %{via() => map()},
           in_use: via() | nil,
           recent: %{byte() => %{byte() => {integer(), MapSet.t(), integer(), non_neg_integer()}}},
-          fresh: %{byte() => non_neg_integer()}
+          fresh: %{byte() => non_neg_integer()},
+          challenger: nil | {via(), integer()}
         }
 
   @typedoc "A path as `list/1` shows it."
@@ -212,11 +217,11 @@ defmodule Dolphin.Vehicles.Paths do
     heard = paths |> Map.values() |> Enum.reject(&(&1.state == :silent)) |> Enum.sort_by(&{score(&1), &1.via})
     current = paths[p.in_use]
 
-    {in_use, reason} =
+    {in_use, reason, challenger} =
       cond do
-        heard == [] -> {p.in_use, nil}
-        current.state == :silent -> {hd(heard).via, :silent}
-        true -> challenge(current, Enum.reject(heard, &(&1.via == current.via)))
+        heard == [] -> {p.in_use, nil, nil}
+        current.state == :silent -> {hd(heard).via, :silent, nil}
+        true -> challenge(current, Enum.reject(heard, &(&1.via == current.via)), p.challenger, real_ms)
       end
 
     paths =
@@ -227,13 +232,19 @@ defmodule Dolphin.Vehicles.Paths do
       end)
 
     change = if in_use != p.in_use, do: {p.in_use, in_use, reason}
-    {%{p | paths: paths, in_use: in_use}, change}
+    {%{p | paths: paths, in_use: in_use, challenger: challenger}, change}
   end
 
-  defp challenge(current, []), do: {current.via, nil}
+  # The best other path, once it has been clearly better for long enough.
+  defp challenge(current, [], _challenger, _real_ms), do: {current.via, nil, nil}
 
-  defp challenge(current, [best | _]) do
-    if better?(best, current), do: {best.via, :better}, else: {current.via, nil}
+  defp challenge(current, [best | _], challenger, real_ms) do
+    case {better?(best, current), challenger} do
+      {false, _} -> {current.via, nil, nil}
+      {true, {via, since}} when via == best.via and real_ms - since >= @better_for_real_ms -> {best.via, :better, nil}
+      {true, {via, since}} when via == best.via -> {current.via, nil, {via, since}}
+      {true, _} -> {current.via, nil, {best.via, real_ms}}
+    end
   end
 
   # Hysteresis: clearly less lossy, or as lossy and clearly quicker.
@@ -241,14 +252,37 @@ defmodule Dolphin.Vehicles.Paths do
     {la, lb} = {loss(a), loss(b)}
     {ra, rb} = {a.quality.rtt_ms, b.quality.rtt_ms}
 
-    la + @loss_margin < lb or
+    (la + @loss_margin < lb and more_lost(b, a) >= @more_lost) or
       (abs(la - lb) <= @loss_margin and is_number(ra) and is_number(rb) and ra * @rtt_ratio + @rtt_margin_ms < rb)
   end
+
+  # How many more of its latest TIMESYNCs one path lost than the other: a
+  # share of a few outcomes (the first ones, one unanswered during start-up)
+  # is no evidence. Without round-trip figures, the loss towards the ground
+  # station (from thousands of frames) speaks for itself.
+  defp more_lost(%{quality: %{loss_rt: nil}}, _), do: @more_lost
+  defp more_lost(_, %{quality: %{loss_rt: nil}}), do: @more_lost
+  defp more_lost(b, a), do: unanswered(b) - unanswered(a)
+
+  defp unanswered(%{quality: q}), do: Enum.count(q.outcomes, &(not &1))
 
   # Lowest loss first, then lowest round trip (unknown last).
   defp score(path), do: {loss(path), path.quality.rtt_ms || :unknown}
 
   defp loss(%{quality: q}), do: q.loss_rt || q.loss_in || 0.0
+
+  @doc """
+  A path's name in words: a link's name is its endpoint string unless it was
+  given another term.
+
+      iex> Dolphin.Vehicles.Paths.via_text("udpin:0.0.0.0:14550")
+      "udpin:0.0.0.0:14550"
+      iex> Dolphin.Vehicles.Paths.via_text({:radio, 2})
+      "{:radio, 2}"
+  """
+  @spec via_text(via()) :: String.t()
+  def via_text(via) when is_binary(via), do: via
+  def via_text(via), do: inspect(via)
 
   @doc "The paths, the one in use first, then by name."
   @spec list(t()) :: [summary()]

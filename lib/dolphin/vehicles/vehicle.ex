@@ -226,12 +226,7 @@ defmodule Dolphin.Vehicles.Vehicle do
   defp send_message(s, message), do: Connection.send_message(Paths.in_use(s.paths), s.sysid, message)
 
   defp path_changed(s, {from, to, reason}),
-    do: Telemetry.emit(:path_changed, %{vehicle: s.sysid, from: via_text(from), to: via_text(to), reason: reason})
-
-  @doc false
-  # A path's name in words: a link's name is its endpoint string unless it was given another.
-  def via_text(via) when is_binary(via), do: via
-  def via_text(via), do: inspect(via)
+    do: Telemetry.emit(:path_changed, %{vehicle: s.sysid, from: Paths.via_text(from), to: Paths.via_text(to), reason: reason})
 
   # The new state, and its changes to the vehicle's subscribers.
   defp publish(s, new) do

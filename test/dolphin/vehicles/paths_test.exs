@@ -105,7 +105,9 @@ defmodule Dolphin.Vehicles.PathsTest do
 
   describe "the path in use" do
     defp with_quality(p, via, loss_rt, rtt) do
-      q = %{LinkQuality.new() | loss_rt: loss_rt, rtt_ms: rtt}
+      # The latest 20 TIMESYNCs, that many unanswered.
+      lost = round(loss_rt * 20)
+      q = %{LinkQuality.new() | loss_rt: loss_rt, rtt_ms: rtt, outcomes: List.duplicate(false, lost) ++ List.duplicate(true, 20 - lost)}
       put_in(p.paths[via].quality, q)
     end
 
@@ -146,10 +148,26 @@ defmodule Dolphin.Vehicles.PathsTest do
 
     test "another path takes over only when clearly better" do
       p = Paths.new(:a, 0, 0) |> heard_at(:b, 0)
-      assert {_, nil} = p |> with_quality(:a, 0.10, 50) |> with_quality(:b, 0.07, 30) |> Paths.judge(100, 100)
-      assert {_, {:a, :b, :better}} = p |> with_quality(:a, 0.10, 50) |> with_quality(:b, 0.04, 60) |> Paths.judge(100, 100)
-      assert {_, nil} = p |> with_quality(:a, 0.0, 50) |> with_quality(:b, 0.0, 35) |> Paths.judge(100, 100)
-      assert {_, {:a, :b, :better}} = p |> with_quality(:a, 0.0, 50) |> with_quality(:b, 0.0, 20) |> Paths.judge(100, 100)
+      # Judged at 100 ms and again 2 s of real time later (heard in between).
+      twice = fn p ->
+        {p, nil} = Paths.judge(p, 100, 100)
+        p = p |> heard_at(:a, 1_000) |> heard_at(:b, 1_000)
+        Paths.judge(p, 1_100, 2_100)
+      end
+
+      assert {_, nil} = p |> with_quality(:a, 0.10, 50) |> with_quality(:b, 0.07, 30) |> twice.()
+      assert {_, {:a, :b, :better}} = p |> with_quality(:a, 0.10, 50) |> with_quality(:b, 0.0, 60) |> twice.()
+      assert {_, nil} = p |> with_quality(:a, 0.0, 50) |> with_quality(:b, 0.0, 30) |> twice.()
+      assert {_, {:a, :b, :better}} = p |> with_quality(:a, 0.0, 80) |> with_quality(:b, 0.0, 20) |> twice.()
+      # A share of few outcomes is no evidence: one lost of the first five.
+      few = fn p, via, outcomes -> put_in(p.paths[via].quality, %{LinkQuality.new() | loss_rt: 0.2, rtt_ms: 50, outcomes: outcomes}) end
+      assert {_, nil} = p |> few.(:a, [false, true, true, true, true]) |> with_quality(:b, 0.0, 50) |> twice.()
+      # Better for less than 2 s: not yet.
+      {p, nil} = p |> with_quality(:a, 0.0, 80) |> with_quality(:b, 0.0, 20) |> Paths.judge(100, 100)
+      assert {p, nil} = Paths.judge(p, 200, 1_000)
+      # Not better for a moment: the 2 s start again.
+      {p, nil} = p |> with_quality(:b, 0.0, 79) |> Paths.judge(300, 1_500)
+      assert {_, nil} = p |> with_quality(:b, 0.0, 20) |> Paths.judge(400, 2_200)
     end
 
     test "two equal paths whose figures wobble do not take turns" do
