@@ -94,7 +94,7 @@ defmodule Dolphin.CLI do
   def event_text(%{event: :vehicle_reconnected} = e), do: "vehicle #{e.vehicle} reconnected"
 
   def event_text(%{event: :path_changed} = e),
-    do: "vehicle #{e.vehicle}: now through #{e.to} (#{e.from} #{if e.reason in [:silent, "silent"], do: "went silent", else: "is worse"})"
+    do: "vehicle #{e.vehicle}: now through #{e.to} (#{if e.reason in [:silent, "silent"], do: "#{e.from} went silent", else: "better than #{e.from}"})"
   def event_text(%{event: :mode_changed} = e), do: "vehicle #{e.vehicle} mode #{Format.mode(e.mode)}"
   def event_text(%{event: :armed} = e), do: "vehicle #{e.vehicle} armed"
   def event_text(%{event: :disarmed} = e), do: "vehicle #{e.vehicle} disarmed"

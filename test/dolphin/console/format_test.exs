@@ -72,7 +72,7 @@ defmodule Dolphin.Console.FormatTest do
       [_header, _one, _two, title, used, silent] = String.split(text, "\n")
       assert title == "vehicle 1 paths:"
       assert used == "  *  udpin:0.0.0.0:14551  active  loss 2 %, 12 ms, 1520 frames  heard 40 ms ago"
-      assert silent == "     {:radio, 2}          silent  loss ?, ? ms, 7 frames       heard 4.2 s ago"
+      assert silent == "     {:radio, 2}          silent  loss ?, ? ms, 7 frames        heard 4.2 s ago"
     end
 
     test "no vehicles, a vehicle never heard, and link quality" do

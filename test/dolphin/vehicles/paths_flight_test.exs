@@ -74,6 +74,9 @@ defmodule Dolphin.Vehicles.PathsFlightTest do
     assert [%{in_use?: true, state: :active, frames: f1}, %{in_use?: false, state: :standby, frames: f2}] = Vehicles.paths(1)
     assert f1 > 0 and f2 > 0
     assert Enum.sort(Enum.map(Vehicles.paths(1), &side(&1.via, ports))) == [:a, :b]
+    # The console shows both, the one in use marked.
+    shown = ExUnit.CaptureIO.capture_io(fn -> Dolphin.Console.vehicles() end)
+    assert shown =~ ~r/vehicle 1 paths:\n  \*  test-gcs-\d+  active .*\n     test-gcs-\d+  standby /
 
     assert {:ok, :done} = Engine.run(Engine.on(out_and_back(home), [1]))
     msgs = flush()
