@@ -39,9 +39,9 @@ defmodule Dolphin.Vehicles do
   ## Paths: one vehicle heard on several links
 
   The same system id heard on several links (two radios, a radio and a
-  relay) is one vehicle with several paths, one per link
-  (`Dolphin.Vehicles.Paths`; `paths/1` lists them, the console's
-  `vehicles()` shows them):
+  relay) is one vehicle with several paths, one per link and, on a `udpin`
+  link, per address it sends from (`Dolphin.Vehicles.Paths`; `paths/1` lists
+  them, the console's `vehicles()` shows them):
 
     * **De-duplication.** A frame heard on one path and then again on
       another (same component, sequence number and bytes, within a second)
@@ -147,7 +147,8 @@ defmodule Dolphin.Vehicles do
 
   @doc """
   The paths to a vehicle (see "Paths"), the one in use first: `via` (the
-  link's name), `state` (`:active`, `:standby` or `:silent`), `loss` (towards
+  link's name and the address heard from, `t:Dolphin.Link.Connection.via/0`;
+  in words with `Dolphin.Vehicles.Paths.via_text/1`), `state` (`:active`, `:standby` or `:silent`), `loss` (towards
   the ground station, from the sequence numbers; nil until measured),
   `rtt_ms` (nil until measured), `last_heard_ms` (clock time), `frames`
   (received on that path, copies included), `in_use?`. `[]` for a vehicle
@@ -416,7 +417,8 @@ defmodule Dolphin.Vehicles do
   defp check_items!(other), do: raise(ArgumentError, "a mission is a list of items, got: #{inspect(other)}")
 
   @doc false
-  # Called by links for every frame: cast it to its vehicle, discovering the
+  # Called by links for every frame and the path it came by (a
+  # Dolphin.Link.Connection.via()): cast it to its vehicle, discovering the
   # vehicle on its first HEARTBEAT from a vehicle component.
   @spec route(Frame.t(), term()) :: :ok
   def route(%Frame{sysid: sysid} = frame, link) do

@@ -30,8 +30,8 @@ defmodule Dolphin.Link.Connection do
     * `:signing` — `[key: KEY, link_id: N, require: boolean]`: outgoing frames
       are signed; incoming signed frames are verified; with `require: true`
       unsigned ones are dropped;
-    * `:router` — a 2-arity function given each frame and the link name
-      (default `Dolphin.Vehicles.route/2`).
+    * `:router` — a 2-arity function given each frame and the path it came
+      by, a `t:via/0` (default `Dolphin.Vehicles.route/2`).
 
   ## Links that share a .tlog
 
@@ -83,9 +83,24 @@ defmodule Dolphin.Link.Connection do
   @spec spawn_opt() :: [{:min_heap_size, pos_integer()}]
   def spawn_opt, do: [min_heap_size: 32_768]
 
+  @typedoc """
+  The path a frame came by: the link's name, and for a `udpin` link the
+  address it came from (nil for `udpout` and `tcp`, whose peer is the one
+  they connect to). A vehicle heard on two links, or on one `udpin` link from
+  two addresses (a radio and a relay), has two paths.
+  """
+  @type via :: {term(), {:inet.ip_address(), :inet.port_number()} | nil}
+
   @doc "Sends a message to system `sysid` (0: every known peer) through the link named `name`."
   @spec send_message(term(), byte(), struct()) :: :ok
   def send_message(name, sysid, message), do: GenServer.cast(via(name), {:send, sysid, message})
+
+  @doc "Sends a message to system `sysid` by a path (`t:via/0`): on its link, to its address."
+  @spec send_via(via(), byte(), struct()) :: :ok
+  def send_via({name, nil}, sysid, message), do: send_message(name, sysid, message)
+  def send_via({name, {_ip, _port} = address}, _sysid, message), do: GenServer.cast(via(name), {:send, {:address, address}, message})
+  # A link's name alone (a frame routed by hand): as send_message/3.
+  def send_via(name, sysid, message), do: send_message(name, sysid, message)
 
   @doc "The local port of the link's socket (useful with port 0)."
   @spec port(term()) :: :inet.port_number()
@@ -262,7 +277,7 @@ defmodule Dolphin.Link.Connection do
     Enum.reduce(frames, state, fn frame, state ->
       record_in(state, frame)
       # A reply addressed to another ground station on the link is not ours.
-      if for_us?(frame.message, gcs_sysid), do: state.router.(frame, state.name)
+      if for_us?(frame.message, gcs_sysid), do: state.router.(frame, {state.name, if(state.endpoint.kind == :udpin, do: from)})
       if from == :tcp, do: state, else: %{state | peers: Map.put(state.peers, frame.sysid, from)}
     end)
   end
@@ -272,13 +287,17 @@ defmodule Dolphin.Link.Connection do
 
   # What cannot be encoded is a caller's mistake that got this far: it is
   # logged and dropped, never allowed to crash the link (and its vehicles' traffic).
-  defp transmit(state, sysid, message) do
-    transmit!(state, sysid, message)
+  # `to` is a system id, or {:address, address} for one peer address.
+  defp transmit(state, to, message) do
+    transmit!(state, to, message)
   rescue
     e in ArgumentError ->
-      Logger.error("link #{state.name}: not sent to #{sysid}: #{Exception.message(e)}")
+      Logger.error("link #{state.name}: not sent to #{to_text(to)}: #{Exception.message(e)}")
       state
   end
+
+  defp to_text({:address, {ip, port}}), do: "#{:inet.ntoa(ip)}:#{port}"
+  defp to_text(sysid), do: "system #{sysid}"
 
   defp transmit!(state, sysid, message) do
     {gcs_sysid, gcs_compid} = state.gcs
@@ -321,6 +340,7 @@ defmodule Dolphin.Link.Connection do
   end
 
   defp destinations(%{endpoint: %{kind: :udpout} = ep}, _sysid), do: [{ep.address, ep.port}]
+  defp destinations(_state, {:address, address}), do: [address]
   defp destinations(%{peers: peers}, 0), do: peers |> Map.values() |> Enum.uniq()
 
   defp destinations(%{peers: peers}, sysid) do

@@ -1,10 +1,11 @@
 defmodule Dolphin.Vehicles.Paths do
   @moduledoc """
-  The paths to one vehicle — one per link it is heard on (two radios, a radio
-  and a relay) — kept by pure functions that the vehicle's process drives:
-  which frames are new, how good each path is, and which one to send on.
+  The paths to one vehicle — one per link it is heard on, and per address
+  on a `udpin` link (two radios, a radio and a relay) — kept by pure
+  functions that the vehicle's process drives: which frames are new, how
+  good each path is, and which one to send on.
 
-  Each path has a `via` (the link's name), the clock time it was last heard,
+  Each path has a `via` (see `t:via/0`), the clock time it was last heard,
   the frames received on it, its loss from the sequence numbers seen on it
   (per component), its round trip and round-trip loss from the TIMESYNCs sent
   on it (a `Dolphin.Vehicles.LinkQuality` per path; an answer counts only for
@@ -65,7 +66,11 @@ defmodule Dolphin.Vehicles.Paths do
 
   defstruct paths: %{}, in_use: nil, recent: %{}, fresh: %{}, challenger: nil
 
-  @typedoc "A path's name: the name of the link it is heard on."
+  @typedoc """
+  A path's name: what the link gives with each frame (a
+  `t:Dolphin.Link.Connection.via/0`: the link's name and, for a `udpin` link,
+  the address the vehicle sends from); any term in tests.
+  """
   @type via :: term()
   @type path_state :: :active | :standby | :silent
   @type t :: %__MODULE__{
@@ -272,17 +277,39 @@ defmodule Dolphin.Vehicles.Paths do
   defp loss(%{quality: q}), do: q.loss_rt || q.loss_in || 0.0
 
   @doc """
-  A path's name in words: a link's name is its endpoint string unless it was
-  given another term.
+  A path's name in words: the link's name (its endpoint string unless it
+  was given another), and the address a `udpin` link hears the vehicle from.
 
-      iex> Dolphin.Vehicles.Paths.via_text("udpin:0.0.0.0:14550")
-      "udpin:0.0.0.0:14550"
+      iex> Dolphin.Vehicles.Paths.via_text({"udpin:0.0.0.0:14550", {{10, 0, 0, 7}, 14_555}})
+      "udpin:0.0.0.0:14550 from 10.0.0.7:14555"
+      iex> Dolphin.Vehicles.Paths.via_text({"tcp:127.0.0.1:5760", nil})
+      "tcp:127.0.0.1:5760"
       iex> Dolphin.Vehicles.Paths.via_text({:radio, 2})
       "{:radio, 2}"
   """
   @spec via_text(via()) :: String.t()
+  def via_text({name, nil}), do: via_text(name)
+  def via_text({name, {ip, port}}) when is_tuple(ip) and is_integer(port), do: "#{via_text(name)} from #{:inet.ntoa(ip)}:#{port}"
   def via_text(via) when is_binary(via), do: via
   def via_text(via), do: inspect(via)
+
+  @doc """
+  Forgets the paths not heard for `after_ms` of clock time at `now_ms` whose
+  link has heard the vehicle since from another address (a vehicle that
+  restarted, a new NAT mapping: the old address is gone for good). A silent
+  path of a link that has not heard the vehicle since stays, shown silent:
+  that radio may come back.
+  """
+  @spec forget_silent(t(), integer(), pos_integer()) :: t()
+  def forget_silent(%__MODULE__{} = p, now_ms, after_ms) do
+    paths = Map.reject(p.paths, fn {via, path} -> via != p.in_use and now_ms - path.last_heard_ms > after_ms and replaced?(p.paths, via, path) end)
+    %{p | paths: paths}
+  end
+
+  defp replaced?(paths, {link, _address} = via, path),
+    do: Enum.any?(paths, fn {other, o} -> match?({^link, _}, other) and other != via and o.last_heard_ms > path.last_heard_ms end)
+
+  defp replaced?(_paths, _via, _path), do: false
 
   @doc "The paths, the one in use first, then by name."
   @spec list(t()) :: [summary()]

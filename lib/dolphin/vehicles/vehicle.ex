@@ -68,7 +68,7 @@ defmodule Dolphin.Vehicles.Vehicle do
     {:ok,
      %{
        sysid: sysid,
-       # One path per link the vehicle is heard on (Dolphin.Vehicles.Paths),
+       # One path per link (and address) the vehicle is heard on (Dolphin.Vehicles.Paths),
        # the one it was discovered on in use; and when the next judging is due
        # (real ms).
        paths: Paths.new(link, now, real),
@@ -168,7 +168,7 @@ defmodule Dolphin.Vehicles.Vehicle do
   def handle_info({:timesync, n}, s) do
     now = real_ms()
     {requests, paths} = s.paths |> Paths.measure(now, @timesync_stale_ms) |> Paths.timesync(System.os_time(:nanosecond), now)
-    for {via, ts1} <- requests, do: Connection.send_message(via, s.sysid, %M.Timesync{tc1: 0, ts1: ts1})
+    for {via, ts1} <- requests, do: Connection.send_via(via, s.sysid, %M.Timesync{tc1: 0, ts1: ts1})
     Process.send_after(self(), {:timesync, n + 1}, if(n < @timesync_first, do: div(@timesync_every_ms, 4), else: @timesync_every_ms))
     {:noreply, publish(%{s | paths: paths}, %{s.state | link_quality: Paths.quality(paths)})}
   end
@@ -204,7 +204,9 @@ defmodule Dolphin.Vehicles.Vehicle do
     Clock.send_after(self(), :check_link, period)
     now = Clock.now_ms()
     on_time? = now - s.check_due_ms <= period
-    s = %{s | check_due_ms: now + period}
+    # Paths silent for as long as the vehicle timeout (a vehicle that came
+    # back from another address) are forgotten.
+    s = %{s | check_due_ms: now + period, paths: Paths.forget_silent(s.paths, now, s.timeout_ms)}
     last = s.state.link.last_seen_ms
 
     if on_time? and not s.lost and last != nil and now - last > s.timeout_ms do
@@ -223,7 +225,7 @@ defmodule Dolphin.Vehicles.Vehicle do
   defp judge_period, do: max(Clock.to_real_ms(@judge_every_ms), @judge_real_ms)
 
   # Everything to the vehicle goes on the path in use at the time of sending.
-  defp send_message(s, message), do: Connection.send_message(Paths.in_use(s.paths), s.sysid, message)
+  defp send_message(s, message), do: Connection.send_via(Paths.in_use(s.paths), s.sysid, message)
 
   defp path_changed(s, {from, to, reason}),
     do: Telemetry.emit(:path_changed, %{vehicle: s.sysid, from: Paths.via_text(from), to: Paths.via_text(to), reason: reason})

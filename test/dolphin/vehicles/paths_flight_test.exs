@@ -23,8 +23,9 @@ defmodule Dolphin.Vehicles.PathsFlightTest do
     %{ports: ports, splitter: splitter}
   end
 
-  # The side (:a or :b) of a path, from its link's port.
-  defp side(via, [a, _b]), do: if(Connection.port(via) == a, do: :a, else: :b)
+  # The side (:a or :b) of a path (or of its words in an event), from its link's port.
+  defp side({link, _address}, ports), do: side(link, ports)
+  defp side(text, [a, _b]), do: if(Connection.port(text |> String.split(" from ") |> hd()) == a, do: :a, else: :b)
 
   defp in_use(ports) do
     case Enum.find(Vehicles.paths(1), & &1.in_use?) do
@@ -76,7 +77,7 @@ defmodule Dolphin.Vehicles.PathsFlightTest do
     assert Enum.sort(Enum.map(Vehicles.paths(1), &side(&1.via, ports))) == [:a, :b]
     # The console shows both, the one in use marked.
     shown = ExUnit.CaptureIO.capture_io(fn -> Dolphin.Console.vehicles() end)
-    assert shown =~ ~r/vehicle 1 paths:\n  \*  test-gcs-\d+  active .*\n     test-gcs-\d+  standby /
+    assert shown =~ ~r/vehicle 1 paths:\n  \*  test-gcs-\d+ from 127.0.0.1:\d+  active .*\n     test-gcs-\d+ from 127.0.0.1:\d+  standby /
 
     assert {:ok, :done} = Engine.run(Engine.on(out_and_back(home), [1]))
     msgs = flush()

@@ -139,6 +139,16 @@ defmodule Dolphin.Vehicles.PathsTest do
       assert {_, {:a, :b, :silent}} = Paths.judge(p, 2_000, 250)
     end
 
+    test "an address a link no longer hears the vehicle from is forgotten; a silent link is not" do
+      {_, p} = Paths.heard(Paths.new({:l1, {{10, 0, 0, 1}, 1}}, 0, 0), {:l2, {{10, 0, 0, 2}, 1}}, frame(0, 0, 2), 0, 0)
+      # The vehicle comes back on link 1 from another port.
+      {_, p} = Paths.heard(p, {:l1, {{10, 0, 0, 1}, 2}}, frame(1), 5_000, 5_000)
+      {p, _} = Paths.judge(p, 5_000, 5_000)
+      assert Paths.in_use(p) == {:l1, {{10, 0, 0, 1}, 2}}
+      assert length(Paths.list(Paths.forget_silent(p, 20_000, 20_000))) == 3
+      assert [{:l1, {_, 2}}, {:l2, _}] = p |> Paths.forget_silent(20_001, 20_000) |> Paths.list() |> Enum.map(& &1.via)
+    end
+
     test "every path silent: the path in use stays" do
       p = Paths.new(:a, 0, 0) |> heard_at(:b, 0)
       assert {p, nil} = Paths.judge(p, 5_000, 5_000)
