@@ -38,8 +38,9 @@ defmodule Dolphin.Vehicles.Paths do
   over from one still heard only when it has been clearly better for 2 s of
   real time (5 points less loss and two more of the latest 20 TIMESYNCs
   answered; or as lossy, and a round trip under two thirds and 20 ms less),
-  so that two equal radios whose figures wobble do not take turns. When every path is silent the path in use stays
-  (the vehicle, or this host, is silent: no path is better than another).
+  so that two equal radios whose figures wobble do not take turns. When
+  every path is silent the path in use stays (the vehicle, or this host, is
+  silent: no path is better than another).
 
       iex> alias Dolphin.Vehicles.Paths
       iex> p = Paths.new("radio-a", 0, 0)
