@@ -38,7 +38,7 @@ defmodule Dolphin.Vehicles.Vehicle do
   # The paths are judged this often (clock ms; at least every @judge_real_ms
   # of real time): a path in use that goes silent (1.5 s, see
   # Dolphin.Vehicles.Paths) is replaced within 2 s of clock time.
-  @judge_every_ms 250
+  @judge_every_ms 100
   @judge_real_ms 50
 
   def child_spec({sysid, _link, _opts} = args),
