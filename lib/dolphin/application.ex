@@ -7,6 +7,9 @@ defmodule Dolphin.Application do
   def start(_type, _args) do
     # Per-vehicle settings (timeouts) outlive the vehicles' processes.
     :ets.new(Dolphin.Vehicles.Settings, [:named_table, :public, :set])
+    # The frames each .tlog recorded lately, so that links writing to the same
+    # file record a frame heard on several of them once (Dolphin.Link.Connection).
+    :ets.new(Dolphin.Link.Recorded, [:named_table, :public, :set, write_concurrency: true, read_concurrency: true])
 
     children = [
       # Vehicles and links by name ({:vehicle, sysid}, {:link, name}).

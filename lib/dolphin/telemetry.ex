@@ -9,6 +9,8 @@ defmodule Dolphin.Telemetry do
     {:station_changed, [:vehicle, :from, :to, :reason], "a vehicle is now reached through the ground station on node `to` instead of `from` (failover; its tasks go on)"},
     {:vehicle_conflict, [:vehicle, :stations, :reason], "two ground stations (`stations`, node names, the followed one first) hear one system id with different vehicles behind it; the vehicle is not merged"},
     {:claim_conflict, [:vehicle, :kept, :dropped], "after a netsplit, both sides had claimed the vehicle (`Dolphin.Fleet.Claims`): the claim of the owner on node `kept` stays, the other's (on `dropped`) was dropped without stopping anything"},
+    {:path_changed, [:vehicle, :from, :to, :reason],
+     "the vehicle is now sent to on another of the links it is heard on: `from` and `to` are the links' names, `reason` is `silent` (the path in use went silent) or `better` (the other is clearly less lossy or quicker)"},
     {:mode_changed, [:vehicle, :mode], "the vehicle reported another flight mode"},
     {:armed, [:vehicle], "the vehicle reported it is armed"},
     {:disarmed, [:vehicle], "the vehicle reported it is disarmed"},

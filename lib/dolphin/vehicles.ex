@@ -35,6 +35,40 @@ defmodule Dolphin.Vehicles do
   reconnection event when the vehicle goes silent or is heard again. A
   subscriber keeps the latest view it got, or asks `view/1`; nobody rebuilds
   a vehicle from its changes.
+
+  ## Paths: one vehicle heard on several links
+
+  The same system id heard on several links (two radios, a radio and a
+  relay) is one vehicle with several paths, one per link and, on a `udpin`
+  link, per address it sends from (`Dolphin.Vehicles.Paths`; `paths/1` lists
+  them, the console's `vehicles()` shows them):
+
+    * **De-duplication.** A frame heard on one path and then again on
+      another (same component, sequence number and bytes, within a second)
+      is applied to the state, given to the command and mission protocols
+      and counted in `State`'s `link` once; the copy still counts in its own
+      path's figures. A frame heard twice on the *same* path is never taken
+      for a copy, so a vehicle heard on one link is treated exactly as if
+      there were no de-duplication (a reboot that restarts the sequence at
+      0, a wrap, a network's duplicate are all applied). Links see every
+      frame: a link's decoding counters (`Dolphin.Link.Connection.info/1`)
+      and its `.tlog` count what that link received, copies included.
+    * **Figures per path.** Each path has its last-heard clock time, its
+      frame count, its loss from the sequence numbers seen on it, and its
+      round trip and round-trip loss from a TIMESYNC sent on it once a
+      second (answers are matched to their path by `ts1`).
+    * **The best path.** Everything sent to the vehicle (commands and their
+      retries, mission transfers, `send_message/2`, telemetry requests)
+      goes on the path in use at the moment it is sent: among the paths
+      heard within 1.5 s of clock time (and 200 ms of real time), the
+      lowest loss, then the lowest round trip, with hysteresis (another path
+      must be clearly better for 2 s to take over). When the path in use
+      goes silent another takes over within 2 s of clock time; the command
+      or transfer under way carries on over it, and the task flying the
+      vehicle never knows. Each change is a `path_changed` event
+      (`Dolphin.Telemetry`). The view's `link` gives the figures of the path
+      in use. The vehicle is lost only when every path has been silent for
+      its timeout.
   """
 
   alias Dolphin.CommandError
@@ -144,6 +178,24 @@ defmodule Dolphin.Vehicles do
   defp node_gone?(_reason), do: false
 
   @doc "Sends a message to a vehicle through the link it was last heard on."
+  @doc """
+  The paths to a vehicle (see "Paths"), the one in use first: `via` (the
+  link's name and the address heard from, `t:Dolphin.Link.Connection.via/0`;
+  in words with `Dolphin.Vehicles.Paths.via_text/1`), `state` (`:active`, `:standby` or `:silent`), `loss` (towards
+  the ground station, from the sequence numbers; nil until measured),
+  `rtt_ms` (nil until measured), `last_heard_ms` (clock time), `frames`
+  (received on that path, copies included), `in_use?`. `[]` for a vehicle
+  not known.
+  """
+  @spec paths(byte()) :: [Dolphin.Vehicles.Paths.summary()]
+  def paths(sysid) do
+    case call_vehicle(sysid, :paths) do
+      {:ok, paths} -> paths
+      _ -> []
+    end
+  end
+
+  @doc "Sends a message to a vehicle on the path in use."
   @spec send_message(byte(), struct()) :: :ok | {:error, :unknown_vehicle}
   def send_message(sysid, message) do
     case whereis(sysid) do
@@ -406,7 +458,8 @@ defmodule Dolphin.Vehicles do
   defp check_items!(other), do: raise(ArgumentError, "a mission is a list of items, got: #{inspect(other)}")
 
   @doc false
-  # Called by links for every frame: cast it to its vehicle, discovering the
+  # Called by links for every frame and the path it came by (a
+  # Dolphin.Link.Connection.via()): cast it to its vehicle, discovering the
   # vehicle on its first HEARTBEAT from a vehicle component.
   @spec route(Frame.t(), term()) :: :ok
   def route(%Frame{sysid: sysid} = frame, link) do

@@ -34,6 +34,11 @@ defmodule Dolphin.CLITest do
                ~s[task 4 mission "Survey": stopped (the script halted)]
 
       assert CLI.event_text(%{event: :mode_changed, vehicle: 2, mode: :rtl}) == "vehicle 2 mode RTL"
+      assert CLI.event_text(%{event: :path_changed, vehicle: 2, from: "udpin:0.0.0.0:14550", to: "udpin:0.0.0.0:14551", reason: :silent}) ==
+               "vehicle 2: now through udpin:0.0.0.0:14551 (udpin:0.0.0.0:14550 went silent)"
+
+      # As read back from an events file: strings.
+      assert CLI.event_text(%{event: :path_changed, vehicle: 2, from: "a", to: "b", reason: "better"}) == "vehicle 2: now through b (better than a)"
 
       assert CLI.event_text(%{event: :task_reassigned, run: 7, task_id: 5, from: 1, to: 3, resume_seq: 6}) ==
                "task 5: vehicle 1 failed it; vehicle 3 takes it over from item 6"

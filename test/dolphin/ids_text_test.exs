@@ -75,6 +75,7 @@ defmodule Dolphin.IdsTextTest do
           %{event: :vehicle_discovered, vehicle: id, type: :uav},
           %{event: :armed, vehicle: id},
           %{event: :mission_item_reached, vehicle: id, seq: 1},
+          %{event: :path_changed, vehicle: id, from: "udpin:0.0.0.0:14550", to: "udpin:0.0.0.0:14551", reason: :silent},
           %{event: :allocated, run: 1, allocation: %{5 => id}},
           %{event: :task_started, task_id: 5, kind: :fly, name: "go", vehicle: id},
           %{event: :task_progress, task_id: 5, vehicle: id, progress: %{current: 1, total: 3, reached: 1}},

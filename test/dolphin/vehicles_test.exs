@@ -31,6 +31,28 @@ defmodule Dolphin.VehiclesTest do
 
   defp copter(mode \\ 4), do: %M.Heartbeat{type: 2, autopilot: 3, base_mode: 0x81, custom_mode: mode, system_status: 4}
 
+  test "a vehicle heard on one udpin link from two addresses (a radio and a relay) has two paths, and is sent to on the one in use",
+       %{port: port, peer: peer, name: name} do
+    relay = UDPPeer.open()
+    Vehicles.subscribe(:all)
+    # The same frame from both: one vehicle, the frame applied once.
+    heartbeat = Frame.encode(copter(), sysid: 12, compid: 1, seq: 0)
+    :ok = :gen_udp.send(peer, {127, 0, 0, 1}, port, heartbeat)
+    assert_receive {:dolphin, :vehicles, {:vehicle_discovered, 12}}, 10_000
+    :ok = :gen_udp.send(relay, {127, 0, 0, 1}, port, heartbeat)
+    Wait.until(fn -> length(Vehicles.paths(12)) == 2 end)
+
+    {:ok, radio_port} = :inet.port(peer)
+    {:ok, relay_port} = :inet.port(relay)
+    assert [%{via: {^name, {_, ^radio_port}}, in_use?: true, frames: 1}, %{via: {^name, {_, ^relay_port}}, in_use?: false, frames: 1}] = Vehicles.paths(12)
+    assert {:ok, %{link: %{received: 1}}} = Vehicles.state(12)
+
+    :ok = Vehicles.send_message(12, %M.Statustext{severity: 6, text: "to the path in use"})
+    assert %Frame{} = UDPPeer.receive_until(peer, &match?(%M.Statustext{}, &1.message), 10_000)
+    # Sent once, by the same link just before: a copy to the relay would be there by now.
+    assert_raise ExUnit.AssertionError, fn -> UDPPeer.receive_until(relay, &match?(%M.Statustext{}, &1.message), 300) end
+  end
+
   test "a vehicle is discovered from its heartbeat, asked for telemetry, and sent the GCS heartbeat", %{port: port, peer: peer} do
     Vehicles.subscribe(:all)
     UDPPeer.send_message(peer, port, copter(), sysid: 11)

@@ -94,6 +94,8 @@ defmodule Dolphin.CLI.Renderer do
        block: 0,
        # vehicle => {task_id, name} of the platform task it flies.
        tasks: %{},
+       # The link each vehicle is reached through, once it changed (path_changed).
+       paths: %{},
        columns: if(live, do: columns(tty), else: 80)
      }}
   end
@@ -141,6 +143,7 @@ defmodule Dolphin.CLI.Renderer do
     end
   end
 
+  defp track(p, %{event: :path_changed, vehicle: v, to: to}), do: put_in(p.paths[v], to)
   defp track(p, _event), do: p
 
   defp draw_block(p, before \\ []) do
@@ -154,7 +157,7 @@ defmodule Dolphin.CLI.Renderer do
 
     tasks = Map.new(p.tasks, fn {v, {_id, name}} -> {v, name} end)
     # A line wider than the terminal would wrap, and the block's redraw would miss its rows.
-    lines = StatusBlock.render(vehicles, tasks, Dolphin.Clock.now_ms() - p.origin) |> Enum.map(&String.slice(&1, 0, p.columns - 1))
+    lines = StatusBlock.render(vehicles, tasks, Dolphin.Clock.now_ms() - p.origin, p.paths) |> Enum.map(&String.slice(&1, 0, p.columns - 1))
     IO.write(p.out, [before, StatusBlock.redraw(p.block, lines)])
     %{p | block: length(lines)}
   end

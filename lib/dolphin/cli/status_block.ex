@@ -2,8 +2,9 @@ defmodule Dolphin.CLI.StatusBlock do
   @moduledoc """
   The live status block of `mix dolphin.run` on a terminal: one line per
   vehicle — mode, armed, battery bar, mission progress, the link's round trip
-  and loss each way once measured, and the task it flies — redrawn in place
-  under the scrolling log of events.
+  and loss each way once measured (and which link, once a vehicle heard on
+  several has changed the one it is reached through), and the task it flies
+  — redrawn in place under the scrolling log of events.
 
       iex> v = %Dolphin.Vehicles.View{id: 2, mode: :auto, armed?: true, battery: 0.72, mission_progress: {3, 42}, relative_altitude: 380.4}
       iex> Dolphin.CLI.StatusBlock.vehicle_line(v, "Survey Area 1")
@@ -11,6 +12,8 @@ defmodule Dolphin.CLI.StatusBlock do
       iex> v = %{v | link: %{rtt_ms: 45, loss_in: 0.1, loss_out: 0.12}}
       iex> Dolphin.CLI.StatusBlock.vehicle_line(v, nil)
       "  2  AUTO      armed     [#######---]  72 %  alt  380 m  item  3/42  link 45 ms, loss in 10 % / out 12 %"
+      iex> Dolphin.CLI.StatusBlock.vehicle_line(v, nil, "udpin:0.0.0.0:14551")
+      "  2  AUTO      armed     [#######---]  72 %  alt  380 m  item  3/42  link 45 ms, loss in 10 % / out 12 % via udpin:0.0.0.0:14551"
 
   `render/3` draws the block (a header and the lines) and `redraw/2` gives the
   ANSI sequence that replaces a block of `n` lines with a new one.
@@ -20,16 +23,22 @@ defmodule Dolphin.CLI.StatusBlock do
 
   @bar 10
 
-  @doc "The block's lines for these vehicles; `tasks` maps a vehicle id to the name of the task it flies; `clock_ms` is the run's clock time."
-  @spec render([Vehicle.t()], %{optional(non_neg_integer()) => String.t()}, non_neg_integer()) :: [String.t()]
-  def render(vehicles, tasks, clock_ms) do
+  @doc """
+  The block's lines for these vehicles; `tasks` maps a vehicle id to the name
+  of the task it flies; `clock_ms` is the run's clock time; `paths` maps a
+  vehicle id to the name of the link it is reached through, for vehicles
+  heard on several (`path_changed` events).
+  """
+  @spec render([Vehicle.t()], %{optional(non_neg_integer()) => String.t()}, non_neg_integer(), %{optional(non_neg_integer()) => String.t()}) ::
+          [String.t()]
+  def render(vehicles, tasks, clock_ms, paths \\ %{}) do
     header = "── #{clock(clock_ms)} ── #{length(vehicles)} vehicle(s) " <> String.duplicate("─", 40)
-    [header | Enum.map(Enum.sort_by(vehicles, & &1.id), &vehicle_line(&1, Map.get(tasks, &1.id)))]
+    [header | Enum.map(Enum.sort_by(vehicles, & &1.id), &vehicle_line(&1, Map.get(tasks, &1.id), Map.get(paths, &1.id)))]
   end
 
-  @doc "One vehicle's line."
-  @spec vehicle_line(Vehicle.t(), String.t() | nil) :: String.t()
-  def vehicle_line(%Vehicle{} = v, task) do
+  @doc "One vehicle's line; `via`, the link it is reached through when it is heard on several (else nil)."
+  @spec vehicle_line(Vehicle.t(), String.t() | nil, String.t() | nil) :: String.t()
+  def vehicle_line(%Vehicle{} = v, task, via \\ nil) do
     mode = v.mode |> mode_name() |> String.pad_trailing(9)
     state = if(not v.connected?, do: "LOST", else: if(v.armed?, do: "armed", else: "disarmed")) |> String.pad_trailing(9)
     item =
@@ -48,6 +57,8 @@ defmodule Dolphin.CLI.StatusBlock do
         [] -> line
         figures -> line <> "  link " <> Enum.join(figures, ", ")
       end
+
+    line = if via, do: line <> if(String.contains?(line, "  link "), do: " via ", else: "  link via ") <> via, else: line
 
     if task, do: line <> "  " <> task, else: String.trim_trailing(line)
   end

@@ -120,11 +120,38 @@ defmodule Dolphin.Console.Format do
   @doc false
   # The vehicles() table. Each row: %{id, type, mode, armed, battery, lat, lon,
   # alt (above home), link: nil | %{received, lost}, seen_ms (since the last
-  # frame, or nil), lost?, activity}.
+  # frame, or nil), lost?, activity}, and optionally paths (those of
+  # Dolphin.Vehicles.paths/1, each with seen_ms): a vehicle heard on more than
+  # one link gets a line per path under the table.
   @spec vehicles([map()]) :: String.t()
   def vehicles([]), do: "no vehicles known yet (a link may still be waiting for their first heartbeat)"
 
   def vehicles(rows) do
+    paths = for r <- rows, length(Map.get(r, :paths, [])) > 1, do: paths(r.id, r.paths)
+    Enum.join([vehicles_table(rows) | paths], "\n")
+  end
+
+  @doc false
+  # A vehicle's paths, one line each, the one in use marked:
+  # "vehicle 1 paths:\n  * udpin:0.0.0.0:14550  active   loss 0 %, 12 ms, 1520 frames, heard 40 ms ago".
+  @spec paths(integer(), [map()]) :: String.t()
+  def paths(id, paths) do
+    rows =
+      Enum.map(paths, fn p ->
+        figures = [if(p.loss, do: "loss #{round(p.loss * 100)} %", else: "loss ?"), if(p.rtt_ms, do: "#{round(p.rtt_ms)} ms", else: "? ms"), "#{p.frames} frames"]
+        ["  " <> if(p.in_use?, do: "*", else: " "), Dolphin.Vehicles.Paths.via_text(p.via), Atom.to_string(p.state), Enum.join(figures, ", "), "heard " <> seen(p.seen_ms, false)]
+      end)
+
+    "vehicle #{id} paths:\n" <> pad_columns(rows)
+  end
+
+  # Columns lined up (each cell padded to its column's widest).
+  defp pad_columns(rows) do
+    widths = rows |> Enum.zip() |> Enum.map(fn column -> column |> Tuple.to_list() |> Enum.map(&String.length/1) |> Enum.max() end)
+    Enum.map_join(rows, "\n", fn row -> row |> Enum.zip(widths) |> Enum.map_join("  ", fn {c, w} -> String.pad_trailing(c, w) end) |> String.trim_trailing() end)
+  end
+
+  defp vehicles_table(rows) do
     table(
       ["ID", "TYPE", "MODE", "ARMED", "BATTERY", "POSITION", "ALT", "LINK", "SEEN", "TASK"],
       Enum.map(rows, fn r ->

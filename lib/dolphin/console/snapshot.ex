@@ -10,8 +10,9 @@ defmodule Dolphin.Console.Snapshot do
 
   @doc false
   # Every known vehicle: %{id, state (Dolphin.Vehicles.State plus :lost, or
-  # nil for a vehicle of another source), fleet (%Dolphin.Vehicles.View{} or
-  # nil), picked_by, busy, task (the platform task flying it, or nil)}.
+  # nil for a vehicle of another source), paths (Dolphin.Vehicles.paths/1),
+  # fleet (%Dolphin.Vehicles.View{} or nil), picked_by, busy, task (the
+  # platform task flying it, or nil)}.
   @spec vehicles() :: [map()]
   def vehicles do
     fleet = Map.new(safe(fn -> Fleet.vehicles() end, []), &{&1.vehicle.id, &1})
@@ -26,7 +27,8 @@ defmodule Dolphin.Console.Snapshot do
         end
 
       entry = fleet[id] || %{}
-      %{id: id, state: state, fleet: entry[:vehicle], picked_by: entry[:picked_by], busy: entry[:busy], task: leaves[id]}
+      paths = if state, do: Vehicles.paths(id), else: []
+      %{id: id, state: state, paths: paths, fleet: entry[:vehicle], picked_by: entry[:picked_by], busy: entry[:busy], task: leaves[id]}
     end
   end
 
@@ -63,7 +65,8 @@ defmodule Dolphin.Console.Snapshot do
       link: Map.merge(s.link, Dolphin.Vehicles.State.link_figures(s)),
       seen_ms: s.link.last_seen_ms && now_ms - s.link.last_seen_ms,
       lost?: Map.get(s, :lost) == true,
-      activity: activity(v, console_runs)
+      activity: activity(v, console_runs),
+      paths: for(path <- Map.get(v, :paths, []), do: Map.put(path, :seen_ms, now_ms - path.last_heard_ms))
     }
   end
 

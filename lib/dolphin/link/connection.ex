@@ -23,13 +23,27 @@ defmodule Dolphin.Link.Connection do
     * `:name` — the registry key (default: the endpoint string);
     * `:gcs_sysid`, `:gcs_compid` — our identity (default `config :dolphin,
       gcs_sysid:` or 255, and 190);
-    * `:tlog` — a path to append every frame to;
+    * `:tlog` — a path to append every frame to (links given the same path
+      record a frame from a vehicle heard on several of them once: see
+      "Links that share a .tlog");
     * `:forward` — endpoints (`udpout` ones) that get a copy of all traffic;
     * `:signing` — `[key: KEY, link_id: N, require: boolean]`: outgoing frames
       are signed; incoming signed frames are verified; with `require: true`
       unsigned ones are dropped;
-    * `:router` — a 2-arity function given each frame and the link name
-      (default `Dolphin.Vehicles.route/2`).
+    * `:router` — a 2-arity function given each frame and the path it came
+      by, a `t:via/0` (default `Dolphin.Vehicles.route/2`).
+
+  ## Links that share a .tlog
+
+  A vehicle heard on two links (two radios) sends each frame on both. Links
+  that record to the same `.tlog` file record such a frame once: a frame
+  with the same system, component, sequence number and bytes that another
+  link recorded in that file less than a second ago is not recorded again.
+  A frame heard twice on the same link is recorded twice (a vehicle that
+  reboots restarts its sequence: nothing it sends is taken for a copy), and
+  what the ground station sends is recorded by each link that sends it. A
+  link's decoding counters (`info/1`) count every frame it received, copies
+  included: they are that link's.
   """
 
   use GenServer
@@ -44,6 +58,9 @@ defmodule Dolphin.Link.Connection do
   @heartbeat_ms 1_000
   @backoff_min 500
   @backoff_max 5_000
+  # How long (real ms) a frame another link recorded in the same .tlog makes
+  # an identical one a copy (see "Links that share a .tlog").
+  @copy_window_ms 1_000
 
   @doc false
   def child_spec(opts) do
@@ -66,9 +83,24 @@ defmodule Dolphin.Link.Connection do
   @spec spawn_opt() :: [{:min_heap_size, pos_integer()}]
   def spawn_opt, do: [min_heap_size: 32_768]
 
+  @typedoc """
+  The path a frame came by: the link's name, and for a `udpin` link the
+  address it came from (nil for `udpout` and `tcp`, whose peer is the one
+  they connect to). A vehicle heard on two links, or on one `udpin` link from
+  two addresses (a radio and a relay), has two paths.
+  """
+  @type via :: {term(), {:inet.ip_address(), :inet.port_number()} | nil}
+
   @doc "Sends a message to system `sysid` (0: every known peer) through the link named `name`."
   @spec send_message(term(), byte(), struct()) :: :ok
   def send_message(name, sysid, message), do: GenServer.cast(via(name), {:send, sysid, message})
+
+  @doc "Sends a message to system `sysid` by a path (`t:via/0`): on its link, to its address."
+  @spec send_via(via(), byte(), struct()) :: :ok
+  def send_via({name, nil}, sysid, message), do: send_message(name, sysid, message)
+  def send_via({name, {_ip, _port} = address}, _sysid, message), do: GenServer.cast(via(name), {:send, {:address, address}, message})
+  # A link's name alone (a frame routed by hand): as send_message/3.
+  def send_via(name, sysid, message), do: send_message(name, sysid, message)
 
   @doc "The local port of the link's socket (useful with port 0)."
   @spec port(term()) :: :inet.port_number()
@@ -90,7 +122,10 @@ defmodule Dolphin.Link.Connection do
 
     with {:ok, socket} <- open(endpoint),
          {:ok, forward} <- open_forward(Keyword.get(opts, :forward, [])) do
-      tlog = with path when is_binary(path) <- opts[:tlog], do: File.open!(path, [:append, :binary, :raw, {:delayed_write, 65_536, 200}])
+      tlog =
+        with path when is_binary(path) <- opts[:tlog],
+             do: {File.open!(path, [:append, :binary, :raw, {:delayed_write, 65_536, 200}]), Path.expand(path)}
+
       if endpoint.kind == :tcp, do: send(self(), :connect)
       send(self(), :heartbeat)
 
@@ -227,7 +262,7 @@ defmodule Dolphin.Link.Connection do
     do: {:reply, %{stats: state.stats, peers: state.peers, connected: state.socket != nil}, state}
 
   @impl true
-  def terminate(_reason, %{tlog: tlog}) when tlog != nil, do: File.close(tlog)
+  def terminate(_reason, %{tlog: {io, _path}}), do: File.close(io)
   def terminate(_reason, _state), do: :ok
 
   # Reconnection is in real time, not clock time: it is about the network.
@@ -240,9 +275,9 @@ defmodule Dolphin.Link.Connection do
     {gcs_sysid, _} = state.gcs
 
     Enum.reduce(frames, state, fn frame, state ->
-      record(state, frame.raw)
+      record_in(state, frame)
       # A reply addressed to another ground station on the link is not ours.
-      if for_us?(frame.message, gcs_sysid), do: state.router.(frame, state.name)
+      if for_us?(frame.message, gcs_sysid), do: state.router.(frame, {state.name, if(state.endpoint.kind == :udpin, do: from)})
       if from == :tcp, do: state, else: %{state | peers: Map.put(state.peers, frame.sysid, from)}
     end)
   end
@@ -252,13 +287,17 @@ defmodule Dolphin.Link.Connection do
 
   # What cannot be encoded is a caller's mistake that got this far: it is
   # logged and dropped, never allowed to crash the link (and its vehicles' traffic).
-  defp transmit(state, sysid, message) do
-    transmit!(state, sysid, message)
+  # `to` is a system id, or {:address, address} for one peer address.
+  defp transmit(state, to, message) do
+    transmit!(state, to, message)
   rescue
     e in ArgumentError ->
-      Logger.error("link #{state.name}: not sent to #{sysid}: #{Exception.message(e)}")
+      Logger.error("link #{state.name}: not sent to #{to_text(to)}: #{Exception.message(e)}")
       state
   end
+
+  defp to_text({:address, {ip, port}}), do: "#{:inet.ntoa(ip)}:#{port}"
+  defp to_text(sysid), do: "system #{sysid}"
 
   defp transmit!(state, sysid, message) do
     {gcs_sysid, gcs_compid} = state.gcs
@@ -301,6 +340,7 @@ defmodule Dolphin.Link.Connection do
   end
 
   defp destinations(%{endpoint: %{kind: :udpout} = ep}, _sysid), do: [{ep.address, ep.port}]
+  defp destinations(_state, {:address, address}), do: [address]
   defp destinations(%{peers: peers}, 0), do: peers |> Map.values() |> Enum.uniq()
 
   defp destinations(%{peers: peers}, sysid) do
@@ -314,7 +354,26 @@ defmodule Dolphin.Link.Connection do
   defp forward(%{forward: {socket, targets}}, bytes), do: Enum.each(targets, fn {ip, port} -> :gen_udp.send(socket, ip, port, bytes) end)
 
   defp record(%{tlog: nil}, _bytes), do: :ok
-  defp record(%{tlog: io}, bytes), do: IO.binwrite(io, Tlog.record(System.os_time(:microsecond), bytes))
+  defp record(%{tlog: {io, _path}}, bytes), do: IO.binwrite(io, Tlog.record(System.os_time(:microsecond), bytes))
+
+  # A received frame, unless another link recorded it in the same file (see
+  # "Links that share a .tlog").
+  defp record_in(%{tlog: nil}, _frame), do: :ok
+
+  defp record_in(%{tlog: {_io, path}, name: name} = state, %Frame{sysid: sysid, compid: compid, seq: seq, raw: raw}) do
+    key = {path, sysid, compid, seq}
+    hash = :erlang.phash2(raw)
+    now = System.monotonic_time(:millisecond)
+
+    case :ets.lookup(Dolphin.Link.Recorded, key) do
+      [{^key, ^hash, other, at}] when other != name and now - at <= @copy_window_ms ->
+        :ok
+
+      _ ->
+        :ets.insert(Dolphin.Link.Recorded, {key, hash, name, now})
+        record(state, raw)
+    end
+  end
 
   defp add_stats(total, more), do: merge_stats(total, more, &+/2)
   defp diff_stats(now, before), do: merge_stats(now, before, &-/2)

@@ -8,10 +8,10 @@ defmodule Dolphin.Vehicles.Vehicle do
   # costs the state until the next frames.
   use GenServer, restart: :permanent
 
-  alias Dolphin.{Clock, PubSub}
+  alias Dolphin.{Clock, PubSub, Telemetry}
   alias Dolphin.Link.Connection
   alias Dolphin.MAVLink.Ardupilotmega, as: M
-  alias Dolphin.Vehicles.{CommandProtocol, LinkQuality, MissionProtocol, State, View}
+  alias Dolphin.Vehicles.{CommandProtocol, MissionProtocol, Paths, State, View}
 
   # Messages asked for by interval (µs of vehicle time) on top of the streams:
   # ArduPilot sends EXTENDED_SYS_STATE only when asked this way.
@@ -35,6 +35,12 @@ defmodule Dolphin.Vehicles.Vehicle do
   @timesync_first 8
   @timesync_stale_ms 2_000
 
+  # The paths are judged this often (clock ms; at least every @judge_real_ms
+  # of real time): a path in use that goes silent (1.5 s, see
+  # Dolphin.Vehicles.Paths) is replaced within 2 s of clock time.
+  @judge_every_ms 100
+  @judge_real_ms 50
+
   def child_spec({sysid, _link, _opts} = args),
     do: %{id: {__MODULE__, sysid}, start: {__MODULE__, :start_link, [args]}, restart: :permanent}
 
@@ -56,11 +62,17 @@ defmodule Dolphin.Vehicles.Vehicle do
     send(self(), {:timesync, 0})
     Clock.send_after(self(), :check_link, check_period(timeout))
     now = Clock.now_ms()
+    real = real_ms()
+    Process.send_after(self(), :judge_paths, judge_period())
 
     {:ok,
      %{
        sysid: sysid,
-       link: link,
+       # One path per link (and address) the vehicle is heard on (Dolphin.Vehicles.Paths),
+       # the one it was discovered on in use; and when the next judging is due
+       # (real ms).
+       paths: Paths.new(link, now, real),
+       judge_due: real + judge_period(),
        # Seen now (it was just heard, or its process restarted): silence from
        # here on makes it lost.
        state: put_in(State.new(sysid).link.last_seen_ms, now),
@@ -83,16 +95,28 @@ defmodule Dolphin.Vehicles.Vehicle do
   @impl true
   def handle_cast({:frame, frame, link}, s) do
     s = if s.lost, do: reconnected(s), else: s
-    s = publish(s, s.state |> State.apply(frame, Clock.now_ms()) |> timesync_answer(frame.message))
-    route_to_op(s, frame)
+    now = Clock.now_ms()
+    {verdict, paths} = Paths.heard(s.paths, link, frame, now, real_ms())
+    s = %{s | paths: paths}
 
-    # Position telemetry flowing means the requests were heard.
-    requests_left = if match?(%M.GlobalPositionInt{}, frame.message), do: 0, else: s.requests_left
-    {:noreply, %{s | link: link, requests_left: requests_left}}
+    case verdict do
+      # A copy of a frame already heard on another path: it counted for its
+      # path's figures, and goes no further (the state and the protocols had it).
+      :duplicate ->
+        {:noreply, publish(s, %{s.state | link_quality: Paths.quality(paths)})}
+
+      :fresh ->
+        s = publish(s, %{State.apply(s.state, frame, now) | link_quality: Paths.quality(paths)})
+        route_to_op(s, frame)
+
+        # Position telemetry flowing means the requests were heard.
+        requests_left = if match?(%M.GlobalPositionInt{}, frame.message), do: 0, else: s.requests_left
+        {:noreply, %{s | requests_left: requests_left}}
+    end
   end
 
   def handle_cast({:send, message}, s) do
-    Connection.send_message(s.link, s.sysid, message)
+    send_message(s, message)
     {:noreply, s}
   end
 
@@ -100,6 +124,7 @@ defmodule Dolphin.Vehicles.Vehicle do
   def handle_call(:state, _from, s), do: {:reply, %{s.state | seqs: %{}} |> Map.put(:lost, s.lost), s}
   def handle_call(:view, _from, s), do: {:reply, s.view || view(s), s}
 
+  def handle_call(:paths, _from, s), do: {:reply, Paths.list(s.paths), s}
   def handle_call({:set_timeout, ms}, _from, s), do: {:reply, :ok, %{s | timeout_ms: ms}}
 
   # One command of an id at a time (a COMMAND_ACK names only the command id),
@@ -138,14 +163,34 @@ defmodule Dolphin.Vehicles.Vehicle do
     {:noreply, %{s | queued: queued}}
   end
 
+  # Each path is measured on its own: a TIMESYNC goes out on every path,
+  # stamped so that its answer is matched to its path.
   def handle_info({:timesync, n}, s) do
-    now = System.monotonic_time(:millisecond)
-    rtt = State.link_figures(s.state).rtt_ms || 0
-    quality = LinkQuality.measure(s.state.link_quality, now, max(@timesync_stale_ms, 4 * rtt))
-    ts1 = System.os_time(:nanosecond)
-    Connection.send_message(s.link, s.sysid, %M.Timesync{tc1: 0, ts1: ts1})
+    now = real_ms()
+    {requests, paths} = s.paths |> Paths.measure(now, @timesync_stale_ms) |> Paths.timesync(System.os_time(:nanosecond), now)
+    for {via, ts1} <- requests, do: Connection.send_via(via, s.sysid, %M.Timesync{tc1: 0, ts1: ts1})
     Process.send_after(self(), {:timesync, n + 1}, if(n < @timesync_first, do: div(@timesync_every_ms, 4), else: @timesync_every_ms))
-    {:noreply, publish(s, %{s.state | link_quality: LinkQuality.request(quality, ts1, now)})}
+    {:noreply, publish(%{s | paths: paths}, %{s.state | link_quality: Paths.quality(paths)})}
+  end
+
+  # As with silence (:check_link), a judging that runs more than a period late
+  # does not judge: the frames of the while this host was held up may still
+  # wait in the mailbox, and a path would look silent for want of reading them.
+  def handle_info(:judge_paths, s) do
+    period = judge_period()
+    Process.send_after(self(), :judge_paths, period)
+    now = real_ms()
+    on_time? = now - s.judge_due <= period
+    s = %{s | judge_due: now + period}
+
+    if on_time? do
+      {paths, change} = Paths.judge(s.paths, Clock.now_ms(), now)
+      s = %{s | paths: paths}
+      if change, do: path_changed(s, change)
+      {:noreply, publish(s, %{s.state | link_quality: Paths.quality(paths)})}
+    else
+      {:noreply, s}
+    end
   end
 
   # Silence is judged only by a check that runs on time. One that runs more than
@@ -159,7 +204,9 @@ defmodule Dolphin.Vehicles.Vehicle do
     Clock.send_after(self(), :check_link, period)
     now = Clock.now_ms()
     on_time? = now - s.check_due_ms <= period
-    s = %{s | check_due_ms: now + period}
+    # Paths silent for as long as the vehicle timeout (a vehicle that came
+    # back from another address) are forgotten.
+    s = %{s | check_due_ms: now + period, paths: Paths.forget_silent(s.paths, now, s.timeout_ms)}
     last = s.state.link.last_seen_ms
 
     if on_time? and not s.lost and last != nil and now - last > s.timeout_ms do
@@ -173,11 +220,15 @@ defmodule Dolphin.Vehicles.Vehicle do
     end
   end
 
-  # An answer to one of our TIMESYNCs (tc1 0 is the vehicle's own request).
-  defp timesync_answer(state, %M.Timesync{tc1: tc1, ts1: ts1}) when tc1 != 0,
-    do: %{state | link_quality: LinkQuality.reply(state.link_quality, ts1, System.monotonic_time(:millisecond))}
+  defp real_ms, do: System.monotonic_time(:millisecond)
 
-  defp timesync_answer(state, _message), do: state
+  defp judge_period, do: max(Clock.to_real_ms(@judge_every_ms), @judge_real_ms)
+
+  # Everything to the vehicle goes on the path in use at the time of sending.
+  defp send_message(s, message), do: Connection.send_via(Paths.in_use(s.paths), s.sysid, message)
+
+  defp path_changed(s, {from, to, reason}),
+    do: Telemetry.emit(:path_changed, %{vehicle: s.sysid, from: Paths.via_text(from), to: Paths.via_text(to), reason: reason})
 
   # The new state, and its changes to the vehicle's subscribers.
   defp publish(s, new) do
@@ -243,9 +294,11 @@ defmodule Dolphin.Vehicles.Vehicle do
   end
 
   defp start_op(s, key, module, request, opts, monitor) do
-    link = s.link
-    sysid = s.sysid
-    request = Map.put(request, :send, fn message -> Connection.send_message(link, sysid, message) end)
+    # Through this process, so that each message goes on the path in use when
+    # it is sent: a path that changes during a transfer or between a
+    # command's retries is followed, and the exchange never knows.
+    vehicle = self()
+    request = Map.put(request, :send, fn message -> GenServer.cast(vehicle, {:send, message}) end)
     what = if module == MissionProtocol, do: {:mission, request.operation, request.mission_type}, else: {:command, key}
 
     opts = Keyword.merge(link_opts(s.state), opts)
@@ -301,7 +354,7 @@ defmodule Dolphin.Vehicles.Vehicle do
     # Every stream at 2 Hz for autopilots that ignore message intervals; the
     # intervals below are what ArduPilot really follows. (Rates are in vehicle
     # time: at a speed-up of 100 this is already 200 frames a second per stream.)
-    Connection.send_message(s.link, s.sysid, %M.RequestDataStream{target_system: s.sysid, target_component: 0, req_stream_id: 0, req_message_rate: 2, start_stop: 1})
+    send_message(s, %M.RequestDataStream{target_system: s.sysid, target_component: 0, req_stream_id: 0, req_message_rate: 2, start_stop: 1})
 
     # Each interval is asked for until acknowledged, as many times as the
     # link's loss calls for: on a bad radio a request sent once is lost, and

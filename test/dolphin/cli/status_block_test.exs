@@ -22,6 +22,11 @@ defmodule Dolphin.CLI.StatusBlockTest do
     assert String.ends_with?(three, "Return to base")
   end
 
+  test "the link a vehicle heard on several is reached through, once it changed" do
+    [_, line] = StatusBlock.render([%Vehicle{id: 4, mode: :auto}], %{}, 0, %{4 => "udpin:0.0.0.0:14551"})
+    assert String.ends_with?(line, "link via udpin:0.0.0.0:14551")
+  end
+
   test "redraw goes up over the old block and clears it" do
     assert IO.iodata_to_binary(StatusBlock.redraw(3, ["a", "b"])) == "\e[3A\r\e[Ja\nb\n"
     assert IO.iodata_to_binary(StatusBlock.redraw(0, ["a"])) == "\r\e[Ja\n"

@@ -62,6 +62,19 @@ defmodule Dolphin.Console.FormatTest do
       assert twelve =~ ~r/^12  quadrotor  BRAKE\s+no\s+-  .*100 %\s+LOST 23.4 s  picked by a script$/
     end
 
+    test "a vehicle heard on more than one link: a line per path, the one in use marked" do
+      paths = [
+        %{via: "udpin:0.0.0.0:14551", state: :active, loss: 0.02, rtt_ms: 12, frames: 1520, in_use?: true, seen_ms: 40},
+        %{via: {:radio, 2}, state: :silent, loss: nil, rtt_ms: nil, frames: 7, in_use?: false, seen_ms: 4_200}
+      ]
+
+      text = Format.vehicles([row(paths: paths), row(id: 2, paths: [hd(paths)])])
+      [_header, _one, _two, title, used, silent] = String.split(text, "\n")
+      assert title == "vehicle 1 paths:"
+      assert used == "  *  udpin:0.0.0.0:14551  active  loss 2 %, 12 ms, 1520 frames  heard 40 ms ago"
+      assert silent == "     {:radio, 2}          silent  loss ?, ? ms, 7 frames        heard 4.2 s ago"
+    end
+
     test "no vehicles, a vehicle never heard, and link quality" do
       assert Format.vehicles([]) =~ "no vehicles known yet"
       assert Format.seen(nil, false) == "never"

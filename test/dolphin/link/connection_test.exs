@@ -54,6 +54,33 @@ defmodule Dolphin.Link.ConnectionTest do
     :gen_tcp.close(listen)
   end
 
+  @tag :tmp_dir
+  test "two links recording to one .tlog record a frame heard on both once, and a frame heard twice on one link twice", %{tmp_dir: dir} do
+    tlog = Path.join(dir, "shared.tlog")
+    names = for _ <- 1..2, do: "tlog-#{System.unique_integer([:positive])}"
+    links = for name <- names, do: elem(Link.connect("udpin:127.0.0.1:0", name: name, tlog: tlog), 1)
+    for link <- links, do: cleanup(link, [21])
+    [a, b] = Enum.map(names, &Connection.port/1)
+    peer = UDPPeer.open()
+
+    send_bytes = fn port, bytes -> :ok = :gen_udp.send(peer, {127, 0, 0, 1}, port, bytes) end
+    # One frame heard on both links (two radios); another heard twice on one (a reboot, a wrap).
+    both = Frame.encode(copter(), sysid: 21, compid: 1, seq: 7)
+    twice = Frame.encode(%M.SysStatus{battery_remaining: 50}, sysid: 21, compid: 1, seq: 8)
+    send_bytes.(a, both)
+    Wait.until(fn -> match?(%{stats: %{frames: 1}}, Connection.info(Enum.at(names, 0))) end)
+    send_bytes.(b, both)
+    send_bytes.(b, twice)
+    send_bytes.(b, twice)
+    # Each link counts what it received.
+    Wait.until(fn -> match?(%{stats: %{frames: 3}}, Connection.info(Enum.at(names, 1))) end)
+
+    for link <- links, do: :ok = DynamicSupervisor.terminate_child(Dolphin.Link.Supervisor, link)
+    {records, _} = Dolphin.MAVLink.Tlog.read(Dolphin.MAVLink.Tlog.reader(), File.read!(tlog))
+    heard = for {_ts, %Frame{sysid: 21} = f} <- records, do: f.raw
+    assert Enum.frequencies(heard) == %{both => 1, twice => 2}
+  end
+
   test "forwarding: a watcher gets all traffic, both ways" do
     watcher = UDPPeer.open()
     {:ok, watcher_port} = :inet.port(watcher)

@@ -79,7 +79,7 @@ defmodule Dolphin.Vehicles.MissionProtocolTest do
   end
 
   defp reached(sysid, link, seq),
-    do: Vehicles.route(%Dolphin.MAVLink.Frame{sysid: sysid, compid: 1, seq: 0, message: %M.MissionItemReached{seq: seq}}, link)
+    do: Vehicles.route(%Dolphin.MAVLink.Frame{sysid: sysid, compid: 1, seq: 0, message: %M.MissionItemReached{seq: seq}}, {link, nil})
 
   test "an upload or a clear makes the vehicle forget the previous mission's progress, and say so", %{port: port, link: link} do
     {sysid, _vehicle} = vehicle(port, [])

@@ -1,0 +1,333 @@
+defmodule Dolphin.Vehicles.Paths do
+  @moduledoc """
+  The paths to one vehicle — one per link it is heard on, and per address
+  on a `udpin` link (two radios, a radio and a relay) — kept by pure
+  functions that the vehicle's process drives: which frames are new, how
+  good each path is, and which one to send on.
+
+  Each path has a `via` (see `t:via/0`), the clock time it was last heard,
+  the frames received on it, its loss from the sequence numbers seen on it
+  (per component), its round trip and round-trip loss from the TIMESYNCs sent
+  on it (a `Dolphin.Vehicles.LinkQuality` per path; an answer counts only for
+  the path whose request it names, by `ts1`, and only when it comes back on
+  that path), and a state: `:active` (the path in use), `:standby` (heard, not
+  in use) or `:silent`.
+
+  ## De-duplication
+
+  The same frame heard on two paths is one frame: `heard/5` says `:fresh` the
+  first time and `:duplicate` for a copy of it on another path: same
+  component, same sequence number, same bytes, within a second of real time
+  and fewer than 128 new frames of that component ago. Copies still count in
+  their own path's figures. A frame heard again on the *same* path is always
+  fresh (a vehicle heard on one link behaves as if there were no
+  de-duplication at all): the 8-bit sequence number wraps, a vehicle that
+  reboots starts again at 0, and a network may duplicate a datagram — none of
+  these may eat a frame. The one frame that could be misjudged (a vehicle that
+  rebooted within the second, whose new frame has the bytes of an old one
+  heard only on the other path) is then taken from the other path's copy.
+
+  ## The path in use
+
+  A path is silent once it has been quiet for 1.5 s of clock time and at
+  least 200 ms of real time (at a high speed-up 1.5 s of clock time is a few
+  tens of real milliseconds, less than a loaded host may hold the ground
+  station up). The path in use is, among the paths not silent, the one with
+  the lowest loss (round-trip loss once measured, else the loss towards the
+  ground station, else none), then the lowest round trip; another path takes
+  over from one still heard only when it has been clearly better for 2 s of
+  real time (5 points less loss and two more of the latest 20 TIMESYNCs
+  answered; or as lossy, and a round trip under two thirds and 20 ms less),
+  so that two equal radios whose figures wobble do not take turns. When
+  every path is silent the path in use stays (the vehicle, or this host, is
+  silent: no path is better than another).
+
+      iex> alias Dolphin.Vehicles.Paths
+      iex> p = Paths.new("radio-a", 0, 0)
+      iex> Paths.in_use(p)
+      "radio-a"
+  """
+
+  alias Dolphin.MAVLink.Ardupilotmega.Timesync
+  alias Dolphin.MAVLink.Frame
+  alias Dolphin.Vehicles.LinkQuality
+
+  @silence_ms 1_500
+  @silence_real_floor_ms 200
+  @dedup_window_real_ms 1_000
+  # New frames of a component after which a remembered one no longer matches:
+  # half the sequence space, so that a wrap never matches an old frame.
+  @dedup_depth 128
+  @loss_margin 0.05
+  @more_lost 2
+  @rtt_ratio 1.5
+  @rtt_margin_ms 20
+  # How long (real ms) another path must stay clearly better before it takes over.
+  @better_for_real_ms 2_000
+
+  defstruct paths: %{}, in_use: nil, recent: %{}, fresh: %{}, challenger: nil
+
+  @typedoc """
+  A path's name: what the link gives with each frame (a
+  `t:Dolphin.Link.Connection.via/0`: the link's name and, for a `udpin` link,
+  the address the vehicle sends from); any term in tests.
+  """
+  @type via :: term()
+  @type path_state :: :active | :standby | :silent
+  @type t :: %__MODULE__{
+          paths: %{via() => map()},
+          in_use: via() | nil,
+          recent: %{byte() => %{byte() => {integer(), MapSet.t(), integer(), non_neg_integer()}}},
+          fresh: %{byte() => non_neg_integer()},
+          challenger: nil | {via(), integer()}
+        }
+
+  @typedoc "A path as `list/1` shows it."
+  @type summary :: %{
+          via: via(),
+          state: path_state(),
+          loss: float() | nil,
+          rtt_ms: non_neg_integer() | nil,
+          last_heard_ms: integer(),
+          frames: non_neg_integer(),
+          in_use?: boolean()
+        }
+
+  @doc "The paths of a vehicle first heard on `via` at `now_ms` (clock) and `real_ms` (real): that path in use."
+  @spec new(via(), integer(), integer()) :: t()
+  def new(via, now_ms, real_ms), do: %__MODULE__{paths: %{via => path(via, now_ms, real_ms, :active)}, in_use: via}
+
+  defp path(via, now_ms, real_ms, state),
+    do: %{via: via, state: state, last_heard_ms: now_ms, last_heard_real_ms: real_ms, frames: 0, lost: 0, seqs: %{}, quality: LinkQuality.new()}
+
+  @doc "The path in use."
+  @spec in_use(t()) :: via()
+  def in_use(%__MODULE__{in_use: via}), do: via
+
+  @doc "The `Dolphin.Vehicles.LinkQuality` of the path in use."
+  @spec quality(t()) :: LinkQuality.t()
+  def quality(%__MODULE__{paths: paths, in_use: via}), do: paths[via].quality
+
+  @doc """
+  A frame heard on `via` at `now_ms` (clock) and `real_ms` (real): counted in
+  that path's figures (a TIMESYNC answer to this path's request gives a round
+  trip), and judged `:fresh` or `:duplicate` (see "De-duplication").
+  """
+  @spec heard(t(), via(), Frame.t(), integer(), integer()) :: {:fresh | :duplicate, t()}
+  def heard(%__MODULE__{} = p, via, %Frame{} = frame, now_ms, real_ms) do
+    path = Map.get_lazy(p.paths, via, fn -> path(via, now_ms, real_ms, :standby) end)
+    path = path |> count(frame, now_ms, real_ms) |> timesync_answer(frame.message, real_ms)
+    path = if path.state == :silent, do: %{path | state: :standby}, else: path
+    dedup(%{p | paths: Map.put(p.paths, via, path)}, via, frame, real_ms)
+  end
+
+  # Sequence numbers are per component; a gap on this path is frames this path lost.
+  defp count(path, %Frame{compid: compid, seq: seq}, now_ms, real_ms) do
+    lost =
+      case Map.fetch(path.seqs, compid) do
+        {:ok, last} -> rem(seq - last - 1 + 256, 256)
+        :error -> 0
+      end
+
+    # A jump of more than half the sequence space is a restart or a reordering, not a loss.
+    lost = if lost > 128, do: 0, else: lost
+
+    %{
+      path
+      | frames: path.frames + 1,
+        lost: path.lost + lost,
+        seqs: Map.put(path.seqs, compid, seq),
+        last_heard_ms: now_ms,
+        last_heard_real_ms: real_ms,
+        quality: LinkQuality.frames(path.quality, 1, lost)
+    }
+  end
+
+  # An answer to a TIMESYNC of ours (tc1 0 is the vehicle's own request): only
+  # this path's pending requests can match it.
+  defp timesync_answer(path, %Timesync{tc1: tc1, ts1: ts1}, real_ms) when tc1 != 0,
+    do: %{path | quality: LinkQuality.reply(path.quality, ts1, real_ms)}
+
+  defp timesync_answer(path, _message, _real_ms), do: path
+
+  defp dedup(p, via, %Frame{compid: compid, seq: seq, raw: raw}, real_ms) do
+    hash = :erlang.phash2(raw)
+    n = Map.get(p.fresh, compid, 0)
+    seen = Map.get(p.recent, compid, %{})
+
+    case seen do
+      %{^seq => {^hash, vias, at, k}} when real_ms - at <= @dedup_window_real_ms and n - k < @dedup_depth ->
+        if MapSet.member?(vias, via) do
+          fresh(p, via, compid, seq, hash, real_ms, n, seen)
+        else
+          {:duplicate, %{p | recent: Map.put(p.recent, compid, Map.put(seen, seq, {hash, MapSet.put(vias, via), at, k}))}}
+        end
+
+      _ ->
+        fresh(p, via, compid, seq, hash, real_ms, n, seen)
+    end
+  end
+
+  defp fresh(p, via, compid, seq, hash, real_ms, n, seen) do
+    seen = Map.put(seen, seq, {hash, MapSet.new([via]), real_ms, n + 1})
+    {:fresh, %{p | recent: Map.put(p.recent, compid, seen), fresh: Map.put(p.fresh, compid, n + 1)}}
+  end
+
+  @doc """
+  TIMESYNC requests, one per path, stamped `ts1`, `ts1 + 1`, ...: the
+  `{via, ts1}` to send, and the paths waiting for their answers (sent at
+  `real_ms`).
+  """
+  @spec timesync(t(), integer(), integer()) :: {[{via(), integer()}], t()}
+  def timesync(%__MODULE__{} = p, ts1, real_ms) do
+    requests = p.paths |> Map.keys() |> Enum.sort() |> Enum.with_index(ts1)
+
+    paths =
+      Enum.reduce(requests, p.paths, fn {via, stamp}, paths ->
+        Map.update!(paths, via, fn path -> %{path | quality: LinkQuality.request(path.quality, stamp, real_ms)} end)
+      end)
+
+    {requests, %{p | paths: paths}}
+  end
+
+  @doc """
+  Measures every path at `real_ms` (`Dolphin.Vehicles.LinkQuality.measure/3`):
+  a TIMESYNC unanswered for `stale_ms`, or four of the path's round trips if
+  longer, is lost.
+  """
+  @spec measure(t(), integer(), pos_integer()) :: t()
+  def measure(%__MODULE__{} = p, real_ms, stale_ms) do
+    paths =
+      Map.new(p.paths, fn {via, path} ->
+        stale = max(stale_ms, 4 * (path.quality.rtt_ms || 0))
+        {via, %{path | quality: LinkQuality.measure(path.quality, real_ms, stale)}}
+      end)
+
+    %{p | paths: paths}
+  end
+
+  @doc """
+  Judges the paths at `now_ms` (clock) and `real_ms` (real): which are
+  silent, and which to use (see "The path in use"). Returns the paths and,
+  when the path in use changed, `{from, to, reason}` with reason `:silent`
+  (the path in use went silent) or `:better`.
+  """
+  @spec judge(t(), integer(), integer()) :: {t(), nil | {via(), via(), :silent | :better}}
+  def judge(%__MODULE__{} = p, now_ms, real_ms) do
+    paths =
+      Map.new(p.paths, fn {via, path} ->
+        silent? = now_ms - path.last_heard_ms > @silence_ms and real_ms - path.last_heard_real_ms > @silence_real_floor_ms
+        {via, %{path | state: if(silent?, do: :silent, else: path.state)}}
+      end)
+
+    heard = paths |> Map.values() |> Enum.reject(&(&1.state == :silent)) |> Enum.sort_by(&{score(&1), &1.via})
+    current = paths[p.in_use]
+
+    {in_use, reason, challenger} =
+      cond do
+        heard == [] -> {p.in_use, nil, nil}
+        current.state == :silent -> {hd(heard).via, :silent, nil}
+        true -> challenge(current, Enum.reject(heard, &(&1.via == current.via)), p.challenger, real_ms)
+      end
+
+    paths =
+      Map.new(paths, fn
+        {^in_use, path} -> {in_use, %{path | state: if(path.state == :silent, do: :silent, else: :active)}}
+        {via, %{state: :silent} = path} -> {via, path}
+        {via, path} -> {via, %{path | state: :standby}}
+      end)
+
+    change = if in_use != p.in_use, do: {p.in_use, in_use, reason}
+    {%{p | paths: paths, in_use: in_use, challenger: challenger}, change}
+  end
+
+  # The best other path, once it has been clearly better for long enough.
+  defp challenge(current, [], _challenger, _real_ms), do: {current.via, nil, nil}
+
+  defp challenge(current, [best | _], challenger, real_ms) do
+    case {better?(best, current), challenger} do
+      {false, _} -> {current.via, nil, nil}
+      {true, {via, since}} when via == best.via and real_ms - since >= @better_for_real_ms -> {best.via, :better, nil}
+      {true, {via, since}} when via == best.via -> {current.via, nil, {via, since}}
+      {true, _} -> {current.via, nil, {best.via, real_ms}}
+    end
+  end
+
+  # Hysteresis: clearly less lossy, or as lossy and clearly quicker.
+  defp better?(a, b) do
+    {la, lb} = {loss(a), loss(b)}
+    {ra, rb} = {a.quality.rtt_ms, b.quality.rtt_ms}
+
+    (la + @loss_margin < lb and more_lost(b, a) >= @more_lost) or
+      (abs(la - lb) <= @loss_margin and is_number(ra) and is_number(rb) and ra * @rtt_ratio + @rtt_margin_ms < rb)
+  end
+
+  # How many more of its latest TIMESYNCs one path lost than the other: a
+  # share of a few outcomes (the first ones, one unanswered during start-up)
+  # is no evidence. Without round-trip figures, the loss towards the ground
+  # station (from thousands of frames) speaks for itself.
+  defp more_lost(%{quality: %{loss_rt: nil}}, _), do: @more_lost
+  defp more_lost(_, %{quality: %{loss_rt: nil}}), do: @more_lost
+  defp more_lost(b, a), do: unanswered(b) - unanswered(a)
+
+  defp unanswered(%{quality: q}), do: Enum.count(q.outcomes, &(not &1))
+
+  # Lowest loss first, then lowest round trip (unknown last).
+  defp score(path), do: {loss(path), path.quality.rtt_ms || :unknown}
+
+  defp loss(%{quality: q}), do: q.loss_rt || q.loss_in || 0.0
+
+  @doc """
+  A path's name in words: the link's name (its endpoint string unless it
+  was given another), and the address a `udpin` link hears the vehicle from.
+
+      iex> Dolphin.Vehicles.Paths.via_text({"udpin:0.0.0.0:14550", {{10, 0, 0, 7}, 14_555}})
+      "udpin:0.0.0.0:14550 from 10.0.0.7:14555"
+      iex> Dolphin.Vehicles.Paths.via_text({"tcp:127.0.0.1:5760", nil})
+      "tcp:127.0.0.1:5760"
+      iex> Dolphin.Vehicles.Paths.via_text({:radio, 2})
+      "{:radio, 2}"
+  """
+  @spec via_text(via()) :: String.t()
+  def via_text({name, nil}), do: via_text(name)
+  def via_text({name, {ip, port}}) when is_tuple(ip) and is_integer(port), do: "#{via_text(name)} from #{:inet.ntoa(ip)}:#{port}"
+  def via_text(via) when is_binary(via), do: via
+  def via_text(via), do: inspect(via)
+
+  @doc """
+  Forgets the paths not heard for `after_ms` of clock time at `now_ms` whose
+  link has heard the vehicle since from another address (a vehicle that
+  restarted, a new NAT mapping: the old address is gone for good). A silent
+  path of a link that has not heard the vehicle since stays, shown silent:
+  that radio may come back.
+  """
+  @spec forget_silent(t(), integer(), pos_integer()) :: t()
+  def forget_silent(%__MODULE__{} = p, now_ms, after_ms) do
+    paths = Map.reject(p.paths, fn {via, path} -> via != p.in_use and now_ms - path.last_heard_ms > after_ms and replaced?(p.paths, via, path) end)
+    %{p | paths: paths}
+  end
+
+  defp replaced?(paths, {link, _address} = via, path),
+    do: Enum.any?(paths, fn {other, o} -> match?({^link, _}, other) and other != via and o.last_heard_ms > path.last_heard_ms end)
+
+  defp replaced?(_paths, _via, _path), do: false
+
+  @doc "The paths, the one in use first, then by name."
+  @spec list(t()) :: [summary()]
+  def list(%__MODULE__{} = p) do
+    p.paths
+    |> Map.values()
+    |> Enum.sort_by(&{&1.via != p.in_use, &1.via})
+    |> Enum.map(fn path ->
+      %{
+        via: path.via,
+        state: path.state,
+        loss: path.quality.loss_in,
+        rtt_ms: path.quality.rtt_ms,
+        last_heard_ms: path.last_heard_ms,
+        frames: path.frames,
+        in_use?: path.via == p.in_use
+      }
+    end)
+  end
+end

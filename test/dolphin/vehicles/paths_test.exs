@@ -1,0 +1,200 @@
+defmodule Dolphin.Vehicles.PathsTest do
+  # The paths to one vehicle as pure functions: de-duplication (with
+  # properties), figures per path, and the choice of the path in use.
+  use ExUnit.Case, async: true
+
+  import Dolphin.Property
+
+  alias Dolphin.MAVLink.Frame
+  alias Dolphin.MAVLink.Ardupilotmega, as: M
+  alias Dolphin.Vehicles.{LinkQuality, Paths}
+
+  doctest Paths
+
+  # A frame whose bytes are its component, sequence number and message id:
+  # after a wrap, the same message at the same number has the same bytes.
+  defp frame(seq, msgid \\ 0, compid \\ 1), do: %Frame{compid: compid, seq: seq, msgid: msgid, raw: <<compid, seq, msgid::24>>}
+
+  defp feed(paths, events), do: Enum.map_reduce(events, paths, fn {via, f, t}, p -> Paths.heard(p, via, f, t, t) end)
+
+  describe "de-duplication" do
+    test "a copy on another path is a duplicate, counted for its path" do
+      p = Paths.new(:a, 0, 0)
+      {verdicts, p} = feed(p, [{:a, frame(0), 1}, {:b, frame(0), 5}, {:b, frame(1), 6}, {:a, frame(1), 8}])
+      assert verdicts == [:fresh, :duplicate, :fresh, :duplicate]
+      assert Enum.map(Paths.list(p), &{&1.via, &1.frames}) == [{:a, 2}, {:b, 2}]
+    end
+
+    test "the same frame again on the same path is fresh (a network's duplicate, a reboot)" do
+      {verdicts, _} = feed(Paths.new(:a, 0, 0), [{:a, frame(0), 1}, {:a, frame(0), 2}, {:b, frame(0), 3}, {:b, frame(0), 4}])
+      assert verdicts == [:fresh, :fresh, :duplicate, :fresh]
+    end
+
+    test "other components, other bytes, or too late are not copies" do
+      {verdicts, _} =
+        feed(Paths.new(:a, 0, 0), [
+          {:a, frame(0, 0, 1), 0},
+          {:b, frame(0, 0, 2), 1},
+          {:b, frame(0, 7, 1), 2},
+          {:a, frame(1), 3},
+          {:b, frame(1), 2_000}
+        ])
+
+      assert verdicts == [:fresh, :fresh, :fresh, :fresh, :fresh]
+    end
+
+    test "a vehicle heard on one path: every frame is fresh, whatever repeats" do
+      gen = :proper_types.list({:proper_types.integer(0, 3), :proper_types.integer(0, 255), :proper_types.integer(0, 2)})
+
+      check(
+        forall(gen, fn frames ->
+          events = frames |> Enum.with_index() |> Enum.map(fn {{compid, seq, msgid}, t} -> {:a, frame(seq, msgid, compid), t} end)
+          {verdicts, _} = feed(Paths.new(:a, 0, 0), events)
+          assert Enum.all?(verdicts, &(&1 == :fresh))
+        end),
+        numtests: 200
+      )
+    end
+
+    test "two paths, each losing frames, one behind the other: every frame is fresh once, across wraps" do
+      # Per frame: heard on a, on b, or both; b lags `lag` frames behind a.
+      gen = {:proper_types.integer(0, 20), :proper_types.non_empty(:proper_types.list({:proper_types.oneof([:a, :b, :both]), :proper_types.integer(0, 2)}))}
+
+      check(
+        forall(gen, fn {lag, heard} ->
+          # Long enough to wrap several times, in ms of real time (a wrap in 256 ms).
+          heard = heard |> Stream.cycle() |> Enum.take(max(length(heard), 700))
+
+          events =
+            heard
+            |> Enum.with_index()
+            |> Enum.flat_map(fn {{on, msgid}, i} ->
+              f = frame(rem(i, 256), msgid)
+              a = if on in [:a, :both], do: [{2 * i, {:a, f, i}}], else: []
+              b = if on in [:b, :both], do: [{2 * (i + lag) + 1, {:b, f, i + lag}}], else: []
+              a ++ b
+            end)
+            |> Enum.sort_by(&elem(&1, 0))
+            |> Enum.map(&elem(&1, 1))
+
+          {verdicts, _} = feed(Paths.new(:a, 0, 0), events)
+          assert Enum.count(verdicts, &(&1 == :fresh)) == length(heard)
+          assert Enum.count(verdicts, &(&1 == :duplicate)) == Enum.count(heard, &(elem(&1, 0) == :both))
+        end),
+        numtests: 100
+      )
+    end
+  end
+
+  describe "figures per path" do
+    test "loss from each path's own sequence numbers; TIMESYNC answers only for their path" do
+      p = Paths.new(:a, 0, 0)
+      # a hears every frame, b every other one.
+      {_, p} = feed(p, for(i <- 0..39, via <- [:a, :b], via == :a or rem(i, 2) == 0, do: {via, frame(i), i}))
+      {[a: 100, b: 101], p} = Paths.timesync(p, 100, 50)
+      p = Paths.measure(p, 50, 2_000)
+      assert [%{via: :a, loss: 0.0}, %{via: :b, loss: b_loss}] = Paths.list(p)
+      assert_in_delta b_loss, 0.5, 0.03
+
+      answer = fn ts1, seq -> %Frame{compid: 1, seq: seq, msgid: 111, message: %M.Timesync{tc1: 1, ts1: ts1}, raw: <<seq, ts1>>} end
+      # a's answer heard on b does not count for b, nor for a.
+      {_, p} = feed(p, [{:b, answer.(100, 40), 60}, {:a, answer.(101, 41), 61}, {:b, answer.(101, 42), 75}])
+      assert [%{via: :a, rtt_ms: nil}, %{via: :b, rtt_ms: 25}] = Paths.list(p)
+    end
+  end
+
+  describe "the path in use" do
+    defp with_quality(p, via, loss_rt, rtt) do
+      # The latest 20 TIMESYNCs, that many unanswered.
+      lost = round(loss_rt * 20)
+      q = %{LinkQuality.new() | loss_rt: loss_rt, rtt_ms: rtt, outcomes: List.duplicate(false, lost) ++ List.duplicate(true, 20 - lost)}
+      put_in(p.paths[via].quality, q)
+    end
+
+    defp heard_at(p, via, t), do: p |> Paths.heard(via, frame(rem(t, 256), 0, via_compid(via)), t, t) |> elem(1)
+    defp via_compid(:a), do: 1
+    defp via_compid(:b), do: 2
+    defp via_compid(:c), do: 3
+
+    test "a path in use that goes silent is replaced by the best heard one" do
+      p = Paths.new(:a, 0, 0) |> heard_at(:b, 10) |> heard_at(:c, 10) |> with_quality(:b, 0.2, 40) |> with_quality(:c, 0.0, 90)
+      assert {p, nil} = Paths.judge(p, 1_000, 1_000)
+      assert Enum.map(Paths.list(p), &{&1.via, &1.state}) == [a: :active, b: :standby, c: :standby]
+
+      p = p |> heard_at(:b, 1_400) |> heard_at(:c, 1_400)
+      assert {p, {:a, :c, :silent}} = Paths.judge(p, 1_600, 1_600)
+      assert Paths.in_use(p) == :c
+      assert Enum.map(Paths.list(p), &{&1.via, &1.state}) == [c: :active, a: :silent, b: :standby]
+
+      # Heard again: standby, and not taken back for being as good.
+      p = heard_at(p, :a, 1_700)
+      assert {p, nil} = Paths.judge(p, 1_800, 1_800)
+      assert Enum.map(Paths.list(p), &{&1.via, &1.state}) == [c: :active, a: :standby, b: :standby]
+    end
+
+    test "silence needs 1.5 s of clock time and a real-time floor" do
+      # 2 s of clock time but only 100 ms of real time (a speed-up of 20): not silent yet.
+      {:fresh, p} = Paths.heard(Paths.new(:a, 0, 0), :b, frame(0, 0, 2), 2_000, 100)
+      assert {_, nil} = Paths.judge(p, 2_000, 100)
+      assert {_, {:a, :b, :silent}} = Paths.judge(p, 2_000, 250)
+    end
+
+    test "an address a link no longer hears the vehicle from is forgotten; a silent link is not" do
+      {_, p} = Paths.heard(Paths.new({:l1, {{10, 0, 0, 1}, 1}}, 0, 0), {:l2, {{10, 0, 0, 2}, 1}}, frame(0, 0, 2), 0, 0)
+      # The vehicle comes back on link 1 from another port.
+      {_, p} = Paths.heard(p, {:l1, {{10, 0, 0, 1}, 2}}, frame(1), 5_000, 5_000)
+      {p, _} = Paths.judge(p, 5_000, 5_000)
+      assert Paths.in_use(p) == {:l1, {{10, 0, 0, 1}, 2}}
+      assert length(Paths.list(Paths.forget_silent(p, 20_000, 20_000))) == 3
+      assert [{:l1, {_, 2}}, {:l2, _}] = p |> Paths.forget_silent(20_001, 20_000) |> Paths.list() |> Enum.map(& &1.via)
+    end
+
+    test "every path silent: the path in use stays" do
+      p = Paths.new(:a, 0, 0) |> heard_at(:b, 0)
+      assert {p, nil} = Paths.judge(p, 5_000, 5_000)
+      assert Paths.in_use(p) == :a
+      assert Enum.map(Paths.list(p), & &1.state) == [:silent, :silent]
+    end
+
+    test "another path takes over only when clearly better" do
+      p = Paths.new(:a, 0, 0) |> heard_at(:b, 0)
+      # Judged at 100 ms and again 2 s of real time later (heard in between).
+      twice = fn p ->
+        {p, nil} = Paths.judge(p, 100, 100)
+        p = p |> heard_at(:a, 1_000) |> heard_at(:b, 1_000)
+        Paths.judge(p, 1_100, 2_100)
+      end
+
+      assert {_, nil} = p |> with_quality(:a, 0.10, 50) |> with_quality(:b, 0.07, 30) |> twice.()
+      assert {_, {:a, :b, :better}} = p |> with_quality(:a, 0.10, 50) |> with_quality(:b, 0.0, 60) |> twice.()
+      assert {_, nil} = p |> with_quality(:a, 0.0, 50) |> with_quality(:b, 0.0, 30) |> twice.()
+      assert {_, {:a, :b, :better}} = p |> with_quality(:a, 0.0, 80) |> with_quality(:b, 0.0, 20) |> twice.()
+      # A share of few outcomes is no evidence: one lost of the first five.
+      few = fn p, via, outcomes -> put_in(p.paths[via].quality, %{LinkQuality.new() | loss_rt: 0.2, rtt_ms: 50, outcomes: outcomes}) end
+      assert {_, nil} = p |> few.(:a, [false, true, true, true, true]) |> with_quality(:b, 0.0, 50) |> twice.()
+      # Better for less than 2 s: not yet.
+      {p, nil} = p |> with_quality(:a, 0.0, 80) |> with_quality(:b, 0.0, 20) |> Paths.judge(100, 100)
+      assert {p, nil} = Paths.judge(p, 200, 1_000)
+      # Not better for a moment: the 2 s start again.
+      {p, nil} = p |> with_quality(:b, 0.0, 79) |> Paths.judge(300, 1_500)
+      assert {_, nil} = p |> with_quality(:b, 0.0, 20) |> Paths.judge(400, 2_200)
+    end
+
+    test "two equal paths whose figures wobble do not take turns" do
+      gen = :proper_types.list({:proper_types.integer(0, 4), :proper_types.integer(0, 4), :proper_types.integer(40, 55), :proper_types.integer(40, 55)})
+
+      check(
+        forall(gen, fn wobbles ->
+          p = Paths.new(:a, 0, 0) |> heard_at(:b, 0)
+
+          Enum.reduce(wobbles, p, fn {la, lb, ra, rb}, p ->
+            {p, change} = p |> with_quality(:a, la / 100, ra) |> with_quality(:b, lb / 100, rb) |> Paths.judge(10, 10)
+            assert change == nil
+            p
+          end)
+        end),
+        numtests: 200
+      )
+    end
+  end
+end
