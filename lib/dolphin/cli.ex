@@ -107,9 +107,9 @@ defmodule Dolphin.CLI do
   def event_text(%{event: :vehicle_conflict} = e),
     do: "vehicle #{e.vehicle}: #{Enum.join(e.stations, " and ")} hear two different vehicles (#{e.reason}); following #{hd(e.stations)} only"
 
-
   def event_text(%{event: :path_changed} = e),
     do: "vehicle #{e.vehicle}: now through #{e.to} (#{if e.reason in [:silent, "silent"], do: "#{e.from} went silent", else: "better than #{e.from}"})"
+
   def event_text(%{event: :mode_changed} = e), do: "vehicle #{e.vehicle} mode #{Format.mode(e.mode)}"
   def event_text(%{event: :armed} = e), do: "vehicle #{e.vehicle} armed"
   def event_text(%{event: :disarmed} = e), do: "vehicle #{e.vehicle} disarmed"

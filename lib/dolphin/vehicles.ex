@@ -177,7 +177,6 @@ defmodule Dolphin.Vehicles do
   defp node_gone?(:noconnection), do: true
   defp node_gone?(_reason), do: false
 
-  @doc "Sends a message to a vehicle through the link it was last heard on."
   @doc """
   The paths to a vehicle (see "Paths"), the one in use first: `via` (the
   link's name and the address heard from, `t:Dolphin.Link.Connection.via/0`;
@@ -185,7 +184,8 @@ defmodule Dolphin.Vehicles do
   the ground station, from the sequence numbers; nil until measured),
   `rtt_ms` (nil until measured), `last_heard_ms` (clock time), `frames`
   (received on that path, copies included), `in_use?`. `[]` for a vehicle
-  not known.
+  not known. For a vehicle of another ground station (`Dolphin.Cluster`),
+  the paths of the station chosen to reach it.
   """
   @spec paths(byte()) :: [Dolphin.Vehicles.Paths.summary()]
   def paths(sysid) do
