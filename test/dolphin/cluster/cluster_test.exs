@@ -104,8 +104,8 @@ defmodule Dolphin.ClusterTest do
   test "a vehicle heard by two stations whose first path dies mid-mission fails over and its mission completes" do
     gs1 = Cluster.start_station("gs1")
     gs2 = Cluster.start_station("gs2")
-    {splitter, port} = Dolphin.Test.Splitter.start([gs1.port, gs2.port])
-    {:ok, [21]} = Dolphin.Sim.start(gcs: port, sysids: [21], speedup: @speedup)
+    splitter = start_supervised!({Dolphin.Test.RadioSplitter, gcs: [gs1.port, gs2.port]})
+    {:ok, [21]} = Dolphin.Sim.start(gcs: Dolphin.Test.RadioSplitter.port(splitter), sysids: [21], speedup: @speedup)
     :ok = Dolphin.Cluster.join(gs1.node)
     Cluster.await_vehicles([21])
     :ok = Dolphin.Cluster.join(gs2.node)
@@ -118,9 +118,9 @@ defmodule Dolphin.ClusterTest do
     # The path of the station chosen now dies (which one it is depends on
     # the links' figures: both are good).
     %{21 => %{chosen: first}} = Dolphin.Cluster.Mirror.routes()
-    {side, other} = if first == gs1.node, do: {0, gs2.node}, else: {1, gs1.node}
+    {side, other} = if first == gs1.node, do: {:a, gs2.node}, else: {:b, gs1.node}
     flush()
-    :ok = Dolphin.Test.Splitter.cut(splitter, side)
+    :ok = Dolphin.Test.RadioSplitter.cut(splitter, side)
 
     assert {:ok, %{result: :done}} = Dolphin.Script.await(run, 60_000)
     events = flush()
