@@ -23,6 +23,7 @@ bench: bootstrap
 	MIX_ENV=prod mix run bench/sim.exs
 	MIX_ENV=prod mix run bench/reaction.exs
 	MIX_ENV=prod mix run bench/report.exs
+	MIX_ENV=prod mix run bench/cluster.exs
 
 dialyzer: bootstrap
 	scripts/dialyzer
