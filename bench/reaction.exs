@@ -22,7 +22,7 @@ alias Dolphin.Fleet.TestSource
 
 source = :bench_fakes
 fleet = :bench_fleet
-{:ok, _} = TestSource.start_link(name: source)
+{:ok, _} = TestSource.start_link(name: source, events: false)
 {:ok, _} = Dolphin.Fleet.start_link(name: fleet, source: TestSource.source(source), events: false)
 Context.put(%Context{fleet: fleet, source: TestSource.source(source), owner: self()})
 
