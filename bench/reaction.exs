@@ -33,7 +33,7 @@ for id <- [shared | ids], do: TestSource.add(source, id, type: :uav, battery: 1.
 {:ok, _} = Dolphin.Fleet.pick(fleet, self(), id: ids, count: max_n, timeout: 10_000)
 
 defmodule Bench do
-  def low(v), do: Cond.new(fn -> Dolphin.Engine.Watcher.vehicle(v).battery < 0.3 end, source: "battery(v) < 0.3")
+  def low(v), do: Cond.new(fn snap -> Dolphin.Engine.Snapshot.battery(snap, v) < 0.3 end, source: "battery(v) < 0.3")
 
   # N untils, task i on vehicle i, condition on cond_vehicle.(i); returns the run once all tasks run.
   def start(n, ids, cond_vehicle) do
