@@ -28,7 +28,9 @@ defmodule Dolphin.Engine.Runner do
   # result comes with the acknowledgement, so that the parent handles it before
   # anything else: the order of events stays deterministic), or {:error, reason}.
   def start_node(task, ctx, run, parent_id) do
-    pid = :proc_lib.spawn_link(__MODULE__, :init_node, [task, self(), ctx, run, parent_id])
+    # One argument: proc_lib makes a dummy argument list of the initial
+    # call's arity on every exit, a cost a burst of ending nodes feels.
+    pid = :proc_lib.spawn_link(__MODULE__, :init_node, [{task, self(), ctx, run, parent_id}])
 
     receive do
       {:"$dolphin_started", ^pid, nil} ->
@@ -91,7 +93,7 @@ defmodule Dolphin.Engine.Runner do
   # --- the node process ---
 
   @doc false
-  def init_node(task, parent, ctx, run, parent_id) do
+  def init_node({task, parent, ctx, run, parent_id}) do
     Process.flag(:trap_exit, true)
     Context.put(ctx)
 
