@@ -81,8 +81,12 @@ defmodule Dolphin.DSL.Expand do
             {call, follow or not Enum.any?(Macro.Env.lookup_import(caller, {name, arity}), fn {_, m} -> plain?(m) end)}
         end
 
-      {{:., _, [module, _fun]}, _, _} = call, follow ->
-        {call, follow or not plain?(Macro.expand(module, caller))}
+      {{:., _, [module, _fun]}, meta, _} = call, follow ->
+        case Macro.expand(module, caller) do
+          module when is_atom(module) -> {call, follow or not plain?(module)}
+          # A field of a value (`position(v).h`) reads nothing hidden; a call through a variable may.
+          _value -> {call, follow or not Keyword.get(meta, :no_parens, false)}
+        end
 
       {{:., _, [_fun]}, _, _} = call, _follow ->
         {call, true}
@@ -94,9 +98,13 @@ defmodule Dolphin.DSL.Expand do
 
   defp imported?(caller, name, arity, module), do: {:function, module} in Macro.Env.lookup_import(caller, {name, arity})
 
+  # Elixir's own modules above, Erlang's (`:math`), Dolphin's.
   defp plain?(module) when module in @plain, do: true
-  defp plain?(module) when is_atom(module), do: String.starts_with?(Atom.to_string(module), "Elixir.Dolphin.")
-  defp plain?(_module), do: false
+
+  defp plain?(module) do
+    name = Atom.to_string(module)
+    String.starts_with?(name, "Elixir.Dolphin.") or not String.starts_with?(name, "Elixir.")
+  end
 
   # `one_of`/`all_of` clauses `condition -> task` as `{cond, task}` pairs.
   @spec branches(Macro.t(), atom(), Macro.Env.t()) :: [Macro.t()]

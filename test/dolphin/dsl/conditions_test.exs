@@ -33,6 +33,9 @@ defmodule Dolphin.DSL.ConditionsTest do
     assert %Cond{follow: false, source: "battery(v) < 0.3 and Enum.all?([v], fn x -> connected?(x) end)"} = c
     assert Cond.evaluate(c, %Snapshot{}) == {:read, {:vehicle, v}}
     assert Cond.evaluate(c) == {:ok, false}
+    assert %Cond{follow: false} = until_cond(until(survey(), position(v).h > 100 or :math.sqrt(battery(v)) < 0.5))
+    mod = Dolphin.DSL
+    assert %Cond{follow: true} = until_cond(until(survey(), mod.battery(v) < 0.3))
 
     run = start_until(v, until(survey(), battery(v) < 0.3))
     TestSource.set(ctx.source, v, battery: 0.2)
