@@ -22,7 +22,7 @@ alias Dolphin.Fleet.TestSource
 
 source = :bench_fakes
 fleet = :bench_fleet
-{:ok, _} = TestSource.start_link(name: source)
+{:ok, _} = TestSource.start_link(name: source, events: false)
 {:ok, _} = Dolphin.Fleet.start_link(name: fleet, source: TestSource.source(source), events: false)
 Context.put(%Context{fleet: fleet, source: TestSource.source(source), owner: self()})
 
@@ -33,7 +33,7 @@ for id <- [shared | ids], do: TestSource.add(source, id, type: :uav, battery: 1.
 {:ok, _} = Dolphin.Fleet.pick(fleet, self(), id: ids, count: max_n, timeout: 10_000)
 
 defmodule Bench do
-  def low(v), do: Cond.new(fn -> Dolphin.Engine.Watcher.vehicle(v).battery < 0.3 end, source: "battery(v) < 0.3")
+  def low(v), do: Cond.new(fn snap -> Dolphin.Engine.Snapshot.battery(snap, v) < 0.3 end, source: "battery(v) < 0.3")
 
   # N untils, task i on vehicle i, condition on cond_vehicle.(i); returns the run once all tasks run.
   def start(n, ids, cond_vehicle) do

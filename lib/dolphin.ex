@@ -6,13 +6,14 @@ defmodule Dolphin do
   Dolphin.Supervisor (rest_for_one)
   ├─ Dolphin.Registry            vehicles {:vehicle, sysid}, links {:link, name}, simulated vehicles {:sim, sysid}
   ├─ Dolphin.PubSub              Registry with duplicate keys: state changes, vehicle and engine events
+  ├─ Dolphin.Vehicles.Views      owner of the ETS table of every vehicle's latest view (read by anyone)
   ├─ Dolphin.Vehicles.Supervisor one Dolphin.Vehicles.Vehicle per discovered vehicle
   │                              (each runs its command and mission protocols as :gen_statem)
   ├─ Dolphin.Link.Supervisor     one Dolphin.Link.Connection per endpoint (owns its socket)
   ├─ configured links            (connects `config :dolphin, links:` and goes away)
   ├─ Dolphin.Cluster.Scope       the :pg scope of a cluster of ground stations (Dolphin.Cluster)
   ├─ Dolphin.Cluster.Mirror      other stations' vehicles, routed and published here once joined
-  ├─ Dolphin.Fleet               who is available, picked, busy; waiting picks
+  ├─ Dolphin.Fleet               who is picked, busy; waiting picks; reservations (no vehicle state)
   ├─ Dolphin.Engine.Supervisor   registry of runs and task nodes; one process tree per run
   │                              (a node per combinator; a Dolphin.Mission.Executor per flying mission)
   ├─ Dolphin.Console.Supervisor  the IEx console's event store and background runs

@@ -15,6 +15,9 @@ defmodule Dolphin.Application do
       # Vehicles and links by name ({:vehicle, sysid}, {:link, name}).
       {Registry, keys: :unique, name: Dolphin.Registry},
       Dolphin.PubSub,
+      # The vehicles' views (Dolphin.Vehicles.Views): the table outlives
+      # each vehicle's process, and the vehicles restart after it.
+      Dolphin.Vehicles.Views,
       # Vehicles before links: a link routes frames to vehicles from its first datagram.
       {DynamicSupervisor, name: Dolphin.Vehicles.Supervisor, strategy: :one_for_one},
       # Several ground stations (Dolphin.Cluster): the :pg scope of their

@@ -13,7 +13,7 @@ defmodule Dolphin.DSL do
   | --- | --- |
   | `pick(opts)`, `release(set)` | `Dolphin.Script.Statements.pick/1`, `Dolphin.Script.Statements.release/1` |
   | `union/2`, `difference/2`, `intersection/2`, `filter/2` | `Dolphin.Fleet.VehicleSet` |
-  | `battery(v)`, `position(v)`, `altitude(v)`, `relative_altitude(v)`, `mode(v)`, `armed?(v)`, `connected?(v)`, `mission_progress(v)` | `Dolphin.Engine.Watcher.vehicle/2` |
+  | `battery(v)`, `position(v)`, `altitude(v)`, `relative_altitude(v)`, `mode(v)`, `armed?(v)`, `connected?(v)`, `mission_progress(v)` | `Dolphin.Engine.Snapshot` (written in a condition), `Dolphin.Engine.Watcher.vehicle/2` (elsewhere) |
   | `set_connection_timeout(t)`, `set_connection_timeout(set, t)` | `Dolphin.Script.Statements.set_connection_timeout/1,2` |
   | `idle(d)`, `on(t, set)`, `during(d, t)`, `watch(t, on_error: h)`, `reassign(t)`, `reassign(t, from: set)`, `named(t, name)`, `t1 >>> t2`, `t1 \\|\\|\\| t2` | `Dolphin.Engine` |
   | `action do ... end`, `condition(c)`, `until(t, c)`, `wait_for(c)`, `wait_for(c, then: t)`, `one_of do c -> t ... end`, `all_of do ... end` | `Dolphin.Engine` with a `Dolphin.Engine.Cond` |
@@ -23,7 +23,12 @@ defmodule Dolphin.DSL do
 
   Conditions are ordinary expressions — `battery(v1) < 0.3`, `poll(:go)`,
   `connected?(v) and mode(v) == :guided` — re-evaluated whenever what they
-  read changes.
+  read changes: the macros rewrite the readers written in the expression
+  (`battery/1`, ..., `poll/1,2`) into those of `Dolphin.Engine.Snapshot`, and
+  the condition becomes a function of its snapshot (`Dolphin.Engine.Cond`). A
+  reader called inside a function of the script's own reads live; a
+  condition calling one is also re-evaluated on the changes of the vehicles
+  its task flies (docs/language.md, "Conditions").
 
   ## Unknown values
 

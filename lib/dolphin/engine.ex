@@ -9,7 +9,7 @@ defmodule Dolphin.Engine do
 
       import Dolphin.Engine
       survey = Dolphin.Engine.TestPlatform.task("survey", duration: :infinity)
-      t = sequence([until(survey, fn -> Dolphin.Engine.Watcher.vehicle(v).battery < 0.3 end), idle(5_000)])
+      t = sequence([until(survey, fn snap -> Dolphin.Engine.Snapshot.battery(snap, v) < 0.3 end), idle(5_000)])
       {:ok, :done} = Dolphin.Engine.run(t)
 
   ## Results
@@ -77,14 +77,16 @@ defmodule Dolphin.Engine do
 
   ## Conditions
 
-  Conditions are closures (`Dolphin.Engine.Cond`) evaluated when their node
-  starts and again on every change of what they read — a vehicle's view
-  (`Dolphin.Vehicles.View`, published whole by the vehicle's owner), a
-  signal — plus a slow tick (`tick_ms`, 1 s of clock time) for conditions
-  on anything else. Each node's `Dolphin.Engine.Watcher` follows exactly
-  the vehicles and signals its conditions read and hands them a snapshot;
-  a frame thus travels link -> vehicle process -> view published -> node,
-  crossing each layer once. Reaction is thus event-driven: see
+  Conditions are functions of a snapshot (`Dolphin.Engine.Cond`,
+  `Dolphin.Engine.Snapshot`) evaluated when their node starts and again on
+  every change of what they read — a vehicle's view (`Dolphin.Vehicles.View`,
+  published whole by the vehicle's owner), a signal — plus a slow tick
+  (`tick_ms`, 1 s of clock time) for conditions on anything else. Each
+  node's `Dolphin.Engine.Watcher` follows the vehicles and signals its
+  conditions read and hands each condition its snapshot as its argument; a
+  change re-evaluates only the conditions that read it. A frame thus
+  travels link -> vehicle process -> view published -> node, crossing each
+  layer once. Reaction is thus event-driven: see
   `bench/reaction.exs` for the latency from a state change to the stop of
   the task it ends.
 

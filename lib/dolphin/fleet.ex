@@ -6,14 +6,17 @@ defmodule Dolphin.Fleet do
 
   Vehicles come from a `Dolphin.Fleet.Source` (by default the MAVLink vehicles
   of `Dolphin.Vehicles`; `config :dolphin, vehicle_source: {module, arg}` or
-  the `:source` option change it). A vehicle's state belongs to its source;
-  the fleet owns only who is picked, who is busy, the waiting picks and the
-  reservations of runs. It follows the views the source publishes
-  (`Dolphin.Vehicles.View`), keeping the latest one of each vehicle to match
-  picks against, and turns their transitions into `Dolphin.Telemetry` events
-  (`vehicle_discovered`, `vehicle_lost`, `vehicle_reconnected`, `mode_changed`,
-  `armed`, `disarmed`, `mission_item_reached`). It knows nothing of the
-  engine: the engine calls it, never the other way round.
+  the `:source` option change it). A vehicle's state belongs to its source,
+  and so do the events of its transitions (`vehicle_discovered`,
+  `mode_changed`, `vehicle_lost`, ...: see `Dolphin.Vehicles.Views`); the
+  fleet owns only who is picked, who is busy, the waiting picks and the
+  reservations of runs. It keeps no copy of any vehicle: it reads the
+  source's views (`Dolphin.Vehicles.View`) when it picks, serves waiting
+  picks, reserves or lists, and follows the source's `:vehicles` events
+  (discovered, lost, reconnected, forgotten, changed) to serve waiting picks
+  again, plus a slow tick (1 s of clock time) while a pick waits on a region.
+  It knows nothing of the engine: the engine calls it, never the other way
+  round.
 
   ## Picking
 
@@ -32,8 +35,18 @@ defmodule Dolphin.Fleet do
   requirement. The owner (a script's process) is monitored: when it ends, its
   vehicles are released.
 
+  In a cluster of ground stations (`Dolphin.Cluster`) a pick is
+  cluster-wide: before giving vehicles, the fleet claims them
+  (`Dolphin.Fleet.Claims`, atomic across nodes), so two scripts on two nodes
+  never get one vehicle, even when they pick at the same moment. A vehicle
+  claimed on another node is left out of this fleet's picks until its claim
+  is released there (the fleets are told) or that node goes down. On a node
+  without distribution there are no claims to make.
+
   A vehicle lost while picked stays picked (it may come back); it is not
-  given to new tasks while lost, and the task running on it fails.
+  given to new tasks while lost, and the task running on it fails. So does
+  one forgotten while picked (`Dolphin.Vehicles.forget/1`), listed by
+  `vehicles/1` as not connected until it is released.
 
   ## Allocation
 
@@ -49,7 +62,7 @@ defmodule Dolphin.Fleet do
 
   alias Dolphin.{Geo, PubSub, Telemetry}
   alias Dolphin.Geo.Area
-  alias Dolphin.Fleet.{Allocation, AllocationError, PickError, Source, VehicleSet}
+  alias Dolphin.Fleet.{Allocation, Claims, AllocationError, PickError, Source, VehicleSet}
   alias Dolphin.Vehicles.View
 
   @types [:uav, :ugv, :usv, :uuv, :other]
@@ -64,7 +77,8 @@ defmodule Dolphin.Fleet do
   @doc """
   Starts a fleet. Options: `:name` (default `Dolphin.Fleet`), `:source`
   (default `config :dolphin, vehicle_source:` or `{Dolphin.Fleet.MAVLinkSource, nil}`),
-  `:events` (emit vehicle events, default true).
+  `:events` (emit the events of picks, default true; vehicles' own events
+  are their source's).
   """
   @spec start_link(keyword()) :: GenServer.on_start()
   def start_link(opts \\ []) do
@@ -88,7 +102,11 @@ defmodule Dolphin.Fleet do
   @spec set_source(fleet(), Source.t()) :: :ok
   def set_source(fleet \\ __MODULE__, {m, _} = source) when is_atom(m), do: GenServer.call(fleet, {:set_source, source})
 
-  @doc "Every known vehicle with its status: `%{vehicle: View.t(), picked_by: pid | nil, busy: run_id | nil}`."
+  @doc """
+  Every known vehicle with its status: `%{vehicle: View.t(), picked_by: pid | nil, busy: run_id | nil}`.
+  A vehicle still picked that its source no longer knows (forgotten) is
+  listed with a view of its id only, not connected.
+  """
   @spec vehicles(fleet()) :: [%{vehicle: View.t(), picked_by: pid() | nil, busy: integer() | nil}]
   def vehicles(fleet \\ __MODULE__), do: GenServer.call(fleet, :vehicles)
 
@@ -190,13 +208,16 @@ defmodule Dolphin.Fleet do
     name = Keyword.fetch!(opts, :name)
     source = Keyword.get_lazy(opts, :source, fn -> Application.get_env(:dolphin, :vehicle_source, {Dolphin.Fleet.MAVLinkSource, nil}) end)
     PubSub.subscribe(:vehicles)
+    # Claims released on other nodes, and nodes gone with their claims, may
+    # make waiting picks servable.
+    :ok = Claims.watch()
+    :ok = :net_kernel.monitor_nodes(true)
 
     s = %{
       name: name,
       source: nil,
       events: Keyword.get(opts, :events, true),
-      # id => %{vehicle: View.t(), announced: boolean}: the latest view published
-      vehicles: %{},
+      # vehicle id => owner pid
       picked: %{},
       # pid => monitor ref (owners, waiting callers, runs)
       monitors: %{},
@@ -205,6 +226,9 @@ defmodule Dolphin.Fleet do
       busy: %{},
       runs: %{},
       waiters: [],
+      # vehicles claimed by another node's pick (Dolphin.Fleet.Claims), as
+      # learnt when claiming them failed; forgotten when claims are released
+      claimed_elsewhere: MapSet.new(),
       region_tick: false
     }
 
@@ -213,9 +237,7 @@ defmodule Dolphin.Fleet do
 
   defp use_source(s, source) do
     if is_atom(s.name), do: :persistent_term.put({__MODULE__, s.name}, source)
-    for id <- Map.keys(s.vehicles), do: Source.unsubscribe(id)
-    s = %{s | source: source, vehicles: %{}}
-    Enum.reduce(Source.list(source), s, &add_vehicle(&2, &1))
+    %{s | source: source}
   end
 
   @impl true
@@ -223,16 +245,10 @@ defmodule Dolphin.Fleet do
 
   @impl true
   def handle_call(:source, _from, s), do: {:reply, s.source, s}
-  # The vehicles of the new source were discovered before: no event for them.
-  def handle_call({:set_source, source}, _from, s),
-    do: {:reply, :ok, %{s | events: false} |> use_source(source) |> Map.put(:events, s.events) |> serve()}
+  def handle_call({:set_source, source}, _from, s), do: {:reply, :ok, s |> use_source(source) |> serve()}
 
   def handle_call(:vehicles, _from, s) do
-    list =
-      s.vehicles
-      |> Enum.sort()
-      |> Enum.map(fn {id, %{vehicle: v}} -> %{vehicle: v, picked_by: s.picked[id], busy: s.busy[id]} end)
-
+    list = Enum.map(known(s), fn v -> %{vehicle: v, picked_by: s.picked[v.id], busy: s.busy[v.id]} end)
     {:reply, list, s}
   end
 
@@ -256,18 +272,13 @@ defmodule Dolphin.Fleet do
   def handle_call({:reserve, run, owner, leaves, inherit}, _from, s) do
     # The owner's vehicles that are free, plus those the run already holds
     # (a watch handler's task reuses its failed task's vehicles); those first.
-    usable = fn id ->
-      entry = s.vehicles[id]
-      entry != nil and entry.vehicle.connected? and (s.busy[id] in [nil, run.id])
-    end
+    # Vehicles the source no longer knows cannot run anything.
+    mine = Enum.sort(picked_by(s, owner))
+    views = for id <- Enum.uniq(inherit ++ mine), {:ok, v} <- [Source.vehicle(s.source, id)], into: %{}, do: {id, v}
+    usable = fn id -> Map.has_key?(views, id) and views[id].connected? and s.busy[id] in [nil, run.id] end
+    pool = Enum.uniq(Enum.filter(inherit, usable) ++ Enum.filter(mine, &(usable.(&1) and s.busy[&1] == nil)))
 
-    pool =
-      (Enum.filter(inherit, usable) ++ Enum.filter(Enum.sort(picked_by(s, owner)), &(usable.(&1) and s.busy[&1] == nil)))
-      |> Enum.uniq()
-      # Vehicles the source no longer knows cannot run anything.
-      |> Enum.filter(&match?({:ok, _}, Source.vehicle(s.source, &1)))
-
-    case Allocation.solve(leaves, Enum.map(pool, &s.vehicles[&1].vehicle)) do
+    case Allocation.solve(leaves, Enum.map(pool, &views[&1])) do
       {:ok, assignment} ->
         busy = Enum.reduce(Map.values(assignment), s.busy, &Map.put(&2, &1, run.id))
         {:reply, {:ok, assignment}, %{monitor(s, run.pid) | busy: busy, runs: Map.put(s.runs, run.id, run.pid)}}
@@ -279,50 +290,15 @@ defmodule Dolphin.Fleet do
 
   def handle_call({:unreserve, run_id}, _from, s), do: {:reply, :ok, s |> unreserve_run(run_id) |> serve()}
 
+  # Whatever may make a waiting pick servable: a vehicle discovered,
+  # reconnected, changed in what picks match on (see Dolphin.Fleet.Source).
+  # A vehicle lost or forgotten only makes fewer vehicles available.
   @impl true
-  def handle_info({:dolphin, :vehicles, {:vehicle_discovered, id}}, s) do
-    case s.vehicles do
-      %{^id => _} -> {:noreply, serve(s)}
-      _ -> {:noreply, s |> add_vehicle(id) |> serve()}
-    end
-  end
+  def handle_info({:dolphin, :vehicles, {event, _id}}, s) when event in [:vehicle_discovered, :vehicle_reconnected, :vehicle_changed],
+    do: {:noreply, serve(s)}
 
-  # Gone for good (Dolphin.Vehicles.forget/1): heard again, it is discovered
-  # anew. One still picked stays picked, as a lost one does, until released.
-  def handle_info({:dolphin, :vehicles, {:vehicle_forgotten, id}}, s) do
-    case s.vehicles do
-      %{^id => entry} when is_map_key(s.picked, id) ->
-        {:noreply, put_in(s.vehicles[id], %{entry | announced: false, vehicle: %{entry.vehicle | connected?: false}})}
-
-      %{^id => _} ->
-        Source.unsubscribe(id)
-        {:noreply, %{s | vehicles: Map.delete(s.vehicles, id)}}
-
-      _ ->
-        {:noreply, s}
-    end
-  end
-
-  # The view saying so came first (see Dolphin.Fleet.Source).
-  def handle_info({:dolphin, :vehicles, {:vehicle_lost, id}}, s), do: {:noreply, connected(s, id, false)}
-  def handle_info({:dolphin, :vehicles, {:vehicle_reconnected, id}}, s), do: {:noreply, s |> connected(id, true) |> serve()}
-
-  def handle_info({:dolphin, {:vehicle_view, id}, {:view, %View{id: id} = new}}, s) do
-    case s.vehicles do
-      %{^id => %{vehicle: old} = entry} ->
-        entry = announce(s, %{entry | vehicle: new})
-        if s.events and entry.announced, do: changed(old, new)
-        s = put_in(s.vehicles[id], entry)
-
-        relevant =
-          old.type != new.type or old.payloads != new.payloads or old.position != new.position or old.connected? != new.connected?
-
-        {:noreply, if(relevant and s.waiters != [], do: serve(s), else: s)}
-
-      _ ->
-        {:noreply, s}
-    end
-  end
+  def handle_info({Claims, :released, _ids}, s), do: {:noreply, serve(%{s | claimed_elsewhere: MapSet.new()})}
+  def handle_info({:nodedown, _node}, s), do: {:noreply, serve(%{s | claimed_elsewhere: MapSet.new()})}
 
   def handle_info({:pick_timeout, ref}, s) do
     case Enum.split_with(s.waiters, &(&1.ref == ref)) do
@@ -353,46 +329,13 @@ defmodule Dolphin.Fleet do
 
   # --- vehicles ---
 
-  # Subscribed before reading: no view is missed in between.
-  defp add_vehicle(s, id) do
-    :ok = Source.subscribe(id)
-
-    case Source.vehicle(s.source, id) do
-      {:ok, v} ->
-        entry = announce(s, %{vehicle: v, announced: false})
-        put_in(s.vehicles[id], entry)
-
-      {:error, :unknown_vehicle} ->
-        # Another source's vehicle (tests run several fleets), or gone already.
-        Source.unsubscribe(id)
-        s
-    end
-  end
-
-  # vehicle_discovered once its type is known (the first heartbeat).
-  defp announce(s, %{announced: false, vehicle: %View{type: type} = v} = entry) when type != nil do
-    if s.events, do: Telemetry.emit(:vehicle_discovered, %{vehicle: v.id, type: type})
-    %{entry | announced: true}
-  end
-
-  defp announce(_s, entry), do: entry
-
-  defp connected(s, id, connected?) do
-    if s.events and Map.has_key?(s.vehicles, id),
-      do: Telemetry.emit(if(connected?, do: :vehicle_reconnected, else: :vehicle_lost), %{vehicle: id})
-
-    s
-  end
-
-  defp changed(old, new) do
-    if old.mode != new.mode and new.mode != nil, do: Telemetry.emit(:mode_changed, %{vehicle: new.id, mode: new.mode})
-    if old.armed? != new.armed?, do: Telemetry.emit(if(new.armed?, do: :armed, else: :disarmed), %{vehicle: new.id})
-
-    case {old.mission_progress, new.mission_progress} do
-      {{reached, _}, {reached, _}} -> :ok
-      {_, {reached, _}} when reached > 0 -> Telemetry.emit(:mission_item_reached, %{vehicle: new.id, seq: reached})
-      _ -> :ok
-    end
+  # The source's vehicles, and those picked that it no longer knows
+  # (forgotten while picked: they stay picked, not connected).
+  defp known(s) do
+    views = Source.views(s.source)
+    ids = MapSet.new(views, & &1.id)
+    gone = for {id, _owner} <- s.picked, not MapSet.member?(ids, id), do: %View{id: id, connected?: false}
+    Enum.sort_by(views ++ gone, & &1.id)
   end
 
   # --- picks ---
@@ -410,6 +353,7 @@ defmodule Dolphin.Fleet do
 
   defp release_vehicles(s, owner, ids) do
     mine = Enum.filter(ids, &(s.picked[&1] == owner))
+    if mine != [], do: Claims.release(mine)
     if s.events and mine != [], do: Telemetry.emit(:released, %{vehicles: Enum.sort(mine)})
     %{s | picked: Map.drop(s.picked, mine)}
   end
@@ -419,32 +363,18 @@ defmodule Dolphin.Fleet do
     %{s | busy: busy, runs: Map.delete(s.runs, run_id)}
   end
 
-  # Serves waiting picks in order; vehicles an earlier waiter could use are
-  # kept for it (first come, first served).
+  # Serves waiting picks in order, on the source's views read now; vehicles
+  # an earlier waiter could use are kept for it (first come, first served).
+  defp serve(%{waiters: []} = s), do: s
+
   defp serve(s) do
-    {s, retry} = serve_waiters(s)
-    if retry, do: serve(s), else: s
-  end
+    available = for v <- Source.views(s.source), v.connected?, s.picked[v.id] == nil, s.busy[v.id] == nil, do: v
 
-  # {s, retry?}: retry when vehicles about to be given turned out to be gone.
-  defp serve_waiters(s) do
-    available = for {id, %{vehicle: v}} <- Enum.sort(s.vehicles), v.connected?, s.picked[id] == nil, s.busy[id] == nil, do: v
-
-    {s, waiters, _claimed, retry} =
-      Enum.reduce(s.waiters, {s, [], MapSet.new(), false}, fn w, {s, kept, claimed, retry} ->
-        matching = Enum.filter(available, &(Map.has_key?(s.vehicles, &1.id) and matches?(w.req, &1) and not MapSet.member?(claimed, &1.id) and s.picked[&1.id] == nil))
-
-        if length(matching) >= w.req.count do
-          ids = matching |> Enum.take(w.req.count) |> Enum.map(& &1.id)
-
-          # A vehicle the source no longer knows (its process stopped for good
-          # without a loss first) is dropped, not given.
-          case Enum.filter(ids, &(Source.vehicle(s.source, &1) == {:error, :unknown_vehicle})) do
-            [] -> {give(s, w, ids), kept, claimed, retry}
-            gone -> {forget(s, gone), [w | kept], claimed, true}
-          end
-        else
-          {s, [w | kept], Enum.reduce(matching, claimed, &MapSet.put(&2, &1.id)), retry}
+    {s, waiters, _claimed} =
+      Enum.reduce(s.waiters, {s, [], MapSet.new()}, fn w, {s, kept, claimed} ->
+        case serve_waiter(s, w, available, claimed) do
+          {:given, s} -> {s, kept, claimed}
+          {:kept, s, matching} -> {s, [w | kept], Enum.reduce(matching, claimed, &MapSet.put(&2, &1.id))}
         end
       end)
 
@@ -452,15 +382,30 @@ defmodule Dolphin.Fleet do
 
     if not s.region_tick and Enum.any?(s.waiters, & &1.req.region) do
       Dolphin.Clock.send_after(self(), :region_tick, @region_tick)
-      {%{s | region_tick: true}, retry}
+      %{s | region_tick: true}
     else
-      {s, retry}
+      s
     end
   end
 
-  defp forget(s, ids) do
-    Enum.each(ids, &Source.unsubscribe/1)
-    %{s | vehicles: Map.drop(s.vehicles, ids)}
+  # Gives the waiter the first vehicles that match and that its cluster-wide
+  # claim gets; those another node's pick holds are left out and the next
+  # ones tried.
+  defp serve_waiter(s, w, available, claimed) do
+    matching =
+      Enum.filter(available, fn v ->
+        matches?(w.req, v) and not MapSet.member?(claimed, v.id) and s.picked[v.id] == nil and
+          not MapSet.member?(s.claimed_elsewhere, v.id)
+      end)
+
+    with true <- length(matching) >= w.req.count,
+         ids = matching |> Enum.take(w.req.count) |> Enum.map(& &1.id),
+         :ok <- Claims.claim(ids, w.owner) do
+      {:given, give(s, w, ids)}
+    else
+      false -> {:kept, s, matching}
+      {:error, {:taken, taken}} -> serve_waiter(%{s | claimed_elsewhere: MapSet.union(s.claimed_elsewhere, MapSet.new(taken))}, w, available, claimed)
+    end
   end
 
   defp give(s, w, ids) do
@@ -477,22 +422,26 @@ defmodule Dolphin.Fleet do
   end
 
   defp pick_error(s, req) do
+    vehicles = known(s)
+
     known =
-      s.vehicles
-      |> Enum.sort()
-      |> Enum.map_join(", ", fn {id, %{vehicle: v}} ->
+      Enum.map_join(vehicles, ", ", fn %View{id: id} = v ->
         status =
           cond do
             not v.connected? -> "lost"
             s.busy[id] -> "busy"
             s.picked[id] -> "picked"
+            MapSet.member?(s.claimed_elsewhere, id) -> "picked on another node"
             true -> "available"
           end
 
         "#{id} (#{v.type || "type unknown"}#{if v.payloads != [], do: " " <> inspect(v.payloads), else: ""}, #{status})"
       end)
 
-    n = Enum.count(s.vehicles, fn {id, %{vehicle: v}} -> v.connected? and s.picked[id] == nil and s.busy[id] == nil and matches?(req, v) end)
+    n =
+      Enum.count(vehicles, fn v ->
+        v.connected? and s.picked[v.id] == nil and s.busy[v.id] == nil and not MapSet.member?(s.claimed_elsewhere, v.id) and matches?(req, v)
+      end)
 
     %PickError{
       requirement: describe(req),

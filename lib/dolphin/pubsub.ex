@@ -6,8 +6,17 @@ defmodule Dolphin.PubSub do
 
   Topics: `{:vehicle, sysid}` (that vehicle's state changes and link events),
   `{:vehicle_view, sysid}` (that vehicle's `Dolphin.Vehicles.View`, whole, on
-  each change), `:vehicles` (discoveries, losses and reconnections of every
-  vehicle) and `{:dolphin_signals, table}` (a script's signals).
+  each change, from its owner through `Dolphin.Vehicles.Views.put/1`),
+  `:vehicles` (discoveries, losses, reconnections and forgettings of every
+  vehicle, and `{:vehicle_changed, id}` when a view changes what picks match
+  on), `:events` (`Dolphin.Telemetry`) and `{:dolphin_signals, table}` (a
+  script's signals).
+
+  Published data is a notice of a change: the data itself has one owner
+  (`Dolphin.Vehicles.Views` for views, a signal table for signals), which
+  anyone may read; a subscriber takes what a notice carries whole (the
+  engine's condition watchers hold the latest views as their snapshot) and
+  never rebuilds the owner's data from changes.
   """
 
   @registry __MODULE__

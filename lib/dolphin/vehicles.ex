@@ -29,12 +29,18 @@ defmodule Dolphin.Vehicles do
 
   A vehicle's state lives in its process and nowhere else. Besides the raw
   changes above (for the protocols that follow the vehicle closely), the
-  process publishes a `Dolphin.Vehicles.View` — what the fleet and the
-  engine's conditions read — on topic `{:vehicle_view, sysid}` each time the
-  view changes (`subscribe_view/1`), the view before the loss or
-  reconnection event when the vehicle goes silent or is heard again. A
-  subscriber keeps the latest view it got, or asks `view/1`; nobody rebuilds
-  a vehicle from its changes.
+  process writes a `Dolphin.Vehicles.View` — what the fleet and the engine's
+  conditions read — into `Dolphin.Vehicles.Views` each time the view
+  changes, the view before the loss or reconnection event when the vehicle
+  goes silent or is heard again. That table holds the latest view of each
+  vehicle for anyone to read (`view/1`, `list/0`: no call to the vehicle's
+  process), publishes it on topic `{:vehicle_view, sysid}`
+  (`subscribe_view/1`) and turns its transitions into the `Dolphin.Telemetry`
+  events of vehicles (`vehicle_discovered`, `mode_changed`, `armed`,
+  `vehicle_lost`, ...). Nobody else keeps a copy to maintain: a subscriber
+  takes the latest view whole, and nobody rebuilds a vehicle from its
+  changes. A vehicle heard by another ground station node can be put in the
+  table too: it is then listed and read here like a local one.
 
   ## Paths: one vehicle heard on several links
 
@@ -82,15 +88,14 @@ defmodule Dolphin.Vehicles do
   @gcs_type 6
   @no_autopilot 8
 
-  @doc "The system ids of the known vehicles, ascending."
+  @doc "The system ids of the known vehicles, ascending: those with a view in `Dolphin.Vehicles.Views`, and local ones not yet through their first frame."
   @spec list() :: [byte()]
   def list do
-    local = Registry.select(Dolphin.Registry, [{{{:vehicle, :"$1"}, :_, :_}, [], [:"$1"]}])
-
-    case Dolphin.Cluster.Mirror.ids() do
-      [] -> Enum.sort(local)
-      remote -> Enum.sort(Enum.uniq(local ++ remote))
-    end
+    Dolphin.Registry
+    |> Registry.select([{{{:vehicle, :"$1"}, :_, :_}, [], [:"$1"]}])
+    |> Enum.concat(Dolphin.Vehicles.Views.ids())
+    |> Enum.uniq()
+    |> Enum.sort()
   end
 
   @doc "Whether a vehicle has been heard and has booted (`Dolphin.Vehicles.State.ready?/1`)."
@@ -115,22 +120,16 @@ defmodule Dolphin.Vehicles do
     end
   end
 
-  @doc "The latest view of a vehicle (see \"One owner of a vehicle's state\")."
+  @doc "The latest view of a vehicle (see \"One owner of a vehicle's state\"), read from `Dolphin.Vehicles.Views`."
   @spec view(byte()) :: {:ok, Dolphin.Vehicles.View.t()} | {:error, :unknown_vehicle}
   def view(sysid) do
-    case local(sysid) do
-      nil ->
-        # A vehicle of another station: the mirror has its latest view.
-        case Dolphin.Cluster.Mirror.view(sysid) do
-          {:ok, view} -> {:ok, view}
-          :error -> {:error, :unknown_vehicle}
-        end
-
-      pid ->
-        case call_pid(sysid, pid, :view, 5_000, 0) do
-          {:ok, view} -> {:ok, view}
-          _ -> {:error, :unknown_vehicle}
-        end
+    with {:error, :unknown_vehicle} <- Dolphin.Vehicles.Views.get(sysid) do
+      # Discovered an instant ago: its process has not taken its first frame
+      # (it will at once, before anything else), so it has no row yet.
+      case call_vehicle(sysid, :view) do
+        {:ok, view} -> {:ok, view}
+        _ -> {:error, :unknown_vehicle}
+      end
     end
   end
 
@@ -237,21 +236,27 @@ defmodule Dolphin.Vehicles do
   end
 
   @doc """
-  Forgets a vehicle: its process stops (no "lost" event, but
-  `{:vehicle_forgotten, sysid}`, and the fleet forgets it unless it is
-  picked); it is discovered anew, with a `vehicle_discovered` event, if it
-  speaks again. For vehicles known to be gone for good, such as a
-  finished simulation's.
+  Forgets a vehicle: its process stops and its view is deleted from
+  `Dolphin.Vehicles.Views` (no "lost" event, but `{:vehicle_forgotten,
+  sysid}`; a vehicle picked stays picked, unavailable, until released); it
+  is discovered anew, with a `vehicle_discovered` event, if it speaks again.
+  For vehicles known to be gone for good, such as a finished simulation's.
   """
   @spec forget(byte()) :: :ok
   def forget(sysid) do
-    if pid = local(sysid) do
-      DynamicSupervisor.terminate_child(Dolphin.Vehicles.Supervisor, pid)
-      PubSub.publish(:vehicles, {:vehicle_forgotten, sysid})
+    pid = local(sysid)
+    if pid, do: DynamicSupervisor.terminate_child(Dolphin.Vehicles.Supervisor, pid)
+
+    if pid == nil and Dolphin.Cluster.Mirror.route(sysid) do
+      # Another station's vehicle is forgotten here only (its station keeps it).
+      Dolphin.Cluster.Mirror.forget(sysid)
+    else
+      # A vehicle put in the table from elsewhere has no process here.
+      known? = pid != nil or match?({:ok, _}, Dolphin.Vehicles.Views.get(sysid))
+      Dolphin.Vehicles.Views.delete(sysid)
+      if known?, do: PubSub.publish(:vehicles, {:vehicle_forgotten, sysid})
     end
 
-    # Another station's vehicle is forgotten here only (its station keeps it).
-    if Dolphin.Cluster.Mirror.route(sysid), do: Dolphin.Cluster.Mirror.forget(sysid)
     :ok
   end
 

@@ -30,7 +30,7 @@ defmodule Dolphin.EngineCase do
     n = System.unique_integer([:positive])
     source = :"fakes_#{n}"
     fleet = :"fleet_#{n}"
-    start_supervised!({TestSource, name: source})
+    start_supervised!({TestSource, name: source, events: false})
     start_supervised!({Dolphin.Fleet, name: fleet, source: TestSource.source(source), events: false})
     Context.put(%Context{fleet: fleet, source: TestSource.source(source), owner: self()})
     Dolphin.Telemetry.subscribe()

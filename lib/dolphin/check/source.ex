@@ -20,6 +20,9 @@ defmodule Dolphin.Check.Source do
   def vehicle(%{test: t}, id), do: TestSource.vehicle(t, id)
 
   @impl true
+  def views(%{test: t}), do: TestSource.views(t)
+
+  @impl true
   def set_timeout(%{test: t}, id, ms), do: TestSource.set_timeout(t, id, ms)
 
   @impl true

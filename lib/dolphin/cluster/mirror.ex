@@ -11,12 +11,13 @@ defmodule Dolphin.Cluster.Mirror do
 
     * routes: `Dolphin.Vehicles.whereis/1` falls back to the chosen station's
       vehicle process (`route/1`, read from an ETS table this process owns;
-      a local vehicle of the same id always wins), `Dolphin.Vehicles.list/0`
-      includes the mirrored ids, `Dolphin.Vehicles.view/1` returns the
-      mirrored view;
-    * publishes on this node's `Dolphin.PubSub` exactly what a local vehicle
-      would: `{:vehicle_view, id}` `{:view, view}` for each new view of the
-      chosen station, `{:vehicle, id}` `{:state, id, changes}`, and on
+      a local vehicle of the same id always wins);
+    * puts each new view of the chosen station in `Dolphin.Vehicles.Views`,
+      as a local vehicle does: `Dolphin.Vehicles.list/0` and `view/1` read
+      it there, it is published on `{:vehicle_view, id}` and its transitions
+      become this node's events (`mode_changed`, `vehicle_lost`, ...);
+    * publishes on this node's `Dolphin.PubSub` what else a local vehicle
+      would: `{:vehicle, id}` `{:state, id, changes}`, and on
       `:vehicles` `{:vehicle_discovered | :vehicle_lost |
       :vehicle_reconnected | :vehicle_forgotten, id}`;
     * fails over: when the chosen station's node goes down, or it stops
@@ -183,7 +184,11 @@ defmodule Dolphin.Cluster.Mirror do
   def handle_call({:forget, id}, _from, s) do
     if Map.has_key?(s.vehicles, id) do
       :ets.delete(@table, id)
-      unless local?(id), do: PubSub.publish(:vehicles, {:vehicle_forgotten, id})
+
+      unless local?(id) do
+        Dolphin.Vehicles.Views.delete(id)
+        PubSub.publish(:vehicles, {:vehicle_forgotten, id})
+      end
     end
 
     {:reply, :ok, %{s | vehicles: Map.delete(s.vehicles, id)}}
@@ -454,8 +459,10 @@ defmodule Dolphin.Cluster.Mirror do
   end
 
   # Every local publication of a remote vehicle's view goes through here:
-  # the route table first (whoever hears of the view finds it in view/1),
-  # then the subscribers, unless a local vehicle of that id owns the topic.
+  # the route table first (whoever hears of the view finds where to send),
+  # then Dolphin.Vehicles.Views, which keeps it for readers, publishes it and
+  # turns its transitions into events as for a vehicle of this node's own —
+  # unless a local vehicle of that id owns the view.
   defp publish_view(_id, _pid, nil), do: :ok
 
   defp publish_view(id, pid, view) do
@@ -465,7 +472,7 @@ defmodule Dolphin.Cluster.Mirror do
 
       _ ->
         :ets.insert(@table, {id, pid, view})
-        unless local?(id), do: PubSub.publish({:vehicle_view, id}, {:view, view})
+        unless local?(id), do: Dolphin.Vehicles.Views.put(view)
     end
   end
 

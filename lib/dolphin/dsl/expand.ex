@@ -1,9 +1,10 @@
 defmodule Dolphin.DSL.Expand do
   @moduledoc false
   # What the macros of Dolphin.DSL expand to, built at compile time: a
-  # condition becomes a `Dolphin.Engine.Cond` of a closure in three-valued
-  # logic (with its source text and script line), an action a closure, and a
-  # statement records its script line first.
+  # condition becomes a `Dolphin.Engine.Cond` of a function of its snapshot
+  # (its readers rewritten to read the snapshot) in three-valued logic (with
+  # its source text and script line), an action a closure, and a statement
+  # records its script line first.
 
   # The line goes first so that an error whose stack has lost the script's
   # frame (raised in another process, say) is still reported at it.
@@ -27,9 +28,82 @@ defmodule Dolphin.DSL.Expand do
 
   @spec cond_ast(Macro.t(), Macro.Env.t()) :: Macro.t()
   def cond_ast(c, caller) do
+    snapshot = Macro.var(:snapshot, __MODULE__)
+    {body, follow} = reads(c, snapshot, caller)
+
     quote do
-      Dolphin.Engine.Cond.new(fn -> unquote(logic(c)) end, source: unquote(Macro.to_string(c)), meta: unquote(meta(caller)))
+      Dolphin.Engine.Cond.new(fn unquote(snapshot) -> unquote(logic(body, snapshot)) end,
+        source: unquote(Macro.to_string(c)),
+        meta: unquote(meta(caller)),
+        follow: unquote(follow)
+      )
     end
+  end
+
+  # The language's readers, as a condition's expression calls them (imported
+  # from Dolphin.DSL), and their snapshot versions in Dolphin.Engine.Snapshot.
+  @readers [
+    battery: 1,
+    position: 1,
+    altitude: 1,
+    relative_altitude: 1,
+    mode: 1,
+    armed?: 1,
+    connected?: 1,
+    mission_progress: 1,
+    poll: 1,
+    poll: 2
+  ]
+
+  # Modules whose functions read nothing a condition follows: calling them
+  # hides no read (a reader in a `fn` given to them is rewritten like any).
+  @plain [Kernel, Enum, Map, MapSet, List, Keyword, Tuple, String, Integer, Float, Access, Stream, Range]
+
+  # The condition with its readers rewritten to read `snapshot`, and whether
+  # it calls functions that may read what the rewriting cannot see (a
+  # script's anonymous function, a module's own function, another
+  # module's): such a condition is re-evaluated on the changes of the
+  # vehicles its task flies too (Dolphin.Engine.Cond, `follow`).
+  defp reads(c, snapshot, caller) do
+    Macro.prewalk(c, false, fn
+      {name, meta, args} = call, follow when is_atom(name) and is_list(args) ->
+        arity = length(args)
+
+        cond do
+          {name, arity} in @readers and imported?(caller, name, arity, Dolphin.DSL) ->
+            {{{:., meta, [Dolphin.Engine.Snapshot, name]}, meta, [snapshot | args]}, follow}
+
+          # Operators, special forms and the language's words read nothing hidden.
+          Macro.operator?(name, arity) or Macro.special_form?(name, arity) or name in [:fn, :->, :__block__] ->
+            {call, follow}
+
+          true ->
+            {call, follow or not Enum.any?(Macro.Env.lookup_import(caller, {name, arity}), fn {_, m} -> plain?(m) end)}
+        end
+
+      {{:., _, [module, _fun]}, meta, _} = call, follow ->
+        case Macro.expand(module, caller) do
+          module when is_atom(module) -> {call, follow or not plain?(module)}
+          # A field of a value (`position(v).h`) reads nothing hidden; a call through a variable may.
+          _value -> {call, follow or not Keyword.get(meta, :no_parens, false)}
+        end
+
+      {{:., _, [_fun]}, _, _} = call, _follow ->
+        {call, true}
+
+      other, follow ->
+        {other, follow}
+    end)
+  end
+
+  defp imported?(caller, name, arity, module), do: {:function, module} in Macro.Env.lookup_import(caller, {name, arity})
+
+  # Elixir's own modules above, Erlang's (`:math`), Dolphin's.
+  defp plain?(module) when module in @plain, do: true
+
+  defp plain?(module) do
+    name = Atom.to_string(module)
+    String.starts_with?(name, "Elixir.Dolphin.") or not String.starts_with?(name, "Elixir.")
   end
 
   # `one_of`/`all_of` clauses `condition -> task` as `{cond, task}` pairs.
@@ -57,49 +131,55 @@ defmodule Dolphin.DSL.Expand do
   # rewritten; anything else is a leaf, evaluated as written, nil reading as
   # unknown. `and`/`or` keep Elixir's short-circuit where the left side
   # decides alone.
-  @spec logic(Macro.t()) :: Macro.t()
-  def logic({op, _, [a, b]}) when op in [:and, :&&] do
+  # `snapshot`: the variable of the condition's snapshot, through which a
+  # leaf that is itself a condition (or a function) is evaluated; nil where
+  # there is none (`filter/2`'s function).
+  @spec logic(Macro.t(), Macro.t()) :: Macro.t()
+  def logic(expr, snapshot \\ nil)
+
+  def logic({op, _, [a, b]}, snapshot) when op in [:and, :&&] do
     quote do
-      case Dolphin.Engine.Cond.truth(unquote(logic(a))) do
+      case Dolphin.Engine.Cond.truth(unquote(logic(a, snapshot))) do
         false -> false
-        left -> Dolphin.Engine.Cond.both(left, unquote(logic(b)))
+        left -> Dolphin.Engine.Cond.both(left, unquote(logic(b, snapshot)))
       end
     end
   end
 
-  def logic({op, _, [a, b]}) when op in [:or, :||] do
+  def logic({op, _, [a, b]}, snapshot) when op in [:or, :||] do
     quote do
-      case Dolphin.Engine.Cond.truth(unquote(logic(a))) do
+      case Dolphin.Engine.Cond.truth(unquote(logic(a, snapshot))) do
         true -> true
-        left -> Dolphin.Engine.Cond.either(left, unquote(logic(b)))
+        left -> Dolphin.Engine.Cond.either(left, unquote(logic(b, snapshot)))
       end
     end
   end
 
-  def logic({op, _, [a]}) when op in [:not, :!], do: quote(do: Dolphin.Engine.Cond.negate(unquote(logic(a))))
+  def logic({op, _, [a]}, snapshot) when op in [:not, :!], do: quote(do: Dolphin.Engine.Cond.negate(unquote(logic(a, snapshot))))
 
   # `x == nil`, `x != nil` ask whether a value is known: a plain test.
-  def logic({op, _, [a, b]} = test) when op in @equality and (a == nil or b == nil), do: test
+  def logic({op, _, [a, b]} = test, _snapshot) when op in @equality and (a == nil or b == nil), do: test
 
-  def logic({op, _, [a, b]}) when op in @comparisons,
-    do: quote(do: Dolphin.Engine.Cond.compare(unquote(op), unquote(operand(a)), unquote(operand(b))))
+  def logic({op, _, [a, b]}, snapshot) when op in @comparisons,
+    do: quote(do: Dolphin.Engine.Cond.compare(unquote(op), unquote(operand(a, snapshot)), unquote(operand(b, snapshot))))
 
-  def logic({:in, _, [a, b]}), do: quote(do: Dolphin.Engine.Cond.member(unquote(operand(a)), unquote(b)))
+  def logic({:in, _, [a, b]}, snapshot), do: quote(do: Dolphin.Engine.Cond.member(unquote(operand(a, snapshot)), unquote(b)))
 
-  def logic({:__block__, meta, [_ | _] = exprs}) do
+  def logic({:__block__, meta, [_ | _] = exprs}, snapshot) do
     {init, [last]} = Enum.split(exprs, -1)
-    {:__block__, meta, init ++ [logic(last)]}
+    {:__block__, meta, init ++ [logic(last, snapshot)]}
   end
 
-  def logic(leaf), do: quote(do: Dolphin.Engine.Cond.truth(unquote(leaf)))
+  def logic(leaf, nil), do: quote(do: Dolphin.Engine.Cond.truth(unquote(leaf)))
+  def logic(leaf, snapshot), do: quote(do: Dolphin.Engine.Cond.truth(unquote(leaf), unquote(snapshot)))
 
   # An operand of a comparison: arithmetic on an unknown value is unknown
   # (not an ArithmeticError); a nested condition keeps its unknowns.
-  defp operand({op, _, [a, b]}) when op in @arithmetic,
-    do: quote(do: Dolphin.Engine.Cond.arith(unquote(op), unquote(operand(a)), unquote(operand(b))))
+  defp operand({op, _, [a, b]}, snapshot) when op in @arithmetic,
+    do: quote(do: Dolphin.Engine.Cond.arith(unquote(op), unquote(operand(a, snapshot)), unquote(operand(b, snapshot))))
 
-  defp operand({:-, _, [a]}) when not is_number(a), do: quote(do: Dolphin.Engine.Cond.arith(:-, unquote(operand(a))))
-  defp operand({op, _, args} = c) when op in [:and, :or, :not, :&&, :||, :!] and is_list(args), do: logic(c)
-  defp operand({op, _, [_, _]} = c) when op in @comparisons, do: logic(c)
-  defp operand(other), do: other
+  defp operand({:-, _, [a]}, snapshot) when not is_number(a), do: quote(do: Dolphin.Engine.Cond.arith(:-, unquote(operand(a, snapshot))))
+  defp operand({op, _, args} = c, snapshot) when op in [:and, :or, :not, :&&, :||, :!] and is_list(args), do: logic(c, snapshot)
+  defp operand({op, _, [_, _]} = c, snapshot) when op in @comparisons, do: logic(c, snapshot)
+  defp operand(other, _snapshot), do: other
 end

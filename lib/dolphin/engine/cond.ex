@@ -1,20 +1,28 @@
 defmodule Dolphin.Engine.Cond do
   @moduledoc """
-  A condition: a closure returning a truthy or falsy value, with the source
-  text it was written as (for events and errors).
+  A condition: a function of the `Dolphin.Engine.Snapshot` it reads,
+  returning a truthy or falsy value, with the source text it was written as
+  (for events and errors).
 
-      iex> c = Dolphin.Engine.Cond.new(fn -> 1 + 1 == 2 end, source: "1 + 1 == 2")
+      iex> c = Dolphin.Engine.Cond.new(fn _snapshot -> 1 + 1 == 2 end, source: "1 + 1 == 2")
       iex> Dolphin.Engine.Cond.evaluate(c)
       {:ok, true}
 
   The script macros (`until(t, battery(v1) < 0.3)`) build these from the
-  expression. The engine evaluates a condition when its task starts, again
-  whenever something it read changes — the state of a vehicle it read
-  (`battery/1`, `position/1`, ...), a signal (`poll/1`): its node's
-  `Dolphin.Engine.Watcher` follows exactly those and hands the condition a
-  snapshot of them — and on a slow tick for conditions on anything else
-  (time). A closure returning another closure or condition is evaluated
-  through it, so `until(t, my_condition)` works with a variable.
+  expression, rewriting its readers to read the snapshot
+  (`Dolphin.Engine.Snapshot.battery(snapshot, v1)`). The engine evaluates a
+  condition when its task starts, again whenever something it read changes
+  — the state of a vehicle it read, a signal it polled: its node's
+  `Dolphin.Engine.Watcher` follows those and hands the condition a snapshot
+  of them — and on a slow tick for conditions on anything else (time). A
+  condition returning another closure or condition is evaluated through it,
+  on the same snapshot, so `until(t, my_condition)` works with a variable.
+
+  A function of no argument is a condition too, but one whose reads nobody
+  sees: it reads live data (`Dolphin.DSL.battery/1` outside a condition's
+  expression reads the vehicle's source). Such a condition, and one the
+  macros found calling functions they cannot see into (`follow: true`), is
+  also re-evaluated on every change of the vehicles its task flies.
 
   ## Unknown values
 
@@ -34,49 +42,65 @@ defmodule Dolphin.Engine.Cond do
       true
       iex> Cond.either(Cond.unknown(), true)
       true
-      iex> Cond.evaluate(Cond.new(fn -> Cond.compare(:>=, nil, 0.9) end))
+      iex> Cond.evaluate(Cond.new(fn _ -> Cond.compare(:>=, nil, 0.9) end))
       {:ok, false}
   """
 
   @enforce_keys [:fun]
-  defstruct fun: nil, source: "condition", meta: %{}
+  defstruct fun: nil, source: "condition", meta: %{}, follow: false
 
-  @type t :: %__MODULE__{fun: (() -> term()), source: String.t(), meta: map()}
+  @type t :: %__MODULE__{fun: (Dolphin.Engine.Snapshot.t() | nil -> term()) | (() -> term()), source: String.t(), meta: map(), follow: boolean()}
 
   # A private atom: no value a script computes can be mistaken for it.
   @unknown :"$dolphin_unknown"
 
-  @doc "A condition from a 0-arity function; options `:source` (text), `:meta`."
-  @spec new((() -> term()), keyword()) :: t()
+  @doc """
+  A condition from a function of the snapshot (or of no argument: see the
+  module doc); options `:source` (text), `:meta`, `:follow` (also re-evaluate
+  it on the changes of the vehicles its task flies; default: for a function
+  of no argument only).
+  """
+  @spec new((Dolphin.Engine.Snapshot.t() | nil -> term()) | (() -> term()), keyword()) :: t()
   def new(fun, opts \\ [])
-  def new(fun, opts) when is_function(fun, 0), do: %__MODULE__{fun: fun, source: Keyword.get(opts, :source, "condition"), meta: Map.new(Keyword.get(opts, :meta, %{}))}
-  def new(other, _opts), do: raise(ArgumentError, "a condition is a function of no arguments, got: #{inspect(other)}")
 
-  @doc "Converts a condition, a 0-arity function or a `condition` task to a `Cond`."
-  @spec from(t() | (() -> term()) | Dolphin.Engine.Condition.t()) :: t()
+  def new(fun, opts) when is_function(fun, 1) or is_function(fun, 0) do
+    follow = Keyword.get(opts, :follow, is_function(fun, 0))
+    %__MODULE__{fun: fun, source: Keyword.get(opts, :source, "condition"), meta: Map.new(Keyword.get(opts, :meta, %{})), follow: follow}
+  end
+
+  def new(other, _opts), do: raise(ArgumentError, "a condition is a function of the snapshot (or of no arguments), got: #{inspect(other)}")
+
+  @doc "Converts a condition, a function (of the snapshot or of no argument) or a `condition` task to a `Cond`."
+  @spec from(t() | (Dolphin.Engine.Snapshot.t() | nil -> term()) | (() -> term()) | Dolphin.Engine.Condition.t()) :: t()
   def from(%__MODULE__{} = c), do: c
   def from(%Dolphin.Engine.Condition{cond: c}), do: c
-  def from(fun) when is_function(fun, 0), do: new(fun)
-  def from(other), do: raise(ArgumentError, "not a condition: #{inspect(other)} (use a boolean expression, a function of no arguments or condition/1)")
+  def from(fun) when is_function(fun, 0) or is_function(fun, 1), do: new(fun)
+  def from(other), do: raise(ArgumentError, "not a condition: #{inspect(other)} (use a boolean expression, a function of the snapshot or of no arguments, or condition/1)")
 
   @doc """
-  Evaluates a condition: `{:ok, boolean}`, or `{:error, exception, stacktrace}`
-  if it raised (or threw, or exited). Vehicles and signals it reads are read
-  live, unless `Dolphin.Engine.Watcher.evaluate/3` evaluates it on a snapshot.
+  Evaluates a condition on `snapshot` (`nil`, the default: on live data):
+  `{:ok, boolean}`, or `{:error, exception, stacktrace}` if it raised (or
+  threw, or exited), or `{:read, read}` when it asked for a vehicle or a
+  signal table that is not in the snapshot (`Dolphin.Engine.Snapshot`): the
+  caller adds it and evaluates again.
   """
-  @spec evaluate(t()) :: {:ok, boolean()} | {:error, Exception.t(), Exception.stacktrace()}
-  def evaluate(%__MODULE__{} = c) do
-    {:ok, truthy(value(c.fun.()))}
+  @spec evaluate(t(), Dolphin.Engine.Snapshot.t() | nil) ::
+          {:ok, boolean()} | {:error, Exception.t(), Exception.stacktrace()} | {:read, Dolphin.Engine.Snapshot.read()}
+  def evaluate(%__MODULE__{} = c, snapshot \\ nil) do
+    {:ok, truthy(value(c, snapshot))}
   rescue
     e -> {:error, e, __STACKTRACE__}
   catch
+    # A reader's request (Dolphin.Engine.Snapshot): only a snapshot's readers make one.
+    :throw, {:"$dolphin_read", read} when snapshot != nil -> {:read, read}
     kind, reason -> {:error, %ErlangError{original: {kind, reason}}, __STACKTRACE__}
   end
 
-  defp value(f) when is_function(f, 0), do: value(f.())
-  defp value(%__MODULE__{fun: f}), do: value(f.())
-  defp value(%Dolphin.Engine.Condition{cond: c}), do: value(c)
-  defp value(v), do: v
+  defp value(f, snapshot) when is_function(f, 1), do: value(f.(snapshot), snapshot)
+  defp value(f, snapshot) when is_function(f, 0), do: value(f.(), snapshot)
+  defp value(%__MODULE__{fun: f}, snapshot), do: value(f, snapshot)
+  defp value(%Dolphin.Engine.Condition{cond: c}, snapshot), do: value(c, snapshot)
+  defp value(v, _snapshot), do: v
 
   defp truthy(v), do: v != nil and v != false and v != @unknown
 
@@ -119,11 +143,11 @@ defmodule Dolphin.Engine.Cond do
   @doc """
   The truth value of an expression in a condition: `true`, `false` or
   unknown (`nil` reads as unknown). A function or condition is evaluated
-  through, as `evaluate/1` does.
+  through, on `snapshot`, as `evaluate/2` does.
   """
-  @spec truth(term()) :: boolean() | atom()
-  def truth(v) do
-    case value(v) do
+  @spec truth(term(), Dolphin.Engine.Snapshot.t() | nil) :: boolean() | atom()
+  def truth(v, snapshot \\ nil) do
+    case value(v, snapshot) do
       v when v == nil or v == @unknown -> @unknown
       false -> false
       _ -> true

@@ -28,7 +28,9 @@ defmodule Dolphin.Engine.Runner do
   # result comes with the acknowledgement, so that the parent handles it before
   # anything else: the order of events stays deterministic), or {:error, reason}.
   def start_node(task, ctx, run, parent_id) do
-    pid = :proc_lib.spawn_link(__MODULE__, :init_node, [task, self(), ctx, run, parent_id])
+    # One argument: proc_lib makes a dummy argument list of the initial
+    # call's arity on every exit, a cost a burst of ending nodes feels.
+    pid = :proc_lib.spawn_link(__MODULE__, :init_node, [{task, self(), ctx, run, parent_id}])
 
     receive do
       {:"$dolphin_started", ^pid, nil} ->
@@ -91,7 +93,7 @@ defmodule Dolphin.Engine.Runner do
   # --- the node process ---
 
   @doc false
-  def init_node(task, parent, ctx, run, parent_id) do
+  def init_node({task, parent, ctx, run, parent_id}) do
     Process.flag(:trap_exit, true)
     Context.put(ctx)
 
@@ -113,7 +115,7 @@ defmodule Dolphin.Engine.Runner do
       # [{key, cond}] in watch order
       watches: [],
       # what those conditions read, and the vehicle of a platform task
-      watcher: Watcher.new(Context.source(ctx)),
+      watcher: Watcher.new(Context.source(ctx), ctx.signals),
       # key => {ref, token}
       timers: %{},
       # key => {:pending, ref, token, fun} | {:running, pid}
@@ -185,7 +187,7 @@ defmodule Dolphin.Engine.Runner do
 
       {:"$dolphin_tick", token} ->
         case s.tick do
-          {_ref, ^token} -> %{s | tick: nil} |> reevaluate() |> ensure_tick() |> loop()
+          {_ref, ^token} -> %{s | tick: nil} |> reevaluate(:all) |> ensure_tick() |> loop()
           _ -> loop(s)
         end
 
@@ -197,10 +199,10 @@ defmodule Dolphin.Engine.Runner do
             do: feed(s, {:vehicle_lost, id}),
             else: s
 
-        loop(reevaluate(s))
+        loop(reevaluate(s, {:vehicle, id}))
 
-      {:dolphin, {:dolphin_signals, _}, _} ->
-        loop(reevaluate(s))
+      {:dolphin, {:dolphin_signals, table}, _} ->
+        loop(reevaluate(s, {:signals, table}))
 
       {:dolphin_platform, ^platform, msg} when platform != nil ->
         # Once it reported its end, the platform's process is going: nothing to stop.
@@ -353,7 +355,7 @@ defmodule Dolphin.Engine.Runner do
     end
   end
 
-  defp effect({:watch, key, cond}, s), do: ensure_tick(%{s | watches: s.watches ++ [{key, cond}]})
+  defp effect({:watch, key, cond}, s), do: ensure_tick(%{follow_flown(s, cond) | watches: s.watches ++ [{key, cond}]})
   defp effect({:unwatch, key}, s), do: %{s | watches: List.keydelete(s.watches, key, 0), watcher: Watcher.forget(s.watcher, key)}
 
   defp effect({:timer, key, ms}, s) do
@@ -423,10 +425,28 @@ defmodule Dolphin.Engine.Runner do
 
   # --- conditions ---
 
-  defp reevaluate(%{watches: []} = s), do: s
+  # A condition whose reads nobody sees (it calls functions the macros could
+  # not see into, or reads live) is re-evaluated on the changes of the
+  # vehicles its node's task flies: followed from when it is watched.
+  defp follow_flown(s, %{follow: true}) do
+    watcher = Enum.reduce(flown(s.task), s.watcher, fn id, w -> elem(Watcher.follow(w, id), 1) end)
+    %{s | watcher: watcher}
+  end
 
-  defp reevaluate(s) do
-    Enum.reduce(Enum.map(s.watches, &elem(&1, 0)), s, fn key, s ->
+  defp follow_flown(s, _cond), do: s
+
+  defp flown(%PlatformTask{vehicle: v}) when v != nil, do: [v]
+  defp flown(task), do: task |> Task.children() |> Enum.flat_map(&flown/1) |> Enum.uniq()
+
+  # The watched conditions a change may concern, evaluated again in watch
+  # order: those that read what changed, those that follow their task's
+  # vehicles; all of them on the slow tick.
+  defp reevaluate(%{watches: []} = s, _changed), do: s
+
+  defp reevaluate(s, changed) do
+    keys = for {key, cond} <- s.watches, concerns?(s, key, cond, changed), do: key
+
+    Enum.reduce(keys, s, fn key, s ->
       case List.keyfind(s.watches, key, 0) do
         nil ->
           s
@@ -448,6 +468,10 @@ defmodule Dolphin.Engine.Runner do
       end
     end)
   end
+
+  defp concerns?(_s, _key, _cond, :all), do: true
+  defp concerns?(_s, _key, %{follow: true}, {:vehicle, _}), do: true
+  defp concerns?(s, key, _cond, read), do: Watcher.reads?(s.watcher, key, read)
 
   defp ensure_tick(%{watches: [_ | _], tick: nil} = s) do
     token = make_ref()

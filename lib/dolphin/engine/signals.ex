@@ -19,7 +19,10 @@ defmodule Dolphin.Engine.Signals do
   its own; `Dolphin.Engine.Signals` itself is the application's default
   table). Every change is published on `Dolphin.PubSub` topic
   `{:dolphin_signals, table}`, and conditions that poll a signal are
-  re-evaluated on it.
+  re-evaluated on it: a condition reads a table through its snapshot
+  (`Dolphin.Engine.Snapshot.poll/2`, `Dolphin.Engine.Snapshot.signals/2`),
+  which has its node's watcher follow the table; the functions here read
+  the table as it is.
   """
 
   alias Dolphin.PubSub
@@ -60,24 +63,18 @@ defmodule Dolphin.Engine.Signals do
   @doc "Whether signal `key` has a value."
   @spec poll(table(), term()) :: boolean()
   def poll(table, key) do
-    track(table)
     :ets.member(table, key)
   end
 
   @doc "Whether signal `key` has a value for which `fun` is truthy."
   @spec poll(table(), term(), (term() -> as_boolean(term()))) :: boolean()
   def poll(table, key, fun) when is_function(fun, 1) do
-    track(table)
     Enum.any?(:ets.lookup(table, key), fn {_, v} -> fun.(v) end)
   end
 
   @doc "The values of signal `key`."
   @spec values(table(), term()) :: [term()]
   def values(table, key) do
-    track(table)
     for {_, v} <- :ets.lookup(table, key), do: v
   end
-
-  # A condition that reads signals is re-evaluated when they change.
-  defp track(table), do: Dolphin.Engine.Watcher.read_signals(table)
 end

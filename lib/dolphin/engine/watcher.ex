@@ -3,82 +3,98 @@ defmodule Dolphin.Engine.Watcher do
   The inputs of a task node's conditions: the engine side of "conditions are
   re-evaluated on every change of what they read".
 
-  A watcher is a value held by the node's process. It follows exactly the
-  vehicles and signal tables that the node's conditions read at their last
-  evaluation (and the vehicle of a platform task: `follow/2`): the node's
-  process is subscribed to their topics on `Dolphin.PubSub`, and the watcher
-  keeps the latest `Dolphin.Vehicles.View` of each vehicle, replaced whole by
-  each one published (`update/2`). `evaluate/3` hands a condition that
-  snapshot; a vehicle read for the first time is subscribed to, then read
-  from the source (no change is missed in between) and followed from then
-  on. What no condition reads any more is let go.
+  A watcher is a value held by the node's process. It follows the vehicles
+  and signal tables that the node's conditions read (and the vehicle of a
+  platform task, and the vehicles a task flies when one of its conditions
+  reads through functions nobody sees into: `follow/2`): the node's process
+  is subscribed to their topics on `Dolphin.PubSub`, and the watcher keeps
+  the latest `Dolphin.Vehicles.View` of each vehicle, replaced whole by each
+  one published (`update/2`).
 
-  Readers of vehicle state (`vehicle/2`, through the script's `battery/1`,
-  `position/1`, ...) and of signals (`Dolphin.Engine.Signals.poll/2`, ...)
-  read from the snapshot of the evaluation under way; outside one, they read
-  the source (for a vehicle) or the table (for a signal) directly.
+  `evaluate/3` hands a condition its `Dolphin.Engine.Snapshot` as its
+  argument: those views, and what this condition has read so far. A
+  condition that reads a vehicle or a signal table not in its snapshot yet
+  makes a request (`Dolphin.Engine.Cond.evaluate/2` returns `{:read, read}`):
+  the watcher subscribes to it, then reads it from the source (no change is
+  missed in between), adds it to the condition's reads and evaluates the
+  condition again. Nothing goes through the process dictionary.
+
+  What a condition has read stays followed while the condition is watched
+  (a condition that stopped reading a vehicle is re-evaluated on its changes
+  for nothing, never missed); once the condition is no longer watched
+  (`forget/2`), what no other condition reads is let go.
+
+  `vehicle/2` is the live reader: outside a condition's snapshot (code of an
+  action, a helper function a condition calls), it reads the vehicle from
+  the calling process's context's source.
 
       import Dolphin.Engine
       v = 1
-      low = Dolphin.Engine.Cond.new(fn -> Dolphin.Engine.Watcher.vehicle(v).battery < 0.3 end, source: "battery(v) < 0.3")
+      low = Dolphin.Engine.Cond.new(fn snap -> Dolphin.Engine.Snapshot.battery(snap, v) < 0.3 end, source: "battery(v) < 0.3")
       Dolphin.Engine.run(until(Dolphin.Engine.TestPlatform.task("survey", duration: :infinity), low))
   """
 
-  alias Dolphin.Engine.{Cond, Context}
+  alias Dolphin.Engine.{Cond, Context, Snapshot}
   alias Dolphin.Fleet.{Source, VehicleSet}
   alias Dolphin.PubSub
   alias Dolphin.Vehicles.View
 
-  defstruct source: nil, vehicles: %{}, signals: MapSet.new(), reads: %{}, followed: MapSet.new()
+  defstruct source: nil, signals_table: nil, vehicles: %{}, signals: MapSet.new(), reads: %{}, followed: MapSet.new()
 
   @typedoc """
   `vehicles`: the latest view of each vehicle followed (its keys are the
   vehicles subscribed to); `signals`: the tables subscribed to; `reads`: what
-  each watched condition (by its node's key) read at its last evaluation;
-  `followed`: vehicles followed whatever the conditions read.
+  each watched condition (by its node's key) has read; `followed`: vehicles
+  followed whatever the conditions read; `signals_table`: the script's table,
+  which `Dolphin.Engine.Snapshot.poll/2` reads.
   """
   @type t :: %__MODULE__{
           source: Source.t() | nil,
+          signals_table: Dolphin.Engine.Signals.table() | nil,
           vehicles: %{non_neg_integer() => View.t()},
           signals: MapSet.t(),
-          reads: %{term() => MapSet.t()},
+          reads: %{term() => MapSet.t(Snapshot.read())},
           followed: MapSet.t()
         }
 
-  # The snapshot of the evaluation under way, for the readers: present only
-  # while evaluate/3 runs.
-  @scope :"$dolphin_evaluation"
-
-  @doc "A watcher of nothing yet, reading vehicles from `source`."
-  @spec new(Source.t()) :: t()
-  def new(source), do: %__MODULE__{source: source}
+  @doc "A watcher of nothing yet, reading vehicles from `source`; `signals`: the script's signal table."
+  @spec new(Source.t(), Dolphin.Engine.Signals.table() | nil) :: t()
+  def new(source, signals \\ nil), do: %__MODULE__{source: source, signals_table: signals}
 
   @doc """
-  Evaluates a condition (`Dolphin.Engine.Cond.evaluate/1`) on the snapshot,
-  and remembers what it read under `key` (replacing what it read before):
-  from now on the calling process gets the events of exactly that.
+  Evaluates a condition (`Dolphin.Engine.Cond.evaluate/2`) on its snapshot,
+  adding what it asks for (see the module doc) under `key`: from now on
+  the calling process gets the events of it.
   """
   @spec evaluate(t(), term(), Cond.t()) :: {{:ok, boolean()} | {:error, Exception.t(), Exception.stacktrace()}, t()}
   def evaluate(%__MODULE__{} = w, key, %Cond{} = cond) do
-    Process.put(@scope, %{source: w.source, vehicles: w.vehicles, signals: w.signals, read: MapSet.new(), fresh: false})
-    # Cond.evaluate/1 turns whatever the condition raises or throws into an error result.
-    result = Cond.evaluate(cond)
-    scope = Process.delete(@scope)
+    reads = Map.get(w.reads, key, MapSet.new())
 
-    # Most evaluations read what they read before: nothing to subscribe or let go.
-    if not scope.fresh and Map.get(w.reads, key) == scope.read,
-      do: {result, w},
-      else: {result, sync(%{w | vehicles: scope.vehicles, signals: scope.signals, reads: Map.put(w.reads, key, scope.read)})}
+    case Cond.evaluate(cond, %Snapshot{vehicles: w.vehicles, reads: reads, signals: w.signals_table}) do
+      {:read, read} ->
+        case add(w, read) do
+          {:ok, w} -> evaluate(%{w | reads: Map.put(w.reads, key, MapSet.put(reads, read))}, key, cond)
+          {:error, e} -> {{:error, e, []}, w}
+        end
+
+      result ->
+        {result, w}
+    end
   end
 
   @doc "Forgets what the condition of `key` read (it is no longer watched)."
   @spec forget(t(), term()) :: t()
-  def forget(%__MODULE__{} = w, key), do: sync(%{w | reads: Map.delete(w.reads, key)})
+  def forget(%__MODULE__{} = w, key) do
+    case Map.has_key?(w.reads, key) do
+      true -> sync(%{w | reads: Map.delete(w.reads, key)})
+      false -> w
+    end
+  end
 
   @doc """
   Follows a vehicle whatever the conditions read (a platform task's, whose
-  loss ends the task): subscribes, then reads it. Returns the read and the
-  watcher.
+  loss ends the task; those a task flies): subscribes, then reads it.
+  Returns the read and the watcher.
   """
   @spec follow(t(), non_neg_integer()) :: {{:ok, View.t()} | {:error, :unknown_vehicle}, t()}
   def follow(%__MODULE__{} = w, id) do
@@ -96,6 +112,44 @@ defmodule Dolphin.Engine.Watcher do
     if Map.has_key?(vehicles, id), do: %{w | vehicles: Map.put(vehicles, id, view)}, else: w
   end
 
+  @doc "Whether the condition of `key` has read `read` (a change of it may change the condition)."
+  @spec reads?(t(), term(), Snapshot.read()) :: boolean()
+  def reads?(%__MODULE__{reads: reads}, key, read) do
+    case reads do
+      %{^key => set} -> MapSet.member?(set, read)
+      _ -> false
+    end
+  end
+
+  # A read asked for: subscribed to first, then read (no change is missed in between).
+  defp add(w, {:vehicle, id}) do
+    case w.vehicles do
+      %{^id => _} ->
+        {:ok, w}
+
+      _ ->
+        Source.subscribe(id)
+
+        case Source.vehicle(w.source, id) do
+          {:ok, view} ->
+            {:ok, %{w | vehicles: Map.put(w.vehicles, id, view)}}
+
+          {:error, :unknown_vehicle} ->
+            Source.unsubscribe(id)
+            {:error, ArgumentError.exception("unknown vehicle #{inspect(id)}")}
+        end
+    end
+  end
+
+  defp add(w, {:signals, table}) do
+    if MapSet.member?(w.signals, table) do
+      {:ok, w}
+    else
+      PubSub.subscribe({:dolphin_signals, table})
+      {:ok, %{w | signals: MapSet.put(w.signals, table)}}
+    end
+  end
+
   # Subscriptions to exactly what is read or followed.
   defp sync(w) do
     read = Enum.reduce(Map.values(w.reads), MapSet.new(), &MapSet.union/2)
@@ -107,74 +161,23 @@ defmodule Dolphin.Engine.Watcher do
     %{w | vehicles: Map.new(keep), signals: MapSet.intersection(w.signals, tables)}
   end
 
-  # --- readers ---
+  # --- the live reader ---
 
   @doc """
-  The view of one vehicle (a one-vehicle set or a system id): during a
-  condition's evaluation, from its snapshot (the read is recorded); outside
-  one, from the calling process's context's source. Raises `ArgumentError`
-  for a set of another size or an unknown vehicle (`function` names the
-  reader in the message).
+  The view of one vehicle (a one-vehicle set or a system id), read live
+  from the calling process's context's source (for real vehicles,
+  `Dolphin.Vehicles.Views`): what the script's readers (`battery/1`, ...)
+  do outside a condition's expression. Raises `ArgumentError` for a set of
+  another size or an unknown vehicle (`function` names the reader in the
+  message).
   """
   @spec vehicle(VehicleSet.t() | non_neg_integer(), atom()) :: View.t()
   def vehicle(ref, function \\ :vehicle) do
     id = VehicleSet.one!(ref, function)
 
-    case Process.get(@scope) do
-      %{vehicles: %{^id => view}} = scope ->
-        Process.put(@scope, %{scope | read: MapSet.put(scope.read, {:vehicle, id})})
-        view
-
-      %{} = scope ->
-        # Subscribed before reading: no change is missed in between.
-        Source.subscribe(id)
-
-        view =
-          try do
-            fetch!(scope.source, id)
-          rescue
-            e ->
-              Source.unsubscribe(id)
-              reraise e, __STACKTRACE__
-          end
-
-        Process.put(@scope, %{scope | vehicles: Map.put(scope.vehicles, id, view), read: MapSet.put(scope.read, {:vehicle, id}), fresh: true})
-        view
-
-      nil ->
-        fetch!(Context.source(Context.current()), id)
-    end
-  end
-
-  defp fetch!(source, id) do
-    case Source.vehicle(source, id) do
+    case Source.vehicle(Context.source(Context.current()), id) do
       {:ok, v} -> v
       {:error, :unknown_vehicle} -> raise ArgumentError, "unknown vehicle #{inspect(id)}"
     end
-  end
-
-  @doc false
-  # Called by Dolphin.Engine.Signals as a signal table is read: during an
-  # evaluation, the read is recorded (and the table subscribed to, once).
-  @spec read_signals(term()) :: :ok
-  def read_signals(table) do
-    case Process.get(@scope) do
-      nil ->
-        :ok
-
-      scope ->
-        scope =
-          if MapSet.member?(scope.signals, table),
-            do: scope,
-            else: %{scope | signals: subscribe_signals(scope.signals, table), fresh: true}
-
-        Process.put(@scope, %{scope | read: MapSet.put(scope.read, {:signals, table})})
-        :ok
-    end
-  end
-
-  defp subscribe_signals(signals, table) do
-    PubSub.subscribe({:dolphin_signals, table})
-    MapSet.put(signals, table)
   end
 end

@@ -8,7 +8,9 @@ defmodule Dolphin.Fleet.MAVLinkSource do
   from its components (a camera component gives `:camera`) plus configured
   ones (`config :dolphin, vehicle_payloads: %{2 => [:sidescan]}`), battery,
   position, relative altitude, mode, armed, landed state, mission progress,
-  link figures. `Dolphin.Vehicles` already publishes the events the fleet needs.
+  link figures, read from `Dolphin.Vehicles.Views`, which already publishes
+  and emits what a source must (including vehicles heard by other nodes
+  and put there).
   """
 
   @behaviour Dolphin.Fleet.Source
@@ -18,6 +20,9 @@ defmodule Dolphin.Fleet.MAVLinkSource do
 
   @impl true
   def vehicle(_arg, id), do: Dolphin.Vehicles.view(id)
+
+  @impl true
+  def views(_arg), do: Dolphin.Vehicles.Views.all()
 
   @impl true
   def set_timeout(_arg, id, ms), do: Dolphin.Vehicles.set_timeout(id, ms)

@@ -7,18 +7,24 @@ defmodule Dolphin.Fleet.Source do
   `Dolphin.Fleet.MAVLinkSource` (the real vehicles of `Dolphin.Vehicles`) and
   `Dolphin.Fleet.TestSource` (fake vehicles whose state tests set).
 
-  A source owns its vehicles' state and publishes it on `Dolphin.PubSub`, with
-  the shapes `Dolphin.Vehicles` uses:
+  A source owns its vehicles' state: it answers `vehicle/2` and `views/1`
+  from it, and announces every change with the shapes `Dolphin.Vehicles`
+  uses (`Dolphin.Vehicles.Views.put/1` does all of it for real vehicles):
 
-    * topic `:vehicles`: `{:vehicle_discovered, id}`, `{:vehicle_lost, id}`,
-      `{:vehicle_reconnected, id}`;
     * topic `{:vehicle_view, id}`: `{:view, %Dolphin.Vehicles.View{}}`, the
       whole view each time it changes (a loss or a reconnection too: the view
-      is published before the `:vehicles` event).
+      is published before the `:vehicles` event);
+    * topic `:vehicles`: `{:vehicle_discovered, id}`, `{:vehicle_lost, id}`,
+      `{:vehicle_reconnected, id}`, `{:vehicle_forgotten, id}`, and
+      `{:vehicle_changed, id}` when a view changes what picks match on but
+      the position (type, payloads, connected?, or a first view);
+    * the view's transitions (`Dolphin.Vehicles.View.transitions/2`) as
+      `Dolphin.Telemetry` events, unless told not to.
 
-  The fleet follows the vehicles it knows and the engine's condition
-  watchers the vehicles their conditions read, so reactions follow events,
-  not polling.
+  The fleet keeps no copy: it reads views from the source when it picks,
+  serves waiting picks, reserves or lists, and follows only `:vehicles`. The
+  engine's condition watchers follow the views of the vehicles their
+  conditions read, so reactions follow events, not polling.
   """
 
   alias Dolphin.Vehicles.View
@@ -32,6 +38,9 @@ defmodule Dolphin.Fleet.Source do
   @doc "A vehicle's latest view."
   @callback vehicle(arg :: term(), id()) :: {:ok, View.t()} | {:error, :unknown_vehicle}
 
+  @doc "Every vehicle's latest view, by ascending id."
+  @callback views(arg :: term()) :: [View.t()]
+
   @doc "Sets after how much clock time without news a vehicle is lost."
   @callback set_timeout(arg :: term(), id(), pos_integer()) :: :ok | {:error, :unknown_vehicle}
 
@@ -42,6 +51,8 @@ defmodule Dolphin.Fleet.Source do
   def list({m, a}), do: m.list(a)
   @doc false
   def vehicle({m, a}, id), do: m.vehicle(a, id)
+  @doc false
+  def views({m, a}), do: m.views(a)
   @doc false
   def set_timeout({m, a}, id, ms), do: m.set_timeout(a, id, ms)
   @doc false

@@ -17,7 +17,13 @@ defmodule Dolphin.Fleet.TestSource do
   `mission_progress` to `{0, 0}`, no mission; `nil` is a value not reported
   yet); a change is a keyword list of those fields. The state lives in a
   public ETS table named after the source, so `set/3` publishes from the
-  caller with no process in between. Vehicle ids are system ids: tests running at the same
+  caller with no process in between. Each change is announced as
+  `Dolphin.Vehicles.Views.put/1` announces a real vehicle's: its view, its
+  transitions as `Dolphin.Telemetry` events (`vehicle_discovered`,
+  `mode_changed`, `vehicle_lost`, ...; `Dolphin.Vehicles.View.transitions/2`)
+  and `{:vehicle_changed, id}` on `:vehicles` when picks may see it anew;
+  `events: false` keeps the telemetry quiet (stand-ins whose changes must not
+  show in a real run's output, such as a pre-flight check's). Vehicle ids are system ids: tests running at the same
   time should use different ones, as the pub/sub topics are shared.
   """
 
@@ -28,13 +34,21 @@ defmodule Dolphin.Fleet.TestSource do
   alias Dolphin.PubSub
   alias Dolphin.Vehicles.View
 
+  # The table's row of the `events` option (vehicles' keys are integers).
+  @events :"$events"
   @fields View.__struct__() |> Map.from_struct() |> Map.keys()
 
-  @doc "Starts a source; options: `:name` (an atom, default `#{inspect(__MODULE__)}`), `:vehicles` (`[{id, attrs}]`)."
+  @doc """
+  Starts a source; options: `:name` (an atom, default `#{inspect(__MODULE__)}`),
+  `:vehicles` (`[{id, attrs}]`), `:events` (emit the vehicles' transitions as
+  telemetry, default true).
+  """
   @spec start_link(keyword()) :: GenServer.on_start()
   def start_link(opts \\ []) do
     name = Keyword.get(opts, :name, __MODULE__)
-    GenServer.start_link(__MODULE__, {name, Keyword.get(opts, :vehicles, [])}, name: name)
+    events = Keyword.get(opts, :events, true)
+    unless is_boolean(events), do: raise(ArgumentError, "events: must be true or false, got: #{inspect(events)}")
+    GenServer.start_link(__MODULE__, {name, Keyword.get(opts, :vehicles, []), events}, name: name)
   end
 
   @doc false
@@ -70,10 +84,17 @@ defmodule Dolphin.Fleet.TestSource do
     PubSub.publish(:vehicles, {:vehicle_reconnected, id})
   end
 
-  # The table holds each vehicle's one copy of its state; every change is published whole.
+  # The table holds each vehicle's one copy of its state; every change is
+  # announced whole, with its transitions, as a real vehicle's is.
   defp put(name, %View{id: id} = v) do
+    old =
+      case :ets.lookup(name, id) do
+        [{^id, old}] -> old
+        [] -> nil
+      end
+
     :ets.insert(name, {id, v})
-    PubSub.publish({:vehicle_view, id}, {:view, v})
+    Dolphin.Vehicles.Views.announce(old, v, :ets.lookup_element(name, @events, 2))
   end
 
   defp change(%View{} = v, changes) do
@@ -125,6 +146,9 @@ defmodule Dolphin.Fleet.TestSource do
   def list(name), do: for({id, %View{}} when is_integer(id) <- :ets.tab2list(name), do: id) |> Enum.sort()
 
   @impl Dolphin.Fleet.Source
+  def views(name), do: name |> :ets.select([{{:"$1", :"$2"}, [{:is_integer, :"$1"}], [:"$2"]}]) |> Enum.sort_by(& &1.id)
+
+  @impl Dolphin.Fleet.Source
   def vehicle(name, id) do
     case :ets.lookup(name, id) do
       [{^id, v}] -> {:ok, v}
@@ -151,8 +175,9 @@ defmodule Dolphin.Fleet.TestSource do
   defp ok(true), do: :ok
 
   @impl GenServer
-  def init({name, vehicles}) do
+  def init({name, vehicles, events}) do
     :ets.new(name, [:named_table, :public, :set, read_concurrency: true])
+    :ets.insert(name, {@events, events})
     Enum.each(vehicles, fn {id, attrs} -> add(name, id, attrs) end)
     {:ok, name}
   end

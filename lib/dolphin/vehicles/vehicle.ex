@@ -242,14 +242,15 @@ defmodule Dolphin.Vehicles.Vehicle do
     end
   end
 
-  # The view, to its subscribers, when it is not the one they have.
+  # The view, to Dolphin.Vehicles.Views (which tells its subscribers and
+  # emits its transitions), when it is not the one they have.
   defp publish_view(s) do
     case view(s) do
       same when same == s.view ->
         s
 
       view ->
-        PubSub.publish({:vehicle_view, s.sysid}, {:view, view})
+        Dolphin.Vehicles.Views.put(view)
         %{s | view: view}
     end
   end

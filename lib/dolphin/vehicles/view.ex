@@ -4,10 +4,12 @@ defmodule Dolphin.Vehicles.View do
   (see `Dolphin.Fleet.Source`): identity, class, payloads and the live state
   that conditions read and the fleet picks by.
 
-  The vehicle's owner (its process in `Dolphin.Vehicles`, or a fake source)
-  publishes a new view on topic `{:vehicle_view, id}` of `Dolphin.PubSub`
-  each time one of these fields changes, as `{:view, %View{}}`: subscribers
-  take the latest view whole and never rebuild one from changes.
+  The vehicle's owner (its process in `Dolphin.Vehicles`, through
+  `Dolphin.Vehicles.Views.put/1`, or a fake source) publishes a new view on
+  topic `{:vehicle_view, id}` of `Dolphin.PubSub` each time one of these
+  fields changes, as `{:view, %View{}}`: subscribers take the latest view
+  whole and never rebuild one from changes. What changed between two views
+  that a user hears of is `transitions/2`.
 
   | field | meaning |
   | --- | --- |
@@ -108,4 +110,51 @@ defmodule Dolphin.Vehicles.View do
   # No MISSION_CURRENT yet: the total is not known, nor is the progress.
   defp progress(%{total: nil}), do: nil
   defp progress(m), do: {m.reached || 0, m.total}
+
+  @doc """
+  The events (`Dolphin.Telemetry` names and metadata) of a vehicle going
+  from view `old` (`nil`: none yet) to view `new`, in the order they are
+  emitted: `vehicle_discovered` once the type is known (a vehicle whose
+  type is unknown is not announced, nor are its changes), then
+  `mode_changed`, `armed` / `disarmed`, `mission_item_reached` and last
+  `vehicle_lost` / `vehicle_reconnected`. A first view announces only the
+  discovery: what the vehicle was doing before it was heard is no change.
+
+      iex> alias Dolphin.Vehicles.View
+      iex> View.transitions(nil, %View{id: 3, type: :uav, mode: :guided})
+      [{:vehicle_discovered, %{vehicle: 3, type: :uav}}]
+      iex> View.transitions(%View{id: 3, type: :uav}, %View{id: 3, type: :uav, mode: :auto, armed?: true, mission_progress: {2, 5}})
+      [{:mode_changed, %{vehicle: 3, mode: :auto}}, {:armed, %{vehicle: 3}}, {:mission_item_reached, %{vehicle: 3, seq: 2}}]
+      iex> View.transitions(%View{id: 3, type: :uav}, %View{id: 3, type: :uav, connected?: false})
+      [{:vehicle_lost, %{vehicle: 3}}]
+  """
+  @spec transitions(t() | nil, t()) :: [{atom(), map()}]
+  def transitions(old, %__MODULE__{} = new) do
+    discovered = if new.type != nil and (old == nil or old.type == nil), do: [{:vehicle_discovered, %{vehicle: new.id, type: new.type}}], else: []
+
+    case old do
+      nil -> discovered
+      old -> discovered ++ changes(old, new) ++ link(old, new)
+    end
+  end
+
+  defp changes(_old, %{type: nil}), do: []
+
+  defp changes(old, new) do
+    mode = if old.mode != new.mode and new.mode != nil, do: [{:mode_changed, %{vehicle: new.id, mode: new.mode}}], else: []
+    armed = if old.armed? != new.armed?, do: [{if(new.armed?, do: :armed, else: :disarmed), %{vehicle: new.id}}], else: []
+
+    reached =
+      case {old.mission_progress, new.mission_progress} do
+        {{reached, _}, {reached, _}} -> []
+        {_, {reached, _}} when reached > 0 -> [{:mission_item_reached, %{vehicle: new.id, seq: reached}}]
+        _ -> []
+      end
+
+    mode ++ armed ++ reached
+  end
+
+  defp link(%{connected?: same}, %{connected?: same}), do: []
+  defp link(_old, %{connected?: false, id: id}), do: [{:vehicle_lost, %{vehicle: id}}]
+  defp link(_old, %{connected?: true, id: id}), do: [{:vehicle_reconnected, %{vehicle: id}}]
 end

@@ -24,8 +24,8 @@ defmodule Dolphin.DSL.UnknownTest do
     mission_progress: {:mission_progress, {1, 3}}
   ]
 
-  # Evaluated in a fresh process each time: a condition's reads are cached in
-  # the process that evaluates it (a runner keeps them up to date, a test does not).
+  # Evaluated on live data (no snapshot: the readers read the source), in a
+  # process of the test's context.
   defp evaluate(%{cond: c}) do
     ctx = Context.current()
     Task.async(fn ->

@@ -14,7 +14,7 @@ defmodule Dolphin.Engine.CombinatorsTest do
   doctest Dolphin.Telemetry
 
   defp never, do: Cond.new(fn -> false end, source: "never")
-  defp low_battery(v), do: Cond.new(fn -> Dolphin.Engine.Watcher.vehicle(v).battery < 0.3 end, source: "battery < 0.3")
+  defp low_battery(v), do: Cond.new(fn snap -> Dolphin.Engine.Snapshot.battery(snap, v) < 0.3 end, source: "battery < 0.3")
   defp tp(name, opts \\ []), do: TestPlatform.task(name, Keyword.put_new(opts, :notify, self()))
 
   describe "leaves" do

@@ -457,7 +457,7 @@ defmodule Dolphin.Engine.PropertyTest do
 
   defp kcond(k) do
     id = @cond_base + k
-    Cond.new(fn -> Dolphin.Engine.Watcher.vehicle(id).battery < 0.5 end, source: "k#{k}")
+    Cond.new(fn snap -> Dolphin.Engine.Snapshot.battery(snap, id) < 0.5 end, source: "k#{k}")
   end
 
   defp normalise({:ok, :done}), do: :done

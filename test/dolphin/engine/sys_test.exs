@@ -24,7 +24,7 @@ defmodule Dolphin.Engine.SysTest do
 
   test ":sys.get_state/1 answers on every process of a running task tree", ctx do
     [a, b] = fake_vehicles(ctx, 2, pick: true)
-    low = Cond.new(fn -> Dolphin.Engine.Watcher.vehicle(a).battery < 0.3 end, source: "battery(a) < 0.3")
+    low = Cond.new(fn snap -> Dolphin.Engine.Snapshot.battery(snap, a) < 0.3 end, source: "battery(a) < 0.3")
     tree = sequence([idle(0, name: "warm-up"), until(concurrent([tp("survey"), tp("photos")]), low, name: "until low"), idle(0, name: "after")], name: "main")
 
     {:ok, run} = start(tree)

@@ -1,0 +1,105 @@
+defmodule Dolphin.Vehicles.Views do
+  @moduledoc """
+  The latest `Dolphin.Vehicles.View` of every vehicle this ground station
+  knows, in one public ETS table that any process reads without asking
+  anyone (`get/1`, `all/0`, `ids/0`).
+
+  Each view has one writer, its owner: a vehicle's process in
+  `Dolphin.Vehicles` puts a new view each time its state changes it, and a
+  vehicle heard by another node can be put here the same way (`put/1` does
+  not need a local vehicle process). Writing a view is also announcing it:
+
+    1. the row is replaced;
+    2. `{:view, view}` is published on `Dolphin.PubSub` topic
+       `{:vehicle_view, id}` (the engine's condition watchers follow it);
+    3. the transitions from the previous row (`Dolphin.Vehicles.View.transitions/2`)
+       are emitted as `Dolphin.Telemetry` events: `vehicle_discovered` once
+       the type is known, `mode_changed`, `armed`, `disarmed`,
+       `mission_item_reached`, `vehicle_lost`, `vehicle_reconnected`;
+    4. `{:vehicle_changed, id}` is published on topic `:vehicles` when what a
+       pick matches on, but the position, changed (`type`, `payloads`,
+       `connected?`, or a first view): the fleet serves its waiting picks
+       again then, and on a slow tick for picks by region.
+
+      Dolphin.Vehicles.Views.get(1)     # {:ok, %Dolphin.Vehicles.View{battery: 0.86, ...}}
+      Dolphin.Vehicles.Views.ids()      # [1, 2, 3]
+
+  The table's owner is a small process under the application's supervisor,
+  started before the vehicles' supervisor: the vehicles restart after it.
+  """
+
+  use GenServer
+
+  alias Dolphin.{PubSub, Telemetry}
+  alias Dolphin.Vehicles.View
+
+  @table __MODULE__
+
+  @doc false
+  @spec start_link(keyword()) :: GenServer.on_start()
+  def start_link(_opts \\ []), do: GenServer.start_link(__MODULE__, :ok, name: __MODULE__)
+
+  @doc """
+  Writes a vehicle's view and announces it (see the module doc). Called by
+  the view's owner only: two writers of one vehicle would interleave their
+  transitions.
+  """
+  @spec put(View.t()) :: :ok
+  def put(%View{id: id} = view) when is_integer(id) and id >= 0 do
+    old =
+      case :ets.lookup(@table, id) do
+        [{^id, old}] -> old
+        [] -> nil
+      end
+
+    :ets.insert(@table, {id, view})
+    announce(old, view, true)
+  end
+
+  def put(other), do: raise(ArgumentError, "a view is a %Dolphin.Vehicles.View{} with a system id, got: #{inspect(other)}")
+
+  @doc "A vehicle's latest view."
+  @spec get(non_neg_integer()) :: {:ok, View.t()} | {:error, :unknown_vehicle}
+  def get(id) do
+    case :ets.lookup(@table, id) do
+      [{^id, view}] -> {:ok, view}
+      [] -> {:error, :unknown_vehicle}
+    end
+  end
+
+  @doc "Every vehicle's latest view, by ascending id."
+  @spec all() :: [View.t()]
+  def all, do: @table |> :ets.tab2list() |> Enum.sort() |> Enum.map(&elem(&1, 1))
+
+  @doc "The ids of the vehicles with a view, ascending."
+  @spec ids() :: [non_neg_integer()]
+  def ids, do: @table |> :ets.select([{{:"$1", :_}, [], [:"$1"]}]) |> Enum.sort()
+
+  @doc "Forgets a vehicle's view (the vehicle is forgotten: a view put later is a discovery again)."
+  @spec delete(non_neg_integer()) :: :ok
+  def delete(id) do
+    :ets.delete(@table, id)
+    :ok
+  end
+
+  @doc false
+  # Steps 2 to 4 of a write, for every owner of views (Dolphin.Fleet.TestSource
+  # keeps its own table): `events?` false keeps the telemetry quiet (a dry
+  # run's stand-in vehicles).
+  @spec announce(View.t() | nil, View.t(), boolean()) :: :ok
+  def announce(old, %View{id: id} = new, events?) do
+    PubSub.publish({:vehicle_view, id}, {:view, new})
+    if events?, do: Enum.each(View.transitions(old, new), fn {event, meta} -> Telemetry.emit(event, meta) end)
+
+    if old == nil or old.type != new.type or old.payloads != new.payloads or old.connected? != new.connected?,
+      do: PubSub.publish(:vehicles, {:vehicle_changed, id})
+
+    :ok
+  end
+
+  @impl true
+  def init(:ok) do
+    :ets.new(@table, [:named_table, :public, :set, read_concurrency: true])
+    {:ok, nil}
+  end
+end

@@ -1,0 +1,82 @@
+defmodule Dolphin.Vehicles.ViewsTest do
+  use ExUnit.Case, async: false
+
+  alias Dolphin.Fleet.TestSource
+  alias Dolphin.Vehicles
+  alias Dolphin.Vehicles.{View, Views}
+
+  doctest Dolphin.Vehicles.View, only: [transitions: 2]
+
+  # A vehicle no process of this node owns (as one heard by another node would be).
+  @id 241
+
+  setup do
+    on_exit(fn -> Vehicles.forget(@id) end)
+    Dolphin.Telemetry.subscribe()
+    Vehicles.subscribe(:all)
+    Vehicles.subscribe_view(@id)
+    :ok
+  end
+
+  test "a view put without a local vehicle process is read, listed, published and announced" do
+    assert Views.get(@id) == {:error, :unknown_vehicle}
+    view = %View{id: @id, type: :uav, battery: 0.9, mode: :guided}
+    :ok = Views.put(view)
+
+    assert Views.get(@id) == {:ok, view}
+    assert Vehicles.view(@id) == {:ok, view}
+    assert @id in Views.ids() and @id in Vehicles.list()
+    assert view in Views.all()
+    assert_receive {:dolphin, {:vehicle_view, @id}, {:view, ^view}}
+    assert_receive {:dolphin, :events, %{event: :vehicle_discovered, vehicle: @id, type: :uav}}
+    assert_receive {:dolphin, :vehicles, {:vehicle_changed, @id}}
+
+    # A change of battery and mode: published, announced, but nothing picks match on.
+    :ok = Views.put(%{view | battery: 0.8, mode: :auto})
+    assert_receive {:dolphin, {:vehicle_view, @id}, {:view, %View{battery: 0.8}}}
+    assert_receive {:dolphin, :events, %{event: :mode_changed, vehicle: @id, mode: :auto}}
+    refute_received {:dolphin, :vehicles, {:vehicle_changed, @id}}
+
+    :ok = Views.put(%{view | mode: :auto, connected?: false})
+    assert_receive {:dolphin, :events, %{event: :vehicle_lost, vehicle: @id}}
+    assert_receive {:dolphin, :vehicles, {:vehicle_changed, @id}}
+
+    # Forgotten: no row, an event; put again, it is discovered anew.
+    :ok = Vehicles.forget(@id)
+    assert_receive {:dolphin, :vehicles, {:vehicle_forgotten, @id}}
+    assert Views.get(@id) == {:error, :unknown_vehicle}
+    refute @id in Vehicles.list()
+    :ok = Views.put(view)
+    assert_receive {:dolphin, :events, %{event: :vehicle_discovered, vehicle: @id}}
+  end
+
+  test "a vehicle whose type is unknown is announced once it is known" do
+    :ok = Views.put(%View{id: @id, mode: :stabilize})
+    :ok = Views.put(%View{id: @id, mode: :guided})
+    :ok = Views.put(%View{id: @id, type: :usv, mode: :guided})
+    assert_receive {:dolphin, :events, %{event: :vehicle_discovered, vehicle: @id, type: :usv}}
+    refute_received {:dolphin, :events, %{event: :mode_changed, vehicle: @id}}
+  end
+
+  test "a put that is not a view is a caller mistake" do
+    assert_raise ArgumentError, ~r/a view is a %Dolphin.Vehicles.View{} with a system id, got: %{id: 3}/, fn -> Views.put(%{id: 3}) end
+  end
+
+  test "a test source's vehicles are announced the same way, or quietly with events: false" do
+    loud = :"views_loud_#{System.unique_integer([:positive])}"
+    quiet = :"views_quiet_#{System.unique_integer([:positive])}"
+    start_supervised!({TestSource, name: loud}, id: loud)
+    start_supervised!({TestSource, name: quiet, events: false}, id: quiet)
+    [a, b] = for _ <- 1..2, do: 300_000 + System.unique_integer([:positive, :monotonic])
+
+    TestSource.add(quiet, b, type: :uav)
+    TestSource.set(quiet, b, mode: :guided)
+    TestSource.add(loud, a, type: :uav)
+    TestSource.set(loud, a, mode: :guided)
+    assert_receive {:dolphin, :events, %{event: :vehicle_discovered, vehicle: ^a}}
+    assert_receive {:dolphin, :events, %{event: :mode_changed, vehicle: ^a, mode: :guided}}
+    refute_received {:dolphin, :events, %{vehicle: ^b}}
+    assert [%View{id: ^b, mode: :guided}] = TestSource.views(quiet)
+    assert_raise ArgumentError, ~r/events: must be true or false, got: :yes/, fn -> TestSource.start_link(name: :views_bad, events: :yes) end
+  end
+end
