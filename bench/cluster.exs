@@ -25,6 +25,8 @@
 #
 #   MIX_ENV=prod mix run bench/cluster.exs
 
+Code.require_file("percentiles.exs", __DIR__)
+
 defmodule ClusterBench do
   alias Dolphin.Engine
   alias Dolphin.Engine.{Cond, Context, TestPlatform}
@@ -218,13 +220,7 @@ defmodule ClusterBench do
       Mix.raise("timed out waiting for #{what}")
   end
 
-  defp stats([]), do: %{n: 0, p50: nil, p99: nil, max: nil}
-
-  defp stats(samples) do
-    sorted = Enum.sort(samples)
-    at = fn q -> Enum.at(sorted, min(length(sorted) - 1, round(q * (length(sorted) - 1)))) end
-    %{n: length(sorted), p50: at.(0.5), p99: at.(0.99), max: List.last(sorted)}
-  end
+  defp stats(samples), do: Bench.Percentiles.of(samples)
 
   defp row(label, %{n: n, p50: p50, p99: p99, max: max}),
     do: IO.puts(String.pad_trailing(label, 44) <> "n=#{n}  p50 #{p50} µs  p99 #{p99} µs  max #{max} µs")

@@ -32,6 +32,8 @@ shared = 20_000
 for id <- [shared | ids], do: TestSource.add(source, id, type: :uav, battery: 1.0)
 {:ok, _} = Dolphin.Fleet.pick(fleet, self(), id: ids, count: max_n, timeout: 10_000)
 
+Code.require_file("percentiles.exs", __DIR__)
+
 defmodule Bench do
   def low(v), do: Cond.new(fn snap -> Dolphin.Engine.Snapshot.battery(snap, v) < 0.3 end, source: "battery(v) < 0.3")
 
@@ -69,11 +71,7 @@ defmodule Bench do
 
   def us(native), do: System.convert_time_unit(native, :native, :microsecond)
 
-  def stats(samples) do
-    sorted = Enum.sort(samples)
-    at = fn q -> Enum.at(sorted, min(length(sorted) - 1, round(q * (length(sorted) - 1)))) end
-    %{n: length(sorted), p50: at.(0.5), p99: at.(0.99), max: List.last(sorted)}
-  end
+  def stats(samples), do: Bench.Percentiles.of(samples)
 
   def row(label, %{n: n, p50: p50, p99: p99, max: max}),
     do: IO.puts(String.pad_trailing(label, 34) <> String.pad_leading("#{n}", 8) <> String.pad_leading("#{p50} µs", 12) <> String.pad_leading("#{p99} µs", 12) <> String.pad_leading("#{max} µs", 12))

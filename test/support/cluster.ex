@@ -18,6 +18,17 @@ defmodule Dolphin.Test.Cluster do
   @doc "The cookie of the test cluster."
   def cookie, do: @cookie
 
+  @doc """
+  A cluster test's set-up: the clock at `speedup`, this node the controller
+  (`start_controller/0`), its fleet on the MAVLink vehicles.
+  """
+  def setup_controller(speedup) do
+    Dolphin.Clock.set_speedup(speedup)
+    start_controller()
+    Dolphin.Fleet.set_source({Dolphin.Fleet.MAVLinkSource, nil})
+    :ok
+  end
+
   @doc "Makes the test node a distributed node on 127.0.0.1 (once; it stays so)."
   def start_controller do
     unless Node.alive?() do

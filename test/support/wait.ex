@@ -21,4 +21,17 @@ defmodule Dolphin.Test.Wait do
         result
     end
   end
+
+  @doc """
+  The `Dolphin.Telemetry` events in the caller's mailbox (after
+  `Dolphin.Telemetry.subscribe/0`), oldest first, taken out of it; waits
+  for none.
+  """
+  def received_events(acc \\ []) do
+    receive do
+      {:dolphin, :events, e} -> received_events([e | acc])
+    after
+      0 -> Enum.reverse(acc)
+    end
+  end
 end

@@ -13,12 +13,7 @@ defmodule Dolphin.Cluster.CLITest do
 
   @speedup 50
 
-  setup do
-    Dolphin.Clock.set_speedup(@speedup)
-    Cluster.start_controller()
-    Dolphin.Fleet.set_source({Dolphin.Fleet.MAVLinkSource, nil})
-    :ok
-  end
+  setup do: Cluster.setup_controller(@speedup)
 
   defp io do
     {:ok, out} = StringIO.open("")
@@ -92,6 +87,8 @@ defmodule Dolphin.Cluster.CLITest do
   @tag :tmp_dir
   test "mix dolphin.run --join flies a station's vehicle and records its events", %{tmp_dir: dir} do
     gs = Cluster.start_station("gs1", sysids: [7])
+    # The station hears its vehicle before the run joins it (the line below counts it).
+    Wait.until(fn -> 7 in Cluster.call(gs.peer, Dolphin.Vehicles, :list, []) end, 1_500, fn -> "vehicle 7 on the station" end)
     script = Path.join(dir, "hop.exs")
 
     File.write!(script, """

@@ -11,12 +11,7 @@ defmodule Dolphin.ClusterTest do
 
   @speedup 50
 
-  setup do
-    Dolphin.Clock.set_speedup(@speedup)
-    Cluster.start_controller()
-    Dolphin.Fleet.set_source({Dolphin.Fleet.MAVLinkSource, nil})
-    :ok
-  end
+  setup do: Cluster.setup_controller(@speedup)
 
   defp hop_script(ids) do
     missions =
@@ -53,7 +48,7 @@ defmodule Dolphin.ClusterTest do
     Telemetry.subscribe()
     assert {:ok, %{result: :done}} = Dolphin.Script.run(hop_script([1, 11]))
     # The controller's events come from both stations' vehicles.
-    events = flush()
+    events = Wait.received_events()
     for id <- [1, 11], do: assert(Enum.any?(events, &match?(%{event: :armed, vehicle: ^id}, &1)))
   end
 
@@ -94,7 +89,7 @@ defmodule Dolphin.ClusterTest do
 
     assert_receive {:dolphin, :vehicles, {:vehicle_lost, 11}}, 10_000
     assert {:ok, %{result: :done}} = Dolphin.Script.await(run, 30_000)
-    texts = for %{event: :message, text: t} <- flush(), do: t
+    texts = for %{event: :message, text: t} <- Wait.received_events(), do: t
     assert Enum.any?(texts, &(&1 =~ ~r/^handled: .*11.*lost/)), inspect(texts)
     assert "after the watch" in texts
     # The other station's vehicle is still there.
@@ -119,11 +114,11 @@ defmodule Dolphin.ClusterTest do
     # the links' figures: both are good).
     %{21 => %{chosen: first}} = Dolphin.Cluster.Mirror.routes()
     {side, other} = if first == gs1.node, do: {:a, gs2.node}, else: {:b, gs1.node}
-    flush()
+    Wait.received_events()
     :ok = Dolphin.Test.RadioSplitter.cut(splitter, side)
 
     assert {:ok, %{result: :done}} = Dolphin.Script.await(run, 60_000)
-    events = flush()
+    events = Wait.received_events()
     assert Enum.any?(events, &match?(%{event: :station_changed, vehicle: 21, from: ^first, to: ^other}, &1)), inspect(events)
     assert %{21 => %{chosen: ^other}} = Dolphin.Cluster.Mirror.routes()
     refute Enum.any?(events, &match?(%{event: :vehicle_lost, vehicle: 21}, &1))
@@ -148,16 +143,8 @@ defmodule Dolphin.ClusterTest do
     assert {:ok, %{connected?: true}} = Vehicles.view(1)
     assert node(Vehicles.whereis(1)) == gs1.node
     assert {:ok, _} = Vehicles.state(2)
-    events = flush()
+    events = Wait.received_events()
     assert Enum.any?(events, &match?(%{event: :station_left}, &1))
     assert Enum.count(events, &match?(%{event: :station_joined}, &1)) == 1
-  end
-
-  defp flush(acc \\ []) do
-    receive do
-      {:dolphin, :events, e} -> flush([e | acc])
-    after
-      0 -> Enum.reverse(acc)
-    end
   end
 end

@@ -16,12 +16,7 @@ defmodule Dolphin.Cluster.PicksTest do
   @ids [41, 42, 43, 44]
   @rounds 12
 
-  setup do
-    Dolphin.Clock.set_speedup(@speedup)
-    Cluster.start_controller()
-    Fleet.set_source({Dolphin.Fleet.MAVLinkSource, nil})
-    :ok
-  end
+  setup do: Cluster.setup_controller(@speedup)
 
   # A pick by `owner` through the fleet of `where` (:here or a peer).
   defp pick(:here, owner, opts), do: Fleet.pick(Fleet, owner, opts)

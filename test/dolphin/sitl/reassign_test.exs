@@ -9,7 +9,7 @@ defmodule Dolphin.SITL.ReassignTest do
   alias Dolphin.{Engine, Mission, SITL, Telemetry, Vehicles}
   alias Dolphin.Mission.Command, as: C
   alias Dolphin.Mission.Resume
-  alias Dolphin.Test.Backend
+  alias Dolphin.Test.{Backend, Wait}
 
   @moduletag :sitl
   @moduletag timeout: 300_000
@@ -43,7 +43,7 @@ defmodule Dolphin.SITL.ReassignTest do
     :ok = SITL.crash(Backend.fleet(a), a)
 
     assert {:ok, :done} = Engine.await(run, 240_000)
-    events = Enum.reverse(seen) ++ flush()
+    events = Enum.reverse(seen) ++ Wait.received_events()
     Telemetry.unsubscribe()
 
     assert [%{from: ^a, to: ^b, resume_seq: resume}] = for(%{event: :task_reassigned} = e <- events, do: e)
@@ -65,14 +65,6 @@ defmodule Dolphin.SITL.ReassignTest do
       {:dolphin, :events, e} -> if fun.(e), do: [e | seen], else: wait_event(fun, [e | seen])
     after
       120_000 -> flunk("event not seen; saw: #{inspect(Enum.take(seen, 5))}")
-    end
-  end
-
-  defp flush(acc \\ []) do
-    receive do
-      {:dolphin, :events, e} -> flush([e | acc])
-    after
-      0 -> Enum.reverse(acc)
     end
   end
 end
