@@ -295,11 +295,15 @@ defmodule Dolphin.SITL do
   end
 
   # Instance numbers: the lowest free ones, so that -I stays small (SITL's
-  # ports are 5760 + 10·I and 5501 + 10·I).
+  # ports are 5760 + 10·I and 5501 + 10·I). Free on this machine, not only in
+  # this VM: each number in use is a lock file in the system's temporary
+  # directory naming the OS process that holds it, so two ground stations
+  # (or two test runs) on one machine never give two instances one -I. A lock
+  # whose process is gone (a VM that crashed) is taken over.
   defp take_instances(count) do
     :global.trans({@instances_key, self()}, fn ->
       used = :persistent_term.get(@instances_key, MapSet.new())
-      free = Stream.iterate(0, &(&1 + 1)) |> Stream.reject(&MapSet.member?(used, &1)) |> Enum.take(count)
+      free = Stream.iterate(0, &(&1 + 1)) |> Stream.reject(&MapSet.member?(used, &1)) |> Stream.filter(&lock_instance/1) |> Enum.take(count)
       :persistent_term.put(@instances_key, MapSet.union(used, MapSet.new(free)))
       free
     end)
@@ -307,8 +311,40 @@ defmodule Dolphin.SITL do
 
   defp release_instances(numbers) do
     :global.trans({@instances_key, self()}, fn ->
+      Enum.each(numbers, &File.rm(instance_lock(&1)))
       used = :persistent_term.get(@instances_key, MapSet.new())
       :persistent_term.put(@instances_key, MapSet.difference(used, MapSet.new(numbers)))
     end)
   end
+
+  defp instance_lock(n), do: Path.join(Application.get_env(:dolphin, :sitl_lock_dir, System.tmp_dir!()), "dolphin-sitl-instance-#{n}.lock")
+
+  # Held by a process that is gone: taken over (once; another taker may win the race).
+  defp lock_instance(n) do
+    path = instance_lock(n)
+    create_lock(path) or (stale_lock?(path) and File.rm(path) == :ok and create_lock(path))
+  end
+
+  defp create_lock(path) do
+    case File.open(path, [:write, :exclusive]) do
+      {:ok, file} ->
+        IO.write(file, System.pid())
+        File.close(file)
+        true
+
+      {:error, _} ->
+        false
+    end
+  end
+
+  defp stale_lock?(path) do
+    case File.read(path) do
+      {:ok, holder} -> not os_process_alive?(String.trim(holder))
+      {:error, _} -> false
+    end
+  end
+
+  defp os_process_alive?(""), do: false
+  # Without /proc (not Linux), a lock is taken for held: numbers are skipped, never shared.
+  defp os_process_alive?(pid), do: not File.dir?("/proc/self") or File.dir?("/proc/" <> pid)
 end

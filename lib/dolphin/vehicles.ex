@@ -245,7 +245,11 @@ defmodule Dolphin.Vehicles do
   @spec forget(byte()) :: :ok
   def forget(sysid) do
     pid = local(sysid)
-    if pid, do: DynamicSupervisor.terminate_child(Dolphin.Vehicles.Supervisor, pid)
+
+    if pid do
+      DynamicSupervisor.terminate_child(Dolphin.Vehicles.Supervisor, pid)
+      await_unregistered(sysid, pid, 1_000)
+    end
 
     if pid == nil and Dolphin.Cluster.Mirror.route(sysid) do
       # Another station's vehicle is forgotten here only (its station keeps it).
@@ -258,6 +262,16 @@ defmodule Dolphin.Vehicles do
     end
 
     :ok
+  end
+
+  # The registry drops a stopped process's name when it hears of the exit, a
+  # moment later: until then whereis/1 would still give the dead process, and
+  # a vehicle heard again at once would be taken for known.
+  defp await_unregistered(sysid, pid, tries) do
+    if tries > 0 and local(sysid) == pid do
+      Process.sleep(1)
+      await_unregistered(sysid, pid, tries - 1)
+    end
   end
 
   @typedoc "Options of a command: `:attempts`, `:ack_timeout_ms`, `:progress_timeout_ms`, `:progress_to`, `:target_component`."

@@ -53,6 +53,31 @@ defmodule Dolphin.SITLTest do
       assert message =~ "giving up"
     end
 
+    # The lock files of instance numbers in a directory of the test's own,
+    # so that SITL runs elsewhere on the machine do not change the answer.
+    @tag :tmp_dir
+    @tag :capture_log
+    test "instance numbers are free on the machine: one held by a live process is skipped, a stale one taken over", %{tmp_dir: dir} do
+      fake = Path.join(dir, "arducopter")
+      File.write!(fake, "#!/bin/sh\necho \"args: $*\"\nexit 3\n")
+      File.chmod!(fake, 0o755)
+      File.write!(Path.join(dir, "copter.parm"), "")
+      locks = Path.join(dir, "locks")
+      File.mkdir_p!(locks)
+      lock = &Path.join(locks, "dolphin-sitl-instance-#{&1}.lock")
+      # 0: another ground station running now (this very OS process will do); 1: one that crashed.
+      File.write!(lock.(0), System.pid())
+      File.write!(lock.(1), "999999999")
+      Application.put_env(:dolphin, :sitl_lock_dir, locks)
+      on_exit(fn -> Application.delete_env(:dolphin, :sitl_lock_dir) end)
+
+      assert {:error, %SITL.Error{} = e} = SITL.start(1, bin: fake)
+      assert Exception.message(e) =~ ~r/args: .*-I 1 /
+      # Released with the failed start; the live one's untouched.
+      refute File.exists?(lock.(1))
+      assert File.read!(lock.(0)) == System.pid()
+    end
+
     test "instances get distinct system ids, homes 30 m apart, and stop cleanly" do
       ids = Backend.start(:sitl, 2)
       assert ids == [1, 2]

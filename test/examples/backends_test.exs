@@ -9,8 +9,7 @@ defmodule Dolphin.Examples.BackendsTest do
   # than on the other: the histories are compared as far as both went, and
   # each example names how far that must at least be.
   #
-  # The two relays fly 4 and 6 SITL instances: at 10x they keep pace on two
-  # cores beside the rest of the suite (about 0.15 of a core each).
+  # The two relays: test/examples/backends_relays_test.exs.
   use ExUnit.Case, async: false
 
   alias Dolphin.Test.{ExampleRun, GroundStation}
@@ -30,30 +29,13 @@ defmodule Dolphin.Examples.BackendsTest do
     {"two_vehicles", 2, "14m", 15, %{"Survey Area 1" => 1, "Survey Area 2" => 1, "Return to base" => 2}},
     {"single_vehicle", 1, "14m", 15, %{"Survey Area" => 1, "Return to base" => 1}},
     {"standby_patrols", 2, nil, 15, %{"Tower 1" => 2, "Tower 2" => 2, "Home" => 4}},
-    {"photo_patrol", 1, nil, 15, %{"Field patrol" => 1, "Home" => 1}},
-    {"relay", 4, "14m", 10, %{"Survey Area 1" => 2, "Survey Area 2" => 2, "Return to base" => 2}},
-    {"relay_continuous", 6, "13m", 10, %{"Watch North" => 3, "Watch South" => 3, "Return to base" => 4}}
+    {"photo_patrol", 1, nil, 15, %{"Field patrol" => 1, "Home" => 1}}
   ]
 
-  for {name, count, for_time, sitl_speedup, least} <- @cases do
+  for {name, _, _, _, _} = example <- @cases do
     @tag example: name
     test "#{name}.exs: the same history on ArduCopter SITL as on the simulator", %{tmp_dir: dir} do
-      sim = run(dir, unquote(name), "--sim", unquote(count), 25, unquote(for_time))
-      sitl = run(dir, unquote(name), "--sitl", unquote(count), unquote(sitl_speedup), unquote(for_time))
-      assert sim.code == 0, sim.output
-      assert sitl.code == 0, sitl.output <> pace_note(sitl)
-      assert sim.result == sitl.result
-
-      ExampleRun.assert_same_history(sim, sitl, unquote(Macro.escape(least)), {"the simulator", "SITL"}, pace_note(sitl))
-
-      # A script that ends by itself leaves its vehicles alike (landed and
-      # disarmed after their last landing mission, or holding).
-      if unquote(for_time) == nil, do: assert(sitl.disarmed_at_end == sim.disarmed_at_end)
+      ExampleRun.assert_backends_agree(dir, unquote(Macro.escape(example)))
     end
   end
-
-  defp run(dir, name, backend, count, speedup, for_time),
-    do: ExampleRun.run(dir, name, backend, [backend, "#{count}", "--speedup", "#{speedup}"], for_time)
-
-  defp pace_note(run), do: ExampleRun.pace_note(run)
 end

@@ -9,6 +9,8 @@ defmodule Dolphin.Test.ExampleRun do
   alias Dolphin.MAVLink.Ardupilotmega.GlobalPositionInt
   alias Dolphin.MAVLink.{JSON, Tlog}
   alias Dolphin.Test.GroundStation
+
+  import ExUnit.Assertions
   alias Mix.Tasks.Dolphin.Run
 
   @examples Path.expand("../../examples", __DIR__)
@@ -42,6 +44,27 @@ defmodule Dolphin.Test.ExampleRun do
     }
   end
 
+  @doc """
+  Runs example `name` on `count` simulated vehicles (at 25×) and on `count`
+  ArduCopter SITL instances (at `sitl_speedup`), both bounded by `for_time`
+  (nil: the script ends by itself), and asserts the same outcome: the exit
+  status, the script's result, the histories (`assert_same_history/5`, with
+  `least`), and, for a script that ends by itself, the vehicles left alike.
+  """
+  def assert_backends_agree(dir, {name, count, for_time, sitl_speedup, least}) do
+    on = fn backend, speedup -> run(dir, name, backend, [backend, "#{count}", "--speedup", "#{speedup}"], for_time) end
+    sim = on.("--sim", 25)
+    sitl = on.("--sitl", sitl_speedup)
+    assert(sim.code == 0, sim.output)
+    assert(sitl.code == 0, sitl.output <> pace_note(sitl))
+    assert(sim.result == sitl.result)
+    assert_same_history(sim, sitl, least, {"the simulator", "SITL"}, pace_note(sitl))
+
+    # A script that ends by itself leaves its vehicles alike (landed and
+    # disarmed after their last landing mission, or holding).
+    if for_time == nil, do: assert(sitl.disarmed_at_end == sim.disarmed_at_end)
+  end
+
   # For each mission name, in the order they finished: how each ended and the
   # items it reached. A run ended by --for stops what flies at that moment:
   # those last tasks are not part of the history.
@@ -67,8 +90,6 @@ defmodule Dolphin.Test.ExampleRun do
   names the two runs in messages; `note` is added to a shortfall's message.
   """
   def assert_same_history(run_a, run_b, least, {on_a, on_b}, note \\ "") do
-    import ExUnit.Assertions
-
     for {mission, at_least} <- least do
       a = Map.get(run_a.history, mission, [])
       b = Map.get(run_b.history, mission, [])
