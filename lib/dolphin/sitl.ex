@@ -15,8 +15,12 @@ defmodule Dolphin.SITL do
 
     * its own temporary working directory (SITL writes `eeprom.bin`, logs and
       terrain there), removed when it stops;
-    * a distinct instance number (`-I`, which shifts SITL's own ports) and
-      system id (`--sysid`, 1..N unless `:first_sysid` says otherwise);
+    * a distinct instance number (`-I`, which shifts SITL's own ports), free
+      on the whole machine: each number in use is a lock file
+      (`dolphin-sitl-instance-N.lock` in the system's temporary directory,
+      naming the OS process that holds it; one whose process is gone is taken
+      over), so several ground stations or test runs can run SITL at once;
+    * a system id (`--sysid`, 1..N unless `:first_sysid` says otherwise);
     * a home spread like the simulator's (`Dolphin.Sim.homes/2`: 30 m apart
       around the report's home, or `:home` / `:homes`);
     * `--speedup` equal to the clock's (`Dolphin.Clock.speedup/0`), so that
