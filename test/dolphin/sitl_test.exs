@@ -27,6 +27,16 @@ defmodule Dolphin.SITLTest do
     |> Mission.add(C.return_home_and_land())
   end
 
+  # A stand-in for the SITL binary in `dir` (with its defaults file beside
+  # it), running the shell commands `body`.
+  defp fake_binary(dir, body) do
+    fake = Path.join(dir, "arducopter")
+    File.write!(fake, "#!/bin/sh\n" <> body <> "\n")
+    File.chmod!(fake, 0o755)
+    File.write!(Path.join(dir, "copter.parm"), "")
+    fake
+  end
+
   describe "Dolphin.SITL" do
     test "a missing binary or defaults file is a clear error" do
       assert {:error, %SITL.Error{} = e} = SITL.start(1, bin: "/nonexistent/arducopter")
@@ -43,10 +53,7 @@ defmodule Dolphin.SITLTest do
     @tag :tmp_dir
     @tag :capture_log
     test "a binary that exits at once is reported with the last lines it printed", %{tmp_dir: dir} do
-      fake = Path.join(dir, "arducopter")
-      File.write!(fake, "#!/bin/sh\necho 'bad option --model'\necho 'giving up'\nexit 3\n")
-      File.chmod!(fake, 0o755)
-      File.write!(Path.join(dir, "copter.parm"), "")
+      fake = fake_binary(dir, "echo 'bad option --model'\necho 'giving up'\nexit 3")
       assert {:error, %SITL.Error{} = e} = SITL.start(1, bin: fake)
       message = Exception.message(e)
       assert message =~ "exited with status 3 before it answered"
@@ -58,10 +65,7 @@ defmodule Dolphin.SITLTest do
     @tag :tmp_dir
     @tag :capture_log
     test "instance numbers are free on the machine: one held by a live process is skipped, a stale one taken over", %{tmp_dir: dir} do
-      fake = Path.join(dir, "arducopter")
-      File.write!(fake, "#!/bin/sh\necho \"args: $*\"\nexit 3\n")
-      File.chmod!(fake, 0o755)
-      File.write!(Path.join(dir, "copter.parm"), "")
+      fake = fake_binary(dir, "echo \"args: $*\"\nexit 3")
       locks = Path.join(dir, "locks")
       File.mkdir_p!(locks)
       lock = &Path.join(locks, "dolphin-sitl-instance-#{&1}.lock")

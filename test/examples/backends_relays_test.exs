@@ -6,27 +6,9 @@ defmodule Dolphin.Examples.BackendsRelaysTest do
   #
   # They fly 4 and 6 SITL instances: at 10x each takes about 0.15 of a core,
   # so they keep pace on two cores beside the rest of the suite.
-  use ExUnit.Case, async: false
-
-  alias Dolphin.Test.{ExampleRun, GroundStation}
-
-  @moduletag :sitl
-  @moduletag :tmp_dir
-  @moduletag timeout: 900_000
-
-  setup do
-    on_exit(&GroundStation.forget_vehicles/0)
-  end
-
-  @cases [
-    {"relay", 4, "14m", 10, %{"Survey Area 1" => 1, "Survey Area 2" => 1, "Return to base" => 2}},
-    {"relay_continuous", 6, "13m", 10, %{"Watch North" => 2, "Watch South" => 2, "Return to base" => 3}}
-  ]
-
-  for {name, _, _, _, _} = example <- @cases do
-    @tag example: name
-    test "#{name}.exs: the same history on ArduCopter SITL as on the simulator", %{tmp_dir: dir} do
-      ExampleRun.assert_backends_agree(dir, unquote(Macro.escape(example)))
-    end
-  end
+  use Dolphin.Test.BackendsCase,
+    cases: [
+      {"relay", 4, "14m", 10, %{"Survey Area 1" => 1, "Survey Area 2" => 1, "Return to base" => 2}},
+      {"relay_continuous", 6, "13m", 10, %{"Watch North" => 2, "Watch South" => 2, "Return to base" => 3}}
+    ]
 end

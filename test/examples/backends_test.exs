@@ -10,32 +10,12 @@ defmodule Dolphin.Examples.BackendsTest do
   # each example names how far that must at least be.
   #
   # The two relays: test/examples/backends_relays_test.exs.
-  use ExUnit.Case, async: false
-
-  alias Dolphin.Test.{ExampleRun, GroundStation}
-
-  @moduletag :sitl
-  @moduletag :tmp_dir
-  @moduletag timeout: 900_000
-
-  setup do
-    on_exit(&GroundStation.forget_vehicles/0)
-  end
-
-  # example, vehicles, --for (nil: it ends by itself), SITL's speed-up, and
-  # the least each mission name must have been flown on both
-  @cases [
-    {"search_and_signal", 3, nil, 10, %{"Search east" => 1, "Search west" => 1, "Home" => 1}},
-    {"two_vehicles", 2, "14m", 15, %{"Survey Area 1" => 1, "Survey Area 2" => 1, "Return to base" => 2}},
-    {"single_vehicle", 1, "14m", 15, %{"Survey Area" => 1, "Return to base" => 1}},
-    {"standby_patrols", 2, nil, 15, %{"Tower 1" => 2, "Tower 2" => 2, "Home" => 4}},
-    {"photo_patrol", 1, nil, 15, %{"Field patrol" => 1, "Home" => 1}}
-  ]
-
-  for {name, _, _, _, _} = example <- @cases do
-    @tag example: name
-    test "#{name}.exs: the same history on ArduCopter SITL as on the simulator", %{tmp_dir: dir} do
-      ExampleRun.assert_backends_agree(dir, unquote(Macro.escape(example)))
-    end
-  end
+  use Dolphin.Test.BackendsCase,
+    cases: [
+      {"search_and_signal", 3, nil, 10, %{"Search east" => 1, "Search west" => 1, "Home" => 1}},
+      {"two_vehicles", 2, "14m", 15, %{"Survey Area 1" => 1, "Survey Area 2" => 1, "Return to base" => 2}},
+      {"single_vehicle", 1, "14m", 15, %{"Survey Area" => 1, "Return to base" => 1}},
+      {"standby_patrols", 2, nil, 15, %{"Tower 1" => 2, "Tower 2" => 2, "Home" => 4}},
+      {"photo_patrol", 1, nil, 15, %{"Field patrol" => 1, "Home" => 1}}
+    ]
 end
