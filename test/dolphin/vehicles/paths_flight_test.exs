@@ -77,7 +77,8 @@ defmodule Dolphin.Vehicles.PathsFlightTest do
     assert Enum.sort(Enum.map(Vehicles.paths(1), &side(&1.via, ports))) == [:a, :b]
     # The console shows both, the one in use marked.
     shown = ExUnit.CaptureIO.capture_io(fn -> Dolphin.Console.vehicles() end)
-    assert shown =~ ~r/vehicle 1 paths:\n  \*  test-gcs-\d+ from 127.0.0.1:\d+  active .*\n     test-gcs-\d+ from 127.0.0.1:\d+  standby /
+    # (Columns are as wide as the longest path's name.)
+    assert shown =~ ~r/vehicle 1 paths:\n  \*  test-gcs-\d+ from 127.0.0.1:\d+ +active .*\n     test-gcs-\d+ from 127.0.0.1:\d+ +standby /
 
     assert {:ok, :done} = Engine.run(Engine.on(out_and_back(home), [1]))
     msgs = flush()
