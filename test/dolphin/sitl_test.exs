@@ -87,9 +87,11 @@ defmodule Dolphin.SITLTest do
       assert ids == [1, 2]
       [a, b] = Enum.map(ids, &Backend.home/1)
       assert_in_delta Geo.distance(a, b), 30, 1
+      # This fleet's own processes: other SITL runs may share the machine.
+      os_pids = for instance <- Backend.fleet(1).instances, do: :sys.get_state(instance).os_pid
       Backend.stop(ids)
       assert Vehicles.list() == []
-      assert {"", 1} == System.cmd("pgrep", ["-f", "arducopter --model"])
+      Wait.until(fn -> not Enum.any?(os_pids, &File.dir?("/proc/#{&1}")) end, 250, fn -> "SITL processes #{inspect(os_pids)} gone" end)
     end
   end
 
