@@ -226,9 +226,11 @@ defmodule Dolphin.Vehicles do
   chosen to reach it.
   """
   @spec whereis(byte()) :: pid() | nil
-  def whereis(sysid), do: local(sysid) || Dolphin.Cluster.Mirror.route(sysid)
+  def whereis(sysid), do: whereis_local(sysid) || Dolphin.Cluster.Mirror.route(sysid)
 
-  defp local(sysid) do
+  @doc "This node's own process of a vehicle, or nil: never a route to another ground station's."
+  @spec whereis_local(byte()) :: pid() | nil
+  def whereis_local(sysid) do
     case Registry.lookup(Dolphin.Registry, {:vehicle, sysid}) do
       [{pid, _}] -> pid
       [] -> nil
@@ -244,12 +246,9 @@ defmodule Dolphin.Vehicles do
   """
   @spec forget(byte()) :: :ok
   def forget(sysid) do
-    pid = local(sysid)
+    pid = whereis_local(sysid)
 
-    if pid do
-      DynamicSupervisor.terminate_child(Dolphin.Vehicles.Supervisor, pid)
-      await_unregistered(sysid, pid, 1_000)
-    end
+    if pid, do: DynamicSupervisor.terminate_child(Dolphin.Vehicles.Supervisor, pid)
 
     if pid == nil and Dolphin.Cluster.Mirror.route(sysid) do
       # Another station's vehicle is forgotten here only (its station keeps it).
@@ -262,16 +261,6 @@ defmodule Dolphin.Vehicles do
     end
 
     :ok
-  end
-
-  # The registry drops a stopped process's name when it hears of the exit, a
-  # moment later: until then whereis/1 would still give the dead process, and
-  # a vehicle heard again at once would be taken for known.
-  defp await_unregistered(sysid, pid, tries) do
-    if tries > 0 and local(sysid) == pid do
-      Process.sleep(1)
-      await_unregistered(sysid, pid, tries - 1)
-    end
   end
 
   @typedoc "Options of a command: `:attempts`, `:ack_timeout_ms`, `:progress_timeout_ms`, `:progress_to`, `:target_component`."
@@ -482,7 +471,7 @@ defmodule Dolphin.Vehicles do
   # vehicle on its first HEARTBEAT from a vehicle component.
   @spec route(Frame.t(), term()) :: :ok
   def route(%Frame{sysid: sysid} = frame, link) do
-    case local(sysid) do
+    case whereis_local(sysid) do
       nil -> discover(frame, link)
       pid -> GenServer.cast(pid, {:frame, frame, link})
     end

@@ -53,6 +53,20 @@ defmodule Dolphin.VehiclesTest do
     assert_raise ExUnit.AssertionError, fn -> UDPPeer.receive_until(relay, &match?(%M.Statustext{}, &1.message), 300) end
   end
 
+  test "a forgotten vehicle is gone at once, and heard again it is discovered anew", %{port: port, peer: peer} do
+    Vehicles.subscribe(:all)
+
+    for round <- 1..20 do
+      UDPPeer.send_message(peer, port, copter(), sysid: 13)
+      assert_receive {:dolphin, :vehicles, {:vehicle_discovered, 13}}, 10_000
+      pid = Vehicles.whereis(13)
+      :ok = Vehicles.forget(13)
+      # No moment in which the stopped process is still given for it.
+      refute Vehicles.whereis(13), "round #{round}: #{inspect(pid)} still given after forget"
+      refute Process.alive?(pid)
+    end
+  end
+
   test "a vehicle is discovered from its heartbeat, asked for telemetry, and sent the GCS heartbeat", %{port: port, peer: peer} do
     Vehicles.subscribe(:all)
     UDPPeer.send_message(peer, port, copter(), sysid: 11)

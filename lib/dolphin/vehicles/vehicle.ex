@@ -133,6 +133,13 @@ defmodule Dolphin.Vehicles.Vehicle do
   def handle_call({:command, request, opts}, from, s), do: {:noreply, run_op(s, request.command, CommandProtocol, request, opts, from)}
   def handle_call({:mission, request, opts}, from, s), do: {:noreply, run_op(s, :mission, MissionProtocol, request, opts, from)}
 
+  # The name goes with the process, not a moment later when the registry
+  # hears of the exit: once Dolphin.Vehicles.forget/1 has stopped a vehicle,
+  # whereis/1 no longer gives it, and a vehicle heard again at once is
+  # discovered anew rather than cast to a dead process.
+  @impl true
+  def terminate(_reason, s), do: Registry.unregister(Dolphin.Registry, {:vehicle, s.sysid})
+
   @impl true
   def handle_info(:request_telemetry, %{requests_left: 0} = s), do: {:noreply, s}
 
@@ -186,8 +193,14 @@ defmodule Dolphin.Vehicles.Vehicle do
     if on_time? do
       {paths, change} = Paths.judge(s.paths, Clock.now_ms(), now)
       s = %{s | paths: paths}
-      if change, do: path_changed(s, change)
-      {:noreply, publish(s, %{s.state | link_quality: Paths.quality(paths)})}
+
+      # Judging moves no figures: only a new path in use brings other ones.
+      if change do
+        path_changed(s, change)
+        {:noreply, publish(s, %{s.state | link_quality: Paths.quality(paths)})}
+      else
+        {:noreply, s}
+      end
     else
       {:noreply, s}
     end
