@@ -41,7 +41,7 @@ defmodule Dolphin.Cluster.Mirror do
 
   alias Dolphin.{Clock, PubSub, Telemetry}
   alias Dolphin.Cluster.{Choice, Station}
-  alias Dolphin.Vehicles.View
+  alias Dolphin.Vehicles.Views
 
   @table Dolphin.Cluster.Routes
   @reconnect_every_ms 1_000
@@ -53,31 +53,12 @@ defmodule Dolphin.Cluster.Mirror do
   @doc "The process a remote vehicle's commands go to (its chosen station's), or nil."
   @spec route(byte()) :: pid() | nil
   def route(id) do
-    case lookup(id) do
-      [{_, pid, _view}] -> pid
+    case :ets.lookup(@table, id) do
+      [{_, pid}] -> pid
       _ -> nil
     end
-  end
-
-  @doc "The mirrored view of a remote vehicle."
-  @spec view(byte()) :: {:ok, View.t()} | :error
-  def view(id) do
-    case lookup(id) do
-      [{_, _pid, view}] -> {:ok, view}
-      _ -> :error
-    end
-  end
-
-  @doc "The system ids of the remote vehicles mirrored here."
-  @spec ids() :: [byte()]
-  def ids do
-    if :ets.whereis(@table) == :undefined, do: [], else: :ets.select(@table, [{{:"$1", :_, :_}, [], [:"$1"]}])
-  end
-
-  defp lookup(id) do
-    :ets.lookup(@table, id)
   rescue
-    ArgumentError -> []
+    ArgumentError -> nil
   end
 
   @doc """
@@ -186,7 +167,7 @@ defmodule Dolphin.Cluster.Mirror do
       :ets.delete(@table, id)
 
       unless local?(id) do
-        Dolphin.Vehicles.Views.delete(id)
+        Views.delete(id)
         PubSub.publish(:vehicles, {:vehicle_forgotten, id})
       end
     end
@@ -430,8 +411,8 @@ defmodule Dolphin.Cluster.Mirror do
     cond do
       old.lost == false and v.lost ->
         # The view first: whoever hears of the loss finds the view saying so.
-        last = if h, do: h.view, else: elem(view(id), 1)
-        publish_view(id, route(id), %{last | connected?: false})
+        last = if h, do: h.view, else: last_view(id)
+        publish_view(id, route(id), last && %{last | connected?: false})
         lost_or_back(id, :vehicle_lost)
 
       old.lost == true and not v.lost ->
@@ -458,23 +439,25 @@ defmodule Dolphin.Cluster.Mirror do
     end
   end
 
-  # Every local publication of a remote vehicle's view goes through here:
-  # the route table first (whoever hears of the view finds where to send),
-  # then Dolphin.Vehicles.Views, which keeps it for readers, publishes it and
-  # turns its transitions into events as for a vehicle of this node's own —
-  # unless a local vehicle of that id owns the view.
-  defp publish_view(_id, _pid, nil), do: :ok
-
-  defp publish_view(id, pid, view) do
-    case lookup(id) do
-      [{^id, ^pid, ^view}] ->
-        :ok
-
-      _ ->
-        :ets.insert(@table, {id, pid, view})
-        unless local?(id), do: Dolphin.Vehicles.Views.put(view)
+  # The view last put for a vehicle, once no station hears it.
+  defp last_view(id) do
+    case Views.get(id) do
+      {:ok, view} -> view
+      {:error, _} -> nil
     end
   end
 
-  defp local?(id), do: Registry.lookup(Dolphin.Registry, {:vehicle, id}) != []
+  # Every local publication of a remote vehicle's view goes through here:
+  # the route first (whoever hears of the view finds where to send), then
+  # Dolphin.Vehicles.Views, which keeps it for readers, publishes it and
+  # turns its transitions into events as for a vehicle of this node's own —
+  # unless a local vehicle of that id owns the view, or it is the view there.
+  defp publish_view(_id, _pid, nil), do: :ok
+
+  defp publish_view(id, pid, view) do
+    if route(id) != pid, do: :ets.insert(@table, {id, pid})
+    unless local?(id) or Views.get(id) == {:ok, view}, do: Views.put(view)
+  end
+
+  defp local?(id), do: Dolphin.Vehicles.whereis_local(id) != nil
 end

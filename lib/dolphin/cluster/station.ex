@@ -62,7 +62,7 @@ defmodule Dolphin.Cluster.Station do
 
   @impl true
   def handle_info({:dolphin, :vehicles, {:vehicle_discovered, id}}, s) do
-    case local(id) do
+    case Vehicles.whereis_local(id) do
       nil ->
         {:noreply, s}
 
@@ -125,7 +125,7 @@ defmodule Dolphin.Cluster.Station do
   # The first subscriber: follow every local vehicle from now on.
   defp follow(s) do
     PubSub.subscribe(:vehicles)
-    s = Enum.reduce(Vehicles.list(), s, fn id, s -> if pid = local(id), do: watch(s, id, pid), else: s end)
+    s = Enum.reduce(Vehicles.list(), s, fn id, s -> if pid = Vehicles.whereis_local(id), do: watch(s, id, pid), else: s end)
     %{s | timer: s.timer || Process.send_after(self(), :heard, s.heard_every_ms)}
   end
 
@@ -152,7 +152,7 @@ defmodule Dolphin.Cluster.Station do
 
   defp refresh_pids(s) do
     Enum.reduce(s.vehicles, s, fn {id, pid}, s ->
-      case local(id) do
+      case Vehicles.whereis_local(id) do
         ^pid -> s
         nil -> s
         new ->
@@ -166,14 +166,6 @@ defmodule Dolphin.Cluster.Station do
     case Vehicles.view(id) do
       {:ok, view} -> view
       _ -> %Vehicles.View{id: id}
-    end
-  end
-
-  # Only this node's own vehicle processes, never a route to another station's.
-  defp local(id) do
-    case Registry.lookup(Dolphin.Registry, {:vehicle, id}) do
-      [{pid, _}] -> pid
-      [] -> nil
     end
   end
 
