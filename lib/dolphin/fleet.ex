@@ -368,7 +368,7 @@ defmodule Dolphin.Fleet do
   defp serve(%{waiters: []} = s), do: s
 
   defp serve(s) do
-    available = for v <- Source.views(s.source), v.connected?, s.picked[v.id] == nil, s.busy[v.id] == nil, do: v
+    available = for v <- Source.views(s.source), available?(s, v), do: v
 
     {s, waiters, _claimed} =
       Enum.reduce(s.waiters, {s, [], MapSet.new()}, fn w, {s, kept, claimed} ->
@@ -392,11 +392,8 @@ defmodule Dolphin.Fleet do
   # claim gets; those another node's pick holds are left out and the next
   # ones tried.
   defp serve_waiter(s, w, available, claimed) do
-    matching =
-      Enum.filter(available, fn v ->
-        matches?(w.req, v) and not MapSet.member?(claimed, v.id) and s.picked[v.id] == nil and
-          not MapSet.member?(s.claimed_elsewhere, v.id)
-      end)
+    # (What an earlier waiter of this round got, or learnt taken elsewhere, is no longer available.)
+    matching = Enum.filter(available, &(matches?(w.req, &1) and not MapSet.member?(claimed, &1.id) and available?(s, &1)))
 
     with true <- length(matching) >= w.req.count,
          ids = matching |> Enum.take(w.req.count) |> Enum.map(& &1.id),
@@ -415,6 +412,11 @@ defmodule Dolphin.Fleet do
     GenServer.reply(w.from, {:ok, VehicleSet.new(ids)})
     %{s | picked: Enum.reduce(ids, s.picked, &Map.put(&2, &1, w.owner))}
   end
+
+  # Connected, and picked by nobody (here or, as far as this fleet learnt, on
+  # another node), busy with no run.
+  defp available?(s, %View{id: id} = v),
+    do: v.connected? and s.picked[id] == nil and s.busy[id] == nil and not MapSet.member?(s.claimed_elsewhere, id)
 
   defp matches?(req, %View{} = v) do
     (req.type == nil or v.type in List.wrap(req.type)) and Enum.all?(req.payload, &(&1 in v.payloads)) and
@@ -438,10 +440,7 @@ defmodule Dolphin.Fleet do
         "#{id} (#{v.type || "type unknown"}#{if v.payloads != [], do: " " <> inspect(v.payloads), else: ""}, #{status})"
       end)
 
-    n =
-      Enum.count(vehicles, fn v ->
-        v.connected? and s.picked[v.id] == nil and s.busy[v.id] == nil and not MapSet.member?(s.claimed_elsewhere, v.id) and matches?(req, v)
-      end)
+    n = Enum.count(vehicles, &(available?(s, &1) and matches?(req, &1)))
 
     %PickError{
       requirement: describe(req),
