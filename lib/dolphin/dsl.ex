@@ -66,6 +66,7 @@ defmodule Dolphin.DSL do
   import Dolphin.DSL.Expand
 
   alias Dolphin.Engine
+  alias Dolphin.Engine.Snapshot
   alias Dolphin.Fleet.VehicleSet
   alias Dolphin.Script.Statements
 
@@ -166,7 +167,7 @@ defmodule Dolphin.DSL do
       message("battery at \#{round(battery(v) * 100)} %")
   """
   @spec battery(vehicle()) :: float() | nil
-  def battery(v), do: Dolphin.Engine.Watcher.vehicle(v, :battery).battery
+  def battery(v), do: Snapshot.battery(nil, v)
 
   @doc """
   The position of a vehicle: a `Dolphin.Geo.Location` (latitude, longitude,
@@ -175,7 +176,7 @@ defmodule Dolphin.DSL do
       home_pos = position(v)
   """
   @spec position(vehicle()) :: Dolphin.Geo.Location.t() | nil
-  def position(v), do: Dolphin.Engine.Watcher.vehicle(v, :position).position
+  def position(v), do: Snapshot.position(nil, v)
 
   @doc """
   The height of a vehicle above mean sea level, in metres (what missions
@@ -183,14 +184,14 @@ defmodule Dolphin.DSL do
       wait_for(altitude(v) > 1000, then: photos)
   """
   @spec altitude(vehicle()) :: float() | nil
-  def altitude(v), do: with(%{h: h} <- Dolphin.Engine.Watcher.vehicle(v, :altitude).position, do: h)
+  def altitude(v), do: Snapshot.altitude(nil, v)
 
   @doc """
   The height of a vehicle above its home, in metres; #{@unknown}
       wait_for(relative_altitude(v) > 30, then: survey)
   """
   @spec relative_altitude(vehicle()) :: float() | nil
-  def relative_altitude(v), do: Dolphin.Engine.Watcher.vehicle(v, :relative_altitude).relative_altitude
+  def relative_altitude(v), do: Snapshot.relative_altitude(nil, v)
 
   @doc """
   The flight mode of a vehicle: `:stabilize`, `:guided`, `:auto`, `:brake`,
@@ -198,7 +199,7 @@ defmodule Dolphin.DSL do
       until(watch_only, mode(v) == :rtl)
   """
   @spec mode(vehicle()) :: atom() | nil
-  def mode(v), do: Dolphin.Engine.Watcher.vehicle(v, :mode).mode
+  def mode(v), do: Snapshot.mode(nil, v)
 
   @doc """
   Whether a vehicle is armed (`false` until it has reported otherwise).
@@ -206,7 +207,7 @@ defmodule Dolphin.DSL do
       wait_for(not armed?(v), then: swap_battery)
   """
   @spec armed?(vehicle()) :: boolean()
-  def armed?(v), do: Dolphin.Engine.Watcher.vehicle(v, :armed?).armed?
+  def armed?(v), do: Snapshot.armed?(nil, v)
 
   @doc """
   Whether a vehicle is heard: `false` once it is silent for longer than its
@@ -218,7 +219,7 @@ defmodule Dolphin.DSL do
       end
   """
   @spec connected?(vehicle()) :: boolean()
-  def connected?(v), do: Dolphin.Engine.Watcher.vehicle(v, :connected?).connected?
+  def connected?(v), do: Snapshot.connected?(nil, v)
 
   @doc """
   `{reached, total}`: the last mission item reached (0 before the first) and
@@ -229,7 +230,7 @@ defmodule Dolphin.DSL do
       until(survey, mission_progress(v) >= {5, 0})
   """
   @spec mission_progress(vehicle()) :: {non_neg_integer(), non_neg_integer()} | nil
-  def mission_progress(v), do: Dolphin.Engine.Watcher.vehicle(v, :mission_progress).mission_progress
+  def mission_progress(v), do: Snapshot.mission_progress(nil, v)
 
   # --- tasks ---
 
