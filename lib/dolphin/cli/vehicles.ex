@@ -37,7 +37,11 @@ defmodule Dolphin.CLI.Vehicles do
     end
   end
 
-  defp connect_all(endpoints, link_opts, defer) do
+  @doc false
+  # Opens a link to each endpoint, its undoing handed to `defer`; the first
+  # that cannot be opened is the error (mix dolphin.station opens its links so too).
+  @spec connect_all([String.t()], keyword(), (fun() -> any())) :: :ok | {:error, StartError.t()}
+  def connect_all(endpoints, link_opts, defer) do
     Enum.reduce_while(endpoints, :ok, fn ep, :ok ->
       case Dolphin.Link.connect(ep, link_opts) do
         {:ok, pid} ->

@@ -10,21 +10,22 @@ defmodule Dolphin.Sim.Local do
   @type t :: %{link: pid(), port: :inet.port_number(), sysids: [byte()]}
 
   @doc """
-  Starts `count` simulated vehicles on a new local link. Options: `:seed`, and
-  the link's options (`:tlog`, `:forward`). Returns once the fleet knows every
+  Starts `count` simulated vehicles on a new local link. Options: `:seed`,
+  `:first_sysid` (default 1), and the link's options (`:tlog`, `:forward`). Returns once the fleet knows every
   vehicle (or after 10 s of real time), or an error saying what failed.
   """
   @spec start(pos_integer(), keyword()) :: {:ok, t()} | {:error, Dolphin.Sim.Error.t()}
   def start(count, opts \\ []) do
     name = {:dolphin_local_sim, System.unique_integer([:positive])}
-    {seed, link_opts} = Keyword.pop(opts, :seed, 1)
+    {seed, opts} = Keyword.pop(opts, :seed, 1)
+    {first, link_opts} = Keyword.pop(opts, :first_sysid, 1)
 
     case Dolphin.Link.connect("udpin:127.0.0.1:0", [name: name] ++ link_opts) do
       {:ok, link} ->
         port = Dolphin.Link.Connection.port(name)
         # Camera drones: every simulated vehicle carries a camera (component 100).
         # They boot as ArduCopter does: 2 s of MAV_STATE BOOT refusing uploads.
-        sim_opts = [count: count, gcs: {{127, 0, 0, 1}, port}, speedup: Dolphin.Clock.speedup(), seed: seed, camera: true, boot_ms: 2_000]
+        sim_opts = [count: count, first_sysid: first, gcs: {{127, 0, 0, 1}, port}, speedup: Dolphin.Clock.speedup(), seed: seed, camera: true, boot_ms: 2_000]
 
         case Dolphin.Sim.start(sim_opts) do
           {:ok, sysids} ->

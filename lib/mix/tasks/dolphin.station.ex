@@ -153,16 +153,7 @@ defmodule Mix.Tasks.Dolphin.Station do
     endpoints = if endpoints == [] and opts[:sim] == nil, do: [Dolphin.Link.default_endpoint()], else: endpoints
     link_opts = if opts[:tlog], do: [tlog: opts[:tlog]], else: []
 
-    Enum.reduce_while(endpoints, {:ok, []}, fn ep, {:ok, lines} ->
-      case Dolphin.Link.connect(ep, link_opts) do
-        {:ok, pid} ->
-          defer(fn -> DynamicSupervisor.terminate_child(Dolphin.Link.Supervisor, pid) end)
-          {:cont, {:ok, lines ++ ["link #{ep}"]}}
-
-        {:error, why} ->
-          {:halt, {:error, %StartError{option: "--connect #{ep}", reason: why}}}
-      end
-    end)
+    with :ok <- Dolphin.CLI.Vehicles.connect_all(endpoints, link_opts, &defer/1), do: {:ok, Enum.map(endpoints, &"link #{&1}")}
   end
 
   defp sims(opts) do
@@ -171,18 +162,16 @@ defmodule Mix.Tasks.Dolphin.Station do
         {:ok, []}
 
       n ->
-        name = {:dolphin_station_sim, System.unique_integer([:positive])}
         link_opts = if opts[:tlog] && opts[:connect] == nil, do: [tlog: opts[:tlog]], else: []
+        sim_opts = [seed: Keyword.get(opts, :seed, 1), first_sysid: Keyword.get(opts, :first_sysid, 1)] ++ link_opts
 
-        with {:ok, link} <- Dolphin.Link.connect("udpin:127.0.0.1:0", [name: name] ++ link_opts),
-             _ = defer(fn -> DynamicSupervisor.terminate_child(Dolphin.Link.Supervisor, link) end),
-             port = Dolphin.Link.Connection.port(name),
-             sim_opts = [count: n, first_sysid: Keyword.get(opts, :first_sysid, 1), gcs: {{127, 0, 0, 1}, port}, speedup: Dolphin.Clock.speedup(), seed: Keyword.get(opts, :seed, 1), camera: true],
-             {:ok, sysids} <- Dolphin.Sim.start(sim_opts) do
-          defer(fn -> Enum.each(sysids, &Dolphin.Sim.stop/1) end)
-          {:ok, ["#{n} simulated vehicle(s) #{Dolphin.Fleet.VehicleSet.format(sysids)} on 127.0.0.1:#{port}"]}
-        else
-          {:error, e} -> {:error, %StartError{option: "--sim #{n}", reason: e}}
+        case Dolphin.Sim.Local.start(n, sim_opts) do
+          {:ok, sim} ->
+            defer(fn -> Dolphin.Sim.Local.stop(sim) end)
+            {:ok, ["#{n} simulated vehicle(s) #{Dolphin.Fleet.VehicleSet.format(sim.sysids)} on 127.0.0.1:#{sim.port}"]}
+
+          {:error, e} ->
+            {:error, %StartError{reason: e}}
         end
     end
   end
