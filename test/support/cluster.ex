@@ -32,9 +32,12 @@ defmodule Dolphin.Test.Cluster do
   @doc "Makes the test node a distributed node on 127.0.0.1 (once; it stays so)."
   def start_controller do
     unless Node.alive?() do
-      ensure_epmd()
+      # EPMD and distribution on 127.0.0.1 only (Dolphin.Cluster starts an
+      # EPMD if none runs; this one listens where the variable says).
       :ok = :application.set_env(:kernel, :inet_dist_use_interface, {127, 0, 0, 1})
-      {:ok, _} = Node.start(:"ctl@127.0.0.1", :longnames)
+      System.put_env("ERL_EPMD_ADDRESS", "127.0.0.1")
+      {:ok, _} = Dolphin.Cluster.start_node("ctl@127.0.0.1", :longnames)
+      System.delete_env("ERL_EPMD_ADDRESS")
     end
 
     Node.set_cookie(@cookie)
@@ -45,17 +48,6 @@ defmodule Dolphin.Test.Cluster do
     end)
 
     node()
-  end
-
-  defp ensure_epmd do
-    case :erl_epmd.names(~c"127.0.0.1") do
-      {:ok, _} ->
-        :ok
-
-      {:error, _} ->
-        {_, 0} = System.cmd("epmd", ["-daemon"], env: [{"ERL_EPMD_ADDRESS", "127.0.0.1"}])
-        Dolphin.Test.Wait.until(fn -> match?({:ok, _}, :erl_epmd.names(~c"127.0.0.1")) end, 5_000, fn -> "epmd on 127.0.0.1" end)
-    end
   end
 
   @doc """
