@@ -1,14 +1,18 @@
 defmodule Dolphin.Docs.ReadmeTest do
-  # What the README shows a newcomer is what the code does: the event table
-  # lists every event of the catalogue with its fields, the console's sample
-  # is what the console prints, and the live view's endpoints are named.
+  # What the README and docs/ show a newcomer is what the code does: the
+  # event table lists every event of the catalogue with its fields, the
+  # console's sample is what the console prints, the live view's endpoints
+  # are named, the first script is the example the scenario tests fly, and
+  # every link between the documents leads somewhere.
   use ExUnit.Case, async: true
 
-  @readme File.read!(Path.expand("../../README.md", __DIR__))
+  @root Path.expand("../..", __DIR__)
+  @readme File.read!(Path.join(@root, "README.md"))
+  @operating File.read!(Path.join(@root, "docs/operating.md"))
 
   # The rows of the `--events FILE` table: "| name, name | fields |".
   defp event_table do
-    [_, section] = String.split(@readme, "### `--events FILE`", parts: 2)
+    [_, section] = String.split(@operating, "### `--events FILE`", parts: 2)
     [section | _] = String.split(section, "\n### ", parts: 2)
 
     for "| " <> row <- String.split(section, "\n"),
@@ -19,16 +23,16 @@ defmodule Dolphin.Docs.ReadmeTest do
         do: {name, fields}
   end
 
-  test "the event table names every event of Dolphin.Telemetry, and no other" do
+  test "docs/operating.md: the event table names every event of Dolphin.Telemetry, and no other" do
     table = event_table()
     catalogue = Dolphin.Telemetry.catalogue()
     names = catalogue |> Map.keys() |> Enum.map(&Atom.to_string/1)
 
-    assert Enum.sort(names -- Map.keys(table)) == [], "events missing from the README's table"
-    assert Enum.sort(Map.keys(table) -- names) == [], "the README's table names events that do not exist"
+    assert Enum.sort(names -- Map.keys(table)) == [], "events missing from the table"
+    assert Enum.sort(Map.keys(table) -- names) == [], "the table names events that do not exist"
 
     for {name, fields} <- catalogue, field <- fields do
-      assert table[Atom.to_string(name)] =~ Atom.to_string(field), "README: event #{name} does not list its field #{field}"
+      assert table[Atom.to_string(name)] =~ Atom.to_string(field), "docs/operating.md: event #{name} does not list its field #{field}"
     end
   end
 
@@ -42,10 +46,29 @@ defmodule Dolphin.Docs.ReadmeTest do
         Map.merge(base, %{id: 2, lon: -7.375057, seen_ms: 36})
       ])
 
-    assert String.contains?(@readme, "iex(1)> vehicles()\n" <> printed <> "\n"), "README: the sample vehicles() table is not what the console prints:\n" <> printed
+    assert String.contains?(@operating, "iex(1)> vehicles()\n" <> printed <> "\n"), "docs/operating.md: the sample vehicles() table is not what the console prints:\n" <> printed
   end
 
   test "the live view's two endpoints are documented" do
-    for endpoint <- ["`GET /`", "`GET /events`"], do: assert(String.contains?(@readme, endpoint), "README: #{endpoint} is not documented")
+    for endpoint <- ["`GET /`", "`GET /events`"], do: assert(String.contains?(@operating, endpoint), "docs/operating.md: #{endpoint} is not documented")
+  end
+
+  test "the README's first script is examples/single_vehicle.exs, which the scenario tests fly" do
+    example = File.read!(Path.join(@root, "examples/single_vehicle.exs"))
+    [_comments, body] = String.split(example, "use Dolphin.Script", parts: 2)
+    assert String.contains?(@readme, "```elixir\nuse Dolphin.Script" <> String.trim_trailing(body) <> "\n```"), "README: the first script differs from examples/single_vehicle.exs"
+  end
+
+  test "every relative link of the README and docs/ leads to a file that exists" do
+    files = [Path.join(@root, "README.md") | Path.wildcard(Path.join(@root, "docs/*.md"))]
+
+    broken =
+      for file <- files,
+          [_, target] <- Regex.scan(~r/\]\(([^)#\s]+)(?:#[^)]*)?\)/, File.read!(file)),
+          not String.contains?(target, "://"),
+          not File.exists?(Path.expand(target, Path.dirname(file))),
+          do: "#{Path.relative_to(file, @root)}: #{target}"
+
+    assert broken == [], "broken links: #{Enum.join(broken, ", ")}"
   end
 end
