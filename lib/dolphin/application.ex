@@ -18,11 +18,14 @@ defmodule Dolphin.Application do
       # The vehicles' views (Dolphin.Vehicles.Views): the table outlives
       # each vehicle's process, and the vehicles restart after it.
       Dolphin.Vehicles.Views,
+      # Where vehicles without a process here are reached (Dolphin.Vehicles.Routes):
+      # written by the cluster's mirror, read by every command.
+      Dolphin.Vehicles.Routes,
       # Vehicles before links: a link routes frames to vehicles from its first datagram.
       {DynamicSupervisor, name: Dolphin.Vehicles.Supervisor, strategy: :one_for_one},
       # Several ground stations (Dolphin.Cluster): the :pg scope of their
-      # groups, and the mirror of other stations' vehicles, whose routes
-      # Dolphin.Vehicles reads (so before the fleet).
+      # groups, and the mirror of other stations' vehicles, which routes
+      # them (so before the fleet).
       %{id: :cluster_scope, start: {:pg, :start_link, [Dolphin.Cluster.Scope]}},
       Dolphin.Cluster.Mirror,
       {DynamicSupervisor, name: Dolphin.Link.Supervisor, strategy: :one_for_one},

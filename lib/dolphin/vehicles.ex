@@ -157,14 +157,14 @@ defmodule Dolphin.Vehicles do
 
   # A vehicle of another ground station (Dolphin.Cluster) whose node went
   # away during the call may be heard by another station: the call is made
-  # once more on the route the mirror has now, so that a failover does not
+  # once more on the route its router has now (Dolphin.Vehicles.Routes), so that a failover does not
   # fail the task that was using the vehicle.
   defp call_pid(sysid, pid, request, timeout, retries) do
     {:ok, GenServer.call(pid, request, timeout)}
   catch
     :exit, reason ->
       with true <- retries > 0 and node(pid) != node() and node_gone?(reason),
-           new when is_pid(new) and new != pid <- Dolphin.Cluster.Mirror.reroute(sysid, pid) do
+           new when is_pid(new) and new != pid <- Dolphin.Vehicles.Routes.reroute(sysid, pid) do
         call_pid(sysid, new, request, timeout, retries - 1)
       else
         _ -> :gone
@@ -221,12 +221,12 @@ defmodule Dolphin.Vehicles do
   def subscribe(sysid), do: PubSub.subscribe({:vehicle, sysid})
 
   @doc """
-  The process of a vehicle, or nil: this node's own, else (in a cluster of
-  ground stations, `Dolphin.Cluster`) the vehicle's process on the station
-  chosen to reach it.
+  The process of a vehicle, or nil: this node's own, else its route
+  (`Dolphin.Vehicles.Routes`: in a cluster of ground stations, the
+  vehicle's process on the station chosen to reach it).
   """
   @spec whereis(byte()) :: pid() | nil
-  def whereis(sysid), do: whereis_local(sysid) || Dolphin.Cluster.Mirror.route(sysid)
+  def whereis(sysid), do: whereis_local(sysid) || Dolphin.Vehicles.Routes.get(sysid)
 
   @doc "This node's own process of a vehicle, or nil: never a route to another ground station's."
   @spec whereis_local(byte()) :: pid() | nil
@@ -250,9 +250,10 @@ defmodule Dolphin.Vehicles do
 
     if pid, do: DynamicSupervisor.terminate_child(Dolphin.Vehicles.Supervisor, pid)
 
-    if pid == nil and Dolphin.Cluster.Mirror.route(sysid) do
-      # Another station's vehicle is forgotten here only (its station keeps it).
-      Dolphin.Cluster.Mirror.forget(sysid)
+    if pid == nil and Dolphin.Vehicles.Routes.get(sysid) do
+      # A routed vehicle (another station's) is forgotten here only, by its
+      # router (its station keeps it).
+      Dolphin.Vehicles.Routes.forget(sysid)
     else
       # A vehicle put in the table from elsewhere has no process here.
       known? = pid != nil or match?({:ok, _}, Dolphin.Vehicles.Views.get(sysid))

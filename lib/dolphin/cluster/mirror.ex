@@ -9,9 +9,11 @@ defmodule Dolphin.Cluster.Mirror do
   process, latest view, how long ago they heard it, their link figures),
   chooses one (`Dolphin.Cluster.Choice`) and:
 
-    * routes: `Dolphin.Vehicles.whereis/1` falls back to the chosen station's
-      vehicle process (`route/1`, read from an ETS table this process owns;
-      a local vehicle of the same id always wins);
+    * routes: it is the router of its vehicles in `Dolphin.Vehicles.Routes`,
+      to which `Dolphin.Vehicles.whereis/1` falls back: the chosen station's
+      vehicle process (a local vehicle of the same id always wins); it
+      answers the calls `{:reroute, id, dead}` and `{:forget, id}` that the
+      vehicles layer makes there;
     * puts each new view of the chosen station in `Dolphin.Vehicles.Views`,
       as a local vehicle does: `Dolphin.Vehicles.list/0` and `view/1` read
       it there, it is published on `{:vehicle_view, id}` and its transitions
@@ -41,25 +43,13 @@ defmodule Dolphin.Cluster.Mirror do
 
   alias Dolphin.{Clock, PubSub, Telemetry}
   alias Dolphin.Cluster.{Choice, Station}
-  alias Dolphin.Vehicles.Views
+  alias Dolphin.Vehicles.{Routes, Views}
 
-  @table Dolphin.Cluster.Routes
   @reconnect_every_ms 1_000
   @stale_floor_ms 250
 
   @doc false
   def start_link(opts), do: GenServer.start_link(__MODULE__, opts, name: __MODULE__)
-
-  @doc "The process a remote vehicle's commands go to (its chosen station's), or nil."
-  @spec route(byte()) :: pid() | nil
-  def route(id) do
-    case :ets.lookup(@table, id) do
-      [{_, pid}] -> pid
-      _ -> nil
-    end
-  rescue
-    ArgumentError -> nil
-  end
 
   @doc """
   Follows the stations of `node` from now on (and reconnects to it whenever
@@ -85,30 +75,10 @@ defmodule Dolphin.Cluster.Mirror do
   @spec routes() :: %{byte() => map()}
   def routes, do: GenServer.call(__MODULE__, :routes)
 
-  @doc false
-  # Called after a call to `dead` exited for want of its node: the route
-  # now, or nil. Settles the node's departure at once if this process has
-  # not heard of it yet.
-  @spec reroute(byte(), pid()) :: pid() | nil
-  def reroute(id, dead) do
-    GenServer.call(__MODULE__, {:reroute, id, dead}, 10_000)
-  catch
-    :exit, _ -> nil
-  end
-
-  @doc false
-  # Forgets a remote vehicle here (Dolphin.Vehicles.forget/1): it comes
-  # back when a station tells of it anew (its discovery there, or the
-  # station joined again).
-  @spec forget(byte()) :: :ok
-  def forget(id), do: GenServer.call(__MODULE__, {:forget, id})
-
   # --- the process -------------------------------------------------------------
 
   @impl true
   def init(opts) do
-    :ets.new(@table, [:named_table, :protected, :set, read_concurrency: true])
-
     {:ok,
      %{
        enabled: false,
@@ -153,18 +123,24 @@ defmodule Dolphin.Cluster.Mirror do
     {:reply, routes, s}
   end
 
+  # Dolphin.Vehicles.Routes.reroute/2: a call to `dead` exited for want of
+  # its node. The route now, or nil; the node's departure settled at once if
+  # this process has not heard of it yet.
   def handle_call({:reroute, id, dead}, _from, s) do
     s = if node(dead) in Node.list(), do: s, else: node_gone(s, node(dead), "its node is not connected")
 
     case s.vehicles do
-      %{^id => %{lost: false}} -> {:reply, route(id), s}
+      %{^id => %{lost: false}} -> {:reply, Routes.get(id), s}
       _ -> {:reply, nil, s}
     end
   end
 
+  # Dolphin.Vehicles.Routes.forget/1: the vehicle is forgotten here; it comes
+  # back when a station tells of it anew (its discovery there, or the
+  # station joined again).
   def handle_call({:forget, id}, _from, s) do
     if Map.has_key?(s.vehicles, id) do
-      :ets.delete(@table, id)
+      Routes.delete(id)
 
       unless local?(id) do
         Views.delete(id)
@@ -412,7 +388,7 @@ defmodule Dolphin.Cluster.Mirror do
       old.lost == false and v.lost ->
         # The view first: whoever hears of the loss finds the view saying so.
         last = if h, do: h.view, else: last_view(id)
-        publish_view(id, route(id), last && %{last | connected?: false})
+        publish_view(id, Routes.get(id), last && %{last | connected?: false})
         lost_or_back(id, :vehicle_lost)
 
       old.lost == true and not v.lost ->
@@ -455,7 +431,7 @@ defmodule Dolphin.Cluster.Mirror do
   defp publish_view(_id, _pid, nil), do: :ok
 
   defp publish_view(id, pid, view) do
-    if route(id) != pid, do: :ets.insert(@table, {id, pid})
+    if Routes.get(id) != pid, do: Routes.put(id, pid)
     unless local?(id) or Views.get(id) == {:ok, view}, do: Views.put(view)
   end
 

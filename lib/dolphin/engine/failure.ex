@@ -79,8 +79,8 @@ defmodule Dolphin.Engine.Failure do
   def format_reason(other), do: inspect(other, charlists: :as_lists)
 
   @doc """
-  How a process ended, in words (an exit reason as text; an unforeseen
-  reason is shown as it is).
+  How a process ended, in words (`Dolphin.ExitReason.words/2`, with the
+  engine's own words for what a shutdown carries).
 
       iex> Dolphin.Engine.Failure.exit_words(:killed)
       "was killed"
@@ -90,13 +90,7 @@ defmodule Dolphin.Engine.Failure do
       "crashed ({:badmatch, 3})"
   """
   @spec exit_words(term()) :: String.t()
-  def exit_words(:normal), do: "ended"
-  def exit_words(:killed), do: "was killed"
-  def exit_words(:shutdown), do: "was shut down"
-  def exit_words({:shutdown, reason}), do: "was shut down (#{format_reason(reason)})"
-  def exit_words(:noproc), do: "was not running"
-  def exit_words({%_{__exception__: true} = e, _stack}), do: "raised #{format_exception(e)}"
-  def exit_words(other), do: "crashed (#{inspect(other, charlists: :as_lists)})"
+  def exit_words(reason), do: Dolphin.ExitReason.words(reason, &format_reason/1)
 
   # The parent's end: a parent that ended normally was stopped (a script's code at its end).
   defp parent_words(:normal), do: "ended"

@@ -359,7 +359,7 @@ defmodule Dolphin.Vehicles.Vehicle do
 
   # Why a protocol exchange ended without an answer, in words.
   defp op_words(:caller_gone), do: "its caller went away"
-  defp op_words(reason), do: "the exchange #{Dolphin.Engine.Failure.exit_words(reason)}"
+  defp op_words(reason), do: "the exchange #{Dolphin.ExitReason.words(reason)}"
 
   # The data streams (no answer expected), then each message interval as a
   # command of our own through the command protocol, so that its
