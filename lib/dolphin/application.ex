@@ -37,6 +37,9 @@ defmodule Dolphin.Application do
       Dolphin.Engine.Supervisor,
       # The IEx console's event store and background runs (Dolphin.Console).
       Dolphin.Console.Supervisor,
+      # Live views (Dolphin.Web): one server per view, one process per browser.
+      {DynamicSupervisor, name: Dolphin.Web.Supervisor, strategy: :one_for_one},
+      {Task.Supervisor, name: Dolphin.Web.Connections},
       # This node's station for other nodes' controllers: last, as nothing
       # here depends on it (its crash restarts only itself; controllers
       # subscribe again when it rejoins its group).

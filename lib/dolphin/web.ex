@@ -66,7 +66,9 @@ defmodule Dolphin.Web do
       first), shown as if seen live;
     * `:name` — a name to register the view under.
 
-  It is not linked to the caller: stop it with `stop/1` (or give `:owner`).
+  It runs under the application's `Dolphin.Web.Supervisor`, not linked to
+  the caller: stop it with `stop/1` (or give `:owner`). Its browsers'
+  processes run under `Dolphin.Web.Connections`.
   """
   @spec start(keyword()) :: {:ok, pid()} | {:error, Error.t()}
   def start(opts) when is_list(opts) do

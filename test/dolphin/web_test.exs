@@ -107,7 +107,16 @@ defmodule Dolphin.WebTest do
   end
 
   describe "HTTP" do
-    test "GET / is the page, with the report's sections and the vehicles now", %{port: port} do
+    test "a view and each browser's process are supervised: the view under Dolphin.Web.Supervisor, its clients under Dolphin.Web.Connections", %{web: web, port: port} do
+    assert {:undefined, web, :worker, [Dolphin.Web.Hub]} in DynamicSupervisor.which_children(Dolphin.Web.Supervisor)
+    {socket, _head, _rest} = open_stream(port)
+    Wait.until(fn -> Task.Supervisor.children(Dolphin.Web.Connections) != [] end, 30_000, fn -> "no client process under Dolphin.Web.Connections" end)
+    :gen_tcp.close(socket)
+    Web.stop(web)
+    refute Enum.any?(DynamicSupervisor.which_children(Dolphin.Web.Supervisor), &match?({_, ^web, _, _}, &1))
+  end
+
+  test "GET / is the page, with the report's sections and the vehicles now", %{port: port} do
       {status, headers, body} = request(port, "GET", "/")
       assert status == "HTTP/1.1 200 OK"
       assert headers["content-type"] == "text/html; charset=utf-8"

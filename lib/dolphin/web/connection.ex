@@ -17,11 +17,13 @@ defmodule Dolphin.Web.Connection do
   @ping_ms 15_000
 
   @doc false
-  # A process for a client of `hub`; it starts once given its socket
-  # ({:go, socket}, after the socket was handed over to it).
-  @spec start(pid()) :: pid()
+  # A process for a client of `hub`, under Dolphin.Web.Connections (a
+  # Task.Supervisor: never restarted, shut down with the application); it
+  # starts once given its socket ({:go, socket}, after the socket was
+  # handed over to it).
+  @spec start(pid()) :: DynamicSupervisor.on_start_child()
   def start(hub) do
-    spawn(fn ->
+    Task.Supervisor.start_child(Dolphin.Web.Connections, fn ->
       receive do
         {:go, socket} -> serve(socket, hub)
       after

@@ -1,7 +1,8 @@
 defmodule Dolphin.Web.Hub do
   @moduledoc false
-  # One live view's server process: owns the listening socket (its acceptor
-  # is linked: shared fate), the bounded model of the run (Web.Live) fed by
+  # One live view's server process, under Dolphin.Web.Supervisor (temporary:
+  # a view that ended is not started again, its port and its owner decide):
+  # owns the listening socket (its acceptor is a linked Task: shared fate), the bounded model of the run (Web.Live) fed by
   # the vehicles' views and the events, and the list of connected clients,
   # to each of which it sends what changed since what that client last got.
 
@@ -25,7 +26,14 @@ defmodule Dolphin.Web.Hub do
   @max_clients 100
 
   @doc false
-  def start(opts), do: GenServer.start(__MODULE__, opts, Keyword.take(opts, [:name]))
+  # Under Dolphin.Web.Supervisor, not linked to the caller.
+  def start(opts), do: DynamicSupervisor.start_child(Dolphin.Web.Supervisor, {__MODULE__, opts})
+
+  @doc false
+  def start_link(opts), do: GenServer.start_link(__MODULE__, opts, Keyword.take(opts, [:name]))
+
+  @doc false
+  def child_spec(opts), do: %{id: __MODULE__, start: {__MODULE__, :start_link, [opts]}, restart: :temporary, shutdown: 15_000}
 
   @doc false
   # The page now (binary).
@@ -46,7 +54,7 @@ defmodule Dolphin.Web.Hub do
          {:ok, listen} <- listen(ip, port, bind) do
       {:ok, actual} = :inet.port(listen)
       hub = self()
-      spawn_link(fn -> accept(listen, hub) end)
+      {:ok, _acceptor} = Task.start_link(fn -> accept(listen, hub) end)
       if owner = opts[:owner], do: Process.monitor(owner)
       PubSub.subscribe(:vehicles)
       Telemetry.subscribe()
@@ -89,8 +97,13 @@ defmodule Dolphin.Web.Hub do
   defp accept(listen, hub) do
     case :gen_tcp.accept(listen) do
       {:ok, socket} ->
-        pid = Connection.start(hub)
-        if :gen_tcp.controlling_process(socket, pid) == :ok, do: send(pid, {:go, socket}), else: :gen_tcp.close(socket)
+        with {:ok, pid} <- Connection.start(hub),
+             :ok <- :gen_tcp.controlling_process(socket, pid) do
+          send(pid, {:go, socket})
+        else
+          _ -> :gen_tcp.close(socket)
+        end
+
         accept(listen, hub)
 
       {:error, :closed} ->
