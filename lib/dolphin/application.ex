@@ -35,6 +35,9 @@ defmodule Dolphin.Application do
       # Who is available, picked, busy; then the runs of task trees, which use it.
       Dolphin.Fleet,
       Dolphin.Engine.Supervisor,
+      # Scripts (Dolphin.Script.Runner), which start runs: after the engine,
+      # so that they stop before it, each stopping its runs in order.
+      {DynamicSupervisor, name: Dolphin.Script.Supervisor, strategy: :one_for_one},
       # The IEx console's event store and background runs (Dolphin.Console).
       Dolphin.Console.Supervisor,
       # Live views (Dolphin.Web): one server per view, one process per browser.

@@ -245,6 +245,28 @@ defmodule Dolphin.ScriptTest do
       assert %{reason: :operator} = assert_platform(:stopped, "patrol")
     end
 
+    test "a script runs under Dolphin.Script.Supervisor; its shutdown stops the tasks, then the script says it ended", ctx do
+      fake_vehicles(ctx, 1)
+      me = :erlang.pid_to_list(self())
+
+      script =
+        compile!("""
+        use Dolphin.Script
+        _v = pick()
+        execute Dolphin.Engine.TestPlatform.task("patrol", duration: :infinity, notify: :erlang.list_to_pid(#{inspect(me)}))
+        """)
+
+      {:ok, pid} = Script.start(script)
+      assert_platform(:started, "patrol")
+      assert {:undefined, pid, :worker, [Dolphin.Script.Runner]} in DynamicSupervisor.which_children(Dolphin.Script.Supervisor)
+
+      # As the application's shutdown does it: the supervisor's exit.
+      :ok = DynamicSupervisor.terminate_child(Dolphin.Script.Supervisor, pid)
+      assert %{reason: :shutdown} = assert_platform(:stopped, "patrol")
+      assert {:ok, %{result: :stopped}} = Script.await(pid)
+      assert_received {:dolphin, :events, %{event: :script_finished, result: :stopped, reason: "stopped: shutting down"}}
+    end
+
     test "a script whose caller dies stops its tasks, then says it ended", ctx do
       fake_vehicles(ctx, 1)
       me = self()

@@ -22,11 +22,14 @@ defmodule Dolphin.Script.Runner do
   # The caller gets `{tag, runner, result}` when the script ends.
   @spec start_link(map(), Context.t(), keyword(), reply_to()) :: {:ok, pid()}
   def start_link(script, ctx, opts, {caller, _tag} = reply_to) when is_pid(caller) do
-    # Started unlinked and linked from init: the caller is then not the
+    # Under Dolphin.Script.Supervisor (temporary: a script is never started
+    # again), and linked to the caller from init: the caller is then not the
     # runner's OTP parent, so the caller's exit arrives in handle_info like
     # any other reason to end, and the script ends in order (an exit from the
-    # parent would bypass handle_info and skip stopping the tasks).
-    {:ok, _pid} = GenServer.start(__MODULE__, {script, ctx, opts, reply_to})
+    # parent would bypass handle_info and skip stopping the tasks). The
+    # supervisor's own shutdown reaches terminate/2, which ends it in order too.
+    spec = %{id: __MODULE__, start: {GenServer, :start_link, [__MODULE__, {script, ctx, opts, reply_to}]}, restart: :temporary, shutdown: :infinity, modules: [__MODULE__]}
+    {:ok, _pid} = DynamicSupervisor.start_child(Dolphin.Script.Supervisor, spec)
   end
 
   @spec stop(pid(), term()) :: :ok
@@ -99,6 +102,21 @@ defmodule Dolphin.Script.Runner do
   end
 
   def handle_info(_other, s), do: {:noreply, s}
+
+  # The application shuts down (the supervisor's exit; a script that ends by
+  # itself stops with :normal): the script ends as an operator's stop does,
+  # its tasks stopped first and its end reported, each wait bounded by
+  # stop_bound/1.
+  @impl GenServer
+  def terminate(reason, s) when reason == :shutdown or (is_tuple(reason) and elem(reason, 0) == :shutdown) do
+    stop_code(s, :shutdown)
+    finish(s, {:ok, :stopped}, :shutdown)
+    # The caller has its answer; the shutdown is not its end.
+    Process.unlink(s.caller)
+    :ok
+  end
+
+  def terminate(_reason, _s), do: :ok
 
   # Ends the script's code after its runs have stopped, in that order, so
   # that the history reads true: every task stopped (and says why), then the
