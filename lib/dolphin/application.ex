@@ -32,6 +32,8 @@ defmodule Dolphin.Application do
       # The configured links, once the tree they live in is up; a bad endpoint
       # in the configuration stops the start with the reason.
       %{id: :configured_links, start: {Dolphin.Link, :start_configured, []}, restart: :transient},
+      # The holders of this node's cluster-wide claims on vehicles (Dolphin.Fleet.Claims).
+      {Task.Supervisor, name: Dolphin.Fleet.ClaimHolders},
       # Who is available, picked, busy; then the runs of task trees, which use it.
       Dolphin.Fleet,
       Dolphin.Engine.Supervisor,

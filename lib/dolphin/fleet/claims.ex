@@ -9,7 +9,8 @@ defmodule Dolphin.Fleet.Claims do
       :ok = Dolphin.Fleet.Claims.release([1, 2])
 
   A claim is a `:global` name `{Dolphin.Fleet.Claims, id}`, registered to a
-  small holder process on the owner's node that monitors the owner. `claim/2` takes a cluster-wide lock (`:global.trans/4`), checks every
+  small holder process on the owner's node that monitors the owner (under
+  that node's `Dolphin.Fleet.ClaimHolders`, a `Task.Supervisor`). `claim/2` takes a cluster-wide lock (`:global.trans/4`), checks every
   id, and registers them all or none: two claims of overlapping sets are
   served one after the other, and the second is told which ids are taken.
   A claim whose owner ends is gone by itself, and watching fleets are told
@@ -57,7 +58,7 @@ defmodule Dolphin.Fleet.Claims do
     case Enum.filter(ids, fn id -> owner_of(id) not in [nil, owner] end) do
       [] ->
         for id <- ids, owner_of(id) == nil do
-          holder = :erlang.spawn(node(owner), __MODULE__, :hold, [id, owner])
+          {:ok, holder} = Task.Supervisor.start_child({Dolphin.Fleet.ClaimHolders, node(owner)}, __MODULE__, :hold, [id, owner])
           :yes = :global.register_name(name(id), holder, &__MODULE__.resolve/3)
         end
 

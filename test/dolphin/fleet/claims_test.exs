@@ -81,6 +81,10 @@ defmodule Dolphin.Fleet.ClaimsTest do
     :ok = Claims.release([4, 5])
 
     assert :ok = claim_on(c1, [6], c1.owner)
+    # Its holder lives on the owner's node, supervised there.
+    holder = :global.whereis_name({Claims, 6})
+    assert node(holder) == c1.node
+    assert holder in Cluster.call(c1.peer, Task.Supervisor, :children, [Dolphin.Fleet.ClaimHolders])
     Process.exit(c1.owner, :kill)
     Wait.until(fn -> Claims.owner_of(6) == nil end, 10_000, fn -> "the claim of a dead owner gone" end)
   end
