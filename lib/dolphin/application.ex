@@ -37,6 +37,8 @@ defmodule Dolphin.Application do
       # Who is available, picked, busy; then the runs of task trees, which use it.
       Dolphin.Fleet,
       Dolphin.Engine.Supervisor,
+      # Vehicles whose mission went to another (reassign), held when heard again.
+      {Task.Supervisor, name: Dolphin.Mission.Guards},
       # Scripts (Dolphin.Script.Runner), which start runs: after the engine,
       # so that they stop before it, each stopping its runs in order.
       {DynamicSupervisor, name: Dolphin.Script.Supervisor, strategy: :one_for_one},

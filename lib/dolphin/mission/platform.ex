@@ -103,8 +103,9 @@ defmodule Dolphin.Mission.Platform do
   def abandoned(vehicle, opts) do
     owner = Keyword.fetch!(opts, :owner)
     me = self()
-    # Unlinked: it outlives the task that gave the mission away, until the script ends.
-    pid = :proc_lib.spawn(fn -> guard(vehicle, owner, opts, me) end)
+    # Not linked to the task: it outlives the task that gave the mission
+    # away, until the script ends; supervised under Dolphin.Mission.Guards.
+    {:ok, pid} = Task.Supervisor.start_child(Dolphin.Mission.Guards, fn -> guard(vehicle, owner, opts, me) end)
     receive do: ({:"$dolphin_guarding", ^pid} -> :ok)
   end
 

@@ -205,6 +205,8 @@ defmodule Dolphin.Mission.ReassignTest do
       {result, events} = fly_and_kill(port, 3, :silence)
       assert {:ok, :done} = result
       covered_once!(3, events)
+      # The lost vehicle's guard waits for it, supervised.
+      assert [_ | _] = Task.Supervisor.children(Dolphin.Mission.Guards)
       Telemetry.subscribe()
       :ok = Sim.set_faults(1, silence: false)
       assert %{event: :vehicle_returned, vehicle: 1, held: true} = receive_event(&(&1.event == :vehicle_returned))
