@@ -2,24 +2,9 @@ defmodule Dolphin do
   @moduledoc """
   Dolphin for the BEAM: one ground station programs a fleet of drones over MAVLink.
 
-  ```
-  Dolphin.Supervisor (rest_for_one)
-  ├─ Dolphin.Registry            vehicles {:vehicle, sysid}, links {:link, name}, simulated vehicles {:sim, sysid}
-  ├─ Dolphin.PubSub              Registry with duplicate keys: state changes, vehicle and engine events
-  ├─ Dolphin.Vehicles.Views      owner of the ETS table of every vehicle's latest view (read by anyone)
-  ├─ Dolphin.Vehicles.Supervisor one Dolphin.Vehicles.Vehicle per discovered vehicle
-  │                              (each runs its command and mission protocols as :gen_statem)
-  ├─ Dolphin.Link.Supervisor     one Dolphin.Link.Connection per endpoint (owns its socket)
-  ├─ configured links            (connects `config :dolphin, links:` and goes away)
-  ├─ Dolphin.Cluster.Scope       the :pg scope of a cluster of ground stations (Dolphin.Cluster)
-  ├─ Dolphin.Cluster.Mirror      other stations' vehicles, routed and published here once joined
-  ├─ Dolphin.Fleet               who is picked, busy; waiting picks; reservations (no vehicle state)
-  ├─ Dolphin.Engine.Supervisor   registry of runs and task nodes; one process tree per run
-  │                              (a node per combinator; a Dolphin.Mission.Executor per flying mission)
-  ├─ Dolphin.Console.Supervisor  the IEx console's event store and background runs
-  ├─ Dolphin.Cluster.Station     this node's vehicles, told to the controllers that joined it
-  └─ Dolphin.Sim.Supervisor      simulated vehicles, added when `Dolphin.Sim.start/1` asks for them
-  ```
+  The application's supervision tree, what each process owns and why it
+  stands where it does: `docs/architecture.md` (a test checks that it names
+  every child of `Dolphin.Supervisor`).
 
   - `Dolphin.MAVLink` — the codec (pure).
   - `Dolphin.Link` — `connect/2` an endpoint (`udpin:0.0.0.0:14550`, `udpout:...`, `tcp:...`).

@@ -5,8 +5,6 @@ defmodule Dolphin.Application do
 
   @impl true
   def start(_type, _args) do
-    # Per-vehicle settings (timeouts) outlive the vehicles' processes.
-    :ets.new(Dolphin.Vehicles.Settings, [:named_table, :public, :set])
     # The frames each .tlog recorded lately, so that links writing to the same
     # file record a frame heard on several of them once (Dolphin.Link.Connection).
     :ets.new(Dolphin.Link.Recorded, [:named_table, :public, :set, write_concurrency: true, read_concurrency: true])
@@ -21,6 +19,8 @@ defmodule Dolphin.Application do
       # Where vehicles without a process here are reached (Dolphin.Vehicles.Routes):
       # written by the cluster's mirror, read by every command.
       Dolphin.Vehicles.Routes,
+      # What was set for each vehicle (timeouts): it outlives the vehicles' processes.
+      Dolphin.Vehicles.Settings,
       # Vehicles before links: a link routes frames to vehicles from its first datagram.
       {DynamicSupervisor, name: Dolphin.Vehicles.Supervisor, strategy: :one_for_one},
       # Several ground stations (Dolphin.Cluster): the :pg scope of their
@@ -47,10 +47,14 @@ defmodule Dolphin.Application do
       # Live views (Dolphin.Web): one server per view, one process per browser.
       {DynamicSupervisor, name: Dolphin.Web.Supervisor, strategy: :one_for_one},
       {Task.Supervisor, name: Dolphin.Web.Connections},
-      # This node's station for other nodes' controllers: last, as nothing
-      # here depends on it (its crash restarts only itself; controllers
+      # This node's station for other nodes' controllers: nothing here
+      # depends on it (its crash restarts only itself; controllers
       # subscribe again when it rejoins its group).
-      Dolphin.Cluster.Station
+      Dolphin.Cluster.Station,
+      # Simulated vehicles (Dolphin.Sim) and ArduPilot SITL instances
+      # (Dolphin.SITL): empty until asked for; they speak to links over UDP.
+      Dolphin.Sim.Supervisor,
+      {DynamicSupervisor, name: Dolphin.SITL.Supervisor, strategy: :one_for_one}
     ]
 
     # rest_for_one: everything after a crashed child depends on it. A crashed

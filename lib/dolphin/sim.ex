@@ -92,8 +92,7 @@ defmodule Dolphin.Sim do
          {:ok, config} <- config(opts),
          :ok <- free(sysids),
          :ok <- speedup(opts[:speedup]),
-         {:ok, homes, charger} <- places(opts, length(sysids)),
-         {:ok, _} <- ensure_supervisor() do
+         {:ok, homes, charger} <- places(opts, length(sysids)) do
       cameras = cameras(opts[:camera], sysids)
       config = Map.put(config, :charger, charger)
 
@@ -314,13 +313,4 @@ defmodule Dolphin.Sim do
   defp cameras(true, sysids), do: sysids
   defp cameras(list, _sysids) when is_list(list), do: list
   defp cameras(_, _sysids), do: []
-
-  defp ensure_supervisor do
-    case Supervisor.start_child(Dolphin.Supervisor, Dolphin.Sim.Supervisor) do
-      {:ok, pid} -> {:ok, pid}
-      {:error, {:already_started, pid}} -> {:ok, pid}
-      {:error, :already_present} -> Supervisor.restart_child(Dolphin.Supervisor, Dolphin.Sim.Supervisor)
-      {:error, why} -> {:error, %Dolphin.Sim.Error{reason: :start_failed, message: "cannot start the simulator: #{inspect(why)}"}}
-    end
-  end
 end

@@ -234,19 +234,8 @@ defmodule Dolphin.SITL do
   end
 
   defp start_instance(spec) do
-    {:ok, _} = ensure_supervisor()
     {:ok, pid} = DynamicSupervisor.start_child(Dolphin.SITL.Supervisor, {Instance, spec})
     pid
-  end
-
-  defp ensure_supervisor do
-    child = %{id: Dolphin.SITL.Supervisor, start: {DynamicSupervisor, :start_link, [[name: Dolphin.SITL.Supervisor, strategy: :one_for_one]]}, type: :supervisor}
-
-    case Supervisor.start_child(Dolphin.Supervisor, child) do
-      {:ok, pid} -> {:ok, pid}
-      {:error, {:already_started, pid}} -> {:ok, pid}
-      {:error, :already_present} -> Supervisor.restart_child(Dolphin.Supervisor, Dolphin.SITL.Supervisor)
-    end
   end
 
   # Every instance answers and has booted (HEARTBEAT with MAV_STATE past BOOT:

@@ -207,7 +207,7 @@ defmodule Dolphin.Vehicles do
   @spec set_timeout(byte(), pos_integer()) :: :ok | {:error, :unknown_vehicle}
   def set_timeout(sysid, ms) when is_integer(ms) and ms > 0 do
     # Kept outside the process: a restarted vehicle process keeps it.
-    :ets.insert(Dolphin.Vehicles.Settings, {{:timeout, sysid}, ms})
+    :ok = Dolphin.Vehicles.Settings.put_timeout(sysid, ms)
 
     case call_vehicle(sysid, {:set_timeout, ms}) do
       {:ok, :ok} -> :ok

@@ -71,4 +71,22 @@ defmodule Dolphin.Docs.ReadmeTest do
 
     assert broken == [], "broken links: #{Enum.join(broken, ", ")}"
   end
+
+  test "docs/architecture.md's supervision tree names every child of Dolphin.Supervisor, in order" do
+    doc = File.read!(Path.join(@root, "docs/architecture.md"))
+    [_, tree] = String.split(doc, "Dolphin.Supervisor (rest_for_one", parts: 2)
+    [tree | _] = String.split(tree, "```", parts: 2)
+    drawn = for line <- String.split(tree, "\n"), [_, name] <- [Regex.run(~r/^[├└]─ (\S+(?: links)?)/u, line)], do: name
+
+    running =
+      for {id, _pid, _type, _modules} <- Enum.reverse(Supervisor.which_children(Dolphin.Supervisor)) do
+        case id do
+          :cluster_scope -> "Dolphin.Cluster.Scope"
+          :configured_links -> "configured links"
+          module -> inspect(module)
+        end
+      end
+
+    assert drawn == running
+  end
 end

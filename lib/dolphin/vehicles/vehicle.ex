@@ -52,11 +52,7 @@ defmodule Dolphin.Vehicles.Vehicle do
     # Command protocols are linked to this process: their exits come as messages.
     Process.flag(:trap_exit, true)
     # A timeout set for this vehicle (Dolphin.Vehicles.set_timeout/2) survives restarts.
-    timeout =
-      case :ets.lookup(Dolphin.Vehicles.Settings, {:timeout, sysid}) do
-        [{_, ms}] -> ms
-        [] -> Keyword.get(opts, :timeout_ms, Application.get_env(:dolphin, :vehicle_timeout_ms, 20_000))
-      end
+    timeout = Dolphin.Vehicles.Settings.timeout(sysid, Keyword.get(opts, :timeout_ms, Application.get_env(:dolphin, :vehicle_timeout_ms, 20_000)))
 
     send(self(), :request_telemetry)
     send(self(), {:timesync, 0})
