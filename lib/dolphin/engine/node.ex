@@ -28,10 +28,43 @@ defmodule Dolphin.Engine.Node do
   # Events: {:finished, key, result}, {:checked, ...}, {:condition, key},
   # {:timeout, key}, {:code_result, ...}, and the platform ones above.
 
-  @type effect :: tuple() | atom()
+  @type key :: term()
+  @type result :: :done | :stopped | {:failed, term()}
+
+  # What a node asks its runner to do (the list above).
+  @type effect ::
+          {:start, key(), Dolphin.Engine.Task.t()}
+          | {:start_new, key(), Dolphin.Engine.Task.t()}
+          | {:start_new, key(), Dolphin.Engine.Task.t(), [term()]}
+          | {:stop, [key()], term()}
+          | {:check, key(), Dolphin.Engine.Cond.t()}
+          | {:watch, key(), Dolphin.Engine.Cond.t()}
+          | {:unwatch, key()}
+          | {:timer, key(), non_neg_integer()}
+          | {:cancel_timer, key()}
+          | {:run_code, key(), (() -> term())}
+          | :platform_start
+          | {:platform_stop, term()}
+          | {:emit, atom(), map()}
+          | :continue
+          | {:finish, :done | {:failed, term()}}
+
+  # What the runner tells a node (the events above).
+  @type event ::
+          {:finished, key(), result()}
+          | {:checked, key(), boolean()}
+          | {:condition, key()}
+          | {:timeout, key()}
+          | {:code_result, key(), {:ok, term()} | {:error, term()}}
+          | {:platform, term()}
+          | {:platform_exit, term()}
+          | {:platform_start_failed, term()}
+          | {:vehicle_lost, term()}
+          | :continue
+
   @callback kind() :: atom()
   @callback init(task :: struct()) :: {[effect()], term()}
-  @callback handle(event :: term(), state :: term()) :: {[effect()], term()}
+  @callback handle(event(), state :: term()) :: {[effect()], term()}
 
   @doc false
   # A child's result as its parent continues with it: stopped counts as completed.

@@ -17,6 +17,69 @@ defmodule Dolphin.Engine.Runner do
 
   alias Dolphin.Engine.{Context, Failure, PlatformTask, Task, Watcher}
 
+  # A node's state, which :sys.get_state/1 hands back.
+  defstruct [
+    :task,
+    :id,
+    :mod,
+    :kind,
+    :name,
+    :vehicle,
+    :parent,
+    :parent_id,
+    :ctx,
+    :run,
+    :cstate,
+    :watcher,
+    :platform,
+    :tick,
+    :debug,
+    children: %{},
+    order: [],
+    watches: [],
+    timers: %{},
+    code: %{},
+    acked: false,
+    halted: :ok
+  ]
+
+  @typedoc """
+  A node's state: its task and where it stands (`parent`, `parent_id`,
+  `run`, `ctx`); `cstate`, its combinator's own state (`Dolphin.Engine.Node`);
+  `children`, key => %{pid, task}, and `order`, their keys in start order;
+  `watches`, [{key, cond}] in watch order, and `watcher`, what those
+  conditions read (and the vehicle of a platform task); `timers`, key =>
+  {ref, token}; `code`, key => {:pending, ref, token, fun} | {:running, pid};
+  `platform`, the platform task's process (a leaf); `tick`, the 1 s timer of
+  conditions on time; `acked`, whether the parent was told it started;
+  `halted`, the outcome of the platform's stop in phase 1; `debug`, the :sys
+  debug options (`:sys.trace/2`, `:sys.log/2`, ...).
+  """
+  @type t :: %__MODULE__{
+          task: Task.t(),
+          id: non_neg_integer(),
+          mod: module(),
+          kind: atom(),
+          name: String.t() | nil,
+          vehicle: term(),
+          parent: pid(),
+          parent_id: non_neg_integer() | nil,
+          ctx: Context.t(),
+          run: map(),
+          cstate: term(),
+          watcher: Watcher.t(),
+          platform: pid() | nil,
+          tick: reference() | nil,
+          debug: [:sys.dbg_opt()],
+          children: %{term() => %{pid: pid(), task: Task.t()}},
+          order: [term()],
+          watches: [{term(), Dolphin.Engine.Cond.t()}],
+          timers: %{term() => {reference(), reference()}},
+          code: %{term() => {:pending, reference(), reference(), function()} | {:running, pid()}},
+          acked: boolean(),
+          halted: term()
+        }
+
   # Real time a parent waits for a child's initial subtree to start.
   @start_timeout 30_000
 
@@ -97,7 +160,7 @@ defmodule Dolphin.Engine.Runner do
     Process.flag(:trap_exit, true)
     Context.put(ctx)
 
-    s = %{
+    s = %__MODULE__{
       task: task,
       id: task.id,
       mod: task.__struct__,
@@ -108,24 +171,7 @@ defmodule Dolphin.Engine.Runner do
       parent_id: parent_id,
       ctx: ctx,
       run: run,
-      cstate: nil,
-      # key => %{pid, task}; order: keys in start order
-      children: %{},
-      order: [],
-      # [{key, cond}] in watch order
-      watches: [],
-      # what those conditions read, and the vehicle of a platform task
       watcher: Watcher.new(Context.source(ctx), ctx.signals),
-      # key => {ref, token}
-      timers: %{},
-      # key => {:pending, ref, token, fun} | {:running, pid}
-      code: %{},
-      platform: nil,
-      tick: nil,
-      acked: false,
-      # outcome of the platform stop in phase 1
-      halted: :ok,
-      # :sys debug options (:sys.trace/2, :sys.log/2, ...)
       debug: :sys.debug_options([])
     }
 
