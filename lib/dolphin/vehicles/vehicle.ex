@@ -13,6 +13,33 @@ defmodule Dolphin.Vehicles.Vehicle do
   alias Dolphin.MAVLink.Ardupilotmega, as: M
   alias Dolphin.Vehicles.{CommandProtocol, MissionProtocol, Paths, State, View}
 
+  defstruct [:sysid, :paths, :judge_due, :state, :timeout_ms, :check_due_ms, :requests_left, lost: false, view: nil, ops: %{}, queued: %{}]
+
+  # The process's state. `paths`: one path per link (and address) the vehicle
+  # is heard on (Dolphin.Vehicles.Paths), the one it was discovered on in
+  # use; `judge_due`: when they are judged next (real ms). `state`: the
+  # vehicle as its frames say (Dolphin.Vehicles.State). `check_due_ms`: when
+  # the next silence check is due (clock ms): one that runs much later than
+  # that does not judge (see :check_link). `view`: the view last published
+  # (Dolphin.Vehicles.View), nil before the first. `requests_left`: telemetry
+  # requests to repeat until position telemetry comes. `ops`: operations
+  # under way, by key (a command id, or :mission: one transfer at a time),
+  # each %{pid, from, monitor, what}; `queued`: what waits for each key, a
+  # queue of {module, request, opts, monitor}.
+  @type t :: %__MODULE__{
+          sysid: byte(),
+          paths: Paths.t(),
+          judge_due: integer(),
+          state: State.t(),
+          timeout_ms: pos_integer(),
+          check_due_ms: integer(),
+          requests_left: non_neg_integer(),
+          lost: boolean(),
+          view: View.t() | nil,
+          ops: %{term() => map()},
+          queued: %{term() => :queue.queue()}
+        }
+
   # Messages asked for by interval (µs of vehicle time) on top of the streams:
   # ArduPilot sends EXTENDED_SYS_STATE only when asked this way.
   @intervals [
@@ -62,29 +89,16 @@ defmodule Dolphin.Vehicles.Vehicle do
     Process.send_after(self(), :judge_paths, judge_period())
 
     {:ok,
-     %{
+     %__MODULE__{
        sysid: sysid,
-       # One path per link (and address) the vehicle is heard on (Dolphin.Vehicles.Paths),
-       # the one it was discovered on in use; and when the next judging is due
-       # (real ms).
        paths: Paths.new(link, now, real),
        judge_due: real + judge_period(),
        # Seen now (it was just heard, or its process restarted): silence from
        # here on makes it lost.
        state: put_in(State.new(sysid).link.last_seen_ms, now),
        timeout_ms: timeout,
-       # When the next silence check is due (clock ms): one that runs much later
-       # than that does not judge (see :check_link).
        check_due_ms: now + check_period(timeout),
-       lost: false,
-       # The view last published (Dolphin.Vehicles.View), nil before the first.
-       view: nil,
-       requests_left: @request_tries,
-       # Operations under way, by key (a command id, or :mission: one transfer
-       # at a time): %{pid, from, monitor, what}; and what waits for each key:
-       # a queue of {module, request, opts, monitor}.
-       ops: %{},
-       queued: %{}
+       requests_left: @request_tries
      }}
   end
 
