@@ -118,9 +118,58 @@ defmodule Dolphin.CheckTest do
     test "bad ones say what is wrong and where" do
       assert {:error, %FleetFileError{message: "vehicle #1: \"position\" is missing" <> _}} = FleetFile.parse(~s({"vehicles":[{"id":1}]}))
       assert {:error, %FleetFileError{message: "vehicle #2: id 1 is given twice"}} = FleetFile.parse(~s({"vehicles":[{"id":1,"position":[1,2,3]},{"id":1,"position":[1,2,3]}]}))
-      assert {:error, %FleetFileError{message: "not JSON" <> _}} = FleetFile.parse("{")
+      assert {:error, %FleetFileError{message: "not valid JSON" <> _}} = FleetFile.parse("{")
       assert {:error, %FleetFileError{message: "vehicle #1: \"battery\" must be" <> _}} = FleetFile.parse(~s({"vehicles":[{"id":1,"battery":2,"position":[1,2,3]}]}))
-      assert {:error, %FleetFileError{message: "vehicle #1: unknown type \"submarine_zz\""}} = FleetFile.parse(~s({"vehicles":[{"id":1,"type":"submarine_zz","position":[1,2,3]}]}))
+      assert {:error, %FleetFileError{message: "vehicle #1: unknown type \"submarine_zz\" (one of uav, ugv, usv, uuv, other)"}} =
+               FleetFile.parse(~s({"vehicles":[{"id":1,"type":"submarine_zz","position":[1,2,3]}]}))
+    end
+
+    test "every type a pick names, no type, and any payload name are read" do
+      text = ~s({"vehicles": [
+        {"id": 1, "type": "uav", "payloads": ["camera", "lidar_x9_never_named"], "position": [40.44, -7.37, 820]},
+        {"id": 2, "type": "ugv", "position": [40.44, -7.37, 820]},
+        {"id": 3, "type": "usv", "position": [40.44, -7.37, 820]},
+        {"id": 4, "type": "uuv", "position": [40.44, -7.37, 820]},
+        {"id": 5, "type": "other", "position": [40.44, -7.37, 820]},
+        {"id": 6, "position": [40.44, -7.37, 820], "battery": 0, "airborne": true}]})
+
+      assert {:ok, vehicles} = FleetFile.parse(text)
+      assert Enum.map(vehicles, & &1.type) == [:uav, :ugv, :usv, :uuv, :other, :uav]
+      assert hd(vehicles).payloads == [:camera, :lidar_x9_never_named]
+      assert %{battery: 0.0, airborne?: true} = List.last(vehicles)
+    end
+
+    test "every problem of every vehicle is reported, not only the first" do
+      text = ~s({"vehicles": [
+        {"id": 1, "type": "boat", "battery": 2, "position": [40.44, -7.37, 820]},
+        {"id": 300, "payloads": ["Thermal Camera"]},
+        {"id": 1, "position": [40.44, -7.37, 820], "airborne": "no"},
+        {"id": 1, "position": [40.44, -7.37, 820]}]})
+
+      assert {:error, %FleetFileError{problems: problems} = e} = FleetFile.parse(text)
+
+      assert problems == [
+               ~s<vehicle #1: unknown type "boat" (one of uav, ugv, usv, uuv, other)>,
+               ~s<vehicle #1: "battery" must be a number from 0.0 to 1.0, got 2>,
+               ~s<vehicle #2: "id" must be an integer system id 0..255, got 300>,
+               ~s<vehicle #2: payload names are lower-case letters, digits and _ (as in "thermal_camera"), got "Thermal Camera">,
+               ~s<vehicle #2: "position" is missing ([latitude, longitude, height above sea level], latitude -90..90, longitude -180..180)>,
+               ~s<vehicle #3: "airborne" must be true or false, got "no">,
+               "vehicle #3: id 1 is given twice",
+               "vehicle #4: id 1 is given twice"
+             ]
+
+      assert Exception.message(%{e | file: "f.json"}) =~ ~r/^fleet file f.json: 8 problems:\n  vehicle #1: unknown type "boat"/
+    end
+
+    test "text that is not JSON is described in the file's terms: what, byte, line" do
+      assert {:error, e} = FleetFile.parse(~s({"vehicles": [\n  {"id": 1,\n))
+      assert e.message == "not valid JSON: the text ends in the middle of a value (byte 27, line 3, column 1)"
+
+      assert {:error, e} = FleetFile.parse(~s({"vehicles": [\n  {"id": 1 "position": [1, 2, 3]}]}))
+      assert e.message == ~s|not valid JSON: expected , or } in an object, found "\\"position\\": " (byte 26, line 2, column 12)|
+
+      assert {:error, %FleetFileError{message: "not valid JSON: the file is empty"}} = FleetFile.parse("  \n")
     end
   end
 end
