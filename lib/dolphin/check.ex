@@ -23,11 +23,14 @@ defmodule Dolphin.Check do
       concurrent composition without enough distinct vehicles, fails as it
       would in flight, and is reported with its line and why;
     * every mission a task would fly, as it is sent (`Dolphin.Mission.to_items/2`):
-      positions on Earth, heights not below the home's ground, no item
-      beyond `:max_distance` from home or `:max_height` above it, a take-off
-      before the first waypoint for a vehicle on the ground, loiter radii
-      and speeds ArduCopter takes, jumps to existing items, photos only on a
-      vehicle with a camera;
+      something to fly (an item after its home), positions on Earth,
+      heights not below the home's ground, no item beyond `:max_distance`
+      from home or `:max_height` above it, a take-off before the first
+      waypoint for a vehicle on the ground, and one that climbs (ArduCopter
+      takes off from the ground to at least 1 m and flies on from there: a
+      take-off to no height is an error), take-off pitches of 0..90°, loiter
+      radii and speeds ArduCopter takes, jumps to existing items, photos only
+      on a vehicle with a camera;
     * energy and time: each mission's length, flight time and battery use,
       from the simulated ArduCopter's model (cruise 10 m/s, climb 2.5 m/s,
       descent 1.5 m/s, 30 A hovering times effort, a 3300 mAh pack), against

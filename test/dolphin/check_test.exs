@@ -28,6 +28,20 @@ defmodule Dolphin.CheckTest do
     assert Check.format(report) =~ "0 error(s)"
   end
 
+  test "what a run would fail on or never end is an error, with the line that flies it: nothing to fly, a take-off to no height, a pitch for a height", %{fleet: fleet} do
+    report = check("cannot_fly.exs", fleet)
+    errors = for f <- report.findings, f.severity == :error, do: {f.line, f.kind, f.message}
+
+    assert [{26, :empty_mission, empty}, {27, :empty_mission, _}, {28, :no_take_off, speed}, {29, :take_off_pitch, pitch}, {29, :take_off_height, height}] = errors
+    assert empty =~ ~s(mission "Empty" on vehicle 211: nothing to fly: the mission has no item after its home)
+    assert speed =~ "no take-off, and the vehicle starts on the ground: there is nothing it can fly"
+    assert pitch =~ "item 1 (NAV_TAKEOFF) has a pitch of 860°"
+    assert height =~ "item 1 (NAV_TAKEOFF) goes to 820 m above sea level, 0 m above the ground the vehicle takes off from (820 m): ArduCopter climbs only 1 m"
+    # The estimate is ArduCopter's flight: 1 m up, then at the ground's height.
+    assert %{length_m: length} = List.last(report.missions)
+    assert length < 205
+  end
+
   test "a script that does not compile is an error with its line", %{fleet: fleet} do
     report = check("unknown_word.exs", fleet)
     assert %{severity: :error, line: 3, message: message} = finding(report, :compile)
@@ -43,7 +57,7 @@ defmodule Dolphin.CheckTest do
 
   test "photos on a vehicle without a camera are an error" do
     home = Dolphin.Geo.location(40.0, -7.0, 100)
-    mission = Dolphin.Mission.new("P", [Dolphin.Mission.Command.home(home), Dolphin.Mission.Command.take_off(home, 130), Dolphin.Mission.Command.capture_photo()])
+    mission = Dolphin.Mission.new("P", [Dolphin.Mission.Command.home(home), Dolphin.Mission.Command.take_off(%{home | h: 130}), Dolphin.Mission.Command.capture_photo()])
     vehicle = %{id: 5, payloads: [], battery: 1.0, position: nil, airborne?: false}
     assert {[{:error, :no_camera, message}], _energy, %{}} = Dolphin.Check.Mission.check(mission, vehicle, %{max_distance: 1000, max_height: 100})
     assert message =~ "vehicle 5 has no camera"

@@ -89,6 +89,17 @@ defmodule Mix.Tasks.Dolphin.CheckTest do
       assert out =~ "0 error(s)"
     end
 
+    test "missions a run would fail on are errors: exit 1, each with its line" do
+      {status, out} = run_mix(["dolphin.check", Path.join(@dir, "cannot_fly.exs"), "--sim", "1"])
+      assert status == 1, out
+      assert out =~ ~s(cannot_fly.exs:26: error: mission "Empty" on vehicle 1: nothing to fly)
+      assert out =~ ~s(cannot_fly.exs:27: error: mission "Only home" on vehicle 1: nothing to fly)
+      assert out =~ ~s(cannot_fly.exs:28: error: mission "Only speed" on vehicle 1: no take-off)
+      assert out =~ ~s<cannot_fly.exs:29: error: mission "Flat" on vehicle 1: item 1 (NAV_TAKEOFF) has a pitch of 860°>
+      assert out =~ ~s<cannot_fly.exs:29: error: mission "Flat" on vehicle 1: item 1 (NAV_TAKEOFF) goes to 820 m above sea level>
+      assert out =~ "5 error(s)"
+    end
+
     test "every type, no type, and any payload; a broken file is told in its own terms", %{tmp_dir: dir} do
       fleet = Path.join(dir, "fleet.json")
 
