@@ -107,6 +107,15 @@ defmodule Dolphin.CheckTest do
     assert %{severity: :note, line: 4} = finding(report, :waiting)
   end
 
+  test "a loop in which nothing waits is an error naming the loop's line, not the note of a script still waiting", %{fleet: fleet} do
+    report = check("busy_loop.exs", fleet, horizon_ms: 600_000)
+    assert [%{severity: :error, kind: :busy_loop, line: 7, message: message}] = report.findings
+    assert message =~ "nothing in this `forever` loop waits"
+    # A loop that waits is a script still running at the horizon: a note, no error.
+    report = check("waits.exs", Enum.map(fleet, &%{&1 | battery: 0.5}), horizon_ms: 600_000)
+    assert [%{severity: :note, kind: :waiting}] = report.findings
+  end
+
   test "a question to the operator is a note with its line", %{fleet: fleet} do
     report = check("asks.exs", fleet)
     refute Check.errors?(report)

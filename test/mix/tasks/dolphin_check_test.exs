@@ -100,6 +100,13 @@ defmodule Mix.Tasks.Dolphin.CheckTest do
       assert out =~ "5 error(s)"
     end
 
+    test "a loop in which nothing waits is an error with the loop's line" do
+      {status, out} = run_mix(["dolphin.check", Path.join(@dir, "busy_loop.exs"), "--sim", "1"])
+      assert status == 1, out
+      assert out =~ "busy_loop.exs:7: error: nothing in this `forever` loop waits"
+      refute out =~ "still running"
+    end
+
     test "every type, no type, and any payload; a broken file is told in its own terms", %{tmp_dir: dir} do
       fleet = Path.join(dir, "fleet.json")
 
