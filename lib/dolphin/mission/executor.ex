@@ -12,9 +12,9 @@ defmodule Dolphin.Mission.Executor do
   # autopilot is not ready, for at most `:arm_timeout_ms`; MISSION_START at once
   # (a copter armed on the ground disarms itself after ~10 s). In :flying it
   # follows the vehicle's state (Dolphin.Mission.Executor.Flight judges it);
-  # a vehicle that stays armed on the ground, where it stood, for
-  # `:grounded_timeout_ms` (a take-off that does not climb) fails the task
-  # rather than leave it waiting for ever.
+  # a vehicle that stays armed on the ground, where it stood, for a minute
+  # of clock time (a take-off that does not climb) fails the task rather
+  # than leave it waiting for ever.
   # Every state ends in the next one or, done or failed, in a report to the
   # engine (Dolphin.Engine.Platform.done/1, failed/2) and a normal exit.
   #
@@ -40,9 +40,9 @@ defmodule Dolphin.Mission.Executor do
   @here_m 5
   @boot_timeout_ms 60_000
   # Armed on the ground in a mission this long, the vehicle is not taking
-  # off: ArduCopter spools up in about 3 s and climbs its first metre in
-  # about one more (docs/ardupilot.md); a copter held armed there by a
-  # delay disarms itself after 10 s (DISARM_DELAY).
+  # off: ArduCopter spools up in about 2 s and then climbs its first metre
+  # (docs/ardupilot.md); a copter held armed there by a delay disarms
+  # itself after 10 s (DISARM_DELAY).
   @grounded_timeout_ms 60_000
   # Below this height above home, with no landed state saying otherwise, the vehicle is on the ground.
   @ground_m 1.0
@@ -72,8 +72,7 @@ defmodule Dolphin.Mission.Executor do
       vehicle: vehicle,
       owner: opts.owner,
       arm_timeout_ms: Map.get(opts, :arm_timeout_ms, @arm_timeout_ms),
-      grounded_timeout_ms: Map.get(opts, :grounded_timeout_ms, @grounded_timeout_ms),
-      # Since when (clock ms) and where the vehicle has been seen armed on the ground in :flying.
+      # Where the vehicle was first seen armed on the ground in :flying, while it stays so.
       grounded: nil,
       items: nil,
       ending: nil,
@@ -405,7 +404,7 @@ defmodule Dolphin.Mission.Executor do
         {%{data | grounded: nil}, [{{:timeout, :grounded}, :cancel}]}
 
       on_ground_armed?(st) and data.grounded == nil ->
-        {%{data | grounded: %{since: Clock.now_ms(), at: st.position}}, [{{:timeout, :grounded}, Clock.to_real_ms(data.grounded_timeout_ms), :grounded}]}
+        {%{data | grounded: %{at: st.position}}, [{{:timeout, :grounded}, Clock.to_real_ms(@grounded_timeout_ms), :grounded}]}
 
       true ->
         {data, []}
@@ -432,7 +431,7 @@ defmodule Dolphin.Mission.Executor do
     at = if item, do: " (at item #{current} of #{length(data.items) - 1}, #{Mission.item_name(item)})", else: ""
     waiting = if item && item.command == @takeoff, do: "its take-off does not climb", else: "the mission does not go on"
 
-    "vehicle #{data.vehicle} has been armed on the ground for #{div(data.grounded_timeout_ms, 1000)} s of the mission#{at}: #{waiting}" <>
+    "vehicle #{data.vehicle} has been armed on the ground for #{div(@grounded_timeout_ms, 1000)} s of the mission#{at}: #{waiting}" <>
       Dolphin.ManoeuvreError.says(Dolphin.Vehicles.State.texts_since(data.flight_texts, st.status_texts), [])
   end
 
