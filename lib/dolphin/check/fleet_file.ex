@@ -89,7 +89,8 @@ defmodule Dolphin.Check.FleetFile do
 
     case problems ++ twice do
       [] -> {:ok, for({_n, _v, {:ok, vehicle}} <- parsed, do: vehicle)}
-      all -> all |> Enum.with_index() |> Enum.sort_by(fn {{n, _}, i} -> {n, i} end) |> Enum.map(fn {{_, text}, _} -> text end) |> error()
+      # By vehicle, in the order found (the sort is stable).
+      all -> all |> Enum.sort_by(&elem(&1, 0)) |> Enum.map(&elem(&1, 1)) |> error()
     end
   end
 
