@@ -23,11 +23,17 @@ defmodule Dolphin.Check do
       concurrent composition without enough distinct vehicles, fails as it
       would in flight, and is reported with its line and why;
     * every mission a task would fly, as it is sent (`Dolphin.Mission.to_items/2`):
-      positions on Earth, heights not below the home's ground, no item
-      beyond `:max_distance` from home or `:max_height` above it, a take-off
-      before the first waypoint for a vehicle on the ground, loiter radii
-      and speeds ArduCopter takes, jumps to existing items, photos only on a
-      vehicle with a camera;
+      something to fly (an item after its home), positions on Earth,
+      heights not below the home's ground, no item beyond `:max_distance`
+      from home or `:max_height` above it, a take-off before the first
+      waypoint for a vehicle on the ground, and one that climbs (ArduCopter
+      takes off from the ground to at least 1 m and flies on from there: a
+      take-off to no height is an error), take-off pitches of 0..90°, loiter
+      radii and speeds ArduCopter takes, jumps to existing items, photos only
+      on a vehicle with a camera;
+    * loops that never wait: a `forever` whose body has no `execute`,
+      `pause`, `pick` or `ask` (nor anything else that may wait) spins a
+      processor for ever, and is an error with the loop's line;
     * energy and time: each mission's length, flight time and battery use,
       from the simulated ArduCopter's model (cruise 10 m/s, climb 2.5 m/s,
       descent 1.5 m/s, 30 A hovering times effort, a 3300 mAh pack), against
@@ -166,17 +172,34 @@ defmodule Dolphin.Check do
     {:ok, fleet} = Dolphin.Fleet.start_link(name: fleet_name, source: {Source, %{test: test, recorder: recorder}})
 
     try do
+      busy = busy_loops(script)
       outcome = script_outcome(script, fleet_name, horizon, recorder)
       {findings, missions} = Recorder.results(recorder)
       # After an `ask` (answered nil here) what the script does is not the dry run's to judge.
       asked? = Enum.any?(findings, &(&1.kind == :ask))
-      all = energy_severity(findings, Keyword.get(opts, :energy, :error)) ++ outcome_findings(outcome, script.file, horizon, asked?)
+      # A busy loop is why a script is still running at the horizon: no note besides.
+      outcome = if busy != [] and match?({:running, _}, outcome), do: {:ok, :busy}, else: outcome
+      all = busy ++ energy_severity(findings, Keyword.get(opts, :energy, :error)) ++ outcome_findings(outcome, script.file, horizon, asked?)
       %__MODULE__{file: script.file, findings: Enum.sort_by(all, &severity_rank(&1.severity)), missions: missions}
     after
       for pid <- [fleet, recorder, ts] do
         Process.unlink(pid)
         GenServer.stop(pid)
       end
+    end
+  end
+
+  defp busy_loops(script) do
+    for line <- Dolphin.Check.Loops.busy(script.source, script.file) do
+      %Finding{
+        severity: :error,
+        kind: :busy_loop,
+        file: script.file,
+        line: line,
+        message:
+          "nothing in this `forever` loop waits (no `execute`, `pause`, `pick` or `ask` in it): it repeats as fast as the machine runs, " <>
+            "keeping a processor busy for ever; wait in each round, e.g. `pause(seconds(1))` or `execute(wait_for(...))`"
+      }
     end
   end
 

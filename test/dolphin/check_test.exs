@@ -28,6 +28,20 @@ defmodule Dolphin.CheckTest do
     assert Check.format(report) =~ "0 error(s)"
   end
 
+  test "what a run would fail on or never end is an error, with the line that flies it: nothing to fly, a take-off to no height, a pitch for a height", %{fleet: fleet} do
+    report = check("cannot_fly.exs", fleet)
+    errors = for f <- report.findings, f.severity == :error, do: {f.line, f.kind, f.message}
+
+    assert [{26, :empty_mission, empty}, {27, :empty_mission, _}, {28, :no_take_off, speed}, {29, :take_off_pitch, pitch}, {29, :take_off_height, height}] = errors
+    assert empty =~ ~s(mission "Empty" on vehicle 211: nothing to fly: the mission has no item after its home)
+    assert speed =~ "no take-off, and the vehicle starts on the ground: there is nothing it can fly"
+    assert pitch =~ "item 1 (NAV_TAKEOFF) has a pitch of 860°"
+    assert height =~ "item 1 (NAV_TAKEOFF) goes to 820 m above sea level, 0 m above the ground the vehicle takes off from (820 m): ArduCopter climbs only 1 m"
+    # The estimate is ArduCopter's flight: 1 m up, then at the ground's height.
+    assert %{length_m: length} = List.last(report.missions)
+    assert length < 205
+  end
+
   test "a script that does not compile is an error with its line", %{fleet: fleet} do
     report = check("unknown_word.exs", fleet)
     assert %{severity: :error, line: 3, message: message} = finding(report, :compile)
@@ -43,7 +57,7 @@ defmodule Dolphin.CheckTest do
 
   test "photos on a vehicle without a camera are an error" do
     home = Dolphin.Geo.location(40.0, -7.0, 100)
-    mission = Dolphin.Mission.new("P", [Dolphin.Mission.Command.home(home), Dolphin.Mission.Command.take_off(home, 130), Dolphin.Mission.Command.capture_photo()])
+    mission = Dolphin.Mission.new("P", [Dolphin.Mission.Command.home(home), Dolphin.Mission.Command.take_off(%{home | h: 130}), Dolphin.Mission.Command.capture_photo()])
     vehicle = %{id: 5, payloads: [], battery: 1.0, position: nil, airborne?: false}
     assert {[{:error, :no_camera, message}], _energy, %{}} = Dolphin.Check.Mission.check(mission, vehicle, %{max_distance: 1000, max_height: 100})
     assert message =~ "vehicle 5 has no camera"
@@ -93,6 +107,15 @@ defmodule Dolphin.CheckTest do
     assert %{severity: :note, line: 4} = finding(report, :waiting)
   end
 
+  test "a loop in which nothing waits is an error naming the loop's line, not the note of a script still waiting", %{fleet: fleet} do
+    report = check("busy_loop.exs", fleet, horizon_ms: 600_000)
+    assert [%{severity: :error, kind: :busy_loop, line: 7, message: message}] = report.findings
+    assert message =~ "nothing in this `forever` loop waits"
+    # A loop that waits is a script still running at the horizon: a note, no error.
+    report = check("waits.exs", Enum.map(fleet, &%{&1 | battery: 0.5}), horizon_ms: 600_000)
+    assert [%{severity: :note, kind: :waiting}] = report.findings
+  end
+
   test "a question to the operator is a note with its line", %{fleet: fleet} do
     report = check("asks.exs", fleet)
     refute Check.errors?(report)
@@ -118,9 +141,58 @@ defmodule Dolphin.CheckTest do
     test "bad ones say what is wrong and where" do
       assert {:error, %FleetFileError{message: "vehicle #1: \"position\" is missing" <> _}} = FleetFile.parse(~s({"vehicles":[{"id":1}]}))
       assert {:error, %FleetFileError{message: "vehicle #2: id 1 is given twice"}} = FleetFile.parse(~s({"vehicles":[{"id":1,"position":[1,2,3]},{"id":1,"position":[1,2,3]}]}))
-      assert {:error, %FleetFileError{message: "not JSON" <> _}} = FleetFile.parse("{")
+      assert {:error, %FleetFileError{message: "not valid JSON" <> _}} = FleetFile.parse("{")
       assert {:error, %FleetFileError{message: "vehicle #1: \"battery\" must be" <> _}} = FleetFile.parse(~s({"vehicles":[{"id":1,"battery":2,"position":[1,2,3]}]}))
-      assert {:error, %FleetFileError{message: "vehicle #1: unknown type \"submarine_zz\""}} = FleetFile.parse(~s({"vehicles":[{"id":1,"type":"submarine_zz","position":[1,2,3]}]}))
+      assert {:error, %FleetFileError{message: "vehicle #1: unknown type \"submarine_zz\" (one of uav, ugv, usv, uuv, other)"}} =
+               FleetFile.parse(~s({"vehicles":[{"id":1,"type":"submarine_zz","position":[1,2,3]}]}))
+    end
+
+    test "every type a pick names, no type, and any payload name are read" do
+      text = ~s({"vehicles": [
+        {"id": 1, "type": "uav", "payloads": ["camera", "lidar_x9_never_named"], "position": [40.44, -7.37, 820]},
+        {"id": 2, "type": "ugv", "position": [40.44, -7.37, 820]},
+        {"id": 3, "type": "usv", "position": [40.44, -7.37, 820]},
+        {"id": 4, "type": "uuv", "position": [40.44, -7.37, 820]},
+        {"id": 5, "type": "other", "position": [40.44, -7.37, 820]},
+        {"id": 6, "position": [40.44, -7.37, 820], "battery": 0, "airborne": true}]})
+
+      assert {:ok, vehicles} = FleetFile.parse(text)
+      assert Enum.map(vehicles, & &1.type) == [:uav, :ugv, :usv, :uuv, :other, :uav]
+      assert hd(vehicles).payloads == [:camera, :lidar_x9_never_named]
+      assert %{battery: 0.0, airborne?: true} = List.last(vehicles)
+    end
+
+    test "every problem of every vehicle is reported, not only the first" do
+      text = ~s({"vehicles": [
+        {"id": 1, "type": "boat", "battery": 2, "position": [40.44, -7.37, 820]},
+        {"id": 300, "payloads": ["Thermal Camera"]},
+        {"id": 1, "position": [40.44, -7.37, 820], "airborne": "no"},
+        {"id": 1, "position": [40.44, -7.37, 820]}]})
+
+      assert {:error, %FleetFileError{problems: problems} = e} = FleetFile.parse(text)
+
+      assert problems == [
+               ~s<vehicle #1: unknown type "boat" (one of uav, ugv, usv, uuv, other)>,
+               ~s<vehicle #1: "battery" must be a number from 0.0 to 1.0, got 2>,
+               ~s<vehicle #2: "id" must be an integer system id 0..255, got 300>,
+               ~s<vehicle #2: payload names are lower-case letters, digits and _ (as in "thermal_camera"), got "Thermal Camera">,
+               ~s<vehicle #2: "position" is missing ([latitude, longitude, height above sea level], latitude -90..90, longitude -180..180)>,
+               ~s<vehicle #3: "airborne" must be true or false, got "no">,
+               "vehicle #3: id 1 is given twice",
+               "vehicle #4: id 1 is given twice"
+             ]
+
+      assert Exception.message(%{e | file: "f.json"}) =~ ~r/^fleet file f.json: 8 problems:\n  vehicle #1: unknown type "boat"/
+    end
+
+    test "text that is not JSON is described in the file's terms: what, byte, line" do
+      assert {:error, e} = FleetFile.parse(~s({"vehicles": [\n  {"id": 1,\n))
+      assert e.message == "not valid JSON: the text ends in the middle of a value (byte 27, line 3, column 1)"
+
+      assert {:error, e} = FleetFile.parse(~s({"vehicles": [\n  {"id": 1 "position": [1, 2, 3]}]}))
+      assert e.message == ~s|not valid JSON: expected , or } in an object, found "\\"position\\": " (byte 26, line 2, column 12)|
+
+      assert {:error, %FleetFileError{message: "not valid JSON: the file is empty"}} = FleetFile.parse("  \n")
     end
   end
 end

@@ -4,11 +4,12 @@ defmodule Dolphin.Check.Finding do
   (`:error` — the script should not fly as it is; `:warning` — it may fly,
   but look; `:note` — what the check could not decide), its `kind` (an atom
   naming the rule: `:compile`, `:position`, `:below_ground`, `:too_far`,
-  `:too_high`, `:no_take_off`, `:loiter_radius`, `:speed`, `:jump`,
-  `:no_camera`, `:pick`, `:allocation`, `:script`, `:energy`,
-  `:low_reserve`, `:endless`, `:waiting`, `:ask`, `:mission` — a mission whose
-  items cannot be made at all), where (`file`, `line`, nil when
-  unknown) and a `message` that says what is wrong.
+  `:too_high`, `:empty_mission`, `:no_take_off`, `:take_off_height`,
+  `:take_off_pitch`, `:loiter_radius`, `:speed`, `:jump`, `:no_camera`,
+  `:pick`, `:allocation`, `:script`, `:energy`, `:low_reserve`, `:endless`,
+  `:busy_loop`, `:waiting`, `:ask`, `:mission` — a mission whose items
+  cannot be made at all), where (`file`, `line`, nil when unknown) and a
+  `message` that says what is wrong.
 
       iex> f = %Dolphin.Check.Finding{severity: :error, kind: :too_far, file: "s.exs", line: 4, message: "mission \\"M\\": item 2 is 2400 m from home (limit 1000 m)"}
       iex> Dolphin.Check.Finding.format(f)

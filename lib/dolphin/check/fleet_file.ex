@@ -11,108 +11,145 @@ defmodule Dolphin.Check.FleetFile do
       ]}
 
   Each vehicle: `id` (its MAVLink system id, 0..255, unique; required),
-  `type` (default `"uav"`), `payloads` (default none), `battery` (the charge
-  it starts with, 0.0..1.0; default 1.0), `position` (`[lat, lon, height
-  above sea level]`, where it stands — its home; required), `airborne`
-  (default false: on the ground).
+  `type` (`"uav"`, `"ugv"`, `"usv"`, `"uuv"` or `"other"`, as `pick(type:
+  ...)` names them; default `"uav"`), `payloads` (names such as `"camera"`
+  or `"thermal_camera"`, as `pick(payload: ...)` writes them; default none),
+  `battery` (the charge it starts with, 0.0..1.0; default 1.0), `position`
+  (`[lat, lon, height above sea level]`, where it stands — its home;
+  required), `airborne` (default false: on the ground).
+
+  A file that cannot be used is an error naming every problem in it: each
+  field of each vehicle that is wrong, or where the JSON text breaks (byte
+  and line).
 
       iex> Dolphin.Check.FleetFile.parse(~s({"vehicles":[{"id":3,"payloads":["camera"],"position":[41.0,-8.0,100]}]}))
       {:ok, [%{id: 3, type: :uav, payloads: [:camera], battery: 1.0, position: %Dolphin.Geo.Location{lat: 41.0, lon: -8.0, h: 100.0}, airborne?: false}]}
+      iex> {:error, e} = Dolphin.Check.FleetFile.parse(~s({"vehicles":[{"id":300,"type":"boat","position":[41.0,-8.0,100]}]}))
+      iex> e.problems
+      [~s<vehicle #1: "id" must be an integer system id 0..255, got 300>, ~s<vehicle #1: unknown type "boat" (one of uav, ugv, usv, uuv, other)>]
   """
 
   alias Dolphin.Check.FleetFileError
   alias Dolphin.Geo.Location
+  alias Dolphin.MAVLink.{JSON, JSONError}
+
+  # The vehicle classes a pick asks for (Dolphin.Vehicles.View.class/1), by
+  # their names in the file: written out, so that no name read from a file
+  # has to exist as an atom already.
+  @types [{"uav", :uav}, {"ugv", :ugv}, {"usv", :usv}, {"uuv", :uuv}, {"other", :other}]
+  @payload_name ~r/^[a-z][a-z0-9_]{0,63}$/
 
   @type vehicle :: %{id: 0..255, type: atom(), payloads: [atom()], battery: float(), position: Location.t(), airborne?: boolean()}
 
   @doc "Reads and parses a fleet file."
   @spec read(Path.t()) :: {:ok, [vehicle()]} | {:error, FleetFileError.t()}
   def read(path) do
-    case File.read(path) do
-      {:ok, text} -> with {:error, e} <- parse(text), do: {:error, %{e | file: path}}
-      {:error, why} -> {:error, %FleetFileError{file: path, message: "cannot read it: #{:file.format_error(why)}"}}
-    end
+    result =
+      case File.read(path) do
+        {:ok, text} -> parse(text)
+        {:error, why} -> error(["cannot read it: #{:file.format_error(why)}"])
+      end
+
+    with {:error, e} <- result, do: {:error, %{e | file: path}}
   end
 
-  @doc "Parses a fleet file's text."
+  @doc "Parses a fleet file's text; an error lists every problem found."
   @spec parse(String.t()) :: {:ok, [vehicle()]} | {:error, FleetFileError.t()}
   def parse(text) do
-    case decode(text) do
+    case JSON.decode(text) do
       {:ok, %{"vehicles" => list}} when is_list(list) and list != [] -> vehicles(list)
-      {:ok, _} -> error("expected an object with a non-empty \"vehicles\" list")
-      {:error, why} -> error("not JSON (#{why})")
+      {:ok, _} -> error(["expected an object with a non-empty \"vehicles\" list, such as {\"vehicles\": [{\"id\": 1, \"position\": [40.44, -7.37, 820]}]}"])
+      {:error, e} -> error(["not valid JSON: " <> json_problem(e, text)])
     end
   end
 
-  defp decode(text) do
-    {:ok, :jiffy.decode(text, [:return_maps])}
-  catch
-    :error, {pos, why} when is_integer(pos) -> {:error, "#{why} at byte #{pos}"}
-    :throw, {:error, {pos, why}} -> {:error, "#{why} at byte #{pos}"}
+  # Where the text breaks, in the words of someone editing the file.
+  defp json_problem(%JSONError{position: at} = e, text) do
+    lines = text |> binary_part(0, at) |> String.split("\n")
+    where = "byte #{at}, line #{length(lines)}, column #{byte_size(List.last(lines)) + 1}"
+
+    cond do
+      String.trim(text) == "" -> "the file is empty"
+      at >= byte_size(text) -> "the text ends in the middle of a value (#{where})"
+      # The decoder's own words, its position given as above.
+      true -> "#{e |> Exception.message() |> String.replace(~r/ at byte \d+,/, ",")} (#{where})"
+    end
   end
 
   defp vehicles(list) do
-    list
-    |> Enum.with_index(1)
-    |> Enum.reduce_while({:ok, []}, fn {v, n}, {:ok, acc} ->
-      case vehicle(v) do
-        {:ok, vehicle} ->
-          if Enum.any?(acc, &(&1.id == vehicle.id)),
-            do: {:halt, error("vehicle ##{n}: id #{vehicle.id} is given twice")},
-            else: {:cont, {:ok, [vehicle | acc]}}
+    parsed = list |> Enum.with_index(1) |> Enum.map(fn {v, n} -> {n, v, vehicle(v)} end)
+    problems = for {n, _v, {:error, whys}} <- parsed, why <- whys, do: {n, "vehicle ##{n}: #{why}"}
 
-        {:error, why} ->
-          {:halt, error("vehicle ##{n}: #{why}")}
-      end
-    end)
-    |> case do
-      {:ok, acc} -> {:ok, Enum.reverse(acc)}
-      error -> error
+    # An id given twice is a problem of the later vehicle, whatever else is wrong with either.
+    twice =
+      parsed
+      |> Enum.filter(fn {_n, v, _} -> is_map(v) and is_integer(v["id"]) and v["id"] in 0..255 end)
+      |> Enum.group_by(fn {_n, v, _} -> v["id"] end)
+      |> Enum.flat_map(fn {id, [_first | again]} -> for {n, _, _} <- again, do: {n, "vehicle ##{n}: id #{id} is given twice"} end)
+
+    case problems ++ twice do
+      [] -> {:ok, for({_n, _v, {:ok, vehicle}} <- parsed, do: vehicle)}
+      # By vehicle, in the order found (the sort is stable).
+      all -> all |> Enum.sort_by(&elem(&1, 0)) |> Enum.map(&elem(&1, 1)) |> error()
     end
   end
 
   defp vehicle(%{} = v) do
-    with {:ok, id} <- field(v, "id", nil, &(is_integer(&1) and &1 in 0..255), "an integer system id 0..255"),
-         {:ok, type} <- field(v, "type", "uav", &is_binary/1, "a string"),
-         {:ok, type} <- known_atom(type, "type"),
-         {:ok, payloads} <- field(v, "payloads", [], &(is_list(&1) and Enum.all?(&1, fn p -> is_binary(p) end)), "a list of strings"),
-         {:ok, payloads} <- atoms(payloads),
-         {:ok, battery} <- field(v, "battery", 1.0, &(is_number(&1) and &1 >= 0 and &1 <= 1), "a number from 0.0 to 1.0"),
-         {:ok, [lat, lon, h]} <- field(v, "position", nil, &position?/1, "[latitude, longitude, height above sea level]"),
-         {:ok, airborne} <- field(v, "airborne", false, &is_boolean/1, "true or false") do
-      {:ok, %{id: id, type: type, payloads: Enum.sort(payloads), battery: battery * 1.0, position: %Location{lat: lat * 1.0, lon: lon * 1.0, h: h * 1.0}, airborne?: airborne}}
+    fields = [
+      id: field(v, "id", :required, &(is_integer(&1) and &1 in 0..255), "an integer system id 0..255"),
+      type: v |> field("type", "uav", &is_binary/1, "a string") |> and_then(&type/1),
+      payloads: v |> field("payloads", [], &(is_list(&1) and Enum.all?(&1, fn p -> is_binary(p) end)), "a list of strings") |> and_then(&payloads/1),
+      battery: field(v, "battery", 1.0, &(is_number(&1) and &1 >= 0 and &1 <= 1), "a number from 0.0 to 1.0"),
+      position: field(v, "position", :required, &position?/1, "[latitude, longitude, height above sea level], latitude -90..90, longitude -180..180"),
+      airborne: field(v, "airborne", false, &is_boolean/1, "true or false")
+    ]
+
+    case for({_k, {:error, why}} <- fields, do: why) do
+      [] ->
+        f = Map.new(fields, fn {k, {:ok, value}} -> {k, value} end)
+        [lat, lon, h] = f.position
+        {:ok, %{id: f.id, type: f.type, payloads: Enum.sort(f.payloads), battery: f.battery * 1.0, position: %Location{lat: lat * 1.0, lon: lon * 1.0, h: h * 1.0}, airborne?: f.airborne}}
+
+      whys ->
+        {:error, whys}
     end
   end
 
-  defp vehicle(other), do: {:error, "expected an object, got #{:jiffy.encode(other)}"}
+  defp vehicle(other), do: {:error, ["expected an object, got #{shown(other)}"]}
 
   defp position?([lat, lon, h]) when is_number(lat) and is_number(lon) and is_number(h), do: lat >= -90 and lat <= 90 and lon >= -180 and lon <= 180
   defp position?(_), do: false
 
   defp field(v, key, default, ok?, what) do
     case Map.fetch(v, key) do
-      :error when default == nil -> {:error, "\"#{key}\" is missing (#{what})"}
+      :error when default == :required -> {:error, "\"#{key}\" is missing (#{what})"}
       :error -> {:ok, default}
-      {:ok, value} -> if ok?.(value), do: {:ok, value}, else: {:error, "\"#{key}\" must be #{what}, got #{:jiffy.encode(value)}"}
+      {:ok, value} -> if ok?.(value), do: {:ok, value}, else: {:error, "\"#{key}\" must be #{what}, got #{shown(value)}"}
     end
   end
 
-  # Types and payloads are atoms a script names (`pick(type: :uav)`): a name
-  # no code knows cannot be asked for, and is refused rather than made an atom.
-  defp known_atom(name, what) do
-    {:ok, String.to_existing_atom(name)}
-  rescue
-    ArgumentError -> {:error, "unknown #{what} #{inspect(name)}"}
+  defp and_then({:ok, value}, fun), do: fun.(value)
+  defp and_then(error, _fun), do: error
+
+  defp type(name) do
+    case List.keyfind(@types, name, 0) do
+      {_, type} -> {:ok, type}
+      nil -> {:error, "unknown type #{inspect(name)} (one of #{@types |> Enum.map(&elem(&1, 0)) |> Enum.join(", ")})"}
+    end
   end
 
-  defp atoms(names) do
-    Enum.reduce_while(names, {:ok, []}, fn name, {:ok, acc} ->
-      case known_atom(name, "payload") do
-        {:ok, atom} -> {:cont, {:ok, [atom | acc]}}
-        error -> {:halt, error}
-      end
-    end)
+  # A payload is whatever the operator's vehicles carry: any name a script
+  # could write as an atom (`pick(payload: :thermal_camera)`). The file is the
+  # operator's own, read once per check, so its few names may become atoms.
+  defp payloads(names) do
+    case Enum.reject(names, &(&1 =~ @payload_name)) do
+      [] -> {:ok, names |> Enum.uniq() |> Enum.map(&String.to_atom/1)}
+      bad -> {:error, "payload names are lower-case letters, digits and _ (as in \"thermal_camera\"), got #{Enum.map_join(bad, ", ", &inspect/1)}"}
+    end
   end
 
-  defp error(message), do: {:error, %FleetFileError{message: message}}
+  defp shown(value) when is_binary(value), do: inspect(value)
+  defp shown(value), do: value |> JSON.encode() |> IO.iodata_to_binary()
+
+  defp error(problems), do: {:error, FleetFileError.new(problems)}
 end

@@ -2,10 +2,11 @@ defmodule Dolphin.Check.Mission do
   @moduledoc false
   # Pure checks of one mission as a vehicle would be sent it (the items of
   # `Dolphin.Mission.to_items/2`, so that what is checked is what flies):
-  # validity (positions, heights, limits, take-off, loiter radii, speeds,
-  # jumps, camera) and an energy and time estimate with the simulated
-  # ArduCopter's model (Dolphin.Sim.Copter: cruise, climb and descent speeds,
-  # hover current times effort, pack capacity).
+  # validity (something to fly, positions, heights, limits, take-off and its
+  # height and pitch, loiter radii, speeds, jumps, camera) and an energy and
+  # time estimate with the simulated ArduCopter's model (Dolphin.Sim.Copter:
+  # cruise, climb and descent speeds, hover current times effort, pack
+  # capacity).
 
   alias Dolphin.Geo
   alias Dolphin.Geo.Location
@@ -22,6 +23,11 @@ defmodule Dolphin.Check.Mission do
   # ArduCopter's limits: WPNAV_SPEED up to 20 m/s; loiter radii kept up to 255 m × 10.
   @max_speed 20.0
   @max_radius 2550.0
+  # ArduCopter's NAV_TAKEOFF from the ground climbs at least this far above
+  # where it stands (ModeAuto::takeoff_start raises a lower target to it).
+  @least_take_off 1.0
+  # NAV_TAKEOFF's param1 is ArduPlane's least climb angle (ArduCopter ignores it).
+  @pitches 0..90
 
   @waypoint 16
   @loiter_unlim 17
@@ -72,7 +78,14 @@ defmodule Dolphin.Check.Mission do
       {:ok, items} ->
         name = "mission #{inspect(mission.name)} on vehicle #{vehicle.id}"
         estimate = estimate(mission.name, vehicle, items)
-        {validity(name, items, vehicle, limits) ++ endless(name, estimate), energy(name, estimate, items, vehicle), Map.drop(estimate, [:empty_at, :empty_home])}
+
+        problems =
+          case items do
+            [_home] -> [nothing_to_fly(name, vehicle)]
+            _ -> validity(name, items, vehicle, limits) ++ take_off_heights(name, estimate) ++ endless(name, estimate)
+          end
+
+        {problems, energy(name, estimate, items, vehicle), Map.drop(estimate, [:empty_at, :empty_home, :low_take_offs])}
 
       {:error, message} ->
         kind = if message =~ "jump", do: :jump, else: :mission
@@ -130,16 +143,40 @@ defmodule Dolphin.Check.Mission do
     end
   end
 
-  # A vehicle on the ground must take off before it flies to anything.
+  # Only a home: the vehicle is sent no item, and ArduCopter starts no mission.
+  defp nothing_to_fly(name, vehicle) do
+    where = if vehicle.airborne?, do: "", else: " (on the ground it would not even take off)"
+    {:error, :empty_mission, "#{name}: nothing to fly: the mission has no item after its home#{where}"}
+  end
+
+  # A vehicle on the ground must take off before it flies to anything; with
+  # no take-off at all ArduCopter refuses the mission ("Auto: Missing Takeoff Cmd").
   defp take_off(name, items, %{airborne?: false}) do
     first = Enum.find(items, &(&1.command in [@waypoint, @loiter_unlim, @loiter_turns, @loiter_time, @take_off, @rtl]))
 
-    if first != nil and first.command != @take_off,
-      do: [{:error, :no_take_off, "#{name}: no take-off before #{describe(first)}, and the vehicle starts on the ground"}],
-      else: []
+    cond do
+      first == nil and not Enum.any?(items, &(&1.command == @land)) ->
+        [{:error, :no_take_off, "#{name}: no take-off, and the vehicle starts on the ground: there is nothing it can fly (#{Enum.map_join(items, ", ", &describe/1)})"}]
+
+      first != nil and first.command != @take_off ->
+        [{:error, :no_take_off, "#{name}: no take-off before #{describe(first)}, and the vehicle starts on the ground"}]
+
+      true ->
+        []
+    end
   end
 
   defp take_off(_name, _items, _vehicle), do: []
+
+  # A take-off from the ground to no height: ArduCopter climbs its least
+  # take-off and flies on from there, at the ground's height.
+  defp take_off_heights(name, estimate) do
+    for {item, ground, target} <- estimate.low_take_offs do
+      {:error, :take_off_height,
+       "#{name}: #{describe(item)} goes to #{metres(target)} above sea level, #{metres(target - ground)} above the ground the vehicle takes off from (#{metres(ground)}): " <>
+         "ArduCopter climbs only #{metres(@least_take_off)} and flies on from there (a take-off's height is its location's: `take_off location(lat, lon, h)`)"}
+    end
+  end
 
   defp params(name, %{command: c} = item, _count, _vehicle) when c in [@loiter_unlim, @loiter_turns, @loiter_time] do
     r = abs(item.param3)
@@ -158,6 +195,19 @@ defmodule Dolphin.Check.Mission do
       speed > @max_speed -> [{:error, :speed, "#{name}: #{describe(item)} sets #{speed} m/s, above ArduCopter's #{@max_speed} m/s"}]
       true -> []
     end
+  end
+
+  defp params(name, %{command: @take_off} = item, _count, _vehicle) do
+    pitch = item.param1
+
+    if is_number(pitch) and pitch >= @pitches.first and pitch <= @pitches.last,
+      do: [],
+      else:
+        [
+          {:error, :take_off_pitch,
+           "#{name}: #{describe(item)} has a pitch of #{pitch_text(pitch)}°: a take-off's pitch is its angle of climb, #{@pitches.first}..#{@pitches.last}° " <>
+             "(the second argument of `take_off location, pitch`; its height is the location's)"}
+        ]
   end
 
   defp params(name, %{command: @jump} = item, count, _vehicle) do
@@ -217,7 +267,7 @@ defmodule Dolphin.Check.Mission do
   def estimate(name, vehicle, [home | _] = items) do
     home_loc = location(home, nil)
     # Where the vehicle is when the mission starts: where the last one left it, else at home.
-    start = %{at: Map.get(vehicle, :at) || home_loc, airborne?: vehicle.airborne?, speed: @cruise, length: 0.0, time: 0.0, used: 0.0, empty_at: nil, path: []}
+    start = %{at: Map.get(vehicle, :at) || home_loc, airborne?: vehicle.airborne?, speed: @cruise, length: 0.0, time: 0.0, used: 0.0, empty_at: nil, path: [], low_take_offs: []}
     flown = Enum.reduce(flight_order(items), start, fn item, acc -> step(item, home_loc, acc, vehicle.battery) end)
     {back_time, back_as, back_length} = if flown.airborne?, do: leg(flown.at, %{home_loc | h: flown.at.h}, flown.speed) |> land(flown.at.h, home_loc), else: {0.0, 0.0, 0.0}
     back_used = fraction(back_as)
@@ -238,6 +288,7 @@ defmodule Dolphin.Check.Mission do
       empty_at: flown.empty_at,
       start_at: start.at,
       path: Enum.reverse(flown.path),
+      low_take_offs: flown.low_take_offs |> Enum.reverse() |> Enum.uniq_by(fn {item, _, _} -> item.seq end),
       empty_home: vehicle.battery != nil and flown.empty_at == nil and flown.used + back_used > vehicle.battery
     }
   end
@@ -273,12 +324,16 @@ defmodule Dolphin.Check.Mission do
     end
   end
 
+  # From the ground ArduCopter climbs at least its least take-off; in the
+  # air a take-off to no more height is done at once.
   defp step(%{command: @take_off} = item, home, acc, start) do
     target = location(item, home)
-    climb = max(target.h - acc.at.h, 0.0)
+    low? = not acc.airborne? and target.h - acc.at.h < @least_take_off
+    climb = if acc.airborne?, do: max(target.h - acc.at.h, 0.0), else: max(target.h - acc.at.h, @least_take_off)
+    acc = if low?, do: %{acc | low_take_offs: [{item, acc.at.h, target.h} | acc.low_take_offs]}, else: acc
     # Spooling up and climbing straight up, at the climb's effort.
     time = 3.0 + climb / @climb
-    add(%{acc | at: %{acc.at | h: max(target.h, acc.at.h)}, airborne?: true}, item, time, amps(0.0, @climb) * time, climb, start)
+    add(%{acc | at: %{acc.at | h: acc.at.h + climb}, airborne?: true}, item, time, amps(0.0, @climb) * time, climb, start)
   end
 
   defp step(%{command: c} = item, home, acc, start) when c in [@waypoint, @loiter_unlim, @loiter_turns, @loiter_time] do
@@ -354,6 +409,10 @@ defmodule Dolphin.Check.Mission do
   end
 
   defp describe(item), do: "item #{item.seq} (#{M.item_name(item)})"
+
+  defp pitch_text(p) when is_float(p) and p == trunc(p), do: Integer.to_string(trunc(p))
+  defp pitch_text(p) when is_number(p), do: to_string(p)
+  defp pitch_text(p), do: inspect(p)
 
   defp metres(m), do: "#{round(m)} m"
   defp minutes(s) when s < 120, do: "#{round(s)} s"

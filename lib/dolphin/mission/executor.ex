@@ -11,7 +11,10 @@ defmodule Dolphin.Mission.Executor do
   # meaning (never start an unverified mission); GUIDED; arm, retried while the
   # autopilot is not ready, for at most `:arm_timeout_ms`; MISSION_START at once
   # (a copter armed on the ground disarms itself after ~10 s). In :flying it
-  # follows the vehicle's state (Dolphin.Mission.Executor.Flight judges it).
+  # follows the vehicle's state (Dolphin.Mission.Executor.Flight judges it);
+  # a vehicle that stays armed on the ground, where it stood, for a minute
+  # of clock time (a take-off that does not climb) fails the task rather
+  # than leave it waiting for ever.
   # Every state ends in the next one or, done or failed, in a report to the
   # engine (Dolphin.Engine.Platform.done/1, failed/2) and a normal exit.
   #
@@ -36,6 +39,13 @@ defmodule Dolphin.Mission.Executor do
   # A landed vehicle this close to a mission's landing point is there.
   @here_m 5
   @boot_timeout_ms 60_000
+  # Armed on the ground in a mission this long, the vehicle is not taking
+  # off: ArduCopter spools up in about 2 s and then climbs its first metre
+  # (docs/ardupilot.md); a copter held armed there by a delay disarms
+  # itself after 10 s (DISARM_DELAY).
+  @grounded_timeout_ms 60_000
+  # Below this height above home, with no landed state saying otherwise, the vehicle is on the ground.
+  @ground_m 1.0
   @boot_poll_ms 200
   @transfer_attempts 3
 
@@ -62,6 +72,8 @@ defmodule Dolphin.Mission.Executor do
       vehicle: vehicle,
       owner: opts.owner,
       arm_timeout_ms: Map.get(opts, :arm_timeout_ms, @arm_timeout_ms),
+      # Where the vehicle was first seen armed on the ground in :flying, while it stays so.
+      grounded: nil,
       items: nil,
       ending: nil,
       boot_deadline: Clock.now_ms() + @boot_timeout_ms,
@@ -152,6 +164,18 @@ defmodule Dolphin.Mission.Executor do
   end
 
   def handle_event(:info, {:dolphin, _topic, _event}, _state, _data), do: :keep_state_and_data
+
+  def handle_event({:timeout, :grounded}, :grounded, :flying, data) do
+    case Vehicles.state(data.vehicle) do
+      {:ok, st} ->
+        if still_grounded?(data, st),
+          do: fail(:flying, data, {:vehicle_fault, grounded(data, st)}),
+          else: judge(%{data | grounded: nil}, st)
+
+      {:error, _} ->
+        :keep_state_and_data
+    end
+  end
 
   def handle_event(:state_timeout, :check_landed, :flying, data) do
     case Vehicles.state(data.vehicle) do
@@ -348,12 +372,12 @@ defmodule Dolphin.Mission.Executor do
 
   defp judge(data, st) do
     {verdict, progress, flight} = Flight.judge(data.flight, st)
-    data = %{data | flight: flight}
+    {data, watch} = watch_grounded(%{data | flight: flight}, st)
     if progress, do: Platform.progress(data.owner, progress)
 
     case verdict do
       :flying ->
-        {:keep_state, data}
+        {:keep_state, data, watch}
 
       :done ->
         done(data)
@@ -368,8 +392,47 @@ defmodule Dolphin.Mission.Executor do
       # reports the final item after "Disarming motors"): the reports are
       # given their time, which a state change would not cut short.
       :check_landed ->
-        {:keep_state, data, [{:state_timeout, Clock.to_real_ms(@landing_reports_ms), :check_landed}]}
+        {:keep_state, data, [{:state_timeout, Clock.to_real_ms(@landing_reports_ms), :check_landed} | watch]}
     end
+  end
+
+  # Armed on the ground (where a take-off that does not climb leaves it): a
+  # timer from the first time it is seen so, cancelled once it is not.
+  defp watch_grounded(data, st) do
+    cond do
+      not on_ground_armed?(st) and data.grounded != nil ->
+        {%{data | grounded: nil}, [{{:timeout, :grounded}, :cancel}]}
+
+      on_ground_armed?(st) and data.grounded == nil ->
+        {%{data | grounded: %{at: st.position}}, [{{:timeout, :grounded}, Clock.to_real_ms(@grounded_timeout_ms), :grounded}]}
+
+      true ->
+        {data, []}
+    end
+  end
+
+  defp on_ground_armed?(%{armed: true, landed: :on_ground}), do: true
+  defp on_ground_armed?(%{armed: true, landed: landed, position: %{relative_alt: alt}}) when landed in [nil, :takeoff] and is_number(alt), do: alt < @ground_m
+  defp on_ground_armed?(_st), do: false
+
+  # Still armed on the ground, and where it was then (one moving, low over
+  # ground lower than home, is flying).
+  defp still_grounded?(%{grounded: %{at: at}}, st) do
+    on_ground_armed?(st) and
+      (at == nil or st.position == nil or
+         Dolphin.Geo.distance(Dolphin.Geo.location(at.lat, at.lon), Dolphin.Geo.location(st.position.lat, st.position.lon)) <= @here_m)
+  end
+
+  defp still_grounded?(_data, _st), do: false
+
+  defp grounded(data, st) do
+    current = st.mission.current
+    item = if is_integer(current), do: Enum.at(data.items, current)
+    at = if item, do: " (at item #{current} of #{length(data.items) - 1}, #{Mission.item_name(item)})", else: ""
+    waiting = if item && item.command == @takeoff, do: "its take-off does not climb", else: "the mission does not go on"
+
+    "vehicle #{data.vehicle} has been armed on the ground for #{div(@grounded_timeout_ms, 1000)} s of the mission#{at}: #{waiting}" <>
+      Dolphin.ManoeuvreError.says(Dolphin.Vehicles.State.texts_since(data.flight_texts, st.status_texts), [])
   end
 
   # --- the end ----------------------------------------------------------------

@@ -32,9 +32,11 @@ defmodule Mix.Tasks.Dolphin.Check do
                          "airborne": false}]}
 
       `id` (system id) and `position` (`[lat, lon, height above sea
-      level]`, its home) are required; `type` defaults to `"uav"`,
-      `payloads` to none, `battery` (0.0..1.0) to 1.0, `airborne` to false
-      (see `Dolphin.Check.FleetFile`)
+      level]`, its home) are required; `type` (`"uav"`, `"ugv"`, `"usv"`,
+      `"uuv"` or `"other"`) defaults to `"uav"`, `payloads` (names such as
+      `"camera"`) to none, `battery` (0.0..1.0) to 1.0, `airborne` to false;
+      a file that cannot be used is refused with every problem in it (see
+      `Dolphin.Check.FleetFile`)
     * `--connect ENDPOINT` — the live fleet: the vehicles that report on
       this link (`udpin:0.0.0.0:14550`, `udpout:HOST:PORT`, `tcp:HOST:PORT`;
       repeatable) within `--wait`, as they are now (their position taken as

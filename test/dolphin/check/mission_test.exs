@@ -69,4 +69,53 @@ defmodule Dolphin.Check.MissionTest do
     assert Enum.any?(problems, &match?({:error, :position, "mission \"Off\" on vehicle 7: item 2 (NAV_WAYPOINT) is not on Earth" <> _}, &1))
     assert Enum.any?(problems, &match?({:warning, :position, "mission \"Off\" on vehicle 7: item 3 (NAV_WAYPOINT) is at latitude 0, longitude 0" <> _}, &1))
   end
+
+  describe "what a run would fail on, found first" do
+    test "a mission with nothing to fly: no item, only a home, only settings" do
+      grounded = vehicle(1.0, position: @home)
+      flying = vehicle(1.0, position: @home, airborne?: true)
+
+      for m <- [Mission.new("Empty", []), Mission.new("Home", [C.home(@home)])], v <- [grounded, flying] do
+        assert {[{:error, :empty_mission, message}], [], _} = Check.check(m, v, @limits)
+        assert message =~ "nothing to fly: the mission has no item after its home"
+      end
+
+      assert {[{:error, :no_take_off, message}], [], _} = Check.check(Mission.new("Speed", [C.home(@home), C.speed(5)]), grounded, @limits)
+      assert message =~ ~s<mission "Speed" on vehicle 7: no take-off, and the vehicle starts on the ground: there is nothing it can fly (item 1 (DO_CHANGE_SPEED))>
+      # In the air, a setting alone is a mission ArduCopter flies (and ends at once).
+      assert {[], [], _} = Check.check(Mission.new("Speed", [C.home(@home), C.speed(5)]), flying, @limits)
+    end
+
+    test "a take-off from the ground to no height is an error; ArduCopter climbs 1 m, and so does the estimate" do
+      for h <- [@home.h, @home.h + 0.5] do
+        m = Mission.new("Low", [C.home(@home), C.take_off(%{@home | h: h}), C.move(100, 0, 0)])
+        assert {[{:error, :take_off_height, message}], [], e} = Check.check(m, vehicle(1.0), @limits)
+        assert message =~ "item 1 (NAV_TAKEOFF) goes to #{round(h)} m above sea level"
+        assert message =~ "ArduCopter climbs only 1 m"
+        assert [{_, at, true, 1} | _] = e.path
+        assert_in_delta at.h, @home.h + 1, 1.0e-9
+      end
+
+      below = Mission.new("Below", [C.home(@home), C.take_off(%{@home | h: @home.h - 20}), C.move(100, 0, 0)])
+      assert {problems, [], _} = Check.check(below, vehicle(1.0), @limits)
+      assert Enum.sort(for {:error, kind, _} <- problems, do: kind) == [:below_ground, :below_ground, :take_off_height]
+
+      assert {[], [], _} = Check.check(Mission.new("Up", [C.home(@home), C.take_off(%{@home | h: @home.h + 1}), C.move(100, 0, 0)]), vehicle(1.0), @limits)
+      # In the air a take-off to no more height is done at once: nothing wrong.
+      assert {[], [], _} = Check.check(Mission.new("Air", [C.home(@home), C.take_off(@home), C.move(100, 0, 30)]), vehicle(1.0, airborne?: true), @limits)
+    end
+
+    test "a take-off's pitch outside 0..90 degrees is an error that says where the height goes" do
+      for pitch <- [860, -5, 90.5] do
+        m = Mission.new("Pitch", [C.home(@home), C.take_off(@up, pitch), C.move(100, 0, 0)])
+        assert {[{:error, :take_off_pitch, message}], [], _} = Check.check(m, vehicle(1.0), @limits)
+        assert message =~ "item 1 (NAV_TAKEOFF) has a pitch of #{pitch}°"
+        assert message =~ "its height is the location's"
+      end
+
+      for pitch <- [0, 15, 90] do
+        assert {[], [], _} = Check.check(Mission.new("Pitch", [C.home(@home), C.take_off_with_yaw(@up, pitch, 90)]), vehicle(1.0), @limits)
+      end
+    end
+  end
 end

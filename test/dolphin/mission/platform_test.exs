@@ -146,6 +146,21 @@ defmodule Dolphin.Mission.PlatformTest do
     assert {:ok, %{mode: :rtl}} = Sim.info(2)
   end
 
+  test "a vehicle armed for its take-off that does not climb fails the task with the reason, in bounded clock time, and is held", %{port: port} do
+    # Motors that cannot lift it: armed, in AUTO, spooled up, on the ground for ever.
+    [{7, home}] = start_fleet(port, sysids: [7], climb_speed: 0.0)
+    {:ok, run} = Engine.start(Engine.on(out_and_back(home), [7]), [])
+    started = Clock.now_ms()
+    # At most the bound and the telemetry's second after MISSION_START; this test's own wait is a backstop.
+    assert {:error, failure} = Engine.await(run, Clock.to_real_ms(180_000) + 10_000)
+    assert Clock.now_ms() - started < 180_000
+    message = Exception.message(Dolphin.Engine.TaskError.exception(failure: failure))
+    assert message =~ "vehicle 7 has been armed on the ground for 60 s of the mission (at item 1 of 3, NAV_TAKEOFF): its take-off does not climb"
+    # Left holding, not flying on.
+    {:ok, info} = Sim.info(7)
+    assert info.mode in [:brake, :guided] or not info.armed
+  end
+
   # The executor's exit with its parent's :killed is logged as an error: expected here.
   @tag :capture_log
   test "the engine's leaf killed: the mission's process makes the vehicle hold", %{port: port} do

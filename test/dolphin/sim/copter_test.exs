@@ -300,6 +300,39 @@ defmodule Dolphin.Sim.CopterTest do
     assert c.landed == :on_ground
   end
 
+  test "a mission's take-off to the ground's own height climbs 1 m, as ArduCopter's does (ModeAuto::takeoff_start), and the mission flies on" do
+    items = [
+      item(0, 16, {@home.lat, @home.lon, 0}),
+      item(1, 22, {0, 0, @home.alt}, %{frame: 0, param1: 860.0}),
+      item(2, 16, Tuple.append(north_east(60, 0), 20)),
+      item(3, 20, {0, 0, 0})
+    ]
+
+    c = flying_mission(items)
+    {c, said} = run_until(c, &(&1.current == 2), 60_000)
+    # Reached at its 1 m (less ArduCopter's half-metre margin), not higher.
+    assert c.alt - @home.alt >= 0.5 and c.alt - @home.alt <= 1.05
+    assert c.landed == :in_air
+    assert [{_, %{seq: 1}}] = messages(said, M.MissionItemReached)
+    {c, said} = run_until(c, &(&1.mission_state == 5 and not &1.armed), 300_000)
+    assert [2, 3] == for({_, %{seq: s}} <- messages(said, M.MissionItemReached), do: s)
+    assert c.landed == :on_ground
+  end
+
+  test "touching the ground after a take-off to 1 m is a landing: the land detector disarms" do
+    items = [
+      item(0, 16, {@home.lat, @home.lon, 0}),
+      item(1, 22, {0, 0, @home.alt}, %{frame: 0}),
+      item(2, 16, Tuple.append(north_east(100, 0), @home.alt), %{frame: 0}),
+      item(3, 20, {0, 0, 0})
+    ]
+
+    c = flying_mission(items)
+    {c, said} = run_until(c, &(not &1.armed), 60_000)
+    assert "Disarming motors" in texts(said)
+    assert c.landed == :on_ground and c.current == 2 and c.mission_state == 3
+  end
+
   test "a loop of commands that complete at once is cut; DO commands before the take-off do not hide it" do
     items = [
       item(0, 16, {@home.lat, @home.lon, 0}),

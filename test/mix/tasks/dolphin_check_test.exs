@@ -77,6 +77,83 @@ defmodule Mix.Tasks.Dolphin.CheckTest do
     end
   end
 
+  describe "as a command, in a fresh VM" do
+    # `mix dolphin.check` in its own OS process: atoms and modules this test
+    # VM has long loaded do not exist there yet.
+    @describetag :tmp_dir
+
+    test "the fleet file format of the README and `mix help dolphin.check` is read" do
+      {status, out} = run_mix(["dolphin.check", Path.join(@dir, "ok.exs"), "--fleet", Path.join(@dir, "fleet.json")])
+      assert status == 0, out
+      assert out =~ ~s(mission "Hop" on vehicle 211)
+      assert out =~ "0 error(s)"
+    end
+
+    test "missions a run would fail on are errors: exit 1, each with its line" do
+      {status, out} = run_mix(["dolphin.check", Path.join(@dir, "cannot_fly.exs"), "--sim", "1"])
+      assert status == 1, out
+      assert out =~ ~s(cannot_fly.exs:26: error: mission "Empty" on vehicle 1: nothing to fly)
+      assert out =~ ~s(cannot_fly.exs:27: error: mission "Only home" on vehicle 1: nothing to fly)
+      assert out =~ ~s(cannot_fly.exs:28: error: mission "Only speed" on vehicle 1: no take-off)
+      assert out =~ ~s<cannot_fly.exs:29: error: mission "Flat" on vehicle 1: item 1 (NAV_TAKEOFF) has a pitch of 860°>
+      assert out =~ ~s<cannot_fly.exs:29: error: mission "Flat" on vehicle 1: item 1 (NAV_TAKEOFF) goes to 820 m above sea level>
+      assert out =~ "5 error(s)"
+    end
+
+    test "a loop in which nothing waits is an error with the loop's line" do
+      {status, out} = run_mix(["dolphin.check", Path.join(@dir, "busy_loop.exs"), "--sim", "1"])
+      assert status == 1, out
+      assert out =~ "busy_loop.exs:7: error: nothing in this `forever` loop waits"
+      refute out =~ "still running"
+    end
+
+    test "every type, no type, and any payload; a broken file is told in its own terms", %{tmp_dir: dir} do
+      fleet = Path.join(dir, "fleet.json")
+
+      File.write!(fleet, ~s({"vehicles": [
+        {"id": 1, "type": "ugv", "payloads": ["sidescan_sonar"], "position": [40.444233, -7.375234, 820]},
+        {"id": 2, "position": [40.444233, -7.375234, 820]},
+        {"id": 3, "type": "usv", "position": [40.444233, -7.375234, 820]}]}))
+
+      {status, out} = run_mix(["dolphin.check", Path.join(@dir, "ok.exs"), "--fleet", fleet])
+      assert status == 0, out
+      assert out =~ ~s(mission "Hop" on vehicle 2)
+
+      File.write!(fleet, ~s({"vehicles": [\n  {"id": 1, "type": "uav", "battery": 7},\n  {"id": 1, "type": "ugv", "position": [40.4, -7.3, 820]}\n]}))
+      {status, out} = run_mix(["dolphin.check", Path.join(@dir, "ok.exs"), "--fleet", fleet])
+      assert status == 2, out
+      assert out =~ "fleet file #{fleet}: 3 problems:"
+      assert out =~ ~s(vehicle #1: "battery" must be a number from 0.0 to 1.0, got 7)
+      assert out =~ ~s(vehicle #1: "position" is missing)
+      assert out =~ "vehicle #2: id 1 is given twice"
+
+      File.write!(fleet, ~s({"vehicles": [\n))
+      {status, out} = run_mix(["dolphin.check", Path.join(@dir, "ok.exs"), "--fleet", fleet])
+      assert status == 2, out
+      assert out =~ "fleet file #{fleet}: not valid JSON: the text ends in the middle of a value (byte 15, line 2, column 1)"
+      refute out =~ ~r/truncated_json|unknown type/
+    end
+  end
+
+  # Runs a mix task in its own OS process; its exit status and output. A
+  # check takes a moment: the bound is for a loaded machine, not a measure.
+  defp run_mix(args) do
+    env = [{~c"MIX_ENV", ~c"test"}, {~c"LANG", ~c"C.UTF-8"}, {~c"LC_ALL", ~c"C.UTF-8"}]
+    port = Port.open({:spawn_executable, System.find_executable("mix")}, [:binary, :exit_status, :stderr_to_stdout, args: args, cd: File.cwd!(), env: env])
+    {:os_pid, os_pid} = Port.info(port, :os_pid)
+    on_exit(fn -> System.cmd("kill", ["-9", Integer.to_string(os_pid)], stderr_to_stdout: true) end)
+    collect(port, "")
+  end
+
+  defp collect(port, out) do
+    receive do
+      {^port, {:data, data}} -> collect(port, out <> data)
+      {^port, {:exit_status, status}} -> {status, out}
+    after
+      120_000 -> flunk("the command did not end within 120 s:\n#{out}")
+    end
+  end
+
   test "exit 2 on bad usage" do
     assert {2, _, err} = main(["nope.exs"])
     assert err =~ "no such script: nope.exs"

@@ -42,13 +42,15 @@ defmodule Dolphin.Sim.Copter.Commands do
   # MAV_CMD_DO_SET_MODE: p1 has MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, p2 is the custom mode.
   defp run_command(c, 176, [_p1, p2 | _], _), do: Modes.set_mode(c, round(p2))
 
-  # MAV_CMD_NAV_TAKEOFF: p7 metres above home, in GUIDED, armed, on the ground.
+  # MAV_CMD_NAV_TAKEOFF: p7 metres above home, in GUIDED, armed, on the
+  # ground, and up (ArduCopter's do_user_takeoff refuses a take-off downwards).
   defp run_command(c, 22, params, position) do
     alt = takeoff_alt(c, params, position)
 
     cond do
       c.mode != :guided or not c.armed -> {@failed, c}
       in_air?(c) -> {@failed, c}
+      alt <= c.alt -> {@failed, c}
       true -> {@accepted, Flight.start_takeoff(c, alt)}
     end
   end

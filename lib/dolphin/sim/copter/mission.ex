@@ -22,6 +22,8 @@ defmodule Dolphin.Sim.Copter.Mission do
   # Items that complete at once (DO commands, jumps) are run in a row; a loop
   # of nothing else is cut, as ArduPilot bounds its search for the next command.
   @max_items_at_once 64
+  # The least a take-off from the ground climbs (metres).
+  @least_take_off 1.0
 
   # ArduCopter sends MISSION_CURRENT and MISSION_ITEM_REACHED as deferred
   # messages holding only the latest value: items that end in one loop (a
@@ -111,7 +113,7 @@ defmodule Dolphin.Sim.Copter.Mission do
     item = Enum.reduce([:param1, :param2, :param3, :param4], item, fn k, i -> if is_number(Map.fetch!(i, k)), do: i, else: Map.put(i, k, 0.0) end)
     c = text(c, 6, "Mission: #{c.current} #{Map.get(@item_names, item.command, "Cmd#{item.command}")}")
     c = mission_current(c)
-    c = %{c | item: %{seq: c.current, command: item.command, started_ms: c.time_ms, arrived_ms: nil, item: item}}
+    c = %{c | item: %{seq: c.current, command: item.command, started_ms: c.time_ms, arrived_ms: nil, take_off_alt: nil, item: item}}
     run_item(c, item)
   end
 
@@ -132,13 +134,16 @@ defmodule Dolphin.Sim.Copter.Mission do
     {n, e, alt}
   end
 
+  # From the ground ArduCopter climbs at least a metre, whatever height the
+  # item asks for (ModeAuto::takeoff_start); the height it climbs to is the
+  # item's end.
   defp run_item(c, %{command: 22} = item) do
     {_, _, alt} = item_target(c, %{item | x: 0, y: 0})
 
     cond do
       in_air?(c) and c.alt >= alt - 0.5 -> item_reached(c)
       in_air?(c) -> %{c | nav: {:climb, c.n, c.e, alt}}
-      c.armed -> Flight.start_takeoff(c, alt)
+      c.armed -> take_off(c, max(alt, c.alt + @least_take_off))
       # Disarmed on the ground in AUTO: nothing flies until armed, which AUTO refuses.
       true -> c
     end
@@ -209,6 +214,8 @@ defmodule Dolphin.Sim.Copter.Mission do
   # Commands flown as no-ops (yaw, relays, servos, ROI...): done at once.
   defp run_item(c, _item), do: item_reached(c)
 
+  defp take_off(c, alt), do: Flight.start_takeoff(%{c | item: %{c.item | take_off_alt: alt}}, alt)
+
   defp hold_nav(c), do: if(in_air?(c), do: {:hold, c.n, c.e, c.alt}, else: :idle)
 
   @spec item_reached(Copter.t()) :: Copter.t()
@@ -224,9 +231,14 @@ defmodule Dolphin.Sim.Copter.Mission do
   def check_item(%{mode: :auto, item: %{} = item} = c), do: check_item(c, item.command, item)
   def check_item(c), do: c
 
-  defp check_item(c, 22, %{item: i}) do
-    {_, _, alt} = item_target(c, %{i | x: 0, y: 0})
-    if in_air?(c) and c.alt >= alt - 0.5, do: item_reached(c), else: c
+  # Done at its height; in the air from then on (ArduCopter's landed state
+  # TAKEOFF ends with the take-off), so that touching the ground is a landing.
+  defp check_item(c, 22, %{item: i} = item) do
+    alt = item.take_off_alt || c |> item_target(%{i | x: 0, y: 0}) |> elem(2)
+
+    if in_air?(c) and c.alt >= alt - 0.5,
+      do: item_reached(if(c.landed == :takeoff, do: %{c | landed: :in_air}, else: c)),
+      else: c
   end
 
   defp check_item(c, 16, %{item: i} = item) do

@@ -30,6 +30,15 @@ defmodule Dolphin.Sim.Copter.CommandsTest do
     assert {_, {1, 4}} = run(in_air(c), 22, [0, 0, 0, 0, 0, 0, 10])
   end
 
+  test "a GUIDED take-off to no height is refused, as ArduCopter's do_user_takeoff refuses one downwards" do
+    {c, {1, 0}} = run(ready(), 176, [1, 4])
+    {c, {1, 0}} = run(c, 400, [1])
+    {c, {1, 4}} = run(c, 22, [0, 0, 0, 0, 0, 0, 0])
+    assert c.nav == :idle and c.landed == :on_ground
+    {c, {1, 4}} = run(c, 22, [0, 0, 0, 0, 0, 0, -5])
+    assert {_, {1, 0}} = run(c, 22, [0, 0, 0, 0, 0, 0, 0.5])
+  end
+
   test "a COMMAND_INT's point is in its frame: DO_REPOSITION to a point 30 m above home" do
     p = Copter.offset(@home, 0, 40)
     {c, {1, 0}} = run(in_air(ready(), %{mode: :loiter}), 192, [5, 1], {6, round(p.lat * 1.0e7), round(p.lon * 1.0e7), 30.0})
