@@ -16,8 +16,11 @@ defmodule Dolphin.Engine.Failure do
   `{:handler_failed, reason}`, `{:crashed, reason}`, a
   `Dolphin.Fleet.AllocationError`, `{:not_reassigned, reason, why}` (a
   `reassign` that found no vehicle to take the task over); platforms give
-  their own, `{:vehicle_fault, text}` for a failure the vehicle caused (a
-  failsafe, a refused arm: `reassign` takes those over).
+  their own, as data: an exception that words itself (a mission's
+  `Dolphin.Mission.Failure`), which says whether the vehicle caused it (a
+  failsafe, a refused arm: `reassign` takes those over,
+  `c:Dolphin.Engine.Platform.vehicle_fault?/1`); the test platform's
+  `{:vehicle_fault, text}` is such a failure too.
 
   `progress` is the last progress a platform task reported before it failed
   (nil if none): where another vehicle may take it over.
@@ -53,7 +56,7 @@ defmodule Dolphin.Engine.Failure do
   def format_reason({:condition_error, source, e}), do: "condition `#{source}` raised #{format_exception(e)}"
   def format_reason({:vehicle_lost, id}), do: "vehicle #{id} lost"
   def format_reason({:vehicle_fault, text}), do: text
-  def format_reason({:not_reassigned, reason, why}), do: "#{format_reason(reason)}; no other vehicle could take it over: #{why}"
+  def format_reason({:not_reassigned, reason, why}), do: "#{format_reason(reason)}; no other vehicle could take it over: #{format_reason(why)}"
   def format_reason({:platform_exited, reason}), do: "its process #{exit_words(reason)} without reporting"
   def format_reason({:stop_timeout, ms}), do: "did not stop within #{ms} ms of clock time (killed)"
   def format_reason({:stop_failed, reason}), do: "could not be stopped: #{format_reason(reason)}"
@@ -73,7 +76,9 @@ defmodule Dolphin.Engine.Failure do
   def format_reason(:shutdown), do: "stopped: shutting down"
   def format_reason(:deadline), do: "stopped: the run's time (--for) is over"
   def format_reason(%__MODULE__{} = f), do: message(f)
-  def format_reason(%_{__exception__: true} = e), do: format_exception(e)
+  # A platform's failure as data (a mission's Dolphin.Mission.Failure, an
+  # allocation's error) words itself.
+  def format_reason(%_{__exception__: true} = e), do: Exception.message(e)
   def format_reason(text) when is_binary(text), do: text
   # A reason no one foresaw: the term itself is the most truthful text.
   def format_reason(other), do: inspect(other, charlists: :as_lists)

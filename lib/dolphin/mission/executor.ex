@@ -100,8 +100,8 @@ defmodule Dolphin.Mission.Executor do
         # At once: the first look at the vehicle needs no wait.
         {:keep_state, %{data | items: items, ending: ending, flight: Flight.new(ending)}, [{:state_timeout, 0, :look}]}
 
-      {:error, why} ->
-        fail(:hold, data, why)
+      {:error, cause} ->
+        fail(:hold, data, cause)
     end
   end
 
@@ -130,7 +130,7 @@ defmodule Dolphin.Mission.Executor do
       {:ok, st} ->
         cond do
           not Dolphin.Vehicles.State.booting?(st) -> look(data, st)
-          Clock.now_ms() >= data.boot_deadline -> fail(:hold, data, booting(data, st))
+          Clock.now_ms() >= data.boot_deadline -> fail(:hold, data, {:booting, if(st.system_status == 0, do: :uninit, else: :boot), div(@boot_timeout_ms, 1000)})
           # ArduCopter answers the mission protocol while it boots, before its
           # mission store is set up, refusing any upload with NO_SPACE: a
           # vehicle that reports MAV_STATE UNINIT or BOOT is looked at again.
@@ -138,7 +138,7 @@ defmodule Dolphin.Mission.Executor do
         end
 
       {:error, :unknown_vehicle} ->
-        fail(:hold, data, not_mavlink(data))
+        fail(:hold, data, not_mavlink())
     end
   end
 
@@ -150,7 +150,7 @@ defmodule Dolphin.Mission.Executor do
   end
 
   def handle_event(:info, {:DOWN, ref, :process, _, reason}, state, %{task: %Task{ref: ref}} = data),
-    do: fail(state, %{data | task: nil}, "#{state} crashed: #{Exception.format_exit(reason)}")
+    do: fail(state, %{data | task: nil}, {:exchange_crashed, reason})
 
   def handle_event(:info, {:mission_done, :upload, %{retransmissions: n}}, _state, data), do: {:keep_state, %{data | retransmissions: n}}
   def handle_event(:info, {:mission_done, _, _}, _state, _data), do: :keep_state_and_data
@@ -169,7 +169,7 @@ defmodule Dolphin.Mission.Executor do
     case Vehicles.state(data.vehicle) do
       {:ok, st} ->
         if still_grounded?(data, st),
-          do: fail(:flying, data, {:vehicle_fault, grounded(data, st)}),
+          do: fail(:flying, data, grounded(data, st), vehicle_fault?: true, texts: texts(data, st)),
           else: judge(%{data | grounded: nil}, st)
 
       {:error, _} ->
@@ -182,7 +182,7 @@ defmodule Dolphin.Mission.Executor do
       {:ok, st} ->
         case Flight.landed(data.flight, st) do
           :done -> done(data)
-          {:failed, why} -> fail(:flying, data, why)
+          {:failed, cause} -> fail(:flying, data, cause)
         end
 
       _ ->
@@ -245,7 +245,7 @@ defmodule Dolphin.Mission.Executor do
     case on_the_ground(data, st) do
       :ok -> next(:clear, data)
       :already_there -> done(data)
-      {:error, why} -> fail(:hold, data, why)
+      {:error, cause} -> fail(:hold, data, cause)
     end
   end
 
@@ -270,7 +270,7 @@ defmodule Dolphin.Mission.Executor do
   defp answered(:verify, {:ok, back}, data) do
     case Mission.compare_download(data.items, back) do
       :ok -> next(:guided, data)
-      {:error, e} -> fail(:verify, data, "the mission read back differs from the one uploaded: #{Exception.message(e)}")
+      {:error, e} -> fail(:verify, data, {:read_back_differs, e})
     end
   end
 
@@ -278,14 +278,14 @@ defmodule Dolphin.Mission.Executor do
     do: {:repeat_state, %{data | attempt: data.attempt + 1}}
 
   defp answered(:verify, {:error, e}, data),
-    do: fail(:verify, data, "reading the mission back to verify it failed#{if data.attempt > 1, do: " (#{data.attempt} attempts)"}: #{Exception.message(e)}")
+    do: fail(:verify, data, {:read_back_failed, e, data.attempt})
 
   defp answered(:guided, :ok, data), do: next(:arm, data)
   defp answered(:arm, :ok, data), do: next(:start, data)
   # The autopilot would not arm (not ready, a failed check): the vehicle's own fault.
-  defp answered(:arm, {:error, e}, data), do: fail(:arm, data, {:vehicle_fault, Exception.message(e)})
+  defp answered(:arm, {:error, e}, data), do: fail(:arm, data, {:refused, e}, vehicle_fault?: true)
   defp answered(:start, :ok, data), do: next(:flying, data)
-  defp answered(state, {:error, e}, data), do: fail(state, data, Exception.message(e))
+  defp answered(state, {:error, e}, data), do: fail(state, data, {:refused, e})
 
   defp uploaded(data) do
     Telemetry.emit(:mission_uploaded, %{
@@ -309,7 +309,7 @@ defmodule Dolphin.Mission.Executor do
     cond do
       takes_off? or not grounded? -> :ok
       landing_here?(data, st) -> :already_there
-      true -> {:error, "vehicle #{data.vehicle} is on the ground and the mission has no take-off"}
+      true -> {:error, :no_take_off}
     end
   end
 
@@ -325,18 +325,12 @@ defmodule Dolphin.Mission.Executor do
 
   defp landing_here?(_data, _st), do: false
 
-  defp booting(data, st),
-    do: "vehicle #{data.vehicle} was still booting after #{div(@boot_timeout_ms, 1000)} s (MAV_STATE #{if st.system_status == 0, do: "UNINIT", else: "BOOT"})"
-
   # The fleet may be fake vehicles of the test platform (`--fake`), which the
   # ground station never hears: say so rather than "not connected".
-  defp not_mavlink(data) do
+  defp not_mavlink do
     case Dolphin.Fleet.source() do
-      {Dolphin.Fleet.TestSource, _} ->
-        "mission #{inspect(data.name)} needs a MAVLink vehicle; vehicle #{data.vehicle} is a fake vehicle (--fake), which runs only test-platform tasks"
-
-      _ ->
-        "vehicle #{data.vehicle} is not connected"
+      {Dolphin.Fleet.TestSource, _} -> :fake_vehicle
+      _ -> :not_connected
     end
   end
 
@@ -349,7 +343,7 @@ defmodule Dolphin.Mission.Executor do
 
     {:ok, Mission.to_items(mission, home)}
   rescue
-    e in ArgumentError -> {:error, "mission #{inspect(mission.name)} cannot be turned into items: #{Exception.message(e)}"}
+    e in ArgumentError -> {:error, {:cannot_make_items, Exception.message(e)}}
   end
 
   # --- :flying ----------------------------------------------------------------
@@ -383,10 +377,8 @@ defmodule Dolphin.Mission.Executor do
         done(data)
 
       # Left to what took it (a failsafe's RTL or LAND, the pilot): never overridden.
-      {:left, why} ->
-        fail(:flying, data, {:vehicle_fault, why <> Dolphin.ManoeuvreError.says(Dolphin.Vehicles.State.texts_since(data.flight_texts, st.status_texts), [])},
-          hold: false
-        )
+      {:left, cause} ->
+        fail(:flying, data, cause, vehicle_fault?: true, texts: texts(data, st), hold: false)
 
       # A landing mission's disarm comes before its last report (ArduPilot
       # reports the final item after "Disarming motors"): the reports are
@@ -428,12 +420,12 @@ defmodule Dolphin.Mission.Executor do
   defp grounded(data, st) do
     current = st.mission.current
     item = if is_integer(current), do: Enum.at(data.items, current)
-    at = if item, do: " (at item #{current} of #{length(data.items) - 1}, #{Mission.item_name(item)})", else: ""
-    waiting = if item && item.command == @takeoff, do: "its take-off does not climb", else: "the mission does not go on"
-
-    "vehicle #{data.vehicle} has been armed on the ground for #{div(@grounded_timeout_ms, 1000)} s of the mission#{at}: #{waiting}" <>
-      Dolphin.ManoeuvreError.says(Dolphin.Vehicles.State.texts_since(data.flight_texts, st.status_texts), [])
+    at = if item, do: {current, length(data.items) - 1, Mission.item_name(item), item.command == @takeoff}
+    {:grounded, div(@grounded_timeout_ms, 1000), at}
   end
+
+  # What the vehicle said since the mission started.
+  defp texts(data, st), do: Dolphin.Vehicles.State.texts_since(data.flight_texts, st.status_texts)
 
   # --- the end ----------------------------------------------------------------
 
@@ -445,9 +437,17 @@ defmodule Dolphin.Mission.Executor do
     {:stop, :normal, data}
   end
 
-  defp fail(state, data, why, opts \\ []) do
-    # The engine says which task and which vehicle; the reason says what happened.
-    Platform.failed(data.owner, why)
+  defp fail(state, data, cause, opts \\ []) do
+    failure = %Dolphin.Mission.Failure{
+      mission: data.name,
+      vehicle: data.vehicle,
+      step: state,
+      cause: cause,
+      status_texts: Keyword.get(opts, :texts, []),
+      vehicle_fault?: Keyword.get(opts, :vehicle_fault?, false)
+    }
+
+    Platform.failed(data.owner, failure)
     # A failed mission leaves the vehicle holding, not flying on.
     _ = if Keyword.get(opts, :hold, true) and commanded?(state), do: hold(data.vehicle, true)
     {:stop, :normal, data}

@@ -87,14 +87,14 @@ defmodule Dolphin.Mission.Platform do
 
   @impl true
   def vehicle_fault?({:vehicle_lost, _}), do: true
-  def vehicle_fault?({:vehicle_fault, _text}), do: true
+  def vehicle_fault?(%Dolphin.Mission.Failure{vehicle_fault?: fault?}), do: fault?
   def vehicle_fault?(_reason), do: false
 
   @impl true
   def resume(%Mission{} = mission, progress, from, to) do
     # The items the first vehicle flew were made with its home (when the mission has none).
     with {:ok, mission} <- with_home(mission, from),
-         {:ok, at} <- standing(to) do
+         {:ok, at} <- standing(mission, to) do
       Resume.resume(mission, progress && progress[:reached], at)
     end
   end
@@ -114,14 +114,14 @@ defmodule Dolphin.Mission.Platform do
   defp with_home(mission, from) do
     case Vehicles.state(from) do
       {:ok, %{home: %{lat: lat, lon: lon, alt: alt}}} -> {:ok, Mission.put_home(mission, Dolphin.Geo.location(lat, lon, alt))}
-      _ -> {:error, "the home of vehicle #{from}, which its items were made from, is not known"}
+      _ -> {:error, %Dolphin.Mission.Failure{mission: mission.name, vehicle: from, step: :resume, cause: {:home_unknown, from}}}
     end
   end
 
-  defp standing(vehicle) do
+  defp standing(mission, vehicle) do
     case Vehicles.state(vehicle) do
       {:ok, %{position: %{lat: lat, lon: lon, alt: alt}}} -> {:ok, Dolphin.Geo.location(lat, lon, alt)}
-      _ -> {:error, "the position of vehicle #{vehicle} is not known"}
+      _ -> {:error, %Dolphin.Mission.Failure{mission: mission.name, vehicle: vehicle, step: :resume, cause: {:position_unknown, vehicle}}}
     end
   end
 

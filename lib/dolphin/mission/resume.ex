@@ -44,10 +44,11 @@ defmodule Dolphin.Mission.Resume do
   @doc """
   The resumed mission for a vehicle standing at `at`, and the seq of the
   first item it flies: `{:ok, mission, resume_seq}`, or `{:error, why}` when
-  the mission cannot be resumed (it jumps, or nothing is left to fly).
+  the mission cannot be resumed (it jumps, or nothing is left to fly): a
+  `Dolphin.Mission.Failure` of step `:resume`.
   `mission` must have its home (the first vehicle's home, when it had none).
   """
-  @spec resume(Mission.t(), non_neg_integer() | nil, Location.t()) :: {:ok, Mission.t(), pos_integer()} | {:error, String.t()}
+  @spec resume(Mission.t(), non_neg_integer() | nil, Location.t()) :: {:ok, Mission.t(), pos_integer()} | {:error, Dolphin.Mission.Failure.t()}
   def resume(%Mission{} = mission, reached, %Location{} = at) do
     items = Mission.to_items(mission)
 
@@ -60,7 +61,7 @@ defmodule Dolphin.Mission.Resume do
       {:ok, %Mission{name: mission.name, home: nil, commands: [up | Enum.map(left, &as_command/1)]}, seq}
     end
   rescue
-    e in ArgumentError -> {:error, "mission #{inspect(mission.name)} cannot be resumed: #{Exception.message(e)}"}
+    e in ArgumentError -> {:error, cannot(mission, {:cannot_resume, Exception.message(e)})}
   end
 
   @doc "The seq, in the original mission, of item `seq` of a mission resumed from `resume_seq` (nil for home and the take-off)."
@@ -68,18 +69,20 @@ defmodule Dolphin.Mission.Resume do
   def original_seq(seq, _resume_seq) when seq < 2, do: nil
   def original_seq(seq, resume_seq), do: seq - 2 + resume_seq
 
+  defp cannot(mission, cause), do: %Dolphin.Mission.Failure{mission: mission.name, step: :resume, cause: cause}
+
   defp no_jumps(mission, items) do
     jump = Items.command_number(:mav_cmd_do_jump)
 
     if Enum.any?(items, &(&1.command == jump)),
-      do: {:error, "mission #{inspect(mission.name)} has jumps (DO_JUMP): it cannot be resumed on another vehicle"},
+      do: {:error, cannot(mission, :has_jumps)},
       else: :ok
   end
 
   # Nothing reached: the take-off was not even done, nor what follows it.
   defp resume_seq(mission, items, nil) do
     case Enum.find(items, &(&1.seq > 0 and &1.command != @takeoff)) do
-      nil -> {:error, "mission #{inspect(mission.name)} has nothing to fly but its take-off"}
+      nil -> {:error, cannot(mission, :nothing_but_take_off)}
       %{seq: seq} -> {:ok, seq}
     end
   end
@@ -87,7 +90,7 @@ defmodule Dolphin.Mission.Resume do
   defp resume_seq(mission, items, reached) do
     case Enum.find(items, &(&1.seq > reached and navigation?(&1) and &1.command != @takeoff)) do
       nil ->
-        {:error, "mission #{inspect(mission.name)} has nothing left to fly after item #{reached}"}
+        {:error, cannot(mission, {:nothing_left, reached})}
 
       %{seq: seq} ->
         # A survey's pass is two items: a pass whose end is next was not flown whole.

@@ -156,9 +156,8 @@ defmodule Dolphin.Mission.PlatformTest do
     assert Clock.now_ms() - started < 180_000
     message = Exception.message(Dolphin.Engine.TaskError.exception(failure: failure))
     assert message =~ "vehicle 7 has been armed on the ground for 60 s of the mission (at item 1 of 3, NAV_TAKEOFF): its take-off does not climb"
-    # Left holding, not flying on.
-    {:ok, info} = Sim.info(7)
-    assert info.mode in [:brake, :guided] or not info.armed
+    # Left holding, not flying on (the hold follows the report).
+    Dolphin.Test.Wait.until(fn -> match?({:ok, %{mode: m, armed: a}} when m in [:brake, :guided] or not a, Sim.info(7)) end, 30_000, fn -> "vehicle 7 held: #{inspect(Sim.info(7))}" end)
   end
 
   # The executor's exit with its parent's :killed is logged as an error: expected here.

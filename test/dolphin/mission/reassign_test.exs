@@ -62,10 +62,10 @@ defmodule Dolphin.Mission.ReassignTest do
 
     test "a mission with jumps, or with nothing left, cannot be resumed", %{home: home, at: at} do
       looped = Mission.add(survey(home), C.jump_to_item(3, 2))
-      assert {:error, why} = Resume.resume(looped, 4, at)
-      assert why =~ "jumps"
-      assert {:error, why} = Resume.resume(survey(home), 9, at)
-      assert why =~ "nothing left to fly after item 9"
+      assert {:error, %Dolphin.Mission.Failure{step: :resume, cause: :has_jumps, vehicle_fault?: false} = why} = Resume.resume(looped, 4, at)
+      assert Exception.message(why) =~ "jumps"
+      assert {:error, %Dolphin.Mission.Failure{cause: {:nothing_left, 9}} = why} = Resume.resume(survey(home), 9, at)
+      assert Exception.message(why) =~ "nothing left to fly after item 9"
     end
   end
 

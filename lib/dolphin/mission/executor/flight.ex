@@ -18,11 +18,11 @@ defmodule Dolphin.Mission.Executor.Flight do
         }
 
   @typedoc """
-  `:flying`; `:done`; `{:left, why}`: the vehicle left the mission (a failsafe,
+  `:flying`; `:done`; `{:left, cause}`: the vehicle left the mission (a failsafe,
   the pilot), to be left to what took it; `:check_landed`: a landing mission's
   vehicle disarmed, whose last reports are still to come.
   """
-  @type verdict :: :flying | :done | {:left, String.t()} | :check_landed
+  @type verdict :: :flying | :done | {:left, Dolphin.Mission.Failure.cause()} | :check_landed
 
   @spec new(term()) :: t()
   def new(ending), do: %__MODULE__{ending: ending}
@@ -55,10 +55,10 @@ defmodule Dolphin.Mission.Executor.Flight do
         {:done, progress, f}
 
       f.auto_seen and st.mode != :auto ->
-        {{:left, "the vehicle left AUTO for #{mode_name(st.mode)} before the mission ended"}, progress, f}
+        {{:left, {:left_auto, mode_name(st.mode)}}, progress, f}
 
       f.armed_seen and not st.armed and not match?({:landing, _}, f.ending) ->
-        {{:left, "the vehicle disarmed before the mission ended"}, progress, f}
+        {{:left, :disarmed}, progress, f}
 
       f.armed_seen and not st.armed and not f.landing_check ->
         {:check_landed, progress, %{f | landing_check: true}}
@@ -90,11 +90,11 @@ defmodule Dolphin.Mission.Executor.Flight do
 
   @doc false
   # A landing mission's vehicle disarmed some time ago: its reports have come.
-  @spec landed(t(), map()) :: :done | {:failed, String.t()}
+  @spec landed(t(), map()) :: :done | {:failed, Dolphin.Mission.Failure.cause()}
   def landed(f, st) do
     if complete?(f, st),
       do: :done,
-      else: {:failed, "the vehicle landed and disarmed before the mission's end (at item #{st.mission.current} of #{st.mission.total})"}
+      else: {:failed, {:landed_early, st.mission.current, st.mission.total}}
   end
 
   # ArduPilot reports the end with MISSION_CURRENT state COMPLETE (after the

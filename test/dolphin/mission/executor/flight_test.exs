@@ -56,7 +56,8 @@ defmodule Dolphin.Mission.Executor.FlightTest do
     assert Enum.map(verdicts, &elem(&1, 0)) == [:flying, :check_landed]
     # Asked once only.
     assert {:flying, nil, _} = Flight.judge(flight, List.last(states))
-    assert {:failed, "the vehicle landed and disarmed before the mission's end (at item 2 of 3)"} = Flight.landed(flight, List.last(states))
+    assert {:failed, {:landed_early, 2, 3} = cause} = Flight.landed(flight, List.last(states))
+    assert Exception.message(%Dolphin.Mission.Failure{cause: cause}) == "the vehicle landed and disarmed before the mission's end (at item 2 of 3)"
     assert :done = Flight.landed(flight, st(%{mode: :auto, armed: false, mission: %{state: :complete, current: 3, total: 3}}))
   end
 
@@ -67,9 +68,10 @@ defmodule Dolphin.Mission.Executor.FlightTest do
 
     flying = st(%{mode: :auto, armed: true, landed: :in_air, mission: %{state: :active, current: 1}})
     {:flying, _, flight} = Flight.judge(Flight.new({:reached, 3}), flying)
-    assert {{:left, "the vehicle left AUTO for RTL before the mission ended"}, _, _} = Flight.judge(flight, %{flying | mode: :rtl})
-    assert {{:left, "the vehicle left AUTO for mode 99 before the mission ended"}, _, _} = Flight.judge(flight, %{flying | mode: {:custom, 99}})
-    assert {{:left, "the vehicle disarmed before the mission ended"}, _, _} = Flight.judge(flight, %{flying | armed: false})
+    assert {{:left, {:left_auto, "RTL"}}, _, _} = Flight.judge(flight, %{flying | mode: :rtl})
+    assert {{:left, {:left_auto, "mode 99"} = cause}, _, _} = Flight.judge(flight, %{flying | mode: {:custom, 99}})
+    assert Exception.message(%Dolphin.Mission.Failure{cause: cause}) == "the vehicle left AUTO for mode 99 before the mission ended"
+    assert {{:left, :disarmed}, _, _} = Flight.judge(flight, %{flying | armed: false})
   end
 
   test "MISSION_CURRENT's ACTIVE carried by the events counts, even when the state read later no longer shows it" do
