@@ -39,6 +39,8 @@ defmodule Dolphin.CLI.Values do
     * `{:one_of, %{"text" => value}}` — one of the words;
     * `:name` — text that is not empty;
     * `:output` — a file to write, not a directory;
+    * `{:file, what}` — a file to read, not a directory (whether it
+      exists is for the task to find out when it reads it);
     * `:boolean`, `:string` — as `OptionParser` has them; `{:keep, kind}`
       (`:keep` for `{:keep, :string}`) — repeatable.
   """
@@ -63,6 +65,7 @@ defmodule Dolphin.CLI.Values do
           | {:one_of, %{String.t() => term()}}
           | :name
           | :output
+          | {:file, String.t()}
           | :boolean
           | :string
 
@@ -295,6 +298,10 @@ defmodule Dolphin.CLI.Values do
     if File.dir?(path), do: {:error, "a directory: give the name of a file to write"}, else: {:ok, path}
   end
 
+  defp value({:file, what}, path) do
+    if File.dir?(path), do: {:error, "a directory, not a #{what}"}, else: {:ok, path}
+  end
+
   defp integer(text, range, rule) do
     case Integer.parse(text) do
       {n, ""} -> if n in range, do: {:ok, n}, else: {:error, rule}
@@ -322,9 +329,8 @@ defmodule Dolphin.CLI.Values do
   defp within?(x, first..last), do: x >= first and x <= last
   defp range(first..last), do: "#{first}..#{last}"
 
-  @doc false
   # A flag as the user types it.
-  def flag(key), do: "--" <> String.replace(Atom.to_string(key), "_", "-")
+  defp flag(key), do: "--" <> String.replace(Atom.to_string(key), "_", "-")
 
   # The value as given; quoted when it would not read as one word.
   defp shown(text) when is_binary(text), do: if(text == "" or String.match?(text, ~r/\s/), do: inspect(text), else: text)

@@ -113,6 +113,10 @@ defmodule Dolphin.CLI.ValuesTest do
       assert e.message == "--forward udpin:0.0.0.0:14551: udpout:HOST:PORT here, not udpin"
       assert {:error, e} = run.([script, "--events", dir])
       assert e.message == "--events #{dir}: a directory: give the name of a file to write"
+      assert {:error, e} = run.([script, "--sitl", "1", "--sitl-bin", dir])
+      assert e.message == "--sitl-bin #{dir}: a directory, not a SITL binary"
+      assert {:error, e} = run.([script, "--sitl", "1", "--sitl-defaults", dir])
+      assert e.message == "--sitl-defaults #{dir}: a directory, not a parameter file"
       assert {:error, e} = run.([dir, "--fake", "1"])
       assert e.message == "#{dir} is a directory, not a script"
     end
