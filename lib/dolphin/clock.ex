@@ -17,9 +17,29 @@ defmodule Dolphin.Clock do
   (`set_speedup/1`) keeps `now_ms/0` continuous: the clock goes on from where it
   was, at the new rate. The factor is kept in `:persistent_term` (read on every
   call, written only when it changes).
+
+  ## Limits
+
+  The speed-up is a number from 0.01 to 1000. Above 1000 the simulated
+  vehicles (`Dolphin.Sim`) cannot keep up with the clock even on an idle
+  machine: each steps its model in 50 ms steps, at most 40 of them per
+  timer tick, and a timer ticks every millisecond or two at best. Measured
+  with one vehicle and nothing else running: in step at 500×, barely at
+  1000× (7 s of its time behind after 3,000 s), and at 2,000× or 20,000×
+  still at 1000×, ever further behind. A fleet with its ground station
+  keeps a lower pace, what the machine's cores sustain (`bench/sim.exs`:
+  10 vehicles in step up to 200× on two cores). 0.01, a hundred times
+  slower than real time, is the slowest.
+
+  A timer holds at most 4,294,967,295 ms of real time (49.7 days, an
+  Erlang timer's limit): at speed-up K, a wait of at most that times K of
+  clock time (`max_wait_ms/1`).
   """
 
   @key {__MODULE__, :state}
+  @min_speedup 0.01
+  @max_speedup 1000
+  @max_timer_ms 4_294_967_295
 
   @typedoc "Milliseconds of clock time."
   @type clock_ms :: non_neg_integer()
@@ -29,16 +49,51 @@ defmodule Dolphin.Clock do
   def speedup, do: elem(state(), 0)
 
   @doc """
-  Sets the speed-up factor, a positive number. Timers already running keep the
-  real duration they were given.
+  Sets the speed-up factor, a number from #{@min_speedup} to #{@max_speedup}
+  (see "Limits" above; anything else raises `ArgumentError`). Timers already
+  running keep the real duration they were given.
   """
   @spec set_speedup(number()) :: :ok
-  def set_speedup(k) when is_number(k) and k > 0 do
-    now = now_ms()
-    :persistent_term.put(@key, {k, System.monotonic_time(:microsecond), now})
+  def set_speedup(k) do
+    if speedup?(k), do: :persistent_term.put(@key, {k, System.monotonic_time(:microsecond), now_ms()}), else: raise(ArgumentError, speedup_rule(k))
   end
 
-  def set_speedup(other), do: raise(ArgumentError, "speed-up must be a positive number, got: #{inspect(other)}")
+  @doc """
+  Whether `k` is a speed-up the clock and the simulator hold.
+
+      iex> Dolphin.Clock.speedup?(200)
+      true
+      iex> Dolphin.Clock.speedup?(1.0e9)
+      false
+  """
+  @spec speedup?(term()) :: boolean()
+  def speedup?(k), do: is_number(k) and k >= @min_speedup and k <= @max_speedup
+
+  @doc """
+  What a speed-up must be, said of `k`.
+
+      iex> Dolphin.Clock.speedup_rule(0)
+      "a speed-up is a number from 0.01 to 1000 (beyond 1000 the simulated vehicles cannot keep up with the clock), got 0"
+  """
+  @spec speedup_rule(term()) :: String.t()
+  def speedup_rule(k),
+    do: "a speed-up is a number from #{@min_speedup} to #{@max_speedup} (beyond #{@max_speedup} the simulated vehicles cannot keep up with the clock), got #{inspect(k)}"
+
+  @doc "The fastest speed-up (see \"Limits\")."
+  @spec max_speedup() :: pos_integer()
+  def max_speedup, do: @max_speedup
+
+  @doc """
+  The longest wait, in clock milliseconds, that a timer holds at speed-up `k`
+  (see "Limits").
+
+      iex> Dolphin.Clock.max_wait_ms(1)
+      4294967295
+      iex> Dolphin.Clock.max_wait_ms(10)
+      42949672950
+  """
+  @spec max_wait_ms(number()) :: pos_integer()
+  def max_wait_ms(k \\ speedup()), do: trunc(@max_timer_ms * k)
 
   @doc "Clock time now, in milliseconds (monotonic; its origin is arbitrary)."
   @spec now_ms() :: integer()

@@ -83,7 +83,18 @@ defmodule Dolphin.Sim do
       `:battery_failsafe` (`:none`, `:rtl`, `:land`), `:gcs_failsafe`,
       `:gcs_sysid`, `:request_int` (ask for items with MISSION_REQUEST_INT).
 
-  Returns the system ids started, or an error that says what was wrong.
+  Every option is checked before anything starts, so that no vehicle is
+  started with a value it cannot report in MAVLink or that means nothing:
+  locations within latitude -90..90, longitude -180..180 and altitude
+  -1000..10000 m (and the fleet, spread around its home, on the map too),
+  `:speedup` within `Dolphin.Clock`'s limits (0.01 to 1000), system ids
+  1..254, fractions of a pack (`:battery`, `:battery_low`, ...) 0..1,
+  durations 0 or more, speeds, accelerations and the like more than 0 and
+  at most what a copter could do (`:cruise_speed` 50 m/s, `:hover_current`
+  200 A, ...), and the faults as `set_faults/2` takes them.
+
+  Returns the system ids started, or a `Dolphin.Sim.Error` (`:bad_option`)
+  that says which option was wrong and what it takes.
   """
   @spec start(keyword()) :: {:ok, [byte()]} | {:error, Dolphin.Sim.Error.t()}
   def start(opts) do
@@ -91,8 +102,9 @@ defmodule Dolphin.Sim do
          {:ok, sysids} <- sysids(opts),
          {:ok, config} <- config(opts),
          :ok <- free(sysids),
-         :ok <- speedup(opts[:speedup]),
-         {:ok, homes, charger} <- places(opts, length(sysids)) do
+         :ok <- faults(opts),
+         {:ok, homes, charger} <- places(opts, length(sysids)),
+         :ok <- speedup(opts[:speedup]) do
       cameras = cameras(opts[:camera], sysids)
       config = Map.put(config, :charger, charger)
 
@@ -251,14 +263,60 @@ defmodule Dolphin.Sim do
     end
   end
 
+  # What each vehicle setting may be: the vehicle must be able to report
+  # what it does in MAVLink's fields (a battery of 5.0 is 500 %, which
+  # BATTERY_STATUS cannot carry) and the setting must mean something.
+  @settings %{
+    battery: {:fraction, "a fraction of a full pack"},
+    arm_min_battery: {:fraction, "a fraction of a full pack"},
+    battery_low: {:fraction, "a fraction of a full pack"},
+    battery_critical: {:fraction, "a fraction of a full pack"},
+    charge_rate: {:fraction, "a fraction of a full pack a second"},
+    boot_ms: {:at_least_0, "milliseconds"},
+    ekf_ready_ms: {:at_least_0, "milliseconds"},
+    disarm_delay_ms: {:at_least_0, "milliseconds"},
+    rtl_alt: {:at_least_0, "metres"},
+    capacity_mah: {{:positive, 1_000_000}, "mAh"},
+    hover_current: {{:positive, 200}, "amperes"},
+    cruise_speed: {{:positive, 50}, "m/s"},
+    climb_speed: {{:positive, 50}, "m/s"},
+    descent_speed: {{:positive, 50}, "m/s"},
+    circle_speed: {{:positive, 50}, "m/s"},
+    accel: {{:positive, 100}, "m/s²"},
+    brake_accel: {{:positive, 100}, "m/s²"},
+    accel_z: {{:positive, 100}, "m/s²"},
+    circle_rate: {{:positive, 90}, "degrees a second"},
+    wp_radius: {{:positive, 1000}, "metres"},
+    battery_failsafe: {{:one_of, [:none, :rtl, :land]}, nil},
+    gcs_failsafe: {:boolean, nil},
+    request_int: {:boolean, nil},
+    gcs_sysid: {{:one_of, Enum.to_list(1..255)}, "a system id"}
+  }
+
   defp config(opts) do
     known = Map.keys(Copter.defaults()) -- [:camera, :charger]
     config = opts |> Keyword.take(known) |> Map.new()
 
-    case Enum.find(config, fn {_k, v} -> not (is_number(v) or is_boolean(v) or is_atom(v)) end) do
+    case Enum.find_value(config, fn {k, v} -> setting_problem(k, v) end) do
       nil -> {:ok, config}
-      {k, v} -> Dolphin.Sim.Error.bad_option("bad #{inspect(k)}: #{inspect(v)}")
+      problem -> Dolphin.Sim.Error.bad_option(problem)
     end
+  end
+
+  defp setting_problem(key, value) do
+    {rule, unit} = Map.fetch!(@settings, key)
+
+    {ok?, allowed} =
+      case rule do
+        :fraction -> {is_number(value) and value >= 0 and value <= 1, "#{unit}, from 0 to 1"}
+        :at_least_0 -> {is_number(value) and value >= 0, "#{unit}, 0 or more"}
+        {:positive, max} -> {is_number(value) and value > 0 and value <= max, "#{unit}, more than 0 and at most #{max}"}
+        {:one_of, [_ | _] = values} when length(values) > 10 -> {value in values, "#{unit} from #{hd(values)} to #{List.last(values)}"}
+        {:one_of, values} -> {value in values, "one of #{Enum.map_join(values, ", ", &inspect/1)}"}
+        :boolean -> {is_boolean(value), "true or false"}
+      end
+
+    unless ok?, do: "bad #{inspect(key)} #{inspect(value)}: #{allowed}"
   end
 
   defp free(sysids) do
@@ -269,14 +327,32 @@ defmodule Dolphin.Sim do
   end
 
   defp speedup(nil), do: :ok
-  defp speedup(k) when is_number(k) and k > 0, do: Dolphin.Clock.set_speedup(k)
-  defp speedup(k), do: Dolphin.Sim.Error.bad_option("bad :speedup #{inspect(k)}: a positive number")
+
+  defp speedup(k) do
+    if Dolphin.Clock.speedup?(k),
+      do: Dolphin.Clock.set_speedup(k),
+      else: Dolphin.Sim.Error.bad_option("bad :speedup: " <> Dolphin.Clock.speedup_rule(k))
+  end
+
+  # Checked here: a vehicle that cannot take them would fail in its start.
+  defp faults(opts) do
+    case Keyword.get(opts, :faults, %{}) do
+      faults when is_map(faults) or is_list(faults) ->
+        Dolphin.Sim.Faults.new(faults, 1)
+        :ok
+
+      other ->
+        Dolphin.Sim.Error.bad_option("bad :faults #{inspect(other)}: a map or keyword list of faults (see Dolphin.Sim.Faults)")
+    end
+  rescue
+    e in ArgumentError -> Dolphin.Sim.Error.bad_option(Exception.message(e))
+  end
 
   # Where the vehicles boot and where they charge, or what is wrong with them.
   defp places(opts, count) do
     homes = homes(count, opts)
     charger = opts[:charger] || opts[:home] || if(opts[:homes], do: hd(homes), else: @default_home)
-    {:ok, homes, location(charger)}
+    {:ok, homes, location(charger, ":charger")}
   rescue
     e in ArgumentError -> Dolphin.Sim.Error.bad_option(Exception.message(e))
   end
@@ -301,14 +377,36 @@ defmodule Dolphin.Sim do
         for i <- 0..(count - 1) do
           row = div(i, @per_row)
           column = rem(i, @per_row)
-          Geo.tangent_offset(center, -row * @spacing, (column - (columns - 1) / 2) * @spacing)
+          spread(center, Geo.tangent_offset(center, -row * @spacing, (column - (columns - 1) / 2) * @spacing))
         end
     end
   end
 
-  defp location(%{lat: lat, lon: lon} = l), do: %{lat: lat * 1.0, lon: lon * 1.0, alt: Map.get(l, :alt, 0) * 1.0}
-  defp location({lat, lon, alt}), do: %{lat: lat * 1.0, lon: lon * 1.0, alt: alt * 1.0}
-  defp location(other), do: raise(ArgumentError, "bad home #{inspect(other)}: %{lat: ..., lon: ..., alt: ...} or {lat, lon, alt}")
+  # The vehicles report where they are in MAVLink's degE7 and millimetre
+  # fields: a latitude beyond ±90 (or a longitude beyond ±180) is no place,
+  # and one beyond ±214.7° cannot even be sent.
+  defp location(place, what \\ "home")
+  defp location(%{lat: lat, lon: lon} = l, what), do: checked(lat, lon, Map.get(l, :alt, 0), what)
+  defp location({lat, lon, alt}, what), do: checked(lat, lon, alt, what)
+  defp location(other, what), do: raise(ArgumentError, "bad #{what} #{inspect(other)}: %{lat: ..., lon: ..., alt: ...} or {lat, lon, alt}")
+
+  defp checked(lat, lon, alt, what) do
+    cond do
+      not (is_number(lat) and is_number(lon) and is_number(alt)) -> raise ArgumentError, "bad #{what} #{inspect({lat, lon, alt})}: latitude, longitude and altitude are numbers"
+      lat < -90 or lat > 90 -> raise ArgumentError, "bad #{what}: the latitude #{lat} is not within -90..90"
+      lon < -180 or lon > 180 -> raise ArgumentError, "bad #{what}: the longitude #{lon} is not within -180..180"
+      alt < -1000 or alt > 10_000 -> raise ArgumentError, "bad #{what}: the altitude #{alt} m is not within -1000..10000 (metres above mean sea level)"
+      true -> %{lat: lat * 1.0, lon: lon * 1.0, alt: alt * 1.0}
+    end
+  end
+
+  # The fleet is spread on the tangent plane at its home: near a pole (or
+  # across the 180th meridian) the plane's places are off the map.
+  defp spread(center, %{lat: lat, lon: lon} = place) do
+    if lat >= -90 and lat <= 90 and lon >= -180 and lon <= 180,
+      do: place,
+      else: raise(ArgumentError, "bad home: vehicles #{round(@spacing)} m apart around #{center.lat}, #{center.lon} would stand at #{Float.round(lat, 6)}, #{Float.round(lon, 6)}, off the map (too near a pole or the 180th meridian)")
+  end
 
   defp cameras(true, sysids), do: sysids
   defp cameras(list, _sysids) when is_list(list), do: list

@@ -33,6 +33,20 @@ defmodule Dolphin.ClockTest do
     assert remaining == false or remaining <= 50
     assert_receive :ding, 30_000
     assert Clock.to_real_ms(0) == 0
-    assert_raise ArgumentError, ~r/positive number/, fn -> Clock.set_speedup(0) end
+    assert_raise ArgumentError, ~r/a number from 0.01 to 1000/, fn -> Clock.set_speedup(0) end
+  end
+
+  test "the speed-up stays within what the clock and the simulator hold" do
+    for k <- [0, -1, 0.001, 1000.5, 1.0e9, :fast, "10"] do
+      refute Clock.speedup?(k)
+      assert_raise ArgumentError, ~r/a speed-up is a number from 0.01 to 1000 \(beyond 1000 the simulated vehicles cannot keep up/, fn -> Clock.set_speedup(k) end
+    end
+
+    Clock.set_speedup(1000)
+    assert Clock.speedup() == 1000
+    Clock.set_speedup(0.01)
+    assert Clock.speedup() == 0.01
+    # A timer holds 2^32 - 1 ms of real time: that much clock time times the speed-up.
+    assert Clock.max_wait_ms(0.01) == 42_949_672
   end
 end

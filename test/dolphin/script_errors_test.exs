@@ -31,6 +31,24 @@ defmodule Dolphin.ScriptErrorsTest do
     refute warnings =~ "Compiled"
   end
 
+  test "a type conflict is one warning at its line, its text whole and without Elixir's trailer" do
+    source = "use Dolphin.Script\nx = 1\nmessage \"\#{x.speed}\"\n"
+    warnings = capture_io(:stderr, fn -> compile(source, "types.exs") end)
+    assert warnings =~ ~r/\Atypes.exs:3: warning: incompatible types:\n/
+    assert warnings =~ "\n      x.speed\n"
+    refute warnings =~ "Conflict found at"
+    refute warnings =~ "__script__"
+    refute warnings =~ "Compiled"
+  end
+
+  test "an unknown word inside a block, which Elixir only warns about, is said as the error says it" do
+    source = "use Dolphin.Script\nv = pick()\nm = mission \"m\" do\n  takeoff 10\n  wait_fro(1, 2)\nend\nexecute %{v => m}\n"
+    warnings = capture_io(:stderr, fn -> assert {:error, %Error{line: 4}} = compile(source, "block.exs") end)
+    assert warnings =~ "block.exs:5: warning: undefined function wait_fro/2: no word of the language or of Elixir has that name; did you mean wait_for/2"
+    refute warnings =~ "Compiled"
+    refute warnings =~ "expected"
+  end
+
   test "a syntax error says the token, where it is and what is not closed, in plain words" do
     source = "use Dolphin.Script\n\nforever do\n  v = pick(timeout: seconds(1)\n  release(v)\nend\n"
     assert {:error, %Error{kind: :syntax, line: 6, column: 1} = e} = compile(source, "syntax.exs")

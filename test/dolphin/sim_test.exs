@@ -213,4 +213,77 @@ defmodule Dolphin.SimTest do
     assert {:error, %Sim.Error{message: "the simulator sends to a ground station" <> _}} = Sim.start(gcs: "udpin:0.0.0.0:14550")
     assert {:error, %Sim.Error{message: "system ids 250..259" <> _}} = Sim.start(count: 10, first_sysid: 250, gcs: 14_550)
   end
+
+  test "values a vehicle could not report, or that mean nothing, are refused before any vehicle starts" do
+    refused = [
+      {[home: %{lat: 200, lon: 0, alt: 0}], "bad home: the latitude 200 is not within -90..90"},
+      {[home: %{lat: 250, lon: 400, alt: 0}], "bad home: the latitude 250 is not within -90..90"},
+      {[home: {40, 400, 0}], "bad home: the longitude 400 is not within -180..180"},
+      {[home: {40, -7, 2.0e7}], "bad home: the altitude 2.0e7 m is not within -1000..10000"},
+      {[homes: [{0, 0, 0}, {91, 0, 0}], sysids: [77, 78]], "bad home: the latitude 91 is not within -90..90"},
+      {[charger: {0, 181, 0}], "bad :charger: the longitude 181 is not within -180..180"},
+      {[home: {89.9999, 0, 0}, sysids: Enum.to_list(101..112)], "bad home: vehicles 30 m apart around 89.9999, 0.0 would stand at"},
+      {[speedup: 1.0e9], "bad :speedup: a speed-up is a number from 0.01 to 1000"},
+      {[speedup: 0.0], "bad :speedup: a speed-up is a number from 0.01 to 1000"},
+      {[battery: 5.0], "bad :battery 5.0: a fraction of a full pack, from 0 to 1"},
+      {[hover_current: 1_000], "bad :hover_current 1000: amperes, more than 0 and at most 200"},
+      {[cruise_speed: 0], "bad :cruise_speed 0: m/s, more than 0 and at most 50"},
+      {[ekf_ready_ms: -1], "bad :ekf_ready_ms -1: milliseconds, 0 or more"},
+      {[battery_failsafe: :explode], "bad :battery_failsafe :explode: one of :none, :rtl, :land"},
+      {[gcs_sysid: 0], "bad :gcs_sysid 0: a system id from 1 to 255"},
+      {[faults: %{loss: 5}], "bad fault :loss: 5"},
+      {[faults: 5], "bad :faults 5: a map or keyword list"}
+    ]
+
+    for {opts, message} <- refused do
+      result = Sim.start(opts ++ [gcs: 14_550, sysids: [77]])
+      Sim.stop()
+      assert {:error, %Sim.Error{reason: :bad_option, message: got}} = result, "#{inspect(opts)}: #{inspect(result)}"
+      assert String.starts_with?(got, message), "#{inspect(opts)}: #{got}"
+    end
+
+    assert Sim.vehicles() == []
+    # The speed-up of a refused start is not taken.
+    assert Clock.speedup() == 1
+  end
+
+  test "a message with a value it cannot carry is not sent, and said once; the vehicle goes on" do
+    {:ok, socket} = :gen_udp.open(0, [:binary, active: true, ip: {127, 0, 0, 1}])
+    {:ok, port} = :inet.port(socket)
+    on_exit(fn -> :gen_udp.close(socket) end)
+
+    log =
+      ExUnit.CaptureLog.capture_log(fn ->
+        # Past Dolphin.Sim.start/1's checks: a home HOME_POSITION cannot carry
+        # (degE7 beyond int32), sent as soon as the position estimate is ready.
+        home = %{lat: 250.0, lon: 40.0, alt: 0.0}
+        pid = start_supervised!({Dolphin.Sim.Vehicle, sysid: 78, gcs: {{127, 0, 0, 1}, port}, home: home, config: %{ekf_ready_ms: 0}, register: false})
+        Process.put(:vehicle, pid)
+        Wait.until(fn -> match?({:ok, %{home: %{}}}, GenServer.call(pid, :info)) end)
+        {:ok, %{port: vehicle_port}} = GenServer.call(pid, :info)
+
+        for _ <- 1..2 do
+          request = %M.CommandLong{target_system: 78, target_component: 1, command: 512, param1: 242.0, param2: 0.0, param3: 0.0, param4: 0.0, param5: 0.0, param6: 0.0, param7: 0.0}
+          :ok = :gen_udp.send(socket, {127, 0, 0, 1}, vehicle_port, Dolphin.MAVLink.Frame.encode(request, sysid: 255, compid: 190, seq: 0))
+          assert_receive_message(fn m -> match?(%M.CommandAck{command: 512}, m) end)
+        end
+      end)
+
+    pid = Process.get(:vehicle)
+    assert Process.alive?(pid)
+    assert {:ok, %{home: %{lat: 250.0}}} = GenServer.call(pid, :info)
+    assert [_] = Regex.scan(~r/simulated vehicle 78: cannot encode HOME_POSITION.latitude = 2500000000/, log)
+    # It still talks.
+    assert_receive_message(fn m -> match?(%M.Heartbeat{}, m) end)
+  end
+
+  defp assert_receive_message(fun) do
+    receive do
+      {:udp, _, _, _, datagram} ->
+        {frames, _} = Dolphin.MAVLink.Parser.feed(Dolphin.MAVLink.Parser.new(), datagram)
+        unless Enum.any?(frames, &fun.(&1.message)), do: assert_receive_message(fun)
+    after
+      5_000 -> flunk("no such message from the vehicle")
+    end
+  end
 end

@@ -47,6 +47,7 @@ defmodule Dolphin.Console.MissionFile do
   defp read_file(path) do
     case File.read(path) do
       {:ok, source} -> {:ok, source}
+      {:error, :eisdir} -> {:error, %MissionFileError{reason: :unreadable, path: path, detail: "it is a directory, not a script or a file of missions"}}
       {:error, why} -> {:error, %MissionFileError{reason: :unreadable, path: path, detail: List.to_string(:file.format_error(why))}}
     end
   end

@@ -75,7 +75,7 @@ defmodule Dolphin.Mission.Items do
       %Command{args: args} -> match?(%Location{}, args[:position]) && args[:position]
     end) ||
       raise ArgumentError,
-            "mission #{inspect(mission.name)} has no home: give it one (`home location(...)`, or to_items(mission, home: location))"
+            "mission #{inspect(mission.name)} has no home, and no position of its own to take for one: give it one with `home location(LAT, LON, ALT)` in its block"
   end
 
   defp items(%Command{kind: kind, args: a}, state) do

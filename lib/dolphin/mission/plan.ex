@@ -31,6 +31,7 @@ defmodule Dolphin.Mission.Plan do
   """
 
   alias Dolphin.Geo.Location
+  alias Dolphin.JSONText
   alias Dolphin.MAVLink.Ardupilotmega, as: M
   alias Dolphin.Mission
   alias Dolphin.Mission.{Command, Items, PlanError}
@@ -115,46 +116,56 @@ defmodule Dolphin.Mission.Plan do
   def decode(plan, opts \\ [])
 
   def decode(json, opts) when is_binary(json) do
-    case parse_json(json) do
-      {:ok, map} -> decode(map, opts)
-      {:error, detail} -> {:error, %PlanError{reason: :invalid_json, detail: detail}}
+    case JSONText.decode(json) do
+      {:ok, value} -> decode(value, opts)
+      {:error, where_and_why} -> {:error, %PlanError{reason: :invalid_json, detail: where_and_why}}
     end
   end
 
   def decode(%{} = plan, opts) do
-    with :ok <- check(plan["fileType"] == "Plan", :not_a_plan, "fileType is #{inspect(plan["fileType"])}"),
-         :ok <- check(plan["version"] == 1, :unsupported_version, "plan version #{inspect(plan["version"])}"),
-         %{} = mission <- plan["mission"] || {:error, %PlanError{reason: :not_a_plan, detail: "no mission"}},
-         :ok <- check(mission["version"] == 2, :unsupported_version, "mission version #{inspect(mission["version"])}"),
-         {:ok, home} <- home(mission["plannedHomePosition"]),
-         {:ok, items} <- items(mission["items"]) do
+    with :ok <- check(plan["fileType"] == "Plan", :not_a_plan, field("fileType", plan, ~s("Plan"))),
+         :ok <- check(plan["version"] == 1, :unsupported_version, field("version", plan, "1")),
+         {:ok, mission} <- object(plan, "mission"),
+         :ok <- check(mission["version"] == 2, :unsupported_version, field("mission.version", mission, "version", "2")),
+         {:ok, home} <- home(mission),
+         {:ok, items} <- items(mission) do
       name = Keyword.get(opts, :name, "plan")
       {:ok, mission_from_items(name, home, items)}
-    else
-      {:error, %PlanError{}} = error -> error
-      other -> {:error, %PlanError{reason: :not_a_plan, detail: "mission is #{inspect(other)}"}}
     end
   end
 
-  def decode(other, _opts), do: {:error, %PlanError{reason: :not_a_plan, detail: "expected JSON text or a map, got: #{inspect(other)}"}}
+  def decode(other, _opts),
+    do: {:error, %PlanError{reason: :not_a_plan, detail: "the file holds #{JSONText.kind(other)} (#{JSONText.show(other)}), not an object with \"fileType\": \"Plan\""}}
 
-  defp parse_json(json) do
-    {:ok, :jiffy.decode(json, [:return_maps])}
-  catch
-    # jiffy throws {:error, {position, reason}} on malformed JSON.
-    :throw, {:error, reason} -> {:error, inspect(reason)}
-    :error, reason -> {:error, inspect(reason)}
+  # What a field of `object` is, against what it should be: the words of
+  # the error about it.
+  defp field(name, object, expected), do: field(name, object, name, expected)
+
+  defp field(name, object, key, expected) do
+    case Map.fetch(object, key) do
+      {:ok, value} -> ~s|"#{name}" is #{JSONText.show(value)}, not #{expected}|
+      :error -> ~s|no "#{name}" (#{expected} expected)|
+    end
+  end
+
+  defp object(plan, key) do
+    case Map.fetch(plan, key) do
+      {:ok, %{} = object} -> {:ok, object}
+      {:ok, other} -> {:error, %PlanError{reason: :not_a_plan, detail: ~s|"#{key}" is #{JSONText.kind(other)} (#{JSONText.show(other)}), not an object|}}
+      :error -> {:error, %PlanError{reason: :not_a_plan, detail: ~s|no "#{key}"|}}
+    end
   end
 
   defp check(true, _reason, _detail), do: :ok
   defp check(false, reason, detail), do: {:error, %PlanError{reason: reason, detail: detail}}
 
-  defp home([lat, lon, alt]) when is_number(lat) and is_number(lon) and is_number(alt) and lat >= -90 and lat <= 90 and lon >= -180 and lon <= 180,
+  defp home(%{"plannedHomePosition" => [lat, lon, alt]}) when is_number(lat) and is_number(lon) and is_number(alt) and lat >= -90 and lat <= 90 and lon >= -180 and lon <= 180,
     do: {:ok, Location.new(lat, lon, alt)}
 
-  defp home(other), do: {:error, %PlanError{reason: :invalid_home, detail: "plannedHomePosition is #{inspect(other)}"}}
+  defp home(mission),
+    do: {:error, %PlanError{reason: :invalid_home, detail: field("plannedHomePosition", mission, "[latitude, longitude, altitude] with latitude -90..90 and longitude -180..180")}}
 
-  defp items(list) when is_list(list) do
+  defp items(%{"items" => list}) when is_list(list) do
     jump_ids = list |> Enum.with_index(1) |> Map.new(fn {item, seq} -> {is_map(item) && item["doJumpId"], seq} end)
 
     list
@@ -162,7 +173,8 @@ defmodule Dolphin.Mission.Plan do
     |> Enum.reduce_while({:ok, []}, fn {json, seq}, {:ok, acc} ->
       case item(json, seq, jump_ids) do
         {:ok, item} -> {:cont, {:ok, [item | acc]}}
-        {:error, _} = error -> {:halt, error}
+        {:error, why} -> {:halt, {:error, %PlanError{reason: :invalid_item, detail: "item #{seq}: #{why}"}}}
+        {:error, reason, why} -> {:halt, {:error, %PlanError{reason: reason, detail: "item #{seq} #{why}"}}}
       end
     end)
     |> case do
@@ -171,15 +183,19 @@ defmodule Dolphin.Mission.Plan do
     end
   end
 
-  defp items(other), do: {:error, %PlanError{reason: :not_a_plan, detail: "mission items are #{inspect(other)}"}}
+  defp items(mission), do: {:error, %PlanError{reason: :not_a_plan, detail: field("mission.items", mission, "items", "an array of items")}}
 
   @jump Items.command_number(:mav_cmd_do_jump)
 
-  defp item(%{"type" => "SimpleItem", "command" => command, "frame" => frame, "params" => params} = json, seq, jump_ids)
-       when is_integer(command) and command >= 0 and command <= 0xFFFF and is_integer(frame) and frame >= 0 and frame <= 255 do
-    with {:ok, [p1, p2, p3, p4, p5, p6, p7]} <- params(params, seq),
+  # An item of the plan, or what is wrong with it: the field, what it holds
+  # and what it should.
+  defp item(%{"type" => "SimpleItem"} = json, seq, jump_ids) do
+    with {:ok, command} <- whole(json, "command", 0..0xFFFF, "a MAVLink command number"),
+         {:ok, frame} <- whole(json, "frame", 0..255, "a MAV_FRAME number"),
+         {:ok, [p1, p2, p3, p4, p5, p6, p7]} <- params(json),
+         :ok <- auto_continue(json),
          frame = Map.get(@from_plan_frame, frame, frame),
-         {:ok, x, y} <- xy(frame, p5, p6, seq) do
+         {:ok, x, y} <- xy(frame, p5, p6) do
       # DO_JUMP's param 1 names the target by doJumpId; the vehicle wants its seq.
       p1 = if command == @jump and is_float(p1), do: Map.get(jump_ids, trunc(p1), p1) / 1, else: p1
 
@@ -202,30 +218,52 @@ defmodule Dolphin.Mission.Plan do
     end
   end
 
-  defp item(%{"type" => type}, seq, _) when type != "SimpleItem",
-    do: {:error, %PlanError{reason: :unsupported_item, detail: "item #{seq} is a #{inspect(type)}; only SimpleItem items are read"}}
+  defp item(%{"type" => type}, _seq, _) when is_binary(type),
+    do: {:error, :unsupported_item, "is a #{inspect(type)}; only SimpleItem items are read (save the plan with its complex items converted to waypoints)"}
 
-  defp item(other, seq, _), do: {:error, %PlanError{reason: :invalid_item, detail: "item #{seq}: #{inspect(other)}"}}
+  defp item(%{} = json, _seq, _), do: {:error, field("type", json, ~s("SimpleItem"))}
+  defp item(other, _seq, _), do: {:error, "it is #{JSONText.kind(other)} (#{JSONText.show(other)}), not an object"}
 
-  defp params(params, seq) when is_list(params) and length(params) == 7 do
-    if Enum.all?(params, &(is_number(&1) or &1 == :null)),
-      do: {:ok, Enum.map(params, fn :null -> :nan; n -> n / 1 end)},
-      else: {:error, %PlanError{reason: :invalid_item, detail: "item #{seq}: params #{inspect(params)}"}}
+  defp whole(json, key, first..last = range, what) do
+    case Map.fetch(json, key) do
+      {:ok, n} when is_integer(n) -> if n in range, do: {:ok, n}, else: {:error, field(key, json, "#{what} (#{first}..#{last})")}
+      _ -> {:error, field(key, json, "#{what} (#{first}..#{last})")}
+    end
   end
 
-  defp params(params, seq), do: {:error, %PlanError{reason: :invalid_item, detail: "item #{seq}: params must be 7 numbers or nulls, got: #{inspect(params)}"}}
-
-  defp xy(frame, lat, lon, seq) when frame in @global_frames do
-    if is_float(lat) and is_float(lon) and lat >= -90 and lat <= 90 and lon >= -180 and lon <= 180,
-      do: {:ok, round(lat * 1.0e7), round(lon * 1.0e7)},
-      else: {:error, %PlanError{reason: :invalid_item, detail: "item #{seq}: latitude, longitude #{inspect({lat, lon})}"}}
+  defp params(%{"params" => params}) when is_list(params) and length(params) == 7 do
+    case Enum.find_index(params, &(not (is_number(&1) or &1 == :null))) do
+      nil -> {:ok, Enum.map(params, fn :null -> :nan; n -> n / 1 end)}
+      i -> {:error, ~s|"params" #{i + 1} is #{JSONText.show(Enum.at(params, i))}, not a number or null|}
+    end
   end
 
-  defp xy(_frame, x, y, seq) do
-    if is_float(x) and is_float(y) and x == trunc(x) and y == trunc(y),
+  defp params(json), do: {:error, field("params", json, "7 numbers or nulls")}
+
+  defp auto_continue(json) do
+    case Map.fetch(json, "autoContinue") do
+      {:ok, flag} when not is_boolean(flag) -> {:error, field("autoContinue", json, "true or false")}
+      _ -> :ok
+    end
+  end
+
+  defp xy(frame, lat, lon) when frame in @global_frames do
+    cond do
+      not (is_float(lat) and lat >= -90 and lat <= 90) -> {:error, ~s|"params" 5, the latitude, is #{number(lat)}, not within -90..90|}
+      not (is_float(lon) and lon >= -180 and lon <= 180) -> {:error, ~s|"params" 6, the longitude, is #{number(lon)}, not within -180..180|}
+      true -> {:ok, round(lat * 1.0e7), round(lon * 1.0e7)}
+    end
+  end
+
+  # MAVLink's x and y are int32 in the frames without a position.
+  defp xy(frame, x, y) do
+    if is_float(x) and is_float(y) and x == trunc(x) and y == trunc(y) and abs(x) < 2_147_483_648 and abs(y) < 2_147_483_648,
       do: {:ok, trunc(x), trunc(y)},
-      else: {:error, %PlanError{reason: :invalid_item, detail: "item #{seq}: x, y #{inspect({x, y})} are not integers"}}
+      else: {:error, ~s|"params" 5 and 6 are #{number(x)} and #{number(y)}: in frame #{frame} they are whole numbers (x and y)|}
   end
+
+  defp number(:nan), do: "null"
+  defp number(x), do: JSONText.show(x)
 
   # Each item becomes the command that gives it back exactly; an item no
   # command reproduces (checked by generating the items) stays a raw `item`.

@@ -24,7 +24,7 @@ defmodule Dolphin.Script.Compiler do
         end
 
       try do
-        compile_reporting_warnings(wrapped, file, module)
+        compile_reporting_warnings(wrapped, file, module, ast)
         {:ok, module}
       rescue
         e in [CompileError, SyntaxError, TokenMissingError] ->
@@ -54,7 +54,7 @@ defmodule Dolphin.Script.Compiler do
   # The compiler's warnings (an unused variable, ...) name the module the
   # script is compiled into, which means nothing to its author: they are
   # caught and printed in the script's terms, `file:line: warning: ...`.
-  defp compile_reporting_warnings(wrapped, file, module) do
+  defp compile_reporting_warnings(wrapped, file, module, ast) do
     {:ok, capture} = StringIO.open("")
     original = Process.whereis(:standard_error)
 
@@ -66,22 +66,52 @@ defmodule Dolphin.Script.Compiler do
       Process.unregister(:standard_error)
       Process.register(original, :standard_error)
       {:ok, {_, warnings}} = StringIO.close(capture)
-      if warnings != "", do: IO.write(:stderr, script_warnings(warnings, module))
+      if warnings != "", do: IO.write(:stderr, script_warnings(warnings, module, ast))
     end
   end
 
-  # "warning: TEXT\n  FILE:LINE: Module.__script__/0\n" -> "FILE:LINE: warning: TEXT\n"
-  defp script_warnings(text, module) do
+  # Elixir prints each warning as "warning: TEXT" and where it is found on
+  # the lines below it: "  FILE:LINE: Module.__script__/0", after "Conflict
+  # found at" (a type conflict, whose TEXT has paragraphs of its own) or
+  # "Invalid call found at N locations:". Each becomes "FILE:LINE: warning:
+  # TEXT", the rest of TEXT indented below it, once per place.
+  @doc false
+  @spec script_warnings(String.t(), module(), Macro.t()) :: String.t()
+  def script_warnings(text, module, ast) do
+    text
+    |> String.replace(~r/\e\[[0-9;]*m/, "")
+    |> String.split(~r/^warning: /m, trim: true)
+    |> Enum.map_join(fn warning ->
+      {places, lines} = warning |> String.trim_trailing() |> String.split("\n") |> Enum.reverse() |> Enum.split_while(&place?/1)
+      message = lines |> Enum.reverse() |> Enum.reject(&(String.trim(&1) == "" or &1 =~ ~r/^(Conflict found at|Invalid call found at \d+ locations:)$/))
+      [first | rest] = if message == [], do: [""], else: message
+      first = in_script_terms(first, module, ast)
+      rest = Enum.map(rest, &("  " <> in_script_terms(&1, module, ast) <> "\n"))
+
+      case Enum.reverse(places) do
+        [] -> ["warning: ", first, "\n" | rest]
+        places -> Enum.map(places, fn place -> [where(place), ": warning: ", first, "\n" | rest] end)
+      end
+    end)
+  end
+
+  defp place?(line), do: line =~ ~r/^\s+\S+:\d+(:\d+)?(:\s.*)?$/
+
+  defp where(line) do
+    [_, where] = Regex.run(~r/^\s+(\S+?:\d+)/, line)
+    where
+  end
+
+  defp in_script_terms(text, module, ast) do
     internal = inspect(module)
 
     text
-    |> String.split(~r/\n\n+/, trim: true)
-    |> Enum.map_join(fn warning ->
-      case Regex.run(~r/\A(?:warning: )?(.*?)\n\s+(\S+?:\d+)(?::\s*\S+)?\s*\z/s, warning) do
-        [_, message, where] -> "#{where}: warning: #{String.trim(message)}\n"
-        nil -> String.replace(warning, internal <> ".__script__/0", "the script") <> "\n"
-      end
+    |> String.replace(~r/^undefined function ([^\s\/]+)\/(\d+) \(expected #{Regex.escape(internal)} to define such a function or for it to be imported, but none are available\)$/, fn whole ->
+      [_, name, arity] = Regex.run(~r/^undefined function ([^\s\/]+)\/(\d+)/, whole)
+      undefined(name, String.to_integer(arity), ast)
     end)
+    |> String.replace(internal <> ".__script__/0", "the script")
+    |> String.replace(internal, "the script")
   end
 
   defp parse(source, file) do
@@ -122,13 +152,14 @@ defmodule Dolphin.Script.Compiler do
   # nearest words of the language.
   defp compile_message(description, ast, module) do
     case Regex.run(~r/\Aundefined function ([^\s\/]+)\/(\d+)/, description) do
-      [_, name, arity] ->
-        hint = if uses_script?(ast), do: did_you_mean(name, String.to_integer(arity)), else: " (does the script start with `use Dolphin.Script`?)"
-        "undefined function #{name}/#{arity}: no word of the language or of Elixir has that name#{hint}"
-
-      nil ->
-        String.replace(description, inspect(module), "the script")
+      [_, name, arity] -> undefined(name, String.to_integer(arity), ast)
+      nil -> String.replace(description, inspect(module), "the script")
     end
+  end
+
+  defp undefined(name, arity, ast) do
+    hint = if uses_script?(ast), do: did_you_mean(name, arity), else: " (does the script start with `use Dolphin.Script`?)"
+    "undefined function #{name}/#{arity}: no word of the language or of Elixir has that name#{hint}"
   end
 
   # The words `use Dolphin.Script` imports, plus Elixir's own.

@@ -146,10 +146,10 @@ defmodule Dolphin.Sim.Streams do
     }
   end
 
-  def message(c, 30), do: %M.Attitude{time_boot_ms: c.time_ms, yaw: yaw(c)}
+  def message(c, 30), do: %M.Attitude{time_boot_ms: boot_ms(c), yaw: yaw(c)}
 
   def message(c, 33) do
-    fields = %{time_boot_ms: c.time_ms, vx: round(c.vn * 100), vy: round(c.ve * 100), vz: round(-c.vz * 100), hdg: rem(round(c.heading * 100), 36_000)}
+    fields = %{time_boot_ms: boot_ms(c), vx: round(c.vn * 100), vy: round(c.ve * 100), vz: round(-c.vz * 100), hdg: rem(round(c.heading * 100), 36_000)}
     struct(M.GlobalPositionInt, Map.merge(position_fields(c), fields))
   end
 
@@ -250,7 +250,7 @@ defmodule Dolphin.Sim.Streams do
 
   @doc "CAMERA_IMAGE_CAPTURED for the photo just taken."
   def image_captured(c) do
-    fields = %{time_boot_ms: c.time_ms, q: [1.0, 0.0, 0.0, 0.0], image_index: c.photos - 1, capture_result: 1, camera_id: 0}
+    fields = %{time_boot_ms: boot_ms(c), q: [1.0, 0.0, 0.0, 0.0], image_index: c.photos - 1, capture_result: 1, camera_id: 0}
     struct(M.CameraImageCaptured, Map.merge(position_fields(c), fields))
   end
 
@@ -262,6 +262,10 @@ defmodule Dolphin.Sim.Streams do
 
   @doc "Pack voltage in mV: a 3S LiPo sagging with charge and load."
   def voltage(c), do: round((10.5 + 2.1 * c.battery - 0.01 * c.current_a) * 1000)
+
+  # ArduPilot's milliseconds since boot are a uint32 that wraps after 49.7
+  # days of its time (at a speed-up of 1000, 72 minutes of real time).
+  defp boot_ms(c), do: rem(c.time_ms, 1 <<< 32)
 
   # Whole percent, rounded down as ArduPilot does: 29.9 % is reported as 29.
   defp remaining(c), do: trunc(c.battery * 100)

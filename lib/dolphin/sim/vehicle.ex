@@ -15,6 +15,8 @@ defmodule Dolphin.Sim.Vehicle do
 
   import Bitwise, only: [<<<: 2]
 
+  require Logger
+
   alias Dolphin.Clock
   alias Dolphin.MAVLink.{Frame, Parser}
   alias Dolphin.Sim.{Copter, Faults}
@@ -56,6 +58,7 @@ defmodule Dolphin.Sim.Vehicle do
           seqs: %{},
           clock_origin: Clock.now_ms(),
           lag_ms: 0,
+          unsendable: MapSet.new(),
           sent: 0,
           received: 0
         }
@@ -183,7 +186,33 @@ defmodule Dolphin.Sim.Vehicle do
 
   defp transmit_one({compid, message}, s) do
     seq = Map.get(s.seqs, compid, 0)
-    bytes = Frame.encode(message, sysid: s.sysid, compid: compid, seq: seq)
+
+    case encode(message, s.sysid, compid, seq) do
+      {:ok, bytes} -> send_frame(s, compid, seq, bytes)
+      {:error, kind, e} -> unsendable(s, kind, e)
+    end
+  end
+
+  # A value the message cannot carry (a position off the map...) is a fault
+  # of the model or of what it was told: said once per kind of message, and
+  # the message dropped. Raised here, it would restart the vehicle, which
+  # would meet the same value again, for ever.
+  defp encode(message, sysid, compid, seq) do
+    {:ok, Frame.encode(message, sysid: sysid, compid: compid, seq: seq)}
+  rescue
+    e in ArgumentError -> {:error, message.__struct__, e}
+  end
+
+  defp unsendable(s, kind, e) do
+    if MapSet.member?(s.unsendable, kind) do
+      s
+    else
+      Logger.error("simulated vehicle #{s.sysid}: #{Exception.message(e)}; such messages are not sent")
+      %{s | unsendable: MapSet.put(s.unsendable, kind)}
+    end
+  end
+
+  defp send_frame(s, compid, seq, bytes) do
     {deliveries, faults} = Faults.apply(s.faults_out, bytes)
 
     Enum.each(deliveries, fn

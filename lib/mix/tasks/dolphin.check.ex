@@ -24,7 +24,7 @@ defmodule Mix.Tasks.Dolphin.Check do
 
     * `--sim N` — the fleet is N simulated ArduCopters (as `mix dolphin.run
       --sim N` starts them): UAVs with a camera, full, on the ground at the
-      simulator's home (the default: `--sim 1`)
+      simulator's home (the default: `--sim 1`); N from 1 to 254
     * `--fleet FILE` — the fleet described in a JSON file:
 
           {"vehicles": [{"id": 1, "type": "uav", "payloads": ["camera"],
@@ -41,9 +41,12 @@ defmodule Mix.Tasks.Dolphin.Check do
       this link (`udpin:0.0.0.0:14550`, `udpout:HOST:PORT`, `tcp:HOST:PORT`;
       repeatable) within `--wait`, as they are now (their position taken as
       their home); nothing is sent to them (`Dolphin.Check.LiveFleet`)
-    * `--wait SECONDS` — how long `--connect` listens for vehicles (default 5)
-    * `--max-distance M` — no mission item further than M metres from home (default 12000)
-    * `--max-height M` — no mission item higher than M metres above home (default 500)
+    * `--wait SECONDS` — how long `--connect` listens for vehicles (default
+      5; more than 0)
+    * `--max-distance M` — no mission item further than M metres from home
+      (default 12000; more than 0)
+    * `--max-height M` — no mission item higher than M metres above home
+      (default 500; more than 0)
     * `--json` — the report as one JSON object (`file`, `ok`, `findings`:
       `severity`, `kind`, `file`, `line`, `message`; `missions`: `mission`,
       `vehicle`, `line`, `length_m`, `time_s`, `battery_used`,
@@ -52,16 +55,18 @@ defmodule Mix.Tasks.Dolphin.Check do
   ## Exit status
 
   0 — no error (warnings and notes may remain); 1 — the check found errors;
-  2 — bad usage (an unknown option, no such script, a bad fleet file);
+  2 — bad usage (an unknown option, a value out of range, no such script
+  or a directory given for it, a bad fleet file: the message names the
+  flag or the file, the value and what is allowed);
   with `--connect`, 1 also when the link cannot be opened or no vehicle
   reported its position in time.
   """
 
   use Mix.Task
 
-  alias Dolphin.CLI.UsageError
+  alias Dolphin.CLI.{UsageError, Values}
 
-  @switches [sim: :integer, fleet: :string, connect: :keep, wait: :float, max_distance: :float, max_height: :float, json: :boolean]
+  @options [sim: :vehicles, fleet: :string, connect: {:keep, :endpoint}, wait: :wait, max_distance: :metres, max_height: :metres, json: :boolean]
   @usage "usage: mix dolphin.check SCRIPT [--sim N | --fleet FILE | --connect ENDPOINT... [--wait SECONDS]] [--max-distance M] [--max-height M] [--json]"
 
   @impl Mix.Task
@@ -119,26 +124,22 @@ defmodule Mix.Tasks.Dolphin.Check do
   # The script and the options of a command line, checked.
   @spec parse([String.t()]) :: {:ok, Path.t(), keyword()} | {:error, UsageError.t()}
   def parse(argv) do
-    UsageError.parse_script(argv, @switches, fn file, opts ->
-      cond do
-        Enum.count([opts[:sim], opts[:fleet], opts[:connect]], & &1) > 1 -> usage_error("only one of --sim, --fleet and --connect")
-        opts[:wait] != nil and opts[:wait] < 0 -> usage_error("--wait is a number of seconds, got #{opts[:wait]}")
-        (bad = bad_endpoint(opts)) != nil -> usage_error(bad)
-        opts[:sim] != nil and opts[:sim] < 1 -> usage_error("--sim must be a positive number of vehicles, got #{opts[:sim]}")
-        Enum.any?([:max_distance, :max_height], &(opts[&1] != nil and opts[&1] <= 0)) -> usage_error("--max-distance and --max-height are positive numbers of metres")
-        not File.regular?(file) -> usage_error("no such script: #{file}")
-        true -> {:ok, file, opts}
+    UsageError.parse_script(argv, Values.switches(@options), fn file, opts ->
+      with {:ok, opts} <- Values.check(opts, @options),
+           :ok <- combination(opts),
+           :ok <- Values.input_file(file, "script"),
+           :ok <- if(opts[:fleet], do: Values.input_file(opts[:fleet], "fleet file"), else: :ok) do
+        {:ok, file, opts}
       end
     end)
   end
 
-  defp bad_endpoint(opts) do
-    Enum.find_value(Keyword.get_values(opts, :connect), fn ep ->
-      case Dolphin.Link.Endpoint.parse(ep) do
-        {:ok, _} -> nil
-        {:error, e} -> "--connect #{ep}: #{Exception.message(e)}"
-      end
-    end)
+  defp combination(opts) do
+    cond do
+      Enum.count([opts[:sim], opts[:fleet], opts[:connect]], & &1) > 1 -> usage_error("only one of --sim, --fleet and --connect")
+      opts[:wait] != nil and opts[:connect] == nil -> usage_error("--wait goes with --connect")
+      true -> :ok
+    end
   end
 
   defp fleet(opts) do

@@ -19,17 +19,22 @@ defmodule Mix.Tasks.Dolphin.Console do
   Run without IEx (`mix dolphin.console`), it starts nothing and says to use
   `iex -S mix dolphin.console`.
 
+  Bad usage (an unknown option, a value out of range) stops it with a
+  message that names the flag, the value and what is allowed, and exit
+  status 2.
+
   ## Options
 
     * `--connect ENDPOINT` — a link to vehicles (`udpin:0.0.0.0:14550`,
       `udpout:HOST:PORT`, `tcp:HOST:PORT`); repeatable
     * `--sim N` — start N simulated vehicles (`Dolphin.Sim`: ArduCopters with
-      a camera) on a local link (127.0.0.1)
+      a camera) on a local link (127.0.0.1); N from 1 to 254, as for `--sitl`
     * `--sitl N` — start N ArduCopter SITL instances (`Dolphin.SITL`) on a
       local link; `--sitl-bin PATH` and `--sitl-defaults FILE` as for
       `mix dolphin.run`; they stop with the VM
     * `--seed N` — the simulator's seed
-    * `--speedup K` — run K times faster than real time (`Dolphin.Clock`)
+    * `--speedup K` — run K times faster than real time (`Dolphin.Clock`),
+      from 0.01 to 1000
     * `--tlog FILE` — record every MAVLink frame of the links to a telemetry log
     * `--forward ENDPOINT` — copy all traffic to a `udpout` endpoint
       (QGroundControl); repeatable
@@ -50,8 +55,17 @@ defmodule Mix.Tasks.Dolphin.Console do
 
   alias Dolphin.CommandLineError
 
-  @switches [connect: :keep, sim: :integer, sitl: :integer, sitl_bin: :string, sitl_defaults: :keep, seed: :integer, speedup: :float, tlog: :string, forward: :keep] ++
-              Dolphin.CLI.Cluster.switches()
+  @options [
+              connect: {:keep, :endpoint},
+              sim: :vehicles,
+              sitl: :vehicles,
+              sitl_bin: {:file, "SITL binary"},
+              sitl_defaults: {:keep, {:file, "parameter file"}},
+              seed: :integer,
+              speedup: :speedup,
+              tlog: :output,
+              forward: {:keep, {:endpoint, [:udpout]}}
+            ] ++ Dolphin.CLI.Cluster.switches()
 
   @usage "usage: iex -S mix dolphin.console [--connect ENDPOINT]... [--sim N | --sitl N] [--speedup K] [--seed N]  [--tlog FILE] [--forward ENDPOINT]... [--sname NAME | --name NAME@HOST] [--cookie C] [--join NODE]..."
 
@@ -60,7 +74,7 @@ defmodule Mix.Tasks.Dolphin.Console do
     opts =
       case parse(argv) do
         {:ok, opts} -> opts
-        {:error, error} -> Mix.raise("mix dolphin.console: #{Exception.message(error)}\n#{@usage}")
+        {:error, error} -> Mix.raise("mix dolphin.console: #{Exception.message(error)}\n#{@usage}", exit_status: 2)
       end
 
     unless iex?(), do: Mix.raise("mix dolphin.console starts a console for IEx: run it as `iex -S mix dolphin.console #{Enum.join(argv, " ")}`")
@@ -86,16 +100,19 @@ defmodule Mix.Tasks.Dolphin.Console do
   end
 
   defp check(argv) do
-    case OptionParser.parse(argv, strict: @switches) do
+    case OptionParser.parse(argv, strict: Dolphin.CLI.Values.switches(@options)) do
       {opts, [], []} ->
-        cond do
-          opts[:sim] != nil and opts[:sim] < 1 -> {:error, "--sim must be a positive number of vehicles, got #{opts[:sim]}"}
-          opts[:sitl] != nil and opts[:sitl] < 1 -> {:error, "--sitl must be a positive number of vehicles, got #{opts[:sitl]}"}
-          opts[:sim] != nil and opts[:sitl] != nil -> {:error, "--sim and --sitl do not go together"}
-          opts[:speedup] != nil and opts[:speedup] <= 0 -> {:error, "--speedup must be positive, got #{opts[:speedup]}"}
-          # `iex --sname op -S mix dolphin.console --join ...`: the node has its name already.
-          (problem = Dolphin.CLI.Cluster.check(opts, Node.alive?())) != :ok -> problem
-          true -> {:ok, opts}
+        case Dolphin.CLI.Values.check(opts, @options) do
+          {:ok, opts} ->
+            cond do
+              opts[:sim] != nil and opts[:sitl] != nil -> {:error, "--sim and --sitl do not go together"}
+              # `iex --sname op -S mix dolphin.console --join ...`: the node has its name already.
+              (problem = Dolphin.CLI.Cluster.check(opts, Node.alive?())) != :ok -> problem
+              true -> {:ok, opts}
+            end
+
+          {:error, e} ->
+            {:error, Exception.message(e)}
         end
 
       {_, [arg | _], []} ->

@@ -66,18 +66,23 @@ defmodule Mix.Tasks.Dolphin.Plan do
   The missions `FILE` defines, as `export` finds them, and the statements
   it skipped.
 
-  Errors (a missing file, no such mission, a malformed plan, no vehicle
-  heard, a transfer that failed) stop the task with a message and exit
-  status 1.
+  Bad usage (an unknown command or option, a value out of range: the
+  message names the flag, the value and what is allowed) stops the task
+  with exit status 2; other errors (a missing file, no such mission, a
+  malformed plan, no vehicle heard, a transfer that failed) with a message
+  and exit status 1. `--home` takes latitude -90..90, longitude -180..180
+  and altitude -1000..10000 m; speeds, `--timeout` more than 0; `--vehicle`
+  a system id 1..254.
   """
 
   use Mix.Task
 
+  alias Dolphin.CLI.Values
   alias Dolphin.CommandLineError
   alias Dolphin.Console.{Format, MissionFile, MissionSource}
   alias Dolphin.Mission
 
-  @switches [home: :string, cruise_speed: :float, hover_speed: :float, items: :boolean, name: :string, connect: :string, vehicle: :integer, timeout: :integer]
+  @options [home: :location, cruise_speed: :speed, hover_speed: :speed, items: :boolean, name: :name, connect: :endpoint, vehicle: :sysid, timeout: :wait]
 
   @usage """
   usage: mix dolphin.plan export FILE NAME OUT.plan [--home LAT,LON,ALT] [--cruise-speed M_S] [--hover-speed M_S]
@@ -95,7 +100,7 @@ defmodule Mix.Tasks.Dolphin.Plan do
 
     case main(argv) do
       {:ok, text} -> Mix.shell().info(text)
-      {:error, error} -> Mix.raise("mix dolphin.plan: " <> Exception.message(error))
+      {:error, error} -> Mix.raise("mix dolphin.plan: " <> Exception.message(error), exit_status: if(error.reason == :usage, do: 2, else: 1))
     end
   end
 
@@ -107,9 +112,15 @@ defmodule Mix.Tasks.Dolphin.Plan do
   @spec main([String.t()]) :: {:ok, String.t()} | {:error, CommandLineError.t()}
   def main(argv) do
     result =
-      case OptionParser.parse(argv, strict: @switches) do
-        {opts, args, []} -> command(args, opts)
-        {_, _, [{switch, value} | _]} -> usage("bad option #{switch}#{if value, do: " " <> value, else: ""}")
+      case OptionParser.parse(argv, strict: Values.switches(@options)) do
+        {opts, args, []} ->
+          case Values.check(opts, @options) do
+            {:ok, opts} -> command(args, opts)
+            {:error, e} -> usage(Exception.message(e))
+          end
+
+        {_, _, [{switch, value} | _]} ->
+          usage("bad option #{switch}#{if value, do: " " <> value, else: ""}")
       end
 
     case result do
@@ -188,7 +199,7 @@ defmodule Mix.Tasks.Dolphin.Plan do
     with {:ok, endpoint} <- (opts[:connect] && {:ok, opts[:connect]}) || usage("--connect ENDPOINT is needed"),
          {:ok, link} <- connect(endpoint, name) do
       try do
-        with {:ok, id} <- find_vehicle(endpoint, opts[:vehicle], Keyword.get(opts, :timeout, 10) * 1_000), do: fun.(id)
+        with {:ok, id} <- find_vehicle(endpoint, opts[:vehicle], round(Keyword.get(opts, :timeout, 10) * 1_000)), do: fun.(id)
       after
         heard = Dolphin.Vehicles.list()
         DynamicSupervisor.terminate_child(Dolphin.Link.Supervisor, link)
@@ -200,7 +211,8 @@ defmodule Mix.Tasks.Dolphin.Plan do
   defp connect(endpoint, name) do
     case Dolphin.Link.connect(endpoint, name: name) do
       {:ok, link} -> {:ok, link}
-      {:error, e} -> usage("--connect #{endpoint}: #{Exception.message(e)}")
+      # The endpoint was read with the options: what is left is a link that would not open.
+      {:error, e} -> {:error, "--connect #{endpoint}: #{Exception.message(e)}"}
     end
   end
 
@@ -337,41 +349,11 @@ defmodule Mix.Tasks.Dolphin.Plan do
   end
 
   defp plan_opts(opts) do
-    speeds = Enum.filter([cruise_speed: opts[:cruise_speed], hover_speed: opts[:hover_speed]], fn {_, v} -> v != nil end)
+    speeds = Keyword.take(opts, [:cruise_speed, :hover_speed])
 
-    cond do
-      Enum.any?(speeds, fn {_, v} -> v <= 0 end) ->
-        {:error, "speeds must be positive"}
-
-      home = opts[:home] ->
-        case home(home) do
-          {:ok, location} -> {:ok, [home: location] ++ speeds}
-          :error -> usage("--home takes LAT,LON,ALT (degrees, degrees, metres above mean sea level), got #{inspect(home)}")
-        end
-
-      true ->
-        {:ok, speeds}
-    end
-  end
-
-  @doc """
-  A home position from `LAT,LON,ALT`.
-
-      iex> Mix.Tasks.Dolphin.Plan.home("40.444233,-7.375234,820")
-      {:ok, %Dolphin.Geo.Location{lat: 40.444233, lon: -7.375234, h: 820.0}}
-      iex> Mix.Tasks.Dolphin.Plan.home("40.4,north")
-      :error
-  """
-  @spec home(String.t()) :: {:ok, Dolphin.Geo.Location.t()} | :error
-  def home(text) do
-    with [lat, lon, alt] <- String.split(text, ",", trim: true),
-         {lat, ""} <- Float.parse(String.trim(lat)),
-         {lon, ""} <- Float.parse(String.trim(lon)),
-         {alt, ""} <- Float.parse(String.trim(alt)),
-         true <- abs(lat) <= 90 and abs(lon) <= 180 do
-      {:ok, Dolphin.Geo.location(lat, lon, alt)}
-    else
-      _ -> :error
+    case opts[:home] do
+      nil -> {:ok, speeds}
+      %{lat: lat, lon: lon, alt: alt} -> {:ok, [home: Dolphin.Geo.location(lat, lon, alt)] ++ speeds}
     end
   end
 
@@ -385,7 +367,10 @@ defmodule Mix.Tasks.Dolphin.Plan do
   defp encode(mission, opts) do
     {:ok, Mission.to_plan(mission, opts)}
   rescue
-    e in ArgumentError -> {:error, "mission #{inspect(mission.name)}: #{Exception.message(e)} (--home supplies a home)"}
+    e in ArgumentError ->
+      what = Exception.message(e)
+      what = if String.starts_with?(what, "mission #{inspect(mission.name)}"), do: what, else: "mission #{inspect(mission.name)}: #{what}"
+      {:error, if(mission.home == nil and opts[:home] == nil, do: what <> ", or give the plan one with --home LAT,LON,ALT", else: what)}
   end
 
   defp write(path, json) do
@@ -396,9 +381,12 @@ defmodule Mix.Tasks.Dolphin.Plan do
   end
 
   defp read(path) do
-    case File.read(path) do
-      {:ok, text} -> {:ok, text}
+    with nil <- Values.file_problem(path, "plan file"),
+         {:ok, text} <- File.read(path) do
+      {:ok, text}
+    else
       {:error, why} -> {:error, "cannot read #{path}: #{:file.format_error(why)}"}
+      problem -> {:error, problem}
     end
   end
 

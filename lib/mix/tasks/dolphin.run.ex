@@ -23,7 +23,8 @@ defmodule Mix.Tasks.Dolphin.Run do
     * `--connect ENDPOINT` — a link to vehicles (`udpin:0.0.0.0:14550`,
       `udpout:HOST:PORT`, `tcp:HOST:PORT`); repeatable
     * `--sim N` — start N simulated vehicles (`Dolphin.Sim`: ArduCopters with a
-      camera) on a local link
+      camera) on a local link; N from 1 to 254 (one system id each), as for
+      `--sitl` and `--fake`
     * `--sitl N` — start N ArduCopter SITL instances (`Dolphin.SITL`: ArduPilot's
       own flight code) on a local link, at the run's speed-up
     * `--sitl-bin PATH` — the SITL binary (else `$ARDUPILOT_SITL`, else
@@ -34,9 +35,11 @@ defmodule Mix.Tasks.Dolphin.Run do
       (`Dolphin.Fleet.TestSource`, no MAVLink): to try a script's logic with
       `Dolphin.Engine.TestPlatform` tasks
     * `--seed N` — the simulator's seed
-    * `--speedup K` — run K times faster than real time (`Dolphin.Clock`)
+    * `--speedup K` — run K times faster than real time (`Dolphin.Clock`),
+      from 0.01 to 1000 (beyond, the simulated vehicles cannot keep up)
     * `--for DURATION` — stop the script after that much clock time (`90s`,
-      `10m`, `1h`, `500ms`; a bare number is seconds): running tasks are
+      `10m`, `1h`, `500ms`; a bare number is seconds; more than 0, and at
+      most 49.7 days of real time): running tasks are
       stopped, vehicles hold, exit status 0 with a summary
     * `--events FILE` — write every event as a JSON line (schema: `Dolphin.Telemetry`)
     * `--tlog FILE` — where to record every MAVLink frame of the links (a
@@ -121,34 +124,36 @@ defmodule Mix.Tasks.Dolphin.Run do
   (could not compile, the pre-flight check found errors, a task failed, `halt`, a pick timed out: the message
   says what, where and why) or its vehicles could not be started (a port in
   use, a SITL binary missing, the `--web` port in use); 2 — bad usage (an
-  unknown option, a bad endpoint, no such script); 130 — Ctrl-C (SIGINT)
+  unknown option, a value out of range, a bad endpoint, no such script, a
+  directory given for a file: the message names the flag, the value and
+  what is allowed); 130 — Ctrl-C (SIGINT)
   stopped it; 143 — SIGTERM stopped it (128 + the signal's number, as a shell says).
   """
 
   use Mix.Task
 
-  alias Dolphin.CLI.{Run, Signals, UsageError}
+  alias Dolphin.CLI.{Run, Signals, UsageError, Values}
 
-  @switches [
-    connect: :keep,
-    sim: :integer,
-    sitl: :integer,
-    sitl_bin: :string,
-    sitl_defaults: :keep,
-    fake: :integer,
-    seed: :integer,
-    speedup: :float,
-    for: :string,
-    events: :string,
-    tlog: :string,
-    no_tlog: :boolean,
-    forward: :keep,
-    quiet: :boolean,
-    report: :string,
-    web: :integer,
-    web_bind: :string,
-    no_check: :boolean
-  ] ++ Dolphin.CLI.Cluster.switches()
+  @options [
+              connect: {:keep, :endpoint},
+              sim: :vehicles,
+              sitl: :vehicles,
+              sitl_bin: {:file, "SITL binary"},
+              sitl_defaults: {:keep, {:file, "parameter file"}},
+              fake: :vehicles,
+              seed: :integer,
+              speedup: :speedup,
+              for: :string,
+              events: :output,
+              tlog: :output,
+              no_tlog: :boolean,
+              forward: {:keep, {:endpoint, [:udpout]}},
+              quiet: :boolean,
+              report: :output,
+              web: :port,
+              web_bind: :string,
+              no_check: :boolean
+            ] ++ Dolphin.CLI.Cluster.switches()
 
   @usage "usage: mix dolphin.run SCRIPT [--connect ENDPOINT]... [--sim N | --sitl N | --fake N] [--speedup K] [--for DURATION] [--events FILE] [--tlog FILE | --no-tlog] [--forward ENDPOINT]... [--quiet] [--report FILE] [--web PORT [--web-bind ADDRESS]] [--no-check] [--sname NAME | --name NAME@HOST] [--cookie C] [--join NODE]..."
 
@@ -240,18 +245,15 @@ defmodule Mix.Tasks.Dolphin.Run do
   # parse, the script is a file), with the duration of --for as :for_ms.
   @spec parse([String.t()]) :: {:ok, Path.t(), keyword()} | {:error, UsageError.t()}
   def parse(argv) do
-    UsageError.parse_script(argv, @switches, fn file, opts ->
-      with :ok <- positive(opts, :sim),
-           :ok <- positive(opts, :sitl),
-           :ok <- positive(opts, :fake),
+    UsageError.parse_script(argv, Values.switches(@options), fn file, opts ->
+      with {:ok, opts} <- Values.check(opts, @options),
            :ok <- exclusive(opts),
-           :ok <- speedup(opts[:speedup]),
-           :ok <- endpoints(opts),
            :ok <- web(opts),
            :ok <- report(opts),
            :ok <- cluster(opts),
            {:ok, for_ms} <- duration(opts[:for]),
-           :ok <- readable(file) do
+           :ok <- within_a_timer(for_ms, opts),
+           :ok <- Values.input_file(file, "script") do
         {:ok, file, Keyword.put(opts, :for_ms, for_ms)}
       end
     end)
@@ -259,12 +261,16 @@ defmodule Mix.Tasks.Dolphin.Run do
 
   defp usage_error(message), do: UsageError.error(message)
 
-  defp positive(opts, key) do
-    case opts[key] do
-      nil -> :ok
-      n when n > 0 -> :ok
-      n -> usage_error("--#{key} must be a positive number of vehicles, got #{n}")
-    end
+  # The script's deadline is one timer: it holds 49.7 days of real time.
+  defp within_a_timer(nil, _opts), do: :ok
+
+  defp within_a_timer(for_ms, opts) do
+    k = opts[:speedup] || 1
+    max_ms = Dolphin.Clock.max_wait_ms(k)
+
+    if for_ms <= max_ms,
+      do: :ok,
+      else: usage_error("--for #{opts[:for]}: at most #{div(max_ms, 3_600_000)} h at speed-up #{Dolphin.Console.Format.num(k / 1)} (49.7 days of real time, the longest a timer holds)")
   end
 
   defp exclusive(opts) do
@@ -274,20 +280,8 @@ defmodule Mix.Tasks.Dolphin.Run do
     end
   end
 
-  defp endpoints(opts) do
-    given = for {key, ep} <- opts, key in [:connect, :forward], do: {key, ep}
-
-    Enum.reduce_while(given, :ok, fn {key, ep}, :ok ->
-      case Dolphin.Link.Endpoint.parse(ep) do
-        {:ok, _} -> {:cont, :ok}
-        {:error, why} -> {:halt, usage_error("--#{key} #{ep}: #{if is_exception(why), do: Exception.message(why), else: why}")}
-      end
-    end)
-  end
-
   defp web(opts) do
     cond do
-      opts[:web] && opts[:web] not in 0..65_535 -> usage_error("--web takes a TCP port (0..65535), got #{opts[:web]}")
       opts[:web_bind] && !opts[:web] -> usage_error("--web-bind goes with --web PORT")
       opts[:web_bind] && match?({:error, _}, :inet.parse_strict_address(String.to_charlist(opts[:web_bind]))) -> usage_error("--web-bind takes an IP address, got #{inspect(opts[:web_bind])}")
       true -> :ok
@@ -310,16 +304,8 @@ defmodule Mix.Tasks.Dolphin.Run do
     end
   end
 
-  defp speedup(nil), do: :ok
-  defp speedup(k) when k > 0, do: :ok
-  defp speedup(k), do: usage_error("--speedup must be positive, got #{k}")
-
-  defp readable(file) do
-    if File.regular?(file), do: :ok, else: usage_error("no such script: #{file}")
-  end
-
   @doc """
-  A duration in clock milliseconds: `500ms`, `90s`, `10m`, `1h`, `1.5h`; a bare number is seconds.
+  A duration in clock milliseconds, more than 0: `500ms`, `90s`, `10m`, `1h`, `1.5h`; a bare number is seconds.
 
       iex> Mix.Tasks.Dolphin.Run.duration("10m")
       {:ok, 600000}
@@ -327,18 +313,12 @@ defmodule Mix.Tasks.Dolphin.Run do
       {:ok, 2500}
       iex> {:error, %Dolphin.CLI.UsageError{message: message}} = Mix.Tasks.Dolphin.Run.duration("soon")
       iex> message
-      ~s(--for takes a duration such as 90s, 10m, 1h or 500ms, got "soon")
+      "--for soon: a duration more than 0 such as 90s, 10m, 1h or 500ms (a bare number is seconds)"
   """
-  @spec duration(String.t() | nil) :: {:ok, non_neg_integer() | nil} | {:error, UsageError.t()}
+  @spec duration(String.t() | nil) :: {:ok, pos_integer() | nil} | {:error, UsageError.t()}
   def duration(nil), do: {:ok, nil}
 
   def duration(text) do
-    case Float.parse(text) do
-      {n, unit} when n >= 0 and unit in ["", "s", "ms", "m", "min", "h"] ->
-        {:ok, round(n * %{"" => 1000, "s" => 1000, "ms" => 1, "m" => 60_000, "min" => 60_000, "h" => 3_600_000}[unit])}
-
-      _ ->
-        usage_error("--for takes a duration such as 90s, 10m, 1h or 500ms, got #{inspect(text)}")
-    end
+    with {:ok, [for: ms]} <- Values.check([for: text], for: :duration), do: {:ok, ms}
   end
 end

@@ -12,42 +12,58 @@ defmodule Mix.Tasks.Dolphin.Sim do
 
   ## Options
 
-    * `--count N` — how many vehicles (default 1)
+    * `--count N` — how many vehicles (default 1; with `--first-sysid`,
+      their system ids must fit in 1..254)
     * `--gcs udpout:HOST:PORT` — where the ground station listens (default
       `udpout:127.0.0.1:14550`, QGroundControl's port)
-    * `--speedup K` — run K times faster than real time (default 1)
+    * `--speedup K` — run K times faster than real time (default 1; from
+      0.01 to 1000, beyond which the vehicles cannot keep up: see
+      `Dolphin.Clock`)
     * `--home LAT,LON,ALT` — where the fleet stands (default the report's
-      40.444233,-7.375234,820); vehicles are spread 30 m apart
+      40.444233,-7.375234,820; latitude -90..90, longitude -180..180,
+      altitude -1000..10000 m above mean sea level); vehicles are spread 30 m apart
     * `--first-sysid N` — the first system id (default 1)
     * `--camera` — every vehicle carries a camera (component 100)
     * `--ekf-ready SECONDS` — vehicle seconds from boot until arming is possible (default 15)
     * `--battery-failsafe rtl|land|none` — what a low battery does (default none, as ArduPilot)
     * `--seed N` — seeds the faults' randomness
-    * `--for SECONDS` — stop after that many seconds of vehicle time (default: until interrupted)
+    * `--for SECONDS` — stop after that many seconds of vehicle time, more
+      than 0 (default: until interrupted)
     * `--quiet` — no status lines
 
   While it runs, a status line per vehicle is printed every 10 seconds (real time).
+
+  A value out of range (or that means nothing: `--for 0`) is bad usage,
+  exit status 2, with a message that names the flag, the value and what is
+  allowed.
   """
 
   use Mix.Task
 
-  @switches [
-    count: :integer,
-    gcs: :string,
-    speedup: :float,
-    home: :string,
-    first_sysid: :integer,
+  alias Dolphin.CLI.Values
+
+  @options [
+    count: :vehicles,
+    gcs: {:endpoint, [:udpout]},
+    speedup: :speedup,
+    home: :location,
+    first_sysid: :sysid,
     camera: :boolean,
-    ekf_ready: :float,
-    battery_failsafe: :string,
+    ekf_ready: :delay,
+    battery_failsafe: {:one_of, %{"rtl" => :rtl, "land" => :land, "none" => :none}},
     seed: :integer,
-    for: :float,
+    for: :seconds,
     quiet: :boolean
   ]
 
   @impl Mix.Task
   def run(argv) do
-    opts = parse!(argv)
+    opts =
+      case parse(argv) do
+        {:ok, opts} -> opts
+        {:error, e} -> Mix.raise("mix dolphin.sim: #{Exception.message(e)} (see mix help dolphin.sim)", exit_status: 2)
+      end
+
     Mix.Task.run("app.start")
     sysids = start!(opts)
     unless opts[:quiet], do: Mix.shell().info("simulating #{length(sysids)} vehicle(s) #{Dolphin.Fleet.VehicleSet.format(sysids)}, sending to #{opts[:gcs]}")
@@ -56,23 +72,25 @@ defmodule Mix.Tasks.Dolphin.Sim do
 
   @doc false
   # The options, checked, as `Dolphin.Sim.start/1` takes them (plus :for and :quiet).
-  @spec parse!([String.t()]) :: keyword()
-  def parse!(argv) do
-    case OptionParser.parse(argv, strict: @switches) do
+  @spec parse([String.t()]) :: {:ok, keyword()} | {:error, Dolphin.CLI.UsageError.t()}
+  def parse(argv) do
+    case OptionParser.parse(argv, strict: Values.switches(@options)) do
       {opts, [], []} ->
-        opts
-        |> Keyword.put_new(:gcs, "udpout:127.0.0.1:14550")
-        |> Keyword.update(:home, nil, &home!/1)
-        |> Keyword.update(:ekf_ready, nil, &round(&1 * 1000))
-        |> Keyword.update(:battery_failsafe, nil, &failsafe!/1)
-        |> rename(:ekf_ready, :ekf_ready_ms)
-        |> Enum.reject(fn {_k, v} -> v == nil end)
+        with {:ok, opts} <- Values.check(opts, @options),
+             {:ok, _} <- Values.sysids(Keyword.get(opts, :count, 1), Keyword.get(opts, :first_sysid, 1), "--count", "--first-sysid") do
+          {:ok,
+           opts
+           |> Keyword.put_new(:gcs, "udpout:127.0.0.1:14550")
+           |> Keyword.update(:ekf_ready, nil, &round(&1 * 1000))
+           |> rename(:ekf_ready, :ekf_ready_ms)
+           |> Enum.reject(fn {_k, v} -> v == nil end)}
+        end
 
       {_, [extra | _], _} ->
-        Mix.raise("mix dolphin.sim: unexpected argument #{inspect(extra)} (see mix help dolphin.sim)")
+        Dolphin.CLI.UsageError.error("unexpected argument #{inspect(extra)}")
 
       {_, _, [{switch, value} | _]} ->
-        Mix.raise("mix dolphin.sim: bad option #{switch}#{if value, do: " " <> value, else: ""} (see mix help dolphin.sim)")
+        Dolphin.CLI.UsageError.error("bad option #{switch}#{if value, do: " " <> value, else: ""}")
     end
   end
 
@@ -118,22 +136,6 @@ defmodule Mix.Tasks.Dolphin.Sim do
         Mix.shell().info("vehicle #{sysid}: gone")
     end
   end
-
-  defp home!(string) do
-    with [lat, lon, alt] <- String.split(string, ","),
-         {lat, ""} <- Float.parse(lat),
-         {lon, ""} <- Float.parse(lon),
-         {alt, ""} <- Float.parse(alt) do
-      %{lat: lat, lon: lon, alt: alt}
-    else
-      _ -> Mix.raise("mix dolphin.sim: bad --home #{inspect(string)}: LAT,LON,ALT in degrees and metres, e.g. 40.444233,-7.375234,820")
-    end
-  end
-
-  defp failsafe!("rtl"), do: :rtl
-  defp failsafe!("land"), do: :land
-  defp failsafe!("none"), do: :none
-  defp failsafe!(other), do: Mix.raise("mix dolphin.sim: bad --battery-failsafe #{inspect(other)}: rtl, land or none")
 
   defp rename(opts, from, to) do
     case Keyword.pop(opts, from) do

@@ -22,8 +22,9 @@ defmodule Mix.Tasks.Dolphin.Station do
       `udpout:HOST:PORT`, `tcp:HOST:PORT`); repeatable
     * `--sim N` — also start N simulated vehicles (`Dolphin.Sim`) on a local
       link, with system ids from `--first-sysid` (default 1): give each
-      station of one machine its own range
-    * `--speedup K` — run K times faster than real time; every node of the
+      station of one machine its own range (within 1..254)
+    * `--speedup K` — run K times faster than real time (0.01 to 1000, see
+      `Dolphin.Clock`); every node of the
       cluster runs at the same speed-up (a controller adopts it)
     * `--seed N` — the simulator's seed
     * `--tlog FILE` — record every MAVLink frame of the links
@@ -34,14 +35,25 @@ defmodule Mix.Tasks.Dolphin.Station do
   ## Exit status
 
   0 — stopped (Ctrl-C or SIGTERM); 1 — it could not start (distribution,
-  a port in use); 2 — bad usage (no `--sname`/`--name`, an unknown option).
+  a port in use); 2 — bad usage (no `--sname`/`--name`, an unknown option,
+  a value out of range: the message names the flag, the value and what is allowed).
   """
 
   use Mix.Task
 
-  alias Dolphin.CLI.{Signals, StartError, UsageError}
+  alias Dolphin.CLI.{Signals, StartError, UsageError, Values}
 
-  @switches [sname: :string, name: :string, cookie: :string, connect: :keep, sim: :integer, first_sysid: :integer, speedup: :float, seed: :integer, tlog: :string]
+  @options [
+    sname: :string,
+    name: :string,
+    cookie: :string,
+    connect: {:keep, :endpoint},
+    sim: :vehicles,
+    first_sysid: :sysid,
+    speedup: :speedup,
+    seed: :integer,
+    tlog: :output
+  ]
 
   @usage "usage: mix dolphin.station (--sname NAME | --name NAME@HOST) [--cookie C] [--connect ENDPOINT]... [--sim N [--first-sysid ID]] [--speedup K] [--seed N] [--tlog FILE]"
 
@@ -80,17 +92,16 @@ defmodule Mix.Tasks.Dolphin.Station do
   # The options of a command line, checked.
   @spec parse([String.t()]) :: {:ok, keyword()} | {:error, UsageError.t()}
   def parse(argv) do
-    case OptionParser.parse(argv, strict: @switches) do
+    case OptionParser.parse(argv, strict: Values.switches(@options)) do
       {opts, [], []} ->
-        cond do
-          opts[:sname] == nil and opts[:name] == nil -> UsageError.error("a station needs a node name: give --sname NAME or --name NAME@HOST")
-          (problem = Dolphin.CLI.Cluster.check(opts)) != :ok -> UsageError.error(elem(problem, 1))
-          opts[:sim] != nil and opts[:sim] < 1 -> UsageError.error("--sim must be a positive number of vehicles, got #{opts[:sim]}")
-          opts[:first_sysid] != nil and opts[:sim] == nil -> UsageError.error("--first-sysid goes with --sim")
-          opts[:first_sysid] != nil and opts[:first_sysid] not in 1..255 -> UsageError.error("--first-sysid must be a system id 1..255, got #{opts[:first_sysid]}")
-          opts[:speedup] != nil and opts[:speedup] <= 0 -> UsageError.error("--speedup must be positive, got #{opts[:speedup]}")
-          bad = Enum.find(Keyword.get_values(opts, :connect), &match?({:error, _}, Dolphin.Link.Endpoint.parse(&1))) -> UsageError.error("--connect #{bad}: not an endpoint")
-          true -> {:ok, opts}
+        with {:ok, opts} <- Values.check(opts, @options) do
+          cond do
+            opts[:sname] == nil and opts[:name] == nil -> UsageError.error("a station needs a node name: give --sname NAME or --name NAME@HOST")
+            (problem = Dolphin.CLI.Cluster.check(opts)) != :ok -> UsageError.error(elem(problem, 1))
+            opts[:first_sysid] != nil and opts[:sim] == nil -> UsageError.error("--first-sysid goes with --sim")
+            opts[:sim] != nil -> with({:ok, _} <- Values.sysids(opts[:sim], Keyword.get(opts, :first_sysid, 1), "--sim", "--first-sysid"), do: {:ok, opts})
+            true -> {:ok, opts}
+          end
         end
 
       {_, [arg | _], []} ->

@@ -37,7 +37,10 @@ defmodule Mix.Tasks.Mavlink.Encode do
   end
 
   defp stream!(path) do
-    if File.regular?(path), do: File.stream!(path), else: Mix.raise("mavlink.encode: cannot read #{path}")
+    case Dolphin.CLI.Values.file_problem(path, "file of JSON records") do
+      nil -> File.stream!(path)
+      problem -> Mix.raise("mavlink.encode: #{problem}")
+    end
   end
 
   @doc """

@@ -168,7 +168,7 @@ defmodule Dolphin.Mission.PlanTest do
     plan = json(File.read!(@fixture))
 
     assert {:error, %PlanError{reason: :invalid_json}} = Mission.from_plan("{not json")
-    assert {:error, %PlanError{reason: :not_a_plan, detail: ~s(fileType is "Mission")}} = Mission.from_plan(%{plan | "fileType" => "Mission"})
+    assert {:error, %PlanError{reason: :not_a_plan, detail: ~s("fileType" is "Mission", not "Plan")}} = Mission.from_plan(%{plan | "fileType" => "Mission"})
     assert {:error, %PlanError{reason: :unsupported_version}} = Mission.from_plan(%{plan | "version" => 2})
     assert {:error, %PlanError{reason: :unsupported_version}} = Mission.from_plan(put_in(plan, ["mission", "version"], 1))
     assert {:error, %PlanError{reason: :invalid_home}} = Mission.from_plan(put_in(plan, ["mission", "plannedHomePosition"], [91, 0, 0]))
@@ -185,5 +185,44 @@ defmodule Dolphin.Mission.PlanTest do
 
     assert_raise PlanError, ~r/^not a QGroundControl plan/, fn -> Mission.from_plan!(%{"fileType" => "KML"}) end
     assert {:error, %PlanError{reason: :not_a_plan}} = Mission.from_plan(42)
+  end
+
+  test "what is wrong is said in the file's terms: line and column, the field and what it holds, JSON" do
+    text = File.read!(@fixture)
+    cut = binary_part(text, 0, 41)
+    line = length(String.split(cut, "\n"))
+    assert message(cut) =~ ~r/^the plan is not valid JSON: line #{line}, column \d+ \(byte 42\): the text ends before the JSON value does$/
+    assert message(~s|{"fileType": "Plan",\n "version": tru}|) == ~s|the plan is not valid JSON: line 2, column 13 (byte 34): not true, false or null: "tru}"|
+    assert message("") == "the plan is not valid JSON: the file is empty: no JSON value in it"
+    assert message("[]") == ~s|not a QGroundControl plan: the file holds an array ([]), not an object with "fileType": "Plan"|
+    assert message(~s|{"fileType": "Plan"}|) == ~s|unsupported plan version: no "version" (1 expected)|
+    assert message(~s|{"fileType": "Plan", "version": 1}|) == ~s|not a QGroundControl plan: no "mission"|
+    assert message(~s|{"fileType": "Plan", "version": 1, "mission": []}|) == ~s|not a QGroundControl plan: "mission" is an array ([]), not an object|
+
+    plan = json(text)
+    item = %{"type" => "SimpleItem", "command" => 16, "frame" => 3, "params" => [0, 0, 0, :null, 40.1, -7.2, 30], "autoContinue" => true}
+    with_item = fn changes -> put_in(plan, ["mission", "items"], [Map.merge(item, changes)]) end
+
+    assert message(with_item.(%{"command" => "abc"})) == ~s|invalid plan item: item 1: "command" is "abc", not a MAVLink command number (0..65535)|
+    assert message(with_item.(%{"command" => :null})) == ~s|invalid plan item: item 1: "command" is null, not a MAVLink command number (0..65535)|
+    assert message(Map.delete(item, "frame") |> then(&put_in(plan, ["mission", "items"], [&1]))) == ~s|invalid plan item: item 1: no "frame" (a MAV_FRAME number (0..255) expected)|
+    assert message(with_item.(%{"params" => [1, 2]})) == ~s|invalid plan item: item 1: "params" is [1,2], not 7 numbers or nulls|
+    assert message(with_item.(%{"params" => [0, 0, "x", 0, 40.1, -7.2, 30]})) == ~s|invalid plan item: item 1: "params" 3 is "x", not a number or null|
+    assert message(with_item.(%{"params" => [0, 0, 0, 0, 95, -7.2, 30]})) == ~s|invalid plan item: item 1: "params" 5, the latitude, is 95.0, not within -90..90|
+    assert message(with_item.(%{"autoContinue" => "yes"})) == ~s|invalid plan item: item 1: "autoContinue" is "yes", not true or false|
+    assert message(put_in(plan, ["mission", "items"], [5])) == ~s|invalid plan item: item 1: it is a number (5), not an object|
+    assert message(put_in(plan, ["mission", "items"], %{})) == ~s|not a QGroundControl plan: "mission.items" is {}, not an array of items|
+    assert message(put_in(plan, ["mission", "plannedHomePosition"], [91, 0, 0])) ==
+             ~s|invalid planned home position: "plannedHomePosition" is [91,0,0], not [latitude, longitude, altitude] with latitude -90..90 and longitude -180..180|
+
+    # No Elixir in any of them.
+    for plan <- [with_item.(%{"command" => "abc", "frame" => :null}), "[]", ~s|{"a": }|] do
+      refute message(plan) =~ ~r/:null|%\{|=>|\{\d+, :/
+    end
+  end
+
+  defp message(plan) do
+    assert {:error, %PlanError{} = e} = Mission.from_plan(plan)
+    Exception.message(e)
   end
 end

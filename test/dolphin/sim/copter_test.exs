@@ -432,4 +432,12 @@ defmodule Dolphin.Sim.CopterTest do
     assert "Battery Failsafe" in texts(said)
     assert c.mode == :rtl
   end
+
+  test "milliseconds since boot wrap at 2^32, as ArduPilot's do" do
+    c = %{boot() | time_ms: Bitwise.bsl(1, 32) + 1_234}
+    assert %M.Attitude{time_boot_ms: 1_234} = Dolphin.Sim.Streams.message(c, 30)
+    assert %M.GlobalPositionInt{time_boot_ms: 1_234} = Dolphin.Sim.Streams.message(c, 33)
+    # And the frames encode.
+    assert is_binary(Dolphin.MAVLink.Frame.encode(Dolphin.Sim.Streams.message(c, 33), sysid: 1, compid: 1, seq: 0))
+  end
 end

@@ -62,9 +62,9 @@ defmodule Dolphin.Web.RunTest do
     test "--web takes a port, --web-bind an address and goes with --web, --report needs a telemetry log", %{tmp_dir: dir} do
       ok = script(dir, "use Dolphin.Script\n")
       assert {2, _, err} = main([ok, "--fake", "1", "--web", "70000"])
-      assert err =~ "--web takes a TCP port (0..65535), got 70000"
+      assert err =~ "--web 70000: a TCP port from 1 to 65535 (0: any free one)"
       assert {2, _, err} = main([ok, "--fake", "1", "--web", "port"])
-      assert err =~ "bad option --web port"
+      assert err =~ "--web port: a TCP port from 1 to 65535"
       assert {2, _, err} = main([ok, "--fake", "1", "--web-bind", "127.0.0.1"])
       assert err =~ "--web-bind goes with --web PORT"
       assert {2, _, err} = main([ok, "--fake", "1", "--web", "0", "--web-bind", "localhost"])

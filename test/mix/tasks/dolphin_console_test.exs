@@ -15,8 +15,11 @@ defmodule Mix.Tasks.Dolphin.ConsoleTest do
                {:ok, [connect: "udpin:0.0.0.0:14550", connect: "tcp:127.0.0.1:5760"]}
 
       assert "bad option --bogus" = message(Task.parse(["--bogus"]))
-      assert "--sim must be a positive number of vehicles, got 0" = message(Task.parse(["--sim", "0"]))
-      assert "--speedup must be positive, got -1.0" = message(Task.parse(["--speedup", "-1"]))
+      assert "--sim 0: a number of vehicles from 1 to 254 (each needs a system id of its own)" = message(Task.parse(["--sim", "0"]))
+      assert "--speedup -1: a number from 0.01 to 1000" <> _ = message(Task.parse(["--speedup", "-1"]))
+      assert "--sitl 255: a number of vehicles from 1 to 254" <> _ = message(Task.parse(["--sitl", "255"]))
+      assert "--forward udpin:0.0.0.0:14551: udpout:HOST:PORT here, not udpin" = message(Task.parse(["--forward", "udpin:0.0.0.0:14551"]))
+      assert "--connect udpin:0.0.0.0:99999: the port 99999 is not within 1..65535" = message(Task.parse(["--connect", "udpin:0.0.0.0:99999"]))
       assert "unexpected argument \"x.exs\"" <> _ = message(Task.parse(["x.exs"]))
     end
 

@@ -45,7 +45,13 @@ defmodule Mix.Tasks.Dolphin.PlanTest do
       File.write!(file, "m = mission \"Away\" do\n  move 10, 0, 0\nend\n")
       out = Path.join(dir, "away.plan")
       why = message(Plan.main(["export", file, "Away", out]))
-      assert why =~ "--home supplies a home"
+
+      assert why ==
+               ~s|mission "Away" has no home, and no position of its own to take for one: give it one with `home location(LAT, LON, ALT)` in its block, or give the plan one with --home LAT,LON,ALT|
+
+      assert {:ok, listed} = Plan.main(["list", file])
+      assert listed =~ ~s|"Away" (m): cannot be made into items: mission "Away" has no home, and no position of its own|
+      refute listed =~ "to_items"
       assert {:ok, _} = Plan.main(["export", file, "Away", out, "--home", "40.444233,-7.375234,820"])
       assert {:ok, m} = Mission.from_plan(File.read!(out))
       assert m.home == Dolphin.Geo.location(40.444233, -7.375234, 820.0)
@@ -95,7 +101,8 @@ defmodule Mix.Tasks.Dolphin.PlanTest do
       why = message(Plan.main(["import", garbage]))
       assert why =~ "garbage.plan: "
       why = message(Plan.main(["import", Path.join(dir, "none.plan")]))
-      assert why =~ "cannot read"
+      assert why =~ "no such plan file: "
+      assert message(Plan.main(["import", dir])) == "#{dir} is a directory, not a plan file"
     end
   end
 
@@ -120,8 +127,15 @@ defmodule Mix.Tasks.Dolphin.PlanTest do
     assert "export: wrong arguments" <> _ = message(Plan.main(["export", "a.exs"]))
     assert "bad option --bogus" <> _ = message(Plan.main(["import", "a.plan", "--bogus"]))
     assert "--home is no option of import" <> _ = message(Plan.main(["import", "a.plan", "--home", "1,2,3"]))
-    assert "--home takes LAT,LON,ALT" <> _ = message(Plan.main(["export", @example, "x", "o.plan", "--home", "north"]))
-    assert "speeds must be positive" = message(Plan.main(["export", @example, "x", "o.plan", "--cruise-speed", "0"]))
+    assert "--home north: LAT,LON,ALT: degrees, degrees, metres above mean sea level" <> _ = message(Plan.main(["export", @example, "x", "o.plan", "--home", "north"]))
+    assert "--home 91,0,0: the latitude 91 is not within -90..90" <> _ = message(Plan.main(["export", @example, "x", "o.plan", "--home", "91,0,0"]))
+    assert "--cruise-speed 0: a speed in metres per second, more than 0" <> _ = message(Plan.main(["export", @example, "x", "o.plan", "--cruise-speed", "0"]))
+    assert "--vehicle 0: a system id from 1 to 254" <> _ = message(Plan.main(["upload", "a.plan", "--connect", "udpin:127.0.0.1:14550", "--vehicle", "0"]))
+    assert "--timeout 0: a number of seconds, more than 0" <> _ = message(Plan.main(["upload", "a.plan", "--connect", "udpin:127.0.0.1:14550", "--timeout", "0"]))
+    assert "--connect udpin:127.0.0.1:0: the port is 1..65535" <> _ = message(Plan.main(["upload", "a.plan", "--connect", "udpin:127.0.0.1:0"]))
+    assert "--name \"\": a name that is not empty" <> _ = message(Plan.main(["import", "a.plan", "--name", ""]))
+    # Bad usage: the task's exit status is 2.
+    assert %Mix.Error{mix: 2} = assert_raise(Mix.Error, fn -> Plan.run(["export", @example, "x", "o.plan", "--home", "91,0,0"]) end)
   end
 
   test "the task raises on errors and prints on success", %{tmp_dir: dir} do

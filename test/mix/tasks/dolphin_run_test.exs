@@ -36,7 +36,7 @@ defmodule Mix.Tasks.Dolphin.RunTest do
       assert {2, _, err} = main([ok, "--bogus"])
       assert err =~ "bad option --bogus"
       assert {2, _, err} = main([ok, "--for", "soon"])
-      assert err =~ "--for takes a duration"
+      assert err =~ "--for soon: a duration more than 0 such as 90s"
       assert {2, _, err} = main([ok, "--sim", "1", "--fake", "1"])
       assert err =~ "do not go together"
       assert {2, _, err} = main([Path.join(dir, "nope.exs")])

@@ -11,17 +11,46 @@ defmodule Mix.Tasks.Dolphin.SimTest do
   end
 
   test "options are checked and turned into the simulator's" do
-    opts = Task.parse!(~w(--count 3 --speedup 5 --home 41.1,-8.6,100 --ekf-ready 2 --battery-failsafe rtl --camera))
+    {:ok, opts} = Task.parse(~w(--count 3 --speedup 5 --home 41.1,-8.6,100 --ekf-ready 2 --battery-failsafe rtl --camera))
     assert opts[:count] == 3 and opts[:speedup] == 5.0 and opts[:camera]
     assert opts[:home] == %{lat: 41.1, lon: -8.6, alt: 100.0}
     assert opts[:ekf_ready_ms] == 2_000 and opts[:battery_failsafe] == :rtl
     assert opts[:gcs] == "udpout:127.0.0.1:14550"
 
-    assert_raise Mix.Error, ~r/bad option --count/, fn -> Task.parse!(~w(--count many)) end
-    assert_raise Mix.Error, ~r/bad --home "north"/, fn -> Task.parse!(~w(--home north)) end
-    assert_raise Mix.Error, ~r/unexpected argument "extra"/, fn -> Task.parse!(~w(extra)) end
-    assert_raise Mix.Error, ~r/bad --battery-failsafe/, fn -> Task.parse!(~w(--battery-failsafe maybe)) end
-    assert_raise Mix.Error, ~r/sends to a ground station: give it udpout/, fn -> Task.start!(Task.parse!(~w(--gcs udpin:0.0.0.0:1))) end
+    assert message(~w(--count many)) == "--count many: a number of vehicles from 1 to 254 (each needs a system id of its own)"
+    assert message(~w(--home north)) =~ "--home north: LAT,LON,ALT"
+    assert message(~w(extra)) =~ ~s(unexpected argument "extra")
+    assert message(~w(--battery-failsafe maybe)) == "--battery-failsafe maybe: land, none or rtl"
+    assert message(~w(--gcs udpin:0.0.0.0:1)) == "--gcs udpin:0.0.0.0:1: udpout:HOST:PORT here, not udpin"
+  end
+
+  test "every value is checked for range and meaning: the flag, the value and what is allowed" do
+    assert message(~w(--home 200,0,0)) == "--home 200,0,0: the latitude 200 is not within -90..90 (LAT,LON,ALT: degrees, degrees, metres above mean sea level)"
+    assert message(~w(--home 40,400,0)) =~ "--home 40,400,0: the longitude 400 is not within -180..180"
+    assert message(~w(--home 40,-7,1e6)) =~ "--home 40,-7,1e6: the altitude 1e6 m is not within -1000..10000"
+    assert message(~w(--for 0)) == "--for 0: a number of seconds, more than 0"
+    assert message(~w(--for -5)) == "--for -5: a number of seconds, more than 0"
+    assert message(~w(--speedup 1e9)) == "--speedup 1e9: a number from 0.01 to 1000 (beyond 1000 the simulated vehicles cannot keep up with the clock)"
+    assert message(~w(--speedup 0)) =~ "--speedup 0: a number from 0.01 to 1000"
+    assert message(~w(--count 0)) =~ "--count 0: a number of vehicles from 1 to 254"
+    assert message(~w(--count 300)) =~ "--count 300: a number of vehicles from 1 to 254"
+    assert message(~w(--first-sysid 255)) == "--first-sysid 255: a system id from 1 to 254 (255 is the ground station's)"
+    assert message(~w(--count 10 --first-sysid 250)) == "--count 10 with --first-sysid 250: system ids 250..259 do not fit in 1..254 (255 is the ground station's)"
+    assert message(~w(--ekf-ready -1)) == "--ekf-ready -1: a number of seconds, 0 or more"
+    assert message(~w(--seed 1.5)) == "--seed 1.5: a whole number"
+    assert message(~w(--gcs udpout:127.0.0.1:0)) == "--gcs udpout:127.0.0.1:0: the port is 1..65535"
+    assert message(~w(--gcs udpout:127.0.0.1:70000)) == "--gcs udpout:127.0.0.1:70000: the port 70000 is not within 1..65535"
+
+    # The limits themselves are allowed.
+    assert {:ok, opts} = Task.parse(~w(--home -90,180,-1000 --speedup 1000 --count 4 --first-sysid 251 --for 0.5))
+    assert opts[:home] == %{lat: -90.0, lon: 180.0, alt: -1000.0} and opts[:speedup] == 1000.0
+  end
+
+  test "a bad value is bad usage: exit status 2, with the message" do
+    error = assert_raise Mix.Error, fn -> Task.run(~w(--home 250,400,0)) end
+    assert error.mix == 2
+    assert error.message =~ "mix dolphin.sim: --home 250,400,0: the latitude 250 is not within -90..90"
+    assert Dolphin.Sim.vehicles() == []
   end
 
   test "runs vehicles that send to the ground station's endpoint, for a bounded time" do
@@ -35,6 +64,11 @@ defmodule Mix.Tasks.Dolphin.SimTest do
 
     heard = collect(MapSet.new())
     assert MapSet.subset?(MapSet.new([1, 2]), heard)
+  end
+
+  defp message(argv) do
+    assert {:error, %Dolphin.CLI.UsageError{message: message}} = Task.parse(argv)
+    message
   end
 
   defp collect(acc) do

@@ -89,12 +89,16 @@ defmodule Dolphin.Sim.Copter.Commands do
     if seq >= 0 and seq <= length(MissionServer.items(c.missions)), do: {@accepted, Mission.set_current(c, seq)}, else: {@denied, c}
   end
 
-  # MAV_CMD_DO_SET_HOME: p1 = 1 here, else the given point.
+  # MAV_CMD_DO_SET_HOME: p1 = 1 here, else the given point (denied off the
+  # map, as ArduPilot's check of a command's latitude and longitude does).
   defp run_command(c, 179, [p1 | _] = params, position) do
+    point = command_point(params, position)
+
     cond do
       not ready?(c) -> {@failed, c}
       round(p1) == 1 -> {@accepted, set_home(c, position(c))}
-      true -> {@accepted, set_home(c, command_point(params, position))}
+      not on_map?(point) -> {@denied, c}
+      true -> {@accepted, set_home(c, point)}
     end
   end
 
@@ -114,7 +118,7 @@ defmodule Dolphin.Sim.Copter.Commands do
 
     point = command_point(params, position)
 
-    with true <- ok?, {:ok, c} <- Flight.guided_goto(c, point.lat, point.lon, point.alt) do
+    with true <- ok? and on_map?(point), {:ok, c} <- Flight.guided_goto(c, point.lat, point.lon, point.alt) do
       c = if p1 > 0, do: %{c | speed: p1 * 1.0}, else: c
       {@accepted, c}
     else
@@ -161,6 +165,8 @@ defmodule Dolphin.Sim.Copter.Commands do
   defp command_point(_params, {frame, x, y, z}), do: %{lat: x / 1.0e7, lon: y / 1.0e7, alt: {frame, z}}
 
   defp command_point([_, _, _, _, lat, lon, alt], nil), do: %{lat: lat, lon: lon, alt: {0, alt}}
+
+  defp on_map?(%{lat: lat, lon: lon}), do: is_number(lat) and is_number(lon) and lat >= -90 and lat <= 90 and lon >= -180 and lon <= 180
 
   defp takeoff_alt(c, _params, {frame, _x, _y, z}), do: target_alt(c, frame, z)
   defp takeoff_alt(c, params, nil), do: home_alt(c) + List.last(params)

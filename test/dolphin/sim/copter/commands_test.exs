@@ -51,6 +51,16 @@ defmodule Dolphin.Sim.Copter.CommandsTest do
     assert {_, {1, 4}} = run(in_air(ready(), %{mode: :loiter}), 192, [5, 0], {6, round(p.lat * 1.0e7), round(p.lon * 1.0e7), 30.0})
   end
 
+  test "DO_SET_HOME and DO_REPOSITION to a point off the map are refused: the home stays one HOME_POSITION can carry" do
+    c = ready()
+    {c, {1, 0}} = run(c, 179, [0, 0, 0, 0, 41.0, -8.0, 100])
+    assert %{lat: 41.0, lon: -8.0} = c.home
+    assert {%{home: %{lat: 41.0}}, {1, 2}} = run(c, 179, [0, 0, 0, 0, 250.0, 400.0, 0])
+    assert {_, {1, 2}} = run(c, 179, [0, 0, 0, 0, 0, 0, 0], {0, 2_100_000_000, 0, 0.0})
+    assert {%{nav: nav}, {1, 4}} = run(in_air(c), 192, [5, 1, 0, 0, 91.0, 0.0, 20])
+    refute match?({:goto, _, _, _}, nav)
+  end
+
   test "MISSION_START without a mission fails; SET_MISSION_CURRENT out of range is denied" do
     assert {_, {1, 4}} = run(ready(), 300, [0, 0])
     assert {_, {1, 2}} = run(ready(), 224, [3])

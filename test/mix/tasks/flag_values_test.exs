@@ -1,0 +1,157 @@
+defmodule Mix.Tasks.FlagValuesTest do
+  # The mix tasks as a user runs them from the shell, each command in its
+  # own OS process (a fresh VM, MIX_ENV=test): values out of range, files
+  # that are directories, plans and scripts that are wrong. Nothing here
+  # touches this VM's state: async.
+  use ExUnit.Case, async: true
+
+  @moduletag :tmp_dir
+  @moduletag timeout: 600_000
+
+  # Real ms a command may take on a loaded machine (a VM boot): generous,
+  # never a measurement.
+  @step 120_000
+
+  test "mix dolphin.sim: a value out of range is bad usage (status 2) naming the flag, the value and what is allowed" do
+    # Port 9 (discard) on 127.0.0.1: were a vehicle started, it would send there.
+    gcs = "--gcs=udpout:127.0.0.1:9"
+
+    results =
+      run_all([
+        ~w(dolphin.sim --home 250,400,0 --for 5 --quiet) ++ [gcs],
+        ~w(dolphin.sim --home 200,0,0 --for 5 --quiet) ++ [gcs],
+        ~w(dolphin.sim --speedup 1e9 --for 1 --quiet) ++ [gcs],
+        ~w(dolphin.sim --for 0 --quiet) ++ [gcs],
+        ~w(dolphin.sim --count 0 --for 1 --quiet) ++ [gcs]
+      ])
+
+    assert [
+             {2, home},
+             {2, latitude},
+             {2, speedup},
+             {2, for_zero},
+             {2, count}
+           ] = results
+
+    assert home =~ "mix dolphin.sim: --home 250,400,0: the latitude 250 is not within -90..90 (LAT,LON,ALT: degrees, degrees, metres above mean sea level)"
+    refute home =~ "cannot encode"
+    assert latitude =~ "--home 200,0,0: the latitude 200 is not within -90..90"
+    assert speedup =~ "--speedup 1e9: a number from 0.01 to 1000 (beyond 1000 the simulated vehicles cannot keep up with the clock)"
+    assert for_zero =~ "--for 0: a number of seconds, more than 0"
+    assert count =~ "--count 0: a number of vehicles from 1 to 254 (each needs a system id of its own)"
+    for {_, output} <- results, do: refute(output =~ ~r/bad :\w+|simulating/)
+  end
+
+  test "mix dolphin.run and dolphin.check: a directory is not a script, and values out of range are bad usage", %{tmp_dir: dir} do
+    script = Path.join(dir, "hello.exs")
+    File.write!(script, "use Dolphin.Script\nmessage \"hello\"\n")
+
+    assert [{2, run_dir}, {2, for_zero}, {2, fake}, {2, check_dir}, {2, wait}] =
+             run_all([
+               ["dolphin.run", dir, "--fake", "1"],
+               ["dolphin.run", script, "--fake", "1", "--for", "0"],
+               ["dolphin.run", script, "--fake", "300"],
+               ["dolphin.check", dir],
+               ["dolphin.check", script, "--connect", "udpin:127.0.0.1:14999", "--wait", "0"]
+             ])
+
+    assert run_dir =~ "mix dolphin.run: #{dir} is a directory, not a script"
+    refute run_dir =~ "no such script"
+    assert for_zero =~ "mix dolphin.run: --for 0: a duration more than 0 such as 90s, 10m, 1h or 500ms"
+    assert fake =~ "mix dolphin.run: --fake 300: a number of vehicles from 1 to 254"
+    assert check_dir =~ "mix dolphin.check: #{dir} is a directory, not a script"
+    assert wait =~ "mix dolphin.check: --wait 0: a number of seconds, more than 0"
+  end
+
+  test "mix dolphin.station and dolphin.console: values out of range are bad usage" do
+    assert [{2, station}, {2, console}, {2, forward}] =
+             run_all([
+               ~w(dolphin.station --sname gsvalues --sim 1 --first-sysid 255),
+               ~w(dolphin.console --sim 0),
+               ~w(dolphin.console --forward tcp:127.0.0.1:5760)
+             ])
+
+    assert station =~ "mix dolphin.station: --first-sysid 255: a system id from 1 to 254 (255 is the ground station's)"
+    assert console =~ "mix dolphin.console: --sim 0: a number of vehicles from 1 to 254"
+    assert forward =~ "mix dolphin.console: --forward tcp:127.0.0.1:5760: udpout:HOST:PORT here, not tcp"
+  end
+
+  test "mix dolphin.plan: a bad --home is bad usage; a plan that is wrong is said in its terms", %{tmp_dir: dir} do
+    truncated = Path.join(dir, "truncated.plan")
+    File.write!(truncated, ~s|{\n  "fileType": "Plan",\n  "version": 1,\n|)
+    array = Path.join(dir, "array.plan")
+    File.write!(array, "[]\n")
+    example = Path.expand("../../../examples/single_vehicle.exs", __DIR__)
+
+    assert [{2, home}, {1, json}, {1, empty}, {1, directory}, {1, missions}] =
+             run_all([
+               ["dolphin.plan", "export", example, "Survey Area", Path.join(dir, "o.plan"), "--home", "91,0,0"],
+               ["dolphin.plan", "import", truncated],
+               ["dolphin.plan", "import", array],
+               ["dolphin.plan", "import", dir],
+               ["dolphin.plan", "list", dir]
+             ])
+
+    assert home =~ "mix dolphin.plan: --home 91,0,0: the latitude 91 is not within -90..90"
+    end_byte = byte_size(File.read!(truncated)) + 1
+    assert json =~ "#{truncated}: the plan is not valid JSON: line 4, column 1 (byte #{end_byte}): the text ends before the JSON value does"
+    refute json =~ "truncated_json"
+    assert empty =~ ~s|#{array}: not a QGroundControl plan: the file holds an array ([]), not an object with "fileType": "Plan"|
+    assert directory =~ "mix dolphin.plan: #{dir} is a directory, not a plan file"
+    assert missions =~ "#{dir}: cannot read: it is a directory, not a script or a file of missions"
+  end
+
+  test "mix dolphin.check: the compiler's warnings in the script's terms, in a fresh VM", %{tmp_dir: dir} do
+    types = Path.join(dir, "types.exs")
+    File.write!(types, "use Dolphin.Script\nx = 1\nmessage \"\#{x.speed}\"\n")
+    block = Path.join(dir, "block.exs")
+    File.write!(block, "use Dolphin.Script\nv = pick()\nm = mission \"m\" do\n  takeoff 10\n  circle(1, 2)\nend\nexecute %{v => m}\n")
+
+    assert [{1, types_out}, {1, block_out}] = run_all([["dolphin.check", types, "--sim", "1"], ["dolphin.check", block, "--sim", "1"]])
+
+    # The compiler names the file relative to the working directory, as the check's lines do.
+    assert types_out =~ "#{Path.relative_to_cwd(types)}:3: warning: incompatible types:\n"
+    assert block_out =~ "#{Path.relative_to_cwd(block)}:5: warning: undefined function circle/2: no word of the language or of Elixir has that name"
+
+    for output <- [types_out, block_out] do
+      refute output =~ "Conflict found at"
+      refute output =~ "Dolphin.Script.Compiled"
+      refute output =~ "__script__"
+    end
+  end
+
+  # Runs each `mix` command line at once, each in its own OS process, and
+  # returns their exit statuses and outputs (stdout and stderr), in order.
+  defp run_all(commands) do
+    commands |> Enum.map(&open/1) |> Enum.map(&wait_exit(&1, ""))
+  end
+
+  defp open(args) do
+    env = [{~c"MIX_ENV", ~c"test"}, {~c"LANG", ~c"C.UTF-8"}, {~c"LC_ALL", ~c"C.UTF-8"}, {~c"ERL_EPMD_ADDRESS", ~c"127.0.0.1"}]
+    port = Port.open({:spawn_executable, System.find_executable("mix")}, [:binary, :exit_status, :stderr_to_stdout, args: args, cd: File.cwd!(), env: env])
+    {:os_pid, os_pid} = Port.info(port, :os_pid)
+
+    # Whatever is left of it when the test ends (a failed test): its processes, by id.
+    on_exit(fn ->
+      for pid <- descendants(os_pid) ++ [os_pid], do: System.cmd("kill", ["-9", Integer.to_string(pid)], stderr_to_stdout: true)
+    end)
+
+    {port, args}
+  end
+
+  defp wait_exit({port, args}, output) do
+    receive do
+      {^port, {:data, data}} -> wait_exit({port, args}, output <> data)
+      {^port, {:exit_status, status}} -> {status, output}
+    after
+      @step -> flunk("mix #{Enum.join(args, " ")} did not end within #{@step} ms:\n#{output}")
+    end
+  end
+
+  defp descendants(pid) do
+    case System.cmd("ps", ["-o", "pid=", "--ppid", Integer.to_string(pid)], stderr_to_stdout: true) do
+      {out, 0} -> out |> String.split() |> Enum.map(&String.to_integer/1) |> Enum.flat_map(&(descendants(&1) ++ [&1]))
+      _ -> []
+    end
+  end
+end
