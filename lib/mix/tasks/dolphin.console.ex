@@ -57,6 +57,9 @@ defmodule Mix.Tasks.Dolphin.Console do
 
   @impl Mix.Task
   def run(argv) do
+    # Outside IEx (where Ctrl-C and SIGTERM keep IEx's meanings) it only says how to start it.
+    Dolphin.CLI.Signals.exit_on_signal("dolphin.console", "stopped before the console started")
+
     opts =
       case parse(argv) do
         {:ok, opts} -> opts

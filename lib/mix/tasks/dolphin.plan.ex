@@ -89,9 +89,12 @@ defmodule Mix.Tasks.Dolphin.Plan do
 
   @impl Mix.Task
   def run(argv) do
+    verb = List.first(argv)
+    # A transfer cut short has nothing of ours to undo but its link, which ends with the VM.
+    Dolphin.CLI.Signals.exit_on_signal("dolphin.plan", if(verb in ["upload", "download"], do: "the #{verb} did not finish", else: "stopped before it finished"))
     Mix.Task.run("app.config")
     # Transfers need the links and vehicles of the application.
-    if List.first(argv) in ["upload", "download"], do: Mix.Task.run("app.start")
+    if verb in ["upload", "download"], do: Mix.Task.run("app.start")
 
     case main(argv) do
       {:ok, text} -> Mix.shell().info(text)

@@ -30,6 +30,8 @@ defmodule Mix.Tasks.Dolphin.Report do
 
   @impl Mix.Task
   def run(args) do
+    Dolphin.CLI.Signals.exit_on_signal("dolphin.report", "no report was written")
+
     case OptionParser.parse(args, strict: @switches, aliases: @aliases) do
       {opts, [tlog], []} ->
         # The report reads the MAVLink dialect only: no vehicles, links or clock.

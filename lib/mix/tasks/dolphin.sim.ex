@@ -31,6 +31,8 @@ defmodule Mix.Tasks.Dolphin.Sim do
 
   use Mix.Task
 
+  alias Dolphin.CLI.Signals
+
   @switches [
     count: :integer,
     gcs: :string,
@@ -47,10 +49,13 @@ defmodule Mix.Tasks.Dolphin.Sim do
 
   @impl Mix.Task
   def run(argv) do
+    signals? = Signals.exit_on_signal("dolphin.sim", "stopped before the vehicles started")
     opts = parse!(argv)
     Mix.Task.run("app.start")
     sysids = start!(opts)
     unless opts[:quiet], do: Mix.shell().info("simulating #{length(sysids)} vehicle(s) #{Dolphin.Fleet.VehicleSet.format(sysids)}, sending to #{opts[:gcs]}")
+    # While they fly, Ctrl-C and SIGTERM stop them in order (wait/2).
+    if signals?, do: Signals.catch_signals(self())
     wait(sysids, opts)
   end
 
@@ -97,9 +102,16 @@ defmodule Mix.Tasks.Dolphin.Sim do
     if left <= 0 do
       Dolphin.Sim.stop()
     else
-      Process.sleep(left)
-      unless quiet?, do: Enum.each(sysids, &status/1)
-      loop(sysids, until, quiet?)
+      receive do
+        {:dolphin_signal, sig} ->
+          Mix.shell().info("#{Signals.name(sig)}: stopping the simulated vehicles")
+          Dolphin.Sim.stop()
+          exit({:shutdown, Signals.status(sig)})
+      after
+        left ->
+          unless quiet?, do: Enum.each(sysids, &status/1)
+          loop(sysids, until, quiet?)
+      end
     end
   end
 

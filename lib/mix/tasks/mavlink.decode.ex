@@ -34,6 +34,8 @@ defmodule Mix.Tasks.Mavlink.Decode do
 
   @impl Mix.Task
   def run(args) do
+    Dolphin.CLI.Signals.exit_on_signal("mavlink.decode", "stopped before the end of the input")
+
     case OptionParser.parse(args, strict: @switches) do
       {opts, [file], []} ->
         signing = signing!(opts)

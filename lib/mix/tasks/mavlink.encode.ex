@@ -22,6 +22,8 @@ defmodule Mix.Tasks.Mavlink.Encode do
 
   @impl Mix.Task
   def run(args) do
+    Dolphin.CLI.Signals.exit_on_signal("mavlink.encode", "stopped before the end of the input")
+
     case OptionParser.parse(args, strict: []) do
       {_, [file], []} ->
         lines = if file == "-", do: IO.stream(:stdio, :line), else: stream!(file)
