@@ -66,9 +66,13 @@ defmodule Mix.Tasks.Dolphin.Plan do
   The missions `FILE` defines, as `export` finds them, and the statements
   it skipped.
 
-  Errors (a missing file, no such mission, a malformed plan, no vehicle
-  heard, a transfer that failed) stop the task with a message and exit
-  status 1.
+  ## Exit status
+
+  As every task's (README.md, "Exit status"): 1 — no such mission, a
+  malformed plan, a link that cannot be opened (a port in use), no vehicle
+  heard, a transfer that failed; 2 — bad usage (an unknown command or
+  option, wrong arguments, a bad endpoint, no such file); 130 / 143 —
+  Ctrl-C / SIGTERM stopped it. The message says what went wrong.
   """
 
   use Mix.Task
@@ -98,6 +102,7 @@ defmodule Mix.Tasks.Dolphin.Plan do
 
     case main(argv) do
       {:ok, text} -> Mix.shell().info(text)
+      {:error, %CommandLineError{reason: :usage} = error} -> Mix.raise("mix dolphin.plan: " <> Exception.message(error), exit_status: 2)
       {:error, error} -> Mix.raise("mix dolphin.plan: " <> Exception.message(error))
     end
   end
@@ -111,7 +116,7 @@ defmodule Mix.Tasks.Dolphin.Plan do
   def main(argv) do
     result =
       case OptionParser.parse(argv, strict: @switches) do
-        {opts, args, []} -> command(args, opts)
+        {opts, args, []} -> args |> command(opts) |> missing_input(args)
         {_, _, [{switch, value} | _]} -> usage("bad option #{switch}#{if value, do: " " <> value, else: ""}")
       end
 
@@ -125,6 +130,21 @@ defmodule Mix.Tasks.Dolphin.Plan do
 
   # The steps below say what went wrong in words; main/1 makes the error of them.
   defp usage(message), do: {:error, {:usage, message}}
+
+  # A failure because the file to read is not there: the command line named
+  # the wrong one, bad usage (README.md, "Exit status").
+  defp missing_input({:error, why} = error, args) when is_binary(why) or is_exception(why) do
+    file =
+      case args do
+        ["export", file, _name, _out] -> file
+        [verb, file] when verb in ["import", "list", "upload"] -> file
+        _ -> nil
+      end
+
+    if file && not File.exists?(file), do: usage(if(is_binary(why), do: why, else: Exception.message(why))), else: error
+  end
+
+  defp missing_input(result, _args), do: result
 
   defp command(["export", file, name, out], opts) do
     with :ok <- only(opts, [:home, :cruise_speed, :hover_speed], "export"),
@@ -201,8 +221,18 @@ defmodule Mix.Tasks.Dolphin.Plan do
   end
 
   defp connect(endpoint, name) do
-    case Dolphin.Link.connect(endpoint, name: name) do
-      {:ok, link} -> {:ok, link}
+    with {:ok, _} <- endpoint(endpoint) do
+      case Dolphin.Link.connect(endpoint, name: name) do
+        {:ok, link} -> {:ok, link}
+        # A right endpoint that cannot be opened (a port in use): the transfer failed.
+        {:error, e} -> {:error, "--connect #{endpoint}: #{Exception.message(e)}"}
+      end
+    end
+  end
+
+  defp endpoint(endpoint) do
+    case Dolphin.Link.Endpoint.parse(endpoint) do
+      {:ok, parsed} -> {:ok, parsed}
       {:error, e} -> usage("--connect #{endpoint}: #{Exception.message(e)}")
     end
   end

@@ -27,6 +27,13 @@ defmodule Mix.Tasks.Dolphin.Sim do
     * `--quiet` — no status lines
 
   While it runs, a status line per vehicle is printed every 10 seconds (real time).
+
+  ## Exit status
+
+  As every task's (README.md, "Exit status"): 0 — `--for` ended it; 1 —
+  the vehicles could not be started; 2 — bad usage (an unknown option, a
+  bad value); 130 / 143 — Ctrl-C / SIGTERM stopped it: the vehicles are
+  stopped first (a second signal, a second later or more, exits at once).
   """
 
   use Mix.Task
@@ -74,10 +81,10 @@ defmodule Mix.Tasks.Dolphin.Sim do
         |> Enum.reject(fn {_k, v} -> v == nil end)
 
       {_, [extra | _], _} ->
-        Mix.raise("mix dolphin.sim: unexpected argument #{inspect(extra)} (see mix help dolphin.sim)")
+        usage!("mix dolphin.sim: unexpected argument #{inspect(extra)} (see mix help dolphin.sim)")
 
       {_, _, [{switch, value} | _]} ->
-        Mix.raise("mix dolphin.sim: bad option #{switch}#{if value, do: " " <> value, else: ""} (see mix help dolphin.sim)")
+        usage!("mix dolphin.sim: bad option #{switch}#{if value, do: " " <> value, else: ""} (see mix help dolphin.sim)")
     end
   end
 
@@ -138,14 +145,17 @@ defmodule Mix.Tasks.Dolphin.Sim do
          {alt, ""} <- Float.parse(alt) do
       %{lat: lat, lon: lon, alt: alt}
     else
-      _ -> Mix.raise("mix dolphin.sim: bad --home #{inspect(string)}: LAT,LON,ALT in degrees and metres, e.g. 40.444233,-7.375234,820")
+      _ -> usage!("mix dolphin.sim: bad --home #{inspect(string)}: LAT,LON,ALT in degrees and metres, e.g. 40.444233,-7.375234,820")
     end
   end
 
   defp failsafe!("rtl"), do: :rtl
   defp failsafe!("land"), do: :land
   defp failsafe!("none"), do: :none
-  defp failsafe!(other), do: Mix.raise("mix dolphin.sim: bad --battery-failsafe #{inspect(other)}: rtl, land or none")
+  defp failsafe!(other), do: usage!("mix dolphin.sim: bad --battery-failsafe #{inspect(other)}: rtl, land or none")
+
+  # A command line that cannot be run as given: exit status 2 (README.md, "Exit status").
+  defp usage!(message), do: Mix.raise(message, exit_status: 2)
 
   defp rename(opts, from, to) do
     case Keyword.pop(opts, from) do

@@ -13,7 +13,8 @@ defmodule Mix.Tasks.Mavlink.Encode do
 
   `FILE` may be `-` for standard input. Blank lines are skipped. A line that
   cannot be encoded is reported on standard error with its line number, and the
-  task exits with status 1 after the whole file.
+  task exits with status 1 after the whole file (as every task's exit
+  status, README.md, "Exit status": 2 — bad usage, such as no such file).
   """
 
   use Mix.Task
@@ -34,12 +35,13 @@ defmodule Mix.Tasks.Mavlink.Encode do
         end
 
       _ ->
-        Mix.raise("usage: mix mavlink.encode FILE")
+        Mix.raise("usage: mix mavlink.encode FILE", exit_status: 2)
     end
   end
 
   defp stream!(path) do
-    if File.regular?(path), do: File.stream!(path), else: Mix.raise("mavlink.encode: cannot read #{path}")
+    # No such file: bad usage (README.md, "Exit status").
+    if File.regular?(path), do: File.stream!(path), else: Mix.raise("mavlink.encode: cannot read #{path}", exit_status: if(File.exists?(path), do: 1, else: 2))
   end
 
   @doc """
