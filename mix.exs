@@ -9,7 +9,7 @@ defmodule Mix.Tasks.Compile.DolphinNative do
 
   @libraries [
     {"c_src/dolphin_crc.c", "priv/dolphin_crc.so", "the MAVLink checksum will run in Erlang, several times slower"},
-    {"c_src/dolphin_signals.c", "priv/dolphin_signals.so", "Ctrl-C will open the Erlang BREAK menu instead of stopping a run"}
+    {"c_src/dolphin_signals.c", "priv/dolphin_signals.so", "Ctrl-C will open the Erlang BREAK menu instead of stopping a task"}
   ]
 
   @impl true
@@ -40,6 +40,53 @@ defmodule Mix.Tasks.Compile.DolphinNative do
 
   defp warn(why, without, source), do: Mix.shell().error("#{why}; #{without} (see #{source})")
 end
+
+defmodule Dolphin.MixProject.StartSignals do
+  @moduledoc false
+  # SIGTERM while `mix` starts one of the project's tasks (reads this file,
+  # compiles the project: seconds after a change, minutes on a fresh
+  # checkout) would be OTP's init:stop/0: exit status 0, which for
+  # `mix dolphin.check` reads "no errors". From here until the task's
+  # first line (Dolphin.CLI.Signals takes over this handler) it ends the
+  # command with 143. (SIGINT cannot be caught before the project's C
+  # library is loaded: it still opens the BREAK menu.)
+  @behaviour :gen_event
+
+  def install(["dolphin." <> _ = task | _]), do: install(task)
+  def install(["mavlink." <> _ = task | _]), do: install(task)
+
+  def install(task) when is_binary(task) do
+    # IEx keeps its own meanings of the signals; OTP's handler is replaced once.
+    if not (Code.ensure_loaded?(IEx) and IEx.started?()) and :erl_signal_handler in :gen_event.which_handlers(:erl_signal_server) do
+      :ok = :os.set_signal(:sigterm, :handle)
+      :ok = :gen_event.swap_handler(:erl_signal_server, {:erl_signal_handler, :swap}, {__MODULE__, task})
+    end
+
+    :ok
+  end
+
+  def install(_argv), do: :ok
+
+  @impl true
+  def init({task, _swapped_out}), do: {:ok, task}
+
+  @impl true
+  def handle_event(:sigterm, task) do
+    IO.puts(:stderr, "mix #{task}: terminated (SIGTERM) while mix was starting it: nothing ran")
+    System.halt(143)
+  end
+
+  # The other signals keep OTP's actions (SIGUSR1: a crash dump, SIGQUIT: halt).
+  def handle_event(other, task) do
+    {:ok, _} = :erl_signal_handler.handle_event(other, [])
+    {:ok, task}
+  end
+
+  @impl true
+  def handle_call(_request, task), do: {:ok, :ok, task}
+end
+
+Dolphin.MixProject.StartSignals.install(System.argv())
 
 defmodule Dolphin.MixProject do
   use Mix.Project

@@ -30,8 +30,10 @@ defmodule Dolphin.CLI.Run do
     * `:completed` — the script completed;
     * `:stopped` — `--for` (or `Dolphin.Script.stop/2`) stopped it: running
       tasks were stopped, vehicles hold;
-    * `{:stopped, signal}` — SIGINT or SIGTERM stopped it the same way; a
-      second one ends the VM at once with `Dolphin.CLI.Signals.status/1`;
+    * `{:stopped, signal}` — SIGINT or SIGTERM stopped it the same way; a second one,
+      later than `Dolphin.CLI.Signals.repeat_ms/0` after the first, ends
+      the VM at once with `Dolphin.CLI.Signals.status/1`, once the log and
+      the events file have what they were sent;
     * `:failed` — the script failed (what, where and why are printed on `:err`);
     * `{:error, %Dolphin.CLI.StartError{}}` — its vehicles or outputs could
       not be started (a port in use, a SITL binary missing): nothing ran.
@@ -178,44 +180,55 @@ defmodule Dolphin.CLI.Run do
     if opts[:signals], do: await_script(pid, renderer, nil), else: {Dolphin.Script.await(pid), nil}
   end
 
-  defp await_script(pid, renderer, signal) do
+  defp await_script(pid, renderer, signal, hint \\ nil) do
     receive do
       {Dolphin.Script, ^pid, result} ->
+        # A stop that ended before the hint leaves it unsaid.
+        if hint, do: Process.cancel_timer(hint)
+        receive do: (:signal_hint -> :ok), after: (0 -> :ok)
         {result, signal}
 
       {:dolphin_signal, sig} when signal == nil ->
         Dolphin.Script.stop(pid, {:signal, sig})
         # In the log, so that the status block stays whole below it.
-        Renderer.note(renderer, "#{Signals.name(sig)}: stopping the script (tasks stop, vehicles hold); again to exit at once")
-        await_script(pid, renderer, sig)
+        Renderer.note(renderer, "#{Signals.name(sig)}: stopping the script (tasks stop, vehicles hold)")
+        # Until then another signal is a repeat of this one (Dolphin.CLI.Signals).
+        await_script(pid, renderer, sig, Process.send_after(self(), :signal_hint, Signals.repeat_ms()))
+
+      :signal_hint ->
+        Renderer.note(renderer, "still stopping: Ctrl-C or SIGTERM again exits at once, without waiting for the stops")
+        await_script(pid, renderer, signal)
     end
   end
 
   # From the start of the run to its end (teardown included), a first SIGINT
   # or SIGTERM comes to this process as a message: the script stops as with
-  # `--for` (at once if it comes before the script starts). A second one ends
-  # the run at once, with the status of that signal.
+  # `--for` (at once if it comes before the script starts). A repeat soon
+  # after it changes nothing; a later one ends the run at once
+  # (exit_at_once/4), with the status of that signal.
   defp catch_signals(opts) do
     if opts[:signals] do
-      owner = self()
-
-      relay =
-        spawn_link(fn ->
-          receive do: ({:dolphin_signal, _} = first -> send(owner, first))
-          receive do: ({:dolphin_signal, sig} -> System.halt(Signals.status(sig)))
-        end)
-
-      Signals.catch_signals(relay)
-
-      defer(
-        fn ->
-          Signals.release_signals()
-          Process.unlink(relay)
-          Process.exit(relay, :kill)
-        end,
-        :signals
-      )
+      Signals.catch_signals(self())
+      defer(&Signals.release_signals/0, :signals)
     end
+  end
+
+  # A second signal's last words: the log and the events file get what they
+  # were sent (stopping them writes it), then the line that says why the run
+  # ends without its summary. It runs in Dolphin.CLI.Signals' relay.
+  defp exit_at_once(sig, renderer, writer, err) do
+    Renderer.stop(renderer)
+
+    if writer do
+      try do
+        Dolphin.Telemetry.Writer.stop(writer)
+      catch
+        # Stopped already: the run was closing its outputs.
+        :exit, _ -> :ok
+      end
+    end
+
+    IO.puts(err, "#{Signals.name(sig)} again: exiting at once, without waiting for the stops")
   end
 
   defp start_outputs(opts, origin, out) do
@@ -225,13 +238,15 @@ defmodule Dolphin.CLI.Run do
     {:ok, renderer} = Renderer.start_link(out: out, origin_ms: origin, quiet: opts[:quiet] == true, terminal: terminal)
     defer(fn -> Renderer.stop(renderer) end, :output)
 
-    with :ok <- start_writer(opts[:events], origin) do
+    with {:ok, writer} <- start_writer(opts[:events], origin) do
+      err = Keyword.get(opts, :err, :stderr)
+      if opts[:signals], do: Signals.catch_signals(self(), again: &exit_at_once(&1, renderer, writer, err))
       if opts[:tlog] && !opts[:quiet], do: IO.puts(out, "telemetry log: #{opts[:tlog]}")
       {:ok, renderer}
     end
   end
 
-  defp start_writer(nil, _origin), do: :ok
+  defp start_writer(nil, _origin), do: {:ok, nil}
 
   defp start_writer(path, origin) do
     # A writer that cannot open its file stops in its init, and its exit
@@ -243,7 +258,7 @@ defmodule Dolphin.CLI.Run do
       case Dolphin.Telemetry.Writer.start_link(path: path, origin_ms: origin) do
         {:ok, writer} ->
           defer(fn -> Dolphin.Telemetry.Writer.stop(writer) end, :output)
-          :ok
+          {:ok, writer}
 
         {:error, why} ->
           # (It exits right after saying so; the bound only keeps a surprise from hanging the run.)

@@ -1,55 +1,99 @@
 defmodule Dolphin.CLI.Signals do
   @moduledoc """
-  SIGINT (Ctrl-C) and SIGTERM as messages, so that `mix dolphin.run` stops
-  its script the way `--for` does — tasks stopped, vehicles told to hold, a
-  summary, a `script_finished` event — instead of the VM's default: the
-  Erlang BREAK menu on Ctrl-C, `init:stop/0` (an abrupt shutdown) on SIGTERM.
+  SIGINT (Ctrl-C) and SIGTERM for the mix tasks: from a task's first line
+  to its end, a signal never takes the VM's default (the Erlang BREAK menu
+  on Ctrl-C, `init:stop/0` on SIGTERM: exit status 0 and an EXIT trace).
 
-      signals = Dolphin.CLI.Signals.catch_signals(self())
+  A task first says how a signal ends it while it has nothing to stop in
+  order (`exit_on_signal/2`: a line on standard error, then exit status
+  130 or 143). Where it has something to stop in order — a script, simulated
+  vehicles, a station — it catches them meanwhile (`catch_signals/2`) and
+  gets them as messages; `release_signals/0` gives back what was there
+  before.
+
+      Dolphin.CLI.Signals.exit_on_signal("dolphin.sim", "stopped before the vehicles started")
+      Dolphin.CLI.Signals.catch_signals(self())
       receive do
         {:dolphin_signal, :sigint} -> ...
         {:dolphin_signal, :sigterm} -> ...
       end
       Dolphin.CLI.Signals.release_signals()
 
-  SIGTERM goes through the VM's signal server (`:os.set_signal/2` and a
-  handler in `:erl_signal_server` in place of OTP's). SIGINT cannot (OTP 25
-  keeps it for the BREAK handler): a small C library (`c_src/dolphin_signals.c`,
-  built into `priv/`) catches it; when it was not built, SIGINT keeps its
-  default and `catch_signals/1` says so by leaving it out of its answer.
+  While caught, the first signal is sent; a repeat within `repeat_ms/0` of
+  it is taken as the same request (a key pressed twice, `timeout` signalling
+  the VM and its process group, `kill` given twice) and ignored; one that
+  comes later ends the VM at once, after the catcher's last words
+  (`:again`).
+
+  All signals go to one relay process. SIGTERM reaches it through the VM's
+  signal server (`:os.set_signal/2` and a handler in `:erl_signal_server`
+  in place of OTP's, or of the one `mix.exs` installs while `mix` starts a
+  task). SIGINT cannot (OTP 25 keeps it for the BREAK handler): a small C
+  library (`c_src/dolphin_signals.c`, built into `priv/`) catches it; when
+  it was not built, SIGINT keeps its default and `catch_signals/2` says so
+  by leaving it out of its answer. Before this module is loaded (while
+  `mix` starts the VM and compiles the project) Ctrl-C still opens the
+  BREAK menu.
   """
 
   @behaviour :gen_event
 
-  @typedoc "A signal that stops a run."
+  @typedoc "A signal that stops a task."
   @type signal :: :sigint | :sigterm
+
+  @relay Module.concat(__MODULE__, Relay)
+
+  # A second signal this soon after the first is the same request.
+  @repeat_ms 1_000
+
+  @doc """
+  From now on, while nothing catches them (`catch_signals/2`), SIGINT and
+  SIGTERM end the VM with `status/1`, after the line `mix TASK: SIGNAL:
+  what` on standard error. Only when this VM runs `mix task` from the
+  command line, outside IEx: a task called by a test or from IEx leaves the
+  signals alone. Says whether it took them.
+  """
+  @spec exit_on_signal(String.t(), String.t()) :: boolean()
+  def exit_on_signal(task, what) do
+    command? = command?(task)
+    if command?, do: change({:base, "mix #{task}", what})
+    command?
+  end
+
+  @doc """
+  Whether this VM runs `mix task` from the command line (`mix dolphin.run
+  ...`), outside IEx.
+  """
+  @spec command?(String.t()) :: boolean()
+  def command?(task), do: List.first(System.argv()) == task and not (Code.ensure_loaded?(IEx) and IEx.started?())
 
   @doc """
   From now on SIGTERM (and SIGINT, when the C library is loaded) sends
-  `{:dolphin_signal, signal}` to `pid` instead of its default action.
-  Returns the signals caught.
-  """
-  @spec catch_signals(pid()) :: [signal()]
-  def catch_signals(pid) do
-    :ok = :os.set_signal(:sigterm, :handle)
-    # OTP's own handler (init:stop on SIGTERM) makes way for ours; it comes back in release_signals/0.
-    _ = :gen_event.delete_handler(:erl_signal_server, :erl_signal_handler, :ok)
-    _ = :gen_event.delete_handler(:erl_signal_server, __MODULE__, :ok)
-    :ok = :gen_event.add_handler(:erl_signal_server, __MODULE__, pid)
-    if intercept_sigint(pid) == :ok, do: [:sigint, :sigterm], else: [:sigterm]
-  end
+  `{:dolphin_signal, signal}` to `pid` instead of its default action (see
+  the moduledoc for repeats). Returns the signals caught.
 
-  @doc "Gives SIGINT and SIGTERM back their default actions."
+  Option `:again`: a function of the signal run before a later second
+  signal ends the VM (last words: what to flush, what to say); by default
+  the line `SIGNAL again: exiting at once` on standard error. Called again
+  for the same `pid`, it changes the options and keeps what was caught.
+  """
+  @spec catch_signals(pid(), keyword()) :: [signal()]
+  def catch_signals(pid, opts \\ []), do: change({:forward, pid, opts})
+
+  @doc """
+  Ends the calling process's `catch_signals/2` (a catcher that ends does
+  too): back to what was there before — another catch, `exit_on_signal/2`,
+  or with neither, SIGINT and SIGTERM get their default actions back.
+  """
   @spec release_signals() :: :ok
   def release_signals do
-    restore_sigint()
-    _ = :gen_event.delete_handler(:erl_signal_server, __MODULE__, :ok)
-
-    unless :erl_signal_handler in :gen_event.which_handlers(:erl_signal_server),
-      do: :ok = :gen_event.add_handler(:erl_signal_server, :erl_signal_handler, [])
-
+    if Process.whereis(@relay), do: change({:release, self()})
     :ok
   end
+
+  @doc "How long after a first signal another is taken as its repeat (real milliseconds)."
+  @spec repeat_ms() :: pos_integer()
+  def repeat_ms, do: @repeat_ms
 
   @doc """
   The signal in words, for the log and the summary.
@@ -62,7 +106,7 @@ defmodule Dolphin.CLI.Signals do
   def name(:sigterm), do: "terminated (SIGTERM)"
 
   @doc """
-  The exit status of a run the signal stopped: 128 + the signal's number, as a shell says.
+  The exit status of a task the signal stopped: 128 + the signal's number, as a shell says.
 
       iex> Dolphin.CLI.Signals.status(:sigterm)
       143
@@ -88,23 +132,173 @@ defmodule Dolphin.CLI.Signals do
     :ok
   end
 
+  # --- the relay: one process per VM, as the signals are the VM's ---
+
+  # A change, made by the relay in the order of the signals it gets: a
+  # signal that came before the change is handled as things were. Returns
+  # the signals caught.
+  defp change(request) do
+    relay = Process.whereis(@relay) || start_relay()
+    ref = Process.monitor(relay)
+    send(relay, {:change, self(), ref, request})
+
+    receive do
+      {^ref, caught} ->
+        Process.demonitor(ref, [:flush])
+        caught
+
+      # It had just ended (released by another caller): a new one takes the change.
+      {:DOWN, ^ref, _, _, _} ->
+        change(request)
+    end
+  end
+
+  defp start_relay do
+    # Its lines go to the standard error of now: a script being compiled has
+    # :standard_error registered to a capture of its warnings for a while.
+    err = Process.whereis(:standard_error) || :standard_error
+    relay = spawn(fn -> receive(do: ({:installed, caught} -> relay(%{stack: [], caught: caught, err: err}))) end)
+
+    try do
+      Process.register(relay, @relay)
+      send(relay, {:installed, install(relay)})
+      relay
+    rescue
+      # Another caller started one first.
+      ArgumentError ->
+        Process.exit(relay, :kill)
+        Process.whereis(@relay) || start_relay()
+    end
+  end
+
+  # The stack holds what a signal does, the top's does it: {:forward, pid,
+  # opts, monitor, first} (first: when its first signal came, or nil), the
+  # newest on top, above at most one {:exit, prefix, what} at the bottom.
+  defp relay(state) do
+    receive do
+      {:dolphin_signal, sig} ->
+        relay(on_signal(state, sig, System.monotonic_time(:millisecond)))
+
+      {:change, from, ref, request} ->
+        state = apply_change(state, request)
+        # Uninstalled before the answer: a relay started after it installs on a clean slate.
+        if state.stack == [], do: uninstall()
+        send(from, {ref, state.caught})
+        if state.stack != [], do: relay(state)
+
+      {:DOWN, mref, :process, _, _} ->
+        # A catcher that ended without releasing: what was below it is back.
+        state = %{state | stack: Enum.reject(state.stack, &match?({:forward, _, _, ^mref, _}, &1))}
+        if state.stack == [], do: uninstall(), else: relay(state)
+    end
+  end
+
+  defp on_signal(%{stack: [{:forward, pid, opts, mref, nil} | rest]} = state, sig, now) do
+    send(pid, {:dolphin_signal, sig})
+    %{state | stack: [{:forward, pid, opts, mref, now} | rest]}
+  end
+
+  defp on_signal(%{stack: [{:forward, _, _, _, first} | _]} = state, _sig, now) when now - first < @repeat_ms, do: state
+
+  defp on_signal(%{stack: [{:forward, _, opts, _, _} | _]} = state, sig, _now) do
+    case opts[:again] do
+      nil -> IO.puts(state.err, "#{name(sig)} again: exiting at once")
+      again -> last_words(again, sig)
+    end
+
+    System.halt(status(sig))
+  end
+
+  defp on_signal(%{stack: [{:exit, prefix, what} | _]} = state, sig, _now) do
+    IO.puts(state.err, "#{prefix}: #{name(sig)}: #{what}")
+    System.halt(status(sig))
+  end
+
+  defp on_signal(state, _sig, _now), do: state
+
+  # Whatever goes wrong in them, the VM still ends.
+  defp last_words(fun, sig) do
+    fun.(sig)
+  catch
+    _, _ -> :ok
+  end
+
+  defp apply_change(state, {:base, prefix, what}),
+    do: %{state | stack: Enum.filter(state.stack, &match?({:forward, _, _, _, _}, &1)) ++ [{:exit, prefix, what}]}
+
+  defp apply_change(%{stack: [{:forward, pid, _, mref, first} | rest]} = state, {:forward, pid, opts}),
+    do: %{state | stack: [{:forward, pid, opts, mref, first} | rest]}
+
+  defp apply_change(state, {:forward, pid, opts}),
+    do: %{state | stack: [{:forward, pid, opts, Process.monitor(pid), nil} | state.stack]}
+
+  defp apply_change(state, {:release, pid}) do
+    case Enum.split_while(state.stack, &(not match?({:forward, ^pid, _, _, _}, &1))) do
+      {above, [{:forward, _, _, mref, _} | below]} ->
+        Process.demonitor(mref, [:flush])
+        %{state | stack: above ++ below}
+
+      _ ->
+        state
+    end
+  end
+
+  # SIGTERM to `relay` through the signal server, in place of whichever
+  # handler was there (OTP's, or mix.exs's while mix started the task) in
+  # one step, so that no SIGTERM finds none; SIGINT through the C library.
+  defp install(relay) do
+    :ok = :os.set_signal(:sigterm, :handle)
+
+    case :gen_event.which_handlers(:erl_signal_server) do
+      [] ->
+        :ok = :gen_event.add_handler(:erl_signal_server, __MODULE__, relay)
+
+      handlers ->
+        if __MODULE__ in handlers do
+          # One left by a relay that was killed.
+          :ok = :gen_event.call(:erl_signal_server, __MODULE__, {:relay, relay})
+        else
+          [first | others] = handlers
+          :ok = :gen_event.swap_handler(:erl_signal_server, {first, :swap}, {__MODULE__, relay})
+          Enum.each(others, &:gen_event.delete_handler(:erl_signal_server, &1, :swap))
+        end
+    end
+
+    if intercept_sigint(relay) == :ok, do: [:sigint, :sigterm], else: [:sigterm]
+  end
+
+  defp uninstall do
+    restore_sigint()
+    handlers = :gen_event.which_handlers(:erl_signal_server)
+
+    cond do
+      __MODULE__ in handlers -> :ok = :gen_event.swap_handler(:erl_signal_server, {__MODULE__, :swap}, {:erl_signal_handler, []})
+      :erl_signal_handler in handlers -> :ok
+      true -> :ok = :gen_event.add_handler(:erl_signal_server, :erl_signal_handler, [])
+    end
+
+    Process.unregister(@relay)
+  end
+
   # --- the handler in :erl_signal_server ---
 
   @impl :gen_event
-  def init(pid), do: {:ok, pid}
+  def init({relay, _swapped_out}), do: {:ok, relay}
+  def init(relay), do: {:ok, relay}
 
   @impl :gen_event
-  def handle_event(:sigterm, pid) do
-    send(pid, {:dolphin_signal, :sigterm})
-    {:ok, pid}
+  def handle_event(:sigterm, relay) do
+    send(relay, {:dolphin_signal, :sigterm})
+    {:ok, relay}
   end
 
   # The other signals keep OTP's actions (SIGUSR1: a crash dump, SIGQUIT: halt).
-  def handle_event(other, pid) do
+  def handle_event(other, relay) do
     {:ok, _} = :erl_signal_handler.handle_event(other, [])
-    {:ok, pid}
+    {:ok, relay}
   end
 
   @impl :gen_event
-  def handle_call(_request, pid), do: {:ok, :ok, pid}
+  def handle_call({:relay, relay}, _old), do: {:ok, :ok, relay}
+  def handle_call(_request, relay), do: {:ok, :ok, relay}
 end

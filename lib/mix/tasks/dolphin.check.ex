@@ -54,12 +54,14 @@ defmodule Mix.Tasks.Dolphin.Check do
 
   ## Exit status
 
-  0 — no error (warnings and notes may remain); 1 — the check found errors;
-  2 — bad usage (an unknown option, a value out of range, no such script
-  or a directory given for it, a bad fleet file: the message names the
-  flag or the file, the value and what is allowed);
-  with `--connect`, 1 also when the link cannot be opened or no vehicle
-  reported its position in time.
+  As every task's (README.md, "Exit status"): 0 — no error (warnings and
+  notes may remain); 1 — the check found errors; 2 — bad usage (an unknown
+  option, a value out of range, no such script or a directory given for
+  it, a bad fleet file: the message names the flag or the file, the value
+  and what is allowed); with `--connect`, 1 also when the link cannot be
+  opened or no vehicle reported its position in time; 130 / 143 — Ctrl-C /
+  SIGTERM stopped it before it finished (never 0: an interrupted check
+  found nothing).
   """
 
   use Mix.Task
@@ -71,6 +73,9 @@ defmodule Mix.Tasks.Dolphin.Check do
 
   @impl Mix.Task
   def run(argv) do
+    # An interrupted check found nothing: never the status of one that found no error.
+    Dolphin.CLI.Signals.exit_on_signal("dolphin.check", "the check did not finish")
+
     case main(argv) do
       0 -> :ok
       code -> exit({:shutdown, code})

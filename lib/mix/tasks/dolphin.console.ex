@@ -49,6 +49,13 @@ defmodule Mix.Tasks.Dolphin.Console do
   With neither `--connect` nor `--sim` (nor `--join`), the links of the configuration are
   used (`config :dolphin, links: [...]`), or if there are none the ground
   station listens on `Dolphin.Link.default_endpoint/0` (`udpin:0.0.0.0:14550`).
+
+  ## Exit status
+
+  As every task's (README.md, "Exit status"): 1 — the links or vehicles
+  could not be started; 2 — bad usage (an unknown option, a bad value, run
+  without IEx). In the console, Ctrl-C and SIGTERM keep IEx's meanings
+  (the BREAK menu; the VM stops).
   """
 
   use Mix.Task
@@ -71,13 +78,16 @@ defmodule Mix.Tasks.Dolphin.Console do
 
   @impl Mix.Task
   def run(argv) do
+    # Outside IEx (where Ctrl-C and SIGTERM keep IEx's meanings) it only says how to start it.
+    Dolphin.CLI.Signals.exit_on_signal("dolphin.console", "stopped before the console started")
+
     opts =
       case parse(argv) do
         {:ok, opts} -> opts
         {:error, error} -> Mix.raise("mix dolphin.console: #{Exception.message(error)}\n#{@usage}", exit_status: 2)
       end
 
-    unless iex?(), do: Mix.raise("mix dolphin.console starts a console for IEx: run it as `iex -S mix dolphin.console #{Enum.join(argv, " ")}`")
+    unless iex?(), do: Mix.raise("mix dolphin.console starts a console for IEx: run it as `iex -S mix dolphin.console #{Enum.join(argv, " ")}`", exit_status: 2)
 
     Mix.Task.run("app.start")
 

@@ -66,13 +66,17 @@ defmodule Mix.Tasks.Dolphin.Plan do
   The missions `FILE` defines, as `export` finds them, and the statements
   it skipped.
 
-  Bad usage (an unknown command or option, a value out of range: the
-  message names the flag, the value and what is allowed) stops the task
-  with exit status 2; other errors (a missing file, no such mission, a
-  malformed plan, no vehicle heard, a transfer that failed) with a message
-  and exit status 1. `--home` takes latitude -90..90, longitude -180..180
-  and altitude -1000..10000 m; speeds, `--timeout` more than 0; `--vehicle`
-  a system id 1..254.
+  ## Exit status
+
+  As every task's (README.md, "Exit status"): 1 — no such mission, a
+  malformed plan, a link that cannot be opened (a port in use), no vehicle
+  heard, a transfer that failed; 2 — bad usage (an unknown command or
+  option, wrong arguments, a value out of range, a bad endpoint, no such
+  file or a directory given for it: the message names the flag, the value
+  and what is allowed); 130 / 143 — Ctrl-C / SIGTERM stopped it. The
+  message says what went wrong. `--home` takes latitude -90..90, longitude
+  -180..180 and altitude -1000..10000 m; speeds, `--timeout` more than 0;
+  `--vehicle` a system id 1..254.
   """
 
   use Mix.Task
@@ -94,9 +98,12 @@ defmodule Mix.Tasks.Dolphin.Plan do
 
   @impl Mix.Task
   def run(argv) do
+    verb = List.first(argv)
+    # A transfer cut short has nothing of ours to undo but its link, which ends with the VM.
+    Dolphin.CLI.Signals.exit_on_signal("dolphin.plan", if(verb in ["upload", "download"], do: "the #{verb} did not finish", else: "stopped before it finished"))
     Mix.Task.run("app.config")
     # Transfers need the links and vehicles of the application.
-    if List.first(argv) in ["upload", "download"], do: Mix.Task.run("app.start")
+    if verb in ["upload", "download"], do: Mix.Task.run("app.start")
 
     case main(argv) do
       {:ok, text} -> Mix.shell().info(text)
@@ -115,7 +122,7 @@ defmodule Mix.Tasks.Dolphin.Plan do
       case OptionParser.parse(argv, strict: Values.switches(@options)) do
         {opts, args, []} ->
           case Values.check(opts, @options) do
-            {:ok, opts} -> command(args, opts)
+            {:ok, opts} -> args |> command(opts) |> missing_input(args)
             {:error, e} -> usage(Exception.message(e))
           end
 
@@ -133,6 +140,21 @@ defmodule Mix.Tasks.Dolphin.Plan do
 
   # The steps below say what went wrong in words; main/1 makes the error of them.
   defp usage(message), do: {:error, {:usage, message}}
+
+  # A failure because the file to read is not there (or is a directory): the
+  # command line named the wrong one, bad usage (README.md, "Exit status").
+  defp missing_input({:error, why} = error, args) when is_binary(why) or is_exception(why) do
+    file =
+      case args do
+        ["export", file, _name, _out] -> file
+        [verb, file] when verb in ["import", "list", "upload"] -> file
+        _ -> nil
+      end
+
+    if file && not File.regular?(file), do: usage(if(is_binary(why), do: why, else: Exception.message(why))), else: error
+  end
+
+  defp missing_input(result, _args), do: result
 
   defp command(["export", file, name, out], opts) do
     with :ok <- only(opts, [:home, :cruise_speed, :hover_speed], "export"),

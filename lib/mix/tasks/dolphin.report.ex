@@ -20,6 +20,13 @@ defmodule Mix.Tasks.Dolphin.Report do
 
   A damaged log still gives a report, which says what was skipped; events of
   another run are refused.
+
+  ## Exit status
+
+  As every task's (README.md, "Exit status"): 1 — no report (a log with no
+  vehicle in it, events of another run, a report that cannot be written);
+  2 — bad usage (an unknown option, no log given, a log or events file
+  that does not exist).
   """
 
   use Mix.Task
@@ -30,6 +37,8 @@ defmodule Mix.Tasks.Dolphin.Report do
 
   @impl Mix.Task
   def run(args) do
+    Dolphin.CLI.Signals.exit_on_signal("dolphin.report", "no report was written")
+
     case OptionParser.parse(args, strict: @switches, aliases: @aliases) do
       {opts, [tlog], []} ->
         # The report reads the MAVLink dialect only: no vehicles, links or clock.
@@ -38,16 +47,23 @@ defmodule Mix.Tasks.Dolphin.Report do
 
         case make(tlog, opts[:events], out) do
           {:ok, line} -> Mix.shell().info(line)
-          {:error, error} -> Mix.raise("dolphin.report: " <> Exception.message(error))
+          {:error, error} -> Mix.raise("dolphin.report: " <> Exception.message(error), exit_status: status(error))
         end
 
       {_, _, [{switch, _} | _]} ->
-        Mix.raise("dolphin.report: unknown or malformed option #{switch}\n" <> @usage)
+        Mix.raise("dolphin.report: unknown or malformed option #{switch}\n" <> @usage, exit_status: 2)
 
       {_, _, []} ->
-        Mix.raise(@usage)
+        Mix.raise(@usage, exit_status: 2)
     end
   end
+
+  # A log or events file that is not there: the command line named the wrong
+  # one (README.md, "Exit status").
+  defp status(%Dolphin.Report.Error{reason: reason, path: path}) when reason in [:tlog_unreadable, :events_unreadable],
+    do: if(path && File.exists?(path), do: 1, else: 2)
+
+  defp status(_error), do: 1
 
   @doc """
   Writes the report and returns the line the task prints.

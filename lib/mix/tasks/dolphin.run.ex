@@ -113,21 +113,28 @@ defmodule Mix.Tasks.Dolphin.Run do
   Ctrl-C (SIGINT) or SIGTERM stops the script the way `--for` does: running
   tasks are stopped (each says why), vehicles are told to hold, the summary
   is printed and the events end with `script_finished` (result `stopped`).
-  A second Ctrl-C or SIGTERM exits at once, without waiting for the stops.
-  (Ctrl-C is caught by `c_src/dolphin_signals.c`, built into `priv/` with
-  the project; without a C compiler it opens the Erlang BREAK menu. Under
-  IEx both keep their usual meaning.)
+  The same signal again within a second is taken as a repeat (a key pressed
+  twice, `timeout` signalling the run and its process group); once the log
+  says `still stopping`, another exits at once, without waiting for the
+  stops: the log and the `--events` file keep what they had, and a line
+  says so. Before the run starts (the script compiled, the pre-flight
+  check) a signal ends the command at once, saying so. (Ctrl-C is caught
+  by `c_src/dolphin_signals.c`, built into `priv/` with the project;
+  without a C compiler it opens the Erlang BREAK menu, as it does while
+  `mix` itself starts. Under IEx both keep their usual meaning.)
 
   ## Exit status
 
-  0 — the script completed (or `--for` ended it); 1 — the script failed
-  (could not compile, the pre-flight check found errors, a task failed, `halt`, a pick timed out: the message
-  says what, where and why) or its vehicles could not be started (a port in
-  use, a SITL binary missing, the `--web` port in use); 2 — bad usage (an
-  unknown option, a value out of range, a bad endpoint, no such script, a
-  directory given for a file: the message names the flag, the value and
-  what is allowed); 130 — Ctrl-C (SIGINT)
-  stopped it; 143 — SIGTERM stopped it (128 + the signal's number, as a shell says).
+  As every task's (README.md, "Exit status"): 0 — the script completed (or
+  `--for` ended it); 1 — the script failed (could not compile, the
+  pre-flight check found errors, a task failed, `halt`, a pick timed out:
+  the message says what, where and why) or its vehicles could not be
+  started (a port in use, a SITL binary missing, the `--web` port in use);
+  2 — bad usage (an unknown option, a value out of range, a bad endpoint,
+  no such script, a directory given for a file: the message names the flag,
+  the value and what is allowed); 130 — Ctrl-C (SIGINT) stopped it; 143 —
+  SIGTERM stopped it (128 + the signal's number, as a shell says), at any
+  moment from the task's start.
   """
 
   use Mix.Task
@@ -169,8 +176,11 @@ defmodule Mix.Tasks.Dolphin.Run do
       {:ok, _} = Task.start(fn -> main(argv, plain: true, ask: &Dolphin.Console.Runs.ask/1) end)
       :ok
     else
+      # Until the run catches them (while it runs, they stop the script: see
+      # "Interrupting a run"), Ctrl-C and SIGTERM end the command at once.
+      Signals.exit_on_signal("dolphin.run", "no script was running; exiting")
+
       case parse(argv) do
-        # Ctrl-C and SIGTERM stop the script (see "Exit status"), not the VM.
         {:ok, file, opts} ->
           case execute(file, opts, signals: true) do
             0 -> :ok

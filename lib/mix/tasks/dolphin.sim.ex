@@ -33,14 +33,19 @@ defmodule Mix.Tasks.Dolphin.Sim do
 
   While it runs, a status line per vehicle is printed every 10 seconds (real time).
 
-  A value out of range (or that means nothing: `--for 0`) is bad usage,
-  exit status 2, with a message that names the flag, the value and what is
-  allowed.
+  ## Exit status
+
+  As every task's (README.md, "Exit status"): 0 — `--for` ended it; 1 —
+  the vehicles could not be started; 2 — bad usage (an unknown option, a
+  value out of range or that means nothing, such as `--for 0`: the message
+  names the flag, the value and what is allowed); 130 / 143 — Ctrl-C /
+  SIGTERM stopped it: the vehicles are stopped first (a second signal, a
+  second later or more, exits at once).
   """
 
   use Mix.Task
 
-  alias Dolphin.CLI.Values
+  alias Dolphin.CLI.{Signals, Values}
 
   @options [
     count: :vehicles,
@@ -58,6 +63,8 @@ defmodule Mix.Tasks.Dolphin.Sim do
 
   @impl Mix.Task
   def run(argv) do
+    signals? = Signals.exit_on_signal("dolphin.sim", "stopped before the vehicles started")
+
     opts =
       case parse(argv) do
         {:ok, opts} -> opts
@@ -66,6 +73,8 @@ defmodule Mix.Tasks.Dolphin.Sim do
 
     Mix.Task.run("app.start")
     sysids = start!(opts)
+    # While they fly, Ctrl-C and SIGTERM stop them in order (wait/2).
+    if signals?, do: Signals.catch_signals(self())
     unless opts[:quiet], do: Mix.shell().info("simulating #{length(sysids)} vehicle(s) #{Dolphin.Fleet.VehicleSet.format(sysids)}, sending to #{opts[:gcs]}")
     wait(sysids, opts)
   end
@@ -115,9 +124,16 @@ defmodule Mix.Tasks.Dolphin.Sim do
     if left <= 0 do
       Dolphin.Sim.stop()
     else
-      Process.sleep(left)
-      unless quiet?, do: Enum.each(sysids, &status/1)
-      loop(sysids, until, quiet?)
+      receive do
+        {:dolphin_signal, sig} ->
+          Mix.shell().info("#{Signals.name(sig)}: stopping the simulated vehicles")
+          Dolphin.Sim.stop()
+          exit({:shutdown, Signals.status(sig)})
+      after
+        left ->
+          unless quiet?, do: Enum.each(sysids, &status/1)
+          loop(sysids, until, quiet?)
+      end
     end
   end
 

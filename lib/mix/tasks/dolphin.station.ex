@@ -34,9 +34,12 @@ defmodule Mix.Tasks.Dolphin.Station do
 
   ## Exit status
 
-  0 — stopped (Ctrl-C or SIGTERM); 1 — it could not start (distribution,
-  a port in use); 2 — bad usage (no `--sname`/`--name`, an unknown option,
-  a value out of range: the message names the flag, the value and what is allowed).
+  As every task's (README.md, "Exit status"): 1 — it could not start
+  (distribution, a port in use); 2 — bad usage (no `--sname`/`--name`, an
+  unknown option, a value out of range: the message names the flag, the
+  value and what is allowed); 130 — Ctrl-C stopped it; 143 — SIGTERM did
+  (its links and vehicles stopped first; a second signal, a second later or
+  more, ends it at once).
   """
 
   use Mix.Task
@@ -59,7 +62,9 @@ defmodule Mix.Tasks.Dolphin.Station do
 
   @impl Mix.Task
   def run(argv) do
-    case main(argv, signals: true) do
+    signals? = Signals.exit_on_signal("dolphin.station", "stopped before the station started")
+
+    case main(argv, signals: signals?) do
       0 -> :ok
       code -> exit({:shutdown, code})
     end
@@ -68,11 +73,11 @@ defmodule Mix.Tasks.Dolphin.Station do
   @doc """
   Does the work of the task and returns the exit status. `io` options:
   `:out`, `:err` (devices), `:signals` (SIGINT and SIGTERM stop the
-  station), `:ready` (a pid told `{Mix.Tasks.Dolphin.Station, :ready,
+  station, with their status), `:ready` (a pid told `{Mix.Tasks.Dolphin.Station, :ready,
   node}` once the station runs). The station also stops on a
   `{Mix.Tasks.Dolphin.Station, :stop}` message to the calling process.
   """
-  @spec main([String.t()], keyword()) :: 0 | 1 | 2
+  @spec main([String.t()], keyword()) :: 0 | 1 | 2 | 130 | 143
   def main(argv, io \\ []) do
     out = Keyword.get(io, :out, :stdio)
     err = Keyword.get(io, :err, :stderr)
@@ -117,6 +122,9 @@ defmodule Mix.Tasks.Dolphin.Station do
     if k = opts[:speedup], do: Dolphin.Clock.set_speedup(k)
     Process.put(:dolphin_station_cleanup, [])
     Dolphin.Vehicles.subscribe(:all)
+    # Caught until its links and vehicles are stopped: one that comes while
+    # it starts stops it once started (wait/1); a second one, later, ends it at once.
+    if io[:signals], do: Signals.catch_signals(self())
 
     try do
       with {:ok, lines} <- Dolphin.CLI.Cluster.start(opts, nil),
@@ -126,10 +134,7 @@ defmodule Mix.Tasks.Dolphin.Station do
         IO.puts(out, "ground station #{node()} (#{if k == 1, do: "real time", else: "speed-up #{Dolphin.Console.Format.num(k / 1)}x"}); Ctrl-C stops it")
         Enum.each(Enum.drop(lines, 1) ++ more ++ sims, &IO.puts(out, "  " <> &1))
         if pid = io[:ready], do: send(pid, {__MODULE__, :ready, node()})
-        if io[:signals], do: Signals.catch_signals(self())
         wait(out)
-        if io[:signals], do: Signals.release_signals()
-        0
       else
         {:error, e} ->
           IO.puts(err, "mix dolphin.station: #{Exception.message(e)}")
@@ -139,6 +144,7 @@ defmodule Mix.Tasks.Dolphin.Station do
       Dolphin.PubSub.unsubscribe(:vehicles)
       Enum.each(Process.delete(:dolphin_station_cleanup), & &1.())
       Dolphin.Clock.set_speedup(previous)
+      if io[:signals], do: Signals.release_signals()
     end
   end
 
@@ -153,9 +159,11 @@ defmodule Mix.Tasks.Dolphin.Station do
 
       {:dolphin_signal, sig} ->
         IO.puts(out, "#{Signals.name(sig)}: the station stops")
+        Signals.status(sig)
 
       {__MODULE__, :stop} ->
         IO.puts(out, "the station stops")
+        0
     end
   end
 

@@ -22,7 +22,11 @@ defmodule Mix.Tasks.Mavlink.Decode do
       they are decoded: a capture may mix signed and unsigned traffic)
 
   Frames whose message id the dialect does not define are counted, not printed.
-  Exits with status 1 if the file cannot be read.
+
+  ## Exit status
+
+  As every task's (README.md, "Exit status"): 1 — the file cannot be read;
+  2 — bad usage (an unknown option, a bad key, no such file).
   """
 
   use Mix.Task
@@ -34,6 +38,8 @@ defmodule Mix.Tasks.Mavlink.Decode do
 
   @impl Mix.Task
   def run(args) do
+    Dolphin.CLI.Signals.exit_on_signal("mavlink.decode", "stopped before the end of the input")
+
     case OptionParser.parse(args, strict: @switches) do
       {opts, [file], []} ->
         signing = signing!(opts)
@@ -43,16 +49,16 @@ defmodule Mix.Tasks.Mavlink.Decode do
         IO.puts(:stderr, summary(stats))
 
       {_, _, [{switch, _} | _]} ->
-        Mix.raise("mavlink.decode: unknown or malformed option #{switch}")
+        usage!("mavlink.decode: unknown or malformed option #{switch}")
 
       _ ->
-        Mix.raise("usage: mix mavlink.decode FILE [--tlog] [--key HEX] [--reject-unsigned]")
+        usage!("usage: mix mavlink.decode FILE [--tlog] [--key HEX] [--reject-unsigned]")
     end
   end
 
   defp signing!(opts) do
     case {opts[:key], opts[:reject_unsigned]} do
-      {nil, true} -> Mix.raise("mavlink.decode: --reject-unsigned needs --key")
+      {nil, true} -> usage!("mavlink.decode: --reject-unsigned needs --key")
       {nil, _} -> nil
       {hex, reject?} -> new_signing(hex, if(reject?, do: :reject, else: :accept))
     end
@@ -63,7 +69,7 @@ defmodule Mix.Tasks.Mavlink.Decode do
   defp new_signing(hex, unsigned) do
     case Signing.decode_key(hex) do
       {:ok, key} -> Signing.new(key: key, unsigned: unsigned, timestamp: 0)
-      :error -> Mix.raise("mavlink.decode: --key must be 64 hex digits (a 32-byte key), got #{inspect(hex)}")
+      :error -> usage!("mavlink.decode: --key must be 64 hex digits (a 32-byte key), got #{inspect(hex)}")
     end
   end
 
@@ -76,9 +82,13 @@ defmodule Mix.Tasks.Mavlink.Decode do
   defp open!(path) do
     case File.open(path, [:read, :binary, :raw, :read_ahead]) do
       {:ok, io} -> io
-      {:error, why} -> Mix.raise("mavlink.decode: cannot read #{path}: #{:file.format_error(why)}")
+      # A file that is not there is bad usage (2); one that is but cannot be read, a failure (1).
+      {:error, why} -> Mix.raise("mavlink.decode: cannot read #{path}: #{:file.format_error(why)}", exit_status: if(why == :enoent, do: 2, else: 1))
     end
   end
+
+  # README.md, "Exit status".
+  defp usage!(message), do: Mix.raise(message, exit_status: 2)
 
   @doc """
   Reads `input` (an IO device) to its end, writes one JSON line per decoded

@@ -13,7 +13,8 @@ defmodule Mix.Tasks.Mavlink.Encode do
 
   `FILE` may be `-` for standard input. Blank lines are skipped. A line that
   cannot be encoded is reported on standard error with its line number, and the
-  task exits with status 1 after the whole file.
+  task exits with status 1 after the whole file (as every task's exit
+  status, README.md, "Exit status": 2 — bad usage, such as no such file).
   """
 
   use Mix.Task
@@ -22,6 +23,8 @@ defmodule Mix.Tasks.Mavlink.Encode do
 
   @impl Mix.Task
   def run(args) do
+    Dolphin.CLI.Signals.exit_on_signal("mavlink.encode", "stopped before the end of the input")
+
     case OptionParser.parse(args, strict: []) do
       {_, [file], []} ->
         lines = if file == "-", do: IO.stream(:stdio, :line), else: stream!(file)
@@ -32,14 +35,15 @@ defmodule Mix.Tasks.Mavlink.Encode do
         end
 
       _ ->
-        Mix.raise("usage: mix mavlink.encode FILE")
+        Mix.raise("usage: mix mavlink.encode FILE", exit_status: 2)
     end
   end
 
   defp stream!(path) do
+    # No such file, or a directory: bad usage (README.md, "Exit status").
     case Dolphin.CLI.Values.file_problem(path, "file of JSON records") do
       nil -> File.stream!(path)
-      problem -> Mix.raise("mavlink.encode: #{problem}")
+      problem -> Mix.raise("mavlink.encode: #{problem}", exit_status: 2)
     end
   end
 

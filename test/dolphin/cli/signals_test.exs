@@ -1,5 +1,9 @@
 defmodule Dolphin.CLI.SignalsTest do
-  # Signals this test VM itself: nothing else may catch them meanwhile.
+  # Signals this test VM itself: nothing else may catch them meanwhile. Each
+  # catcher is sent one signal only: a second, later one would end this VM
+  # (the tasks' "again: exiting at once"; it and the repeats are tested on
+  # the tasks as OS processes, test/mix/tasks/*signals_test.exs). A test
+  # process that ends releases what it caught.
   use ExUnit.Case, async: false
 
   alias Dolphin.CLI.Signals
@@ -8,25 +12,83 @@ defmodule Dolphin.CLI.SignalsTest do
 
   defp kill_self(signal), do: {_, 0} = System.cmd("kill", ["-#{signal}", System.pid()])
 
+  defp handlers, do: :gen_event.which_handlers(:erl_signal_server)
+
   test "while caught, SIGTERM (and SIGINT, with the C library) come as messages; released, OTP's handler is back" do
     caught = Signals.catch_signals(self())
-    on_exit(&Signals.release_signals/0)
     assert :sigterm in caught
-    refute :erl_signal_handler in :gen_event.which_handlers(:erl_signal_server)
+    refute :erl_signal_handler in handlers()
 
     kill_self("TERM")
     assert_receive {:dolphin_signal, :sigterm}, 10_000
+    assert :ok = Signals.release_signals()
 
     # Without the library SIGINT would open the BREAK menu of this VM: only signalled when caught.
-    if :sigint in caught do
+    if :sigint in Signals.catch_signals(self()) do
       kill_self("INT")
       assert_receive {:dolphin_signal, :sigint}, 10_000
     end
 
     assert :ok = Signals.release_signals()
-    handlers = :gen_event.which_handlers(:erl_signal_server)
-    assert :erl_signal_handler in handlers
-    refute Signals in handlers
+    assert :erl_signal_handler in handlers()
+    refute Signals in handlers()
+  end
+
+  test "a catcher caught above another gets the signals until it releases them, then the one below does" do
+    me = self()
+
+    above =
+      spawn_link(fn ->
+        receive(do: (:go -> Signals.catch_signals(self())))
+        send(me, :caught)
+        receive(do: ({:dolphin_signal, _} = msg -> send(me, {:above, msg})))
+        receive(do: (:release -> Signals.release_signals()))
+        send(me, :released)
+        receive(do: (:never -> :ok))
+      end)
+
+    Signals.catch_signals(self())
+    send(above, :go)
+    assert_receive :caught
+    kill_self("TERM")
+    assert_receive {:above, {:dolphin_signal, :sigterm}}, 10_000
+    refute_received {:dolphin_signal, _}
+
+    send(above, :release)
+    assert_receive :released
+    kill_self("TERM")
+    assert_receive {:dolphin_signal, :sigterm}, 10_000
+
+    Signals.release_signals()
+    assert :erl_signal_handler in handlers()
+  end
+
+  test "a catcher that ends without releasing them gives them back" do
+    catcher = spawn(fn -> receive(do: (:never -> :ok)) end)
+    Signals.catch_signals(catcher)
+    refute :erl_signal_handler in handlers()
+
+    ref = Process.monitor(catcher)
+    Process.exit(catcher, :kill)
+    assert_receive {:DOWN, ^ref, _, _, _}
+    Dolphin.Test.Wait.until(fn -> :erl_signal_handler in handlers() end)
+    refute Signals in handlers()
+  end
+
+  test "caught again by the same process, only the options change: one release gives the signals back" do
+    Signals.catch_signals(self())
+    Signals.catch_signals(self(), again: fn _ -> :ok end)
+    kill_self("TERM")
+    assert_receive {:dolphin_signal, :sigterm}, 10_000
+
+    Signals.release_signals()
+    assert :erl_signal_handler in handlers()
+  end
+
+  test "a task called from a test or from IEx leaves the signals alone" do
+    refute Signals.command?("dolphin.run")
+    refute Signals.exit_on_signal("dolphin.run", "no script was running; exiting")
+    assert :erl_signal_handler in handlers()
   end
 
   test "the C library is built and loaded on this machine (it has a C compiler)" do

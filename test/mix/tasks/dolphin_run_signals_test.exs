@@ -4,12 +4,10 @@ defmodule Mix.Tasks.Dolphin.RunSignalsTest do
   # a simulator of this VM: it changes the clock's speed-up, so not async.
   use ExUnit.Case, async: false
 
+  import Dolphin.Test.MixCommand, only: [kill: 2, kill_twice: 3, wait_for: 2, wait_exit: 2, open: 1]
+
   @moduletag :tmp_dir
   @moduletag timeout: 300_000
-
-  # Real ms any one step of a child run may take on a loaded machine (a VM
-  # boot, a vehicle arming at speed-up 10): generous, never a measurement.
-  @step 120_000
 
   @hover """
   use Dolphin.Script
@@ -89,42 +87,93 @@ defmodule Mix.Tasks.Dolphin.RunSignalsTest do
     end
   end
 
-  test "a second Ctrl-C exits at once, without waiting for the stop", %{tmp_dir: dir} do
+  @patrol """
+  use Dolphin.Script
+  v = pick()
+  forever do
+    execute %{v => Dolphin.Engine.TestPlatform.task("patrol", duration: :infinity)}
+  end
+  """
+
+  # A task whose stop takes 14 s of clock time (the stop timeout is 15 s).
+  @slow_stop """
+  use Dolphin.Script
+  v = pick()
+  execute %{v => Dolphin.Engine.TestPlatform.task("slow", duration: :infinity, stop_ms: 14_000)}
+  """
+
+  defp event_lines(events), do: events |> File.read!() |> String.split("\n", trim: true) |> Enum.map(&:jiffy.decode(&1, [:return_maps]))
+
+  test "a second Ctrl-C, once the log says the stop goes on, exits at once, saying so, the events file written", %{tmp_dir: dir} do
     script = Path.join(dir, "slow_stop.exs")
-
-    # A task whose stop takes 14 s of clock time (the stop timeout is 15 s).
-    File.write!(script, """
-    use Dolphin.Script
-    v = pick()
-    execute %{v => Dolphin.Engine.TestPlatform.task("slow", duration: :infinity, stop_ms: 14_000)}
-    """)
-
+    File.write!(script, @slow_stop)
     events = Path.join(dir, "events.jsonl")
     port = run_mix(["dolphin.run", script, "--fake", "1", "--events", events])
     wait_for(port, ~r/task \d+ test "slow" started/)
     kill(port, "INT")
-    wait_for(port, ~r/interrupted \(SIGINT, Ctrl-C\): stopping the script .* again to exit at once/)
+    wait_for(port, ~r/interrupted \(SIGINT, Ctrl-C\): stopping the script/)
+    # Said once a repeat of the first signal is no longer taken for one.
+    wait_for(port, ~r/still stopping: Ctrl-C or SIGTERM again exits at once/)
     kill(port, "INT")
     output = wait_exit(port, 130)
 
-    # It did not wait for the stop: no task finished, no summary.
-    names = events |> File.read!() |> String.split("\n", trim: true) |> Enum.map(&(:jiffy.decode(&1, [:return_maps])["event"]))
+    assert output =~ "interrupted (SIGINT, Ctrl-C) again: exiting at once, without waiting for the stops"
+    # It did not wait for the stop: no task finished, no summary; what the
+    # events file had been sent is in it, every line whole.
+    names = Enum.map(event_lines(events), & &1["event"])
+    assert "task_started" in names
     refute "task_finished" in names
     refute "script_finished" in names
     refute output =~ "script stopped after"
   end
 
+  # `kill -TERM $pid; kill -TERM $pid`, or GNU timeout signalling the run and
+  # its process group: one request, however many of the signals arrive
+  # (two different ones always both do).
+  for {first, second, status, words} <- [{"TERM", "TERM", 143, "terminated (SIGTERM)"}, {"INT", "TERM", nil, nil}] do
+    @tag first: first, second: second, status: status, words: words
+    test "SIG#{first} and SIG#{second} in a row stop the run in order, with its summary and script_finished", ctx do
+      script = Path.join(ctx.tmp_dir, "patrol.exs")
+      File.write!(script, @patrol)
+      events = Path.join(ctx.tmp_dir, "events.jsonl")
+      port = run_mix(["dolphin.run", script, "--fake", "1", "--events", events])
+      wait_for(port, ~r/test "patrol" started on vehicle 1/)
+      kill_twice(port, ctx.first, ctx.second)
+
+      # Which of two different signals comes first is the VM's affair: the run is stopped by that one.
+      {status, words} = if ctx.status, do: {ctx.status, ctx.words}, else: first_of(port)
+      output = wait_exit(port, status)
+
+      assert_stopped_by(events, output, words, "stopped: the run was #{words}")
+      refute output =~ "exiting at once"
+    end
+  end
+
+  defp first_of(port) do
+    wait_for(port, ~r/(interrupted \(SIGINT, Ctrl-C\)|terminated \(SIGTERM\)): stopping the script/)
+    if Dolphin.Test.MixCommand.output() =~ "interrupted (SIGINT, Ctrl-C): stopping", do: {130, "interrupted (SIGINT, Ctrl-C)"}, else: {143, "terminated (SIGTERM)"}
+  end
+
+  for {signal, status, words} <- [{"INT", 130, "interrupted (SIGINT, Ctrl-C)"}, {"TERM", 143, "terminated (SIGTERM)"}] do
+    @tag signal: signal, status: status, words: words
+    test "SIG#{signal} while the script is being compiled ends the command with #{status}, saying so", ctx do
+      script = Path.join(ctx.tmp_dir, "held.exs")
+      File.write!(script, "use Dolphin.Script\nrequire Dolphin.Test.Hold\nDolphin.Test.Hold.here(\"compiling the script\")\n")
+      port = run_mix(["dolphin.run", script, "--sim", "1"])
+      wait_for(port, ~r/compiling the script/)
+      kill(port, ctx.signal)
+      output = wait_exit(port, ctx.status)
+
+      assert output =~ "mix dolphin.run: #{ctx.words}: no script was running; exiting"
+      refute output =~ "BREAK"
+      refute output =~ "** (EXIT"
+    end
+  end
+
   if System.find_executable("script") do
     test "Ctrl-C typed on a terminal stops the run, no BREAK menu, status 130", %{tmp_dir: dir} do
       script = Path.join(dir, "patrol.exs")
-
-      File.write!(script, """
-      use Dolphin.Script
-      v = pick()
-      forever do
-        execute %{v => Dolphin.Engine.TestPlatform.task("patrol", duration: :infinity)}
-      end
-      """)
+      File.write!(script, @patrol)
 
       events = Path.join(dir, "events.jsonl")
       # script(1) gives the run a terminal; what this test writes is typed on it.
@@ -138,67 +187,5 @@ defmodule Mix.Tasks.Dolphin.RunSignalsTest do
     end
   end
 
-
-  defp run_mix(args), do: open([System.find_executable("mix") | args])
-
-  # The command runs in its own OS process (`mix` execs the VM: the process
-  # id is the VM's); whatever is left of it when the test ends is killed.
-  defp open([exe | args]) do
-    env = [{~c"MIX_ENV", ~c"test"}, {~c"LANG", ~c"C.UTF-8"}, {~c"LC_ALL", ~c"C.UTF-8"}, {~c"TERM", ~c"xterm"}]
-    port = Port.open({:spawn_executable, exe}, [:binary, :exit_status, :stderr_to_stdout, args: args, cd: File.cwd!(), env: env])
-    {:os_pid, os_pid} = Port.info(port, :os_pid)
-    Process.put(:output, "")
-
-    on_exit(fn ->
-      for pid <- descendants(os_pid) ++ [os_pid], do: System.cmd("kill", ["-9", Integer.to_string(pid)], stderr_to_stdout: true)
-    end)
-
-    port
-  end
-
-  defp kill(port, signal) do
-    {:os_pid, os_pid} = Port.info(port, :os_pid)
-    {_, 0} = System.cmd("kill", ["-#{signal}", Integer.to_string(os_pid)])
-  end
-
-  defp descendants(pid) do
-    case System.cmd("ps", ["-o", "pid=", "--ppid", Integer.to_string(pid)], stderr_to_stdout: true) do
-      {out, 0} -> out |> String.split() |> Enum.map(&String.to_integer/1) |> Enum.flat_map(&(descendants(&1) ++ [&1]))
-      _ -> []
-    end
-  end
-
-  # Waits (bounded) until the output matches.
-  defp wait_for(port, pattern) do
-    unless Process.get(:output) =~ pattern do
-      receive do
-        {^port, {:data, data}} ->
-          Process.put(:output, Process.get(:output) <> clean(data))
-          wait_for(port, pattern)
-
-        {^port, {:exit_status, status}} ->
-          flunk("the run ended (status #{status}) before #{inspect(pattern)}:\n#{Process.get(:output)}")
-      after
-        @step -> flunk("no #{inspect(pattern)} within #{@step} ms:\n#{Process.get(:output)}")
-      end
-    end
-  end
-
-  defp wait_exit(port, expected) do
-    receive do
-      {^port, {:data, data}} ->
-        Process.put(:output, Process.get(:output) <> clean(data))
-        wait_exit(port, expected)
-
-      {^port, {:exit_status, status}} ->
-        output = Process.get(:output)
-        assert status == expected, "exit status #{status}, expected #{expected}:\n#{output}"
-        output
-    after
-      @step -> flunk("the run did not end within #{@step} ms:\n#{Process.get(:output)}")
-    end
-  end
-
-  # Without terminal escapes and carriage returns.
-  defp clean(data), do: data |> String.replace(~r/\e\[[0-9;?]*[A-Za-z]/, "") |> String.replace("\r", "")
+  defp run_mix(args), do: Dolphin.Test.MixCommand.start(args)
 end
