@@ -17,7 +17,7 @@ defmodule Mix.Tasks.ExitStatusTest do
     {~w(dolphin.check examples/dry_run.exs --bogus), "bad option --bogus"},
     {~w(dolphin.plan), "no command given"},
     {~w(dolphin.plan list examples/single_vehicle.exs --bogus), "bad option --bogus"},
-    {~w(dolphin.plan import no_such.plan), "cannot read no_such.plan"},
+    {~w(dolphin.plan import no_such.plan), "no such plan file: no_such.plan"},
     {~w(dolphin.plan export no_such.exs Survey out.plan), "no_such.exs"},
     {~w(dolphin.plan download out.plan --connect udpx:1), "--connect udpx:1"},
     {~w(dolphin.sim --bogus), "bad option --bogus"},
@@ -30,7 +30,7 @@ defmodule Mix.Tasks.ExitStatusTest do
     {~w(mavlink.decode), "usage: mix mavlink.decode"},
     {~w(mavlink.decode no_such.bin), "cannot read no_such.bin"},
     {~w(mavlink.encode), "usage: mix mavlink.encode"},
-    {~w(mavlink.encode no_such.jsonl), "cannot read no_such.jsonl"}
+    {~w(mavlink.encode no_such.jsonl), "no such file of JSON records: no_such.jsonl"}
   ]
 
   for {args, message} <- @bad_usage do
