@@ -191,7 +191,7 @@ defmodule Mix.Tasks.Dolphin.Plan do
         with {:ok, id} <- find_vehicle(endpoint, opts[:vehicle], Keyword.get(opts, :timeout, 10) * 1_000), do: fun.(id)
       after
         heard = Dolphin.Vehicles.list()
-        DynamicSupervisor.terminate_child(Dolphin.Link.Supervisor, link)
+        Dolphin.Link.disconnect(link)
         Enum.each(heard, &Dolphin.Vehicles.forget/1)
       end
     end
