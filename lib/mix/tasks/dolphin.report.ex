@@ -17,16 +17,21 @@ defmodule Mix.Tasks.Dolphin.Report do
       what the log alone tells
     * `-o FILE`, `--output FILE` — where to write the page (default: the
       log's name with `.html`)
+    * `--run N` — of a log that holds several runs, the `N`th (from 1;
+      default the last)
 
   A damaged log still gives a report, which says what was skipped; events of
-  another run are refused.
+  another run are refused; a log or an events file with nothing readable in
+  it (no MAVLink frame, no event) is an error. A log that holds several runs
+  (logs appended to one another: see `Dolphin.Report`) gives the report of
+  one of them, never of several at once, and says so.
   """
 
   use Mix.Task
 
-  @switches [events: :string, output: :string]
+  @switches [events: :string, output: :string, run: :integer]
   @aliases [o: :output]
-  @usage "usage: mix dolphin.report RUN.tlog [--events RUN.jsonl] [-o REPORT.html]"
+  @usage "usage: mix dolphin.report RUN.tlog [--events RUN.jsonl] [-o REPORT.html] [--run N]"
 
   @impl Mix.Task
   def run(args) do
@@ -36,7 +41,9 @@ defmodule Mix.Tasks.Dolphin.Report do
         Mix.Task.run("compile", [])
         out = opts[:output] || Path.rootname(tlog, ".tlog") <> ".html"
 
-        case make(tlog, opts[:events], out) do
+        if opts[:run] != nil and opts[:run] < 1, do: Mix.raise("dolphin.report: --run takes a run's number, from 1, got #{opts[:run]}\n" <> @usage, exit_status: 2)
+
+        case make(tlog, opts[:events], out, Keyword.take(opts, [:run])) do
           {:ok, line} -> Mix.shell().info(line)
           {:error, error} -> Mix.raise("dolphin.report: " <> Exception.message(error))
         end
@@ -50,17 +57,24 @@ defmodule Mix.Tasks.Dolphin.Report do
   end
 
   @doc """
-  Writes the report and returns the line the task prints.
+  Writes the report and returns the line the task prints. Option: `:run`
+  (see `Dolphin.Report.write/4`).
   """
-  @spec make(Path.t(), Path.t() | nil, Path.t()) :: {:ok, String.t()} | {:error, Dolphin.Report.Error.t()}
-  def make(tlog, events, out) do
-    with {:ok, s} <- Dolphin.Report.write(tlog, events, out) do
+  @spec make(Path.t(), Path.t() | nil, Path.t(), keyword()) :: {:ok, String.t()} | {:error, Dolphin.Report.Error.t()}
+  def make(tlog, events, out, opts \\ []) do
+    with {:ok, s} <- Dolphin.Report.write(tlog, events, out, opts) do
       damaged = if s.bytes_skipped > 0, do: "; the log is damaged: #{s.bytes_skipped} bytes skipped (see the report)", else: ""
       skipped = if s.events_skipped > 0, do: "; #{s.events_skipped} unreadable event line(s) skipped", else: ""
 
+      runs =
+        if s.runs > 1,
+          do: "\nthe telemetry log holds #{s.runs} runs (the vehicles' clocks started again after the ground station had stopped recording): " <>
+                "this report is of run #{s.run}#{if s.run == s.runs, do: ", the last", else: ""}, alone (--run N for another)",
+          else: ""
+
       {:ok,
        "report: #{out} (#{div(s.bytes + 1023, 1024)} KiB): #{length(s.vehicles)} vehicle(s), #{s.frames} frames, " <>
-         "#{round(s.span_s)} s of clock time" <> if(s.events, do: ", #{s.events} events", else: "") <> damaged <> skipped}
+         "#{round(s.span_s)} s of clock time" <> if(s.events, do: ", #{s.events} events", else: "") <> damaged <> skipped <> runs}
     end
   end
 end
