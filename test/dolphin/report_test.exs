@@ -328,6 +328,10 @@ defmodule Dolphin.ReportTest do
       assert_raise Mix.Error, ~r/usage: mix dolphin.report/, fn -> Mix.Tasks.Dolphin.Report.run([]) end
       assert_raise Mix.Error, ~r/unknown or malformed option --bogus/, fn -> Mix.Tasks.Dolphin.Report.run(["x.tlog", "--bogus"]) end
       assert_raise Mix.Error, ~r/cannot read the telemetry log/, fn -> Mix.Tasks.Dolphin.Report.run([Path.join(dir, "none.tlog")]) end
+      missing = Path.join(dir, "missing")
+      e = assert_raise Mix.Error, fn -> Mix.Tasks.Dolphin.Report.run([tlog(dir), "-o", Path.join(missing, "r.html")]) end
+      assert e.message =~ "dolphin.report: -o #{missing}/r.html: cannot create it: no such directory #{missing}\nusage: mix dolphin.report"
+      assert e.mix == 2
       e = assert_raise Mix.Error, fn -> Mix.Tasks.Dolphin.Report.run([tlog(dir), "--run", "0"]) end
       assert {e.message, e.mix} == {"dolphin.report: --run takes a run's number, from 1, got 0\nusage: mix dolphin.report RUN.tlog [--events RUN.jsonl] [-o REPORT.html] [--run N]", 2}
     end

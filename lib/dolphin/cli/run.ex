@@ -225,9 +225,21 @@ defmodule Dolphin.CLI.Run do
     {:ok, renderer} = Renderer.start_link(out: out, origin_ms: origin, quiet: opts[:quiet] == true, terminal: terminal)
     defer(fn -> Renderer.stop(renderer) end, :output)
 
-    with :ok <- start_writer(opts[:events], origin) do
-      if opts[:tlog] && !opts[:quiet], do: IO.puts(out, "telemetry log: #{opts[:tlog]}")
+    with :ok <- start_writer(opts[:events], origin),
+         {:ok, log} <- start_tlog(opts[:tlog]) do
+      if log && !opts[:quiet], do: IO.puts(out, "telemetry log: #{opts[:tlog]}" <> if(log == :replaced, do: " (replaces the file that was there)", else: ""))
       {:ok, renderer}
+    end
+  end
+
+  # The links append to the log (several links share one); emptied first, it
+  # holds this run only, so that its report is this run's.
+  defp start_tlog(nil), do: {:ok, nil}
+
+  defp start_tlog(path) do
+    case Dolphin.CLI.OutputFile.replace(path) do
+      {:ok, how} -> {:ok, how}
+      {:error, why} -> {:error, %StartError{option: "--tlog", reason: why}}
     end
   end
 

@@ -276,7 +276,13 @@ defmodule Dolphin.Link.Connection do
   def terminate(_reason, state) do
     close_socket(state.endpoint.kind, state.socket)
     with {socket, _targets} <- state.forward, do: :gen_udp.close(socket)
-    with {io, _path} <- state.tlog, do: File.close(io)
+    with {io, path} <- state.tlog do
+      File.close(io)
+      # What it recorded is no copy for a link that records to the file next
+      # (a new run, which may send the very same frames: a deterministic simulation).
+      :ets.match_delete(Dolphin.Link.Recorded, {{path, :_, :_, :_}, :_, state.name, :_})
+    end
+
     :ok
   end
 

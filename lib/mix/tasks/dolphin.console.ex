@@ -31,6 +31,7 @@ defmodule Mix.Tasks.Dolphin.Console do
     * `--seed N` — the simulator's seed
     * `--speedup K` — run K times faster than real time (`Dolphin.Clock`)
     * `--tlog FILE` — record every MAVLink frame of the links to a telemetry log
+      (an existing FILE is replaced)
     * `--forward ENDPOINT` — copy all traffic to a `udpout` endpoint
       (QGroundControl); repeatable
 
@@ -93,6 +94,7 @@ defmodule Mix.Tasks.Dolphin.Console do
           opts[:sitl] != nil and opts[:sitl] < 1 -> {:error, "--sitl must be a positive number of vehicles, got #{opts[:sitl]}"}
           opts[:sim] != nil and opts[:sitl] != nil -> {:error, "--sim and --sitl do not go together"}
           opts[:speedup] != nil and opts[:speedup] <= 0 -> {:error, "--speedup must be positive, got #{opts[:speedup]}"}
+          (problem = tlog_writable(opts[:tlog])) != :ok -> problem
           # `iex --sname op -S mix dolphin.console --join ...`: the node has its name already.
           (problem = Dolphin.CLI.Cluster.check(opts, Node.alive?())) != :ok -> problem
           true -> {:ok, opts}
@@ -106,6 +108,9 @@ defmodule Mix.Tasks.Dolphin.Console do
     end
   end
 
+  defp tlog_writable(nil), do: :ok
+  defp tlog_writable(path), do: Dolphin.CLI.OutputFile.check("--tlog", path)
+
   @doc """
   Opens the links and starts the simulated vehicles of `opts` (parsed
   options) in the running application; returns the banner to print, or a
@@ -117,10 +122,22 @@ defmodule Mix.Tasks.Dolphin.Console do
     link_opts = Enum.reject([tlog: opts[:tlog], forward: Keyword.get_values(opts, :forward)], fn {_, v} -> v in [nil, []] end)
     endpoints = Keyword.get_values(opts, :connect)
 
-    with {:ok, cluster} <- join(opts),
+    with {:ok, log} <- start_tlog(opts[:tlog]),
+         {:ok, cluster} <- join(opts),
          {:ok, lines} <- connect_all(endpoints, link_opts),
          {:ok, more} <- vehicles(opts, endpoints, link_opts) do
-      {:ok, banner(cluster ++ lines ++ more)}
+      {:ok, banner(cluster ++ lines ++ more ++ log)}
+    end
+  end
+
+  # The links append to the log; emptied first, it holds this session only.
+  defp start_tlog(nil), do: {:ok, []}
+
+  defp start_tlog(path) do
+    case Dolphin.CLI.OutputFile.replace(path) do
+      {:ok, :replaced} -> {:ok, ["telemetry log #{path} (replaces the file that was there)"]}
+      {:ok, :created} -> {:ok, ["telemetry log #{path}"]}
+      {:error, why} -> {:error, %CommandLineError{reason: :failed, message: "--tlog: #{why}"}}
     end
   end
 

@@ -125,6 +125,7 @@ defmodule Mix.Tasks.Dolphin.Plan do
 
   defp command(["export", file, name, out], opts) do
     with :ok <- only(opts, [:home, :cruise_speed, :hover_speed], "export"),
+         :ok <- writable("export", out),
          {:ok, plan_opts} <- plan_opts(opts),
          {:ok, found, notes} <- MissionFile.read(file),
          {:ok, %{mission: mission} = one} <- pick(found, name, notes),
@@ -167,7 +168,9 @@ defmodule Mix.Tasks.Dolphin.Plan do
   end
 
   defp command(["download", out], opts) do
-    with :ok <- only(opts, [:connect, :vehicle, :timeout], "download") do
+    # Before the transfer: a plan that could not be written would waste it.
+    with :ok <- only(opts, [:connect, :vehicle, :timeout], "download"),
+         :ok <- writable("download", out) do
       with_vehicle(opts, fn id -> download(id, out) end)
     end
   end
@@ -386,6 +389,13 @@ defmodule Mix.Tasks.Dolphin.Plan do
     {:ok, Mission.to_plan(mission, opts)}
   rescue
     e in ArgumentError -> {:error, "mission #{inspect(mission.name)}: #{Exception.message(e)} (--home supplies a home)"}
+  end
+
+  defp writable(verb, out) do
+    case Dolphin.CLI.OutputFile.check(verb, out) do
+      :ok -> :ok
+      {:error, message} -> usage(message)
+    end
   end
 
   defp write(path, json) do

@@ -41,6 +41,9 @@ defmodule Mix.Tasks.Dolphin.Report do
         Mix.Task.run("compile", [])
         out = opts[:output] || Path.rootname(tlog, ".tlog") <> ".html"
 
+        with {:error, message} <- Dolphin.CLI.OutputFile.check(if(opts[:output], do: "-o", else: "the report"), out),
+             do: Mix.raise("dolphin.report: #{message}\n" <> @usage, exit_status: 2)
+
         if opts[:run] != nil and opts[:run] < 1, do: Mix.raise("dolphin.report: --run takes a run's number, from 1, got #{opts[:run]}\n" <> @usage, exit_status: 2)
 
         case make(tlog, opts[:events], out, Keyword.take(opts, [:run])) do

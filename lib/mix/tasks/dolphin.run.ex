@@ -40,8 +40,9 @@ defmodule Mix.Tasks.Dolphin.Run do
       stopped, vehicles hold, exit status 0 with a summary
     * `--events FILE` — write every event as a JSON line (schema: `Dolphin.Telemetry`)
     * `--tlog FILE` — where to record every MAVLink frame of the links (a
-      telemetry log); by default a run that talks MAVLink writes one to
-      `logs/DATE_TIME-SCRIPT.tlog`
+      telemetry log); a FILE that is there is replaced (said when the run
+      starts): a log holds one run. By default a run that talks MAVLink
+      writes one to `logs/DATE_TIME-SCRIPT.tlog`
     * `--no-tlog` — no telemetry log
     * `--forward ENDPOINT` — copy all traffic to a `udpout` endpoint (QGroundControl); repeatable
     * `--quiet` — print only the script's messages, errors and the summary
@@ -121,7 +122,8 @@ defmodule Mix.Tasks.Dolphin.Run do
   (could not compile, the pre-flight check found errors, a task failed, `halt`, a pick timed out: the message
   says what, where and why) or its vehicles could not be started (a port in
   use, a SITL binary missing, the `--web` port in use); 2 — bad usage (an
-  unknown option, a bad endpoint, no such script); 130 — Ctrl-C (SIGINT)
+  unknown option, a bad endpoint, no such script, an output file —
+  `--tlog`, `--events`, `--report` — that cannot be written); 130 — Ctrl-C (SIGINT)
   stopped it; 143 — SIGTERM stopped it (128 + the signal's number, as a shell says).
   """
 
@@ -249,6 +251,7 @@ defmodule Mix.Tasks.Dolphin.Run do
            :ok <- endpoints(opts),
            :ok <- web(opts),
            :ok <- report(opts),
+           :ok <- outputs(opts),
            :ok <- cluster(opts),
            {:ok, for_ms} <- duration(opts[:for]),
            :ok <- readable(file) do
@@ -301,6 +304,18 @@ defmodule Mix.Tasks.Dolphin.Run do
       opts[:fake] -> usage_error("--report is made from the run's telemetry log, and fake vehicles write none: not with --fake")
       true -> :ok
     end
+  end
+
+  # The files the run writes: a file that cannot be written is said before anything flies.
+  defp outputs(opts) do
+    Enum.reduce_while([:tlog, :events, :report], :ok, fn key, :ok ->
+      with path when is_binary(path) <- opts[key],
+           {:error, message} <- Dolphin.CLI.OutputFile.check("--#{key}", path) do
+        {:halt, usage_error(message)}
+      else
+        _ -> {:cont, :ok}
+      end
+    end)
   end
 
   defp cluster(opts) do

@@ -26,7 +26,8 @@ defmodule Mix.Tasks.Dolphin.Station do
     * `--speedup K` — run K times faster than real time; every node of the
       cluster runs at the same speed-up (a controller adopts it)
     * `--seed N` — the simulator's seed
-    * `--tlog FILE` — record every MAVLink frame of the links
+    * `--tlog FILE` — record every MAVLink frame of the links (an existing
+      FILE is replaced)
 
   With neither `--connect` nor `--sim`, the station listens on
   `Dolphin.Link.default_endpoint/0`.
@@ -90,6 +91,7 @@ defmodule Mix.Tasks.Dolphin.Station do
           opts[:first_sysid] != nil and opts[:first_sysid] not in 1..255 -> UsageError.error("--first-sysid must be a system id 1..255, got #{opts[:first_sysid]}")
           opts[:speedup] != nil and opts[:speedup] <= 0 -> UsageError.error("--speedup must be positive, got #{opts[:speedup]}")
           bad = Enum.find(Keyword.get_values(opts, :connect), &match?({:error, _}, Dolphin.Link.Endpoint.parse(&1))) -> UsageError.error("--connect #{bad}: not an endpoint")
+          (problem = tlog_writable(opts[:tlog])) != :ok -> problem
           true -> {:ok, opts}
         end
 
@@ -101,6 +103,12 @@ defmodule Mix.Tasks.Dolphin.Station do
     end
   end
 
+  defp tlog_writable(nil), do: :ok
+
+  defp tlog_writable(path) do
+    with {:error, message} <- Dolphin.CLI.OutputFile.check("--tlog", path), do: UsageError.error(message)
+  end
+
   defp serve(opts, io, out, err) do
     previous = Dolphin.Clock.speedup()
     if k = opts[:speedup], do: Dolphin.Clock.set_speedup(k)
@@ -109,11 +117,12 @@ defmodule Mix.Tasks.Dolphin.Station do
 
     try do
       with {:ok, lines} <- Dolphin.CLI.Cluster.start(opts, nil),
+           {:ok, log} <- start_tlog(opts[:tlog]),
            {:ok, more} <- links(opts),
            {:ok, sims} <- sims(opts) do
         k = Dolphin.Clock.speedup()
         IO.puts(out, "ground station #{node()} (#{if k == 1, do: "real time", else: "speed-up #{Dolphin.Console.Format.num(k / 1)}x"}); Ctrl-C stops it")
-        Enum.each(Enum.drop(lines, 1) ++ more ++ sims, &IO.puts(out, "  " <> &1))
+        Enum.each(Enum.drop(lines, 1) ++ more ++ sims ++ log, &IO.puts(out, "  " <> &1))
         if pid = io[:ready], do: send(pid, {__MODULE__, :ready, node()})
         if io[:signals], do: Signals.catch_signals(self())
         wait(out)
@@ -145,6 +154,17 @@ defmodule Mix.Tasks.Dolphin.Station do
 
       {__MODULE__, :stop} ->
         IO.puts(out, "the station stops")
+    end
+  end
+
+  # The links append to the log; emptied first, it holds this station's run only.
+  defp start_tlog(nil), do: {:ok, []}
+
+  defp start_tlog(path) do
+    case Dolphin.CLI.OutputFile.replace(path) do
+      {:ok, :replaced} -> {:ok, ["telemetry log #{path} (replaces the file that was there)"]}
+      {:ok, :created} -> {:ok, ["telemetry log #{path}"]}
+      {:error, why} -> {:error, %StartError{option: "--tlog", reason: why}}
     end
   end
 

@@ -81,6 +81,26 @@ defmodule Dolphin.Link.ConnectionTest do
     assert Enum.frequencies(heard) == %{both => 1, twice => 2}
   end
 
+  @tag :tmp_dir
+  test "a link that stopped is no copy source: the next link on the file records the very same frames", %{tmp_dir: dir} do
+    tlog = Path.join(dir, "again.tlog")
+    peer = UDPPeer.open()
+    frame = Frame.encode(copter(), sysid: 22, compid: 1, seq: 3)
+
+    # One run, then the next at once, sending the same bytes (a deterministic simulation).
+    for round <- 1..2 do
+      name = "again-#{round}"
+      {:ok, link} = Link.connect("udpin:127.0.0.1:0", name: name, tlog: tlog)
+      cleanup(link, [22])
+      :ok = :gen_udp.send(peer, {127, 0, 0, 1}, Connection.port(name), frame)
+      Wait.until(fn -> match?(%{stats: %{frames: 1}}, Connection.info(name)) end)
+      :ok = Link.disconnect(link)
+    end
+
+    {records, _} = Dolphin.MAVLink.Tlog.read(Dolphin.MAVLink.Tlog.reader(), File.read!(tlog))
+    assert length(for {_ts, %Frame{sysid: 22}} <- records, do: 1) == 2
+  end
+
   test "forwarding: a watcher gets all traffic, both ways" do
     watcher = UDPPeer.open()
     {:ok, watcher_port} = :inet.port(watcher)

@@ -18,6 +18,7 @@ defmodule Mix.Tasks.Dolphin.ConsoleTest do
       assert "--sim must be a positive number of vehicles, got 0" = message(Task.parse(["--sim", "0"]))
       assert "--speedup must be positive, got -1.0" = message(Task.parse(["--speedup", "-1"]))
       assert "unexpected argument \"x.exs\"" <> _ = message(Task.parse(["x.exs"]))
+      assert "--tlog /no/such/dir/c.tlog: cannot create it: no such directory /no/such/dir" = message(Task.parse(["--tlog", "/no/such/dir/c.tlog"]))
     end
 
     test "without IEx it starts nothing and says to use iex -S" do
@@ -44,6 +45,14 @@ defmodule Mix.Tasks.Dolphin.ConsoleTest do
       assert banner =~ "h Dolphin.Console"
       known = for %{vehicle: v} <- Dolphin.Fleet.vehicles(), v.type != nil, do: v.id
       assert Enum.sort(known) == [1, 2]
+    end
+
+    test "--tlog FILE: a file that is there is replaced, and the banner says so", %{tmp_dir: dir} do
+      tlog = Path.join(dir, "console.tlog")
+      File.write!(tlog, "an older session")
+      assert {:ok, banner} = Task.start(connect: "udpin:127.0.0.1:0", tlog: tlog)
+      assert banner =~ "\n  telemetry log #{tlog} (replaces the file that was there)\n"
+      refute File.read!(tlog) =~ "an older session"
     end
 
     test "a link that cannot be opened is an error" do

@@ -168,12 +168,21 @@ defmodule Mix.Tasks.Dolphin.RunTest do
       assert err =~ "on vehicle 1 failed: motor failure"
     end
 
-    test "an events file that cannot be written: status 1, and why, before anything runs", %{tmp_dir: dir} do
+    test "an output file that cannot be written: bad usage (status 2), the option named, before anything runs", %{tmp_dir: dir} do
       path = script(dir, "hello.exs", "use Dolphin.Script\nmessage(\"hello\")\n")
-      assert {1, out, err} = main([path, "--fake", "1", "--events", Path.join([dir, "no_such_dir", "events.jsonl"])])
-      assert err =~ "mix dolphin.run: --events: cannot write"
-      refute out =~ "message: hello"
+      missing = Path.join(dir, "no_such_dir")
+
+      for option <- ["--events", "--tlog", "--report"] do
+        file = Path.join(missing, "out")
+        assert {2, out, err} = main([path, "--sim", "1", option, file])
+        assert err =~ "mix dolphin.run: #{option} #{file}: cannot create it: no such directory #{missing}\nusage: mix dolphin.run"
+        assert out == ""
+      end
+
+      assert {2, "", err} = main([path, "--fake", "1", "--events", dir])
+      assert err =~ "--events #{dir}: it is a directory, not a file"
       assert Dolphin.Clock.speedup() == 1
+      refute File.exists?(missing)
     end
 
     test "--quiet prints only messages, errors and the summary", %{tmp_dir: dir} do
@@ -202,6 +211,27 @@ defmodule Mix.Tasks.Dolphin.RunTest do
       assert out =~ "vehicle 1 discovered (uav)"
       assert out =~ ~r/message: vehicle #Vehicles<\[1\]> battery (1\.0|0\.\d+|nil)/
       assert File.stat!(tlog).size > 0
+    end
+
+    @tag timeout: 120_000
+    test "--tlog FILE replaces a file that is there, and says so: the log holds one run", %{tmp_dir: dir} do
+      path = script(dir, "hover.exs", "use Dolphin.Script\nv = pick(timeout: seconds(30))\nexecute(wait_for(position(v) != nil))\npause(seconds(5))\nrelease(v)\n")
+      tlog = Path.join(dir, "run.tlog")
+      File.write!(tlog, "an older file")
+
+      for _ <- 1..2 do
+        Dolphin.Test.GroundStation.forget_vehicles()
+        assert {0, out, ""} = main([path, "--sim", "1", "--speedup", "20", "--tlog", tlog])
+        assert out =~ "telemetry log: #{tlog} (replaces the file that was there)"
+      end
+
+      # Nothing of the older file, nor of the first run (whose vehicle booted
+      # anew in the second: its boot clock would go back).
+      {:ok, log} = Dolphin.Report.FlightLog.read_file(tlog)
+      assert log.stats.bytes_skipped == 0
+      assert [_one] = Dolphin.Report.FlightLog.runs(log)
+      boots = for {_ts, %{message: %Dolphin.MAVLink.Ardupilotmega.GlobalPositionInt{time_boot_ms: t}}} <- elem(Dolphin.MAVLink.Tlog.read(Dolphin.MAVLink.Tlog.reader(), File.read!(tlog)), 0), do: t
+      assert boots != [] and boots == Enum.sort(boots)
     end
   end
 end
