@@ -64,6 +64,8 @@ defmodule Mix.Tasks.Dolphin.Check do
 
   @impl Mix.Task
   def run(argv) do
+    # A closed pipe (`| head`) ends the task at once, quietly.
+    Dolphin.CLI.Stdout.watch()
     case main(argv) do
       0 -> :ok
       code -> exit({:shutdown, code})

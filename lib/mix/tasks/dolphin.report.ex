@@ -35,6 +35,8 @@ defmodule Mix.Tasks.Dolphin.Report do
 
   @impl Mix.Task
   def run(args) do
+    # A closed pipe (`| head`) ends the task at once, quietly.
+    Dolphin.CLI.Stdout.watch()
     case OptionParser.parse(args, strict: @switches, aliases: @aliases) do
       {opts, [tlog], []} ->
         # The report reads the MAVLink dialect only: no vehicles, links or clock.

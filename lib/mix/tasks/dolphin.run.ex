@@ -124,7 +124,9 @@ defmodule Mix.Tasks.Dolphin.Run do
   use, a SITL binary missing, the `--web` port in use); 2 — bad usage (an
   unknown option, a bad endpoint, no such script, an output file —
   `--tlog`, `--events`, `--report` — that cannot be written); 130 — Ctrl-C (SIGINT)
-  stopped it; 143 — SIGTERM stopped it (128 + the signal's number, as a shell says).
+  stopped it; 143 — SIGTERM stopped it (128 + the signal's number, as a shell says);
+  141 — its standard output was closed (`| head`): it ended at once, quietly,
+  as a closed pipe ends a command (`Dolphin.CLI.Stdout`).
   """
 
   use Mix.Task
@@ -166,6 +168,9 @@ defmodule Mix.Tasks.Dolphin.Run do
       {:ok, _} = Task.start(fn -> main(argv, plain: true, ask: &Dolphin.Console.Runs.ask/1) end)
       :ok
     else
+      # A closed pipe (`| head`) ends the run at once, quietly (status 141).
+      Dolphin.CLI.Stdout.watch()
+
       case parse(argv) do
         # Ctrl-C and SIGTERM stop the script (see "Exit status"), not the VM.
         {:ok, file, opts} ->

@@ -22,7 +22,9 @@ defmodule Mix.Tasks.Mavlink.Decode do
       they are decoded: a capture may mix signed and unsigned traffic)
 
   Frames whose message id the dialect does not define are counted, not printed.
-  Exits with status 1 if the file cannot be read.
+  Exits with status 1 if the file cannot be read; piped into a reader that
+  stops early (`| head -1`), it ends at once and quietly, with status 141
+  (`Dolphin.CLI.Stdout`).
   """
 
   use Mix.Task
@@ -34,6 +36,8 @@ defmodule Mix.Tasks.Mavlink.Decode do
 
   @impl Mix.Task
   def run(args) do
+    # A closed pipe (`| head`) ends the task at once, quietly.
+    Dolphin.CLI.Stdout.watch()
     case OptionParser.parse(args, strict: @switches) do
       {opts, [file], []} ->
         signing = signing!(opts)

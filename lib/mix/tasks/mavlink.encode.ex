@@ -13,7 +13,9 @@ defmodule Mix.Tasks.Mavlink.Encode do
 
   `FILE` may be `-` for standard input. Blank lines are skipped. A line that
   cannot be encoded is reported on standard error with its line number, and the
-  task exits with status 1 after the whole file.
+  task exits with status 1 after the whole file. Piped into a reader that
+  stops early (`| head -2`), it ends at once and quietly, with status 141
+  (`Dolphin.CLI.Stdout`).
   """
 
   use Mix.Task
@@ -22,6 +24,8 @@ defmodule Mix.Tasks.Mavlink.Encode do
 
   @impl Mix.Task
   def run(args) do
+    # A closed pipe (`| head`) ends the task at once, quietly.
+    Dolphin.CLI.Stdout.watch()
     case OptionParser.parse(args, strict: []) do
       {_, [file], []} ->
         lines = if file == "-", do: IO.stream(:stdio, :line), else: stream!(file)
