@@ -106,7 +106,7 @@ defmodule Dolphin.CLI.Run do
           {result, signal} = run_until_signal(script, opts, renderer)
           # The log and the status block end before the summary is printed below them.
           stop_outputs()
-          summary(result, Keyword.put(opts, :signal, signal), out, err)
+          summary(result, opts ++ [signal: signal, origin_ms: origin], out, err)
         end
       after
         # The outputs stop first (they show the run, not its teardown); then
@@ -280,19 +280,21 @@ defmodule Dolphin.CLI.Run do
 
   defp defer(fun, kind), do: Process.put(@cleanup, [{kind, fun} | Process.get(@cleanup)])
 
-  defp summary({:ok, %{result: :done, duration_ms: ms}}, _opts, out, _err) do
-    IO.puts(out, "script completed in #{Format.seconds(ms)} of clock time")
+  # Times on the run's clock, the events' (from the start of the run, its
+  # vehicles' start included): the summary's time is its last event's.
+  defp summary({:ok, %{result: :done} = s}, opts, out, _err) do
+    IO.puts(out, "script completed after #{Format.seconds(ended(s, opts))} of clock time")
     :completed
   end
 
-  defp summary({:ok, %{result: :stopped, duration_ms: ms}}, opts, out, _err) do
+  defp summary({:ok, %{result: :stopped} = s}, opts, out, _err) do
     why =
       case opts[:signal] do
-        nil -> if opts[:for_ms], do: "--for #{opts[:for]} is over", else: "stopped"
+        nil -> if opts[:for_ms], do: "--for #{opts[:for]} is over, counted from the script's start at #{Format.seconds(s.started_ms - opts[:origin_ms])}", else: "stopped"
         sig -> Signals.name(sig)
       end
 
-    IO.puts(out, "script stopped after #{Format.seconds(ms)} of clock time (#{why}): running tasks were stopped, vehicles hold")
+    IO.puts(out, "script stopped after #{Format.seconds(ended(s, opts))} of clock time (#{why}): running tasks were stopped, vehicles hold")
     if sig = opts[:signal], do: {:stopped, sig}, else: :stopped
   end
 
@@ -300,4 +302,6 @@ defmodule Dolphin.CLI.Run do
     IO.puts(err, Dolphin.Script.Error.format(e))
     :failed
   end
+
+  defp ended(summary, opts), do: summary.started_ms + summary.duration_ms - opts[:origin_ms]
 end

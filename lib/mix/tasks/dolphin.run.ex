@@ -78,6 +78,9 @@ defmodule Mix.Tasks.Dolphin.Run do
   second: one line per vehicle with its mode, armed state, battery bar,
   height, mission progress and the task it flies (`Dolphin.CLI.StatusBlock`).
   Elsewhere (a pipe, a file, CI) the events are plain timestamped lines.
+  Their times, like the summary's (`script stopped after 1808.2 s of clock
+  time`), are clock time since the run started, its vehicles' start
+  included; `--for` counts from the script's start, which the summary gives.
   The lines are `Dolphin.CLI`'s, as in the console; the run itself is
   `Dolphin.CLI.Run`.
 

@@ -79,7 +79,7 @@ defmodule Mix.Tasks.Dolphin.RunTest do
       assert out =~ "2 fake vehicle(s)"
       assert out =~ "message: Done!"
       assert out =~ ~s(test "survey" started on vehicle)
-      assert out =~ "script completed in"
+      assert out =~ "script completed after"
 
       lines = events |> File.read!() |> String.split("\n", trim: true) |> Enum.map(&:jiffy.decode(&1, [:return_maps, null_term: nil]))
       names = Enum.map(lines, & &1["event"])
@@ -211,6 +211,21 @@ defmodule Mix.Tasks.Dolphin.RunTest do
       assert out =~ "vehicle 1 discovered (uav)"
       assert out =~ ~r/message: vehicle #Vehicles<\[1\]> battery (1\.0|0\.\d+|nil)/
       assert File.stat!(tlog).size > 0
+    end
+
+    @tag timeout: 120_000
+    test "one clock for the events and the summary: the run's, from before its vehicles started", %{tmp_dir: dir} do
+      path = script(dir, "wait.exs", "use Dolphin.Script\npick(timeout: seconds(60))\nforever do\n  pause(seconds(1))\nend\n")
+      events = Path.join(dir, "events.jsonl")
+      assert {0, out, ""} = main([path, "--sim", "1", "--speedup", "20", "--for", "10s", "--no-tlog", "--no-check", "--events", events])
+
+      at = fn name -> events |> File.read!() |> String.split("\n", trim: true) |> Enum.map(&:jiffy.decode(&1, [:return_maps])) |> Enum.find(&(&1["event"] == name)) |> Map.fetch!("t_ms") end
+      started = at.("script_started")
+      finished = at.("script_finished")
+      # The simulated vehicle booted before the script started.
+      assert started > 0
+      seconds = &Dolphin.Console.Format.seconds/1
+      assert out =~ "script stopped after #{seconds.(finished)} of clock time (--for 10s is over, counted from the script's start at #{seconds.(started)}): running tasks were stopped, vehicles hold"
     end
 
     @tag timeout: 120_000
