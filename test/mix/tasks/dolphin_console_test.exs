@@ -120,6 +120,11 @@ defmodule Mix.Tasks.Dolphin.ConsoleTest do
     seen_or_wait(port, stopping, ~r/run #{id} script .*patrol\.exs: stopped: its tasks were stopped, vehicles hold/)
     assert ieval(port, "tasks()") =~ "no tasks running"
 
+    # The mission the script uploaded, as many rows as the heading says.
+    downloaded = ieval(port, "download(2)")
+    assert downloaded =~ "vehicle 2 holds 3 items: home (item 0) and 2 mission items (items 1 to 2)"
+    assert length(Regex.scan(~r/^\s+\d (home|[A-Z_]+) /m, downloaded)) == 3
+
     Port.command(port, "System.halt()\n")
     assert_receive {^port, {:exit_status, 0}}, 30_000
   end
