@@ -324,6 +324,15 @@ defmodule Dolphin.ReportTest do
       assert File.exists?(other)
     end
 
+    test "-o - writes the page to standard output, and what it holds to standard error", %{tmp_dir: dir} do
+      log = tlog(dir)
+      err = capture_io(:stderr, fn -> send(self(), {:page, capture_io(fn -> Mix.Tasks.Dolphin.Report.run([log, "-o", "-"]) end)}) end)
+      assert_received {:page, "<!DOCTYPE html>" <> _ = page}
+      assert page =~ "</html>"
+      assert err =~ ~r/^report: standard output \(\d+ KiB\): 2 vehicle\(s\)/
+      refute File.exists?("-")
+    end
+
     test "usage and input errors", %{tmp_dir: dir} do
       assert_raise Mix.Error, ~r/usage: mix dolphin.report/, fn -> Mix.Tasks.Dolphin.Report.run([]) end
       assert_raise Mix.Error, ~r/unknown or malformed option --bogus/, fn -> Mix.Tasks.Dolphin.Report.run(["x.tlog", "--bogus"]) end

@@ -66,6 +66,7 @@ defmodule Mix.Tasks.Dolphin.Check do
   def run(argv) do
     # A closed pipe (`| head`) ends the task at once, quietly.
     Dolphin.CLI.Stdout.watch()
+
     case main(argv) do
       0 -> :ok
       code -> exit({:shutdown, code})

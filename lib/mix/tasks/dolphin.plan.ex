@@ -91,6 +91,7 @@ defmodule Mix.Tasks.Dolphin.Plan do
   def run(argv) do
     # A closed pipe (`| head`) ends the task at once, quietly.
     Dolphin.CLI.Stdout.watch()
+
     Mix.Task.run("app.config")
     # Transfers need the links and vehicles of the application.
     if List.first(argv) in ["upload", "download"], do: Mix.Task.run("app.start")

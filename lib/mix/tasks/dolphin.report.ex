@@ -16,7 +16,8 @@ defmodule Mix.Tasks.Dolphin.Report do
       tasks, conditions and the script's result; without it the report shows
       what the log alone tells
     * `-o FILE`, `--output FILE` — where to write the page (default: the
-      log's name with `.html`)
+      log's name with `.html`); `-o -` writes it to standard output (and
+      the line that says what it holds to standard error)
     * `--run N` — of a log that holds several runs, the `N`th (from 1;
       default the last)
 
@@ -37,19 +38,22 @@ defmodule Mix.Tasks.Dolphin.Report do
   def run(args) do
     # A closed pipe (`| head`) ends the task at once, quietly.
     Dolphin.CLI.Stdout.watch()
+
     case OptionParser.parse(args, strict: @switches, aliases: @aliases) do
       {opts, [tlog], []} ->
         # The report reads the MAVLink dialect only: no vehicles, links or clock.
         Mix.Task.run("compile", [])
         out = opts[:output] || Path.rootname(tlog, ".tlog") <> ".html"
 
-        with {:error, message} <- Dolphin.CLI.OutputFile.check(if(opts[:output], do: "-o", else: "the report"), out),
-             do: Mix.raise("dolphin.report: #{message}\n" <> @usage, exit_status: 2)
+        if out != "-" do
+          with {:error, message} <- Dolphin.CLI.OutputFile.check(if(opts[:output], do: "-o", else: "the report"), out),
+               do: Mix.raise("dolphin.report: #{message}\n" <> @usage, exit_status: 2)
+        end
 
         if opts[:run] != nil and opts[:run] < 1, do: Mix.raise("dolphin.report: --run takes a run's number, from 1, got #{opts[:run]}\n" <> @usage, exit_status: 2)
 
         case make(tlog, opts[:events], out, Keyword.take(opts, [:run])) do
-          {:ok, line} -> Mix.shell().info(line)
+          {:ok, line} -> if out == "-", do: IO.puts(:stderr, line), else: Mix.shell().info(line)
           {:error, error} -> Mix.raise("dolphin.report: " <> Exception.message(error))
         end
 
@@ -62,12 +66,12 @@ defmodule Mix.Tasks.Dolphin.Report do
   end
 
   @doc """
-  Writes the report and returns the line the task prints. Option: `:run`
-  (see `Dolphin.Report.write/4`).
+  Writes the report (`out` `"-"`: to standard output) and returns the line
+  the task prints. Option: `:run` (see `Dolphin.Report.write/4`).
   """
   @spec make(Path.t(), Path.t() | nil, Path.t(), keyword()) :: {:ok, String.t()} | {:error, Dolphin.Report.Error.t()}
   def make(tlog, events, out, opts \\ []) do
-    with {:ok, s} <- Dolphin.Report.write(tlog, events, out, opts) do
+    with {:ok, s} <- write(tlog, events, out, opts) do
       damaged = if s.bytes_skipped > 0, do: "; the log is damaged: #{s.bytes_skipped} bytes skipped (see the report)", else: ""
       skipped = if s.events_skipped > 0, do: "; #{s.events_skipped} unreadable event line(s) skipped", else: ""
 
@@ -78,8 +82,17 @@ defmodule Mix.Tasks.Dolphin.Report do
           else: ""
 
       {:ok,
-       "report: #{out} (#{div(s.bytes + 1023, 1024)} KiB): #{length(s.vehicles)} vehicle(s), #{s.frames} frames, " <>
+       "report: #{if out == "-", do: "standard output", else: out} (#{div(s.bytes + 1023, 1024)} KiB): #{length(s.vehicles)} vehicle(s), #{s.frames} frames, " <>
          "#{round(s.span_s)} s of clock time" <> if(s.events, do: ", #{s.events} events", else: "") <> damaged <> skipped <> runs}
     end
   end
+
+  defp write(tlog, events, "-", opts) do
+    with {:ok, page, summary} <- Dolphin.Report.build(tlog, events, opts) do
+      IO.binwrite(:stdio, page)
+      {:ok, summary}
+    end
+  end
+
+  defp write(tlog, events, out, opts), do: Dolphin.Report.write(tlog, events, out, opts)
 end

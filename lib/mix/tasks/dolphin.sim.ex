@@ -49,6 +49,7 @@ defmodule Mix.Tasks.Dolphin.Sim do
   def run(argv) do
     # A closed pipe (`| head`) ends the task at once, quietly.
     Dolphin.CLI.Stdout.watch()
+
     opts = parse!(argv)
     Mix.Task.run("app.start")
     sysids = start!(opts)

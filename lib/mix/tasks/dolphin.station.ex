@@ -50,6 +50,7 @@ defmodule Mix.Tasks.Dolphin.Station do
   def run(argv) do
     # A closed pipe (`| head`) ends the task at once, quietly.
     Dolphin.CLI.Stdout.watch()
+
     case main(argv, signals: true) do
       0 -> :ok
       code -> exit({:shutdown, code})

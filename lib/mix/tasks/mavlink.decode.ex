@@ -38,6 +38,7 @@ defmodule Mix.Tasks.Mavlink.Decode do
   def run(args) do
     # A closed pipe (`| head`) ends the task at once, quietly.
     Dolphin.CLI.Stdout.watch()
+
     case OptionParser.parse(args, strict: @switches) do
       {opts, [file], []} ->
         signing = signing!(opts)

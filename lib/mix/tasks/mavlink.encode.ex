@@ -26,6 +26,7 @@ defmodule Mix.Tasks.Mavlink.Encode do
   def run(args) do
     # A closed pipe (`| head`) ends the task at once, quietly.
     Dolphin.CLI.Stdout.watch()
+
     case OptionParser.parse(args, strict: []) do
       {_, [file], []} ->
         lines = if file == "-", do: IO.stream(:stdio, :line), else: stream!(file)

@@ -67,6 +67,12 @@ defmodule Mix.Tasks.OutputFilesShellTest do
     assert result.out =~ "1 vehicle(s), 484 frames, 60 s of clock time"
     assert result.out =~ "the telemetry log holds 2 runs"
     assert result.out =~ "this report is of run 2, the last, alone (--run N for another)"
+
+    # The page on standard output, the line on standard error.
+    result = Shell.run("mix dolphin.report #{q(log)} --run 1 -o - | head -c 15")
+    assert result.out == "<!DOCTYPE html>"
+    assert result.statuses in [[0, 0], [141, 0]]
+    assert result.err == "" or result.err =~ "report: standard output"
   end
 
   test "the same command twice: the second run replaces the log and says so, and its report is its own", %{tmp_dir: dir} do
