@@ -36,7 +36,8 @@ defmodule Dolphin.Report do
 
   A truncated or corrupt log gives a report of the frames that could be read
   and says how many bytes were skipped and why; unreadable lines of the events
-  file are skipped and counted. A log with no vehicle in it is an error.
+  file are skipped and counted. A log with no MAVLink frame or no vehicle in
+  it, and an events file with no event, are errors.
 
   ## Logs of several runs
 
@@ -131,15 +132,13 @@ defmodule Dolphin.Report do
     n = length(FlightLog.runs(log))
     run = wanted || n
 
-    cond do
-      run not in 1..n//1 ->
-        {:error, %Error{reason: :no_such_run, path: path, detail: "it holds #{n} run#{if n != 1, do: "s"}, there is no run #{run}"}}
-
-      true ->
-        case FlightLog.select(log, run) do
-          %FlightLog{vehicles: vs} when vs == %{} -> {:error, %Error{reason: :no_vehicles, path: path, detail: "run #{run} of #{n} has none"}}
-          one -> {:ok, one, n, run}
-        end
+    if run in 1..n//1 do
+      case FlightLog.select(log, run) do
+        %FlightLog{vehicles: vs} when vs == %{} -> {:error, %Error{reason: :no_vehicles, path: path, detail: "run #{run} of #{n} has none"}}
+        one -> {:ok, one, n, run}
+      end
+    else
+      {:error, %Error{reason: :no_such_run, path: path, detail: "it holds #{n} run#{if n != 1, do: "s"}, there is no run #{run}"}}
     end
   end
 

@@ -191,13 +191,8 @@ defmodule Dolphin.Report.FlightLog do
         %{^id => {last_ts, last_boot}} when boot_ms > last_boot and boot_ms - last_boot < @max_boot_step_ms and ts > last_ts ->
           %{log | boot_ms: log.boot_ms + (boot_ms - last_boot), boot_real_us: log.boot_real_us + (ts - last_ts)}
 
-        # Its clock started again after the whole log fell silent: a new run
-        # began where the silence ended (noted once for all its vehicles).
         %{^id => {last_ts, last_boot}} when boot_ms + @restart_ms < last_boot ->
-          case {log.silence, log.starts} do
-            {{start, _} = silence, starts} when start > last_ts and not (starts != [] and hd(starts) == silence) -> %{log | starts: [silence | starts]}
-            _ -> log
-          end
+          new_run(log, last_ts)
 
         _ ->
           log
@@ -205,6 +200,15 @@ defmodule Dolphin.Report.FlightLog do
 
     %{log | boot_last: Map.put(log.boot_last, id, {ts, boot_ms})}
   end
+
+  # A boot clock started again after the whole log fell silent (since that
+  # vehicle's previous frame, at `last_ts`): a new run began where the
+  # silence ended, noted once for all its vehicles.
+  defp new_run(%__MODULE__{silence: {start, _} = silence, starts: starts} = log, last_ts) when start > last_ts do
+    if List.first(starts) == silence, do: log, else: %{log | starts: [silence | starts]}
+  end
+
+  defp new_run(log, _last_ts), do: log
 
   defp clean_text(text) when is_binary(text) do
     text = text |> :binary.split(<<0>>) |> hd()
@@ -224,7 +228,7 @@ defmodule Dolphin.Report.FlightLog do
          %{
            v
            | homes: Enum.reverse(v.homes),
-             home: with([{_, home} | _] <- Enum.reverse(v.homes), do: home, else: (_ -> nil)),
+             home: v.homes |> List.last() |> home(),
              positions: Enum.reverse(v.positions),
              arming: Enum.reverse(v.arming),
              modes: Enum.reverse(v.modes),
@@ -276,13 +280,12 @@ defmodule Dolphin.Report.FlightLog do
 
   defp select_vehicle(v, first, within, keep) do
     homes = keep.(v.homes)
-    # A home not sent again in this run is the one it had before.
-    home = with([{_, home} | _] <- homes, do: home, else: (_ -> with({_, home} <- v.homes |> Enum.filter(&(elem(&1, 0) < first)) |> List.last(), do: home)))
 
     %{
       v
       | homes: homes,
-        home: home,
+        # A home not sent again in this run is the one it had before.
+        home: home(List.first(homes) || v.homes |> Enum.filter(&(elem(&1, 0) < first)) |> List.last()),
         positions: keep.(v.positions),
         arming: keep.(v.arming),
         modes: keep.(v.modes),
@@ -294,6 +297,9 @@ defmodule Dolphin.Report.FlightLog do
         texts: keep.(v.texts)
     }
   end
+
+  defp home(nil), do: nil
+  defp home({_ts, home}), do: home
 
   @doc false
   # The vehicles' clock rate over the log's (1.0 when the log does not tell).
