@@ -2,9 +2,11 @@ defmodule Dolphin.Link do
   @moduledoc """
   Connections to vehicles. `connect/2` starts a link for an endpoint string
   (see `Dolphin.Link.Endpoint`) under `Dolphin.Link.Supervisor`, which restarts
-  it if it crashes; vehicles outlive their link's restarts.
+  it if it crashes; vehicles outlive their link's restarts. `disconnect/1`
+  stops it, its socket closed when it returns.
 
-      {:ok, _pid} = Dolphin.Link.connect("udpin:0.0.0.0:14550", tlog: "flight.tlog")
+      {:ok, link} = Dolphin.Link.connect("udpin:0.0.0.0:14550", tlog: "flight.tlog")
+      :ok = Dolphin.Link.disconnect(link)
 
   Every kind of endpoint (`udpin`, `udpout`, `tcp`) is served by `Dolphin.Link.Connection`.
 
@@ -74,6 +76,18 @@ defmodule Dolphin.Link do
         {:error, other} -> {:error, %EndpointError{endpoint: endpoint, reason: :failed, detail: inspect(other)}}
       end
     end
+  end
+
+  @doc """
+  Stops a link that `connect/2` started. When it returns, the link's sockets
+  are closed (its port can be opened again at once) and its telemetry log
+  is written out.
+  """
+  @spec disconnect(pid()) :: :ok
+  def disconnect(link) do
+    # :not_found: it was stopped already.
+    _ = DynamicSupervisor.terminate_child(Dolphin.Link.Supervisor, link)
+    :ok
   end
 
   defp parse_all(endpoints) do

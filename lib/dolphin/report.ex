@@ -36,7 +36,20 @@ defmodule Dolphin.Report do
 
   A truncated or corrupt log gives a report of the frames that could be read
   and says how many bytes were skipped and why; unreadable lines of the events
-  file are skipped and counted. A log with no vehicle in it is an error.
+  file are skipped and counted. A log with no MAVLink frame or no vehicle in
+  it, and an events file with no event, are errors.
+
+  ## Logs of several runs
+
+  A log written by one run holds that run (`mix dolphin.run --tlog` replaces
+  an existing file). A log that holds several — logs appended to one
+  another, a link's `:tlog` given the same file run after run — is cut into
+  its runs where the vehicles' boot clocks start again after a silence of
+  the whole log (the ground station, which records its own heartbeat every
+  second, was not running); the report shows one run, the last unless
+  `:run` says which, and says so (`runs` and `run` in the summary). Runs
+  of vehicles that kept running in between (real vehicles, whose clocks do
+  not start again) cannot be told apart.
 
   ## Events of another run
 
@@ -64,13 +77,16 @@ defmodule Dolphin.Report do
           bytes_skipped: non_neg_integer(),
           events: non_neg_integer() | nil,
           events_skipped: non_neg_integer(),
-          script_result: String.t() | nil
+          script_result: String.t() | nil,
+          runs: pos_integer(),
+          run: pos_integer()
         }
 
   @doc """
   Reads `tlog_path` (and `events_path`, unless nil), writes the report to
-  `out_path` and returns its summary. Option: `:title`, the page's heading
-  (default "Flight report").
+  `out_path` and returns its summary. Options: `:title`, the page's heading
+  (default "Flight report"); `:run`, which run of a log that holds several
+  (from 1; default the last: see "Logs of several runs").
   """
   @spec write(Path.t(), Path.t() | nil, Path.t(), keyword()) :: {:ok, summary()} | {:error, Error.t()}
   def write(tlog_path, events_path, out_path, opts \\ []) when is_list(opts) do
@@ -85,12 +101,13 @@ defmodule Dolphin.Report do
   @doc "Like `write/4`, but returns the page (iodata) and its summary (`path` nil) instead of writing it."
   @spec build(Path.t(), Path.t() | nil, keyword()) :: {:ok, iodata(), summary()} | {:error, Error.t()}
   def build(tlog_path, events_path, opts \\ []) when is_list(opts) do
-    with {:ok, log} <- read_log(tlog_path),
+    with {:ok, whole} <- read_log(tlog_path),
+         {:ok, log, runs, run} <- select_run(whole, opts[:run], tlog_path),
          {:ok, events, bad} <- read_events(events_path),
          {:ok, offset} <- Events.align(events, Model.anchors(log), events_path) do
       model = Model.build(log, events, offset)
       title = Keyword.get(opts, :title, "Flight report")
-      page = HTML.page(model, %{title: title, tlog: tlog_path, events: events_path, events_skipped: bad})
+      page = HTML.page(model, %{title: title, tlog: tlog_path, events: events_path, events_skipped: bad, runs: {runs, run}})
 
       {:ok, page,
        %{
@@ -103,13 +120,36 @@ defmodule Dolphin.Report do
          bytes_skipped: log.stats.bytes_skipped,
          events: if(events_path, do: length(events)),
          events_skipped: bad,
-         script_result: model.script && model.script.result
+         script_result: model.script && model.script.result,
+         runs: runs,
+         run: run
        }}
+    end
+  end
+
+  # One run of the log: the one asked for, else the last.
+  defp select_run(log, wanted, path) do
+    n = length(FlightLog.runs(log))
+    run = wanted || n
+
+    if run in 1..n//1 do
+      case FlightLog.select(log, run) do
+        %FlightLog{vehicles: vs} when vs == %{} -> {:error, %Error{reason: :no_vehicles, path: path, detail: "run #{run} of #{n} has none"}}
+        one -> {:ok, one, n, run}
+      end
+    else
+      {:error, %Error{reason: :no_such_run, path: path, detail: "it holds #{n} run#{if n != 1, do: "s"}, there is no run #{run}"}}
     end
   end
 
   defp read_log(path) do
     case FlightLog.read_file(path) do
+      {:ok, %FlightLog{stats: %{frames: 0, bytes: 0}}} ->
+        {:error, %Error{reason: :no_frames, path: path, detail: "the file is empty"}}
+
+      {:ok, %FlightLog{stats: %{frames: 0, bytes: bytes}}} ->
+        {:error, %Error{reason: :no_frames, path: path, detail: "none of its #{bytes} bytes is a telemetry-log record (a .tlog as mix dolphin.run writes it?)"}}
+
       {:ok, %FlightLog{vehicles: vs, stats: stats}} when vs == %{} ->
         {:error, %Error{reason: :no_vehicles, path: path, detail: "#{stats.frames} frame(s) read, #{stats.bytes_skipped} of #{stats.bytes} bytes skipped"}}
 

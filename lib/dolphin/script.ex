@@ -79,7 +79,8 @@ defmodule Dolphin.Script do
   defstruct [:file, :module, :source]
 
   @type t :: %__MODULE__{file: String.t(), module: module(), source: String.t()}
-  @type summary :: %{result: :done | :stopped, duration_ms: non_neg_integer(), file: String.t()}
+  @typedoc "How a script ended: its result, how long it ran and when it started (`Dolphin.Clock` ms)."
+  @type summary :: %{result: :done | :stopped, duration_ms: non_neg_integer(), started_ms: integer(), file: String.t()}
 
   @doc false
   defmacro __using__(_opts) do

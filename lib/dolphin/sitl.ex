@@ -152,7 +152,7 @@ defmodule Dolphin.SITL do
   def stop(%{link: link, sysids: sysids, instances: instances, numbers: numbers} = fleet) do
     if pid = fleet.charger, do: DynamicSupervisor.terminate_child(Dolphin.SITL.Supervisor, pid)
     # The link first: a frame still on its way would make a forgotten vehicle known again.
-    DynamicSupervisor.terminate_child(Dolphin.Link.Supervisor, link)
+    Dolphin.Link.disconnect(link)
     Enum.each(instances, &DynamicSupervisor.terminate_child(Dolphin.SITL.Supervisor, &1))
     release_instances(numbers)
     remove_payload(sysids, :camera)

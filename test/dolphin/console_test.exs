@@ -323,7 +323,10 @@ defmodule Dolphin.ConsoleTest do
     saved = Path.join(dir, "back.plan")
     download(1, save: saved)
     text = out(io)
-    assert text =~ "vehicle 1: 5 mission items (0 is home)"
+    # As many items as rows in the table below, home first.
+    assert text =~ "vehicle 1 holds 6 items: home (item 0) and 5 mission items (items 1 to 5)\n"
+    assert length(Regex.scan(~r/^\s+\d+ [A-Z_]+|^\s+0 home/m, text)) == 6
+    assert text =~ ~r/\n\s+0 home\s/
     assert text =~ ~r/\n\s+1 NAV_TAKEOFF\s+40\.4442330, -7\.3752340, 20 m above home/
     assert text =~ ~s{\nmission "vehicle 1" do\n  home location(}
     assert text =~ "saved as #{saved}"

@@ -26,7 +26,9 @@ defmodule Dolphin.ReportTest do
     path
   end
 
-  defp tlog_bytes do
+  # `shift_us` later on the log's clock; `reboot_at_s`: vehicle 2's boot clock
+  # starts again then (a reboot in flight).
+  defp tlog_bytes(shift_us \\ 0, reboot_at_s \\ nil) do
     upload =
       for v <- [1, 2] do
         count = %M.MissionCount{target_system: v, target_component: 1, count: 3}
@@ -49,7 +51,9 @@ defmodule Dolphin.ReportTest do
         {lat, lon} = if v == 1, do: {@lat0 + along, @lon0}, else: {@lat0, @lon0 + along}
         ts = round(t * 1_000_000) + v * 1_000
 
-        [{ts, v, 1, %M.GlobalPositionInt{time_boot_ms: round(t * 1000), lat: lat, lon: lon, alt: 820_000 + up * 1000, relative_alt: up * 1000, vx: 500, vy: 0}}] ++
+        boot_s = if reboot_at_s && v == 2 && t >= reboot_at_s, do: t - reboot_at_s, else: t
+
+        [{ts, v, 1, %M.GlobalPositionInt{time_boot_ms: round(boot_s * 1000), lat: lat, lon: lon, alt: 820_000 + up * 1000, relative_alt: up * 1000, vx: 500, vy: 0}}] ++
           if rem(half, 2) == 0 do
             [
               {ts + 1, v, 1, %M.Heartbeat{type: 2, autopilot: 3, base_mode: if(armed, do: 0x91, else: 0x11), custom_mode: if(armed, do: 3, else: 0), mavlink_version: 3}},
@@ -71,7 +75,7 @@ defmodule Dolphin.ReportTest do
     |> Enum.sort_by(&elem(&1, 0))
     |> Enum.map_reduce(%{}, fn {ts, sysid, compid, msg}, seqs ->
       seq = Map.get(seqs, {sysid, compid}, 0)
-      {Tlog.record(@t0 + ts, Frame.encode(msg, sysid: sysid, compid: compid, seq: rem(seq, 256))), Map.put(seqs, {sysid, compid}, seq + 1)}
+      {Tlog.record(@t0 + shift_us + ts, Frame.encode(msg, sysid: sysid, compid: compid, seq: rem(seq, 256))), Map.put(seqs, {sysid, compid}, seq + 1)}
     end)
     |> elem(0)
     |> IO.iodata_to_binary()
@@ -236,11 +240,71 @@ defmodule Dolphin.ReportTest do
     end
   end
 
+  describe "a log that holds two runs" do
+    # A second run of the same vehicles appended two minutes after the first
+    # began: the ground station recorded nothing in between, and the
+    # vehicles' boot clocks started again.
+    setup %{tmp_dir: dir} do
+      path = Path.join(dir, "two.tlog")
+      File.write!(path, [tlog_bytes(), tlog_bytes(120_000_000)])
+      %{two: path}
+    end
+
+    test "is reported one run at a time, the last unless --run says, and says so", %{tmp_dir: dir, two: two} do
+      out = Path.join(dir, "r.html")
+      # The second run's events line up with the second run alone.
+      assert {:ok, summary} = Report.write(two, events(dir), out)
+      assert %{runs: 2, run: 2, vehicles: [1, 2], events: 16} = summary
+      assert_in_delta summary.span_s, 60.0, 1.0
+      html = File.read!(out)
+      assert html =~ "The telemetry log holds 2 runs"
+      assert html =~ "this report shows run 2 of 2 alone, the last"
+      assert count(html, ~r/<polyline class="flown"/) == 2
+
+      assert {:ok, %{runs: 2, run: 1, span_s: span}} = Report.write(two, nil, out, run: 1)
+      assert_in_delta span, 60.0, 1.0
+      assert {:error, %Error{reason: :no_such_run} = e} = Report.write(two, nil, out, run: 3)
+      assert Exception.message(e) == "no such run in the telemetry log: #{two}: it holds 2 runs, there is no run 3"
+    end
+
+    test "a vehicle that reboots while the ground station goes on recording is one run", %{tmp_dir: dir} do
+      path = Path.join(dir, "reboot.tlog")
+      File.write!(path, tlog_bytes(0, 30))
+      assert {:ok, %{runs: 1, run: 1, span_s: span}} = Report.write(path, events(dir), Path.join(dir, "r.html"))
+      assert_in_delta span, 60.0, 1.0
+      refute File.read!(Path.join(dir, "r.html")) =~ "holds 2 runs"
+    end
+
+    test "mix dolphin.report says which run it reports", %{tmp_dir: dir, two: two} do
+      out = capture_io(fn -> Mix.Tasks.Dolphin.Report.run([two, "--events", events(dir), "-o", Path.join(dir, "r.html")]) end)
+      assert out =~ "the telemetry log holds 2 runs (the vehicles' clocks started again after the ground station had stopped recording): this report is of run 2, the last, alone (--run N for another)"
+      out = capture_io(fn -> Mix.Tasks.Dolphin.Report.run([two, "--run", "1", "-o", Path.join(dir, "r.html")]) end)
+      assert out =~ "this report is of run 1, alone"
+    end
+  end
+
+  test "a file with nothing readable in it is an error, not an empty report", %{tmp_dir: dir} do
+    out = Path.join(dir, "r.html")
+    noise = Path.join(dir, "noise.bin")
+    File.write!(noise, :crypto.strong_rand_bytes(2000))
+    assert {:error, %Error{reason: :no_frames} = e} = Report.write(noise, nil, out)
+    assert Exception.message(e) == "no MAVLink frame in the telemetry log: #{noise}: none of its 2000 bytes is a telemetry-log record (a .tlog as mix dolphin.run writes it?)"
+    empty = Path.join(dir, "empty")
+    File.write!(empty, "")
+    assert {:error, %Error{reason: :no_frames, detail: "the file is empty"}} = Report.write(empty, nil, out)
+
+    assert {:error, %Error{reason: :no_events} = e} = Report.write(tlog(dir), noise, out)
+    assert Exception.message(e) =~ ~r/^no event in the events file: #{Regex.escape(noise)}: none of its \d+ line\(s\) is an event/
+    assert {:error, %Error{reason: :no_events, detail: "the file is empty"}} = Report.write(tlog(dir), empty, out)
+    refute File.exists?(out)
+  end
+
   test "errors: no log, no vehicle in it, nowhere to write", %{tmp_dir: dir} do
     assert {:error, %Error{reason: :tlog_unreadable}} = Report.write(Path.join(dir, "missing.tlog"), nil, Path.join(dir, "r.html"))
-    empty = Path.join(dir, "empty.tlog")
-    File.write!(empty, :crypto.strong_rand_bytes(2000))
-    assert {:error, %Error{reason: :no_vehicles}} = Report.write(empty, nil, Path.join(dir, "r.html"))
+    # Frames, but only a ground station's.
+    gcs = Path.join(dir, "gcs.tlog")
+    File.write!(gcs, for(i <- 0..9, do: Tlog.record(@t0 + i * 1_000_000, Frame.encode(%M.Heartbeat{type: 6, autopilot: 8, mavlink_version: 3}, sysid: 255, compid: 190, seq: i))))
+    assert {:error, %Error{reason: :no_vehicles}} = Report.write(gcs, nil, Path.join(dir, "r.html"))
     assert {:error, %Error{reason: :events_unreadable}} = Report.write(tlog(dir), Path.join(dir, "missing.jsonl"), Path.join(dir, "r.html"))
     assert {:error, %Error{reason: :write_failed}} = Report.write(tlog(dir), nil, Path.join([dir, "no", "such", "r.html"]))
   end
@@ -260,10 +324,25 @@ defmodule Dolphin.ReportTest do
       assert File.exists?(other)
     end
 
+    test "-o - writes the page to standard output, and what it holds to standard error", %{tmp_dir: dir} do
+      log = tlog(dir)
+      err = capture_io(:stderr, fn -> send(self(), {:page, capture_io(fn -> Mix.Tasks.Dolphin.Report.run([log, "-o", "-"]) end)}) end)
+      assert_received {:page, "<!DOCTYPE html>" <> _ = page}
+      assert page =~ "</html>"
+      assert err =~ ~r/^report: standard output \(\d+ KiB\): 2 vehicle\(s\)/
+      refute File.exists?("-")
+    end
+
     test "usage and input errors", %{tmp_dir: dir} do
       assert_raise Mix.Error, ~r/usage: mix dolphin.report/, fn -> Mix.Tasks.Dolphin.Report.run([]) end
       assert_raise Mix.Error, ~r/unknown or malformed option --bogus/, fn -> Mix.Tasks.Dolphin.Report.run(["x.tlog", "--bogus"]) end
       assert_raise Mix.Error, ~r/cannot read the telemetry log/, fn -> Mix.Tasks.Dolphin.Report.run([Path.join(dir, "none.tlog")]) end
+      missing = Path.join(dir, "missing")
+      e = assert_raise Mix.Error, fn -> Mix.Tasks.Dolphin.Report.run([tlog(dir), "-o", Path.join(missing, "r.html")]) end
+      assert e.message =~ "dolphin.report: -o #{missing}/r.html: cannot create it: no such directory #{missing}\nusage: mix dolphin.report"
+      assert e.mix == 2
+      e = assert_raise Mix.Error, fn -> Mix.Tasks.Dolphin.Report.run([tlog(dir), "--run", "0"]) end
+      assert {e.message, e.mix} == {"dolphin.report: --run takes a run's number, from 1, got 0\nusage: mix dolphin.report RUN.tlog [--events RUN.jsonl] [-o REPORT.html] [--run N]", 2}
     end
   end
 end

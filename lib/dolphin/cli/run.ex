@@ -108,7 +108,7 @@ defmodule Dolphin.CLI.Run do
           {result, signal} = run_until_signal(script, opts, renderer)
           # The log and the status block end before the summary is printed below them.
           stop_outputs()
-          summary(result, Keyword.put(opts, :signal, signal), out, err)
+          summary(result, opts ++ [signal: signal, origin_ms: origin], out, err)
         end
       after
         # The outputs stop first (they show the run, not its teardown); then
@@ -238,11 +238,23 @@ defmodule Dolphin.CLI.Run do
     {:ok, renderer} = Renderer.start_link(out: out, origin_ms: origin, quiet: opts[:quiet] == true, terminal: terminal)
     defer(fn -> Renderer.stop(renderer) end, :output)
 
-    with {:ok, writer} <- start_writer(opts[:events], origin) do
+    with {:ok, writer} <- start_writer(opts[:events], origin),
+         {:ok, log} <- start_tlog(opts[:tlog]) do
       err = Keyword.get(opts, :err, :stderr)
       if opts[:signals], do: Signals.catch_signals(self(), again: &exit_at_once(&1, renderer, writer, err))
-      if opts[:tlog] && !opts[:quiet], do: IO.puts(out, "telemetry log: #{opts[:tlog]}")
+      if log && !opts[:quiet], do: IO.puts(out, "telemetry log: #{opts[:tlog]}" <> if(log == :replaced, do: " (replaces the file that was there)", else: ""))
       {:ok, renderer}
+    end
+  end
+
+  # The links append to the log (several links share one); emptied first, it
+  # holds this run only, so that its report is this run's.
+  defp start_tlog(nil), do: {:ok, nil}
+
+  defp start_tlog(path) do
+    case Dolphin.CLI.OutputFile.replace(path) do
+      {:ok, how} -> {:ok, how}
+      {:error, why} -> {:error, %StartError{option: "--tlog", reason: why}}
     end
   end
 
@@ -283,19 +295,21 @@ defmodule Dolphin.CLI.Run do
 
   defp defer(fun, kind), do: Process.put(@cleanup, [{kind, fun} | Process.get(@cleanup)])
 
-  defp summary({:ok, %{result: :done, duration_ms: ms}}, _opts, out, _err) do
-    IO.puts(out, "script completed in #{Format.seconds(ms)} of clock time")
+  # Times on the run's clock, the events' (from the start of the run, its
+  # vehicles' start included): the summary's time is its last event's.
+  defp summary({:ok, %{result: :done} = s}, opts, out, _err) do
+    IO.puts(out, "script completed after #{Format.seconds(ended(s, opts))} of clock time")
     :completed
   end
 
-  defp summary({:ok, %{result: :stopped, duration_ms: ms}}, opts, out, _err) do
+  defp summary({:ok, %{result: :stopped} = s}, opts, out, _err) do
     why =
       case opts[:signal] do
-        nil -> if opts[:for_ms], do: "--for #{opts[:for]} is over", else: "stopped"
+        nil -> if opts[:for_ms], do: "--for #{opts[:for]} is over, counted from the script's start at #{Format.seconds(s.started_ms - opts[:origin_ms])}", else: "stopped"
         sig -> Signals.name(sig)
       end
 
-    IO.puts(out, "script stopped after #{Format.seconds(ms)} of clock time (#{why}): running tasks were stopped, vehicles hold")
+    IO.puts(out, "script stopped after #{Format.seconds(ended(s, opts))} of clock time (#{why}): running tasks were stopped, vehicles hold")
     if sig = opts[:signal], do: {:stopped, sig}, else: :stopped
   end
 
@@ -303,4 +317,6 @@ defmodule Dolphin.CLI.Run do
     IO.puts(err, Dolphin.Script.Error.format(e))
     :failed
   end
+
+  defp ended(summary, opts), do: summary.started_ms + summary.duration_ms - opts[:origin_ms]
 end

@@ -45,7 +45,7 @@ defmodule Dolphin.CLI.Vehicles do
     Enum.reduce_while(endpoints, :ok, fn ep, :ok ->
       case Dolphin.Link.connect(ep, link_opts) do
         {:ok, pid} ->
-          defer.(fn -> DynamicSupervisor.terminate_child(Dolphin.Link.Supervisor, pid) end)
+          defer.(fn -> Dolphin.Link.disconnect(pid) end)
           {:cont, :ok}
 
         {:error, why} ->

@@ -209,7 +209,7 @@ defmodule Dolphin.Console.Vehicle do
           say("vehicle #{id} has no mission (only its home)")
 
         {:ok, items} ->
-          say("vehicle #{id}: #{length(items) - 1} mission items (0 is home)")
+          say(holds(id, length(items) - 1))
           say(Format.items(items))
 
           case MissionSource.from_items(items, "vehicle #{id}") do
@@ -226,6 +226,10 @@ defmodule Dolphin.Console.Vehicle do
       end
     end)
   end
+
+  # The heading of the table below it: as many items as rows, home first.
+  defp holds(id, 1), do: "vehicle #{id} holds 2 items: home (item 0) and 1 mission item (item 1)"
+  defp holds(id, n), do: "vehicle #{id} holds #{n + 1} items: home (item 0) and #{n} mission items (items 1 to #{n})"
 
   defp save_plan(mission, path) do
     case File.write(path, Mission.to_plan(mission)) do

@@ -117,15 +117,13 @@ defmodule Dolphin.Link.Connection do
   def init(opts) do
     %Endpoint{} = endpoint = Keyword.fetch!(opts, :endpoint)
     # Trapping exits makes a supervisor's shutdown run terminate/2, which
-    # flushes the tlog; a crash loses at most its last 200 ms.
+    # closes the sockets and flushes the tlog; a crash loses at most its last 200 ms.
     Process.flag(:trap_exit, true)
 
-    with {:ok, socket} <- open(endpoint),
+    # The log first: a log that cannot be written leaves no socket behind.
+    with {:ok, tlog} <- open_tlog(opts[:tlog]),
+         {:ok, socket} <- open(endpoint),
          {:ok, forward} <- open_forward(Keyword.get(opts, :forward, [])) do
-      tlog =
-        with path when is_binary(path) <- opts[:tlog],
-             do: {File.open!(path, [:append, :binary, :raw, {:delayed_write, 65_536, 200}]), Path.expand(path)}
-
       if endpoint.kind == :tcp, do: send(self(), :connect)
       send(self(), :heartbeat)
 
@@ -147,6 +145,15 @@ defmodule Dolphin.Link.Connection do
        }}
     else
       {:error, reason} -> {:stop, {:cannot_open, Endpoint.to_string(endpoint), reason}}
+    end
+  end
+
+  defp open_tlog(nil), do: {:ok, nil}
+
+  defp open_tlog(path) do
+    case File.open(path, [:append, :binary, :raw, {:delayed_write, 65_536, 200}]) do
+      {:ok, io} -> {:ok, {io, Path.expand(path)}}
+      {:error, why} -> {:error, "telemetry log #{path}: #{:file.format_error(why)}"}
     end
   end
 
@@ -261,9 +268,27 @@ defmodule Dolphin.Link.Connection do
   def handle_call(:info, _from, state),
     do: {:reply, %{stats: state.stats, peers: state.peers, connected: state.socket != nil}, state}
 
+  # The sockets are closed here, not left to the exit of this process: a
+  # socket closed by its owner's exit is closed a moment after the exit, and
+  # whoever stopped the link (`Dolphin.Link.disconnect/1`) may open the same
+  # port again at once. (Trapping exits, a close waits for the port to go.)
   @impl true
-  def terminate(_reason, %{tlog: {io, _path}}), do: File.close(io)
-  def terminate(_reason, _state), do: :ok
+  def terminate(_reason, state) do
+    close_socket(state.endpoint.kind, state.socket)
+    with {socket, _targets} <- state.forward, do: :gen_udp.close(socket)
+    with {io, path} <- state.tlog do
+      File.close(io)
+      # What it recorded is no copy for a link that records to the file next
+      # (a new run, which may send the very same frames: a deterministic simulation).
+      :ets.match_delete(Dolphin.Link.Recorded, {{path, :_, :_, :_}, :_, state.name, :_})
+    end
+
+    :ok
+  end
+
+  defp close_socket(_kind, nil), do: :ok
+  defp close_socket(:tcp, socket), do: :gen_tcp.close(socket)
+  defp close_socket(_udp, socket), do: :gen_udp.close(socket)
 
   # Reconnection is in real time, not clock time: it is about the network.
   defp reconnect(state) do

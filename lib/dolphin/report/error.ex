@@ -5,8 +5,11 @@ defmodule Dolphin.Report.Error do
   `reason` is one of:
 
     * `:tlog_unreadable` — the telemetry log cannot be opened or read;
-    * `:no_vehicles` — the log holds no frame of any vehicle (an empty file,
-      or nothing in it is MAVLink);
+    * `:no_frames` — the log holds no MAVLink frame (an empty file, or not
+      a telemetry log);
+    * `:no_vehicles` — the log holds frames, but none of a vehicle;
+    * `:no_such_run` — the run asked for is not in the log;
+    * `:no_events` — the events file holds no event that can be read;
     * `:events_unreadable` — the events file cannot be read;
     * `:events_mismatch` — the events are from another run (see
       `Dolphin.Report`);
@@ -17,7 +20,7 @@ defmodule Dolphin.Report.Error do
 
   defexception [:reason, :path, :detail]
 
-  @type reason :: :tlog_unreadable | :no_vehicles | :events_unreadable | :events_mismatch | :write_failed
+  @type reason :: :tlog_unreadable | :no_frames | :no_vehicles | :no_such_run | :events_unreadable | :no_events | :events_mismatch | :write_failed
   @type t :: %__MODULE__{reason: reason(), path: Path.t() | nil, detail: String.t() | nil}
 
   @impl true
@@ -25,7 +28,10 @@ defmodule Dolphin.Report.Error do
     what =
       case reason do
         :tlog_unreadable -> "cannot read the telemetry log"
+        :no_frames -> "no MAVLink frame in the telemetry log"
         :no_vehicles -> "no vehicle in the telemetry log"
+        :no_such_run -> "no such run in the telemetry log"
+        :no_events -> "no event in the events file"
         :events_unreadable -> "cannot read the events"
         :events_mismatch -> "the events do not belong to the telemetry log"
         :write_failed -> "cannot write the report"

@@ -33,7 +33,13 @@ defmodule Dolphin.Report.Events do
             end
           end)
 
-        {:ok, events |> Enum.reverse() |> Enum.sort_by(& &1["t_ms"]), bad}
+        # A file with no event is not a run's events (another kind of file,
+        # or the wrong one): an error, not a report without events.
+        case events do
+          [] when bad == 0 -> {:error, %Error{reason: :no_events, path: path, detail: "the file is empty"}}
+          [] -> {:error, %Error{reason: :no_events, path: path, detail: "none of its #{bad} line(s) is an event (a JSON line as mix dolphin.run --events writes it)"}}
+          _ -> {:ok, events |> Enum.reverse() |> Enum.sort_by(& &1["t_ms"]), bad}
+        end
 
       {:error, why} ->
         {:error, %Error{reason: :events_unreadable, path: path, detail: :file.format_error(why) |> to_string()}}

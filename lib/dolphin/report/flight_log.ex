@@ -3,6 +3,13 @@ defmodule Dolphin.Report.FlightLog do
   # Reads a .tlog into what a flight report shows, one fold over its records:
   # per vehicle the positions, home, arming and modes, battery, link counters,
   # uploaded missions, items reached, photos and status texts.
+  #
+  # A log may hold several runs (logs appended to one another: each link
+  # appends). A new run begins where the vehicles' boot clocks start again
+  # after a silence of the whole log, when not even the ground station's own
+  # heartbeat was recorded: the ground station was not running. (A vehicle
+  # that reboots during a run restarts its clock too, but the ground station
+  # goes on recording meanwhile.) `runs/1` lists them, `select/2` keeps one.
 
   alias Dolphin.MAVLink.Ardupilotmega, as: M
   alias Dolphin.MAVLink.{Frame, Tlog}
@@ -18,6 +25,12 @@ defmodule Dolphin.Report.FlightLog do
   # A gap in the vehicle's boot clock this long is a reboot or a silence, not
   # a measure of how fast its clock runs.
   @max_boot_step_ms 60_000
+  # Real µs without any record that may separate two runs: the ground station
+  # records its own heartbeat every second of clock time while it runs.
+  @silence_us 2_000_000
+  # How far (ms) a boot clock must go back to have started again, not to be
+  # a frame overtaken on the way.
+  @restart_ms 2_000
 
   defmodule Vehicle do
     @moduledoc false
@@ -26,6 +39,7 @@ defmodule Dolphin.Report.FlightLog do
               type: nil,
               autopilot: nil,
               home: nil,
+              homes: [],
               positions: [],
               armed: nil,
               arming: [],
@@ -41,7 +55,10 @@ defmodule Dolphin.Report.FlightLog do
 
   # `links`: per system id, {last seq, frames received, frames lost} of its
   # autopilot (kept apart from the vehicles: updated on every frame).
-  defstruct vehicles: %{}, links: %{}, first_us: nil, last_us: nil, boot_ms: 0, boot_real_us: 0, boot_last: %{}, stats: nil
+  # `previous_us`: the last record's stamp; `silence`: {first stamp after the
+  # latest silence, last stamp before it}; `starts`: those of the silences
+  # that began a run, newest first.
+  defstruct vehicles: %{}, links: %{}, first_us: nil, last_us: nil, boot_ms: 0, boot_real_us: 0, boot_last: %{}, stats: nil, previous_us: nil, silence: nil, starts: []
 
   @type t :: %__MODULE__{}
 
@@ -81,7 +98,8 @@ defmodule Dolphin.Report.FlightLog do
   # One record into the log.
   @spec add({non_neg_integer(), Frame.t()}, t()) :: t()
   def add({ts, %Frame{} = frame}, log) do
-    log = %{log | first_us: log.first_us || ts, last_us: max(log.last_us || ts, ts), links: sequence(log.links, frame)}
+    silence = if log.previous_us && ts - log.previous_us >= @silence_us, do: {ts, log.previous_us}, else: log.silence
+    log = %{log | first_us: log.first_us || ts, last_us: max(log.last_us || ts, ts), previous_us: ts, silence: silence, links: sequence(log.links, frame)}
     message(frame.message, ts, frame, log)
   end
 
@@ -105,8 +123,8 @@ defmodule Dolphin.Report.FlightLog do
     update(log, frame, &%{&1 | positions: [{ts, p.lat, p.lon, p.relative_alt, p.vx, p.vy} | &1.positions]})
   end
 
-  defp message(%M.HomePosition{} = h, _ts, frame, log),
-    do: update(log, frame, &%{&1 | home: &1.home || {h.latitude, h.longitude, h.altitude}})
+  defp message(%M.HomePosition{} = h, ts, frame, log),
+    do: update(log, frame, &%{&1 | homes: [{ts, {h.latitude, h.longitude, h.altitude}} | &1.homes]})
 
   defp message(%M.SysStatus{battery_remaining: pct}, ts, frame, log) when pct >= 0,
     do: update(log, frame, &%{&1 | battery: [{ts, pct} | &1.battery]})
@@ -173,12 +191,24 @@ defmodule Dolphin.Report.FlightLog do
         %{^id => {last_ts, last_boot}} when boot_ms > last_boot and boot_ms - last_boot < @max_boot_step_ms and ts > last_ts ->
           %{log | boot_ms: log.boot_ms + (boot_ms - last_boot), boot_real_us: log.boot_real_us + (ts - last_ts)}
 
+        %{^id => {last_ts, last_boot}} when boot_ms + @restart_ms < last_boot ->
+          new_run(log, last_ts)
+
         _ ->
           log
       end
 
     %{log | boot_last: Map.put(log.boot_last, id, {ts, boot_ms})}
   end
+
+  # A boot clock started again after the whole log fell silent (since that
+  # vehicle's previous frame, at `last_ts`): a new run began where the
+  # silence ended, noted once for all its vehicles.
+  defp new_run(%__MODULE__{silence: {start, _} = silence, starts: starts} = log, last_ts) when start > last_ts do
+    if List.first(starts) == silence, do: log, else: %{log | starts: [silence | starts]}
+  end
+
+  defp new_run(log, _last_ts), do: log
 
   defp clean_text(text) when is_binary(text) do
     text = text |> :binary.split(<<0>>) |> hd()
@@ -197,7 +227,9 @@ defmodule Dolphin.Report.FlightLog do
         {id,
          %{
            v
-           | positions: Enum.reverse(v.positions),
+           | homes: Enum.reverse(v.homes),
+             home: v.homes |> List.last() |> home(),
+             positions: Enum.reverse(v.positions),
              arming: Enum.reverse(v.arming),
              modes: Enum.reverse(v.modes),
              battery: Enum.reverse(v.battery),
@@ -211,6 +243,63 @@ defmodule Dolphin.Report.FlightLog do
 
     %{log | vehicles: vehicles, links: %{}, boot_last: %{}}
   end
+
+  @doc false
+  # The runs the log holds, oldest first: the stamps of the first and the
+  # last record of each ([] for a log with no record).
+  @spec runs(t()) :: [{integer(), integer()}]
+  def runs(%__MODULE__{first_us: nil}), do: []
+
+  def runs(%__MODULE__{} = log) do
+    starts = Enum.reverse(log.starts)
+    firsts = [log.first_us | Enum.map(starts, &elem(&1, 0))]
+    lasts = Enum.map(starts, &elem(&1, 1)) ++ [log.last_us]
+    Enum.zip(firsts, lasts)
+  end
+
+  @doc false
+  # The log of its `n`th run (from 1) alone: what the vehicles recorded
+  # from its first record to its last; a vehicle not heard then is left out.
+  @spec select(t(), pos_integer()) :: t()
+  def select(%__MODULE__{} = log, n) do
+    case runs(log) do
+      [_] ->
+        log
+
+      runs ->
+        {first, last} = Enum.at(runs, n - 1)
+        within = fn ts -> ts >= first and ts <= last end
+        keep = fn list -> Enum.filter(list, &within.(elem(&1, 0))) end
+
+        vehicles =
+          for {id, v} <- log.vehicles, v = select_vehicle(v, first, within, keep), v.positions != [] or v.modes != [], into: %{}, do: {id, v}
+
+        %{log | vehicles: vehicles, first_us: first, last_us: last, starts: []}
+    end
+  end
+
+  defp select_vehicle(v, first, within, keep) do
+    homes = keep.(v.homes)
+
+    %{
+      v
+      | homes: homes,
+        # A home not sent again in this run is the one it had before.
+        home: home(List.first(homes) || v.homes |> Enum.filter(&(elem(&1, 0) < first)) |> List.last()),
+        positions: keep.(v.positions),
+        arming: keep.(v.arming),
+        modes: keep.(v.modes),
+        battery: keep.(v.battery),
+        link: keep.(v.link),
+        uploads: Enum.filter(v.uploads, &within.(&1.at)),
+        reached: keep.(v.reached),
+        photos: keep.(v.photos),
+        texts: keep.(v.texts)
+    }
+  end
+
+  defp home(nil), do: nil
+  defp home({_ts, home}), do: home
 
   @doc false
   # The vehicles' clock rate over the log's (1.0 when the log does not tell).

@@ -62,7 +62,17 @@ defmodule Dolphin.Report.HTML do
 
     events = if info.events_skipped > 0, do: ["<li>#{info.events_skipped} line(s) of the events file could not be read and were skipped.</li>"], else: []
 
-    case skipped ++ events do
+    runs =
+      case Map.get(info, :runs) do
+        {n, run} when n > 1 ->
+          ["<li id=\"runs\">The telemetry log holds #{n} runs (the vehicles' clocks started again after the ground station had stopped recording): this report shows run #{run} of #{n} alone",
+           if(run == n, do: ", the last", else: ""), " (<code>mix dolphin.report --run N</code> shows another).</li>"]
+
+        _ ->
+          []
+      end
+
+    case runs ++ skipped ++ events do
       [] -> []
       items -> ["<ul class=\"notes\" id=\"skipped\">", items, "</ul>"]
     end

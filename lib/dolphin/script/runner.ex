@@ -166,11 +166,14 @@ defmodule Dolphin.Script.Runner do
         {:error, %Error{kind: kind} = e} -> {if(kind == :halted, do: :halted, else: :failed), Error.format(e)}
       end
 
-    Dolphin.Telemetry.emit(:script_finished, %{script: s.script.file, result: name, reason: reason}, s.ctx.clock.now_ms())
+    # One moment for the event and the summary: a run's summary line and its
+    # last event read the same time.
+    ended = s.ctx.clock.now_ms()
+    Dolphin.Telemetry.emit(:script_finished, %{script: s.script.file, result: name, reason: reason}, ended)
 
     result =
       case result do
-        {:ok, r} -> {:ok, %{result: r, duration_ms: s.ctx.clock.now_ms() - s.started, file: s.script.file}}
+        {:ok, r} -> {:ok, %{result: r, duration_ms: ended - s.started, started_ms: s.started, file: s.script.file}}
         error -> error
       end
 

@@ -33,7 +33,7 @@ defmodule Dolphin.Sim.Local do
             {:ok, %{link: link, port: port, sysids: sysids}}
 
           {:error, e} ->
-            DynamicSupervisor.terminate_child(Dolphin.Link.Supervisor, link)
+            Dolphin.Link.disconnect(link)
             {:error, %{e | message: "--sim: " <> e.message}}
         end
 
@@ -52,7 +52,7 @@ defmodule Dolphin.Sim.Local do
 
     Enum.each(sysids, &Dolphin.Vehicles.forget/1)
 
-    DynamicSupervisor.terminate_child(Dolphin.Link.Supervisor, link)
+    Dolphin.Link.disconnect(link)
     :ok
   end
 

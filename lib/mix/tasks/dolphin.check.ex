@@ -75,6 +75,8 @@ defmodule Mix.Tasks.Dolphin.Check do
   def run(argv) do
     # An interrupted check found nothing: never the status of one that found no error.
     Dolphin.CLI.Signals.exit_on_signal("dolphin.check", "the check did not finish")
+    # A closed pipe (`| head`) ends the task at once, quietly.
+    Dolphin.CLI.Stdout.watch()
 
     case main(argv) do
       0 -> :ok

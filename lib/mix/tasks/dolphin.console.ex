@@ -36,6 +36,7 @@ defmodule Mix.Tasks.Dolphin.Console do
     * `--speedup K` — run K times faster than real time (`Dolphin.Clock`),
       from 0.01 to 1000
     * `--tlog FILE` — record every MAVLink frame of the links to a telemetry log
+      (an existing FILE is replaced)
     * `--forward ENDPOINT` — copy all traffic to a `udpout` endpoint
       (QGroundControl); repeatable
 
@@ -116,6 +117,7 @@ defmodule Mix.Tasks.Dolphin.Console do
           {:ok, opts} ->
             cond do
               opts[:sim] != nil and opts[:sitl] != nil -> {:error, "--sim and --sitl do not go together"}
+              (problem = tlog_writable(opts[:tlog])) != :ok -> problem
               # `iex --sname op -S mix dolphin.console --join ...`: the node has its name already.
               (problem = Dolphin.CLI.Cluster.check(opts, Node.alive?())) != :ok -> problem
               true -> {:ok, opts}
@@ -133,6 +135,9 @@ defmodule Mix.Tasks.Dolphin.Console do
     end
   end
 
+  defp tlog_writable(nil), do: :ok
+  defp tlog_writable(path), do: Dolphin.CLI.OutputFile.check("--tlog", path)
+
   @doc """
   Opens the links and starts the simulated vehicles of `opts` (parsed
   options) in the running application; returns the banner to print, or a
@@ -144,10 +149,22 @@ defmodule Mix.Tasks.Dolphin.Console do
     link_opts = Enum.reject([tlog: opts[:tlog], forward: Keyword.get_values(opts, :forward)], fn {_, v} -> v in [nil, []] end)
     endpoints = Keyword.get_values(opts, :connect)
 
-    with {:ok, cluster} <- join(opts),
+    with {:ok, log} <- start_tlog(opts[:tlog]),
+         {:ok, cluster} <- join(opts),
          {:ok, lines} <- connect_all(endpoints, link_opts),
          {:ok, more} <- vehicles(opts, endpoints, link_opts) do
-      {:ok, banner(cluster ++ lines ++ more)}
+      {:ok, banner(cluster ++ lines ++ more ++ log)}
+    end
+  end
+
+  # The links append to the log; emptied first, it holds this session only.
+  defp start_tlog(nil), do: {:ok, []}
+
+  defp start_tlog(path) do
+    case Dolphin.CLI.OutputFile.replace(path) do
+      {:ok, :replaced} -> {:ok, ["telemetry log #{path} (replaces the file that was there)"]}
+      {:ok, :created} -> {:ok, ["telemetry log #{path}"]}
+      {:error, why} -> {:error, %CommandLineError{reason: :failed, message: "--tlog: #{why}"}}
     end
   end
 

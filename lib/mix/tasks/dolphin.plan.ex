@@ -101,6 +101,9 @@ defmodule Mix.Tasks.Dolphin.Plan do
     verb = List.first(argv)
     # A transfer cut short has nothing of ours to undo but its link, which ends with the VM.
     Dolphin.CLI.Signals.exit_on_signal("dolphin.plan", if(verb in ["upload", "download"], do: "the #{verb} did not finish", else: "stopped before it finished"))
+    # A closed pipe (`| head`) ends the task at once, quietly.
+    Dolphin.CLI.Stdout.watch()
+
     Mix.Task.run("app.config")
     # Transfers need the links and vehicles of the application.
     if verb in ["upload", "download"], do: Mix.Task.run("app.start")
@@ -158,6 +161,7 @@ defmodule Mix.Tasks.Dolphin.Plan do
 
   defp command(["export", file, name, out], opts) do
     with :ok <- only(opts, [:home, :cruise_speed, :hover_speed], "export"),
+         :ok <- writable("export", out),
          {:ok, plan_opts} <- plan_opts(opts),
          {:ok, found, notes} <- MissionFile.read(file),
          {:ok, %{mission: mission} = one} <- pick(found, name, notes),
@@ -200,7 +204,9 @@ defmodule Mix.Tasks.Dolphin.Plan do
   end
 
   defp command(["download", out], opts) do
-    with :ok <- only(opts, [:connect, :vehicle, :timeout], "download") do
+    # Before the transfer: a plan that could not be written would waste it.
+    with :ok <- only(opts, [:connect, :vehicle, :timeout], "download"),
+         :ok <- writable("download", out) do
       with_vehicle(opts, fn id -> download(id, out) end)
     end
   end
@@ -224,7 +230,7 @@ defmodule Mix.Tasks.Dolphin.Plan do
         with {:ok, id} <- find_vehicle(endpoint, opts[:vehicle], round(Keyword.get(opts, :timeout, 10) * 1_000)), do: fun.(id)
       after
         heard = Dolphin.Vehicles.list()
-        DynamicSupervisor.terminate_child(Dolphin.Link.Supervisor, link)
+        Dolphin.Link.disconnect(link)
         Enum.each(heard, &Dolphin.Vehicles.forget/1)
       end
     end
@@ -393,6 +399,13 @@ defmodule Mix.Tasks.Dolphin.Plan do
       what = Exception.message(e)
       what = if String.starts_with?(what, "mission #{inspect(mission.name)}"), do: what, else: "mission #{inspect(mission.name)}: #{what}"
       {:error, if(mission.home == nil and opts[:home] == nil, do: what <> ", or give the plan one with --home LAT,LON,ALT", else: what)}
+  end
+
+  defp writable(verb, out) do
+    case Dolphin.CLI.OutputFile.check(verb, out) do
+      :ok -> :ok
+      {:error, message} -> usage(message)
+    end
   end
 
   defp write(path, json) do

@@ -43,8 +43,9 @@ defmodule Mix.Tasks.Dolphin.Run do
       stopped, vehicles hold, exit status 0 with a summary
     * `--events FILE` — write every event as a JSON line (schema: `Dolphin.Telemetry`)
     * `--tlog FILE` — where to record every MAVLink frame of the links (a
-      telemetry log); by default a run that talks MAVLink writes one to
-      `logs/DATE_TIME-SCRIPT.tlog`
+      telemetry log); a FILE that is there is replaced (said when the run
+      starts): a log holds one run. By default a run that talks MAVLink
+      writes one to `logs/DATE_TIME-SCRIPT.tlog`
     * `--no-tlog` — no telemetry log
     * `--forward ENDPOINT` — copy all traffic to a `udpout` endpoint (QGroundControl); repeatable
     * `--quiet` — print only the script's messages, errors and the summary
@@ -80,6 +81,9 @@ defmodule Mix.Tasks.Dolphin.Run do
   second: one line per vehicle with its mode, armed state, battery bar,
   height, mission progress and the task it flies (`Dolphin.CLI.StatusBlock`).
   Elsewhere (a pipe, a file, CI) the events are plain timestamped lines.
+  Their times, like the summary's (`script stopped after 1808.2 s of clock
+  time`), are clock time since the run started, its vehicles' start
+  included; `--for` counts from the script's start, which the summary gives.
   The lines are `Dolphin.CLI`'s, as in the console; the run itself is
   `Dolphin.CLI.Run`.
 
@@ -131,10 +135,13 @@ defmodule Mix.Tasks.Dolphin.Run do
   the message says what, where and why) or its vehicles could not be
   started (a port in use, a SITL binary missing, the `--web` port in use);
   2 — bad usage (an unknown option, a value out of range, a bad endpoint,
-  no such script, a directory given for a file: the message names the flag,
-  the value and what is allowed); 130 — Ctrl-C (SIGINT) stopped it; 143 —
-  SIGTERM stopped it (128 + the signal's number, as a shell says), at any
-  moment from the task's start.
+  no such script, a directory given for a file, an output file — `--tlog`,
+  `--events`, `--report` — that cannot be written: the message names the
+  flag, the value and what is allowed); 130 — Ctrl-C (SIGINT) stopped it;
+  143 — SIGTERM stopped it (128 + the signal's number, as a shell says), at
+  any moment from the task's start; 141 — its standard output was closed
+  (`| head`): it ended at once, quietly, as a closed pipe ends a command
+  (`Dolphin.CLI.Stdout`).
   """
 
   use Mix.Task
@@ -179,6 +186,8 @@ defmodule Mix.Tasks.Dolphin.Run do
       # Until the run catches them (while it runs, they stop the script: see
       # "Interrupting a run"), Ctrl-C and SIGTERM end the command at once.
       Signals.exit_on_signal("dolphin.run", "no script was running; exiting")
+      # A closed pipe (`| head`) ends the run at once, quietly (status 141).
+      Dolphin.CLI.Stdout.watch()
 
       case parse(argv) do
         {:ok, file, opts} ->
@@ -260,6 +269,7 @@ defmodule Mix.Tasks.Dolphin.Run do
            :ok <- exclusive(opts),
            :ok <- web(opts),
            :ok <- report(opts),
+           :ok <- outputs(opts),
            :ok <- cluster(opts),
            {:ok, for_ms} <- duration(opts[:for]),
            :ok <- within_a_timer(for_ms, opts),
@@ -305,6 +315,18 @@ defmodule Mix.Tasks.Dolphin.Run do
       opts[:fake] -> usage_error("--report is made from the run's telemetry log, and fake vehicles write none: not with --fake")
       true -> :ok
     end
+  end
+
+  # The files the run writes: a file that cannot be written is said before anything flies.
+  defp outputs(opts) do
+    Enum.reduce_while([:tlog, :events, :report], :ok, fn key, :ok ->
+      with path when is_binary(path) <- opts[key],
+           {:error, message} <- Dolphin.CLI.OutputFile.check("--#{key}", path) do
+        {:halt, usage_error(message)}
+      else
+        _ -> {:cont, :ok}
+      end
+    end)
   end
 
   defp cluster(opts) do

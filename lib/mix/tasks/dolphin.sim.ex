@@ -64,6 +64,8 @@ defmodule Mix.Tasks.Dolphin.Sim do
   @impl Mix.Task
   def run(argv) do
     signals? = Signals.exit_on_signal("dolphin.sim", "stopped before the vehicles started")
+    # A closed pipe (`| head`) ends the task at once, quietly.
+    Dolphin.CLI.Stdout.watch()
 
     opts =
       case parse(argv) do

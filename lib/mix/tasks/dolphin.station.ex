@@ -27,7 +27,8 @@ defmodule Mix.Tasks.Dolphin.Station do
       `Dolphin.Clock`); every node of the
       cluster runs at the same speed-up (a controller adopts it)
     * `--seed N` — the simulator's seed
-    * `--tlog FILE` — record every MAVLink frame of the links
+    * `--tlog FILE` — record every MAVLink frame of the links (an existing
+      FILE is replaced)
 
   With neither `--connect` nor `--sim`, the station listens on
   `Dolphin.Link.default_endpoint/0`.
@@ -63,6 +64,8 @@ defmodule Mix.Tasks.Dolphin.Station do
   @impl Mix.Task
   def run(argv) do
     signals? = Signals.exit_on_signal("dolphin.station", "stopped before the station started")
+    # A closed pipe (`| head`) ends the task at once, quietly.
+    Dolphin.CLI.Stdout.watch()
 
     case main(argv, signals: signals?) do
       0 -> :ok
@@ -104,6 +107,7 @@ defmodule Mix.Tasks.Dolphin.Station do
             opts[:sname] == nil and opts[:name] == nil -> UsageError.error("a station needs a node name: give --sname NAME or --name NAME@HOST")
             (problem = Dolphin.CLI.Cluster.check(opts)) != :ok -> UsageError.error(elem(problem, 1))
             opts[:first_sysid] != nil and opts[:sim] == nil -> UsageError.error("--first-sysid goes with --sim")
+            (problem = tlog_writable(opts[:tlog])) != :ok -> problem
             opts[:sim] != nil -> with({:ok, _} <- Values.sysids(opts[:sim], Keyword.get(opts, :first_sysid, 1), "--sim", "--first-sysid"), do: {:ok, opts})
             true -> {:ok, opts}
           end
@@ -117,6 +121,12 @@ defmodule Mix.Tasks.Dolphin.Station do
     end
   end
 
+  defp tlog_writable(nil), do: :ok
+
+  defp tlog_writable(path) do
+    with {:error, message} <- Dolphin.CLI.OutputFile.check("--tlog", path), do: UsageError.error(message)
+  end
+
   defp serve(opts, io, out, err) do
     previous = Dolphin.Clock.speedup()
     if k = opts[:speedup], do: Dolphin.Clock.set_speedup(k)
@@ -128,11 +138,12 @@ defmodule Mix.Tasks.Dolphin.Station do
 
     try do
       with {:ok, lines} <- Dolphin.CLI.Cluster.start(opts, nil),
+           {:ok, log} <- start_tlog(opts[:tlog]),
            {:ok, more} <- links(opts),
            {:ok, sims} <- sims(opts) do
         k = Dolphin.Clock.speedup()
         IO.puts(out, "ground station #{node()} (#{if k == 1, do: "real time", else: "speed-up #{Dolphin.Console.Format.num(k / 1)}x"}); Ctrl-C stops it")
-        Enum.each(Enum.drop(lines, 1) ++ more ++ sims, &IO.puts(out, "  " <> &1))
+        Enum.each(Enum.drop(lines, 1) ++ more ++ sims ++ log, &IO.puts(out, "  " <> &1))
         if pid = io[:ready], do: send(pid, {__MODULE__, :ready, node()})
         wait(out)
       else
@@ -164,6 +175,17 @@ defmodule Mix.Tasks.Dolphin.Station do
       {__MODULE__, :stop} ->
         IO.puts(out, "the station stops")
         0
+    end
+  end
+
+  # The links append to the log; emptied first, it holds this station's run only.
+  defp start_tlog(nil), do: {:ok, []}
+
+  defp start_tlog(path) do
+    case Dolphin.CLI.OutputFile.replace(path) do
+      {:ok, :replaced} -> {:ok, ["telemetry log #{path} (replaces the file that was there)"]}
+      {:ok, :created} -> {:ok, ["telemetry log #{path}"]}
+      {:error, why} -> {:error, %StartError{option: "--tlog", reason: why}}
     end
   end
 

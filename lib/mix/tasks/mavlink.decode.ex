@@ -26,7 +26,9 @@ defmodule Mix.Tasks.Mavlink.Decode do
   ## Exit status
 
   As every task's (README.md, "Exit status"): 1 — the file cannot be read;
-  2 — bad usage (an unknown option, a bad key, no such file).
+  2 — bad usage (an unknown option, a bad key, no such file); 141 — piped
+  into a reader that stops early (`| head -1`), it ended at once and
+  quietly (`Dolphin.CLI.Stdout`).
   """
 
   use Mix.Task
@@ -39,6 +41,8 @@ defmodule Mix.Tasks.Mavlink.Decode do
   @impl Mix.Task
   def run(args) do
     Dolphin.CLI.Signals.exit_on_signal("mavlink.decode", "stopped before the end of the input")
+    # A closed pipe (`| head`) ends the task at once, quietly.
+    Dolphin.CLI.Stdout.watch()
 
     case OptionParser.parse(args, strict: @switches) do
       {opts, [file], []} ->

@@ -15,6 +15,8 @@ defmodule Mix.Tasks.Mavlink.Encode do
   cannot be encoded is reported on standard error with its line number, and the
   task exits with status 1 after the whole file (as every task's exit
   status, README.md, "Exit status": 2 — bad usage, such as no such file).
+  Piped into a reader that stops early (`| head -2`), it ends at once and
+  quietly, with status 141 (`Dolphin.CLI.Stdout`).
   """
 
   use Mix.Task
@@ -24,6 +26,8 @@ defmodule Mix.Tasks.Mavlink.Encode do
   @impl Mix.Task
   def run(args) do
     Dolphin.CLI.Signals.exit_on_signal("mavlink.encode", "stopped before the end of the input")
+    # A closed pipe (`| head`) ends the task at once, quietly.
+    Dolphin.CLI.Stdout.watch()
 
     case OptionParser.parse(args, strict: []) do
       {_, [file], []} ->

@@ -41,6 +41,10 @@ defmodule Dolphin.Cluster.CLITest do
     assert Station.main(~w(--sim 1), out: out, err: err) == 2
     assert text(err) =~ "a station needs a node name: give --sname NAME or --name NAME@HOST"
 
+    {out, err} = io()
+    assert Station.main(~w(--sname gsx --sim 1 --tlog /no/such/dir/gs.tlog), out: out, err: err) == 2
+    assert text(err) =~ "mix dolphin.station: --tlog /no/such/dir/gs.tlog: cannot create it: no such directory /no/such/dir"
+
     script = Path.expand("../../../examples/single_vehicle.exs", __DIR__)
     {out, err} = io()
     assert Run.main([script, "--join", "gs1@127.0.0.1"], out: out, err: err) == 2

@@ -81,6 +81,26 @@ defmodule Dolphin.Link.ConnectionTest do
     assert Enum.frequencies(heard) == %{both => 1, twice => 2}
   end
 
+  @tag :tmp_dir
+  test "a link that stopped is no copy source: the next link on the file records the very same frames", %{tmp_dir: dir} do
+    tlog = Path.join(dir, "again.tlog")
+    peer = UDPPeer.open()
+    frame = Frame.encode(copter(), sysid: 22, compid: 1, seq: 3)
+
+    # One run, then the next at once, sending the same bytes (a deterministic simulation).
+    for round <- 1..2 do
+      name = "again-#{round}"
+      {:ok, link} = Link.connect("udpin:127.0.0.1:0", name: name, tlog: tlog)
+      cleanup(link, [22])
+      :ok = :gen_udp.send(peer, {127, 0, 0, 1}, Connection.port(name), frame)
+      Wait.until(fn -> match?(%{stats: %{frames: 1}}, Connection.info(name)) end)
+      :ok = Link.disconnect(link)
+    end
+
+    {records, _} = Dolphin.MAVLink.Tlog.read(Dolphin.MAVLink.Tlog.reader(), File.read!(tlog))
+    assert length(for {_ts, %Frame{sysid: 22}} <- records, do: 1) == 2
+  end
+
   test "forwarding: a watcher gets all traffic, both ways" do
     watcher = UDPPeer.open()
     {:ok, watcher_port} = :inet.port(watcher)
@@ -113,4 +133,28 @@ defmodule Dolphin.Link.ConnectionTest do
     assert {:ok, _} = Signing.verify(Signing.new(key: key), heartbeat)
   end
 
+  test "a stopped link has closed its sockets itself: its port can be opened again at once" do
+    port = Dolphin.Test.GroundStation.free_udp_port()
+    {:ok, link} = Link.connect("udpin:127.0.0.1:#{port}", name: "close-test", forward: ["udpout:127.0.0.1:9"])
+    cleanup(link, [])
+    # The listening socket and the forwarding one.
+    {:links, linked} = Process.info(link, :links)
+    sockets = for p <- linked, is_port(p), do: {Port.monitor(p), p}
+    assert length(sockets) == 2
+
+    :ok = Link.disconnect(link)
+    # Closed by the link (reason :normal), not by its exit (the exit's reason,
+    # a moment after the exit: a port opened again at once could still be taken).
+    for {ref, socket} <- sockets, do: assert_receive({:DOWN, ^ref, :port, ^socket, :normal}, 30_000)
+    assert {:ok, again} = :gen_udp.open(port, ip: {127, 0, 0, 1})
+    :gen_udp.close(again)
+  end
+
+  @tag :tmp_dir
+  test "a telemetry log that cannot be written: no link, and why in words", %{tmp_dir: dir} do
+    tlog = Path.join([dir, "missing", "run.tlog"])
+    assert {:error, e} = Link.connect("udpin:127.0.0.1:0", name: "tlog-missing", tlog: tlog)
+    assert Exception.message(e) == "udpin:127.0.0.1:0: cannot open: telemetry log #{tlog}: no such file or directory"
+    assert Registry.lookup(Dolphin.Registry, {:link, "tlog-missing"}) == []
+  end
 end

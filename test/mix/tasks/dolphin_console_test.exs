@@ -21,6 +21,7 @@ defmodule Mix.Tasks.Dolphin.ConsoleTest do
       assert "--forward udpin:0.0.0.0:14551: udpout:HOST:PORT here, not udpin" = message(Task.parse(["--forward", "udpin:0.0.0.0:14551"]))
       assert "--connect udpin:0.0.0.0:99999: the port 99999 is not within 1..65535" = message(Task.parse(["--connect", "udpin:0.0.0.0:99999"]))
       assert "unexpected argument \"x.exs\"" <> _ = message(Task.parse(["x.exs"]))
+      assert "--tlog /no/such/dir/c.tlog: cannot create it: no such directory /no/such/dir" = message(Task.parse(["--tlog", "/no/such/dir/c.tlog"]))
     end
 
     test "without IEx it starts nothing and says to use iex -S" do
@@ -47,6 +48,14 @@ defmodule Mix.Tasks.Dolphin.ConsoleTest do
       assert banner =~ "h Dolphin.Console"
       known = for %{vehicle: v} <- Dolphin.Fleet.vehicles(), v.type != nil, do: v.id
       assert Enum.sort(known) == [1, 2]
+    end
+
+    test "--tlog FILE: a file that is there is replaced, and the banner says so", %{tmp_dir: dir} do
+      tlog = Path.join(dir, "console.tlog")
+      File.write!(tlog, "an older session")
+      assert {:ok, banner} = Task.start(connect: "udpin:127.0.0.1:0", tlog: tlog)
+      assert banner =~ "\n  telemetry log #{tlog} (replaces the file that was there)\n"
+      refute File.read!(tlog) =~ "an older session"
     end
 
     test "a link that cannot be opened is an error" do
@@ -113,6 +122,11 @@ defmodule Mix.Tasks.Dolphin.ConsoleTest do
     assert stopping =~ "stopping run #{id} (script "
     seen_or_wait(port, stopping, ~r/run #{id} script .*patrol\.exs: stopped: its tasks were stopped, vehicles hold/)
     assert ieval(port, "tasks()") =~ "no tasks running"
+
+    # The mission the script uploaded, as many rows as the heading says.
+    downloaded = ieval(port, "download(2)")
+    assert downloaded =~ "vehicle 2 holds 3 items: home (item 0) and 2 mission items (items 1 to 2)"
+    assert length(Regex.scan(~r/^\s+\d (home|[A-Z_]+) /m, downloaded)) == 3
 
     Port.command(port, "System.halt()\n")
     assert_receive {^port, {:exit_status, 0}}, 30_000

@@ -140,6 +140,16 @@ defmodule Mix.Tasks.Dolphin.PlanTest do
     assert %Mix.Error{mix: 2} = assert_raise(Mix.Error, fn -> Plan.run(["export", @example, "x", "o.plan", "--home", "91,0,0"]) end)
   end
 
+  test "a plan that cannot be written is bad usage, said before anything is done", %{tmp_dir: dir} do
+    out = Path.join([dir, "missing", "o.plan"])
+    assert {:error, %Dolphin.CommandLineError{reason: :usage} = e} = Plan.main(["export", @example, "Survey Area", out])
+    assert Exception.message(e) =~ "export #{out}: cannot create it: no such directory #{Path.join(dir, "missing")}\nusage: mix dolphin.plan"
+    # Before any vehicle is looked for (there is none on this port: "no vehicle heard" after the --timeout).
+    assert {:error, %Dolphin.CommandLineError{reason: :usage} = e} = Plan.main(["download", out, "--connect", "udpin:127.0.0.1:0", "--timeout", "5"])
+    assert Exception.message(e) =~ "download #{out}: cannot create it: no such directory"
+    assert message(Plan.main(["download", dir, "--connect", "udpin:127.0.0.1:0"])) =~ "download #{dir}: it is a directory, not a file"
+  end
+
   test "the task raises on errors and prints on success", %{tmp_dir: dir} do
     assert_raise Mix.Error, ~r/mix dolphin.plan: no command given/, fn -> Plan.run([]) end
     Mix.shell(Mix.Shell.Process)

@@ -5,7 +5,7 @@ defmodule Mix.Tasks.Dolphin.PlanTransferTest do
   use ExUnit.Case, async: false
 
   alias Dolphin.{Mission, Sim}
-  alias Dolphin.Test.{GroundStation, UDPProxy}
+  alias Dolphin.Test.{GroundStation, UDPProxy, Wait}
   alias Mix.Tasks.Dolphin.Plan
 
   @moduletag :tmp_dir
@@ -40,6 +40,30 @@ defmodule Mix.Tasks.Dolphin.PlanTransferTest do
     assert {:ok, text} = Plan.main(["download", out, "--connect", "udpin:127.0.0.1:#{port}"])
     assert text =~ ~r/^vehicle 1: downloaded \d+ items in \d+\.\d\d s \(\d+ retransmissions?\); wrote #{Regex.escape(out)}$/
     assert Enum.map(tl(plan_items(out)), &meaning/1) == Enum.map(tl(plan_items(plan)), &meaning/1)
+  end
+
+  test "upload and download have closed their link's socket when they return: the next one can listen on that port at once", %{plan: plan, port: port, tmp_dir: dir} do
+    {:ok, [1]} = Sim.start(count: 1, gcs: port, speedup: 5)
+
+    for argv <- [["upload", plan], ["download", Path.join(dir, "back.plan")]] do
+      transfer = Task.async(fn -> Plan.main(argv ++ ["--connect", "udpin:127.0.0.1:#{port}"]) end)
+      socket = Wait.until(fn -> link_socket(port) end)
+      ref = Port.monitor(socket)
+      assert {:ok, _} = Task.await(transfer, 120_000)
+      # Closed by the link itself (:normal), not by its process's exit (whose
+      # reason it would carry, a moment after main/1 returned).
+      assert_receive {:DOWN, ^ref, :port, ^socket, :normal}, 30_000
+      assert {:ok, listening} = :gen_udp.open(port, ip: {127, 0, 0, 1})
+      :gen_udp.close(listening)
+    end
+  end
+
+  # The socket of the link that listens on `port`, once there is one.
+  defp link_socket(port) do
+    Enum.find_value(DynamicSupervisor.which_children(Dolphin.Link.Supervisor), fn {_, link, _, _} ->
+      with {:links, linked} <- Process.info(link, :links),
+           do: Enum.find(linked, &(is_port(&1) and :inet.port(&1) == {:ok, port}))
+    end)
   end
 
   test "over 30 % loss each way, 10 % duplicates and reordering the upload is still exact", %{plan: plan, port: port} do

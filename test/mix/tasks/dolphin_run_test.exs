@@ -79,7 +79,7 @@ defmodule Mix.Tasks.Dolphin.RunTest do
       assert out =~ "2 fake vehicle(s)"
       assert out =~ "message: Done!"
       assert out =~ ~s(test "survey" started on vehicle)
-      assert out =~ "script completed in"
+      assert out =~ "script completed after"
 
       lines = events |> File.read!() |> String.split("\n", trim: true) |> Enum.map(&:jiffy.decode(&1, [:return_maps, null_term: nil]))
       names = Enum.map(lines, & &1["event"])
@@ -168,12 +168,21 @@ defmodule Mix.Tasks.Dolphin.RunTest do
       assert err =~ "on vehicle 1 failed: motor failure"
     end
 
-    test "an events file that cannot be written: status 1, and why, before anything runs", %{tmp_dir: dir} do
+    test "an output file that cannot be written: bad usage (status 2), the option named, before anything runs", %{tmp_dir: dir} do
       path = script(dir, "hello.exs", "use Dolphin.Script\nmessage(\"hello\")\n")
-      assert {1, out, err} = main([path, "--fake", "1", "--events", Path.join([dir, "no_such_dir", "events.jsonl"])])
-      assert err =~ "mix dolphin.run: --events: cannot write"
-      refute out =~ "message: hello"
+      missing = Path.join(dir, "no_such_dir")
+
+      for option <- ["--events", "--tlog", "--report"] do
+        file = Path.join(missing, "out")
+        assert {2, out, err} = main([path, "--sim", "1", option, file])
+        assert err =~ "mix dolphin.run: #{option} #{file}: cannot create it: no such directory #{missing}\nusage: mix dolphin.run"
+        assert out == ""
+      end
+
+      assert {2, "", err} = main([path, "--fake", "1", "--events", dir])
+      assert err =~ "--events #{dir}: it is a directory, not a file"
       assert Dolphin.Clock.speedup() == 1
+      refute File.exists?(missing)
     end
 
     test "--quiet prints only messages, errors and the summary", %{tmp_dir: dir} do
@@ -202,6 +211,42 @@ defmodule Mix.Tasks.Dolphin.RunTest do
       assert out =~ "vehicle 1 discovered (uav)"
       assert out =~ ~r/message: vehicle #Vehicles<\[1\]> battery (1\.0|0\.\d+|nil)/
       assert File.stat!(tlog).size > 0
+    end
+
+    @tag timeout: 120_000
+    test "one clock for the events and the summary: the run's, from before its vehicles started", %{tmp_dir: dir} do
+      path = script(dir, "wait.exs", "use Dolphin.Script\npick(timeout: seconds(60))\nforever do\n  pause(seconds(1))\nend\n")
+      events = Path.join(dir, "events.jsonl")
+      assert {0, out, ""} = main([path, "--sim", "1", "--speedup", "20", "--for", "10s", "--no-tlog", "--no-check", "--events", events])
+
+      at = fn name -> events |> File.read!() |> String.split("\n", trim: true) |> Enum.map(&:jiffy.decode(&1, [:return_maps])) |> Enum.find(&(&1["event"] == name)) |> Map.fetch!("t_ms") end
+      started = at.("script_started")
+      finished = at.("script_finished")
+      # The simulated vehicle booted before the script started.
+      assert started > 0
+      seconds = &Dolphin.Console.Format.seconds/1
+      assert out =~ "script stopped after #{seconds.(finished)} of clock time (--for 10s is over, counted from the script's start at #{seconds.(started)}): running tasks were stopped, vehicles hold"
+    end
+
+    @tag timeout: 120_000
+    test "--tlog FILE replaces a file that is there, and says so: the log holds one run", %{tmp_dir: dir} do
+      path = script(dir, "hover.exs", "use Dolphin.Script\nv = pick(timeout: seconds(30))\nexecute(wait_for(position(v) != nil))\npause(seconds(5))\nrelease(v)\n")
+      tlog = Path.join(dir, "run.tlog")
+      File.write!(tlog, "an older file")
+
+      for _ <- 1..2 do
+        Dolphin.Test.GroundStation.forget_vehicles()
+        assert {0, out, ""} = main([path, "--sim", "1", "--speedup", "20", "--tlog", tlog])
+        assert out =~ "telemetry log: #{tlog} (replaces the file that was there)"
+      end
+
+      # Nothing of the older file, nor of the first run (whose vehicle booted
+      # anew in the second: its boot clock would go back).
+      {:ok, log} = Dolphin.Report.FlightLog.read_file(tlog)
+      assert log.stats.bytes_skipped == 0
+      assert [_one] = Dolphin.Report.FlightLog.runs(log)
+      boots = for {_ts, %{message: %Dolphin.MAVLink.Ardupilotmega.GlobalPositionInt{time_boot_ms: t}}} <- elem(Dolphin.MAVLink.Tlog.read(Dolphin.MAVLink.Tlog.reader(), File.read!(tlog)), 0), do: t
+      assert boots != [] and boots == Enum.sort(boots)
     end
   end
 end
