@@ -22,15 +22,29 @@ defmodule Dolphin.CLI.OutputFile do
   """
   @spec check(String.t(), Path.t()) :: :ok | {:error, String.t()}
   def check(option, path) do
+    case problem(path) do
+      nil -> :ok
+      problem -> {:error, "#{option} #{path}: #{problem}"}
+    end
+  end
+
+  @doc """
+  What stands in the way of writing `path`, in words, or nil (see
+  `check/2`, which says it after the option that names the file).
+
+      iex> Dolphin.CLI.OutputFile.problem("/")
+      "it is a directory, not a file"
+  """
+  @spec problem(Path.t()) :: String.t() | nil
+  def problem(path) do
     dir = Path.dirname(path)
-    what = "#{option} #{path}"
 
     cond do
-      File.dir?(path) -> {:error, "#{what}: it is a directory, not a file"}
-      File.exists?(path) -> writable(what, path)
-      not File.exists?(dir) -> {:error, "#{what}: cannot create it: no such directory #{dir}"}
-      not File.dir?(dir) -> {:error, "#{what}: cannot create it: #{dir} is not a directory"}
-      true -> creatable(what, path)
+      File.dir?(path) -> "it is a directory, not a file"
+      File.exists?(path) -> writable(path)
+      not File.exists?(dir) -> "cannot create it: no such directory #{dir}"
+      not File.dir?(dir) -> "cannot create it: #{dir} is not a directory"
+      true -> creatable(path)
     end
   end
 
@@ -49,23 +63,27 @@ defmodule Dolphin.CLI.OutputFile do
   end
 
   # Opened for appending and closed again: its content stays as it is.
-  defp writable(what, path) do
+  defp writable(path) do
     case File.open(path, [:append]) do
-      {:ok, io} -> File.close(io)
-      {:error, why} -> {:error, "#{what}: cannot write it: #{:file.format_error(why)}"}
+      {:ok, io} ->
+        File.close(io)
+        nil
+
+      {:error, why} ->
+        "cannot write it: #{:file.format_error(why)}"
     end
   end
 
   # Permissions are the file system's to judge (and root's differ): try.
-  defp creatable(what, path) do
+  defp creatable(path) do
     case File.open(path, [:write, :exclusive]) do
       {:ok, io} ->
         File.close(io)
         File.rm(path)
-        :ok
+        nil
 
       {:error, why} ->
-        {:error, "#{what}: cannot create it: #{:file.format_error(why)}"}
+        "cannot create it: #{:file.format_error(why)}"
     end
   end
 end

@@ -38,7 +38,7 @@ defmodule Dolphin.CLI.Values do
       1..65535; kept as text;
     * `{:one_of, %{"text" => value}}` — one of the words;
     * `:name` — text that is not empty;
-    * `:output` — a file to write, not a directory;
+    * `:output` — a file that can be written (`Dolphin.CLI.OutputFile`);
     * `{:file, what}` — a file to read, not a directory (whether it
       exists is for the task to find out when it reads it);
     * `:boolean`, `:string` — as `OptionParser` has them; `{:keep, kind}`
@@ -295,7 +295,10 @@ defmodule Dolphin.CLI.Values do
   defp value(:name, text), do: if(String.trim(text) == "", do: {:error, "a name that is not empty"}, else: {:ok, text})
 
   defp value(:output, path) do
-    if File.dir?(path), do: {:error, "a directory: give the name of a file to write"}, else: {:ok, path}
+    case Dolphin.CLI.OutputFile.problem(path) do
+      nil -> {:ok, path}
+      problem -> {:error, problem}
+    end
   end
 
   defp value({:file, what}, path) do

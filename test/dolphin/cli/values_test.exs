@@ -52,7 +52,7 @@ defmodule Dolphin.CLI.ValuesTest do
   end
 
   test "files: a directory is said to be one", %{tmp_dir: dir} do
-    assert message([report: dir], report: :output) == "--report #{dir}: a directory: give the name of a file to write"
+    assert message([report: dir], report: :output) == "--report #{dir}: it is a directory, not a file"
     assert {:ok, [report: "r.html"]} = Values.check([report: "r.html"], report: :output)
     file = Path.join(dir, "s.exs")
     File.write!(file, "")
@@ -112,7 +112,7 @@ defmodule Dolphin.CLI.ValuesTest do
       assert {:error, e} = run.([script, "--forward", "udpin:0.0.0.0:14551"])
       assert e.message == "--forward udpin:0.0.0.0:14551: udpout:HOST:PORT here, not udpin"
       assert {:error, e} = run.([script, "--events", dir])
-      assert e.message == "--events #{dir}: a directory: give the name of a file to write"
+      assert e.message == "--events #{dir}: it is a directory, not a file"
       assert {:error, e} = run.([script, "--sitl", "1", "--sitl-bin", dir])
       assert e.message == "--sitl-bin #{dir}: a directory, not a SITL binary"
       assert {:error, e} = run.([script, "--sitl", "1", "--sitl-defaults", dir])

@@ -145,9 +145,9 @@ defmodule Mix.Tasks.Dolphin.PlanTest do
     assert {:error, %Dolphin.CommandLineError{reason: :usage} = e} = Plan.main(["export", @example, "Survey Area", out])
     assert Exception.message(e) =~ "export #{out}: cannot create it: no such directory #{Path.join(dir, "missing")}\nusage: mix dolphin.plan"
     # Before any vehicle is looked for (there is none on this port: "no vehicle heard" after the --timeout).
-    assert {:error, %Dolphin.CommandLineError{reason: :usage} = e} = Plan.main(["download", out, "--connect", "udpin:127.0.0.1:0", "--timeout", "5"])
+    assert {:error, %Dolphin.CommandLineError{reason: :usage} = e} = Plan.main(["download", out, "--connect", "udpin:127.0.0.1:#{Dolphin.Test.GroundStation.free_udp_port()}", "--timeout", "5"])
     assert Exception.message(e) =~ "download #{out}: cannot create it: no such directory"
-    assert message(Plan.main(["download", dir, "--connect", "udpin:127.0.0.1:0"])) =~ "download #{dir}: it is a directory, not a file"
+    assert message(Plan.main(["download", dir, "--connect", "udpin:127.0.0.1:#{Dolphin.Test.GroundStation.free_udp_port()}"])) =~ "download #{dir}: it is a directory, not a file"
   end
 
   test "the task raises on errors and prints on success", %{tmp_dir: dir} do

@@ -83,7 +83,8 @@ defmodule Mix.Tasks.FlagValuesTest do
     File.write!(array, "[]\n")
     example = Path.expand("../../../examples/single_vehicle.exs", __DIR__)
 
-    assert [{2, home}, {1, json}, {1, empty}, {1, directory}, {1, missions}] =
+    # A directory named for a file to read is bad usage, as a missing file is.
+    assert [{2, home}, {1, json}, {1, empty}, {2, directory}, {2, missions}] =
              run_all([
                ["dolphin.plan", "export", example, "Survey Area", Path.join(dir, "o.plan"), "--home", "91,0,0"],
                ["dolphin.plan", "import", truncated],
