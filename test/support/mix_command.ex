@@ -27,14 +27,40 @@ defmodule Dolphin.Test.MixCommand do
   def open([exe | args], env \\ []) do
     env = Enum.map([{"MIX_ENV", "test"}, {"LANG", "C.UTF-8"}, {"LC_ALL", "C.UTF-8"}, {"TERM", "xterm"}] ++ env, fn {k, v} -> {String.to_charlist(k), String.to_charlist(v)} end)
     port = Port.open({:spawn_executable, exe}, [:binary, :exit_status, :stderr_to_stdout, args: args, cd: File.cwd!(), env: env])
-    {:os_pid, os_pid} = Port.info(port, :os_pid)
     Process.put(:mix_command_output, "")
+    kill_on_exit(port)
+    port
+  end
+
+  @doc """
+  Whatever is left of the OS process behind `port` when the test ends (a
+  failed test): it and its descendants are killed, by process id.
+  """
+  def kill_on_exit(port) do
+    {:os_pid, os_pid} = Port.info(port, :os_pid)
 
     ExUnit.Callbacks.on_exit(fn ->
       for pid <- descendants(os_pid) ++ [os_pid], do: System.cmd("kill", ["-9", Integer.to_string(pid)], stderr_to_stdout: true)
     end)
+  end
 
-    port
+  @doc """
+  Runs each `mix` command line at once, each in its own OS process, and
+  returns their exit statuses and outputs (standard output and error), in
+  order: `[{status, output}]`.
+  """
+  def run_all(commands, env \\ []) do
+    ports = Enum.map(commands, &start(&1, env))
+    Enum.map(Enum.zip(commands, ports), fn {args, port} -> collect_all(port, args, "") end)
+  end
+
+  defp collect_all(port, args, output) do
+    receive do
+      {^port, {:data, data}} -> collect_all(port, args, output <> clean(data))
+      {^port, {:exit_status, status}} -> {status, output}
+    after
+      @step -> flunk("mix #{Enum.join(args, " ")} did not end within #{@step} ms:\n#{output}")
+    end
   end
 
   @doc "The process id of the command (its VM)."

@@ -62,6 +62,18 @@ defmodule Dolphin.CLI.OutputFile do
     end
   end
 
+  @doc """
+  Empties a telemetry log for a new run or session (`replace/1`): the line
+  that says so (`telemetry log: PATH`, and whether it replaces a file), or
+  why it cannot be written.
+  """
+  @spec start_log(Path.t()) :: {:ok, String.t()} | {:error, String.t()}
+  def start_log(path) do
+    with {:ok, how} <- replace(path) do
+      {:ok, "telemetry log: #{path}" <> if(how == :replaced, do: " (replaces the file that was there)", else: "")}
+    end
+  end
+
   # Opened for appending and closed again: its content stays as it is.
   defp writable(path) do
     case File.open(path, [:append]) do

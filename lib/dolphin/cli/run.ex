@@ -242,7 +242,7 @@ defmodule Dolphin.CLI.Run do
          {:ok, log} <- start_tlog(opts[:tlog]) do
       err = Keyword.get(opts, :err, :stderr)
       if opts[:signals], do: Signals.catch_signals(self(), again: &exit_at_once(&1, renderer, writer, err))
-      if log && !opts[:quiet], do: IO.puts(out, "telemetry log: #{opts[:tlog]}" <> if(log == :replaced, do: " (replaces the file that was there)", else: ""))
+      if log && !opts[:quiet], do: IO.puts(out, log)
       {:ok, renderer}
     end
   end
@@ -252,8 +252,8 @@ defmodule Dolphin.CLI.Run do
   defp start_tlog(nil), do: {:ok, nil}
 
   defp start_tlog(path) do
-    case Dolphin.CLI.OutputFile.replace(path) do
-      {:ok, how} -> {:ok, how}
+    case Dolphin.CLI.OutputFile.start_log(path) do
+      {:ok, line} -> {:ok, line}
       {:error, why} -> {:error, %StartError{option: "--tlog", reason: why}}
     end
   end

@@ -180,6 +180,26 @@ defmodule Dolphin.CLI.Values do
     end
   end
 
+  @doc """
+  The options of every command that brings a fleet up (`mix dolphin.run`,
+  `mix dolphin.console`): its links, simulated or SITL vehicles, the
+  speed-up, the telemetry log and where to forward it.
+  """
+  @spec fleet_options() :: keyword()
+  def fleet_options do
+    [
+      connect: {:keep, :endpoint},
+      sim: :vehicles,
+      sitl: :vehicles,
+      sitl_bin: {:file, "SITL binary"},
+      sitl_defaults: {:keep, {:file, "parameter file"}},
+      seed: :integer,
+      speedup: :speedup,
+      tlog: :output,
+      forward: {:keep, {:endpoint, [:udpout]}}
+    ]
+  end
+
   # --- kinds ------------------------------------------------------------------
 
   defp value(:boolean, given), do: {:ok, given}

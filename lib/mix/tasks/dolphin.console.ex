@@ -63,17 +63,7 @@ defmodule Mix.Tasks.Dolphin.Console do
 
   alias Dolphin.CommandLineError
 
-  @options [
-              connect: {:keep, :endpoint},
-              sim: :vehicles,
-              sitl: :vehicles,
-              sitl_bin: {:file, "SITL binary"},
-              sitl_defaults: {:keep, {:file, "parameter file"}},
-              seed: :integer,
-              speedup: :speedup,
-              tlog: :output,
-              forward: {:keep, {:endpoint, [:udpout]}}
-            ] ++ Dolphin.CLI.Cluster.switches()
+  @options Dolphin.CLI.Values.fleet_options() ++ Dolphin.CLI.Cluster.switches()
 
   @usage "usage: iex -S mix dolphin.console [--connect ENDPOINT]... [--sim N | --sitl N] [--speedup K] [--seed N]  [--tlog FILE] [--forward ENDPOINT]... [--sname NAME | --name NAME@HOST] [--cookie C] [--join NODE]..."
 
@@ -161,9 +151,8 @@ defmodule Mix.Tasks.Dolphin.Console do
   defp start_tlog(nil), do: {:ok, []}
 
   defp start_tlog(path) do
-    case Dolphin.CLI.OutputFile.replace(path) do
-      {:ok, :replaced} -> {:ok, ["telemetry log #{path} (replaces the file that was there)"]}
-      {:ok, :created} -> {:ok, ["telemetry log #{path}"]}
+    case Dolphin.CLI.OutputFile.start_log(path) do
+      {:ok, line} -> {:ok, [line]}
       {:error, why} -> {:error, %CommandLineError{reason: :failed, message: "--tlog: #{why}"}}
     end
   end

@@ -148,26 +148,18 @@ defmodule Mix.Tasks.Dolphin.Run do
 
   alias Dolphin.CLI.{Run, Signals, UsageError, Values}
 
-  @options [
-              connect: {:keep, :endpoint},
-              sim: :vehicles,
-              sitl: :vehicles,
-              sitl_bin: {:file, "SITL binary"},
-              sitl_defaults: {:keep, {:file, "parameter file"}},
-              fake: :vehicles,
-              seed: :integer,
-              speedup: :speedup,
-              for: :string,
-              events: :output,
-              tlog: :output,
-              no_tlog: :boolean,
-              forward: {:keep, {:endpoint, [:udpout]}},
-              quiet: :boolean,
-              report: :output,
-              web: :port,
-              web_bind: :string,
-              no_check: :boolean
-            ] ++ Dolphin.CLI.Cluster.switches()
+  @options Values.fleet_options() ++
+             [
+               fake: :vehicles,
+               for: :string,
+               events: :output,
+               no_tlog: :boolean,
+               quiet: :boolean,
+               report: :output,
+               web: :port,
+               web_bind: :string,
+               no_check: :boolean
+             ] ++ Dolphin.CLI.Cluster.switches()
 
   @usage "usage: mix dolphin.run SCRIPT [--connect ENDPOINT]... [--sim N | --sitl N | --fake N] [--speedup K] [--for DURATION] [--events FILE] [--tlog FILE | --no-tlog] [--forward ENDPOINT]... [--quiet] [--report FILE] [--web PORT [--web-bind ADDRESS]] [--no-check] [--sname NAME | --name NAME@HOST] [--cookie C] [--join NODE]..."
 

@@ -182,9 +182,8 @@ defmodule Mix.Tasks.Dolphin.Station do
   defp start_tlog(nil), do: {:ok, []}
 
   defp start_tlog(path) do
-    case Dolphin.CLI.OutputFile.replace(path) do
-      {:ok, :replaced} -> {:ok, ["telemetry log #{path} (replaces the file that was there)"]}
-      {:ok, :created} -> {:ok, ["telemetry log #{path}"]}
+    case Dolphin.CLI.OutputFile.start_log(path) do
+      {:ok, line} -> {:ok, [line]}
       {:error, why} -> {:error, %StartError{option: "--tlog", reason: why}}
     end
   end

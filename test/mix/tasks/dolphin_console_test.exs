@@ -54,7 +54,7 @@ defmodule Mix.Tasks.Dolphin.ConsoleTest do
       tlog = Path.join(dir, "console.tlog")
       File.write!(tlog, "an older session")
       assert {:ok, banner} = Task.start(connect: "udpin:127.0.0.1:0", tlog: tlog)
-      assert banner =~ "\n  telemetry log #{tlog} (replaces the file that was there)\n"
+      assert banner =~ "\n  telemetry log: #{tlog} (replaces the file that was there)\n"
       refute File.read!(tlog) =~ "an older session"
     end
 
@@ -180,22 +180,10 @@ defmodule Mix.Tasks.Dolphin.ConsoleTest do
       end
 
     port = Port.open({:spawn_executable, exe}, [:binary, :exit_status, :stderr_to_stdout, args: args, cd: root, env: env])
-    {:os_pid, os_pid} = Port.info(port, :os_pid)
     Process.put(:session_output, "")
-
-    on_exit(fn ->
-      # Whatever is left of the session (a failed test): its processes, by id.
-      for pid <- descendants(os_pid) ++ [os_pid], do: System.cmd("kill", ["-9", Integer.to_string(pid)], stderr_to_stdout: true)
-    end)
+    Dolphin.Test.MixCommand.kill_on_exit(port)
 
     port
-  end
-
-  defp descendants(pid) do
-    case System.cmd("ps", ["-o", "pid=", "--ppid", Integer.to_string(pid)], stderr_to_stdout: true) do
-      {out, 0} -> out |> String.split() |> Enum.map(&String.to_integer/1) |> Enum.flat_map(&(descendants(&1) ++ [&1]))
-      _ -> []
-    end
   end
 
   # Everything the session printed, without terminal escapes and carriage returns.

@@ -8,10 +8,6 @@ defmodule Mix.Tasks.FlagValuesTest do
   @moduletag :tmp_dir
   @moduletag timeout: 600_000
 
-  # Real ms a command may take on a loaded machine (a VM boot): generous,
-  # never a measurement.
-  @step 120_000
-
   test "mix dolphin.sim: a value out of range is bad usage (status 2) naming the flag, the value and what is allowed" do
     # Port 9 (discard) on 127.0.0.1: were a vehicle started, it would send there.
     gcs = "--gcs=udpout:127.0.0.1:9"
@@ -121,38 +117,5 @@ defmodule Mix.Tasks.FlagValuesTest do
     end
   end
 
-  # Runs each `mix` command line at once, each in its own OS process, and
-  # returns their exit statuses and outputs (stdout and stderr), in order.
-  defp run_all(commands) do
-    commands |> Enum.map(&open/1) |> Enum.map(&wait_exit(&1, ""))
-  end
-
-  defp open(args) do
-    env = [{~c"MIX_ENV", ~c"test"}, {~c"LANG", ~c"C.UTF-8"}, {~c"LC_ALL", ~c"C.UTF-8"}, {~c"ERL_EPMD_ADDRESS", ~c"127.0.0.1"}]
-    port = Port.open({:spawn_executable, System.find_executable("mix")}, [:binary, :exit_status, :stderr_to_stdout, args: args, cd: File.cwd!(), env: env])
-    {:os_pid, os_pid} = Port.info(port, :os_pid)
-
-    # Whatever is left of it when the test ends (a failed test): its processes, by id.
-    on_exit(fn ->
-      for pid <- descendants(os_pid) ++ [os_pid], do: System.cmd("kill", ["-9", Integer.to_string(pid)], stderr_to_stdout: true)
-    end)
-
-    {port, args}
-  end
-
-  defp wait_exit({port, args}, output) do
-    receive do
-      {^port, {:data, data}} -> wait_exit({port, args}, output <> data)
-      {^port, {:exit_status, status}} -> {status, output}
-    after
-      @step -> flunk("mix #{Enum.join(args, " ")} did not end within #{@step} ms:\n#{output}")
-    end
-  end
-
-  defp descendants(pid) do
-    case System.cmd("ps", ["-o", "pid=", "--ppid", Integer.to_string(pid)], stderr_to_stdout: true) do
-      {out, 0} -> out |> String.split() |> Enum.map(&String.to_integer/1) |> Enum.flat_map(&(descendants(&1) ++ [&1]))
-      _ -> []
-    end
-  end
+  defp run_all(commands), do: Dolphin.Test.MixCommand.run_all(commands, [{"ERL_EPMD_ADDRESS", "127.0.0.1"}])
 end
