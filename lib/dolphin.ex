@@ -13,7 +13,7 @@ defmodule Dolphin do
   - `Dolphin.Mission` — missions as data; `Dolphin.Mission.Platform` flies them as tasks.
   - `Dolphin.Sim` — simulated ArduCopters speaking MAVLink over UDP.
   - `Dolphin.Cluster` — several ground stations, one fleet (distributed Erlang; `docs/cluster.md`).
-  - `Dolphin.Clock` — the time source with a speed-up factor; `Dolphin.Telemetry` — the events.
+  - `Dolphin.Clock` — the time source with a speed-up factor; `Dolphin.Events` — the events.
 
   A link decodes and casts each frame to its vehicle's process and never waits
   on it; a vehicle rebuilds its state from telemetry after a crash; a link's

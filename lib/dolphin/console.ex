@@ -39,7 +39,7 @@ defmodule Dolphin.Console do
     * vehicle commands: `arm/2`, `disarm/2`, `mode/3`, `takeoff/3`, `goto/5`,
       `hold/2`, `rtl/2`, `land/2`, `upload/3`, `download/2`;
     * watching: `watch/2` (a live ticker), `messages/1` (STATUSTEXTs),
-      `events/2` (the last events, `Dolphin.Telemetry`);
+      `events/2` (the last events, `Dolphin.Events`);
     * `answer/2` — answers a script's `ask`;
     * `web/2` — a live view of the fleet in the browser (`Dolphin.Web`).
 
@@ -54,7 +54,7 @@ defmodule Dolphin.Console do
   """
 
   alias Dolphin.{Engine, Mission}
-  alias Dolphin.Console.{Check, Events, Format, Runs, Snapshot, Vehicle}
+  alias Dolphin.Console.{Arguments, EventLog, Format, Runs, Overview, Vehicle}
 
   @type vehicle_id :: non_neg_integer()
 
@@ -79,7 +79,7 @@ defmodule Dolphin.Console do
   """
   @spec vehicles() :: printed()
   def vehicles do
-    Snapshot.vehicles() |> Snapshot.rows() |> Format.vehicles() |> say()
+    Overview.vehicles() |> Overview.rows() |> Format.vehicles() |> say()
     done()
   end
 
@@ -90,10 +90,10 @@ defmodule Dolphin.Console do
   """
   @spec tasks() :: printed()
   def tasks do
-    work = Snapshot.work()
+    work = Overview.work()
     say(Format.task_tree(work.groups, work.runs, work.tasks, work.states))
 
-    for q <- Snapshot.safe(fn -> Runs.questions() end, []),
+    for q <- Overview.safe(fn -> Runs.questions() end, []),
         do: say("waiting for an answer: #{if q.run, do: "run #{q.run}", else: "a script"} asks #{inspect(q.prompt)} (answer/1)")
 
     done()
@@ -116,7 +116,7 @@ defmodule Dolphin.Console do
   def run(script_or_task, opts \\ [])
 
   def run(path, opts) when is_binary(path) do
-    with {:ok, opts} <- Check.options(opts, [:for]),
+    with {:ok, opts} <- Arguments.options(opts, [:for]),
          :ok <- if(File.regular?(path), do: :ok, else: {:error, "no such script: #{path}"}),
          {:ok, script} <- compile(path),
          {:ok, id} <- Runs.start_script(script, opts) do
@@ -129,7 +129,7 @@ defmodule Dolphin.Console do
   end
 
   def run(task, opts) do
-    with {:ok, opts} <- Check.options(opts, [:on]),
+    with {:ok, opts} <- Arguments.options(opts, [:on]),
          {:ok, task} <- taskable(task),
          {:ok, id} <- Runs.start_task(task, opts) do
       say("run #{id} started: #{Engine.Task.kind(task)} #{inspect(Engine.Task.label(task))} (tasks() shows it, stop(#{id}) stops it)")
@@ -193,7 +193,7 @@ defmodule Dolphin.Console do
   @doc "Stops everything that runs: the scripts and tasks started here, other scripts, other runs. Vehicles hold."
   @spec stop_all() :: printed()
   def stop_all do
-    work = Snapshot.work()
+    work = Overview.work()
     console = for run <- work.console, match?({:ok, _}, Runs.stop(run.id)), do: "run #{run.id} (#{run.label})"
     scripts = for runner <- work.scripts, :ok == Dolphin.Script.stop(runner, :operator), do: "script #{inspect(runner)}"
     loose = for run <- work.loose, Engine.stop(run, :operator) == :ok, do: "run #{run}"
@@ -304,7 +304,7 @@ defmodule Dolphin.Console do
   defdelegate messages(id), to: Vehicle
 
   @doc """
-  The last `n` events (default 20) of `Dolphin.Telemetry`, oldest first.
+  The last `n` events (default 20) of `Dolphin.Events`, oldest first.
   Filters: `vehicle: id`, `run: id`, `event: name` (or a list of names).
   """
   @spec events(pos_integer(), keyword()) :: printed()
@@ -333,10 +333,10 @@ defmodule Dolphin.Console do
   end
 
   def web(port, opts) when is_integer(port) and port in 0..65_535 do
-    with {:ok, opts} <- Check.options(opts, [:bind]),
+    with {:ok, opts} <- Arguments.options(opts, [:bind]),
          true <- is_binary(Keyword.get(opts, :bind, "")) || {:error, "bind: takes an address as text (\"0.0.0.0\"), got #{inspect(opts[:bind])}"},
          nil <- Process.whereis(@web) do
-      start = [port: port, name: @web, title: "Live: the fleet", origin_ms: Events.origin_ms(), history: Events.last(1_000)] ++ opts
+      start = [port: port, name: @web, title: "Live: the fleet", origin_ms: EventLog.origin_ms(), history: EventLog.last(1_000)] ++ opts
 
       case Dolphin.Web.start(start) do
         {:ok, pid} -> say("live view: #{Dolphin.Web.url(pid)} (web(:stop) stops it)")

@@ -64,7 +64,7 @@ defmodule Dolphin.Engine do
 
   ## Order of events
 
-  Events (`Dolphin.Telemetry`: `task_started`, `task_finished`,
+  Events (`Dolphin.Events`: `task_started`, `task_finished`,
   `condition_met`, ...) follow the tree deterministically: a node's
   `task_started` precedes its children's; a node's initial subtree has fully
   started before its next sibling starts (a handshake; a child that ends as

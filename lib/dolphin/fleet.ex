@@ -60,7 +60,7 @@ defmodule Dolphin.Fleet do
 
   require Logger
 
-  alias Dolphin.{Geo, PubSub, Telemetry}
+  alias Dolphin.{Geo, PubSub, Events}
   alias Dolphin.Geo.Area
   alias Dolphin.Fleet.{Allocation, Claims, AllocationError, PickError, Source, VehicleSet}
   alias Dolphin.Vehicles.View
@@ -304,7 +304,7 @@ defmodule Dolphin.Fleet do
     case Enum.split_with(s.waiters, &(&1.ref == ref)) do
       {[w], rest} ->
         error = pick_error(s, w.req)
-        if s.events, do: Telemetry.emit(:pick_failed, %{requirement: describe(w.req), reason: error.message})
+        if s.events, do: Events.emit(:pick_failed, %{requirement: describe(w.req), reason: error.message})
         GenServer.reply(w.from, {:error, error})
         {:noreply, serve(%{s | waiters: rest})}
 
@@ -354,7 +354,7 @@ defmodule Dolphin.Fleet do
   defp release_vehicles(s, owner, ids) do
     mine = Enum.filter(ids, &(s.picked[&1] == owner))
     if mine != [], do: Claims.release(mine)
-    if s.events and mine != [], do: Telemetry.emit(:released, %{vehicles: Enum.sort(mine)})
+    if s.events and mine != [], do: Events.emit(:released, %{vehicles: Enum.sort(mine)})
     %{s | picked: Map.drop(s.picked, mine)}
   end
 
@@ -408,7 +408,7 @@ defmodule Dolphin.Fleet do
   defp give(s, w, ids) do
     if w.timer, do: Process.cancel_timer(w.timer)
     if ms = s.timeouts[w.owner], do: Enum.each(ids, &Source.set_timeout(s.source, &1, ms))
-    if s.events, do: Telemetry.emit(:picked, %{vehicles: ids, requirement: describe(w.req)})
+    if s.events, do: Events.emit(:picked, %{vehicles: ids, requirement: describe(w.req)})
     GenServer.reply(w.from, {:ok, VehicleSet.new(ids)})
     %{s | picked: Enum.reduce(ids, s.picked, &Map.put(&2, &1, w.owner))}
   end

@@ -9,7 +9,7 @@ defmodule Dolphin.PubSub do
   each change, from its owner through `Dolphin.Vehicles.Views.put/1`),
   `:vehicles` (discoveries, losses, reconnections and forgettings of every
   vehicle, and `{:vehicle_changed, id}` when a view changes what picks match
-  on), `:events` (`Dolphin.Telemetry`) and `{:dolphin_signals, table}` (a
+  on), `:events` (`Dolphin.Events`) and `{:dolphin_signals, table}` (a
   script's signals).
 
   Published data is a notice of a change: the data itself has one owner

@@ -35,7 +35,7 @@ defmodule Dolphin.Vehicles do
   goes silent or is heard again. That table holds the latest view of each
   vehicle for anyone to read (`view/1`, `list/0`: no call to the vehicle's
   process), publishes it on topic `{:vehicle_view, sysid}`
-  (`subscribe_view/1`) and turns its transitions into the `Dolphin.Telemetry`
+  (`subscribe_view/1`) and turns its transitions into the `Dolphin.Events`
   events of vehicles (`vehicle_discovered`, `mode_changed`, `armed`,
   `vehicle_lost`, ...). Nobody else keeps a copy to maintain: a subscriber
   takes the latest view whole, and nobody rebuilds a vehicle from its
@@ -72,7 +72,7 @@ defmodule Dolphin.Vehicles do
       goes silent another takes over within 2 s of clock time; the command
       or transfer under way carries on over it, and the task flying the
       vehicle never knows. Each change is a `path_changed` event
-      (`Dolphin.Telemetry`). The view's `link` gives the figures of the path
+      (`Dolphin.Events`). The view's `link` gives the figures of the path
       in use. The vehicle is lost only when every path has been silent for
       its timeout.
   """

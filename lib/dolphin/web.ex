@@ -33,7 +33,7 @@ defmodule Dolphin.Web do
   One process per view (`start/1`) owns the listening socket and a bounded
   model of the run, fed by the vehicles' views (`Dolphin.Vehicles.subscribe_view/1`,
   and the `:vehicles` topic for the ones discovered later) and by the events
-  (`Dolphin.Telemetry`): at most 4,000 positions per vehicle (past that,
+  (`Dolphin.Events`): at most 4,000 positions per vehicle (past that,
   every other one is dropped: the track keeps its shape), 2,000 samples of
   battery, modes and arming, and the last 5,000 events. Each client has a
   process of its own that writes to its socket; the view casts to it and
@@ -62,7 +62,7 @@ defmodule Dolphin.Web do
     * `:origin_ms` — the `Dolphin.Clock` time the run started (the page's
       time zero), default now;
     * `:owner` — a process: the view stops when it ends;
-    * `:history` — events that came before (`Dolphin.Telemetry` maps, oldest
+    * `:history` — events that came before (`Dolphin.Events` maps, oldest
       first), shown as if seen live;
     * `:name` — a name to register the view under.
 

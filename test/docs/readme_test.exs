@@ -23,9 +23,9 @@ defmodule Dolphin.Docs.ReadmeTest do
         do: {name, fields}
   end
 
-  test "docs/operating.md: the event table names every event of Dolphin.Telemetry, and no other" do
+  test "docs/operating.md: the event table names every event of Dolphin.Events, and no other" do
     table = event_table()
-    catalogue = Dolphin.Telemetry.catalogue()
+    catalogue = Dolphin.Events.catalogue()
     names = catalogue |> Map.keys() |> Enum.map(&Atom.to_string/1)
 
     assert Enum.sort(names -- Map.keys(table)) == [], "events missing from the table"

@@ -83,8 +83,8 @@ defmodule Dolphin.IdsTextTest do
           %{event: :something_new, vehicles: [id]}
         ]
 
-        for e <- events, do: names_id!(Dolphin.CLI.event_text(e), id)
-        names_id!(Dolphin.CLI.event_text(%{event: :task_finished, task_id: 5, kind: :fly, name: "go", vehicle: id, result: :done, reason: nil}), id)
+        for e <- events, do: names_id!(Dolphin.EventText.event_text(e), id)
+        names_id!(Dolphin.EventText.event_text(%{event: :task_finished, task_id: 5, kind: :fly, name: "go", vehicle: id, result: :done, reason: nil}), id)
 
         assert Format.task_state(nil, %{event: :task_progress, progress: %{vehicles: [id]}}) |> names_id!(id)
 
@@ -96,7 +96,7 @@ defmodule Dolphin.IdsTextTest do
 
         names_id!(StatusBlock.vehicle_line(%View{id: id, mission_progress: {0, 0}}, "go"), id)
         names_id!(Failure.format_reason({:no_such_vehicles, [id]}), id)
-        names_id!(Dolphin.CLI.event_text(%{event: :signal_posted, key: :ready, value: [id]}), id)
+        names_id!(Dolphin.EventText.event_text(%{event: :signal_posted, key: :ready, value: [id]}), id)
         names_id!(Dolphin.Console.Runs.result_text({:unexpected, [id]}), id)
 
         # A script's message of a list of ids.
@@ -115,10 +115,10 @@ defmodule Dolphin.IdsTextTest do
 
     assert {:ok, set} = Fleet.pick(fleet, self(), id: 9, timeout: 5_000)
     assert_receive {:dolphin, :events, %{event: :picked, vehicles: [9]} = picked}, 5_000
-    assert Dolphin.CLI.event_text(picked) == "picked [9] (1 vehicle, id [9])"
+    assert Dolphin.EventText.event_text(picked) == "picked [9] (1 vehicle, id [9])"
 
     Fleet.release(fleet, self(), set)
     assert_receive {:dolphin, :events, %{event: :released, vehicles: [9]} = released}, 5_000
-    assert Dolphin.CLI.event_text(released) == "released [9]"
+    assert Dolphin.EventText.event_text(released) == "released [9]"
   end
 end

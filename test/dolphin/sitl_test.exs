@@ -259,7 +259,7 @@ defmodule Dolphin.SITLTest do
     assert_received {:proxy, proxy}
     home = Backend.home(id)
     pick(id)
-    Dolphin.Telemetry.subscribe()
+    Dolphin.Events.subscribe()
 
     assert {:ok, :done} = Engine.run(Engine.on(hop(home), [id]))
     assert_received {:dolphin, :events, %{event: :mission_uploaded, vehicle: ^id, items: 4}}

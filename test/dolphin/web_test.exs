@@ -2,7 +2,7 @@ defmodule Dolphin.WebTest do
   # Servers on 127.0.0.1 and events on the node's shared topics: not async.
   use ExUnit.Case, async: false
 
-  alias Dolphin.{PubSub, Telemetry, Web}
+  alias Dolphin.{PubSub, Events, Web}
   alias Dolphin.Test.Wait
   alias Dolphin.Vehicles.View
 
@@ -158,7 +158,7 @@ defmodule Dolphin.WebTest do
       assert page["live-status"] =~ ~s(data-lat="40.4442000")
       assert page["legend"] =~ ~s(data-vehicle="#{@id}")
 
-      Telemetry.emit(:task_started, %{run: 900, task_id: 9001, parent_id: nil, kind: :mission, name: "Survey", vehicle: @id})
+      Events.emit(:task_started, %{run: 900, task_id: 9001, parent_id: nil, kind: :mission, name: "Survey", vehicle: @id})
       {page, rest} = await_piece(socket, {page, rest}, "timeline-section", ~s(data-name="Survey"))
       assert page["timeline-section"] =~ ~s(data-result="unfinished")
 

@@ -2,7 +2,7 @@ defmodule Dolphin.EngineCase do
   @moduledoc """
   Tests of the engine, the fleet and scripts: each test gets its own fake
   vehicle source and fleet (events off), set as the test process's
-  `Dolphin.Engine.Context`, and is subscribed to `Dolphin.Telemetry` events.
+  `Dolphin.Engine.Context`, and is subscribed to `Dolphin.Events` events.
 
       test "...", ctx do
         [v] = fake_vehicles(ctx, 1, pick: true)
@@ -33,7 +33,7 @@ defmodule Dolphin.EngineCase do
     start_supervised!({TestSource, name: source, events: false})
     start_supervised!({Dolphin.Fleet, name: fleet, source: TestSource.source(source), events: false})
     Context.put(%Context{fleet: fleet, source: TestSource.source(source), owner: self()})
-    Dolphin.Telemetry.subscribe()
+    Dolphin.Events.subscribe()
     {:ok, source: source, fleet: fleet}
   end
 

@@ -23,8 +23,8 @@ defmodule Dolphin.Test.Wait do
   end
 
   @doc """
-  The `Dolphin.Telemetry` events in the caller's mailbox (after
-  `Dolphin.Telemetry.subscribe/0`), oldest first, taken out of it; waits
+  The `Dolphin.Events` events in the caller's mailbox (after
+  `Dolphin.Events.subscribe/0`), oldest first, taken out of it; waits
   for none.
   """
   def received_events(acc \\ []) do

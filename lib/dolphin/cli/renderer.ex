@@ -1,7 +1,7 @@
 defmodule Dolphin.CLI.Renderer do
   @moduledoc """
-  The process that prints a run as it goes: each event `Dolphin.CLI.logged?/2`
-  keeps, as `Dolphin.CLI.event_line/2` words it, and notes of the run itself
+  The process that prints a run as it goes: each event `Dolphin.EventText.logged?/2`
+  keeps, as `Dolphin.EventText.event_line/2` words it, and notes of the run itself
   (`note/2`). On a terminal the log scrolls above the status block
   (`Dolphin.CLI.StatusBlock`), redrawn twice a second; elsewhere (a pipe, a
   file, CI) it is plain timestamped lines.
@@ -10,14 +10,14 @@ defmodule Dolphin.CLI.Renderer do
       Dolphin.CLI.Renderer.note(r, "interrupted")
       :ok = Dolphin.CLI.Renderer.stop(r)
 
-  It subscribes to `Dolphin.Telemetry` before `start_link/1` returns, so that
+  It subscribes to `Dolphin.Events` before `start_link/1` returns, so that
   no event of the run is missed, and prints all it was sent before `stop/1`
   returns.
   """
 
   use GenServer
 
-  alias Dolphin.CLI
+  alias Dolphin.EventText
   alias Dolphin.CLI.StatusBlock
 
   # How often the status block is redrawn on a terminal (real time).
@@ -79,7 +79,7 @@ defmodule Dolphin.CLI.Renderer do
 
   @impl true
   def init(opts) do
-    if Keyword.get(opts, :subscribe, true), do: Dolphin.Telemetry.subscribe()
+    if Keyword.get(opts, :subscribe, true), do: Dolphin.Events.subscribe()
     tty = Keyword.get(opts, :terminal)
     live = tty != nil
     if live, do: Process.send_after(self(), :redraw, @redraw_ms)
@@ -124,11 +124,11 @@ defmodule Dolphin.CLI.Renderer do
   end
 
   defp print(p, event) do
-    if CLI.logged?(event, p.quiet), do: print_line(p, event.at_ms, CLI.event_text(event)), else: p
+    if EventText.logged?(event, p.quiet), do: print_line(p, event.at_ms, EventText.event_text(event)), else: p
   end
 
   defp print_line(p, at_ms, text) do
-    log = CLI.stamp(at_ms, p.origin, text) <> "\n"
+    log = EventText.stamp(at_ms, p.origin, text) <> "\n"
     # The block is erased, the line written where it was, and the block drawn again below.
     if p.live, do: draw_block(%{p | block: 0}, [StatusBlock.erase(p.block), log]), else: IO.write(p.out, log) && p
   end

@@ -221,7 +221,7 @@ defmodule Dolphin.CLI.Run do
 
     if writer do
       try do
-        Dolphin.Telemetry.Writer.stop(writer)
+        Dolphin.Events.Writer.stop(writer)
       catch
         # Stopped already: the run was closing its outputs.
         :exit, _ -> :ok
@@ -267,9 +267,9 @@ defmodule Dolphin.CLI.Run do
     trapping = Process.flag(:trap_exit, true)
 
     try do
-      case Dolphin.Telemetry.Writer.start_link(path: path, origin_ms: origin) do
+      case Dolphin.Events.Writer.start_link(path: path, origin_ms: origin) do
         {:ok, writer} ->
-          defer(fn -> Dolphin.Telemetry.Writer.stop(writer) end, :output)
+          defer(fn -> Dolphin.Events.Writer.stop(writer) end, :output)
           {:ok, writer}
 
         {:error, why} ->

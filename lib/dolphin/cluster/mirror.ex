@@ -41,7 +41,7 @@ defmodule Dolphin.Cluster.Mirror do
   use GenServer
   require Logger
 
-  alias Dolphin.{Clock, PubSub, Telemetry}
+  alias Dolphin.{Clock, PubSub, Events}
   alias Dolphin.Cluster.{Choice, Station}
   alias Dolphin.Vehicles.{Routes, Views}
 
@@ -222,7 +222,7 @@ defmodule Dolphin.Cluster.Mirror do
         {:ok, %{speedup: k} = hello} ->
           if k == Clock.speedup() do
             s = %{s | stations: Map.put(s.stations, station, %{node: node(station), monitor: Process.monitor(station)})}
-            Telemetry.emit(:station_joined, %{station: node(station), heard: length(hello.vehicles)})
+            Events.emit(:station_joined, %{station: node(station), heard: length(hello.vehicles)})
             s = Enum.reduce(hello.vehicles, s, fn {id, pid, view}, s -> hear(s, id, station, pid, view) end)
             answer_waiters(s, node(station))
           else
@@ -255,7 +255,7 @@ defmodule Dolphin.Cluster.Mirror do
   defp station_gone(s, station, why) do
     {st, stations} = Map.pop(s.stations, station)
     Process.demonitor(st.monitor, [:flush])
-    Telemetry.emit(:station_left, %{station: st.node, reason: why})
+    Events.emit(:station_left, %{station: st.node, reason: why})
     s = %{s | stations: stations}
 
     Enum.reduce(s.vehicles, s, fn {id, v}, s ->
@@ -329,7 +329,7 @@ defmodule Dolphin.Cluster.Mirror do
   defp check_conflict(%{conflict: nil, chosen: chosen} = v, id, station) when chosen != nil and chosen != station do
     with %{^chosen => first} <- v.hearings,
          {:conflict, why} <- Choice.conflict(first.view, v.hearings[station].view) do
-      Telemetry.emit(:vehicle_conflict, %{vehicle: id, stations: [node(chosen), node(station)], reason: why})
+      Events.emit(:vehicle_conflict, %{vehicle: id, stations: [node(chosen), node(station)], reason: why})
       Logger.warning("vehicle #{id}: #{node(chosen)} and #{node(station)} hear two different vehicles (#{why}); following #{node(chosen)} only")
       %{v | conflict: %{first: chosen, other: station}}
     else
@@ -377,7 +377,7 @@ defmodule Dolphin.Cluster.Mirror do
         unless local?(id), do: PubSub.publish(:vehicles, {:vehicle_discovered, id})
 
       old.chosen != v.chosen ->
-        Telemetry.emit(:station_changed, %{vehicle: id, from: node(old.chosen), to: node(v.chosen), reason: reason_words(why)})
+        Events.emit(:station_changed, %{vehicle: id, from: node(old.chosen), to: node(v.chosen), reason: reason_words(why)})
         publish_view(id, h.pid, view_of(h, v.lost))
 
       true ->

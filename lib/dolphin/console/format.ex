@@ -1,7 +1,7 @@
 defmodule Dolphin.Console.Format do
   @moduledoc false
   # Pure text of the console (Dolphin.Console): tables, the task tree, the
-  # watch ticker (event lines are Dolphin.CLI's). Every function takes plain
+  # watch ticker (event lines are Dolphin.EventText's). Every function takes plain
   # data and returns a string (no trailing newline), so all of it is tested
   # without IEx.
 

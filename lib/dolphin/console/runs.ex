@@ -276,12 +276,12 @@ defmodule Dolphin.Console.Runs do
   end
 
   defp start_run(server, fleet, task) do
-    Dolphin.Telemetry.subscribe()
+    Dolphin.Events.subscribe()
     {:ok, run} = Engine.start(task, owner: self(), fleet: fleet)
 
     case first_sign(run) do
       :started ->
-        Dolphin.Telemetry.unsubscribe()
+        Dolphin.Events.unsubscribe()
         flush_events()
         # The allocation is made: the vehicles it did not take are free again.
         spare = for %{vehicle: v, picked_by: me, busy: busy} <- Fleet.vehicles(fleet), me == self(), busy != run, do: v.id

@@ -12,7 +12,7 @@ defmodule Dolphin.Console.Supervisor do
   @impl true
   def init(_opts) do
     children = [
-      %{id: Dolphin.Console.Events, start: {Dolphin.Console.Events, :start_link, [[]]}},
+      %{id: Dolphin.Console.EventLog, start: {Dolphin.Console.EventLog, :start_link, [[]]}},
       %{id: Dolphin.Console.Runs, start: {Dolphin.Console.Runs, :start_link, [[]]}}
     ]
 

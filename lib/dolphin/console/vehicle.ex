@@ -6,7 +6,7 @@ defmodule Dolphin.Console.Vehicle do
 
   alias Dolphin.{Clock, Console, Engine, ManoeuvreError, Mission, Vehicles}
   alias Dolphin.Vehicles.Manoeuvres
-  alias Dolphin.Console.{Check, Events, Format, MissionSource, Snapshot}
+  alias Dolphin.Console.{Arguments, EventLog, Format, MissionSource, Overview}
 
   # What IEx does not print (IEx.dont_display_result/0): the helpers print for themselves.
   defp done, do: IEx.dont_display_result()
@@ -28,7 +28,7 @@ defmodule Dolphin.Console.Vehicle do
 
   # The `wait:` of arm/2 and takeoff/3, checked before anything is sent.
   defp with_wait(id, opts, fun) do
-    case Check.ms(Keyword.get(opts, :wait, 30_000), :wait) do
+    case Arguments.ms(Keyword.get(opts, :wait, 30_000), :wait) do
       {:ok, wait} -> fun.(wait)
       {:error, why} -> say("vehicle #{id}: " <> why_text(why))
     end
@@ -79,10 +79,10 @@ defmodule Dolphin.Console.Vehicle do
 
   @spec mode(Console.vehicle_id(), atom() | String.t(), keyword()) :: Console.printed()
   def mode(id, mode, opts \\ []) do
-    case Check.mode(mode) do
+    case Arguments.mode(mode) do
       {:ok, mode} ->
         command(id, :control, opts, [:force], fn state, opts ->
-          case Check.pilot_mode(mode, Manoeuvres.in_air?(state), opts[:force] == true) do
+          case Arguments.pilot_mode(mode, Manoeuvres.in_air?(state), opts[:force] == true) do
             :ok -> result(id, "mode #{Format.mode(mode)}", fn -> Vehicles.set_mode(id, mode) end)
             {:error, why} -> say("vehicle #{id}: " <> why_text(why))
           end
@@ -96,7 +96,7 @@ defmodule Dolphin.Console.Vehicle do
 
   @spec takeoff(Console.vehicle_id(), number(), keyword()) :: Console.printed()
   def takeoff(id, altitude, opts \\ []) do
-    case Check.altitude(altitude) do
+    case Arguments.altitude(altitude) do
       {:ok, alt} ->
         command(id, :control, opts, [:force, :wait], fn state, opts ->
           if Manoeuvres.in_air?(state) do
@@ -114,7 +114,7 @@ defmodule Dolphin.Console.Vehicle do
 
   @spec goto(Console.vehicle_id(), number(), number(), number(), keyword()) :: Console.printed()
   def goto(id, lat, lon, altitude, opts \\ []) do
-    case Check.position(lat, lon, altitude) do
+    case Arguments.position(lat, lon, altitude) do
       {:ok, point} ->
         command(id, :control, opts, [:force, :amsl], fn state, opts ->
           ref = if opts[:amsl], do: "AMSL", else: "above home"
@@ -305,8 +305,8 @@ defmodule Dolphin.Console.Vehicle do
 
   @spec events(pos_integer(), keyword()) :: Console.printed()
   def events(n \\ 20, opts \\ []) do
-    with {:ok, n} <- Check.count(n),
-         {:ok, opts} <- Check.options(opts, [:vehicle, :run, :event]) do
+    with {:ok, n} <- Arguments.count(n),
+         {:ok, opts} <- Arguments.options(opts, [:vehicle, :run, :event]) do
       names = opts[:event] && List.wrap(opts[:event])
 
       filter = fn e ->
@@ -315,9 +315,9 @@ defmodule Dolphin.Console.Vehicle do
           (opts[:run] == nil or Map.get(e, :run) == opts[:run])
       end
 
-      case Events.last(n, filter) do
+      case EventLog.last(n, filter) do
         [] -> say("no events#{if opts != [], do: " match", else: " yet"}")
-        events -> say(Enum.map_join(events, "\n", &Dolphin.CLI.event_line(&1, Events.origin_ms())))
+        events -> say(Enum.map_join(events, "\n", &Dolphin.EventText.event_line(&1, EventLog.origin_ms())))
       end
     else
       {:error, why} -> say("events: " <> why_text(why))
@@ -331,9 +331,9 @@ defmodule Dolphin.Console.Vehicle do
   # Checks the id and the options, stops the vehicle's task if told to force,
   # then runs `fun` with the vehicle's state.
   defp command(id, needs, opts, allowed, fun) do
-    with {:ok, opts} <- Check.options(opts, allowed),
-         vehicles = Snapshot.vehicles(),
-         {:ok, verdict} <- Check.vehicle(id, Snapshot.known(vehicles), needs, opts[:force] == true),
+    with {:ok, opts} <- Arguments.options(opts, allowed),
+         vehicles = Overview.vehicles(),
+         {:ok, verdict} <- Arguments.vehicle(id, Overview.known(vehicles), needs, opts[:force] == true),
          :ok <- stop_first(id, verdict),
          {:ok, state} <- Vehicles.state(id) |> gone(id) do
       fun.(state, opts)

@@ -21,7 +21,7 @@ defmodule Dolphin.Engine.Node do
   #   :platform_start            (platform tasks) -> {:platform, msg}, {:platform_exit, reason},
   #                              {:platform_start_failed, reason}, {:vehicle_lost, id}
   #   {:platform_stop, reason}   (platform tasks) bounded stop callback
-  #   {:emit, event, fields}     a Dolphin.Telemetry event (run and task_id added, unless given)
+  #   {:emit, event, fields}     a Dolphin.Events event (run and task_id added, unless given)
   #   :continue                  -> :continue at once (to do things one at a time)
   #   {:finish, result}          :done | {:failed, reason}
   #

@@ -32,7 +32,7 @@ defmodule Dolphin.Engine.Run do
         case Dolphin.Fleet.reserve(ctx.fleet, run, ctx.owner, leaves, inherit) do
           {:ok, assignment} ->
             allocation = Map.new(assignment, fn {id, v} -> {Integer.to_string(id), v} end)
-            Dolphin.Telemetry.emit(:allocated, %{run: run.id, allocation: allocation}, ctx.clock.now_ms())
+            Dolphin.Events.emit(:allocated, %{run: run.id, allocation: allocation}, ctx.clock.now_ms())
             {:ok, strip(tree, assignment)}
 
           {:error, error} ->

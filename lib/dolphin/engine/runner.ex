@@ -666,7 +666,7 @@ defmodule Dolphin.Engine.Runner do
   end
 
   defp emit(s, event, fields),
-    do: Dolphin.Telemetry.emit(event, Map.merge(%{run: s.run.id, task_id: s.id}, fields), s.ctx.clock.now_ms())
+    do: Dolphin.Events.emit(event, Map.merge(%{run: s.run.id, task_id: s.id}, fields), s.ctx.clock.now_ms())
 
   defp vehicles_in(task), do: for(%PlatformTask{vehicle: v} when v != nil <- Task.flatten(task), do: v) |> Enum.uniq()
 end

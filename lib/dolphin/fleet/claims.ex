@@ -162,7 +162,7 @@ defmodule Dolphin.Fleet.Claims do
   defp report(id, keep, drop) do
     Logger.error("vehicle #{id} was claimed on both sides of a netsplit, by an owner on #{node(keep)} and one on #{node(drop)}: the claim of #{node(keep)} is kept, the other dropped; nobody was stopped")
     # Told on the node where :global resolves, as every event is.
-    Dolphin.Telemetry.emit(:claim_conflict, %{vehicle: id, kept: node(keep), dropped: node(drop)})
+    Dolphin.Events.emit(:claim_conflict, %{vehicle: id, kept: node(keep), dropped: node(drop)})
   catch
     # A report that cannot be made must not keep :global from resolving.
     _, _ -> :ok

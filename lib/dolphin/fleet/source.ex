@@ -19,7 +19,7 @@ defmodule Dolphin.Fleet.Source do
       `{:vehicle_changed, id}` when a view changes what picks match on but
       the position (type, payloads, connected?, or a first view);
     * the view's transitions (`Dolphin.Vehicles.View.transitions/2`) as
-      `Dolphin.Telemetry` events, unless told not to.
+      `Dolphin.Events` events, unless told not to.
 
   The fleet keeps no copy: it reads views from the source when it picks,
   serves waiting picks, reserves or lists, and follows only `:vehicles`. The

@@ -19,7 +19,7 @@ defmodule Dolphin.Fleet.TestSource do
   public ETS table named after the source, so `set/3` publishes from the
   caller with no process in between. Each change is announced as
   `Dolphin.Vehicles.Views.put/1` announces a real vehicle's: its view, its
-  transitions as `Dolphin.Telemetry` events (`vehicle_discovered`,
+  transitions as `Dolphin.Events` events (`vehicle_discovered`,
   `mode_changed`, `vehicle_lost`, ...; `Dolphin.Vehicles.View.transitions/2`)
   and `{:vehicle_changed, id}` on `:vehicles` when picks may see it anew;
   `events: false` keeps the telemetry quiet (stand-ins whose changes must not

@@ -27,7 +27,7 @@ defmodule Dolphin.Mission.Executor do
 
   @behaviour :gen_statem
 
-  alias Dolphin.{Clock, Mission, PubSub, Telemetry, Vehicles}
+  alias Dolphin.{Clock, Mission, PubSub, Events, Vehicles}
   alias Dolphin.Engine.Platform
   alias Dolphin.Mission.Executor.Flight
   alias Dolphin.Vehicles.Manoeuvres
@@ -288,7 +288,7 @@ defmodule Dolphin.Mission.Executor do
   defp answered(state, {:error, e}, data), do: fail(state, data, {:refused, e})
 
   defp uploaded(data) do
-    Telemetry.emit(:mission_uploaded, %{
+    Events.emit(:mission_uploaded, %{
       vehicle: data.vehicle,
       name: data.name,
       items: length(data.items),

@@ -47,7 +47,7 @@ defmodule Dolphin.Mission.Platform do
 
   @behaviour Dolphin.Engine.Platform
 
-  alias Dolphin.{Mission, PubSub, Telemetry, Vehicles}
+  alias Dolphin.{Mission, PubSub, Events, Vehicles}
   alias Dolphin.Mission.{Executor, Resume}
 
   defimpl Dolphin.Engine.Taskable, for: Dolphin.Mission do
@@ -137,7 +137,7 @@ defmodule Dolphin.Mission.Platform do
     receive do
       {:dolphin, {:vehicle, ^vehicle}, {:vehicle_reconnected, ^vehicle}} ->
         held = Dolphin.Vehicles.Manoeuvres.hold(vehicle) == :ok
-        Telemetry.emit(:vehicle_returned, %{run: opts[:run], task_id: opts[:task_id], vehicle: vehicle, held: held})
+        Events.emit(:vehicle_returned, %{run: opts[:run], task_id: opts[:task_id], vehicle: vehicle, held: held})
 
       {:DOWN, ^ref, :process, _, _} ->
         :ok

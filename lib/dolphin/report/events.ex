@@ -1,6 +1,6 @@
 defmodule Dolphin.Report.Events do
   @moduledoc false
-  # Reads a run's JSONL events (Dolphin.Telemetry.Writer) and places them on
+  # Reads a run's JSONL events (Dolphin.Events.Writer) and places them on
   # the telemetry log's time line, refusing the events of another run.
   #
   # The events file carries no run id and no wall-clock time: `t_ms` is clock

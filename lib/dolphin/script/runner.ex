@@ -53,7 +53,7 @@ defmodule Dolphin.Script.Runner do
         send(me, {:script_done, self(), execute(script)})
       end)
 
-    Dolphin.Telemetry.emit(:script_started, %{script: script.file}, started)
+    Dolphin.Events.emit(:script_started, %{script: script.file}, started)
     if ms = opts[:for], do: ctx.clock.send_after(self(), :deadline, ms)
     {:ok, %{script: script, caller: caller, reply_to: reply_to, code: code, ctx: ctx, started: started}}
   end
@@ -169,7 +169,7 @@ defmodule Dolphin.Script.Runner do
     # One moment for the event and the summary: a run's summary line and its
     # last event read the same time.
     ended = s.ctx.clock.now_ms()
-    Dolphin.Telemetry.emit(:script_finished, %{script: s.script.file, result: name, reason: reason}, ended)
+    Dolphin.Events.emit(:script_finished, %{script: s.script.file, result: name, reason: reason}, ended)
 
     result =
       case result do

@@ -115,7 +115,7 @@ defmodule Dolphin.Script.Statements do
     # Lists print as lists: `message(ids)` of vehicle 99 is "[99]", not 'c'.
     text = if is_binary(text), do: text, else: inspect(text, charlists: :as_lists)
     ctx = Context.current()
-    Dolphin.Telemetry.emit(:message, %{text: text}, ctx.clock.now_ms())
+    Dolphin.Events.emit(:message, %{text: text}, ctx.clock.now_ms())
     if ctx.output, do: ctx.output.(text)
     :ok
   end
@@ -124,7 +124,7 @@ defmodule Dolphin.Script.Statements do
   @spec post(term(), term()) :: :ok
   def post(key, value) do
     ctx = Context.current()
-    Dolphin.Telemetry.emit(:signal_posted, %{key: key, value: value}, ctx.clock.now_ms())
+    Dolphin.Events.emit(:signal_posted, %{key: key, value: value}, ctx.clock.now_ms())
     Signals.post(ctx.signals, key, value)
   end
 
@@ -133,7 +133,7 @@ defmodule Dolphin.Script.Statements do
   def consume(key, value) do
     ctx = Context.current()
     consumed = Signals.consume(ctx.signals, key, value)
-    if consumed, do: Dolphin.Telemetry.emit(:signal_consumed, %{key: key, value: value}, ctx.clock.now_ms())
+    if consumed, do: Dolphin.Events.emit(:signal_consumed, %{key: key, value: value}, ctx.clock.now_ms())
     consumed
   end
 

@@ -8,7 +8,7 @@ defmodule Dolphin.Vehicles.Vehicle do
   # costs the state until the next frames.
   use GenServer, restart: :permanent
 
-  alias Dolphin.{Clock, PubSub, Telemetry}
+  alias Dolphin.{Clock, PubSub, Events}
   alias Dolphin.Link.Connection
   alias Dolphin.MAVLink.Ardupilotmega, as: M
   alias Dolphin.Vehicles.{CommandProtocol, MissionProtocol, Paths, State, View}
@@ -251,7 +251,7 @@ defmodule Dolphin.Vehicles.Vehicle do
   defp send_message(s, message), do: Connection.send_via(Paths.in_use(s.paths), s.sysid, message)
 
   defp path_changed(s, {from, to, reason}),
-    do: Telemetry.emit(:path_changed, %{vehicle: s.sysid, from: Paths.via_text(from), to: Paths.via_text(to), reason: reason})
+    do: Events.emit(:path_changed, %{vehicle: s.sysid, from: Paths.via_text(from), to: Paths.via_text(to), reason: reason})
 
   # The new state, and its changes to the vehicle's subscribers.
   defp publish(s, new) do

@@ -112,7 +112,7 @@ defmodule Dolphin.Vehicles.View do
   defp progress(m), do: {m.reached || 0, m.total}
 
   @doc """
-  The events (`Dolphin.Telemetry` names and metadata) of a vehicle going
+  The events (`Dolphin.Events` names and metadata) of a vehicle going
   from view `old` (`nil`: none yet) to view `new`, in the order they are
   emitted: `vehicle_discovered` once the type is known (a vehicle whose
   type is unknown is not announced, nor are its changes), then

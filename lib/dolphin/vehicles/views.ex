@@ -13,7 +13,7 @@ defmodule Dolphin.Vehicles.Views do
     2. `{:view, view}` is published on `Dolphin.PubSub` topic
        `{:vehicle_view, id}` (the engine's condition watchers follow it);
     3. the transitions from the previous row (`Dolphin.Vehicles.View.transitions/2`)
-       are emitted as `Dolphin.Telemetry` events: `vehicle_discovered` once
+       are emitted as `Dolphin.Events` events: `vehicle_discovered` once
        the type is known, `mode_changed`, `armed`, `disarmed`,
        `mission_item_reached`, `vehicle_lost`, `vehicle_reconnected`;
     4. `{:vehicle_changed, id}` is published on topic `:vehicles` when what a
@@ -30,7 +30,7 @@ defmodule Dolphin.Vehicles.Views do
 
   use GenServer
 
-  alias Dolphin.{PubSub, Telemetry}
+  alias Dolphin.{PubSub, Events}
   alias Dolphin.Vehicles.View
 
   @table __MODULE__
@@ -89,7 +89,7 @@ defmodule Dolphin.Vehicles.Views do
   @spec announce(View.t() | nil, View.t(), boolean()) :: :ok
   def announce(old, %View{id: id} = new, events?) do
     PubSub.publish({:vehicle_view, id}, {:view, new})
-    if events?, do: Enum.each(View.transitions(old, new), fn {event, meta} -> Telemetry.emit(event, meta) end)
+    if events?, do: Enum.each(View.transitions(old, new), fn {event, meta} -> Events.emit(event, meta) end)
 
     if old == nil or old.type != new.type or old.payloads != new.payloads or old.connected? != new.connected?,
       do: PubSub.publish(:vehicles, {:vehicle_changed, id})

@@ -8,7 +8,7 @@ defmodule Dolphin.Web.Hub do
 
   use GenServer
 
-  alias Dolphin.{Clock, PubSub, Telemetry, Vehicles}
+  alias Dolphin.{Clock, PubSub, Events, Vehicles}
   alias Dolphin.Web.{Connection, Error, Live}
 
   # How often (real milliseconds) clients are sent what changed: a page
@@ -57,7 +57,7 @@ defmodule Dolphin.Web.Hub do
       {:ok, _acceptor} = Task.start_link(fn -> accept(listen, hub) end)
       if owner = opts[:owner], do: Process.monitor(owner)
       PubSub.subscribe(:vehicles)
-      Telemetry.subscribe()
+      Events.subscribe()
       origin = Keyword.get(opts, :origin_ms, Clock.now_ms())
       started_at = DateTime.add(DateTime.utc_now(), -Clock.to_real_ms(max(Clock.now_ms() - origin, 0)), :millisecond)
       live = Live.new(origin, [started_at: started_at] ++ Keyword.take(opts, [:title, :tlog]))

@@ -81,10 +81,10 @@ defmodule Dolphin.Web.Live do
   end
 
   @doc false
-  # One Dolphin.Telemetry event.
+  # One Dolphin.Events event.
   @spec event(t(), map()) :: t()
   def event(live, %{event: _, at_ms: _} = event) do
-    e = event |> Dolphin.Telemetry.to_json(live.origin_ms) |> :jiffy.decode([:return_maps, null_term: nil])
+    e = event |> Dolphin.Events.to_json(live.origin_ms) |> :jiffy.decode([:return_maps, null_term: nil])
     {events, n} = if live.n_events >= @max_events, do: {:queue.drop(live.events), live.n_events}, else: {live.events, live.n_events + 1}
     %{live | events: :queue.in(e, events), n_events: n, running: running(live.running, e)}
   end

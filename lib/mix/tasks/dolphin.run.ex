@@ -41,7 +41,7 @@ defmodule Mix.Tasks.Dolphin.Run do
       `10m`, `1h`, `500ms`; a bare number is seconds; more than 0, and at
       most 49.7 days of real time): running tasks are
       stopped, vehicles hold, exit status 0 with a summary
-    * `--events FILE` — write every event as a JSON line (schema: `Dolphin.Telemetry`)
+    * `--events FILE` — write every event as a JSON line (schema: `Dolphin.Events`)
     * `--tlog FILE` — where to record every MAVLink frame of the links (a
       telemetry log); a FILE that is there is replaced (said when the run
       starts): a log holds one run. By default a run that talks MAVLink
@@ -84,7 +84,7 @@ defmodule Mix.Tasks.Dolphin.Run do
   Their times, like the summary's (`script stopped after 1808.2 s of clock
   time`), are clock time since the run started, its vehicles' start
   included; `--for` counts from the script's start, which the summary gives.
-  The lines are `Dolphin.CLI`'s, as in the console; the run itself is
+  The lines are `Dolphin.EventText`'s, as in the console; the run itself is
   `Dolphin.CLI.Run`.
 
   ## Watching a run in QGroundControl

@@ -125,7 +125,7 @@ defmodule Dolphin.Cluster.CLITest do
     there = %{lat: 40.454233, lon: -7.375234, alt: 820.0}
     gs1 = Cluster.start_station("gs1", sysids: [30], sim: [home: here])
     gs2 = Cluster.start_station("gs2", sysids: [30], sim: [home: there])
-    Dolphin.Telemetry.subscribe()
+    Dolphin.Events.subscribe()
     :ok = Dolphin.Cluster.join(gs1.node)
     Cluster.await_vehicles([30])
     :ok = Dolphin.Cluster.join(gs2.node)

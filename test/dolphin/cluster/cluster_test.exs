@@ -6,7 +6,7 @@ defmodule Dolphin.ClusterTest do
   @moduletag :cluster
   @moduletag timeout: 120_000
 
-  alias Dolphin.{Telemetry, Vehicles}
+  alias Dolphin.{Events, Vehicles}
   alias Dolphin.Test.{Cluster, Wait}
 
   @speedup 50
@@ -45,7 +45,7 @@ defmodule Dolphin.ClusterTest do
     assert node(Vehicles.whereis(1)) == gs1.node
     assert node(Vehicles.whereis(11)) == gs2.node
 
-    Telemetry.subscribe()
+    Events.subscribe()
     assert {:ok, %{result: :done}} = Dolphin.Script.run(hop_script([1, 11]))
     # The controller's events come from both stations' vehicles.
     events = Wait.received_events()
@@ -81,7 +81,7 @@ defmodule Dolphin.ClusterTest do
         "far.exs"
       )
 
-    Telemetry.subscribe()
+    Events.subscribe()
     Vehicles.subscribe(:all)
     {:ok, run} = Dolphin.Script.start(script)
     Wait.until(fn -> in_air?(11) end, 30_000, fn -> "vehicle 11 in the air" end)
@@ -106,7 +106,7 @@ defmodule Dolphin.ClusterTest do
     :ok = Dolphin.Cluster.join(gs2.node)
     Wait.until(fn -> match?(%{21 => %{stations: [_, _]}}, Dolphin.Cluster.Mirror.routes()) end, 20_000, fn -> "vehicle 21 heard by both" end)
 
-    Telemetry.subscribe()
+    Events.subscribe()
     Vehicles.subscribe(:all)
     {:ok, run} = Dolphin.Script.start(hop_script([21]))
     Wait.until(fn -> in_air?(21) end, 30_000, fn -> "vehicle 21 in the air" end)
@@ -130,7 +130,7 @@ defmodule Dolphin.ClusterTest do
     :ok = Dolphin.Cluster.join(gs1.node)
     Cluster.await_vehicles([1, 2])
     Vehicles.subscribe(:all)
-    Telemetry.subscribe()
+    Events.subscribe()
 
     true = :erlang.disconnect_node(gs1.node)
     assert_receive {:dolphin, :vehicles, {:vehicle_lost, 1}}, 5_000

@@ -23,7 +23,7 @@ defmodule Dolphin.Console.MissionFileTest do
   end
 
   test "a script: its missions are found and nothing of it runs" do
-    Dolphin.Telemetry.subscribe()
+    Dolphin.Events.subscribe()
     path = Path.join(@fixtures, "script_with_missions.exs")
     assert {:ok, found, notes} = MissionFile.read(path)
     assert Enum.map(found, &{&1.var, &1.mission.name}) == [{"later", "Later"}, {"survey", "Survey"}]

@@ -11,7 +11,7 @@ defmodule Dolphin.Engine.CombinatorsTest do
   doctest Dolphin.Engine.Cond
   doctest Dolphin.Engine.Signals
   doctest Dolphin.Engine.Failure
-  doctest Dolphin.Telemetry
+  doctest Dolphin.Events
 
   defp never, do: Cond.new(fn -> false end, source: "never")
   defp low_battery(v), do: Cond.new(fn snap -> Dolphin.Engine.Snapshot.battery(snap, v) < 0.3 end, source: "battery < 0.3")

@@ -3,7 +3,7 @@ defmodule Dolphin.Mission.PlatformTest do
   # Changes the clock speed-up and uses the global fleet: not async.
   use ExUnit.Case, async: false
 
-  alias Dolphin.{Clock, Engine, Mission, Sim, Telemetry, Vehicles}
+  alias Dolphin.{Clock, Engine, Mission, Sim, Events, Vehicles}
   alias Dolphin.Mission.Command, as: C
   alias Dolphin.Test.Wait
 
@@ -37,7 +37,7 @@ defmodule Dolphin.Mission.PlatformTest do
 
   test "a mission is uploaded, verified, flown and completes when the vehicle has landed and disarmed", %{port: port} do
     [{1, home}] = start_fleet(port, count: 1)
-    Telemetry.subscribe()
+    Events.subscribe()
 
     assert {:ok, :done} = Engine.run(Engine.on(out_and_back(home), [1]))
 
@@ -67,7 +67,7 @@ defmodule Dolphin.Mission.PlatformTest do
     :ok = Vehicles.upload_mission(1, Mission.to_items(out_and_back(home)))
     assert {:ok, %{mission: %{reached: nil, current: nil}}} = Vehicles.state(1)
 
-    Telemetry.subscribe()
+    Events.subscribe()
     assert {:ok, :done} = Engine.run(Engine.on(out_and_back(home), [1]))
     reached = for {:dolphin, :events, %{event: :task_progress, progress: p}} <- flush(), do: p.reached
     # The take-off (the vehicle is already up) is item 1 reached; 3 never came from the previous mission.
@@ -232,7 +232,7 @@ defmodule Dolphin.Mission.PlatformTest do
     up = Mission.new("up") |> Mission.add(C.home(home)) |> Mission.add(C.take_off(%{home | h: home.h + 20})) |> Mission.add(C.move_and_loiter_pos(0, 0, 0, 10))
     reached_loiter = fn -> match?({:ok, %{mission: %{current: 2, reached: 1}, mode: :auto}}, Vehicles.state(1)) end
     assert {:ok, :done} = Engine.run(Engine.on(Engine.until(up, reached_loiter), [1]))
-    Telemetry.subscribe()
+    Events.subscribe()
     flush()
 
     back = Mission.new("Return to base") |> Mission.add(C.home(home)) |> Mission.add(C.take_off(%{home | h: home.h + 30})) |> Mission.add(C.return_home_and_land())

@@ -6,7 +6,7 @@ defmodule Dolphin.Mission.ReassignTest do
 
   import Dolphin.Property
 
-  alias Dolphin.{Engine, Mission, Sim, Telemetry, Vehicles}
+  alias Dolphin.{Engine, Mission, Sim, Events, Vehicles}
   alias Dolphin.Mission.Command, as: C
   alias Dolphin.Mission.Resume
   alias Dolphin.Test.{GroundStation, Wait}
@@ -102,7 +102,7 @@ defmodule Dolphin.Mission.ReassignTest do
     # reached, in the survey's numbering, and the reassignment.
     defp fly_and_kill(port, k, how) do
       home = start_fleet(port)
-      Telemetry.subscribe()
+      Events.subscribe()
       {:ok, run} = Engine.start(Engine.reassign(Engine.on(plain_survey(home), [1]), from: [1, 2]))
       receive_event(&match?(%{event: :mission_item_reached, vehicle: 1, seq: ^k}, &1))
 
@@ -114,7 +114,7 @@ defmodule Dolphin.Mission.ReassignTest do
 
       result = Engine.await(run, 120_000)
       events = flush_events()
-      Telemetry.unsubscribe()
+      Events.unsubscribe()
       {result, events}
     end
 
@@ -190,7 +190,7 @@ defmodule Dolphin.Mission.ReassignTest do
       for id <- [1, 2], do: {:ok, _} = Dolphin.Fleet.pick(Dolphin.Fleet, self(), id: id)
       {:ok, %{home: h}} = Vehicles.state(2)
       home = Dolphin.Geo.location(h.lat, h.lon, h.alt)
-      Telemetry.subscribe()
+      Events.subscribe()
       assert {:ok, :done} = Engine.run(Engine.reassign(Engine.on(plain_survey(home), [1]), from: [1, 2]))
       events = flush_events()
       # Nothing was reached: vehicle 2 takes off, then flies everything after the take-off (items 2..8).
@@ -207,7 +207,7 @@ defmodule Dolphin.Mission.ReassignTest do
       covered_once!(3, events)
       # The lost vehicle's guard waits for it, supervised.
       assert [_ | _] = Task.Supervisor.children(Dolphin.Mission.Guards)
-      Telemetry.subscribe()
+      Events.subscribe()
       :ok = Sim.set_faults(1, silence: false)
       assert %{event: :vehicle_returned, vehicle: 1, held: true} = receive_event(&(&1.event == :vehicle_returned))
       Wait.until(fn -> match?({:ok, %{mode: :brake}}, Sim.info(1)) end, 5_000, fn -> "vehicle 1 holding: #{inspect(Sim.info(1))}" end)

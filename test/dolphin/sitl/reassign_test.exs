@@ -6,7 +6,7 @@ defmodule Dolphin.SITL.ReassignTest do
   # clock's speed-up: not async.
   use ExUnit.Case, async: false
 
-  alias Dolphin.{Engine, Mission, SITL, Telemetry, Vehicles}
+  alias Dolphin.{Engine, Mission, SITL, Events, Vehicles}
   alias Dolphin.Mission.Command, as: C
   alias Dolphin.Mission.Resume
   alias Dolphin.Test.{Backend, Wait}
@@ -36,7 +36,7 @@ defmodule Dolphin.SITL.ReassignTest do
     Vehicles.set_timeout(a, 5_000)
 
     survey = Mission.new("Survey", [C.home(home), C.take_off(%{home | h: home.h + 20}), C.survey_area(60, 60, 20, :north_east), C.return_home()])
-    Telemetry.subscribe()
+    Events.subscribe()
     {:ok, run} = Engine.start(Engine.reassign(Engine.on(survey, [a]), from: [a, b]))
 
     seen = wait_event(&match?(%{event: :mission_item_reached, vehicle: ^a, seq: @killed_after}, &1), [])
@@ -44,7 +44,7 @@ defmodule Dolphin.SITL.ReassignTest do
 
     assert {:ok, :done} = Engine.await(run, 240_000)
     events = Enum.reverse(seen) ++ Wait.received_events()
-    Telemetry.unsubscribe()
+    Events.unsubscribe()
 
     assert [%{from: ^a, to: ^b, resume_seq: resume}] = for(%{event: :task_reassigned} = e <- events, do: e)
     first = MapSet.new(for %{event: :mission_item_reached, vehicle: ^a, seq: s} <- events, do: s)

@@ -7,7 +7,7 @@ defmodule Dolphin.Vehicles.PathsFlightTest do
 
   @moduletag timeout: 600_000
 
-  alias Dolphin.{Clock, Engine, Mission, Sim, Telemetry, Vehicles}
+  alias Dolphin.{Clock, Engine, Mission, Sim, Events, Vehicles}
   alias Dolphin.Link.Connection
   alias Dolphin.Mission.Command, as: C
   alias Dolphin.Test.{GroundStation, RadioSplitter, Wait}
@@ -68,7 +68,7 @@ defmodule Dolphin.Vehicles.PathsFlightTest do
 
   test "a vehicle heard on two links is one vehicle: discovered once, its state and mission applied once", %{ports: ports, splitter: splitter} do
     Vehicles.subscribe(:all)
-    Telemetry.subscribe()
+    Events.subscribe()
     home = start_copter(splitter)
 
     assert Vehicles.list() == [1]
@@ -96,7 +96,7 @@ defmodule Dolphin.Vehicles.PathsFlightTest do
   end
 
   test "the best path is used: a slower radio gives way to a quicker one", %{ports: ports, splitter: splitter} do
-    Telemetry.subscribe()
+    Events.subscribe()
     start_copter(splitter)
     slow = in_use(ports)
     :ok = RadioSplitter.set(splitter, slow, both: [latency: 150])
@@ -116,7 +116,7 @@ defmodule Dolphin.Vehicles.PathsFlightTest do
     # path in use is cut from beside it once the mission is under way (the
     # take-off reached).
     spawn_link(fn ->
-      Telemetry.subscribe()
+      Events.subscribe()
       receive do: ({:dolphin, :events, %{event: :mission_item_reached, vehicle: 1, seq: 1}} -> :ok)
       cut = in_use(ports)
       cut_at = Clock.now_ms()
@@ -124,7 +124,7 @@ defmodule Dolphin.Vehicles.PathsFlightTest do
       send(test, {:cut, cut, cut_at})
     end)
 
-    Telemetry.subscribe()
+    Events.subscribe()
     assert {:ok, :done} = Engine.run(Engine.on(out_and_back(home), [1]))
     assert_received {:cut, cut, cut_at}
 
@@ -141,7 +141,7 @@ defmodule Dolphin.Vehicles.PathsFlightTest do
 
   test "the path in use cut in the middle of a mission upload: the upload carries on over the other path", %{ports: ports, splitter: splitter} do
     home = start_copter(splitter)
-    Telemetry.subscribe()
+    Events.subscribe()
     # A long mission, sent slowly enough (both radios 20 ms each way) to be cut in the middle.
     :ok = RadioSplitter.set(splitter, :a, both: [latency: 20])
     :ok = RadioSplitter.set(splitter, :b, both: [latency: 20])

@@ -12,7 +12,7 @@ defmodule Dolphin.Vehicles.ViewsTest do
 
   setup do
     on_exit(fn -> Vehicles.forget(@id) end)
-    Dolphin.Telemetry.subscribe()
+    Dolphin.Events.subscribe()
     Vehicles.subscribe(:all)
     Vehicles.subscribe_view(@id)
     :ok

@@ -76,7 +76,7 @@ defmodule Dolphin.Web.RunTest do
     end
 
     test "a --web port in use: exit status 1, nothing run", %{tmp_dir: dir} do
-      Dolphin.Telemetry.subscribe()
+      Dolphin.Events.subscribe()
       {:ok, busy} = :gen_tcp.listen(0, ip: {127, 0, 0, 1})
       {:ok, port} = :inet.port(busy)
       ok = script(dir, "use Dolphin.Script\nmessage(\"hi\")\n")

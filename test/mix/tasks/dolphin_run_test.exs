@@ -49,7 +49,7 @@ defmodule Mix.Tasks.Dolphin.RunTest do
 
   describe "scripts" do
     test "a syntax error or an unknown word: file and line, status 1, nothing run", %{tmp_dir: dir} do
-      Dolphin.Telemetry.subscribe()
+      Dolphin.Events.subscribe()
       bad = script(dir, "bad.exs", "use Dolphin.Script\nmessage(\"hi\")\nexecute %{v1 => \n")
       assert {1, "", err} = main([bad, "--fake", "1"])
       assert err =~ ~r/bad.exs:\d+:\d+: syntax error/
@@ -88,7 +88,7 @@ defmodule Mix.Tasks.Dolphin.RunTest do
           do: assert(name in names, "no #{name} event")
 
       # Every line follows the catalogue: t_ms, event and exactly its fields.
-      catalogue = Dolphin.Telemetry.catalogue()
+      catalogue = Dolphin.Events.catalogue()
 
       for line <- lines do
         fields = catalogue[String.to_existing_atom(line["event"])] |> Enum.map(&Atom.to_string/1)

@@ -1,13 +1,13 @@
-defmodule Dolphin.CLI do
+defmodule Dolphin.EventText do
   @moduledoc """
   What an operator reads of a run, in one place: one line per event, and
   which events a run's log shows. `mix dolphin.run` and the console
   (`Dolphin.Console.events/1`) both print events through `event_line/2`, so an
   event reads the same wherever it is shown.
 
-      iex> Dolphin.CLI.event_text(%{event: :armed, vehicle: 2})
+      iex> Dolphin.EventText.event_text(%{event: :armed, vehicle: 2})
       "vehicle 2 armed"
-      iex> Dolphin.CLI.event_line(%{event: :task_finished, task_id: 5, kind: :test, name: "survey", vehicle: 1, result: :done, reason: nil, at_ms: 31_300}, 500)
+      iex> Dolphin.EventText.event_line(%{event: :task_finished, task_id: 5, kind: :test, name: "survey", vehicle: 1, result: :done, reason: nil, at_ms: 31_300}, 500)
       ~s([   30.8 s] task 5 test "survey" on vehicle 1: done)
 
   The rest of the command line's view lives beside it:
@@ -51,7 +51,7 @@ defmodule Dolphin.CLI do
   ]
 
   @doc """
-  One event (`Dolphin.Telemetry`) as a line stamped with its clock time since
+  One event (`Dolphin.Events`) as a line stamped with its clock time since
   `origin_ms`.
   """
   @spec event_line(map(), integer()) :: String.t()
@@ -60,7 +60,7 @@ defmodule Dolphin.CLI do
   @doc """
   A line of the log at clock time `at_ms`, with the time since `origin_ms` in front.
 
-      iex> Dolphin.CLI.stamp(81_200, 0, "vehicle 1 armed")
+      iex> Dolphin.EventText.stamp(81_200, 0, "vehicle 1 armed")
       "[   81.2 s] vehicle 1 armed"
   """
   @spec stamp(integer(), integer(), String.t()) :: String.t()
@@ -72,11 +72,11 @@ defmodule Dolphin.CLI do
   modes, arming, missions, conditions, and the platform tasks (those on a
   vehicle) as they start and end, with every failure.
 
-      iex> Dolphin.CLI.logged?(%{event: :message, text: "hi"}, true)
+      iex> Dolphin.EventText.logged?(%{event: :message, text: "hi"}, true)
       true
-      iex> Dolphin.CLI.logged?(%{event: :armed, vehicle: 1}, true)
+      iex> Dolphin.EventText.logged?(%{event: :armed, vehicle: 1}, true)
       false
-      iex> Dolphin.CLI.logged?(%{event: :task_started, task_id: 2, kind: :sequence, name: nil, vehicle: nil}, false)
+      iex> Dolphin.EventText.logged?(%{event: :task_started, task_id: 2, kind: :sequence, name: nil, vehicle: nil}, false)
       false
   """
   @spec logged?(map(), boolean()) :: boolean()

@@ -1,6 +1,6 @@
-defmodule Dolphin.Console.Events do
+defmodule Dolphin.Console.EventLog do
   @moduledoc false
-  # The console's memory of events: the last `max` Dolphin.Telemetry events
+  # The console's memory of events: the last `max` Dolphin.Events events
   # in a ring buffer (for events/1), and what each running task is doing,
   # from the events about it (for tasks/0). Started with the application,
   # so that a console opened mid-run still knows the run's beginning.
@@ -33,7 +33,7 @@ defmodule Dolphin.Console.Events do
   @impl true
   def init(opts) do
     # subscribe: false (tests) — the events are sent by hand.
-    if Keyword.get(opts, :subscribe, true), do: Dolphin.Telemetry.subscribe()
+    if Keyword.get(opts, :subscribe, true), do: Dolphin.Events.subscribe()
     {:ok, %{max: Keyword.get(opts, :max, @default_max), size: 0, buffer: :queue.new(), tasks: %{}, origin: Dolphin.Clock.now_ms()}}
   end
 

@@ -1,7 +1,7 @@
-defmodule Dolphin.Console.EventsTest do
+defmodule Dolphin.Console.EventLogTest do
   use ExUnit.Case, async: true
 
-  alias Dolphin.Console.Events
+  alias Dolphin.Console.EventLog
 
   test "the store keeps the last events, oldest first, and filters them" do
     name = :"events_#{System.unique_integer([:positive])}"
@@ -32,7 +32,7 @@ defmodule Dolphin.Console.EventsTest do
   end
 
   test "the application's store is running" do
-    assert is_pid(Process.whereis(Dolphin.Console.Events))
+    assert is_pid(Process.whereis(Dolphin.Console.EventLog))
     assert is_list(Events.last(5))
   end
 end

@@ -1,4 +1,4 @@
-defmodule Dolphin.Telemetry do
+defmodule Dolphin.Events do
   # The catalogue: {name, fields, meaning}. The moduledoc and emit/3 both read it.
   @events [
     {:vehicle_discovered, [:vehicle, :type], "a vehicle was heard for the first time; `type` is `uav`, `ugv`, `usv`, `uuv`, `other` or null while unknown"},
@@ -41,7 +41,7 @@ defmodule Dolphin.Telemetry do
   The one catalogue of Dolphin's events: what happens to vehicles, picks, tasks
   and scripts, as plain maps published on `Dolphin.PubSub` topic `:events`.
 
-      Dolphin.Telemetry.subscribe()
+      Dolphin.Events.subscribe()
       # {:dolphin, :events, %{event: :task_started, at_ms: 81_234, task_id: 3, ...}}
 
   Every event is a map with `:event` (its name), `:at_ms` (the clock time of
@@ -50,7 +50,7 @@ defmodule Dolphin.Telemetry do
   not in the catalogue or fields that differ from it.
 
   `mix dolphin.run --events FILE` writes them one JSON object per line with
-  `Dolphin.Telemetry.Writer`: `{"t_ms": ..., "event": NAME, ...fields}`, where
+  `Dolphin.Events.Writer`: `{"t_ms": ..., "event": NAME, ...fields}`, where
   `t_ms` is clock milliseconds since the writer started. In JSON, vehicles are
   system ids (integers), names and atoms are strings, absent values `null`.
 
@@ -103,7 +103,7 @@ defmodule Dolphin.Telemetry do
   @doc """
   One event as a JSON line (no newline), `t_ms` counted from `origin_ms`.
 
-      iex> Dolphin.Telemetry.to_json(%{event: :armed, at_ms: 1500, vehicle: 2}, 1000)
+      iex> Dolphin.Events.to_json(%{event: :armed, at_ms: 1500, vehicle: 2}, 1000)
       ~s({"t_ms":500,"event":"armed","vehicle":2})
   """
   @spec to_json(event(), integer()) :: String.t()
@@ -127,67 +127,4 @@ defmodule Dolphin.Telemetry do
   defp key(k) when is_binary(k), do: k
   defp key(k) when is_atom(k), do: Atom.to_string(k)
   defp key(k), do: inspect(k)
-end
-
-defmodule Dolphin.Telemetry.Writer do
-  @moduledoc """
-  Writes every event (see `Dolphin.Telemetry`) to a file, one JSON object per
-  line, `t_ms` counted from when the writer started. `stop/1` writes what is
-  still queued and closes the file.
-
-      {:ok, w} = Dolphin.Telemetry.Writer.start_link(path: "run.jsonl")
-      ...
-      :ok = Dolphin.Telemetry.Writer.stop(w)
-  """
-
-  use GenServer
-
-  @doc "Starts a writer; options `:path` (required), `:origin_ms` (default: now on `Dolphin.Clock`)."
-  @spec start_link(keyword()) :: GenServer.on_start()
-  def start_link(opts), do: GenServer.start_link(__MODULE__, opts)
-
-  @doc "Writes the events received so far, closes the file and stops."
-  @spec stop(GenServer.server()) :: :ok
-  def stop(writer), do: GenServer.stop(writer, :normal, 30_000)
-
-  @impl true
-  def init(opts) do
-    path = Keyword.fetch!(opts, :path)
-
-    case File.open(path, [:write, :binary]) do
-      {:ok, io} ->
-        Dolphin.Telemetry.subscribe()
-        # Written on stop, whatever the reason, so no event already received is lost.
-        Process.flag(:trap_exit, true)
-        {:ok, %{io: io, origin: Keyword.get_lazy(opts, :origin_ms, &Dolphin.Clock.now_ms/0)}}
-
-      {:error, why} ->
-        {:stop, "cannot write #{path}: #{:file.format_error(why)}"}
-    end
-  end
-
-  @impl true
-  def handle_info({:dolphin, :events, event}, s) do
-    IO.binwrite(s.io, [Dolphin.Telemetry.to_json(event, s.origin), ?\n])
-    {:noreply, s}
-  end
-
-  def handle_info(_other, s), do: {:noreply, s}
-
-  @impl true
-  def terminate(_reason, s) do
-    Dolphin.Telemetry.unsubscribe()
-    drain(s)
-    File.close(s.io)
-  end
-
-  defp drain(s) do
-    receive do
-      {:dolphin, :events, event} ->
-        IO.binwrite(s.io, [Dolphin.Telemetry.to_json(event, s.origin), ?\n])
-        drain(s)
-    after
-      0 -> :ok
-    end
-  end
 end

@@ -1,9 +1,9 @@
-defmodule Dolphin.Console.Check do
+defmodule Dolphin.Console.Arguments do
   @moduledoc false
   # Pure argument checks of the console's helpers: each returns {:ok, value}
   # or {:error, %UsageError{}} whose message an operator can act on. The
   # vehicle check works on a snapshot of what the ground station knows
-  # (Dolphin.Console.Snapshot).
+  # (Dolphin.Console.Overview).
 
   alias Dolphin.Console.UsageError
 

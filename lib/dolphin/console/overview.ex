@@ -1,12 +1,12 @@
-defmodule Dolphin.Console.Snapshot do
+defmodule Dolphin.Console.Overview do
   @moduledoc false
   # What the console shows, gathered from the live system (the vehicles'
   # states, the fleet, the engine's registry of runs and tasks, the console's
   # runs and event store) into plain data for Dolphin.Console.Format and
-  # Dolphin.Console.Check. Read-only.
+  # Dolphin.Console.Arguments. Read-only.
 
   alias Dolphin.{Clock, Engine, Fleet, Vehicles}
-  alias Dolphin.Console.{Events, Format, Runs}
+  alias Dolphin.Console.{EventLog, Format, Runs}
 
   @doc false
   # Every known vehicle: %{id, state (Dolphin.Vehicles.State plus :lost, or
@@ -33,8 +33,8 @@ defmodule Dolphin.Console.Snapshot do
   end
 
   @doc false
-  # What Dolphin.Console.Check.vehicle/4 needs, by id.
-  @spec known([map()], integer()) :: %{integer() => Dolphin.Console.Check.info()}
+  # What Dolphin.Console.Arguments.vehicle/4 needs, by id.
+  @spec known([map()], integer()) :: %{integer() => Dolphin.Console.Arguments.info()}
   def known(vehicles \\ vehicles(), now_ms \\ Clock.now_ms()) do
     Map.new(vehicles, fn v ->
       silent = if v.state && v.state.link.last_seen_ms, do: now_ms - v.state.link.last_seen_ms
@@ -169,7 +169,7 @@ defmodule Dolphin.Console.Snapshot do
       groups: console_groups ++ other_groups,
       runs: run_texts,
       tasks: Engine.tasks(),
-      states: safe(fn -> Events.task_states() end, %{}),
+      states: safe(fn -> EventLog.task_states() end, %{}),
       console: console,
       scripts: Map.keys(others),
       loose: for(r <- runs, owners[r.run] == :other, do: r.run)
