@@ -18,8 +18,9 @@ defmodule Dolphin.EventText do
       (and on a terminal redraws the status block below them);
     * `Dolphin.CLI.StatusBlock` — the status block's text, one line per vehicle;
     * `Dolphin.CLI.Signals` — SIGINT and SIGTERM as messages;
-    * `Dolphin.CLI.UsageError` and `Dolphin.CLI.StartError` — a command line
-      that cannot be run (exit status 2), a run that could not start (1).
+    * `Dolphin.CLI.Values` — every task's options, checked; and the one
+      error of a command line, `Dolphin.CommandLineError`: one that cannot
+      be run (exit status 2), or a run that could not start (1).
   """
 
   alias Dolphin.Console.Format

@@ -4,8 +4,7 @@ defmodule Dolphin.EventTextTest do
   alias Dolphin.EventText
 
   doctest Dolphin.EventText
-  doctest Dolphin.CLI.UsageError
-  doctest Dolphin.CLI.StartError
+  doctest Dolphin.CommandLineError
 
   describe "event lines" do
     test "every event of the catalogue has its own line" do

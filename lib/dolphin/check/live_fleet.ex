@@ -10,16 +10,15 @@ defmodule Dolphin.Check.LiveFleet do
       {:ok, fleet, skipped} = Dolphin.Check.LiveFleet.gather(["udpin:0.0.0.0:14550"], 5_000)
   """
 
-  alias Dolphin.CLI.StartError
-  alias Dolphin.Vehicles
+    alias Dolphin.Vehicles
 
   @doc """
   Connects to `endpoints`, waits `wait_ms` (real time) for vehicles, and
   returns them, with the ids of those that did not report a position in
-  time (left out). `{:error, %Dolphin.CLI.StartError{}}` when a link cannot
+  time (left out). `{:error, %Dolphin.CommandLineError{reason: :failed}}` when a link cannot
   be opened or no vehicle answered.
   """
-  @spec gather([String.t()], non_neg_integer()) :: {:ok, [Dolphin.Check.FleetFile.vehicle()], [non_neg_integer()]} | {:error, StartError.t()}
+  @spec gather([String.t()], non_neg_integer()) :: {:ok, [Dolphin.Check.FleetFile.vehicle()], [non_neg_integer()]} | {:error, Dolphin.CommandLineError.t()}
   def gather(endpoints, wait_ms) do
     before = MapSet.new(Vehicles.list())
 
@@ -31,7 +30,7 @@ defmodule Dolphin.Check.LiveFleet do
         {known, unknown} = Enum.split_with(views, &(&1.position != nil))
 
         case known do
-          [] -> {:error, %StartError{option: "--connect #{Enum.join(endpoints, " ")}", reason: "no vehicle reported its position within #{div(wait_ms, 1000)} s"}}
+          [] -> {:error, Dolphin.CommandLineError.failed("--connect #{Enum.join(endpoints, " ")}", "no vehicle reported its position within #{div(wait_ms, 1000)} s")}
           _ -> {:ok, Enum.map(known, &vehicle/1), Enum.map(unknown, & &1.id)}
         end
       after
@@ -50,7 +49,7 @@ defmodule Dolphin.Check.LiveFleet do
 
       {:error, why} ->
         Enum.each(links, &DynamicSupervisor.terminate_child(Dolphin.Link.Supervisor, &1))
-        {:error, %StartError{option: "--connect #{ep}", reason: why}}
+        {:error, Dolphin.CommandLineError.failed("--connect #{ep}", why)}
     end
   end
 

@@ -5,8 +5,7 @@ defmodule Dolphin.CLI.Cluster do
   # the command line is parsed, then distribution started and the stations
   # joined (Dolphin.Cluster).
 
-  alias Dolphin.CLI.StartError
-
+  
   @switches [sname: :string, name: :string, cookie: :string, join: :keep]
 
   @doc false
@@ -38,7 +37,7 @@ defmodule Dolphin.CLI.Cluster do
   # node. `speedup`: the one the user asked for, or nil to adopt the first
   # station's (the stations after it must then agree with it). Returns what
   # to print, or the first error.
-  @spec start(keyword(), number() | nil) :: {:ok, [String.t()]} | {:error, StartError.t()}
+  @spec start(keyword(), number() | nil) :: {:ok, [String.t()]} | {:error, Dolphin.CommandLineError.t()}
   def start(opts, speedup) do
     with {:ok, lines} <- start_node(opts) do
       # After the first station, the speed-up is the cluster's: every other must agree with it.
@@ -46,7 +45,7 @@ defmodule Dolphin.CLI.Cluster do
       |> Enum.reduce_while({:ok, lines, speedup}, fn node, {:ok, lines, k} ->
         case Dolphin.Cluster.join(node, speedup: k) do
           :ok -> {:cont, {:ok, lines ++ ["joined #{node}: #{count(node)} vehicle(s)"], Dolphin.Clock.speedup()}}
-          {:error, e} -> {:halt, {:error, %StartError{option: "--join #{node}", reason: e}}}
+          {:error, e} -> {:halt, {:error, Dolphin.CommandLineError.failed("--join #{node}", e)}}
         end
       end)
       |> case do
@@ -73,7 +72,7 @@ defmodule Dolphin.CLI.Cluster do
       name != nil ->
         case Dolphin.Cluster.start_node(name, type, opts[:cookie]) do
           {:ok, node} -> {:ok, ["node #{node}"]}
-          {:error, e} -> {:error, %StartError{option: "--#{if type == :shortnames, do: "sname", else: "name"} #{name}", reason: e}}
+          {:error, e} -> {:error, Dolphin.CommandLineError.failed("--#{if type == :shortnames, do: "sname", else: "name"} #{name}", e)}
         end
 
       opts[:cookie] ->

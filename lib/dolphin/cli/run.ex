@@ -35,14 +35,14 @@ defmodule Dolphin.CLI.Run do
       the VM at once with `Dolphin.CLI.Signals.status/1`, once the log and
       the events file have what they were sent;
     * `:failed` — the script failed (what, where and why are printed on `:err`);
-    * `{:error, %Dolphin.CLI.StartError{}}` — its vehicles or outputs could
+    * `{:error, %Dolphin.CommandLineError{reason: :failed}}` — its vehicles or outputs could
       not be started (a port in use, a SITL binary missing): nothing ran.
   """
 
-  alias Dolphin.CLI.{Renderer, Signals, StartError, Vehicles}
+  alias Dolphin.CLI.{Renderer, Signals, Vehicles}
   alias Dolphin.Console.Format
 
-  @type outcome :: :completed | :stopped | {:stopped, Signals.signal()} | :failed | {:error, StartError.t()}
+  @type outcome :: :completed | :stopped | {:stopped, Signals.signal()} | :failed | {:error, Dolphin.CommandLineError.t()}
 
   # What to undo when the run ends, newest first, each tagged with its kind:
   # :output (stopped before the summary, which comes below them), :vehicles
@@ -155,7 +155,7 @@ defmodule Dolphin.CLI.Run do
             :ok
 
           {:error, e} ->
-            {:error, %StartError{option: "--web #{port}", reason: e}}
+            {:error, Dolphin.CommandLineError.failed("--web #{port}", e)}
         end
     end
   end
@@ -254,7 +254,7 @@ defmodule Dolphin.CLI.Run do
   defp start_tlog(path) do
     case Dolphin.CLI.OutputFile.start_log(path) do
       {:ok, line} -> {:ok, line}
-      {:error, why} -> {:error, %StartError{option: "--tlog", reason: why}}
+      {:error, why} -> {:error, Dolphin.CommandLineError.failed("--tlog", why)}
     end
   end
 
@@ -280,7 +280,7 @@ defmodule Dolphin.CLI.Run do
             5_000 -> :ok
           end
 
-          {:error, %StartError{option: "--events", reason: why}}
+          {:error, Dolphin.CommandLineError.failed("--events", why)}
       end
     after
       Process.flag(:trap_exit, trapping)

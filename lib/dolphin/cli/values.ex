@@ -2,7 +2,7 @@ defmodule Dolphin.CLI.Values do
   @moduledoc """
   The values of the mix tasks' flags, read from the text given and checked
   for range and meaning before anything starts. A value that will not do is
-  a `Dolphin.CLI.UsageError` (exit status 2) that names the flag, the value
+  a `Dolphin.CommandLineError` of reason `:usage` (exit status 2) that names the flag, the value
   as given and what is allowed:
 
       iex> {:error, e} = Dolphin.CLI.Values.check([home: "250,400,0"], home: :location)
@@ -45,7 +45,7 @@ defmodule Dolphin.CLI.Values do
       (`:keep` for `{:keep, :string}`) — repeatable.
   """
 
-  alias Dolphin.CLI.UsageError
+  alias Dolphin.CommandLineError
 
   @type kind ::
           :vehicles
@@ -102,7 +102,7 @@ defmodule Dolphin.CLI.Values do
   values (options not in `spec` kept as they are), or the error of the
   first that will not do.
   """
-  @spec check(keyword(), spec()) :: {:ok, keyword()} | {:error, UsageError.t()}
+  @spec check(keyword(), spec()) :: {:ok, keyword()} | {:error, CommandLineError.t()}
   def check(opts, spec) do
     Enum.reduce_while(opts, {:ok, []}, fn {key, given}, {:ok, acc} ->
       kind =
@@ -114,7 +114,7 @@ defmodule Dolphin.CLI.Values do
 
       case value(kind, given) do
         {:ok, value} -> {:cont, {:ok, [{key, value} | acc]}}
-        {:error, rule} -> {:halt, UsageError.error("#{flag(key)} #{shown(given)}: #{rule}")}
+        {:error, rule} -> {:halt, CommandLineError.usage_error("#{flag(key)} #{shown(given)}: #{rule}")}
       end
     end)
     |> case do
@@ -134,13 +134,13 @@ defmodule Dolphin.CLI.Values do
       iex> e.message
       "--count 3 with --first-sysid 253: system ids 253..255 do not fit in 1..254 (255 is the ground station's)"
   """
-  @spec sysids(pos_integer(), pos_integer(), String.t(), String.t()) :: {:ok, Range.t()} | {:error, UsageError.t()}
+  @spec sysids(pos_integer(), pos_integer(), String.t(), String.t()) :: {:ok, Range.t()} | {:error, CommandLineError.t()}
   def sysids(count, first, count_flag, first_flag) do
     last = first + count - 1
 
     if last <= @max_sysid,
       do: {:ok, first..last},
-      else: UsageError.error("#{count_flag} #{count} with #{first_flag} #{first}: system ids #{first}..#{last} do not fit in 1..#{@max_sysid} (255 is the ground station's)")
+      else: CommandLineError.usage_error("#{count_flag} #{count} with #{first_flag} #{first}: system ids #{first}..#{last} do not fit in 1..#{@max_sysid} (255 is the ground station's)")
   end
 
   @doc """
@@ -154,11 +154,11 @@ defmodule Dolphin.CLI.Values do
       iex> e.message
       "no such script: nope.exs"
   """
-  @spec input_file(Path.t(), String.t()) :: :ok | {:error, UsageError.t()}
+  @spec input_file(Path.t(), String.t()) :: :ok | {:error, CommandLineError.t()}
   def input_file(path, what) do
     case file_problem(path, what) do
       nil -> :ok
-      problem -> UsageError.error(problem)
+      problem -> CommandLineError.usage_error(problem)
     end
   end
 
@@ -177,6 +177,27 @@ defmodule Dolphin.CLI.Values do
       {:ok, %File.Stat{}} -> "#{path} is not a file: it cannot be read as a #{what}"
       {:error, :enoent} -> "no such #{what}: #{path}"
       {:error, why} -> "cannot read #{path}: #{:file.format_error(why)}"
+    end
+  end
+
+  @doc """
+  Parses the command line of a task that takes one script and `switches`
+  (`OptionParser`'s `strict:`): `{:ok, file, opts}` for `check.(file, opts)`
+  to judge further (it returns `{:ok, file, opts}` or an error), else the
+  error of no script, two scripts or an unknown option.
+
+      iex> {:error, e} = Dolphin.CLI.Values.parse_script(["--bogus"], [quiet: :boolean], &{:ok, &1, &2})
+      iex> e.message
+      "bad option --bogus"
+  """
+  @spec parse_script([String.t()], keyword(), (Path.t(), keyword() -> {:ok, Path.t(), keyword()} | {:error, CommandLineError.t()})) ::
+          {:ok, Path.t(), keyword()} | {:error, CommandLineError.t()}
+  def parse_script(argv, switches, check) do
+    case OptionParser.parse(argv, strict: switches) do
+      {opts, [file], []} -> check.(file, opts)
+      {_, [], []} -> CommandLineError.usage_error("no script given")
+      {_, [_, extra | _], []} -> CommandLineError.usage_error("one script at a time (unexpected #{inspect(extra)})")
+      {_, _, [{switch, value} | _]} -> CommandLineError.usage_error("bad option #{switch}#{if value, do: " " <> value, else: ""}")
     end
   end
 

@@ -6,13 +6,12 @@ defmodule Dolphin.CLI.Vehicles do
   # hands its undoing to `defer` at once, so that a run that fails half way
   # still stops what it started.
 
-  alias Dolphin.CLI.StartError
-  alias Dolphin.Fleet.TestSource
+    alias Dolphin.Fleet.TestSource
 
   @doc false
   # `opts`: the run's options (those of Mix.Tasks.Dolphin.Run, :tlog resolved,
   # :sitl_extra); `out`: where to say what was started.
-  @spec start(keyword(), IO.device(), (fun() -> any())) :: :ok | {:error, StartError.t()}
+  @spec start(keyword(), IO.device(), (fun() -> any())) :: :ok | {:error, Dolphin.CommandLineError.t()}
   def start(opts, out, defer) do
     link_opts = Enum.reject([tlog: opts[:tlog], forward: Keyword.get_values(opts, :forward)], fn {_, v} -> v in [nil, []] end)
 
@@ -40,7 +39,7 @@ defmodule Dolphin.CLI.Vehicles do
   @doc false
   # Opens a link to each endpoint, its undoing handed to `defer`; the first
   # that cannot be opened is the error (mix dolphin.station opens its links so too).
-  @spec connect_all([String.t()], keyword(), (fun() -> any())) :: :ok | {:error, StartError.t()}
+  @spec connect_all([String.t()], keyword(), (fun() -> any())) :: :ok | {:error, Dolphin.CommandLineError.t()}
   def connect_all(endpoints, link_opts, defer) do
     Enum.reduce_while(endpoints, :ok, fn ep, :ok ->
       case Dolphin.Link.connect(ep, link_opts) do
@@ -49,7 +48,7 @@ defmodule Dolphin.CLI.Vehicles do
           {:cont, :ok}
 
         {:error, why} ->
-          {:halt, {:error, %StartError{option: "--connect #{ep}", reason: why}}}
+          {:halt, {:error, Dolphin.CommandLineError.failed("--connect #{ep}", why)}}
       end
     end)
   end
@@ -62,7 +61,7 @@ defmodule Dolphin.CLI.Vehicles do
         :ok
 
       {:error, why} ->
-        {:error, %StartError{reason: why}}
+        {:error, Dolphin.CommandLineError.failed(nil, why)}
     end
   end
 
@@ -76,7 +75,7 @@ defmodule Dolphin.CLI.Vehicles do
         :ok
 
       {:error, why} ->
-        {:error, %StartError{reason: why}}
+        {:error, Dolphin.CommandLineError.failed(nil, why)}
     end
   end
 

@@ -66,7 +66,7 @@ defmodule Mix.Tasks.Dolphin.Check do
 
   use Mix.Task
 
-  alias Dolphin.CLI.{UsageError, Values}
+  alias Dolphin.CLI.Values
 
   @options [sim: :vehicles, fleet: :string, connect: {:keep, :endpoint}, wait: :wait, max_distance: :metres, max_height: :metres, json: :boolean]
   @usage "usage: mix dolphin.check SCRIPT [--sim N | --fleet FILE | --connect ENDPOINT... [--wait SECONDS]] [--max-distance M] [--max-height M] [--json]"
@@ -100,7 +100,7 @@ defmodule Mix.Tasks.Dolphin.Check do
       if opts[:json], do: IO.puts(out, :jiffy.encode(Dolphin.Check.to_map(report), [:pretty])), else: IO.write(out, Dolphin.Check.format(report))
       if Dolphin.Check.errors?(report), do: 1, else: 0
     else
-      {:error, %Dolphin.CLI.StartError{} = e} ->
+      {:error, %Dolphin.CommandLineError{reason: :failed} = e} ->
         IO.puts(err, "mix dolphin.check: #{Exception.message(e)}")
         1
 
@@ -129,9 +129,9 @@ defmodule Mix.Tasks.Dolphin.Check do
 
   @doc false
   # The script and the options of a command line, checked.
-  @spec parse([String.t()]) :: {:ok, Path.t(), keyword()} | {:error, UsageError.t()}
+  @spec parse([String.t()]) :: {:ok, Path.t(), keyword()} | {:error, Dolphin.CommandLineError.t()}
   def parse(argv) do
-    UsageError.parse_script(argv, Values.switches(@options), fn file, opts ->
+    Values.parse_script(argv, Values.switches(@options), fn file, opts ->
       with {:ok, opts} <- Values.check(opts, @options),
            :ok <- combination(opts),
            :ok <- Values.input_file(file, "script"),
@@ -164,5 +164,5 @@ defmodule Mix.Tasks.Dolphin.Check do
     end
   end
 
-  defp usage_error(message), do: UsageError.error(message)
+  defp usage_error(message), do: Dolphin.CommandLineError.usage_error(message)
 end

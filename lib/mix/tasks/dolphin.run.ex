@@ -146,7 +146,7 @@ defmodule Mix.Tasks.Dolphin.Run do
 
   use Mix.Task
 
-  alias Dolphin.CLI.{Run, Signals, UsageError, Values}
+  alias Dolphin.CLI.{Run, Signals, Values}
 
   @options Values.fleet_options() ++
              [
@@ -215,7 +215,7 @@ defmodule Mix.Tasks.Dolphin.Run do
     end
   end
 
-  defp usage(%UsageError{} = e), do: "mix dolphin.run: #{Exception.message(e)}\n#{@usage}"
+  defp usage(%Dolphin.CommandLineError{reason: :usage} = e), do: "mix dolphin.run: #{Exception.message(e)}\n#{@usage}"
 
   # Compiles the script, then runs it (Dolphin.CLI.Run); the exit status.
   defp execute(file, opts, io) do
@@ -254,9 +254,9 @@ defmodule Mix.Tasks.Dolphin.Run do
   @doc false
   # The script and the options of a command line, checked (the endpoints
   # parse, the script is a file), with the duration of --for as :for_ms.
-  @spec parse([String.t()]) :: {:ok, Path.t(), keyword()} | {:error, UsageError.t()}
+  @spec parse([String.t()]) :: {:ok, Path.t(), keyword()} | {:error, Dolphin.CommandLineError.t()}
   def parse(argv) do
-    UsageError.parse_script(argv, Values.switches(@options), fn file, opts ->
+    Values.parse_script(argv, Values.switches(@options), fn file, opts ->
       with {:ok, opts} <- Values.check(opts, @options),
            :ok <- exclusive(opts),
            :ok <- web(opts),
@@ -271,7 +271,7 @@ defmodule Mix.Tasks.Dolphin.Run do
     end)
   end
 
-  defp usage_error(message), do: UsageError.error(message)
+  defp usage_error(message), do: Dolphin.CommandLineError.usage_error(message)
 
   # The script's deadline is one timer: it holds 49.7 days of real time.
   defp within_a_timer(nil, _opts), do: :ok
@@ -335,11 +335,11 @@ defmodule Mix.Tasks.Dolphin.Run do
       {:ok, 600000}
       iex> Mix.Tasks.Dolphin.Run.duration("2.5")
       {:ok, 2500}
-      iex> {:error, %Dolphin.CLI.UsageError{message: message}} = Mix.Tasks.Dolphin.Run.duration("soon")
+      iex> {:error, %Dolphin.CommandLineError{reason: :usage, message: message}} = Mix.Tasks.Dolphin.Run.duration("soon")
       iex> message
       "--for soon: a duration more than 0 such as 90s, 10m, 1h or 500ms (a bare number is seconds)"
   """
-  @spec duration(String.t() | nil) :: {:ok, pos_integer() | nil} | {:error, UsageError.t()}
+  @spec duration(String.t() | nil) :: {:ok, pos_integer() | nil} | {:error, Dolphin.CommandLineError.t()}
   def duration(nil), do: {:ok, nil}
 
   def duration(text) do

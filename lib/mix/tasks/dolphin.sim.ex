@@ -83,7 +83,7 @@ defmodule Mix.Tasks.Dolphin.Sim do
 
   @doc false
   # The options, checked, as `Dolphin.Sim.start/1` takes them (plus :for and :quiet).
-  @spec parse([String.t()]) :: {:ok, keyword()} | {:error, Dolphin.CLI.UsageError.t()}
+  @spec parse([String.t()]) :: {:ok, keyword()} | {:error, Dolphin.CommandLineError.t()}
   def parse(argv) do
     case OptionParser.parse(argv, strict: Values.switches(@options)) do
       {opts, [], []} ->
@@ -98,10 +98,10 @@ defmodule Mix.Tasks.Dolphin.Sim do
         end
 
       {_, [extra | _], _} ->
-        Dolphin.CLI.UsageError.error("unexpected argument #{inspect(extra)}")
+        Dolphin.CommandLineError.usage_error("unexpected argument #{inspect(extra)}")
 
       {_, _, [{switch, value} | _]} ->
-        Dolphin.CLI.UsageError.error("bad option #{switch}#{if value, do: " " <> value, else: ""}")
+        Dolphin.CommandLineError.usage_error("bad option #{switch}#{if value, do: " " <> value, else: ""}")
     end
   end
 

@@ -45,7 +45,7 @@ defmodule Mix.Tasks.Dolphin.Station do
 
   use Mix.Task
 
-  alias Dolphin.CLI.{Signals, StartError, UsageError, Values}
+  alias Dolphin.CLI.{Signals, Values}
 
   @options [
     sname: :string,
@@ -98,15 +98,15 @@ defmodule Mix.Tasks.Dolphin.Station do
 
   @doc false
   # The options of a command line, checked.
-  @spec parse([String.t()]) :: {:ok, keyword()} | {:error, UsageError.t()}
+  @spec parse([String.t()]) :: {:ok, keyword()} | {:error, Dolphin.CommandLineError.t()}
   def parse(argv) do
     case OptionParser.parse(argv, strict: Values.switches(@options)) do
       {opts, [], []} ->
         with {:ok, opts} <- Values.check(opts, @options) do
           cond do
-            opts[:sname] == nil and opts[:name] == nil -> UsageError.error("a station needs a node name: give --sname NAME or --name NAME@HOST")
-            (problem = Dolphin.CLI.Cluster.check(opts)) != :ok -> UsageError.error(elem(problem, 1))
-            opts[:first_sysid] != nil and opts[:sim] == nil -> UsageError.error("--first-sysid goes with --sim")
+            opts[:sname] == nil and opts[:name] == nil -> Dolphin.CommandLineError.usage_error("a station needs a node name: give --sname NAME or --name NAME@HOST")
+            (problem = Dolphin.CLI.Cluster.check(opts)) != :ok -> Dolphin.CommandLineError.usage_error(elem(problem, 1))
+            opts[:first_sysid] != nil and opts[:sim] == nil -> Dolphin.CommandLineError.usage_error("--first-sysid goes with --sim")
             (problem = tlog_writable(opts[:tlog])) != :ok -> problem
             opts[:sim] != nil -> with({:ok, _} <- Values.sysids(opts[:sim], Keyword.get(opts, :first_sysid, 1), "--sim", "--first-sysid"), do: {:ok, opts})
             true -> {:ok, opts}
@@ -114,17 +114,17 @@ defmodule Mix.Tasks.Dolphin.Station do
         end
 
       {_, [arg | _], []} ->
-        UsageError.error("unexpected argument #{inspect(arg)} (a station runs no script: mix dolphin.run SCRIPT --join NODE does)")
+        Dolphin.CommandLineError.usage_error("unexpected argument #{inspect(arg)} (a station runs no script: mix dolphin.run SCRIPT --join NODE does)")
 
       {_, _, [{switch, value} | _]} ->
-        UsageError.error("bad option #{switch}#{if value, do: " " <> value, else: ""}")
+        Dolphin.CommandLineError.usage_error("bad option #{switch}#{if value, do: " " <> value, else: ""}")
     end
   end
 
   defp tlog_writable(nil), do: :ok
 
   defp tlog_writable(path) do
-    with {:error, message} <- Dolphin.CLI.OutputFile.check("--tlog", path), do: UsageError.error(message)
+    with {:error, message} <- Dolphin.CLI.OutputFile.check("--tlog", path), do: Dolphin.CommandLineError.usage_error(message)
   end
 
   defp serve(opts, io, out, err) do
@@ -184,7 +184,7 @@ defmodule Mix.Tasks.Dolphin.Station do
   defp start_tlog(path) do
     case Dolphin.CLI.OutputFile.start_log(path) do
       {:ok, line} -> {:ok, [line]}
-      {:error, why} -> {:error, %StartError{option: "--tlog", reason: why}}
+      {:error, why} -> {:error, Dolphin.CommandLineError.failed("--tlog", why)}
     end
   end
 
@@ -211,7 +211,7 @@ defmodule Mix.Tasks.Dolphin.Station do
             {:ok, ["#{n} simulated vehicle(s) #{Dolphin.Fleet.VehicleSet.format(sim.sysids)} on 127.0.0.1:#{sim.port}"]}
 
           {:error, e} ->
-            {:error, %StartError{reason: e}}
+            {:error, Dolphin.CommandLineError.failed(nil, e)}
         end
     end
   end

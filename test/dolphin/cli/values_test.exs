@@ -8,7 +8,7 @@ defmodule Dolphin.CLI.ValuesTest do
   @moduletag :tmp_dir
 
   defp message(opts, spec) do
-    assert {:error, %Dolphin.CLI.UsageError{message: message}} = Values.check(opts, spec)
+    assert {:error, %Dolphin.CommandLineError{reason: :usage, message: message}} = Values.check(opts, spec)
     message
   end
 

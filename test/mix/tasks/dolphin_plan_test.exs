@@ -6,7 +6,6 @@ defmodule Mix.Tasks.Dolphin.PlanTest do
   alias Mix.Tasks.Dolphin.Plan
 
   doctest Mix.Tasks.Dolphin.Plan
-  doctest Dolphin.CommandLineError
 
   @moduletag :tmp_dir
   @fixtures Path.expand("../../fixtures/console", __DIR__)

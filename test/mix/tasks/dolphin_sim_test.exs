@@ -67,7 +67,7 @@ defmodule Mix.Tasks.Dolphin.SimTest do
   end
 
   defp message(argv) do
-    assert {:error, %Dolphin.CLI.UsageError{message: message}} = Task.parse(argv)
+    assert {:error, %Dolphin.CommandLineError{reason: :usage, message: message}} = Task.parse(argv)
     message
   end
 
