@@ -39,16 +39,14 @@ defmodule Dolphin.CLI.Run do
       not be started (a port in use, a SITL binary missing): nothing ran.
   """
 
-  alias Dolphin.CLI.{Renderer, Signals, Vehicles}
+  alias Dolphin.CLI.{Renderer, Signals, Teardown, Vehicles}
   alias Dolphin.Console.Format
 
   @type outcome :: :completed | :stopped | {:stopped, Signals.signal()} | :failed | {:error, Dolphin.CommandLineError.t()}
 
-  # What to undo when the run ends, newest first, each tagged with its kind:
-  # :output (stopped before the summary, which comes below them), :vehicles
-  # and :signals. Kept in the run's process so that a run that raises half
-  # way still stops all it started.
-  @cleanup :dolphin_cli_run_cleanup
+  # What the run undoes when it ends (Dolphin.CLI.Teardown) is tagged with
+  # its kind: :output (stopped before the summary, which comes below them),
+  # :vehicles and :signals.
 
   @doc """
   The pre-flight check (`Dolphin.Check`) that `mix dolphin.run` makes before
@@ -95,7 +93,7 @@ defmodule Dolphin.CLI.Run do
     previous_speedup = Dolphin.Clock.speedup()
     if k = opts[:speedup], do: Dolphin.Clock.set_speedup(k)
     origin = Dolphin.Clock.now_ms()
-    Process.put(@cleanup, [])
+    Teardown.begin()
     catch_signals(opts)
     opts = Keyword.put(opts, :tlog, Vehicles.tlog_path(opts, script.file))
 
@@ -107,14 +105,14 @@ defmodule Dolphin.CLI.Run do
              :ok <- Vehicles.start(opts, out, &defer(&1, :vehicles)) do
           {result, signal} = run_until_signal(script, opts, renderer)
           # The log and the status block end before the summary is printed below them.
-          stop_outputs()
+          Teardown.run(:output)
           summary(result, opts ++ [signal: signal, origin_ms: origin], out, err)
         end
       after
         # The outputs stop first (they show the run, not its teardown); then
         # the last started is the first stopped: the simulator before its link.
-        stop_outputs()
-        Enum.each(Process.delete(@cleanup), fn {_, fun} -> fun.() end)
+        Teardown.run(:output)
+        Teardown.run_all()
         Dolphin.Clock.set_speedup(previous_speedup)
       end
 
@@ -287,13 +285,7 @@ defmodule Dolphin.CLI.Run do
     end
   end
 
-  defp stop_outputs do
-    {outputs, others} = Enum.split_with(Process.get(@cleanup), &match?({:output, _}, &1))
-    Process.put(@cleanup, others)
-    Enum.each(outputs, fn {_, fun} -> fun.() end)
-  end
-
-  defp defer(fun, kind), do: Process.put(@cleanup, [{kind, fun} | Process.get(@cleanup)])
+  defp defer(fun, kind), do: Teardown.defer(fun, kind)
 
   # Times on the run's clock, the events' (from the start of the run, its
   # vehicles' start included): the summary's time is its last event's.

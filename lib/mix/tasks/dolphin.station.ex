@@ -45,7 +45,7 @@ defmodule Mix.Tasks.Dolphin.Station do
 
   use Mix.Task
 
-  alias Dolphin.CLI.{Signals, Values}
+  alias Dolphin.CLI.{Signals, Teardown, Values}
 
   @options [
     sname: :string,
@@ -130,7 +130,7 @@ defmodule Mix.Tasks.Dolphin.Station do
   defp serve(opts, io, out, err) do
     previous = Dolphin.Clock.speedup()
     if k = opts[:speedup], do: Dolphin.Clock.set_speedup(k)
-    Process.put(:dolphin_station_cleanup, [])
+    Teardown.begin()
     Dolphin.Vehicles.subscribe(:all)
     # Caught until its links and vehicles are stopped: one that comes while
     # it starts stops it once started (wait/1); a second one, later, ends it at once.
@@ -153,7 +153,7 @@ defmodule Mix.Tasks.Dolphin.Station do
       end
     after
       Dolphin.PubSub.unsubscribe(:vehicles)
-      Enum.each(Process.delete(:dolphin_station_cleanup), & &1.())
+      Teardown.run_all()
       Dolphin.Clock.set_speedup(previous)
       if io[:signals], do: Signals.release_signals()
     end
@@ -216,5 +216,5 @@ defmodule Mix.Tasks.Dolphin.Station do
     end
   end
 
-  defp defer(fun), do: Process.put(:dolphin_station_cleanup, [fun | Process.get(:dolphin_station_cleanup)])
+  defp defer(fun), do: Teardown.defer(fun)
 end
