@@ -5,10 +5,6 @@ defmodule Dolphin.Application do
 
   @impl true
   def start(_type, _args) do
-    # The frames each .tlog recorded lately, so that links writing to the same
-    # file record a frame heard on several of them once (Dolphin.Link.Connection).
-    :ets.new(Dolphin.Link.Recorded, [:named_table, :public, :set, write_concurrency: true, read_concurrency: true])
-
     children = [
       # Vehicles and links by name ({:vehicle, sysid}, {:link, name}).
       {Registry, keys: :unique, name: Dolphin.Registry},
@@ -28,6 +24,8 @@ defmodule Dolphin.Application do
       # them (so before the fleet).
       %{id: :cluster_scope, start: {:pg, :start_link, [Dolphin.Cluster.Scope]}},
       Dolphin.Cluster.Mirror,
+      # The frames each .tlog recorded lately (links sharing a file record a frame once).
+      Dolphin.Link.Recorded,
       {DynamicSupervisor, name: Dolphin.Link.Supervisor, strategy: :one_for_one},
       # The configured links, once the tree they live in is up; a bad endpoint
       # in the configuration stops the start with the reason.

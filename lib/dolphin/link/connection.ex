@@ -278,9 +278,7 @@ defmodule Dolphin.Link.Connection do
     with {socket, _targets} <- state.forward, do: :gen_udp.close(socket)
     with {io, path} <- state.tlog do
       File.close(io)
-      # What it recorded is no copy for a link that records to the file next
-      # (a new run, which may send the very same frames: a deterministic simulation).
-      :ets.match_delete(Dolphin.Link.Recorded, {{path, :_, :_, :_}, :_, state.name, :_})
+      Dolphin.Link.Recorded.forget(path, state.name)
     end
 
     :ok
@@ -386,18 +384,9 @@ defmodule Dolphin.Link.Connection do
   defp record_in(%{tlog: nil}, _frame), do: :ok
 
   defp record_in(%{tlog: {_io, path}, name: name} = state, %Frame{sysid: sysid, compid: compid, seq: seq, raw: raw}) do
-    key = {path, sysid, compid, seq}
-    hash = :erlang.phash2(raw)
-    now = System.monotonic_time(:millisecond)
-
-    case :ets.lookup(Dolphin.Link.Recorded, key) do
-      [{^key, ^hash, other, at}] when other != name and now - at <= @copy_window_ms ->
-        :ok
-
-      _ ->
-        :ets.insert(Dolphin.Link.Recorded, {key, hash, name, now})
-        record(state, raw)
-    end
+    if Dolphin.Link.Recorded.first?(path, {sysid, compid, seq}, raw, name, System.monotonic_time(:millisecond), @copy_window_ms),
+      do: record(state, raw),
+      else: :ok
   end
 
   defp add_stats(total, more), do: merge_stats(total, more, &+/2)
