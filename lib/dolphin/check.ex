@@ -220,7 +220,7 @@ defmodule Dolphin.Check do
       nil
     end
 
-    {:ok, pid} = Dolphin.Script.start(script, fleet: fleet, clock: Dolphin.Check.Clock, ask: ask, output: fn _ -> :ok end)
+    {:ok, pid} = Dolphin.Script.start(script, fleet: fleet, clock: Dolphin.Check.Clock, ask: ask, output: fn _ -> :ok end, platform_opts: [missions: Dolphin.Fleet.source(fleet)])
     real = div(horizon, Dolphin.Check.Clock.speedup())
 
     case Dolphin.Script.await(pid, real) do

@@ -279,7 +279,8 @@ defmodule Dolphin.Sim do
     capacity_mah: {{:positive, 1_000_000}, "mAh"},
     hover_current: {{:positive, 200}, "amperes"},
     cruise_speed: {{:positive, 50}, "m/s"},
-    climb_speed: {{:positive, 50}, "m/s"},
+    # 0: motors that cannot lift it (a fault a test may simulate: armed on the ground for ever).
+    climb_speed: {{:at_least_0, 50}, "m/s"},
     descent_speed: {{:positive, 50}, "m/s"},
     circle_speed: {{:positive, 50}, "m/s"},
     accel: {{:positive, 100}, "m/s²"},
@@ -310,6 +311,7 @@ defmodule Dolphin.Sim do
       case rule do
         :fraction -> {is_number(value) and value >= 0 and value <= 1, "#{unit}, from 0 to 1"}
         :at_least_0 -> {is_number(value) and value >= 0, "#{unit}, 0 or more"}
+        {:at_least_0, max} -> {is_number(value) and value >= 0 and value <= max, "#{unit}, from 0 to #{max}"}
         {:positive, max} -> {is_number(value) and value > 0 and value <= max, "#{unit}, more than 0 and at most #{max}"}
         {:one_of, [_ | _] = values} when length(values) > 10 -> {value in values, "#{unit} from #{hd(values)} to #{List.last(values)}"}
         {:one_of, values} -> {value in values, "one of #{Enum.map_join(values, ", ", &inspect/1)}"}

@@ -3,9 +3,10 @@ defmodule Dolphin.Check.Source do
   # The vehicles of a pre-flight check: stand-ins for the described fleet
   # (a `Dolphin.Fleet.TestSource` holds their views, so picks, allocation and
   # conditions see them as they see real vehicles) that fly no mission.
-  # `Dolphin.Mission.Platform` hands a mission to `start_mission/4` when the
-  # run's source has it: the mission is checked and estimated
-  # (Dolphin.Check.Recorder) and a `Dolphin.Check.Flight` passes its time.
+  # The dry run's context has `Dolphin.Mission.Platform` hand each mission to
+  # `fly/4` (its `platform_opts`, `missions: {Dolphin.Check.Source, arg}`):
+  # the mission is checked and estimated (Dolphin.Check.Recorder) and a
+  # `Dolphin.Check.Flight` passes its time.
 
   @behaviour Dolphin.Fleet.Source
 
@@ -31,8 +32,8 @@ defmodule Dolphin.Check.Source do
   @doc false
   # Called by Dolphin.Mission.Platform.start/3 in the engine's leaf process,
   # whose context names the script's code process (the line it is at).
-  @spec start_mission(arg(), Dolphin.Mission.t(), non_neg_integer(), keyword()) :: {:ok, pid()}
-  def start_mission(%{test: t, recorder: recorder}, mission, vehicle, opts) do
+  @spec fly(arg(), Dolphin.Mission.t(), non_neg_integer(), keyword()) :: {:ok, pid()}
+  def fly(%{test: t, recorder: recorder}, mission, vehicle, opts) do
     line = script_line(Dolphin.Engine.Context.current().owner)
     estimate = Dolphin.Check.Recorder.mission(recorder, mission, vehicle, line)
     Dolphin.Check.Flight.start_link(%{test: t, recorder: recorder, vehicle: vehicle, estimate: estimate, owner: opts[:owner], clock: opts[:clock]})

@@ -174,7 +174,9 @@ defmodule Dolphin.CLI.Run do
 
   # The script's result and the signal that stopped it (nil: none did).
   defp run_until_signal(script, opts, renderer) do
-    {:ok, pid} = Dolphin.Script.start(script, [for: opts[:for_ms]] ++ Keyword.take(opts, [:ask]))
+    # Fake vehicles (--fake) fly no MAVLink mission: each says so at once.
+    platform_opts = if opts[:fake], do: Dolphin.Mission.Platform.refusing(:fake_vehicle), else: []
+    {:ok, pid} = Dolphin.Script.start(script, [for: opts[:for_ms], platform_opts: platform_opts] ++ Keyword.take(opts, [:ask]))
     if opts[:signals], do: await_script(pid, renderer, nil), else: {Dolphin.Script.await(pid), nil}
   end
 

@@ -14,7 +14,11 @@ defmodule Dolphin.Engine.Context do
   conditions, default 1000), `stop_timeout_ms` (bound on a platform task's
   stop, default 15_000), `script` (the script runner, or nil), `output` (a
   function given each `message` line, or nil), `ask` (a function from prompt
-  to answer, or nil: standard input).
+  to answer, or nil: standard input), `platform_opts` (options every
+  platform task of the context is started with, beside the engine's own:
+  how the run flies the tasks of a platform — the pre-flight check's dry
+  run and a run on fake vehicles give the mission platform `:missions`,
+  see `Dolphin.Mission.Platform`).
   """
 
   defstruct fleet: Dolphin.Fleet,
@@ -26,7 +30,8 @@ defmodule Dolphin.Engine.Context do
             stop_timeout_ms: 15_000,
             script: nil,
             output: nil,
-            ask: nil
+            ask: nil,
+            platform_opts: []
 
   @type t :: %__MODULE__{}
 

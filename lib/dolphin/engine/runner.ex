@@ -436,7 +436,7 @@ defmodule Dolphin.Engine.Runner do
     {found, watcher} = Watcher.follow(s.watcher, vehicle)
     s = %{s | watcher: watcher}
 
-    opts = [owner: self(), run: s.run.id, task_id: s.id, clock: s.ctx.clock, source: Context.source(s.ctx), vehicle: vehicle]
+    opts = [owner: self(), run: s.run.id, task_id: s.id, clock: s.ctx.clock, source: Context.source(s.ctx), vehicle: vehicle] ++ s.ctx.platform_opts
 
     case found do
       {:ok, %{connected?: false}} ->

@@ -138,7 +138,7 @@ defmodule Dolphin.Mission.Executor do
         end
 
       {:error, :unknown_vehicle} ->
-        fail(:hold, data, not_mavlink())
+        fail(:hold, data, :not_connected)
     end
   end
 
@@ -324,15 +324,6 @@ defmodule Dolphin.Mission.Executor do
   end
 
   defp landing_here?(_data, _st), do: false
-
-  # The fleet may be fake vehicles of the test platform (`--fake`), which the
-  # ground station never hears: say so rather than "not connected".
-  defp not_mavlink do
-    case Dolphin.Fleet.source() do
-      {Dolphin.Fleet.TestSource, _} -> :fake_vehicle
-      _ -> :not_connected
-    end
-  end
 
   defp items(%{mission: mission, vehicle: vehicle}) do
     home =

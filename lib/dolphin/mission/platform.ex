@@ -43,6 +43,15 @@ defmodule Dolphin.Mission.Platform do
   failures. A lost vehicle heard again after its mission was taken over is
   made to hold (a vehicle that was only out of range still flies it) and a
   `vehicle_returned` event says so.
+
+  Who flies a mission is the run's choice, through its context's
+  `platform_opts` (`Dolphin.Engine.Context`): by default the MAVLink
+  executor above; with `missions: {module, arg}`, `module.fly(arg, mission,
+  vehicle, opts)` stands in for it (`{:ok, pid}` of a process that reports
+  to the engine as the executor does, or `{:error, reason}`): the pre-flight
+  check's dry run estimates the mission and passes its time
+  (`Dolphin.Check.Source`), a run on fake vehicles refuses it
+  (`refusing/1`).
   """
 
   @behaviour Dolphin.Engine.Platform
@@ -72,18 +81,24 @@ defmodule Dolphin.Mission.Platform do
 
   @impl true
   def start(%Mission{} = mission, vehicle, opts) do
-    case opts[:source] do
-      # A source of stand-in vehicles (the pre-flight check's dry run,
-      # `Dolphin.Check`) flies missions itself: nothing is sent to a vehicle.
-      {module, arg} when is_atom(module) ->
-        if function_exported?(module, :start_mission, 4),
-          do: module.start_mission(arg, mission, vehicle, opts),
-          else: Executor.start_link(mission, vehicle, opts)
-
-      _ ->
-        Executor.start_link(mission, vehicle, opts)
+    case opts[:missions] do
+      {module, arg} -> module.fly(arg, mission, vehicle, opts)
+      nil -> Executor.start_link(mission, vehicle, opts)
     end
   end
+
+  @doc """
+  The `platform_opts` of a run whose missions cannot fly (on fake
+  vehicles, `--fake`): each fails at once with a `Dolphin.Mission.Failure`
+  of that `cause`.
+  """
+  @spec refusing(Dolphin.Mission.Failure.cause()) :: keyword()
+  def refusing(cause), do: [missions: {__MODULE__, {:refuse, cause}}]
+
+  @doc false
+  # The missions of a run that `refusing/1` set up.
+  def fly({:refuse, cause}, %Mission{} = mission, vehicle, _opts),
+    do: {:error, %Dolphin.Mission.Failure{mission: mission.name, vehicle: vehicle, step: :hold, cause: cause}}
 
   @impl true
   def vehicle_fault?({:vehicle_lost, _}), do: true
