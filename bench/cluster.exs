@@ -29,7 +29,7 @@ Code.require_file("percentiles.exs", __DIR__)
 
 defmodule ClusterBench do
   alias Dolphin.Engine
-  alias Dolphin.Engine.{Cond, Context, TestPlatform}
+  alias Dolphin.Engine.{Cond, Context, FakePlatform}
 
   # Compiled on every node: records when views arrive there.
   @probe """
@@ -138,12 +138,12 @@ defmodule ClusterBench do
 
     tasks =
       for v <- sample do
-        task = TestPlatform.task("t#{v}", duration: :infinity, notify: self())
+        task = FakePlatform.task("t#{v}", duration: :infinity, notify: self())
         Engine.on(Engine.until(task, Cond.new(fn -> (Dolphin.Engine.Watcher.vehicle(v).battery || 1.0) < 0.3 end, source: "battery(v) < 0.3")), [v])
       end
 
     {:ok, run} = Engine.start(Engine.concurrent(tasks))
-    for _ <- sample, do: receive(do: ({:test_platform, :started, _} -> :ok))
+    for _ <- sample, do: receive(do: ({:fake_platform, :started, _} -> :ok))
     Process.sleep(500)
 
     stopped =
@@ -152,7 +152,7 @@ defmodule ClusterBench do
         :ok = call(sims, Dolphin.Sim, :set_battery, [v, 0.2])
 
         receive do
-          {:test_platform, :stopped, %{name: ^name}} -> {v, :os.system_time(:microsecond)}
+          {:fake_platform, :stopped, %{name: ^name}} -> {v, :os.system_time(:microsecond)}
         after
           30_000 -> Mix.raise("the condition on vehicle #{v} never held")
         end

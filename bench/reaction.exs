@@ -9,7 +9,7 @@
 #   all N:     N untils all reading the same vehicle, whose battery drops:
 #              time until each of the N stop callbacks (a burst).
 #
-# The vehicles are Dolphin.Fleet.TestSource fakes: the change is published on
+# The vehicles are Dolphin.Fleet.FakeSource fakes: the change is published on
 # Dolphin.PubSub exactly as a real vehicle's telemetry is, so this measures
 # the engine (pub/sub, condition re-evaluation in the until's process, the
 # stop travelling to the leaf, the platform's stop callback), not the radio.
@@ -17,19 +17,19 @@
 #   MIX_ENV=prod mix run bench/reaction.exs
 
 alias Dolphin.Engine
-alias Dolphin.Engine.{Cond, Context, TestPlatform}
-alias Dolphin.Fleet.TestSource
+alias Dolphin.Engine.{Cond, Context, FakePlatform}
+alias Dolphin.Fleet.FakeSource
 
 source = :bench_fakes
 fleet = :bench_fleet
-{:ok, _} = TestSource.start_link(name: source, events: false)
-{:ok, _} = Dolphin.Fleet.start_link(name: fleet, source: TestSource.source(source), events: false)
-Context.put(%Context{fleet: fleet, source: TestSource.source(source), owner: self()})
+{:ok, _} = FakeSource.start_link(name: source, events: false)
+{:ok, _} = Dolphin.Fleet.start_link(name: fleet, source: FakeSource.source(source), events: false)
+Context.put(%Context{fleet: fleet, source: FakeSource.source(source), owner: self()})
 
 max_n = 1_000
 ids = Enum.map(1..max_n, &(10_000 + &1))
 shared = 20_000
-for id <- [shared | ids], do: TestSource.add(source, id, type: :uav, battery: 1.0)
+for id <- [shared | ids], do: FakeSource.add(source, id, type: :uav, battery: 1.0)
 {:ok, _} = Dolphin.Fleet.pick(fleet, self(), id: ids, count: max_n, timeout: 10_000)
 
 Code.require_file("percentiles.exs", __DIR__)
@@ -41,12 +41,12 @@ defmodule Bench do
   def start(n, ids, cond_vehicle) do
     tasks =
       for {v, i} <- Enum.with_index(Enum.take(ids, n)) do
-        task = TestPlatform.task("t#{i}", duration: :infinity, notify: self())
+        task = FakePlatform.task("t#{i}", duration: :infinity, notify: self())
         Engine.on(Engine.until(task, low(cond_vehicle.(i, v))), [v])
       end
 
     {:ok, run} = Engine.start(Engine.concurrent(tasks))
-    for _ <- 1..n, do: receive(do: ({:test_platform, :started, _} -> :ok))
+    for _ <- 1..n, do: receive(do: ({:fake_platform, :started, _} -> :ok))
     # Steady state: the run has started (its processes spawned, their first
     # garbage collections done) before anything is measured.
     Process.sleep(20)
@@ -58,12 +58,12 @@ defmodule Bench do
     _ = Engine.stop(run)
     {:ok, _} = Engine.await(run, 60_000)
     flush()
-    for id <- ids, do: TestSource.set(source, id, battery: 1.0)
+    for id <- ids, do: FakeSource.set(source, id, battery: 1.0)
   end
 
   def flush do
     receive do
-      {:test_platform, _, _} -> flush()
+      {:fake_platform, _, _} -> flush()
     after
       100 -> :ok
     end
@@ -90,10 +90,10 @@ one_of = fn n, samples ->
     |> Enum.map(fn {v, i} ->
       name = "t#{i}"
       t0 = System.monotonic_time()
-      TestSource.set(source, v, battery: 0.2)
+      FakeSource.set(source, v, battery: 0.2)
 
       receive do
-        {:test_platform, :stopped, %{name: ^name, at: t1}} -> Bench.us(t1 - t0)
+        {:fake_platform, :stopped, %{name: ^name, at: t1}} -> Bench.us(t1 - t0)
       end
     end)
 
@@ -105,8 +105,8 @@ end
 all_n = fn n ->
   run = Bench.start(n, ids, fn _i, _v -> shared end)
   t0 = System.monotonic_time()
-  TestSource.set(source, shared, battery: 0.2)
-  latencies = for _ <- 1..n, do: receive(do: ({:test_platform, :stopped, %{at: t1}} -> Bench.us(t1 - t0)))
+  FakeSource.set(source, shared, battery: 0.2)
+  latencies = for _ <- 1..n, do: receive(do: ({:fake_platform, :stopped, %{at: t1}} -> Bench.us(t1 - t0)))
   Bench.finish(run, source, [shared])
   latencies
 end

@@ -1,20 +1,20 @@
 # The engine's combinators on fake vehicles: no MAVLink, no simulator — the
 # logic of a script, tried in seconds. Platform tasks here only pass time
-# (Dolphin.Engine.TestPlatform); the conditions read the fake vehicles' state,
+# (Dolphin.Engine.FakePlatform); the conditions read the fake vehicles' state,
 # which an action changes as a real battery would drain.
 #
 #   mix dolphin.run examples/dry_run.exs --fake 3 --speedup 20
 use Dolphin.Script
-alias Dolphin.Engine.TestPlatform
-alias Dolphin.Fleet.TestSource
+alias Dolphin.Engine.FakePlatform
+alias Dolphin.Fleet.FakeSource
 
 # mix dolphin.run --fake names its fake source after the fleet's.
-{TestSource, fakes} = Dolphin.Fleet.source()
-drain = fn v, level -> TestSource.set(fakes, hd(Dolphin.Fleet.VehicleSet.ids(v)), battery: level) end
+{FakeSource, fakes} = Dolphin.Fleet.source()
+drain = fn v, level -> FakeSource.set(fakes, hd(Dolphin.Fleet.VehicleSet.ids(v)), battery: level) end
 
-survey = TestPlatform.task("survey", duration: :infinity)
-photos = TestPlatform.task("photos", duration: minutes(2))
-return_home = TestPlatform.task("return home", duration: seconds(30))
+survey = FakePlatform.task("survey", duration: :infinity)
+photos = FakePlatform.task("photos", duration: minutes(2))
+return_home = FakePlatform.task("return home", duration: seconds(30))
 
 [scout, spare] = for _ <- 1..2, do: pick(type: :uav, timeout: seconds(10))
 message("scout #{inspect(scout)}, spare #{inspect(spare)}")
@@ -40,7 +40,7 @@ execute one_of do
 end
 
 # A failure handled: the fallback runs on the failed task's vehicle.
-flaky = TestPlatform.task("flaky", duration: seconds(5), result: {:fail, "compass variance"})
+flaky = FakePlatform.task("flaky", duration: seconds(5), result: {:fail, "compass variance"})
 execute watch(on(flaky, spare), on_error: fn failure ->
   message("handled: " <> Dolphin.Engine.Failure.message(failure))
   return_home

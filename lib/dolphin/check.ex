@@ -61,7 +61,7 @@ defmodule Dolphin.Check do
   """
 
   alias Dolphin.Check.{Finding, Recorder, Source}
-  alias Dolphin.Fleet.TestSource
+  alias Dolphin.Fleet.FakeSource
 
   defstruct file: nil, findings: [], missions: []
 
@@ -162,12 +162,12 @@ defmodule Dolphin.Check do
     fleet_name = :"dolphin_check_fleet_#{n}"
 
     # Stand-ins: their discoveries and changes are no event of the real run.
-    {:ok, ts} = TestSource.start_link(name: test, events: false)
+    {:ok, ts} = FakeSource.start_link(name: test, events: false)
     by_id = Map.new(vehicles, &{&1.id, %{payloads: &1.payloads, home: &1.position, airborne?: &1.airborne?}})
     {:ok, recorder} = Recorder.start_link(%{test: test, file: script.file, limits: limits, vehicles: by_id})
 
     for v <- vehicles,
-        do: TestSource.add(test, v.id, type: v.type, payloads: v.payloads, battery: v.battery, position: v.position, relative_altitude: if(v.airborne?, do: 20.0, else: 0.0))
+        do: FakeSource.add(test, v.id, type: v.type, payloads: v.payloads, battery: v.battery, position: v.position, relative_altitude: if(v.airborne?, do: 20.0, else: 0.0))
 
     {:ok, fleet} = Dolphin.Fleet.start_link(name: fleet_name, source: {Source, %{test: test, recorder: recorder}})
 

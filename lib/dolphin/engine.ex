@@ -8,7 +8,7 @@ defmodule Dolphin.Engine do
   platform tasks of a task, then runs it: one process per node of the tree.
 
       import Dolphin.Engine
-      survey = Dolphin.Engine.TestPlatform.task("survey", duration: :infinity)
+      survey = Dolphin.Engine.FakePlatform.task("survey", duration: :infinity)
       t = sequence([until(survey, fn snap -> Dolphin.Engine.Snapshot.battery(snap, v) < 0.3 end), idle(5_000)])
       {:ok, :done} = Dolphin.Engine.run(t)
 

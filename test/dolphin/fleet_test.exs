@@ -93,19 +93,19 @@ defmodule Dolphin.FleetTest do
 
     test "lost vehicles are not picked; an owner that ends releases its vehicles", ctx do
       [a, b] = fake_vehicles(ctx, 2)
-      TestSource.lose(ctx.source, a)
+      FakeSource.lose(ctx.source, a)
       owner = spawn(fn -> Process.sleep(:infinity) end)
       assert {:ok, %VehicleSet{ids: [^b]}} = pick(ctx, [timeout: 1_000], owner)
       assert {:error, %PickError{}} = pick(ctx, timeout: 0)
       Process.exit(owner, :kill)
       assert {:ok, %VehicleSet{ids: [^b]}} = pick(ctx, timeout: 1_000)
-      TestSource.reconnect(ctx.source, a)
+      FakeSource.reconnect(ctx.source, a)
       assert {:ok, %VehicleSet{ids: [^a]}} = pick(ctx, timeout: 1_000)
     end
 
     test "a vehicle its source no longer knows is not given", ctx do
       [a, b] = fake_vehicles(ctx, 2)
-      TestSource.remove(ctx.source, a)
+      FakeSource.remove(ctx.source, a)
       assert {:ok, %VehicleSet{ids: [^b]}} = pick(ctx, timeout: 1_000)
       refute Enum.any?(Fleet.vehicles(ctx.fleet), &(&1.vehicle.id == a))
     end
@@ -124,35 +124,35 @@ defmodule Dolphin.FleetTest do
       [a, b] = fake_vehicles(ctx, 2)
       {:ok, _} = pick(ctx, id: a, timeout: 0)
       :ok = Fleet.set_connection_timeout(ctx.fleet, self(), 600_000)
-      assert TestSource.timeout(ctx.source, a) == 600_000
-      assert TestSource.timeout(ctx.source, b) == nil
+      assert FakeSource.timeout(ctx.source, a) == 600_000
+      assert FakeSource.timeout(ctx.source, b) == nil
       {:ok, _} = pick(ctx, id: b, timeout: 0)
-      assert TestSource.timeout(ctx.source, b) == 600_000
+      assert FakeSource.timeout(ctx.source, b) == 600_000
     end
   end
 
   describe "events" do
     test "vehicles, picks and state changes are events" do
       source = :"fleet_events_#{System.unique_integer([:positive])}"
-      start_supervised!({TestSource, name: source}, id: :events_source)
-      start_supervised!({Fleet, name: :fleet_with_events, source: TestSource.source(source)}, id: :events_fleet)
+      start_supervised!({FakeSource, name: source}, id: :events_source)
+      start_supervised!({Fleet, name: :fleet_with_events, source: FakeSource.source(source)}, id: :events_fleet)
       id = 200_000 + System.unique_integer([:positive])
-      TestSource.add(source, id, type: :ugv)
+      FakeSource.add(source, id, type: :ugv)
       assert_receive {:dolphin, :events, %{event: :vehicle_discovered, vehicle: ^id, type: :ugv}}, 5_000
-      TestSource.set(source, id, mode: :guided, armed?: true, mission_progress: {3, 9})
+      FakeSource.set(source, id, mode: :guided, armed?: true, mission_progress: {3, 9})
       assert_receive {:dolphin, :events, %{event: :mode_changed, vehicle: ^id, mode: :guided}}, 5_000
       assert_receive {:dolphin, :events, %{event: :armed, vehicle: ^id}}
       assert_receive {:dolphin, :events, %{event: :mission_item_reached, vehicle: ^id, seq: 3}}
       {:ok, set} = Fleet.pick(:fleet_with_events, self(), id: id, timeout: 1_000)
       assert_receive {:dolphin, :events, %{event: :picked, vehicles: [^id]}}
-      TestSource.lose(source, id)
+      FakeSource.lose(source, id)
       assert_receive {:dolphin, :events, %{event: :vehicle_lost, vehicle: ^id}}, 5_000
       Fleet.release(:fleet_with_events, self(), set)
       assert_receive {:dolphin, :events, %{event: :released, vehicles: [^id]}}
 
       # Forgotten (a finished simulation's vehicle), then heard again: discovered anew.
-      TestSource.remove(source, id)
-      TestSource.add(source, id, type: :ugv)
+      FakeSource.remove(source, id)
+      FakeSource.add(source, id, type: :ugv)
       assert_receive {:dolphin, :events, %{event: :vehicle_discovered, vehicle: ^id, type: :ugv}}, 5_000
     end
   end

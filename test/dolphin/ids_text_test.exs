@@ -30,7 +30,7 @@ defmodule Dolphin.IdsTextTest do
         names_id!(VehicleSet.format(VehicleSet.new([id, 1])), id)
         names_id!(VehicleSet.format(id), id)
         names_id!(inspect(VehicleSet.new(id)), id)
-        names_id!(Dolphin.Engine.Task.format(on(TestPlatform.task("t"), VehicleSet.new(id))), id)
+        names_id!(Dolphin.Engine.Task.format(on(FakePlatform.task("t"), VehicleSet.new(id))), id)
       end),
       numtests: 300
     )
@@ -109,8 +109,8 @@ defmodule Dolphin.IdsTextTest do
 
   test "the fleet's picked and released events name vehicle 9 as 9", ctx do
     fleet = :"ids_fleet_#{System.unique_integer([:positive])}"
-    start_supervised!({Fleet, name: fleet, source: TestSource.source(ctx.source), events: true}, id: fleet)
-    TestSource.add(ctx.source, 9)
+    start_supervised!({Fleet, name: fleet, source: FakeSource.source(ctx.source), events: true}, id: fleet)
+    FakeSource.add(ctx.source, 9)
     _ = Fleet.vehicles(fleet)
 
     assert {:ok, set} = Fleet.pick(fleet, self(), id: 9, timeout: 5_000)

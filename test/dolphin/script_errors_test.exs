@@ -69,7 +69,7 @@ defmodule Dolphin.ScriptErrorsTest do
     {:ok, err} = StringIO.open("")
     assert 1 == Run.main([file, "--fake", "1"], out: out, err: err)
     {_, text} = StringIO.contents(err)
-    assert text =~ ~s|mission "m" needs a MAVLink vehicle; vehicle 1 is a fake vehicle (--fake), which runs only test-platform tasks|
+    assert text =~ ~s|mission "m" needs a MAVLink vehicle; vehicle 1 is a fake vehicle (--fake), which runs only fake-platform tasks|
     refute text =~ "not connected"
   end
 

@@ -74,10 +74,10 @@ defmodule Dolphin.ScriptTest do
 
       source = """
       use Dolphin.Script
-      alias Dolphin.Engine.TestPlatform
+      alias Dolphin.Engine.FakePlatform
 
       v = pick(type: :uav, timeout: seconds(5))
-      survey = TestPlatform.task("survey", duration: :infinity)
+      survey = FakePlatform.task("survey", duration: :infinity)
 
       execute until(survey, poll(:enough)) ||| (idle(10) >>> action do post(:enough, true) end)
       message("consumed: \#{consume(:enough, true)}, again: \#{consume(:enough, true)}")
@@ -111,14 +111,14 @@ defmodule Dolphin.ScriptTest do
 
       source = """
       use Dolphin.Script
-      alias Dolphin.Engine.TestPlatform
+      alias Dolphin.Engine.FakePlatform
       me = :erlang.list_to_pid(#{inspect(:erlang.pid_to_list(self()))})
       [v1, v2] = for id <- [#{a}, #{b}], do: pick(id: id)
       _other = pick(id: #{c})
       execute %{
-        v1 => TestPlatform.task("one", duration: 1, notify: me),
-        v2 => TestPlatform.task("two", duration: 1, notify: me),
-        _: TestPlatform.task("any", duration: 1, notify: me)
+        v1 => FakePlatform.task("one", duration: 1, notify: me),
+        v2 => FakePlatform.task("two", duration: 1, notify: me),
+        _: FakePlatform.task("any", duration: 1, notify: me)
       }
       release([v1, v2])
       """
@@ -134,9 +134,9 @@ defmodule Dolphin.ScriptTest do
 
       source = """
       use Dolphin.Script
-      alias Dolphin.Engine.TestPlatform
+      alias Dolphin.Engine.FakePlatform
       v = pick()
-      broken = TestPlatform.task("survey", duration: 1, result: {:fail, "GPS glitch"})
+      broken = FakePlatform.task("survey", duration: 1, result: {:fail, "GPS glitch"})
 
       execute %{v => broken}
       message("not reached")
@@ -161,7 +161,7 @@ defmodule Dolphin.ScriptTest do
       source = """
       use Dolphin.Script
       _v = pick()
-      execute Dolphin.Engine.TestPlatform.task("loiter", duration: :infinity) ||| (idle(5) >>> action do halt("from a task") end)
+      execute Dolphin.Engine.FakePlatform.task("loiter", duration: :infinity) ||| (idle(5) >>> action do halt("from a task") end)
       """
 
       assert {:error, %Error{kind: :halted, message: "halted: from a task"}} = run_source(source)
@@ -180,7 +180,7 @@ defmodule Dolphin.ScriptTest do
       use Dolphin.Script
       _v = pick()
       forever do
-        execute Dolphin.Engine.TestPlatform.task("patrol", duration: :infinity, notify: :erlang.list_to_pid(#{inspect(me)}))
+        execute Dolphin.Engine.FakePlatform.task("patrol", duration: :infinity, notify: :erlang.list_to_pid(#{inspect(me)}))
       end
       """
 
@@ -198,7 +198,7 @@ defmodule Dolphin.ScriptTest do
       use Dolphin.Script
       _v = pick()
       forever do
-        execute Dolphin.Engine.TestPlatform.task("patrol", duration: :infinity, notify: :erlang.list_to_pid(#{inspect(me)}))
+        execute Dolphin.Engine.FakePlatform.task("patrol", duration: :infinity, notify: :erlang.list_to_pid(#{inspect(me)}))
       end
       """
 
@@ -224,7 +224,7 @@ defmodule Dolphin.ScriptTest do
         compile!("""
         use Dolphin.Script
         _v = pick()
-        execute Dolphin.Engine.TestPlatform.task("patrol", duration: :infinity, notify: :erlang.list_to_pid(#{inspect(me)}))
+        execute Dolphin.Engine.FakePlatform.task("patrol", duration: :infinity, notify: :erlang.list_to_pid(#{inspect(me)}))
         """)
 
       {:ok, pid} = Script.start(script)
@@ -253,7 +253,7 @@ defmodule Dolphin.ScriptTest do
         compile!("""
         use Dolphin.Script
         _v = pick()
-        execute Dolphin.Engine.TestPlatform.task("patrol", duration: :infinity, notify: :erlang.list_to_pid(#{inspect(me)}))
+        execute Dolphin.Engine.FakePlatform.task("patrol", duration: :infinity, notify: :erlang.list_to_pid(#{inspect(me)}))
         """)
 
       {:ok, pid} = Script.start(script)
@@ -273,7 +273,7 @@ defmodule Dolphin.ScriptTest do
       script = compile!("""
       use Dolphin.Script
       _v = pick()
-      execute Dolphin.Engine.TestPlatform.task("patrol", duration: :infinity, notify: :erlang.list_to_pid(#{inspect(:erlang.pid_to_list(me))}))
+      execute Dolphin.Engine.FakePlatform.task("patrol", duration: :infinity, notify: :erlang.list_to_pid(#{inspect(:erlang.pid_to_list(me))}))
       """)
 
       # The caller runs in the test's context (its fleet and clock).
@@ -307,8 +307,8 @@ defmodule Dolphin.ScriptTest do
       """
 
       assert {:ok, _} = run_source(source, ask: fn "Go?" -> "yes" end)
-      assert TestSource.messages(ctx.source, a) == [{:hello, "yes"}]
-      assert TestSource.timeout(ctx.source, a) == 600_000
+      assert FakeSource.messages(ctx.source, a) == [{:hello, "yes"}]
+      assert FakeSource.timeout(ctx.source, a) == 600_000
     end
 
     test "picks are released when the script ends", ctx do

@@ -15,14 +15,14 @@ defmodule Dolphin.EngineCase do
   use ExUnit.CaseTemplate
 
   alias Dolphin.Engine.Context
-  alias Dolphin.Fleet.TestSource
+  alias Dolphin.Fleet.FakeSource
 
   using do
     quote do
       import Dolphin.Engine
       import Dolphin.EngineCase
-      alias Dolphin.Engine.{Failure, TestPlatform}
-      alias Dolphin.Fleet.{TestSource, VehicleSet}
+      alias Dolphin.Engine.{Failure, FakePlatform}
+      alias Dolphin.Fleet.{FakeSource, VehicleSet}
     end
   end
 
@@ -30,9 +30,9 @@ defmodule Dolphin.EngineCase do
     n = System.unique_integer([:positive])
     source = :"fakes_#{n}"
     fleet = :"fleet_#{n}"
-    start_supervised!({TestSource, name: source, events: false})
-    start_supervised!({Dolphin.Fleet, name: fleet, source: TestSource.source(source), events: false})
-    Context.put(%Context{fleet: fleet, source: TestSource.source(source), owner: self()})
+    start_supervised!({FakeSource, name: source, events: false})
+    start_supervised!({Dolphin.Fleet, name: fleet, source: FakeSource.source(source), events: false})
+    Context.put(%Context{fleet: fleet, source: FakeSource.source(source), owner: self()})
     Dolphin.Events.subscribe()
     {:ok, source: source, fleet: fleet}
   end
@@ -41,7 +41,7 @@ defmodule Dolphin.EngineCase do
   def fake_vehicles(ctx, n, attrs \\ []) do
     {pick, attrs} = Keyword.pop(attrs, :pick, false)
     ids = for _ <- 1..n, do: 100_000 + System.unique_integer([:positive, :monotonic])
-    Enum.each(ids, &TestSource.add(ctx.source, &1, attrs))
+    Enum.each(ids, &FakeSource.add(ctx.source, &1, attrs))
     # The fleet has seen them once it answers (the discoveries are ahead in its mailbox).
     _ = Dolphin.Fleet.vehicles(ctx.fleet)
     if pick, do: {:ok, _} = Dolphin.Fleet.pick(ctx.fleet, self(), id: ids, count: n, timeout: 5_000)
@@ -101,10 +101,10 @@ defmodule Dolphin.EngineCase do
     end)
   end
 
-  @doc "Receives the next test platform notification of `event` for `name` (bounded)."
+  @doc "Receives the next fake platform notification of `event` for `name` (bounded)."
   defmacro assert_platform(event, name, timeout \\ 5_000) do
     quote do
-      assert_receive {:test_platform, unquote(event), %{name: unquote(name)} = info}, unquote(timeout)
+      assert_receive {:fake_platform, unquote(event), %{name: unquote(name)} = info}, unquote(timeout)
       info
     end
   end

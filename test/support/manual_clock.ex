@@ -92,7 +92,7 @@ defmodule Dolphin.Test.ManualClock do
   end
 
   @doc """
-  Waits until every engine process (node, run, user code, test platform task,
+  Waits until every engine process (node, run, user code, fake platform task,
   fleet, fake source, this clock) is idle with an empty mailbox, three checks
   in a row.
   """
@@ -144,7 +144,7 @@ defmodule Dolphin.Test.ManualClock do
 
           _ ->
             case List.keyfind(dict, :"$initial_call", 0) do
-              {_, {m, _, _}} -> m in [Dolphin.Engine.Runner, Dolphin.Engine.Run, Dolphin.Engine.TestPlatform, Dolphin.Fleet, Dolphin.Fleet.TestSource, __MODULE__]
+              {_, {m, _, _}} -> m in [Dolphin.Engine.Runner, Dolphin.Engine.Run, Dolphin.Engine.FakePlatform, Dolphin.Fleet, Dolphin.Fleet.FakeSource, __MODULE__]
               _ -> false
             end
         end

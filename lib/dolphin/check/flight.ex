@@ -9,7 +9,7 @@ defmodule Dolphin.Check.Flight do
 
   use GenServer, restart: :temporary
 
-  alias Dolphin.Fleet.TestSource
+  alias Dolphin.Fleet.FakeSource
 
   # Clock time between two battery updates.
   @tick_ms 10_000
@@ -22,7 +22,7 @@ defmodule Dolphin.Check.Flight do
   @impl true
   def init(args) do
     # Linked to the engine's leaf: its exit is ours.
-    {:ok, view} = TestSource.vehicle(args.test, args.vehicle)
+    {:ok, view} = FakeSource.vehicle(args.test, args.vehicle)
     clock = args.clock || Dolphin.Check.Clock
     e = args.estimate
     start_battery = view.battery || 1.0
@@ -76,7 +76,7 @@ defmodule Dolphin.Check.Flight do
   defp left_at(s, elapsed_s) do
     e = s.estimate
     {_, at, airborne?, _} = e.path |> Enum.take_while(fn {t, _, _, _} -> t <= elapsed_s end) |> List.last() || {0.0, e.start_at, s.airborne?, 0}
-    if at, do: TestSource.set(s.test, s.vehicle, position: at, relative_altitude: if(airborne?, do: 20.0, else: 0.0))
+    if at, do: FakeSource.set(s.test, s.vehicle, position: at, relative_altitude: if(airborne?, do: 20.0, else: 0.0))
     Dolphin.Check.Recorder.ended(s.recorder, s.vehicle, at, airborne?)
   end
 
@@ -102,7 +102,7 @@ defmodule Dolphin.Check.Flight do
     flying = min(elapsed_s, s.time_s)
     used = s.rate * flying + @hover_per_s * max(elapsed_s - s.time_s, 0.0)
     left = max(s.battery - used, 0.0)
-    TestSource.set(s.test, s.vehicle, battery: left)
+    FakeSource.set(s.test, s.vehicle, battery: left)
     left
   end
 end

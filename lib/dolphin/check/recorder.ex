@@ -8,7 +8,7 @@ defmodule Dolphin.Check.Recorder do
   use GenServer
 
   alias Dolphin.Check.Finding
-  alias Dolphin.Fleet.TestSource
+  alias Dolphin.Fleet.FakeSource
 
   @spec start_link(map()) :: GenServer.on_start()
   def start_link(args), do: GenServer.start_link(__MODULE__, args)
@@ -30,14 +30,14 @@ defmodule Dolphin.Check.Recorder do
 
   @impl true
   def init(args) do
-    # args: test (the TestSource name), file, limits, vehicles (id => %{payloads, home, airborne?})
+    # args: test (the FakeSource name), file, limits, vehicles (id => %{payloads, home, airborne?})
     {:ok, Map.merge(args, %{findings: [], estimates: []})}
   end
 
   @impl true
   def handle_call({:mission, mission, id, line}, _from, s) do
     fleet = Map.get(s.vehicles, id, %{payloads: [], home: nil, airborne?: false})
-    battery = case TestSource.vehicle(s.test, id), do: ({:ok, view} -> view.battery; _ -> nil)
+    battery = case FakeSource.vehicle(s.test, id), do: ({:ok, view} -> view.battery; _ -> nil)
     vehicle = %{id: id, payloads: fleet.payloads, battery: battery, position: fleet.home, airborne?: fleet.airborne?, at: Map.get(fleet, :at)}
     {problems, energy, estimate} = Dolphin.Check.Mission.check(mission, vehicle, s.limits)
     estimate = estimate && Map.merge(estimate, %{line: line, energy: energy})

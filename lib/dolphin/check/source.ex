@@ -1,7 +1,7 @@
 defmodule Dolphin.Check.Source do
   @moduledoc false
   # The vehicles of a pre-flight check: stand-ins for the described fleet
-  # (a `Dolphin.Fleet.TestSource` holds their views, so picks, allocation and
+  # (a `Dolphin.Fleet.FakeSource` holds their views, so picks, allocation and
   # conditions see them as they see real vehicles) that fly no mission.
   # The dry run's context has `Dolphin.Mission.Platform` hand each mission to
   # `fly/4` (its `platform_opts`, `missions: {Dolphin.Check.Source, arg}`):
@@ -10,24 +10,24 @@ defmodule Dolphin.Check.Source do
 
   @behaviour Dolphin.Fleet.Source
 
-  alias Dolphin.Fleet.TestSource
+  alias Dolphin.Fleet.FakeSource
 
   @type arg :: %{test: atom(), recorder: pid()}
 
   @impl true
-  def list(%{test: t}), do: TestSource.list(t)
+  def list(%{test: t}), do: FakeSource.list(t)
 
   @impl true
-  def vehicle(%{test: t}, id), do: TestSource.vehicle(t, id)
+  def vehicle(%{test: t}, id), do: FakeSource.vehicle(t, id)
 
   @impl true
-  def views(%{test: t}), do: TestSource.views(t)
+  def views(%{test: t}), do: FakeSource.views(t)
 
   @impl true
-  def set_timeout(%{test: t}, id, ms), do: TestSource.set_timeout(t, id, ms)
+  def set_timeout(%{test: t}, id, ms), do: FakeSource.set_timeout(t, id, ms)
 
   @impl true
-  def send_message(%{test: t}, id, message), do: TestSource.send_message(t, id, message)
+  def send_message(%{test: t}, id, message), do: FakeSource.send_message(t, id, message)
 
   @doc false
   # Called by Dolphin.Mission.Platform.start/3 in the engine's leaf process,

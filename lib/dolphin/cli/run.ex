@@ -55,7 +55,7 @@ defmodule Dolphin.CLI.Run do
   an error: the estimate is the simulator's model, and simulated copters
   (and SITL, with its own battery model) fly on at 0 %. Its findings are printed on `out` (nothing when there
   are none); `:refused` when it found errors. Skipped (`:ok`) with `--fake`
-  (test-platform tasks, no missions), with `--connect` or configured links
+  (fake-platform tasks, no missions), with `--connect` or configured links
   (the fleet is known only once connected: `mix dolphin.check --connect`
   checks against it) and with `--no-check`.
   """

@@ -6,7 +6,7 @@ defmodule Dolphin.CLI.Vehicles do
   # hands its undoing to `defer` at once, so that a run that fails half way
   # still stops what it started.
 
-    alias Dolphin.Fleet.TestSource
+    alias Dolphin.Fleet.FakeSource
 
   @doc false
   # `opts`: the run's options (those of Mix.Tasks.Dolphin.Run, :tlog resolved,
@@ -81,14 +81,14 @@ defmodule Dolphin.CLI.Vehicles do
 
   defp start_fake(n, out, defer) do
     name = :"dolphin_run_fakes_#{System.unique_integer([:positive])}"
-    {:ok, source} = TestSource.start_link(name: name)
+    {:ok, source} = FakeSource.start_link(name: name)
     Process.unlink(source)
     defer.(fn -> GenServer.stop(source) end)
     previous = Dolphin.Fleet.source()
-    :ok = Dolphin.Fleet.set_source(TestSource.source(name))
+    :ok = Dolphin.Fleet.set_source(FakeSource.source(name))
     defer.(fn -> Dolphin.Fleet.set_source(previous) end)
-    for id <- 1..n, do: TestSource.add(name, id, type: :uav)
-    IO.puts(out, "#{n} fake vehicle(s) [1..#{n}] of the test platform (no MAVLink: missions cannot fly on them)")
+    for id <- 1..n, do: FakeSource.add(name, id, type: :uav)
+    IO.puts(out, "#{n} fake vehicle(s) [1..#{n}] of the fake platform (no MAVLink: missions cannot fly on them)")
     :ok
   end
 

@@ -9,7 +9,7 @@ defmodule Dolphin.Console.Arguments do
 
   @typedoc """
   What the console knows of a vehicle: `mavlink?` (it has a MAVLink state;
-  false for fake vehicles of the test platform), `lost?`, `silent_ms` (clock
+  false for fake vehicles of the fake platform), `lost?`, `silent_ms` (clock
   time since the last frame), `task` (the platform task flying it:
   %{task_id, kind, name, run} or nil).
   """

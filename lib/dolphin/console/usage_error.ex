@@ -48,7 +48,7 @@ defmodule Dolphin.Console.UsageError do
   defp text(:not_a_vehicle_id, other, _), do: "a vehicle is given by its system id (an integer, as vehicles() lists them), got: #{inspect(other)}"
   defp text(:unknown_vehicle, id, []), do: "no vehicle #{id}: no vehicle is known yet (is a link connected? see vehicles())"
   defp text(:unknown_vehicle, id, known), do: "no vehicle #{id}: the known vehicles are #{Enum.join(known, ", ")} (see vehicles())"
-  defp text(:fake_vehicle, id, _), do: "vehicle #{id} is a fake vehicle of the test platform: it takes no MAVLink commands"
+  defp text(:fake_vehicle, id, _), do: "vehicle #{id} is a fake vehicle of the fake platform: it takes no MAVLink commands"
 
   defp text(:lost, id, silent_ms),
     do: "vehicle #{id} is lost (nothing heard for #{Format.duration(silent_ms || 0)}): nothing sent; check its link (vehicles())"

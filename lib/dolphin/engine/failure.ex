@@ -19,7 +19,7 @@ defmodule Dolphin.Engine.Failure do
   their own, as data: an exception that words itself (a mission's
   `Dolphin.Mission.Failure`), which says whether the vehicle caused it (a
   failsafe, a refused arm: `reassign` takes those over,
-  `c:Dolphin.Engine.Platform.vehicle_fault?/1`); the test platform's
+  `c:Dolphin.Engine.Platform.vehicle_fault?/1`); the fake platform's
   `{:vehicle_fault, text}` is such a failure too.
 
   `progress` is the last progress a platform task reported before it failed

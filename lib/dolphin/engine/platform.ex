@@ -1,7 +1,7 @@
 defmodule Dolphin.Engine.Platform do
   @moduledoc """
   The behaviour of a platform: what runs one-vehicle tasks (MAVLink missions,
-  the test platform), as Dolphin's plugins do. The engine knows nothing else
+  the fake platform), as Dolphin's plugins do. The engine knows nothing else
   of vehicles.
 
   A platform task is `%Dolphin.Engine.PlatformTask{platform: module, spec: term}`
@@ -42,7 +42,7 @@ defmodule Dolphin.Engine.Platform do
 
   ## Example
 
-  `Dolphin.Engine.TestPlatform` is a complete, small platform.
+  `Dolphin.Engine.FakePlatform` is a complete, small platform.
   """
 
   @type spec :: term()

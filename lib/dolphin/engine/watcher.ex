@@ -31,7 +31,7 @@ defmodule Dolphin.Engine.Watcher do
       import Dolphin.Engine
       v = 1
       low = Dolphin.Engine.Cond.new(fn snap -> Dolphin.Engine.Snapshot.battery(snap, v) < 0.3 end, source: "battery(v) < 0.3")
-      Dolphin.Engine.run(until(Dolphin.Engine.TestPlatform.task("survey", duration: :infinity), low))
+      Dolphin.Engine.run(until(Dolphin.Engine.FakePlatform.task("survey", duration: :infinity), low))
   """
 
   alias Dolphin.Engine.{Cond, Context, Snapshot}

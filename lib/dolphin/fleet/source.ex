@@ -5,7 +5,7 @@ defmodule Dolphin.Fleet.Source do
 
   A source is `{module, arg}`; every callback gets `arg` first. Two exist:
   `Dolphin.Fleet.MAVLinkSource` (the real vehicles of `Dolphin.Vehicles`) and
-  `Dolphin.Fleet.TestSource` (fake vehicles whose state tests set).
+  `Dolphin.Fleet.FakeSource` (fake vehicles whose state tests set).
 
   A source owns its vehicles' state: it answers `vehicle/2` and `views/1`
   from it, and announces every change with the shapes `Dolphin.Vehicles`

@@ -87,7 +87,7 @@ defmodule Dolphin.Mission.Failure do
   defp words(%{cause: :not_connected} = f), do: "vehicle #{f.vehicle} is not connected"
 
   defp words(%{cause: :fake_vehicle} = f),
-    do: "mission #{inspect(f.mission)} needs a MAVLink vehicle; vehicle #{f.vehicle} is a fake vehicle (--fake), which runs only test-platform tasks"
+    do: "mission #{inspect(f.mission)} needs a MAVLink vehicle; vehicle #{f.vehicle} is a fake vehicle (--fake), which runs only fake-platform tasks"
 
   defp words(%{cause: :no_take_off} = f), do: "vehicle #{f.vehicle} is on the ground and the mission has no take-off"
   defp words(%{cause: {:exchange_crashed, reason}} = f), do: "#{f.step} crashed: #{Exception.format_exit(reason)}"

@@ -83,7 +83,7 @@ defmodule Dolphin.Vehicles.Views do
   end
 
   @doc false
-  # Steps 2 to 4 of a write, for every owner of views (Dolphin.Fleet.TestSource
+  # Steps 2 to 4 of a write, for every owner of views (Dolphin.Fleet.FakeSource
   # keeps its own table): `events?` false keeps the telemetry quiet (a dry
   # run's stand-in vehicles).
   @spec announce(View.t() | nil, View.t(), boolean()) :: :ok

@@ -31,9 +31,9 @@ defmodule Mix.Tasks.Dolphin.Run do
       `../shared/sitl/arducopter` beside the project)
     * `--sitl-defaults FILE` — its parameter defaults (else `copter.parm` beside
       the binary); repeatable, later files win
-    * `--fake N` — N fake vehicles of the test platform
-      (`Dolphin.Fleet.TestSource`, no MAVLink): to try a script's logic with
-      `Dolphin.Engine.TestPlatform` tasks
+    * `--fake N` — N fake vehicles of the fake platform
+      (`Dolphin.Fleet.FakeSource`, no MAVLink): to try a script's logic with
+      `Dolphin.Engine.FakePlatform` tasks
     * `--seed N` — the simulator's seed
     * `--speedup K` — run K times faster than real time (`Dolphin.Clock`),
       from 0.01 to 1000 (beyond, the simulated vehicles cannot keep up)

@@ -36,7 +36,7 @@ defmodule Dolphin.Console.ArgumentsTest do
     end
 
     test "a fake vehicle takes no MAVLink" do
-      assert "vehicle 7 is a fake vehicle of the test platform" <> _ = message(Arguments.vehicle(7, @known, :control))
+      assert "vehicle 7 is a fake vehicle of the fake platform" <> _ = message(Arguments.vehicle(7, @known, :control))
       assert {:ok, :free} = Arguments.vehicle(7, @known, :any)
     end
 

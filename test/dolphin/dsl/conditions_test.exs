@@ -25,7 +25,7 @@ defmodule Dolphin.DSL.ConditionsTest do
     run
   end
 
-  defp survey, do: TestPlatform.task("survey", duration: :infinity)
+  defp survey, do: FakePlatform.task("survey", duration: :infinity)
 
   test "the readers of a condition's expression read the snapshot; nothing else is followed", ctx do
     [v] = fake_vehicles(ctx, 1, pick: true, battery: 0.9)
@@ -38,7 +38,7 @@ defmodule Dolphin.DSL.ConditionsTest do
     assert %Cond{follow: true} = until_cond(until(survey(), mod.battery(v) < 0.3))
 
     run = start_until(v, until(survey(), battery(v) < 0.3))
-    TestSource.set(ctx.source, v, battery: 0.2)
+    FakeSource.set(ctx.source, v, battery: 0.2)
     assert {:ok, :done} = Dolphin.Engine.await(run, 5_000)
   end
 
@@ -48,7 +48,7 @@ defmodule Dolphin.DSL.ConditionsTest do
     assert %Cond{follow: true} = until_cond(until(survey(), low.(v)))
 
     run = start_until(v, until(survey(), low.(v)))
-    TestSource.set(ctx.source, v, battery: 0.2)
+    FakeSource.set(ctx.source, v, battery: 0.2)
     assert {:ok, :done} = Dolphin.Engine.await(run, 5_000)
   end
 
@@ -58,7 +58,7 @@ defmodule Dolphin.DSL.ConditionsTest do
 
     # The until's task flies `other`; the condition reads `v`, found by its request.
     run = start_until(other, until(survey(), low.(v)))
-    TestSource.set(ctx.source, v, battery: 0.2)
+    FakeSource.set(ctx.source, v, battery: 0.2)
     assert {:ok, :done} = Dolphin.Engine.await(run, 5_000)
   end
 end

@@ -107,7 +107,7 @@ defmodule Dolphin.DSL.UnknownTest do
     assert evaluate(condition(mode(v) == :auto)) == {:ok, false}
     assert evaluate(condition(mode(v) in [:guided, :auto] and mode(v) not in [:rtl])) == {:ok, true}
 
-    TestSource.set(ctx.source, id, battery: nil)
+    FakeSource.set(ctx.source, id, battery: nil)
     assert evaluate(condition(battery(v) >= 0.9)) == {:ok, false}
     assert evaluate(condition(not (battery(v) >= 0.9))) == {:ok, false}
   end
@@ -163,8 +163,8 @@ defmodule Dolphin.DSL.UnknownTest do
     assert {:ok, run} = run
     await_event(run, &match?(%{event: :task_started, kind: :wait_for}, &1))
     # A report that leaves the battery unknown, then the battery: the condition is read again on each.
-    TestSource.set(ctx.source, id, mode: :guided)
-    TestSource.set(ctx.source, id, battery: 0.95)
+    FakeSource.set(ctx.source, id, mode: :guided)
+    FakeSource.set(ctx.source, id, battery: 0.95)
     met = await_event(run, &match?(%{event: :condition_met}, &1))
     assert {:ok, _} = Dolphin.Engine.await(run, 30_000)
     assert met.condition == "battery(v) >= 0.9"

@@ -15,7 +15,7 @@ defmodule Dolphin.Engine.CombinatorsTest do
 
   defp never, do: Cond.new(fn -> false end, source: "never")
   defp low_battery(v), do: Cond.new(fn snap -> Dolphin.Engine.Snapshot.battery(snap, v) < 0.3 end, source: "battery < 0.3")
-  defp tp(name, opts \\ []), do: TestPlatform.task(name, Keyword.put_new(opts, :notify, self()))
+  defp tp(name, opts \\ []), do: FakePlatform.task(name, Keyword.put_new(opts, :notify, self()))
 
   describe "leaves" do
     test "idle completes" do
@@ -50,8 +50,8 @@ defmodule Dolphin.Engine.CombinatorsTest do
       [v] = fake_vehicles(ctx, 1)
       {:ok, run} = start(condition(low_battery(v), name: "low"))
       wait_running("low")
-      TestSource.set(ctx.source, v, battery: 0.5)
-      TestSource.set(ctx.source, v, battery: 0.2)
+      FakeSource.set(ctx.source, v, battery: 0.5)
+      FakeSource.set(ctx.source, v, battery: 0.2)
       assert {:ok, :done} = await(run, 5_000)
       assert [{:started, "low"}, {:met, _}, {:finished, "low", :done}] = summary(events_of(run))
     end
@@ -93,8 +93,8 @@ defmodule Dolphin.Engine.CombinatorsTest do
       assert {{:error, %Failure{name: "fire"} = f}, events} = run_events(t)
       assert f.reason |> elem(1) |> Map.get(:message) == "engine fire"
       # Both platform tasks got their stop callback before the run returned.
-      assert_received {:test_platform, :stopped, %{name: "left", reason: {:sibling_failed, 0}}}
-      assert_received {:test_platform, :stopped, %{name: "right", reason: {:sibling_failed, 0}}}
+      assert_received {:fake_platform, :stopped, %{name: "left", reason: {:sibling_failed, 0}}}
+      assert_received {:fake_platform, :stopped, %{name: "right", reason: {:sibling_failed, 0}}}
       assert {:finished, "left", :stopped} in summary(events)
       assert {:finished, "right", :stopped} in summary(events)
     end
@@ -113,7 +113,7 @@ defmodule Dolphin.Engine.CombinatorsTest do
       [v] = fake_vehicles(ctx, 1, pick: true)
       {:ok, run} = start(until(tp("survey", duration: :infinity), low_battery(v), name: "u") >>> idle(1, name: "after"))
       assert_platform(:started, "survey")
-      TestSource.set(ctx.source, v, battery: 0.1)
+      FakeSource.set(ctx.source, v, battery: 0.1)
       assert {:ok, :done} = await(run, 5_000)
       assert %{reason: {:condition_met, _}} = assert_platform(:stopped, "survey")
 
@@ -125,7 +125,7 @@ defmodule Dolphin.Engine.CombinatorsTest do
       [v] = fake_vehicles(ctx, 1, pick: true)
       assert {:ok, :done} = run(until(tp("quick", duration: 1), never()))
       assert_platform(:finished, "quick")
-      TestSource.set(ctx.source, v, battery: 0.1)
+      FakeSource.set(ctx.source, v, battery: 0.1)
       assert {{:ok, :done}, events} = run_events(until(tp("skipped"), low_battery(v)))
       refute {:started, "skipped"} in summary(events)
     end
@@ -153,7 +153,7 @@ defmodule Dolphin.Engine.CombinatorsTest do
       [v] = fake_vehicles(ctx, 1)
       {:ok, run} = start(wait_for(low_battery(v), idle(1, name: "then"), name: "w"))
       wait_running("w")
-      TestSource.set(ctx.source, v, battery: 0.2)
+      FakeSource.set(ctx.source, v, battery: 0.2)
       assert {:ok, :done} = await(run, 5_000)
       assert [{:started, "w"}, {:met, _}, {:started, "then"}, {:finished, "then", :done}, {:finished, "w", :done}] = summary(events_of(run))
     end
@@ -165,14 +165,14 @@ defmodule Dolphin.Engine.CombinatorsTest do
       t = one_of([{low_battery(a), idle(1, name: "A")}, {low_battery(b), idle(1, name: "B")}], name: "o")
       {:ok, run} = start(t)
       wait_running("o")
-      TestSource.set(ctx.source, b, battery: 0.1)
+      FakeSource.set(ctx.source, b, battery: 0.1)
       assert {:ok, :done} = await(run, 5_000)
       events = events_of(run)
       assert [%{branch: 1}] = Enum.filter(events, &(&1.event == :condition_met))
       assert {:finished, "B", :done} in summary(events)
       refute {:started, "A"} in summary(events)
       # A's condition holding later changes nothing.
-      TestSource.set(ctx.source, a, battery: 0.1)
+      FakeSource.set(ctx.source, a, battery: 0.1)
     end
 
     test "at start, the earliest branch that holds wins" do
@@ -189,10 +189,10 @@ defmodule Dolphin.Engine.CombinatorsTest do
       t = all_of([{low_battery(a), idle(1, name: "A")}, {low_battery(b), idle(1, name: "B")}], name: "all")
       {:ok, run} = start(t)
       wait_running("all")
-      TestSource.set(ctx.source, b, battery: 0.1)
+      FakeSource.set(ctx.source, b, battery: 0.1)
       await_event(run, &match?(%{event: :task_finished, name: "B"}, &1))
       assert {:error, :timeout} = await(run, 0)
-      TestSource.set(ctx.source, a, battery: 0.1)
+      FakeSource.set(ctx.source, a, battery: 0.1)
       assert {:ok, :done} = await(run, 5_000)
       assert [{:started, "all"}, {:met, _}, {:started, "B"}, {:finished, "B", :done}, {:met, _}, {:started, "A"}, {:finished, "A", :done}, {:finished, "all", :done}] =
                summary(events_of(run))
@@ -209,7 +209,7 @@ defmodule Dolphin.Engine.CombinatorsTest do
         ])
 
       assert {{:error, %Failure{name: "bad"}}, events} = run_events(t)
-      assert_received {:test_platform, :stopped, %{name: "runs"}}
+      assert_received {:fake_platform, :stopped, %{name: "runs"}}
       refute {:started, "waits"} in summary(events)
     end
   end
@@ -252,7 +252,7 @@ defmodule Dolphin.Engine.CombinatorsTest do
       [v] = fake_vehicles(ctx, 1, pick: true)
       {:ok, run} = start(tp("far", duration: :infinity))
       assert_platform(:started, "far")
-      TestSource.lose(ctx.source, v)
+      FakeSource.lose(ctx.source, v)
       assert {:error, %Failure{name: "far", vehicle: ^v, reason: {:vehicle_lost, ^v}} = f} = await(run, 5_000)
       assert Failure.message(f) =~ "vehicle #{v} lost"
       assert %{reason: {:vehicle_lost, ^v}} = assert_platform(:stopped, "far")
@@ -340,7 +340,7 @@ defmodule Dolphin.Engine.CombinatorsTest do
   defp wait_running(name), do: Dolphin.Test.Wait.until(fn -> Enum.any?(Dolphin.Engine.tasks(), &(&1.name == name)) end)
 
   defp assert_received_stop(name) do
-    assert_receive {:test_platform, :stopped, %{name: ^name} = info}, 5_000
+    assert_receive {:fake_platform, :stopped, %{name: ^name} = info}, 5_000
     info
   end
 end

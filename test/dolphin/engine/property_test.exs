@@ -266,7 +266,7 @@ end
 
 defmodule Dolphin.Engine.PropertyTest do
   @moduledoc false
-  # Random task trees over the test platform, run by the engine on a manual
+  # Random task trees over the fake platform, run by the engine on a manual
   # clock, against the reference interpreter: same result, same events in
   # the same order at the same clock times.
   use Dolphin.EngineCase, async: false
@@ -284,7 +284,7 @@ defmodule Dolphin.Engine.PropertyTest do
   setup ctx do
     start_supervised!(ManualClock)
     platform = fake_vehicles(ctx, @vehicles, pick: true)
-    for k <- 1..300, do: TestSource.add(ctx.source, @cond_base + k, type: :ugv, battery: 1.0)
+    for k <- 1..300, do: FakeSource.add(ctx.source, @cond_base + k, type: :ugv, battery: 1.0)
     {:ok, platform: platform}
   end
 
@@ -402,11 +402,11 @@ defmodule Dolphin.Engine.PropertyTest do
   # --- the engine's side ---
 
   defp run_engine(ctx, tree, flips) do
-    for {k, _} <- flips, do: TestSource.set(ctx.source, @cond_base + k, battery: if(flips[k] == 0, do: 0.1, else: 1.0))
+    for {k, _} <- flips, do: FakeSource.set(ctx.source, @cond_base + k, battery: if(flips[k] == 0, do: 0.1, else: 1.0))
     ManualClock.reset()
 
     for {k, at} <- Enum.sort(flips), is_integer(at) and at > 0 do
-      ManualClock.at(at, fn -> TestSource.set(ctx.source, @cond_base + k, battery: 0.1) end)
+      ManualClock.at(at, fn -> FakeSource.set(ctx.source, @cond_base + k, battery: 0.1) end)
     end
 
     {:ok, run} = start(engine(tree), clock: ManualClock, tick_ms: 1_000_000_000)
@@ -435,7 +435,7 @@ defmodule Dolphin.Engine.PropertyTest do
   end
 
   defp engine({:idle, name, d}), do: idle(d, name: name)
-  defp engine({:test, name, d, r}), do: TestPlatform.task(name, duration: d, result: if(r == :fail, do: {:fail, :boom}, else: :done))
+  defp engine({:test, name, d, r}), do: FakePlatform.task(name, duration: d, result: if(r == :fail, do: {:fail, :boom}, else: :done))
   defp engine({:action, name, :ok}), do: action(fn -> :ok end, name: name)
   defp engine({:action, name, :raise}), do: action(fn -> raise "boom" end, name: name)
   defp engine({:cond, name, k}), do: condition(kcond(k), name: name)

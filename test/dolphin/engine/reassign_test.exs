@@ -1,12 +1,12 @@
 defmodule Dolphin.Engine.ReassignTest do
-  # reassign on fake vehicles (the test platform); missions on the simulator
+  # reassign on fake vehicles (the fake platform); missions on the simulator
   # are in test/dolphin/mission/reassign_test.exs. The fleet and the engine's
   # registry are shared: not async.
   use Dolphin.EngineCase, async: false
 
   import Dolphin.DSL, only: [|||: 2]
 
-  defp tp(name, opts \\ []), do: TestPlatform.task(name, Keyword.put_new(opts, :notify, self()))
+  defp tp(name, opts \\ []), do: FakePlatform.task(name, Keyword.put_new(opts, :notify, self()))
 
   test "a lost vehicle's task goes to another picked vehicle, with a task_reassigned event", ctx do
     [a, b] = fake_vehicles(ctx, 2, pick: true)
@@ -14,7 +14,7 @@ defmodule Dolphin.Engine.ReassignTest do
     %{vehicle: first, task_id: id} = assert_platform(:started, "survey")
     other = if first == a, do: b, else: a
     await_event(run, &match?(%{event: :task_progress, progress: %{reached: 3}}, &1))
-    TestSource.lose(ctx.source, first)
+    FakeSource.lose(ctx.source, first)
 
     assert %{vehicle: ^other} = assert_platform(:started, "survey")
     e = await_event(run, &(&1.event == :task_reassigned))
@@ -27,7 +27,7 @@ defmodule Dolphin.Engine.ReassignTest do
     fake_vehicles(ctx, 2, pick: true)
     {:ok, run} = start(reassign(tp("patrol", duration: :infinity)))
     %{vehicle: first} = assert_platform(:started, "patrol")
-    TestSource.lose(ctx.source, first)
+    FakeSource.lose(ctx.source, first)
     %{vehicle: second, task_id: id} = assert_platform(:started, "patrol")
     assert second != first
     # Stopped from outside, the task taken over counts as completed: so does the watch.
@@ -45,7 +45,7 @@ defmodule Dolphin.Engine.ReassignTest do
     assert [%{from: v1, to: v2}] = Enum.filter(events, &(&1.event == :task_reassigned))
     assert v1 != v2
 
-    assert {:error, %Failure{name: "gps", reason: :gps}} = run(reassign(TestPlatform.task("gps", duration: 1, result: {:fail, :gps})))
+    assert {:error, %Failure{name: "gps", reason: :gps}} = run(reassign(FakePlatform.task("gps", duration: 1, result: {:fail, :gps})))
     refute_received {:dolphin, :events, %{event: :task_reassigned}}
   end
 
@@ -55,7 +55,7 @@ defmodule Dolphin.Engine.ReassignTest do
     {:ok, run} = start(t)
     assert_platform(:started, "north")
     assert_platform(:started, "south")
-    TestSource.lose(ctx.source, a)
+    FakeSource.lose(ctx.source, a)
     # b runs "south" and c is not in from: nobody can take "north" over.
     assert {:error, %Failure{name: "north", reason: {:not_reassigned, {:vehicle_lost, ^a}, why}}} = await(run, 5_000)
     assert why =~ "among #{VehicleSet.format(VehicleSet.new([a, b]))}"
@@ -64,7 +64,7 @@ defmodule Dolphin.Engine.ReassignTest do
     {:ok, run} = start(reassign(on(tp("west", duration: :infinity), [d]), from: [d, c]) ||| on(tp("east", duration: :infinity), [e]))
     assert %{vehicle: ^d} = assert_platform(:started, "west")
     assert_platform(:started, "east")
-    TestSource.lose(ctx.source, d)
+    FakeSource.lose(ctx.source, d)
     assert %{vehicle: ^c} = assert_platform(:started, "west")
     assert :ok = stop(run)
     assert {:ok, :stopped} = await(run, 5_000)

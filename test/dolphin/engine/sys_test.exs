@@ -5,7 +5,7 @@ defmodule Dolphin.Engine.SysTest do
 
   alias Dolphin.Engine.Cond
 
-  defp tp(name, opts \\ []), do: TestPlatform.task(name, Keyword.merge([notify: self(), duration: :infinity], opts))
+  defp tp(name, opts \\ []), do: FakePlatform.task(name, Keyword.merge([notify: self(), duration: :infinity], opts))
 
   # The processes under a run, found by walking the states :sys.get_state/1
   # returns: the run's root node, each node's children and platform task.
@@ -51,7 +51,7 @@ defmodule Dolphin.Engine.SysTest do
     [{_, until_pid, _}] = for {_, _, %{kind: :until}} = p <- procs, do: p
     me = self()
     :ok = :sys.install(until_pid, {fn acc, event, _name -> send(me, {:sys_event, event}) && acc end, nil})
-    TestSource.set(ctx.source, a, battery: 0.2)
+    FakeSource.set(ctx.source, a, battery: 0.2)
     assert_receive {:sys_event, {:in, {:dolphin, {:vehicle_view, ^a}, _}}}, 5_000
     assert {:ok, :done} = await(run, 10_000)
   end

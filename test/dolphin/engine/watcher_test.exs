@@ -11,14 +11,14 @@ defmodule Dolphin.Engine.WatcherTest do
     use_b = :atomics.new(1, [])
     reads = Cond.new(fn snap -> Snapshot.battery(snap, if(:atomics.get(use_b, 1) == 1, do: b, else: a)) < 0.3 end)
 
-    w = Watcher.new(TestSource.source(ctx.source))
+    w = Watcher.new(FakeSource.source(ctx.source))
     assert {{:ok, false}, w} = Watcher.evaluate(w, :low, reads)
     assert topics() == [{:vehicle_view, a}]
     assert Map.keys(w.vehicles) == [a]
     assert Watcher.reads?(w, :low, {:vehicle, a})
 
     # A change of what it read comes as a whole view, and the next evaluation reads it.
-    TestSource.set(ctx.source, a, battery: 0.2)
+    FakeSource.set(ctx.source, a, battery: 0.2)
     assert_receive {:dolphin, {:vehicle_view, ^a}, {:view, %View{battery: 0.2} = view}}, 5_000
     w = Watcher.update(w, view)
     # The snapshot is what it reads: the source is not asked again.
@@ -50,7 +50,7 @@ defmodule Dolphin.Engine.WatcherTest do
   test "signals read by a condition are followed; a followed vehicle stays whatever conditions read", ctx do
     [a] = fake_vehicles(ctx, 1)
     table = Signals.new()
-    w = Watcher.new(TestSource.source(ctx.source), table)
+    w = Watcher.new(FakeSource.source(ctx.source), table)
     assert {{:ok, %View{id: ^a}}, w} = Watcher.follow(w, a)
 
     assert {{:ok, false}, w} = Watcher.evaluate(w, :sig, Cond.new(fn snap -> Snapshot.poll(snap, :go) end))

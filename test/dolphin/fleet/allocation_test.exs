@@ -9,7 +9,7 @@ defmodule Dolphin.Fleet.AllocationTest do
 
   doctest Dolphin.Fleet.Allocation
 
-  defp tp(name, opts \\ []), do: TestPlatform.task(name, opts)
+  defp tp(name, opts \\ []), do: FakePlatform.task(name, opts)
   defp v(id, type \\ :uav, payloads \\ []), do: %View{id: id, type: type, payloads: payloads}
 
   defp solve(task, vehicles) do
@@ -73,15 +73,15 @@ defmodule Dolphin.Fleet.AllocationTest do
 
   test "runs use only the vehicles the script picked and not busy in another run", ctx do
     [a, b] = fake_vehicles(ctx, 2)
-    assert {:error, %AllocationError{}} = run(TestPlatform.task("unpicked"))
+    assert {:error, %AllocationError{}} = run(FakePlatform.task("unpicked"))
     {:ok, _} = Dolphin.Fleet.pick(ctx.fleet, self(), id: a, timeout: 1_000)
-    {:ok, first} = start(TestPlatform.task("long", duration: :infinity, notify: self()))
-    assert_receive {:test_platform, :started, %{vehicle: ^a}}, 5_000
+    {:ok, first} = start(FakePlatform.task("long", duration: :infinity, notify: self()))
+    assert_receive {:fake_platform, :started, %{vehicle: ^a}}, 5_000
     # The only picked vehicle is busy: another run cannot have it.
-    assert {:error, %AllocationError{task_name: "second"}} = run(TestPlatform.task("second"))
+    assert {:error, %AllocationError{task_name: "second"}} = run(FakePlatform.task("second"))
     {:ok, _} = Dolphin.Fleet.pick(ctx.fleet, self(), id: b, timeout: 1_000)
-    assert {:ok, :done} = run(TestPlatform.task("second", duration: 1, notify: self()))
-    assert_receive {:test_platform, :started, %{name: "second", vehicle: ^b}}
+    assert {:ok, :done} = run(FakePlatform.task("second", duration: 1, notify: self()))
+    assert_receive {:fake_platform, :started, %{name: "second", vehicle: ^b}}
     :ok = Dolphin.Engine.stop(first)
     assert {:ok, :stopped} = await(first, 5_000)
     assert [%{busy: nil}, %{busy: nil}] = Enum.filter(Dolphin.Fleet.vehicles(ctx.fleet), &(&1.vehicle.id in [a, b]))

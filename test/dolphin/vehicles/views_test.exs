@@ -1,7 +1,7 @@
 defmodule Dolphin.Vehicles.ViewsTest do
   use ExUnit.Case, async: false
 
-  alias Dolphin.Fleet.TestSource
+  alias Dolphin.Fleet.FakeSource
   alias Dolphin.Vehicles
   alias Dolphin.Vehicles.{View, Views}
 
@@ -65,18 +65,18 @@ defmodule Dolphin.Vehicles.ViewsTest do
   test "a test source's vehicles are announced the same way, or quietly with events: false" do
     loud = :"views_loud_#{System.unique_integer([:positive])}"
     quiet = :"views_quiet_#{System.unique_integer([:positive])}"
-    start_supervised!({TestSource, name: loud}, id: loud)
-    start_supervised!({TestSource, name: quiet, events: false}, id: quiet)
+    start_supervised!({FakeSource, name: loud}, id: loud)
+    start_supervised!({FakeSource, name: quiet, events: false}, id: quiet)
     [a, b] = for _ <- 1..2, do: 300_000 + System.unique_integer([:positive, :monotonic])
 
-    TestSource.add(quiet, b, type: :uav)
-    TestSource.set(quiet, b, mode: :guided)
-    TestSource.add(loud, a, type: :uav)
-    TestSource.set(loud, a, mode: :guided)
+    FakeSource.add(quiet, b, type: :uav)
+    FakeSource.set(quiet, b, mode: :guided)
+    FakeSource.add(loud, a, type: :uav)
+    FakeSource.set(loud, a, mode: :guided)
     assert_receive {:dolphin, :events, %{event: :vehicle_discovered, vehicle: ^a}}
     assert_receive {:dolphin, :events, %{event: :mode_changed, vehicle: ^a, mode: :guided}}
     refute_received {:dolphin, :events, %{vehicle: ^b}}
-    assert [%View{id: ^b, mode: :guided}] = TestSource.views(quiet)
-    assert_raise ArgumentError, ~r/events: must be true or false, got: :yes/, fn -> TestSource.start_link(name: :views_bad, events: :yes) end
+    assert [%View{id: ^b, mode: :guided}] = FakeSource.views(quiet)
+    assert_raise ArgumentError, ~r/events: must be true or false, got: :yes/, fn -> FakeSource.start_link(name: :views_bad, events: :yes) end
   end
 end

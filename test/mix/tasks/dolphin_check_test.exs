@@ -43,7 +43,7 @@ defmodule Mix.Tasks.Dolphin.CheckTest do
     assert {:ok, _, opts} = Mix.Tasks.Dolphin.Run.parse([Path.join(@dir, "ok.exs"), "--sim", "1", "--no-check"])
     assert opts[:no_check]
     {:ok, out} = StringIO.open("")
-    # --fake tries a script's logic on the test platform: no missions, no check.
+    # --fake tries a script's logic on the fake platform: no missions, no check.
     {:ok, script} = Dolphin.Script.compile(Path.join(@dir, "bad_mission.exs"))
     assert :ok = Dolphin.CLI.Run.check(script, [fake: 1], out)
     assert :ok = Dolphin.CLI.Run.check(script, [sim: 1, no_check: true], out)

@@ -91,7 +91,7 @@ defmodule Mix.Tasks.Dolphin.RunSignalsTest do
   use Dolphin.Script
   v = pick()
   forever do
-    execute %{v => Dolphin.Engine.TestPlatform.task("patrol", duration: :infinity)}
+    execute %{v => Dolphin.Engine.FakePlatform.task("patrol", duration: :infinity)}
   end
   """
 
@@ -99,7 +99,7 @@ defmodule Mix.Tasks.Dolphin.RunSignalsTest do
   @slow_stop """
   use Dolphin.Script
   v = pick()
-  execute %{v => Dolphin.Engine.TestPlatform.task("slow", duration: :infinity, stop_ms: 14_000)}
+  execute %{v => Dolphin.Engine.FakePlatform.task("slow", duration: :infinity, stop_ms: 14_000)}
   """
 
   defp event_lines(events), do: events |> File.read!() |> String.split("\n", trim: true) |> Enum.map(&:jiffy.decode(&1, [:return_maps]))

@@ -66,10 +66,10 @@ defmodule Mix.Tasks.Dolphin.RunTest do
       path =
         script(dir, "survey.exs", """
         use Dolphin.Script
-        alias Dolphin.Engine.TestPlatform
+        alias Dolphin.Engine.FakePlatform
 
         v = pick(type: :uav, timeout: seconds(5))
-        execute %{v => wait_for(battery(v) >= 0.9, then: during(seconds(2), TestPlatform.task("survey", duration: :infinity)))}
+        execute %{v => wait_for(battery(v) >= 0.9, then: during(seconds(2), FakePlatform.task("survey", duration: :infinity)))}
         release(v)
         message("Done!")
         """)
@@ -112,7 +112,7 @@ defmodule Mix.Tasks.Dolphin.RunTest do
         use Dolphin.Script
         v = pick()
         forever do
-          execute %{v => Dolphin.Engine.TestPlatform.task("patrol", duration: minutes(5))}
+          execute %{v => Dolphin.Engine.FakePlatform.task("patrol", duration: minutes(5))}
         end
         """)
 
@@ -129,7 +129,7 @@ defmodule Mix.Tasks.Dolphin.RunTest do
         use Dolphin.Script
         vs = pick(count: 2)
         forever do
-          execute %{vs => Dolphin.Engine.concurrent([Dolphin.Engine.TestPlatform.task("a", duration: :infinity), Dolphin.Engine.TestPlatform.task("b", duration: :infinity)])}
+          execute %{vs => Dolphin.Engine.concurrent([Dolphin.Engine.FakePlatform.task("a", duration: :infinity), Dolphin.Engine.FakePlatform.task("b", duration: :infinity)])}
         end
         """)
 
@@ -160,7 +160,7 @@ defmodule Mix.Tasks.Dolphin.RunTest do
         use Dolphin.Script
         v = pick()
 
-        execute %{v => Dolphin.Engine.TestPlatform.task("survey", duration: 10, result: {:fail, "motor failure"})}
+        execute %{v => Dolphin.Engine.FakePlatform.task("survey", duration: 10, result: {:fail, "motor failure"})}
         """)
 
       assert {1, _out, err} = main([path, "--fake", "1", "--quiet"])

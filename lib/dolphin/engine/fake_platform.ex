@@ -1,18 +1,18 @@
-defmodule Dolphin.Engine.TestPlatform do
+defmodule Dolphin.Engine.FakePlatform do
   @moduledoc """
   A platform whose tasks only pass time: each runs for a scripted duration and
   then completes or fails, reports scripted progress, and takes a scripted
   time to stop. For tests, benchmarks and dry runs of a script's logic
   (`mix dolphin.run --fake N`); a complete example of `Dolphin.Engine.Platform`.
 
-      survey = Dolphin.Engine.TestPlatform.task("survey", duration: 30_000, type: :uav, notify: self())
+      survey = Dolphin.Engine.FakePlatform.task("survey", duration: 30_000, type: :uav, notify: self())
       Dolphin.Engine.run(until(survey, battery(v) < 0.3) >>> idle(1000))
 
   Options of `task/2`: `:duration` (clock ms or `:infinity`, default 1000),
   `:result` (`:done` or `{:fail, reason}`), `:type`, `:payloads`, `:id`
   (requirements), `:progress` (`[{after_ms, map}]`), `:stop_ms` (clock time
   the stop takes, default 0), `:stop_result` (`:ok` or `{:error, reason}`),
-  `:notify` (a pid that gets `{:test_platform, event, info}` for
+  `:notify` (a pid that gets `{:fake_platform, event, info}` for
   `:started`, `:stopped`, `:finished` and `:abandoned` — the leaf died
   without stopping it — with `info` a map of `name`, `vehicle`, `task_id`,
   `pid`, `reason`, `at` (`System.monotonic_time/0` when it happened)).
@@ -29,7 +29,7 @@ defmodule Dolphin.Engine.TestPlatform do
 
   @type t :: %__MODULE__{}
 
-  @doc "A test platform task (see the module doc for options)."
+  @doc "A fake-platform task (see the module doc for options)."
   @spec task(String.t(), keyword()) :: t()
   def task(name, opts \\ []) when is_binary(name) do
     t = struct!(%__MODULE__{name: name}, opts)
@@ -44,7 +44,7 @@ defmodule Dolphin.Engine.TestPlatform do
   end
 
   defimpl Dolphin.Engine.Taskable do
-    def to_task(t), do: Dolphin.Engine.platform_task(Dolphin.Engine.TestPlatform, t)
+    def to_task(t), do: Dolphin.Engine.platform_task(Dolphin.Engine.FakePlatform, t)
   end
 
   @impl Dolphin.Engine.Platform
@@ -133,5 +133,5 @@ defmodule Dolphin.Engine.TestPlatform do
   defp notify(%{t: %{notify: nil}}, _event, _reason), do: :ok
 
   defp notify(s, event, reason),
-    do: send(s.t.notify, {:test_platform, event, %{name: s.t.name, vehicle: s.vehicle, task_id: s.task_id, pid: self(), reason: reason, at: System.monotonic_time()}})
+    do: send(s.t.notify, {:fake_platform, event, %{name: s.t.name, vehicle: s.vehicle, task_id: s.task_id, pid: self(), reason: reason, at: System.monotonic_time()}})
 end

@@ -1,4 +1,4 @@
-defmodule Dolphin.Fleet.TestSource do
+defmodule Dolphin.Fleet.FakeSource do
   @moduledoc """
   Fake vehicles for tests, benchmarks and dry runs (`mix dolphin.run --fake N`):
   a `Dolphin.Fleet.Source` whose vehicles' state the caller sets, publishing
@@ -6,11 +6,11 @@ defmodule Dolphin.Fleet.TestSource do
   `Dolphin.Vehicles.View` on each change), so conditions react to them
   exactly as they react to telemetry.
 
-      {:ok, _} = Dolphin.Fleet.TestSource.start_link(name: :fakes)
-      :ok = Dolphin.Fleet.TestSource.add(:fakes, 1, type: :uav, payloads: [:camera])
-      {:ok, fleet} = Dolphin.Fleet.start_link(name: :test_fleet, source: Dolphin.Fleet.TestSource.source(:fakes))
-      :ok = Dolphin.Fleet.TestSource.set(:fakes, 1, battery: 0.25)   # {:view, %Dolphin.Vehicles.View{battery: 0.25}}
-      :ok = Dolphin.Fleet.TestSource.lose(:fakes, 1)                 # {:view, ...connected?: false}, {:vehicle_lost, 1}
+      {:ok, _} = Dolphin.Fleet.FakeSource.start_link(name: :fakes)
+      :ok = Dolphin.Fleet.FakeSource.add(:fakes, 1, type: :uav, payloads: [:camera])
+      {:ok, fleet} = Dolphin.Fleet.start_link(name: :test_fleet, source: Dolphin.Fleet.FakeSource.source(:fakes))
+      :ok = Dolphin.Fleet.FakeSource.set(:fakes, 1, battery: 0.25)   # {:view, %Dolphin.Vehicles.View{battery: 0.25}}
+      :ok = Dolphin.Fleet.FakeSource.lose(:fakes, 1)                 # {:view, ...connected?: false}, {:vehicle_lost, 1}
 
   A vehicle's attributes are the fields of `Dolphin.Vehicles.View` (`type`
   defaults to `:uav`, `battery` to 1.0, `position` to a point near Porto,
