@@ -137,7 +137,12 @@ defmodule Dolphin.Vehicles do
   @spec subscribe_view(byte()) :: :ok
   def subscribe_view(sysid), do: PubSub.subscribe({:vehicle_view, sysid})
 
-  @doc "The state of a vehicle, plus `lost: boolean`."
+  @doc """
+  The whole state of a vehicle, as its process folds it
+  (`Dolphin.Vehicles.State`), by a call to that process: for debugging and
+  the operator's console. What the rest of the ground station reads is the
+  vehicle's view (`view/1`, `Dolphin.Vehicles.Views`), read without a call.
+  """
   @spec state(byte()) :: {:ok, Dolphin.Vehicles.State.t()} | {:error, :unknown_vehicle}
   def state(sysid) do
     case call_vehicle(sysid, :state) do

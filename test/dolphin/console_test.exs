@@ -121,7 +121,7 @@ defmodule Dolphin.ConsoleTest do
     assert out(io) =~ ~r/vehicle 1: mode MANUAL refused: .*no mode :manual on this vehicle/
 
     :ok = Sim.stop(2)
-    Wait.until(fn -> match?({:ok, %{lost: true}}, Vehicles.state(2)) end)
+    Wait.until(fn -> match?({:ok, %{connected?: false}}, Vehicles.view(2)) end)
     arm(2)
     assert out(io) =~ ~r/^vehicle 2 is lost \(nothing heard for .+\): nothing sent; check its link/
     watch(2)

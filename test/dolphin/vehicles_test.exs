@@ -93,7 +93,8 @@ defmodule Dolphin.VehiclesTest do
              UDPPeer.receive_until(peer, &match?(%M.Heartbeat{}, &1.message))
 
     {:ok, state} = Vehicles.state(11)
-    assert {state.mode, state.armed, state.autopilot, state.lost} == {:guided, true, :ardupilot, false}
+    assert {state.mode, state.armed, state.autopilot} == {:guided, true, :ardupilot}
+    assert {:ok, %{connected?: true}} = Vehicles.view(11)
   end
 
   test "state changes are published to subscribers", %{port: port, peer: peer} do
@@ -122,11 +123,11 @@ defmodule Dolphin.VehiclesTest do
     # 20 s of clock time at 200x: 100 ms of real time.
     Clock.set_speedup(200)
     assert_receive {:dolphin, :vehicles, {:vehicle_lost, 13}}, 10_000
-    assert {:ok, %{lost: true}} = Vehicles.state(13)
+    assert {:ok, %{connected?: false}} = Vehicles.view(13)
 
     UDPPeer.send_message(peer, port, copter(5), sysid: 13, seq: 1)
     assert_receive {:dolphin, :vehicles, {:vehicle_reconnected, 13}}, 10_000
-    assert {:ok, %{lost: false, mode: :loiter}} = Vehicles.state(13)
+    assert {:ok, %{connected?: true, mode: :loiter}} = Vehicles.view(13)
   end
 
   test "a restarted vehicle process is lost when silent, and keeps the timeout set for it", %{port: port, peer: peer} do
@@ -159,7 +160,7 @@ defmodule Dolphin.VehiclesTest do
     UDPPeer.send_message(peer, port, copter(), sysid: 17, seq: 1)
     Clock.sleep(4_500)
     true = :erlang.resume_process(vehicle)
-    assert {:ok, %{lost: false}} = Vehicles.state(17)
+    assert {:ok, %{connected?: true}} = Vehicles.view(17)
     true = :erlang.resume_process(link)
     Wait.until(fn -> match?({:ok, %{link: %{received: 2}}}, Vehicles.state(17)) end)
     refute_received {:dolphin, :vehicles, {:vehicle_lost, 17}}

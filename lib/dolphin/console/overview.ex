@@ -9,8 +9,8 @@ defmodule Dolphin.Console.Overview do
   alias Dolphin.Console.{EventLog, Format, Runs}
 
   @doc false
-  # Every known vehicle: %{id, state (Dolphin.Vehicles.State plus :lost, or
-  # nil for a vehicle of another source), paths (Dolphin.Vehicles.paths/1),
+  # Every known vehicle: %{id, state (Dolphin.Vehicles.State, or nil for a
+  # vehicle of another source), view (Dolphin.Vehicles.View, or nil), paths (Dolphin.Vehicles.paths/1),
   # fleet (%Dolphin.Vehicles.View{} or nil), picked_by, busy, task (the
   # platform task flying it, or nil)}.
   @spec vehicles() :: [map()]
@@ -28,9 +28,19 @@ defmodule Dolphin.Console.Overview do
 
       entry = fleet[id] || %{}
       paths = if state, do: Vehicles.paths(id), else: []
-      %{id: id, state: state, paths: paths, fleet: entry[:vehicle], picked_by: entry[:picked_by], busy: entry[:busy], task: leaves[id]}
+      view = if state, do: ok_or_nil(Vehicles.view(id))
+      %{id: id, state: state, view: view, paths: paths, fleet: entry[:vehicle], picked_by: entry[:picked_by], busy: entry[:busy], task: leaves[id]}
     end
   end
+
+  # Silent for longer than its timeout, as its view (or the fleet's, for a
+  # vehicle of another source) says.
+  defp lost?(%{view: %{connected?: connected?}}), do: not connected?
+  defp lost?(%{fleet: %{connected?: connected?}}), do: not connected?
+  defp lost?(_v), do: false
+
+  defp ok_or_nil({:ok, value}), do: value
+  defp ok_or_nil(_), do: nil
 
   @doc false
   # What Dolphin.Console.Arguments.vehicle/4 needs, by id.
@@ -38,7 +48,7 @@ defmodule Dolphin.Console.Overview do
   def known(vehicles \\ vehicles(), now_ms \\ Clock.now_ms()) do
     Map.new(vehicles, fn v ->
       silent = if v.state && v.state.link.last_seen_ms, do: now_ms - v.state.link.last_seen_ms
-      lost? = if v.state, do: Map.get(v.state, :lost) == true, else: v.fleet != nil and not v.fleet.connected?
+      lost? = lost?(v)
       {v.id, %{mavlink?: v.state != nil, lost?: lost?, silent_ms: silent, task: v.task}}
     end)
   end
@@ -64,7 +74,7 @@ defmodule Dolphin.Console.Overview do
       alt: pos[:relative_alt],
       link: Map.merge(s.link, Dolphin.Vehicles.State.link_figures(s)),
       seen_ms: s.link.last_seen_ms && now_ms - s.link.last_seen_ms,
-      lost?: Map.get(s, :lost) == true,
+      lost?: lost?(v),
       activity: activity(v, console_runs),
       paths: for(path <- Map.get(v, :paths, []), do: Map.put(path, :seen_ms, now_ms - path.last_heard_ms))
     }

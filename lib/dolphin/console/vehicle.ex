@@ -17,10 +17,10 @@ defmodule Dolphin.Console.Vehicle do
 
   @spec arm(Console.vehicle_id(), keyword()) :: Console.printed()
   def arm(id, opts \\ []) do
-    command(id, :control, opts, [:force, :wait], fn state, opts ->
+    command(id, :control, opts, [:force, :wait], fn view, opts ->
       cond do
-        state.armed -> say("vehicle #{id} is armed already")
-        state.mode == :auto -> say("vehicle #{id} is in AUTO, where ArduCopter does not arm: mode(#{id}, :guided) first")
+        view.armed? -> say("vehicle #{id} is armed already")
+        view.mode == :auto -> say("vehicle #{id} is in AUTO, where ArduCopter does not arm: mode(#{id}, :guided) first")
         true -> with_wait(id, opts, &finish(id, Manoeuvres.arm_when_ready(id, within: &1, report: reporter(id)), nil))
       end
     end)
@@ -68,10 +68,10 @@ defmodule Dolphin.Console.Vehicle do
 
   @spec disarm(Console.vehicle_id(), keyword()) :: Console.printed()
   def disarm(id, opts \\ []) do
-    command(id, :control, opts, [:force], fn state, _opts ->
+    command(id, :control, opts, [:force], fn view, _opts ->
       cond do
-        not state.armed -> say("vehicle #{id} is disarmed already")
-        Manoeuvres.in_air?(state) -> say("vehicle #{id} is in the air: disarming would make it fall; land(#{id}) lands it and it disarms on the ground")
+        not view.armed? -> say("vehicle #{id} is disarmed already")
+        Manoeuvres.in_air?(view) -> say("vehicle #{id} is in the air: disarming would make it fall; land(#{id}) lands it and it disarms on the ground")
         true -> result(id, "disarm", fn -> Vehicles.disarm(id) end)
       end
     end)
@@ -81,8 +81,8 @@ defmodule Dolphin.Console.Vehicle do
   def mode(id, mode, opts \\ []) do
     case Arguments.mode(mode) do
       {:ok, mode} ->
-        command(id, :control, opts, [:force], fn state, opts ->
-          case Arguments.pilot_mode(mode, Manoeuvres.in_air?(state), opts[:force] == true) do
+        command(id, :control, opts, [:force], fn view, opts ->
+          case Arguments.pilot_mode(mode, Manoeuvres.in_air?(view), opts[:force] == true) do
             :ok -> result(id, "mode #{Format.mode(mode)}", fn -> Vehicles.set_mode(id, mode) end)
             {:error, why} -> say("vehicle #{id}: " <> why_text(why))
           end
@@ -98,9 +98,9 @@ defmodule Dolphin.Console.Vehicle do
   def takeoff(id, altitude, opts \\ []) do
     case Arguments.altitude(altitude) do
       {:ok, alt} ->
-        command(id, :control, opts, [:force, :wait], fn state, opts ->
-          if Manoeuvres.in_air?(state) do
-            say("vehicle #{id} is flying already (#{Format.metres(state.position[:relative_alt])} above home): goto(#{id}, lat, lon, alt) moves it")
+        command(id, :control, opts, [:force, :wait], fn view, opts ->
+          if Manoeuvres.in_air?(view) do
+            say("vehicle #{id} is flying already (#{Format.metres(view.relative_altitude)} above home): goto(#{id}, lat, lon, alt) moves it")
           else
             with_wait(id, opts, &finish(id, Manoeuvres.take_off(id, alt, within: &1, report: reporter(id, alt)), alt))
           end
@@ -116,10 +116,10 @@ defmodule Dolphin.Console.Vehicle do
   def goto(id, lat, lon, altitude, opts \\ []) do
     case Arguments.position(lat, lon, altitude) do
       {:ok, point} ->
-        command(id, :control, opts, [:force, :amsl], fn state, opts ->
+        command(id, :control, opts, [:force, :amsl], fn view, opts ->
           ref = if opts[:amsl], do: "AMSL", else: "above home"
 
-          if Manoeuvres.in_air?(state) do
+          if Manoeuvres.in_air?(view) do
             result(id, "go to #{Format.position(lat, lon)} at #{Format.metres(altitude)} #{ref}", fn -> Manoeuvres.go_to(id, point, amsl: opts[:amsl]) end)
           else
             say("vehicle #{id} is not in the air: takeoff(#{id}, altitude) first")
@@ -134,13 +134,13 @@ defmodule Dolphin.Console.Vehicle do
 
   @spec hold(Console.vehicle_id(), keyword()) :: Console.printed()
   def hold(id, opts \\ []) do
-    command(id, :control, opts, [:force], fn state, _opts ->
+    command(id, :control, opts, [:force], fn view, _opts ->
       case Manoeuvres.hold(id) do
         :ok ->
           cond do
-            not state.armed -> say("vehicle #{id} is disarmed: nothing to hold")
-            state.mode in [:brake, :guided] -> say("vehicle #{id} holds already (#{Format.mode(state.mode)})")
-            true -> say("vehicle #{id}: holding position (was #{Format.mode(state.mode)})")
+            not view.armed? -> say("vehicle #{id} is disarmed: nothing to hold")
+            view.mode in [:brake, :guided] -> say("vehicle #{id} holds already (#{Format.mode(view.mode)})")
+            true -> say("vehicle #{id}: holding position (was #{Format.mode(view.mode)})")
           end
 
         {:error, e} ->
@@ -159,8 +159,8 @@ defmodule Dolphin.Console.Vehicle do
   def upload(id, mission, opts \\ []) do
     case load_mission(mission) do
       {:ok, mission} ->
-        command(id, :control, opts, [:force], fn state, _opts ->
-          home = mission.home || (state.home && Dolphin.Geo.location(state.home.lat, state.home.lon, state.home.alt))
+        command(id, :control, opts, [:force], fn view, _opts ->
+          home = mission.home || view.home
 
           case items(mission, home) do
             {:ok, items} ->
@@ -242,7 +242,7 @@ defmodule Dolphin.Console.Vehicle do
 
   @spec watch(Console.vehicle_id(), keyword()) :: Console.printed()
   def watch(id, opts \\ []) do
-    command(id, :link, opts, [:every, :timeout, :keys], fn state, opts ->
+    command(id, :link, opts, [:every, :timeout, :keys], fn _view, opts ->
       every = Keyword.get(opts, :every, 1_000)
       timeout = Keyword.get(opts, :timeout, 60_000)
 
@@ -252,7 +252,7 @@ defmodule Dolphin.Console.Vehicle do
         reader = if Keyword.get(opts, :keys, true), do: key_reader()
         say("watching vehicle #{id} (#{if reader, do: "Enter stops, ", else: ""}stops by itself after #{Format.duration(timeout)})")
         start = System.monotonic_time(:millisecond)
-        why = tick(id, state.status_texts, reader, start, start + timeout, every)
+        why = tick(id, Vehicles.status_texts(id), reader, start, start + timeout, every)
         if reader, do: Process.exit(reader, :kill)
         say("watch ended (#{why})")
       end
@@ -296,10 +296,9 @@ defmodule Dolphin.Console.Vehicle do
 
   @spec messages(Console.vehicle_id()) :: Console.printed()
   def messages(id) do
-    command(id, :any, [], [], fn state, _ ->
-      # Dolphin.Vehicles.state/1 adds :lost to the state struct.
-      if Map.get(state, :lost), do: say("vehicle #{id} is lost; its last messages:")
-      say(Format.messages(state.status_texts))
+    command(id, :any, [], [], fn view, _ ->
+      unless view.connected?, do: say("vehicle #{id} is lost; its last messages:")
+      say(Format.messages(Vehicles.status_texts(id)))
     end)
   end
 
@@ -329,14 +328,14 @@ defmodule Dolphin.Console.Vehicle do
   # --- the common path of vehicle helpers -------------------------------------------
 
   # Checks the id and the options, stops the vehicle's task if told to force,
-  # then runs `fun` with the vehicle's state.
+  # then runs `fun` with the vehicle's view (Dolphin.Vehicles.View).
   defp command(id, needs, opts, allowed, fun) do
     with {:ok, opts} <- Arguments.options(opts, allowed),
          vehicles = Overview.vehicles(),
          {:ok, verdict} <- Arguments.vehicle(id, Overview.known(vehicles), needs, opts[:force] == true),
          :ok <- stop_first(id, verdict),
-         {:ok, state} <- Vehicles.state(id) |> gone(id) do
-      fun.(state, opts)
+         {:ok, view} <- Vehicles.view(id) |> gone(id) do
+      fun.(view, opts)
     else
       {:error, why} -> say(why_text(why))
     end

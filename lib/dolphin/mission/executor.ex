@@ -27,7 +27,7 @@ defmodule Dolphin.Mission.Executor do
 
   @behaviour :gen_statem
 
-  alias Dolphin.{Clock, Mission, PubSub, Events, Vehicles}
+  alias Dolphin.{Clock, Mission, Events, Vehicles}
   alias Dolphin.Engine.Platform
   alias Dolphin.Mission.Executor.Flight
   alias Dolphin.Vehicles.Manoeuvres
@@ -64,7 +64,9 @@ defmodule Dolphin.Mission.Executor do
   def init({%Mission{} = mission, vehicle, opts}) do
     # Linked to the engine's leaf: its exit means it died without stopping us.
     Process.flag(:trap_exit, true)
-    PubSub.subscribe({:vehicle, vehicle})
+    # Its views: every change of what the vehicle reports, in order, read
+    # from the message itself (no call to the vehicle's process).
+    Vehicles.subscribe_view(vehicle)
 
     data = %{
       mission: mission,
@@ -126,7 +128,7 @@ defmodule Dolphin.Mission.Executor do
   # --- :hold: booted, and not flying another mission -----------------------------
 
   def handle_event(:state_timeout, :look, :hold, data) do
-    case Vehicles.state(data.vehicle) do
+    case Vehicles.view(data.vehicle) do
       {:ok, st} ->
         cond do
           not Dolphin.Vehicles.State.booting?(st) -> look(data, st)
@@ -158,18 +160,19 @@ defmodule Dolphin.Mission.Executor do
 
   # --- :start and :flying: the vehicle's state ----------------------------------
 
-  def handle_event(:info, {:dolphin, {:vehicle, id}, {:state, id, changes}}, state, data) when state in [:start, :flying] do
-    data = %{data | flight: Flight.changes(data.flight, changes)}
-    if state == :flying, do: follow(data), else: {:keep_state, observe(data)}
+  def handle_event(:info, {:dolphin, {:vehicle_view, id}, {:view, st}}, state, %{vehicle: id} = data) when state in [:start, :flying] do
+    data = %{data | flight: Flight.reported(data.flight, st)}
+    # While MISSION_START's answer is awaited, what the vehicle shows is kept for the judging.
+    if state == :flying, do: judge(data, st), else: {:keep_state, %{data | flight: Flight.observe(data.flight, st)}}
   end
 
   def handle_event(:info, {:dolphin, _topic, _event}, _state, _data), do: :keep_state_and_data
 
   def handle_event({:timeout, :grounded}, :grounded, :flying, data) do
-    case Vehicles.state(data.vehicle) do
+    case Vehicles.view(data.vehicle) do
       {:ok, st} ->
         if still_grounded?(data, st),
-          do: fail(:flying, data, grounded(data, st), vehicle_fault?: true, texts: texts(data, st)),
+          do: fail(:flying, data, grounded(data, st), vehicle_fault?: true, texts: texts(data)),
           else: judge(%{data | grounded: nil}, st)
 
       {:error, _} ->
@@ -178,7 +181,7 @@ defmodule Dolphin.Mission.Executor do
   end
 
   def handle_event(:state_timeout, :check_landed, :flying, data) do
-    case Vehicles.state(data.vehicle) do
+    case Vehicles.view(data.vehicle) do
       {:ok, st} ->
         case Flight.landed(data.flight, st) do
           :done -> done(data)
@@ -238,7 +241,7 @@ defmodule Dolphin.Mission.Executor do
 
   # The vehicle flies another mission: it holds first (ArduCopter refuses to
   # clear a mission that runs in AUTO).
-  defp look(data, %{armed: true, mode: :auto} = st) when st.landed != :on_ground,
+  defp look(data, %{armed?: true, mode: :auto} = st) when st.landed != :on_ground,
     do: exchange(data, fn -> Manoeuvres.hold(data.vehicle) end)
 
   defp look(data, st) do
@@ -304,7 +307,7 @@ defmodule Dolphin.Mission.Executor do
   # and lands is already done when the vehicle stands at its landing point.
   defp on_the_ground(data, st) do
     takes_off? = Enum.any?(data.items, &(&1.command == @takeoff))
-    grounded? = not st.armed and st.landed in [:on_ground, nil]
+    grounded? = not st.armed? and st.landed in [:on_ground, nil]
 
     cond do
       takes_off? or not grounded? -> :ok
@@ -327,8 +330,8 @@ defmodule Dolphin.Mission.Executor do
 
   defp items(%{mission: mission, vehicle: vehicle}) do
     home =
-      case {mission.home, Vehicles.state(vehicle)} do
-        {nil, {:ok, %{home: %{lat: lat, lon: lon, alt: alt}}}} -> [home: Dolphin.Geo.location(lat, lon, alt)]
+      case {mission.home, Vehicles.view(vehicle)} do
+        {nil, {:ok, %{home: %Dolphin.Geo.Location{} = home}}} -> [home: home]
         _ -> []
       end
 
@@ -340,18 +343,10 @@ defmodule Dolphin.Mission.Executor do
   # --- :flying ----------------------------------------------------------------
 
   defp follow(data) do
-    case Vehicles.state(data.vehicle) do
+    case Vehicles.view(data.vehicle) do
       {:ok, st} -> judge(data, st)
       # Lost: the engine stops us with {:vehicle_lost, id}.
       {:error, _} -> {:keep_state, data}
-    end
-  end
-
-  # While MISSION_START's answer is awaited, what the vehicle shows is kept for the judging.
-  defp observe(data) do
-    case Vehicles.state(data.vehicle) do
-      {:ok, st} -> %{data | flight: Flight.observe(data.flight, st)}
-      {:error, _} -> data
     end
   end
 
@@ -369,7 +364,7 @@ defmodule Dolphin.Mission.Executor do
 
       # Left to what took it (a failsafe's RTL or LAND, the pilot): never overridden.
       {:left, cause} ->
-        fail(:flying, data, cause, vehicle_fault?: true, texts: texts(data, st), hold: false)
+        fail(:flying, data, cause, vehicle_fault?: true, texts: texts(data), hold: false)
 
       # A landing mission's disarm comes before its last report (ArduPilot
       # reports the final item after "Disarming motors"): the reports are
@@ -394,8 +389,8 @@ defmodule Dolphin.Mission.Executor do
     end
   end
 
-  defp on_ground_armed?(%{armed: true, landed: :on_ground}), do: true
-  defp on_ground_armed?(%{armed: true, landed: landed, position: %{relative_alt: alt}}) when landed in [nil, :takeoff] and is_number(alt), do: alt < @ground_m
+  defp on_ground_armed?(%{armed?: true, landed: :on_ground}), do: true
+  defp on_ground_armed?(%{armed?: true, landed: landed, relative_altitude: alt}) when landed in [nil, :takeoff] and is_number(alt), do: alt < @ground_m
   defp on_ground_armed?(_st), do: false
 
   # Still armed on the ground, and where it was then (one moving, low over
@@ -416,7 +411,8 @@ defmodule Dolphin.Mission.Executor do
   end
 
   # What the vehicle said since the mission started.
-  defp texts(data, st), do: Dolphin.Vehicles.State.texts_since(data.flight_texts, st.status_texts)
+  # (A call to the vehicle's process, once, as the mission fails: the views carry no texts.)
+  defp texts(data), do: Dolphin.Vehicles.State.texts_since(data.flight_texts, Vehicles.status_texts(data.vehicle))
 
   # --- the end ----------------------------------------------------------------
 

@@ -127,15 +127,15 @@ defmodule Dolphin.Mission.Platform do
   defp with_home(%Mission{home: %Dolphin.Geo.Location{}} = mission, _from), do: {:ok, mission}
 
   defp with_home(mission, from) do
-    case Vehicles.state(from) do
-      {:ok, %{home: %{lat: lat, lon: lon, alt: alt}}} -> {:ok, Mission.put_home(mission, Dolphin.Geo.location(lat, lon, alt))}
+    case Vehicles.view(from) do
+      {:ok, %{home: %Dolphin.Geo.Location{} = home}} -> {:ok, Mission.put_home(mission, home)}
       _ -> {:error, %Dolphin.Mission.Failure{mission: mission.name, vehicle: from, step: :resume, cause: {:home_unknown, from}}}
     end
   end
 
   defp standing(mission, vehicle) do
-    case Vehicles.state(vehicle) do
-      {:ok, %{position: %{lat: lat, lon: lon, alt: alt}}} -> {:ok, Dolphin.Geo.location(lat, lon, alt)}
+    case Vehicles.view(vehicle) do
+      {:ok, %{position: %Dolphin.Geo.Location{} = at}} -> {:ok, at}
       _ -> {:error, %Dolphin.Mission.Failure{mission: mission.name, vehicle: vehicle, step: :resume, cause: {:position_unknown, vehicle}}}
     end
   end

@@ -33,8 +33,8 @@ defmodule Dolphin.SITL.Charger do
   # The charge is kept here as a float (the autopilot reports whole percents);
   # nil while the vehicle is not charging.
   defp top_up(id, charging, gained) do
-    case Vehicles.state(id) do
-      {:ok, %{armed: false, landed: landed, battery: battery}} when landed in [:on_ground, nil] and is_number(battery) and battery < 1.0 ->
+    case Vehicles.view(id) do
+      {:ok, %{armed?: false, landed: landed, battery: battery}} when landed in [:on_ground, nil] and is_number(battery) and battery < 1.0 ->
         level = min(100.0, max(charging || battery * 100, battery * 100) + gained)
         # A command that is not answered (a busy link) is tried again at the next top-up.
         _ = Vehicles.command(id, :mav_cmd_battery_reset, [1, Float.round(level, 1)], attempts: 1)

@@ -50,15 +50,14 @@ defmodule Dolphin.Vehicles.Manoeuvres do
   @type result :: :ok | {:error, ManoeuvreError.t()}
 
   @doc """
-  Whether a vehicle's state (`Dolphin.Vehicles.State`) says it is in the air:
+  Whether a vehicle's view (`Dolphin.Vehicles.View`) says it is in the air:
   armed, and its EXTENDED_SYS_STATE says flying (taking off, in the air,
   landing) or, without one, it is more than a metre above home.
   """
-  @spec in_air?(map()) :: boolean()
-  def in_air?(state) do
-    state.armed and
-      (state.landed in [:in_air, :takeoff, :landing] or
-         (state.landed == nil and is_map(state.position) and (state.position[:relative_alt] || 0) > 1))
+  @spec in_air?(Dolphin.Vehicles.View.t()) :: boolean()
+  def in_air?(view) do
+    view.armed? and
+      (view.landed in [:in_air, :takeoff, :landing] or (view.landed == nil and (view.relative_altitude || 0) > 1))
   end
 
   @doc """
@@ -72,10 +71,10 @@ defmodule Dolphin.Vehicles.Manoeuvres do
   def hold(vehicle, opts \\ []) do
     fresh? = Keyword.get(opts, :fresh, false)
 
-    case Vehicles.state(vehicle) do
+    case Vehicles.view(vehicle) do
       {:error, :unknown_vehicle} -> :ok
       {:ok, %{mode: mode}} when mode in @landing_modes -> :ok
-      {:ok, %{armed: false}} when not fresh? -> :ok
+      {:ok, %{armed?: false}} when not fresh? -> :ok
       {:ok, %{mode: mode}} when mode in [:brake, :guided] and not fresh? -> :ok
       {:ok, %{landed: :on_ground}} when not fresh? -> disarm_or_brake(vehicle)
       {:ok, _} -> brake(vehicle)
@@ -114,8 +113,8 @@ defmodule Dolphin.Vehicles.Manoeuvres do
   end
 
   defp arm(vehicle, a) do
-    case Vehicles.state(vehicle) do
-      {:ok, %{armed: true}} ->
+    case Vehicles.view(vehicle) do
+      {:ok, %{armed?: true}} ->
         :ok
 
       _ ->
@@ -152,7 +151,7 @@ defmodule Dolphin.Vehicles.Manoeuvres do
   """
   @spec guided(byte(), keyword()) :: result()
   def guided(vehicle, opts \\ []) do
-    case Vehicles.state(vehicle) do
+    case Vehicles.view(vehicle) do
       {:ok, %{mode: :guided}} -> :ok
       _ -> command(vehicle, "switching to GUIDED", fn -> Vehicles.set_mode(vehicle, :guided) end) |> reported(:guided, opts)
     end
@@ -165,7 +164,7 @@ defmodule Dolphin.Vehicles.Manoeuvres do
   """
   @spec take_off(byte(), number(), keyword()) :: result()
   def take_off(vehicle, altitude, opts \\ []) do
-    armed? = match?({:ok, %{armed: true}}, Vehicles.state(vehicle))
+    armed? = match?({:ok, %{armed?: true}}, Vehicles.view(vehicle))
 
     with :ok <- guided(vehicle, opts),
          :ok <- if(armed?, do: :ok, else: arm_when_ready(vehicle, opts)) do

@@ -131,7 +131,7 @@ defmodule Dolphin.Vehicles.Vehicle do
   end
 
   @impl true
-  def handle_call(:state, _from, s), do: {:reply, %{s.state | seqs: %{}} |> Map.put(:lost, s.lost), s}
+  def handle_call(:state, _from, s), do: {:reply, %{s.state | seqs: %{}}, s}
   def handle_call(:view, _from, s), do: {:reply, s.view || view(s), s}
 
   def handle_call(:paths, _from, s), do: {:reply, Paths.list(s.paths), s}

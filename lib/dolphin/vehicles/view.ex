@@ -23,6 +23,9 @@ defmodule Dolphin.Vehicles.View do
   | `armed?`, `connected?` | booleans |
   | `mission_progress` | `{reached, total}`: last mission item reached (0 before the first) and items in the mission, since the mission was last uploaded; `nil` until the vehicle reports its mission |
   | `landed` | `:on_ground`, `:in_air`, `:takeoff`, `:landing` or `nil` |
+  | `mission` | the mission on the vehicle as it reports it: `%{current, total, state, reached}` (`state` `:active`, `:complete`, ... from MISSION_CURRENT; all `nil` until reported, and again once a new mission is uploaded) |
+  | `home` | `Dolphin.Geo.Location` of its home, or `nil` until reported |
+  | `system_status` | MAV_STATE number (0 UNINIT, 1 BOOT, ... 4 ACTIVE), `nil` until reported |
   | `link` | `%{rtt_ms, loss_in, loss_out}`: round trip and loss each way, `nil`s until measured (`Dolphin.Vehicles.LinkQuality`) |
   """
 
@@ -37,6 +40,9 @@ defmodule Dolphin.Vehicles.View do
             connected?: true,
             mission_progress: nil,
             landed: nil,
+            mission: %{current: nil, total: nil, state: nil, reached: nil},
+            home: nil,
+            system_status: nil,
             link: %{rtt_ms: nil, loss_in: nil, loss_out: nil}
 
   @type class :: :uav | :ugv | :usv | :uuv | :other
@@ -52,6 +58,9 @@ defmodule Dolphin.Vehicles.View do
           connected?: boolean(),
           mission_progress: {non_neg_integer(), non_neg_integer()} | nil,
           landed: atom() | nil,
+          mission: %{current: non_neg_integer() | nil, total: non_neg_integer() | nil, state: atom() | nil, reached: non_neg_integer() | nil},
+          home: Dolphin.Geo.Location.t() | nil,
+          system_status: non_neg_integer() | nil,
           link: %{rtt_ms: non_neg_integer() | nil, loss_in: float() | nil, loss_out: float() | nil}
         }
 
@@ -103,6 +112,9 @@ defmodule Dolphin.Vehicles.View do
       connected?: not lost,
       mission_progress: progress(state.mission),
       landed: state.landed,
+      mission: state.mission,
+      home: state.home && Dolphin.Geo.Location.new(state.home.lat, state.home.lon, state.home.alt),
+      system_status: state.system_status,
       link: Map.take(Dolphin.Vehicles.State.link_figures(state), [:rtt_ms, :loss_in, :loss_out])
     }
   end

@@ -13,13 +13,14 @@ defmodule Dolphin.Vehicles.ManoeuvresTest do
 
   describe "in_air?/1" do
     test "armed, and flying by EXTENDED_SYS_STATE or, without it, more than a metre above home" do
-      assert Manoeuvres.in_air?(%{armed: true, landed: :in_air, position: nil})
-      assert Manoeuvres.in_air?(%{armed: true, landed: :takeoff, position: nil})
-      refute Manoeuvres.in_air?(%{armed: false, landed: :in_air, position: nil})
-      refute Manoeuvres.in_air?(%{armed: true, landed: :on_ground, position: %{relative_alt: 30}})
-      assert Manoeuvres.in_air?(%{armed: true, landed: nil, position: %{relative_alt: 1.5}})
-      refute Manoeuvres.in_air?(%{armed: true, landed: nil, position: %{relative_alt: 0.4}})
-      refute Manoeuvres.in_air?(%{armed: true, landed: nil, position: nil})
+      view = fn fields -> struct!(Dolphin.Vehicles.View, fields) end
+      assert Manoeuvres.in_air?(view.(armed?: true, landed: :in_air))
+      assert Manoeuvres.in_air?(view.(armed?: true, landed: :takeoff))
+      refute Manoeuvres.in_air?(view.(armed?: false, landed: :in_air))
+      refute Manoeuvres.in_air?(view.(armed?: true, landed: :on_ground, relative_altitude: 30.0))
+      assert Manoeuvres.in_air?(view.(armed?: true, landed: nil, relative_altitude: 1.5))
+      refute Manoeuvres.in_air?(view.(armed?: true, landed: nil, relative_altitude: 0.4))
+      refute Manoeuvres.in_air?(view.(armed?: true, landed: nil))
     end
   end
 
@@ -48,8 +49,8 @@ defmodule Dolphin.Vehicles.ManoeuvresTest do
       assert_received {:report, {:accepted, :take_off}}
 
       Wait.until(fn -> match?({:ok, %{position: %{relative_alt: a}}} when a > 9.5, Vehicles.state(1)) end)
-      {:ok, st} = Vehicles.state(1)
-      assert Manoeuvres.in_air?(st)
+      {:ok, view} = Vehicles.view(1)
+      assert Manoeuvres.in_air?(view)
 
       {:ok, %{home: h}} = Vehicles.state(1)
       assert :ok = Manoeuvres.go_to(1, {h.lat + 0.0002, h.lon, 15})

@@ -1,7 +1,7 @@
 defmodule Dolphin.Mission.Executor.Flight do
   @moduledoc false
   # The executor's judgement of a mission in flight, pure: from the vehicle's
-  # state (Dolphin.Vehicles.State) to progress and an end (done, or the
+  # views (Dolphin.Vehicles.View), each in turn, to progress and an end (done, or the
   # vehicle left the mission), with what it has seen of this flight.
 
   defstruct [:ending, active: false, armed_seen: false, auto_seen: false, landing_check: false, on_land_item: false, progress: nil]
@@ -28,17 +28,18 @@ defmodule Dolphin.Mission.Executor.Flight do
   def new(ending), do: %__MODULE__{ending: ending}
 
   @doc false
-  # MISSION_CURRENT's ACTIVE may come and go between two reads of the state (a
-  # mission that completes at once): the changes carried by the events count.
-  @spec changes(t(), [{atom(), term()}]) :: t()
-  def changes(f, changes) do
-    if Enum.any?(changes, &match?({:mission, %{state: :active}}, &1)), do: %{f | active: true}, else: f
-  end
+  # MISSION_CURRENT's ACTIVE may come before the heartbeat shows AUTO and be
+  # gone by the next view (a mission that completes at once): a view that
+  # shows this mission ACTIVE counts, whatever its mode (the mission state is
+  # reset by the upload, so an ACTIVE after it is this mission's).
+  @spec reported(t(), Dolphin.Vehicles.View.t()) :: t()
+  def reported(f, %{mission: %{state: :active}}), do: %{f | active: true}
+  def reported(f, _view), do: f
 
   @doc false
   # The verdict on a state of the vehicle, and the progress to report (nil:
   # none new).
-  @spec judge(t(), map()) :: {verdict(), map() | nil, t()}
+  @spec judge(t(), Dolphin.Vehicles.View.t()) :: {verdict(), map() | nil, t()}
   def judge(f, st) do
     mission = st.mission
     f = observe(f, st)
@@ -57,10 +58,10 @@ defmodule Dolphin.Mission.Executor.Flight do
       f.auto_seen and st.mode != :auto ->
         {{:left, {:left_auto, mode_name(st.mode)}}, progress, f}
 
-      f.armed_seen and not st.armed and not match?({:landing, _}, f.ending) ->
+      f.armed_seen and not st.armed? and not match?({:landing, _}, f.ending) ->
         {{:left, :disarmed}, progress, f}
 
-      f.armed_seen and not st.armed and not f.landing_check ->
+      f.armed_seen and not st.armed? and not f.landing_check ->
         {:check_landed, progress, %{f | landing_check: true}}
 
       true ->
@@ -72,7 +73,7 @@ defmodule Dolphin.Mission.Executor.Flight do
   # What a state of the vehicle shows of the flight, judged or not: a short
   # mission may be flown, even landed, while MISSION_START's answer is still
   # on its way, and what was seen then counts.
-  @spec observe(t(), map()) :: t()
+  @spec observe(t(), Dolphin.Vehicles.View.t()) :: t()
   def observe(f, st) do
     mission = st.mission
     # The mission counts as running once the vehicle reports it active in AUTO,
@@ -84,13 +85,13 @@ defmodule Dolphin.Mission.Executor.Flight do
     # Reports travel separately (mode and armed bit with the 1 Hz heartbeat,
     # the mission state with MISSION_CURRENT): leaving AUTO or disarming counts
     # only once the heartbeat has shown AUTO, or armed, during this mission.
-    f = %{f | active: active, armed_seen: f.armed_seen or (active and st.armed), auto_seen: f.auto_seen or (active and st.mode == :auto)}
-    %{f | on_land_item: f.on_land_item or (active and st.armed and on_land_item?(f, mission))}
+    f = %{f | active: active, armed_seen: f.armed_seen or (active and st.armed?), auto_seen: f.auto_seen or (active and st.mode == :auto)}
+    %{f | on_land_item: f.on_land_item or (active and st.armed? and on_land_item?(f, mission))}
   end
 
   @doc false
   # A landing mission's vehicle disarmed some time ago: its reports have come.
-  @spec landed(t(), map()) :: :done | {:failed, Dolphin.Mission.Failure.cause()}
+  @spec landed(t(), Dolphin.Vehicles.View.t()) :: :done | {:failed, Dolphin.Mission.Failure.cause()}
   def landed(f, st) do
     if complete?(f, st),
       do: :done,
@@ -105,7 +106,7 @@ defmodule Dolphin.Mission.Executor.Flight do
   # the mission ACTIVE (docs/ardupilot.md), so landed and disarmed at the last
   # item is the end.
   defp complete?(%{ending: {:landing, seq}} = f, st),
-    do: f.armed_seen and not st.armed and (st.mission.state == :complete or st.mission.reached == seq or landed_at_end?(f, st))
+    do: f.armed_seen and not st.armed? and (st.mission.state == :complete or st.mission.reached == seq or landed_at_end?(f, st))
 
   defp complete?(%{ending: {:reached, seq}}, st), do: st.mission.state == :complete or (st.mission.state == nil and st.mission.reached == seq)
   defp complete?(_forever, _st), do: false

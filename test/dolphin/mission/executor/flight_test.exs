@@ -4,9 +4,11 @@ defmodule Dolphin.Mission.Executor.FlightTest do
 
   alias Dolphin.Mission.Executor.Flight
 
+  # A view of the vehicle (`armed` for its `armed?`).
   defp st(fields) do
     mission = Map.merge(%{state: nil, current: nil, reached: nil, total: 3}, Map.get(fields, :mission, %{}))
-    Map.merge(%{mode: :guided, armed: false, landed: :on_ground, status_texts: []}, Map.put(fields, :mission, mission))
+    {armed, fields} = Map.pop(fields, :armed, false)
+    struct!(Dolphin.Vehicles.View, Map.merge(%{mode: :guided, landed: :on_ground}, fields) |> Map.merge(%{mission: mission, armed?: armed}))
   end
 
   defp run(flight, states), do: Enum.map_reduce(states, flight, fn s, f ->
@@ -63,7 +65,7 @@ defmodule Dolphin.Mission.Executor.FlightTest do
 
   test "leaving AUTO or disarming counts only once the heartbeat showed AUTO, or armed, during this mission" do
     # ACTIVE reported before the heartbeat shows AUTO and armed: not a departure.
-    early = Flight.changes(Flight.new({:reached, 3}), [{:mission, %{state: :active}}])
+    early = Flight.reported(Flight.new({:reached, 3}), st(%{mode: :guided, mission: %{state: :active}}))
     assert {:flying, _, _} = Flight.judge(early, st(%{mode: :guided, armed: false, mission: %{state: :active, current: 1}}))
 
     flying = st(%{mode: :auto, armed: true, landed: :in_air, mission: %{state: :active, current: 1}})
@@ -71,11 +73,11 @@ defmodule Dolphin.Mission.Executor.FlightTest do
     assert {{:left, {:left_auto, "RTL"}}, _, _} = Flight.judge(flight, %{flying | mode: :rtl})
     assert {{:left, {:left_auto, "mode 99"} = cause}, _, _} = Flight.judge(flight, %{flying | mode: {:custom, 99}})
     assert Exception.message(%Dolphin.Mission.Failure{cause: cause}) == "the vehicle left AUTO for mode 99 before the mission ended"
-    assert {{:left, :disarmed}, _, _} = Flight.judge(flight, %{flying | armed: false})
+    assert {{:left, :disarmed}, _, _} = Flight.judge(flight, %{flying | armed?: false})
   end
 
-  test "MISSION_CURRENT's ACTIVE carried by the events counts, even when the state read later no longer shows it" do
-    flight = Flight.changes(Flight.new({:reached, 3}), [{:mission, %{state: :active}}])
+  test "MISSION_CURRENT's ACTIVE in a view counts, before the heartbeat shows AUTO and after a later view no longer shows it" do
+    flight = Flight.reported(Flight.new({:reached, 3}), st(%{mode: :guided, mission: %{state: :active}}))
     assert {:done, _, _} = Flight.judge(flight, st(%{mode: :auto, armed: true, mission: %{state: :complete, current: 3}}))
     assert {:flying, nil, _} = Flight.judge(Flight.new({:reached, 3}), st(%{mode: :guided, armed: true, mission: %{state: :complete, current: 3}}))
   end
