@@ -9,10 +9,10 @@ defmodule Dolphin.Vehicles do
 
       Dolphin.Vehicles.subscribe(:all)      # {:dolphin, :vehicles, {:vehicle_discovered, 1}}, ...
       Dolphin.Vehicles.list()               # [1, 2, 3]
-      Dolphin.Vehicles.state(1)             # {:ok, %Dolphin.Vehicles.State{mode: :guided, battery: 0.87, ...}}
-      Dolphin.Vehicles.subscribe(1)         # {:dolphin, {:vehicle, 1}, {:state, 1, [battery: 0.86]}}, ...
-      Dolphin.Vehicles.view(1)              # {:ok, %Dolphin.Vehicles.View{battery: 0.86, ...}}
+      Dolphin.Vehicles.view(1)              # {:ok, %Dolphin.Vehicles.View{battery: 0.86, mission: %{...}, ...}}
       Dolphin.Vehicles.subscribe_view(1)    # {:dolphin, {:vehicle_view, 1}, {:view, %Dolphin.Vehicles.View{}}}, ...
+      Dolphin.Vehicles.state(1)             # {:ok, %Dolphin.Vehicles.State{...}}: the whole state, by a call (debugging)
+      Dolphin.Vehicles.subscribe(1)         # {:dolphin, {:vehicle, 1}, {:state, 1, [battery: 0.86]}}, ...
       Dolphin.Vehicles.send_message(1, %Dolphin.MAVLink.Ardupilotmega.CommandLong{...})
 
   Commands (`command/3` and the helpers below) follow the MAVLink command
@@ -39,7 +39,11 @@ defmodule Dolphin.Vehicles do
   events of vehicles (`vehicle_discovered`, `mode_changed`, `armed`,
   `vehicle_lost`, ...). Nobody else keeps a copy to maintain: a subscriber
   takes the latest view whole, and nobody rebuilds a vehicle from its
-  changes. A vehicle heard by another ground station node can be put in the
+  changes. The view carries what the ground station's readers need — the
+  mission as the vehicle reports it (`mission`), its `home` and MAV_STATE
+  besides what conditions read — so the mission executor, the manoeuvres
+  and the console's helpers read views too; `state/1`, a call to the
+  vehicle's process, is for debugging and the console's listing. A vehicle heard by another ground station node can be put in the
   table too: it is then listed and read here like a local one.
 
   ## Paths: one vehicle heard on several links
