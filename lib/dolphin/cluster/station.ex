@@ -18,8 +18,8 @@ defmodule Dolphin.Cluster.Station do
     * `{:view, id, view}` — each new view of a vehicle, whole, as soon as
       it is published here (not batched: a controller's conditions react to
       it, and one message per view keeps the latency to the network's);
-    * `{:state, id, changes}` — the vehicle's raw state changes (the
-      mission executor follows them);
+    * `{:state, id, changes}` — the vehicle's raw state changes (for
+      `Dolphin.Vehicles.subscribe/1` on the controller);
     * `{:heard, %{id => {age_ms, link}}}` — every `:heard_every_ms` of real
       time: how long ago (clock ms) each vehicle's last frame came and its
       link figures, so that a controller tells a stale station (it stops
