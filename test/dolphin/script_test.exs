@@ -15,6 +15,24 @@ defmodule Dolphin.ScriptTest do
 
   defp run_source(source, opts \\ []), do: source |> compile!() |> Script.run(opts)
 
+  # A script on one fake vehicle whose task patrols until stopped, started
+  # and patrolling: the script and its runner.
+  defp start_patrol(ctx) do
+    fake_vehicles(ctx, 1)
+    me = :erlang.pid_to_list(self())
+
+    script =
+      compile!("""
+      use Dolphin.Script
+      _v = pick()
+      execute Dolphin.Engine.FakePlatform.task("patrol", duration: :infinity, notify: :erlang.list_to_pid(#{inspect(me)}))
+      """)
+
+    {:ok, pid} = Script.start(script)
+    assert_platform(:started, "patrol")
+    {script, pid}
+  end
+
   describe "compiling" do
     test "a syntax error is reported with its line" do
       assert {:error, %Error{kind: :syntax, line: 2} = e} = Script.compile_string("use Dolphin.Script\nx = 1 +* 2\n", "bad.exs")
@@ -217,18 +235,7 @@ defmodule Dolphin.ScriptTest do
     end
 
     test "a running script's runner is an OTP process: :sys.get_state/1 and :sys.trace/2 see into it", ctx do
-      fake_vehicles(ctx, 1)
-      me = :erlang.pid_to_list(self())
-
-      script =
-        compile!("""
-        use Dolphin.Script
-        _v = pick()
-        execute Dolphin.Engine.FakePlatform.task("patrol", duration: :infinity, notify: :erlang.list_to_pid(#{inspect(me)}))
-        """)
-
-      {:ok, pid} = Script.start(script)
-      assert_platform(:started, "patrol")
+      {script, pid} = start_patrol(ctx)
 
       assert %{script: ^script, code: code, ctx: %Dolphin.Engine.Context{script: ^pid}} = :sys.get_state(pid)
       assert Process.alive?(code)
@@ -246,18 +253,7 @@ defmodule Dolphin.ScriptTest do
     end
 
     test "a script runs under Dolphin.Script.Supervisor; its shutdown stops the tasks, then the script says it ended", ctx do
-      fake_vehicles(ctx, 1)
-      me = :erlang.pid_to_list(self())
-
-      script =
-        compile!("""
-        use Dolphin.Script
-        _v = pick()
-        execute Dolphin.Engine.FakePlatform.task("patrol", duration: :infinity, notify: :erlang.list_to_pid(#{inspect(me)}))
-        """)
-
-      {:ok, pid} = Script.start(script)
-      assert_platform(:started, "patrol")
+      {_script, pid} = start_patrol(ctx)
       assert {:undefined, pid, :worker, [Dolphin.Script.Runner]} in DynamicSupervisor.which_children(Dolphin.Script.Supervisor)
 
       # As the application's shutdown does it: the supervisor's exit.

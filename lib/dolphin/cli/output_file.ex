@@ -63,14 +63,15 @@ defmodule Dolphin.CLI.OutputFile do
   end
 
   @doc """
-  Empties a telemetry log for a new run or session (`replace/1`): the line
-  that says so (`telemetry log: PATH`, and whether it replaces a file), or
-  why it cannot be written.
+  Empties the telemetry log of `--tlog` for a new run, console or station
+  session (`replace/1`): the line that says so (`telemetry log: PATH`, and
+  whether it replaces a file), or the failure, naming the option.
   """
-  @spec start_log(Path.t()) :: {:ok, String.t()} | {:error, String.t()}
+  @spec start_log(Path.t()) :: {:ok, String.t()} | {:error, Dolphin.CommandLineError.t()}
   def start_log(path) do
-    with {:ok, how} <- replace(path) do
-      {:ok, "telemetry log: #{path}" <> if(how == :replaced, do: " (replaces the file that was there)", else: "")}
+    case replace(path) do
+      {:ok, how} -> {:ok, "telemetry log: #{path}" <> if(how == :replaced, do: " (replaces the file that was there)", else: "")}
+      {:error, why} -> {:error, Dolphin.CommandLineError.failed("--tlog", why)}
     end
   end
 

@@ -251,12 +251,7 @@ defmodule Dolphin.CLI.Run do
   # holds this run only, so that its report is this run's.
   defp start_tlog(nil), do: {:ok, nil}
 
-  defp start_tlog(path) do
-    case Dolphin.CLI.OutputFile.start_log(path) do
-      {:ok, line} -> {:ok, line}
-      {:error, why} -> {:error, Dolphin.CommandLineError.failed("--tlog", why)}
-    end
-  end
+  defp start_tlog(path), do: Dolphin.CLI.OutputFile.start_log(path)
 
   defp start_writer(nil, _origin), do: {:ok, nil}
 

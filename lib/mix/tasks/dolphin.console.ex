@@ -151,10 +151,7 @@ defmodule Mix.Tasks.Dolphin.Console do
   defp start_tlog(nil), do: {:ok, []}
 
   defp start_tlog(path) do
-    case Dolphin.CLI.OutputFile.start_log(path) do
-      {:ok, line} -> {:ok, [line]}
-      {:error, why} -> {:error, %CommandLineError{reason: :failed, message: "--tlog: #{why}"}}
-    end
+    with {:ok, line} <- Dolphin.CLI.OutputFile.start_log(path), do: {:ok, [line]}
   end
 
   # --sname/--name and --join (Dolphin.Cluster): the joined stations' vehicles are the console's too.

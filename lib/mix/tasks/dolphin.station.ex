@@ -182,10 +182,7 @@ defmodule Mix.Tasks.Dolphin.Station do
   defp start_tlog(nil), do: {:ok, []}
 
   defp start_tlog(path) do
-    case Dolphin.CLI.OutputFile.start_log(path) do
-      {:ok, line} -> {:ok, [line]}
-      {:error, why} -> {:error, Dolphin.CommandLineError.failed("--tlog", why)}
-    end
+    with {:ok, line} <- Dolphin.CLI.OutputFile.start_log(path), do: {:ok, [line]}
   end
 
   defp links(opts) do
