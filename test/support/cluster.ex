@@ -1,7 +1,7 @@
 defmodule Dolphin.Test.Cluster do
   @moduledoc """
   Ground-station nodes for cluster tests: the test node becomes the
-  controller (`ctl@127.0.0.1`, distribution bound to 127.0.0.1), stations
+  controller (`ctl<N>@127.0.0.1`, distribution bound to 127.0.0.1), stations
   are `:peer` nodes on 127.0.0.1 with the test's code path, Dolphin started,
   a UDP link on an ephemeral port and simulated vehicles. Every peer is
   stopped and every vehicle forgotten when the test ends.
@@ -14,6 +14,13 @@ defmodule Dolphin.Test.Cluster do
   import ExUnit.Callbacks, only: [on_exit: 1]
 
   @cookie :dolphin_cluster_test
+
+  @doc """
+  A node name of this test VM's cluster: `base` and the VM's OS process id,
+  so that two suites running at once on one machine (one EPMD) never take
+  each other's names.
+  """
+  def name(base), do: "#{base}#{System.pid()}"
 
   @doc "The cookie of the test cluster."
   def cookie, do: @cookie
@@ -36,7 +43,7 @@ defmodule Dolphin.Test.Cluster do
       # EPMD if none runs; this one listens where the variable says).
       :ok = :application.set_env(:kernel, :inet_dist_use_interface, {127, 0, 0, 1})
       System.put_env("ERL_EPMD_ADDRESS", "127.0.0.1")
-      {:ok, _} = Dolphin.Cluster.start_node("ctl@127.0.0.1", :longnames)
+      {:ok, _} = Dolphin.Cluster.start_node(name("ctl") <> "@127.0.0.1", :longnames)
       System.delete_env("ERL_EPMD_ADDRESS")
     end
 
@@ -51,7 +58,7 @@ defmodule Dolphin.Test.Cluster do
   end
 
   @doc """
-  Starts a peer node `NAME@127.0.0.1` with Dolphin running (at the test's
+  Starts a peer node `NAME<N>@127.0.0.1` (`name/1`) with Dolphin running (at the test's
   speed-up) and returns `%{peer, node}`. Options: `:cookie` (default the
   test cluster's), `:speedup` (default the controller's).
   """
@@ -61,7 +68,7 @@ defmodule Dolphin.Test.Cluster do
     args = [~c"-setcookie", Atom.to_charlist(cookie), ~c"-kernel", ~c"inet_dist_use_interface", ~c"{127,0,0,1}", ~c"-kernel", ~c"logger_level", ~c"error"] ++ paths
 
     {:ok, peer, node} =
-      :peer.start(%{name: String.to_atom(name), host: ~c"127.0.0.1", longnames: true, args: args, connection: :standard_io, wait_boot: 60_000})
+      :peer.start(%{name: String.to_atom(name(name)), host: ~c"127.0.0.1", longnames: true, args: args, connection: :standard_io, wait_boot: 60_000})
 
     on_exit(fn ->
       try do

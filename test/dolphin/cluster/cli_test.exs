@@ -60,7 +60,7 @@ defmodule Dolphin.Cluster.CLITest do
   end
 
   test "mix dolphin.console takes --join on a node that has a name (iex --sname), and checks it" do
-    # This VM is the distributed node ctl@127.0.0.1, as under `iex --sname`.
+    # This VM is the distributed node ctl<N>@127.0.0.1, as under `iex --sname`.
     assert {:ok, opts} = Mix.Tasks.Dolphin.Console.parse(~w(--join gs1@127.0.0.1 --join gs2@127.0.0.1))
     assert Keyword.get_values(opts, :join) == ["gs1@127.0.0.1", "gs2@127.0.0.1"]
     assert {:error, e} = Mix.Tasks.Dolphin.Console.parse(~w(--join gs1))
@@ -77,13 +77,13 @@ defmodule Dolphin.Cluster.CLITest do
   test "a wrong cookie: the connection is refused, and the cookie is named as the likely cause" do
     gs = Cluster.start_node("gsc", cookie: :not_the_same)
     assert {:error, %Dolphin.Cluster.Error{reason: :refused} = e} = Dolphin.Cluster.join(gs.node)
-    assert Exception.message(e) =~ "cannot reach gsc@127.0.0.1: the connection was refused (the cookies may differ; a node cannot tell for sure)"
+    assert Exception.message(e) =~ "cannot reach #{gs.node}: the connection was refused (the cookies may differ; a node cannot tell for sure)"
   end
 
   test "a node at another speed-up is refused, naming both; without one of its own it adopts the station's" do
     gs = Cluster.start_station("gs1", speedup: 40)
     assert {:error, %Dolphin.Cluster.Error{reason: :speedup} = e} = Dolphin.Cluster.join(gs.node, speedup: 50)
-    assert Exception.message(e) =~ "gs1@127.0.0.1 runs at speed-up 40, this node was asked for 50"
+    assert Exception.message(e) =~ "#{gs.node} runs at speed-up 40, this node was asked for 50"
     assert :ok = Dolphin.Cluster.join(gs.node)
     assert Dolphin.Clock.speedup() == 40
   end
@@ -113,7 +113,7 @@ defmodule Dolphin.Cluster.CLITest do
     {out, err} = io()
     code = Run.main([script, "--sname", "ctl", "--join", Atom.to_string(gs.node), "--events", events, "--no-tlog"], out: out, err: err, plain: true)
     assert code == 0, text(out) <> text(err)
-    assert text(out) =~ "joined gs1@127.0.0.1: 1 vehicle(s)"
+    assert text(out) =~ "joined #{gs.node}: 1 vehicle(s)"
     lines = File.read!(events)
     assert lines =~ ~s("event":"station_joined")
     assert lines =~ ~s("event":"armed","vehicle":7)
