@@ -86,7 +86,11 @@ defmodule Dolphin.Mission.Executor do
       retransmissions: 0,
       # The vehicle's STATUSTEXTs when the flight began (see judge/2).
       flight_texts: [],
-      flight: nil
+      flight: nil,
+      # The last view of the vehicle it was sent (:start, :flying): the flight
+      # is judged on the views in the order they came, never on a read of the
+      # table, which can be newer than views still waiting in the mailbox.
+      view: nil
     }
 
     {:ok, :hold, data}
@@ -123,7 +127,11 @@ defmodule Dolphin.Mission.Executor do
   def handle_event(:enter, _old, :start, data),
     do: exchange(data, fn -> Manoeuvres.command(data.vehicle, "MISSION_START", fn -> Vehicles.start_mission(data.vehicle) end) end)
 
-  def handle_event(:enter, _old, :flying, data), do: follow(%{data | flight_texts: Vehicles.status_texts(data.vehicle)})
+  def handle_event(:enter, _old, :flying, data) do
+    data = %{data | flight_texts: Vehicles.status_texts(data.vehicle)}
+    # Judged at once on what it was last sent; else on the next view.
+    if data.view, do: judge(data, data.view), else: {:keep_state, data}
+  end
 
   # --- :hold: booted, and not flying another mission -----------------------------
 
@@ -161,23 +169,17 @@ defmodule Dolphin.Mission.Executor do
   # --- :start and :flying: the vehicle's state ----------------------------------
 
   def handle_event(:info, {:dolphin, {:vehicle_view, id}, {:view, st}}, state, %{vehicle: id} = data) when state in [:start, :flying] do
-    data = %{data | flight: Flight.reported(data.flight, st)}
+    data = %{data | view: st, flight: Flight.reported(data.flight, st)}
     # While MISSION_START's answer is awaited, what the vehicle shows is kept for the judging.
     if state == :flying, do: judge(data, st), else: {:keep_state, %{data | flight: Flight.observe(data.flight, st)}}
   end
 
   def handle_event(:info, {:dolphin, _topic, _event}, _state, _data), do: :keep_state_and_data
 
-  def handle_event({:timeout, :grounded}, :grounded, :flying, data) do
-    case Vehicles.view(data.vehicle) do
-      {:ok, st} ->
-        if still_grounded?(data, st),
-          do: fail(:flying, data, grounded(data, st), vehicle_fault?: true, texts: texts(data)),
-          else: judge(%{data | grounded: nil}, st)
-
-      {:error, _} ->
-        :keep_state_and_data
-    end
+  def handle_event({:timeout, :grounded}, :grounded, :flying, %{view: st} = data) do
+    if still_grounded?(data, st),
+      do: fail(:flying, data, grounded(data, st), vehicle_fault?: true, texts: texts(data)),
+      else: judge(%{data | grounded: nil}, st)
   end
 
   def handle_event(:state_timeout, :check_landed, :flying, data) do
@@ -341,14 +343,6 @@ defmodule Dolphin.Mission.Executor do
   end
 
   # --- :flying ----------------------------------------------------------------
-
-  defp follow(data) do
-    case Vehicles.view(data.vehicle) do
-      {:ok, st} -> judge(data, st)
-      # Lost: the engine stops us with {:vehicle_lost, id}.
-      {:error, _} -> {:keep_state, data}
-    end
-  end
 
   defp judge(data, st) do
     {verdict, progress, flight} = Flight.judge(data.flight, st)
