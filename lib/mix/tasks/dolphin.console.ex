@@ -107,7 +107,6 @@ defmodule Mix.Tasks.Dolphin.Console do
           {:ok, opts} ->
             cond do
               opts[:sim] != nil and opts[:sitl] != nil -> {:error, "--sim and --sitl do not go together"}
-              (problem = tlog_writable(opts[:tlog])) != :ok -> problem
               # `iex --sname op -S mix dolphin.console --join ...`: the node has its name already.
               (problem = Dolphin.CLI.Cluster.check(opts, Node.alive?())) != :ok -> problem
               true -> {:ok, opts}
@@ -125,8 +124,6 @@ defmodule Mix.Tasks.Dolphin.Console do
     end
   end
 
-  defp tlog_writable(nil), do: :ok
-  defp tlog_writable(path), do: Dolphin.CLI.OutputFile.check("--tlog", path)
 
   @doc """
   Opens the links and starts the simulated vehicles of `opts` (parsed

@@ -261,7 +261,6 @@ defmodule Mix.Tasks.Dolphin.Run do
            :ok <- exclusive(opts),
            :ok <- web(opts),
            :ok <- report(opts),
-           :ok <- outputs(opts),
            :ok <- cluster(opts),
            {:ok, for_ms} <- duration(opts[:for]),
            :ok <- within_a_timer(for_ms, opts),
@@ -307,18 +306,6 @@ defmodule Mix.Tasks.Dolphin.Run do
       opts[:fake] -> usage_error("--report is made from the run's telemetry log, and fake vehicles write none: not with --fake")
       true -> :ok
     end
-  end
-
-  # The files the run writes: a file that cannot be written is said before anything flies.
-  defp outputs(opts) do
-    Enum.reduce_while([:tlog, :events, :report], :ok, fn key, :ok ->
-      with path when is_binary(path) <- opts[key],
-           {:error, message} <- Dolphin.CLI.OutputFile.check("--#{key}", path) do
-        {:halt, usage_error(message)}
-      else
-        _ -> {:cont, :ok}
-      end
-    end)
   end
 
   defp cluster(opts) do

@@ -107,7 +107,6 @@ defmodule Mix.Tasks.Dolphin.Station do
             opts[:sname] == nil and opts[:name] == nil -> Dolphin.CommandLineError.usage_error("a station needs a node name: give --sname NAME or --name NAME@HOST")
             (problem = Dolphin.CLI.Cluster.check(opts)) != :ok -> Dolphin.CommandLineError.usage_error(elem(problem, 1))
             opts[:first_sysid] != nil and opts[:sim] == nil -> Dolphin.CommandLineError.usage_error("--first-sysid goes with --sim")
-            (problem = tlog_writable(opts[:tlog])) != :ok -> problem
             opts[:sim] != nil -> with({:ok, _} <- Values.sysids(opts[:sim], Keyword.get(opts, :first_sysid, 1), "--sim", "--first-sysid"), do: {:ok, opts})
             true -> {:ok, opts}
           end
@@ -119,12 +118,6 @@ defmodule Mix.Tasks.Dolphin.Station do
       {_, _, [{switch, value} | _]} ->
         Dolphin.CommandLineError.usage_error("bad option #{switch}#{if value, do: " " <> value, else: ""}")
     end
-  end
-
-  defp tlog_writable(nil), do: :ok
-
-  defp tlog_writable(path) do
-    with {:error, message} <- Dolphin.CLI.OutputFile.check("--tlog", path), do: Dolphin.CommandLineError.usage_error(message)
   end
 
   defp serve(opts, io, out, err) do
