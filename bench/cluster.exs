@@ -40,7 +40,7 @@ defmodule ClusterBench do
       pid =
         spawn(fn ->
           :ets.new(:bench_probe, [:named_table, :public, :set])
-          Enum.each(ids, &Dolphin.Vehicles.subscribe_view/1)
+          Enum.each(ids, &Dolphin.Vehicles.subscribe/1)
           send(parent, :probe_ready)
           loop()
         end)
@@ -52,7 +52,7 @@ defmodule ClusterBench do
 
     defp loop do
       receive do
-        {:dolphin, {:vehicle_view, id}, {:view, v}} ->
+        {:dolphin, {:vehicle, id}, {:view, v}} ->
           t = :os.system_time(:microsecond)
           :ets.insert_new(:bench_probe, {{id, :erlang.phash2(v)}, t})
           if is_number(v.battery) and v.battery < 0.3, do: :ets.insert_new(:bench_probe, {{:low, id}, t})

@@ -4,13 +4,14 @@ defmodule Dolphin.PubSub do
   itself under a topic and receives `{:dolphin, topic, event}` messages. The
   registry monitors subscribers, so one that dies is dropped without help.
 
-  Topics: `{:vehicle, sysid}` (that vehicle's state changes and link events),
-  `{:vehicle_view, sysid}` (that vehicle's `Dolphin.Vehicles.View`, whole, on
-  each change, from its owner through `Dolphin.Vehicles.Views.put/1`),
-  `:vehicles` (discoveries, losses, reconnections and forgettings of every
-  vehicle, and `{:vehicle_changed, id}` when a view changes what picks match
-  on), `:events` (`Dolphin.Events`) and `{:dolphin_signals, table}` (a
-  script's signals).
+  Topics: `{:vehicle, sysid}` (that vehicle's `Dolphin.Vehicles.View`,
+  whole, as `{:view, view}` on each change, from its owner through
+  `Dolphin.Vehicles.Views.put/1`: a vehicle's one topic), `:vehicles`
+  (discoveries, losses, reconnections and forgettings of every vehicle,
+  derived from the views by `Dolphin.Vehicles.Views`, and
+  `{:vehicle_changed, id}` when a view changes what picks match on),
+  `:events` (`Dolphin.Events`) and `{:dolphin_signals, table}` (a script's
+  signals).
 
   Published data is a notice of a change: the data itself has one owner
   (`Dolphin.Vehicles.Views` for views, a signal table for signals), which

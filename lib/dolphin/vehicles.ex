@@ -10,9 +10,8 @@ defmodule Dolphin.Vehicles do
       Dolphin.Vehicles.subscribe(:all)      # {:dolphin, :vehicles, {:vehicle_discovered, 1}}, ...
       Dolphin.Vehicles.list()               # [1, 2, 3]
       Dolphin.Vehicles.view(1)              # {:ok, %Dolphin.Vehicles.View{battery: 0.86, mission: %{...}, ...}}
-      Dolphin.Vehicles.subscribe_view(1)    # {:dolphin, {:vehicle_view, 1}, {:view, %Dolphin.Vehicles.View{}}}, ...
+      Dolphin.Vehicles.subscribe(1)         # {:dolphin, {:vehicle, 1}, {:view, %Dolphin.Vehicles.View{}}}, ...
       Dolphin.Vehicles.state(1)             # {:ok, %Dolphin.Vehicles.State{...}}: the whole state, by a call (debugging)
-      Dolphin.Vehicles.subscribe(1)         # {:dolphin, {:vehicle, 1}, {:state, 1, [battery: 0.86]}}, ...
       Dolphin.Vehicles.send_message(1, %Dolphin.MAVLink.Ardupilotmega.CommandLong{...})
 
   Commands (`command/3` and the helpers below) follow the MAVLink command
@@ -23,19 +22,20 @@ defmodule Dolphin.Vehicles do
   longer than its timeout: 20 s of `Dolphin.Clock` time by default, set with
   `set_timeout/2` or `config :dolphin, vehicle_timeout_ms:`),
   `{:vehicle_reconnected, sysid}`, `{:vehicle_forgotten, sysid}` (`forget/1`),
-  and per vehicle `{:state, sysid, changes}`.
+  all derived from the vehicles' views by `Dolphin.Vehicles.Views`, and per
+  vehicle its views, `{:view, view}`.
 
   ## One owner of a vehicle's state
 
-  A vehicle's state lives in its process and nowhere else. Besides the raw
-  changes above (for the protocols that follow the vehicle closely), the
-  process writes a `Dolphin.Vehicles.View` — what the fleet and the engine's
+  A vehicle's state lives in its process and nowhere else. The process
+  writes a `Dolphin.Vehicles.View` — what the fleet and the engine's
   conditions read — into `Dolphin.Vehicles.Views` each time the view
   changes, the view before the loss or reconnection event when the vehicle
   goes silent or is heard again. That table holds the latest view of each
   vehicle for anyone to read (`view/1`, `list/0`: no call to the vehicle's
-  process), publishes it on topic `{:vehicle_view, sysid}`
-  (`subscribe_view/1`) and turns its transitions into the `Dolphin.Events`
+  process), publishes it on the vehicle's topic `{:vehicle, sysid}`
+  (`subscribe/1`), says when the vehicle is discovered, lost or heard again
+  (topic `:vehicles`) and turns its transitions into the `Dolphin.Events`
   events of vehicles (`vehicle_discovered`, `mode_changed`, `armed`,
   `vehicle_lost`, ...). Nobody else keeps a copy to maintain: a subscriber
   takes the latest view whole, and nobody rebuilds a vehicle from its
@@ -137,10 +137,6 @@ defmodule Dolphin.Vehicles do
     end
   end
 
-  @doc "Subscribes the caller to a vehicle's views: `{:dolphin, {:vehicle_view, sysid}, {:view, view}}`."
-  @spec subscribe_view(byte()) :: :ok
-  def subscribe_view(sysid), do: PubSub.subscribe({:vehicle_view, sysid})
-
   @doc """
   The whole state of a vehicle, as its process folds it
   (`Dolphin.Vehicles.State`), by a call to that process: for debugging and
@@ -224,7 +220,11 @@ defmodule Dolphin.Vehicles do
     end
   end
 
-  @doc "Subscribes the caller to one vehicle's events, or to `:all` fleet events."
+  @doc """
+  Subscribes the caller to one vehicle's views (`{:dolphin, {:vehicle,
+  sysid}, {:view, view}}`, one per change), or to `:all` the fleet's
+  notices (`{:dolphin, :vehicles, {:vehicle_discovered, sysid}}`, ...).
+  """
   @spec subscribe(byte() | :all) :: :ok
   def subscribe(:all), do: PubSub.subscribe(:vehicles)
   def subscribe(sysid), do: PubSub.subscribe({:vehicle, sysid})
@@ -264,10 +264,9 @@ defmodule Dolphin.Vehicles do
       # router (its station keeps it).
       Dolphin.Vehicles.Routes.forget(sysid)
     else
-      # A vehicle put in the table from elsewhere has no process here.
-      known? = pid != nil or match?({:ok, _}, Dolphin.Vehicles.Views.get(sysid))
+      # A vehicle put in the table from elsewhere has no process here; the
+      # table says it is forgotten.
       Dolphin.Vehicles.Views.delete(sysid)
-      if known?, do: PubSub.publish(:vehicles, {:vehicle_forgotten, sysid})
     end
 
     :ok
@@ -490,8 +489,9 @@ defmodule Dolphin.Vehicles do
   defp discover(%Frame{message: %Heartbeat{type: type, autopilot: autopilot}} = frame, link)
        when type != @gcs_type and autopilot != @no_autopilot do
     case DynamicSupervisor.start_child(Dolphin.Vehicles.Supervisor, {Dolphin.Vehicles.Vehicle, {frame.sysid, link, []}}) do
+      # Its first view, put once the process has taken this frame, says
+      # it is discovered.
       {:ok, pid} ->
-        PubSub.publish(:vehicles, {:vehicle_discovered, frame.sysid})
         GenServer.cast(pid, {:frame, frame, link})
 
       {:error, {:already_started, pid}} ->

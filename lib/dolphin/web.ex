@@ -31,7 +31,7 @@ defmodule Dolphin.Web do
   ## How it keeps up
 
   One process per view (`start/1`) owns the listening socket and a bounded
-  model of the run, fed by the vehicles' views (`Dolphin.Vehicles.subscribe_view/1`,
+  model of the run, fed by the vehicles' views (`Dolphin.Vehicles.subscribe/1`,
   and the `:vehicles` topic for the ones discovered later) and by the events
   (`Dolphin.Events`): at most 4,000 positions per vehicle (past that,
   every other one is dropped: the track keeps its shape), 2,000 samples of

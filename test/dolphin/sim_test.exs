@@ -34,14 +34,14 @@ defmodule Dolphin.SimTest do
   # `{:vehicle, sysid}` before the mission started).
   defp closest_until_reached(sysid, point, seq, closest \\ :infinity) do
     receive do
-      {:dolphin, {:vehicle, ^sysid}, {:state, ^sysid, changes}} ->
+      {:dolphin, {:vehicle, ^sysid}, {:view, view}} ->
         closest =
-          case changes[:position] do
+          case view.position do
             %{lat: lat, lon: lon} -> min(closest, distance({lat, lon}, {point.lat, point.lon}))
-            _ -> closest
+            nil -> closest
           end
 
-        case changes[:mission] do
+        case view.mission do
           %{reached: reached} when is_integer(reached) and reached >= seq -> closest
           _ -> closest_until_reached(sysid, point, seq, closest)
         end

@@ -170,14 +170,14 @@ defmodule Dolphin.SITLTest do
     end
   end
 
-  # {seq, location} for each MISSION_ITEM_REACHED reported, from the state changes received.
+  # {seq, location} for each MISSION_ITEM_REACHED reported, from the views received.
   defp reached_positions(id, acc \\ [], last \\ nil) do
     receive do
-      {:dolphin, {:vehicle, ^id}, {:state, ^id, changes}} ->
-        last = with {:position, p} <- List.keyfind(changes, :position, 0), do: Geo.location(p.lat, p.lon), else: (_ -> last)
+      {:dolphin, {:vehicle, ^id}, {:view, view}} ->
+        last = if view.position, do: Geo.location(view.position.lat, view.position.lon), else: last
 
-        case List.keyfind(changes, :mission, 0) do
-          {:mission, %{reached: seq}} when seq != nil and (acc == [] or elem(hd(acc), 0) != seq) -> reached_positions(id, [{seq, last} | acc], last)
+        case view.mission do
+          %{reached: seq} when seq != nil and (acc == [] or elem(hd(acc), 0) != seq) -> reached_positions(id, [{seq, last} | acc], last)
           _ -> reached_positions(id, acc, last)
         end
     after
@@ -235,11 +235,11 @@ defmodule Dolphin.SITLTest do
 
     {:ok, run} = Engine.start(Engine.watch(Engine.on(long, [id]), on_error: handler))
     Wait.until(fn -> match?({:ok, %{armed: true, position: %{relative_alt: alt}}} when alt > 3, Vehicles.state(id)) end, 3_000)
-    Vehicles.subscribe(id)
+    Vehicles.subscribe(:all)
     lost_from = Clock.now_ms()
     :ok = SITL.crash(Backend.fleet(id), id)
 
-    assert_receive {:dolphin, {:vehicle, ^id}, {:vehicle_lost, ^id}}, Clock.to_real_ms(30_000) + 2_000
+    assert_receive {:dolphin, :vehicles, {:vehicle_lost, ^id}}, Clock.to_real_ms(30_000) + 2_000
     # Lost after its 5 s of silence, with the slack of the link's checks.
     assert Clock.now_ms() - lost_from < 15_000
     assert_receive {:handled, %Dolphin.Engine.Failure{vehicle: ^id, reason: {:vehicle_lost, ^id}}}, 10_000

@@ -6,6 +6,7 @@ defmodule Dolphin.VehiclesTest do
   alias Dolphin.Test.Wait
 
   alias Dolphin.{Clock, Link, Vehicles}
+  alias Dolphin.Vehicles.View
   alias Dolphin.Link.Connection
   alias Dolphin.MAVLink.{Frame, Tlog}
   alias Dolphin.MAVLink.Ardupilotmega, as: M
@@ -97,16 +98,16 @@ defmodule Dolphin.VehiclesTest do
     assert {:ok, %{connected?: true}} = Vehicles.view(11)
   end
 
-  test "state changes are published to subscribers", %{port: port, peer: peer} do
+  test "each change of a vehicle's view is published to its subscribers, whole", %{port: port, peer: peer} do
     UDPPeer.send_message(peer, port, copter(), sysid: 12)
     Wait.until(fn -> Vehicles.whereis(12) end)
     Vehicles.subscribe(12)
 
     UDPPeer.send_message(peer, port, %M.SysStatus{battery_remaining: 55}, sysid: 12, seq: 1)
-    assert_receive {:dolphin, {:vehicle, 12}, {:state, 12, [battery: 0.55]}}, 10_000
+    assert_receive {:dolphin, {:vehicle, 12}, {:view, %View{id: 12, battery: 0.55, position: nil}}}, 10_000
 
     UDPPeer.send_message(peer, port, %M.GlobalPositionInt{lat: 411_780_000, lon: -85_960_000, relative_alt: 10_000}, sysid: 12, seq: 2)
-    assert_receive {:dolphin, {:vehicle, 12}, {:state, 12, [position: %{lat: 41.178, relative_alt: 10.0}]}}, 10_000
+    assert_receive {:dolphin, {:vehicle, 12}, {:view, %View{battery: 0.55, position: %{lat: 41.178}, relative_altitude: 10.0}}}, 10_000
 
     # A GCS's heartbeat (another ground station on the link) is not a vehicle.
     UDPPeer.send_message(peer, port, %M.Heartbeat{type: 6, autopilot: 8}, sysid: 250)

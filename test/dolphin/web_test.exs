@@ -103,7 +103,7 @@ defmodule Dolphin.WebTest do
     PubSub.publish(:vehicles, {:vehicle_discovered, @id})
     # Once it has seen the discovery, it follows the vehicle's views.
     _ = :sys.get_state(web)
-    PubSub.publish({:vehicle_view, @id}, {:view, view(lat, opts)})
+    PubSub.publish({:vehicle, @id}, {:view, view(lat, opts)})
   end
 
   describe "HTTP" do

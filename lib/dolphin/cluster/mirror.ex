@@ -16,12 +16,13 @@ defmodule Dolphin.Cluster.Mirror do
       vehicles layer makes there;
     * puts each new view of the chosen station in `Dolphin.Vehicles.Views`,
       as a local vehicle does: `Dolphin.Vehicles.list/0` and `view/1` read
-      it there, it is published on `{:vehicle_view, id}` and its transitions
-      become this node's events (`mode_changed`, `vehicle_lost`, ...);
-    * publishes on this node's `Dolphin.PubSub` what else a local vehicle
-      would: `{:vehicle, id}` `{:state, id, changes}`, and on
-      `:vehicles` `{:vehicle_discovered | :vehicle_lost |
-      :vehicle_reconnected | :vehicle_forgotten, id}`;
+      it there, it is published on `{:vehicle, id}`, its transitions
+      become this node's events (`mode_changed`, `vehicle_lost`, ...) and
+      notices on `:vehicles` (`{:vehicle_discovered | :vehicle_lost |
+      :vehicle_reconnected, id}`); a view it marks disconnected when no
+      station hears the vehicle any more, and the view's deletion when the
+      vehicle is forgotten (`{:vehicle_forgotten, id}`), are announced the
+      same way;
     * fails over: when the chosen station's node goes down, or it stops
       hearing the vehicle while another station hears it, the route moves to
       the other (`station_changed` event) without any `vehicle_lost`; a
@@ -41,7 +42,7 @@ defmodule Dolphin.Cluster.Mirror do
   use GenServer
   require Logger
 
-  alias Dolphin.{Clock, PubSub, Events}
+  alias Dolphin.{Clock, Events}
   alias Dolphin.Cluster.{Choice, Station}
   alias Dolphin.Vehicles.{Routes, Views}
 
@@ -142,10 +143,8 @@ defmodule Dolphin.Cluster.Mirror do
     if Map.has_key?(s.vehicles, id) do
       Routes.delete(id)
 
-      unless local?(id) do
-        Views.delete(id)
-        PubSub.publish(:vehicles, {:vehicle_forgotten, id})
-      end
+      # Deleting the view says it is forgotten.
+      unless local?(id), do: Views.delete(id)
     end
 
     {:reply, :ok, %{s | vehicles: Map.delete(s.vehicles, id)}}
@@ -274,15 +273,6 @@ defmodule Dolphin.Cluster.Mirror do
   defp station_event(s, station, {:discovered, id, pid, view}), do: hear(s, id, station, pid, view)
   defp station_event(s, station, {:view, id, view}), do: update_hearing(s, id, station, &%{&1 | view: view}, :view)
 
-  defp station_event(s, station, {:state, id, changes}) do
-    case s.vehicles do
-      %{^id => %{chosen: ^station}} -> unless local?(id), do: PubSub.publish({:vehicle, id}, {:state, id, changes})
-      _ -> :ok
-    end
-
-    s
-  end
-
   defp station_event(s, station, {event, id}) when event in [:lost, :reconnected], do: update_hearing(s, id, station, & &1, event)
 
   defp station_event(s, station, {:forgotten, id}) do
@@ -372,9 +362,8 @@ defmodule Dolphin.Cluster.Mirror do
 
     cond do
       old.chosen == nil ->
-        # New here: the route and view first, then the news.
+        # New here: the route, then the view, which says it is discovered.
         publish_view(id, h.pid, view_of(h, v.lost))
-        unless local?(id), do: PubSub.publish(:vehicles, {:vehicle_discovered, id})
 
       old.chosen != v.chosen ->
         Events.emit(:station_changed, %{vehicle: id, from: node(old.chosen), to: node(v.chosen), reason: reason_words(why)})
@@ -386,14 +375,12 @@ defmodule Dolphin.Cluster.Mirror do
 
     cond do
       old.lost == false and v.lost ->
-        # The view first: whoever hears of the loss finds the view saying so.
+        # The view says it is lost (Dolphin.Vehicles.Views derives the news).
         last = if h, do: h.view, else: last_view(id)
         publish_view(id, Routes.get(id), last && %{last | connected?: false})
-        lost_or_back(id, :vehicle_lost)
 
       old.lost == true and not v.lost ->
         publish_view(id, h.pid, h.view)
-        lost_or_back(id, :vehicle_reconnected)
 
       true ->
         :ok
@@ -407,13 +394,6 @@ defmodule Dolphin.Cluster.Mirror do
   defp view_of(nil, _lost), do: nil
   defp view_of(h, true), do: %{h.view | connected?: false}
   defp view_of(h, false), do: h.view
-
-  defp lost_or_back(id, event) do
-    unless local?(id) do
-      PubSub.publish(:vehicles, {event, id})
-      PubSub.publish({:vehicle, id}, {event, id})
-    end
-  end
 
   # The view last put for a vehicle, once no station hears it.
   defp last_view(id) do

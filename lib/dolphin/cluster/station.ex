@@ -7,7 +7,7 @@ defmodule Dolphin.Cluster.Station do
 
   It costs nothing while no controller is subscribed: only then does it
   follow the local vehicles (topic `:vehicles`, and each vehicle's
-  `{:vehicle_view, id}` and `{:vehicle, id}`). Vehicles that this node only
+  `{:vehicle, id}`). Vehicles that this node only
   mirrors from other stations are never passed on (no loops between nodes).
 
   Messages to each subscriber, `{:dolphin_station, station_pid, event}`:
@@ -18,8 +18,6 @@ defmodule Dolphin.Cluster.Station do
     * `{:view, id, view}` — each new view of a vehicle, whole, as soon as
       it is published here (not batched: a controller's conditions react to
       it, and one message per view keeps the latency to the network's);
-    * `{:state, id, changes}` — the vehicle's raw state changes (for
-      `Dolphin.Vehicles.subscribe/1` on the controller);
     * `{:heard, %{id => {age_ms, link}}}` — every `:heard_every_ms` of real
       time: how long ago (clock ms) each vehicle's last frame came and its
       link figures, so that a controller tells a stale station (it stops
@@ -75,7 +73,6 @@ defmodule Dolphin.Cluster.Station do
 
   def handle_info({:dolphin, :vehicles, {:vehicle_forgotten, id}}, s) do
     if Map.has_key?(s.vehicles, id) do
-      PubSub.unsubscribe({:vehicle_view, id})
       PubSub.unsubscribe({:vehicle, id})
       tell(s, {:forgotten, id})
     end
@@ -88,13 +85,8 @@ defmodule Dolphin.Cluster.Station do
     {:noreply, s}
   end
 
-  def handle_info({:dolphin, {:vehicle_view, id}, {:view, view}}, s) do
+  def handle_info({:dolphin, {:vehicle, id}, {:view, view}}, s) do
     if Map.has_key?(s.vehicles, id), do: tell(s, {:view, id, view})
-    {:noreply, s}
-  end
-
-  def handle_info({:dolphin, {:vehicle, id}, {:state, id, changes}}, s) do
-    if Map.has_key?(s.vehicles, id), do: tell(s, {:state, id, changes})
     {:noreply, s}
   end
 
@@ -133,19 +125,13 @@ defmodule Dolphin.Cluster.Station do
   defp unfollow(s) do
     PubSub.unsubscribe(:vehicles)
 
-    for {id, _} <- s.vehicles do
-      PubSub.unsubscribe({:vehicle_view, id})
-      PubSub.unsubscribe({:vehicle, id})
-    end
+    for {id, _} <- s.vehicles, do: PubSub.unsubscribe({:vehicle, id})
 
     %{s | vehicles: %{}}
   end
 
   defp watch(s, id, pid) do
-    unless Map.has_key?(s.vehicles, id) do
-      PubSub.subscribe({:vehicle_view, id})
-      PubSub.subscribe({:vehicle, id})
-    end
+    unless Map.has_key?(s.vehicles, id), do: PubSub.subscribe({:vehicle, id})
 
     put_in(s.vehicles[id], pid)
   end

@@ -15,7 +15,11 @@ defmodule Dolphin.Engine.Failure do
   `{:platform_exited, reason}`, `{:stop_timeout, ms}`, `{:stop_failed, reason}`,
   `{:handler_failed, reason}`, `{:crashed, reason}`, a
   `Dolphin.Fleet.AllocationError`, `{:not_reassigned, reason, why}` (a
-  `reassign` that found no vehicle to take the task over); platforms give
+  `reassign` that could not hand the task over: `why` is
+  `{:no_vehicle, vehicle_set_or_nil, requirements}` when no vehicle
+  among its `from:` set, or the script's, could take it,
+  `{:cannot_resume, platform}`, or what the platform or the code said);
+  platforms give
   their own, as data: an exception that words itself (a mission's
   `Dolphin.Mission.Failure`), which says whether the vehicle caused it (a
   failsafe, a refused arm: `reassign` takes those over,
@@ -57,6 +61,12 @@ defmodule Dolphin.Engine.Failure do
   def format_reason({:vehicle_lost, id}), do: "vehicle #{id} lost"
   def format_reason({:vehicle_fault, text}), do: text
   def format_reason({:not_reassigned, reason, why}), do: "#{format_reason(reason)}; no other vehicle could take it over: #{format_reason(why)}"
+  def format_reason({:no_vehicle, set, requirements}) do
+    among = if set, do: "among #{Dolphin.Fleet.VehicleSet.format(set)}", else: "among the vehicles the script picked"
+    "no vehicle #{among} is connected, free and meets its requirements#{requirement_words(requirements)}"
+  end
+
+  def format_reason({:cannot_resume, platform}), do: "#{inspect(platform)} cannot resume its tasks on another vehicle"
   def format_reason({:platform_exited, reason}), do: "its process #{exit_words(reason)} without reporting"
   def format_reason({:stop_timeout, ms}), do: "did not stop within #{ms} ms of clock time (killed)"
   def format_reason({:stop_failed, reason}), do: "could not be stopped: #{format_reason(reason)}"
@@ -104,6 +114,13 @@ defmodule Dolphin.Engine.Failure do
 
   defp format_exception(%_{__exception__: true} = e), do: "#{inspect(e.__struct__)}: #{Exception.message(e)}"
   defp format_exception(other), do: inspect(other)
+
+  defp requirement_words(req) do
+    case Enum.filter([req[:type] && "type #{inspect(req[:type])}", req[:payloads] not in [nil, []] && "payloads #{inspect(req[:payloads])}"], & &1) do
+      [] -> ""
+      said -> " (" <> Enum.join(said, ", ") <> ")"
+    end
+  end
 end
 
 defmodule Dolphin.Engine.TaskError do

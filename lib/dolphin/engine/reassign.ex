@@ -19,10 +19,13 @@ defmodule Dolphin.Engine.Reassign do
   end
 
   @doc false
-  # {:ok, task for the new vehicle, %{from, to, resume_seq}} | {:error, why}.
-  # `failed`: the vehicles that failed this task (never given it again).
+  # {:ok, task for the new vehicle, %{from, to, resume_seq}} | {:error, why},
+  # why a failure reason, worded by Dolphin.Engine.Failure.format_reason/1:
+  # {:no_vehicle, set or nil, requirements}, {:cannot_resume, platform} or
+  # the platform's own. `failed`: the vehicles that failed this task (never
+  # given it again).
   @spec plan(PlatformTask.t(), Failure.t(), VehicleSet.t() | nil, [non_neg_integer()], integer()) ::
-          {:ok, PlatformTask.t(), map()} | {:error, String.t()}
+          {:ok, PlatformTask.t(), map()} | {:error, term()}
   def plan(%PlatformTask{platform: p, spec: spec} = leaf, %Failure{vehicle: from} = f, set, failed, watch_id) do
     ctx = Context.current()
     run = run_of(watch_id)
@@ -38,7 +41,7 @@ defmodule Dolphin.Engine.Reassign do
   defp resume(p, spec, progress, from, to) do
     if function_exported?(p, :resume, 4),
       do: p.resume(spec, progress, from, to),
-      else: {:error, "#{inspect(p)} cannot resume its tasks on another vehicle"}
+      else: {:error, {:cannot_resume, p}}
   end
 
   # Connected, meeting the task's requirements, the script's (or held by this
@@ -64,15 +67,7 @@ defmodule Dolphin.Engine.Reassign do
         {:ok, to}
 
       [] ->
-        among = if allowed, do: "among #{VehicleSet.format(set)}", else: "among the vehicles the script picked"
-        {:error, "no vehicle #{among} is connected, free and meets its requirements#{describe(requirements)}"}
-    end
-  end
-
-  defp describe(req) do
-    case Enum.filter([req[:type] && "type #{inspect(req[:type])}", req[:payloads] not in [nil, []] && "payloads #{inspect(req[:payloads])}"], & &1) do
-      [] -> ""
-      said -> " (" <> Enum.join(said, ", ") <> ")"
+        {:error, {:no_vehicle, allowed && set, requirements}}
     end
   end
 

@@ -237,7 +237,7 @@ defmodule Dolphin.Engine.Runner do
           _ -> loop(s)
         end
 
-      {:dolphin, {:vehicle_view, id}, {:view, view}} ->
+      {:dolphin, {:vehicle, id}, {:view, view}} ->
         s = %{s | watcher: Watcher.update(s.watcher, view)}
 
         s =

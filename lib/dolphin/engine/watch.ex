@@ -76,7 +76,7 @@ defmodule Dolphin.Engine.Watch do
   end
 
   def handle({:code_result, :reassign, {:ok, {:error, why}}}, st), do: not_reassigned(st, why)
-  def handle({:code_result, :reassign, {:error, reason}}, st), do: not_reassigned(st, Failure.format_reason(reason))
+  def handle({:code_result, :reassign, {:error, reason}}, st), do: not_reassigned(st, reason)
   def handle({:finished, :handler, result}, st), do: {[{:finish, completed(result)}], st}
 
   # The platform task of `t` that failed (after a reassignment, the one handed over).

@@ -20,18 +20,20 @@ defmodule Dolphin.Fleet.FakeSource do
   caller with no process in between. Each change is announced as
   `Dolphin.Vehicles.Views.put/1` announces a real vehicle's: its view, its
   transitions as `Dolphin.Events` events (`vehicle_discovered`,
-  `mode_changed`, `vehicle_lost`, ...; `Dolphin.Vehicles.View.transitions/2`)
-  and `{:vehicle_changed, id}` on `:vehicles` when picks may see it anew;
-  `events: false` keeps the telemetry quiet (stand-ins whose changes must not
-  show in a real run's output, such as a pre-flight check's). Vehicle ids are system ids: tests running at the same
-  time should use different ones, as the pub/sub topics are shared.
+  `mode_changed`, `vehicle_lost`, ...; `Dolphin.Vehicles.View.transitions/2`),
+  the same transitions as notices on `:vehicles` (`{:vehicle_discovered,
+  id}`, `{:vehicle_lost, id}`, ...) and `{:vehicle_changed, id}` there when
+  picks may see it anew; `events: false` keeps the telemetry quiet
+  (stand-ins whose changes must not show in a real run's output, such as a
+  pre-flight check's), not the notices. Vehicle ids are system ids: tests
+  running at the same time should use different ones, as the pub/sub
+  topics are shared.
   """
 
   use GenServer
 
   @behaviour Dolphin.Fleet.Source
 
-  alias Dolphin.PubSub
   alias Dolphin.Vehicles.View
 
   # The table's row of the `events` option (vehicles' keys are integers).
@@ -58,12 +60,11 @@ defmodule Dolphin.Fleet.FakeSource do
   @spec source(atom()) :: Dolphin.Fleet.Source.t()
   def source(name \\ __MODULE__), do: {__MODULE__, name}
 
-  @doc "Adds a vehicle (or replaces one) and publishes its view and its discovery."
+  @doc "Adds a vehicle (or replaces one) and publishes its view: a new one is discovered (`{:vehicle_discovered, id}` on `:vehicles`)."
   @spec add(atom(), non_neg_integer(), keyword()) :: :ok
   def add(name, id, attrs \\ []) when is_integer(id) and id >= 0 do
     vehicle = struct!(%View{id: id, type: :uav, battery: 1.0, position: Dolphin.Geo.Location.new(41.1780, -8.5980, 100), mission_progress: {0, 0}}, check!(attrs))
-    :ok = put(name, %{vehicle | id: id, payloads: Enum.sort(vehicle.payloads)})
-    PubSub.publish(:vehicles, {:vehicle_discovered, id})
+    put(name, %{vehicle | id: id, payloads: Enum.sort(vehicle.payloads)})
   end
 
   @doc "Changes a vehicle's state and publishes its new view."
@@ -72,17 +73,11 @@ defmodule Dolphin.Fleet.FakeSource do
 
   @doc "Makes a vehicle silent: it is lost (its view, then `{:vehicle_lost, id}` on `:vehicles`)."
   @spec lose(atom(), non_neg_integer()) :: :ok
-  def lose(name, id) do
-    :ok = put(name, %{fetch!(name, id) | connected?: false})
-    PubSub.publish(:vehicles, {:vehicle_lost, id})
-  end
+  def lose(name, id), do: put(name, %{fetch!(name, id) | connected?: false})
 
   @doc "Brings a lost vehicle back (its view, then `{:vehicle_reconnected, id}` on `:vehicles`)."
   @spec reconnect(atom(), non_neg_integer()) :: :ok
-  def reconnect(name, id) do
-    :ok = put(name, %{fetch!(name, id) | connected?: true})
-    PubSub.publish(:vehicles, {:vehicle_reconnected, id})
-  end
+  def reconnect(name, id), do: put(name, %{fetch!(name, id) | connected?: true})
 
   # The table holds each vehicle's one copy of its state; every change is
   # announced whole, with its transitions, as a real vehicle's is.
@@ -108,7 +103,7 @@ defmodule Dolphin.Fleet.FakeSource do
   @spec remove(atom(), non_neg_integer()) :: :ok
   def remove(name, id) do
     :ets.delete(name, id)
-    PubSub.publish(:vehicles, {:vehicle_forgotten, id})
+    Dolphin.Vehicles.Views.forgotten(id)
   end
 
   @doc "The messages sent to a vehicle with `send_message`, oldest first."

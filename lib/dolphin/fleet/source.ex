@@ -11,7 +11,7 @@ defmodule Dolphin.Fleet.Source do
   from it, and announces every change with the shapes `Dolphin.Vehicles`
   uses (`Dolphin.Vehicles.Views.put/1` does all of it for real vehicles):
 
-    * topic `{:vehicle_view, id}`: `{:view, %Dolphin.Vehicles.View{}}`, the
+    * topic `{:vehicle, id}`: `{:view, %Dolphin.Vehicles.View{}}`, the
       whole view each time it changes (a loss or a reconnection too: the view
       is published before the `:vehicles` event);
     * topic `:vehicles`: `{:vehicle_discovered, id}`, `{:vehicle_lost, id}`,
@@ -58,11 +58,11 @@ defmodule Dolphin.Fleet.Source do
   @doc false
   def send_message({m, a}, id, msg), do: m.send_message(a, id, msg)
 
-  @doc "Subscribes the caller to a vehicle's views (`{:dolphin, {:vehicle_view, id}, {:view, view}}`), whatever the source."
+  @doc "Subscribes the caller to a vehicle's views (`{:dolphin, {:vehicle, id}, {:view, view}}`), whatever the source."
   @spec subscribe(id()) :: :ok
-  def subscribe(id), do: Dolphin.PubSub.subscribe({:vehicle_view, id})
+  def subscribe(id), do: Dolphin.PubSub.subscribe({:vehicle, id})
 
   @doc "Undoes `subscribe/1`."
   @spec unsubscribe(id()) :: :ok
-  def unsubscribe(id), do: Dolphin.PubSub.unsubscribe({:vehicle_view, id})
+  def unsubscribe(id), do: Dolphin.PubSub.unsubscribe({:vehicle, id})
 end

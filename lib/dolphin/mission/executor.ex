@@ -66,7 +66,7 @@ defmodule Dolphin.Mission.Executor do
     Process.flag(:trap_exit, true)
     # Its views: every change of what the vehicle reports, in order, read
     # from the message itself (no call to the vehicle's process).
-    Vehicles.subscribe_view(vehicle)
+    Vehicles.subscribe(vehicle)
 
     data = %{
       mission: mission,
@@ -168,7 +168,7 @@ defmodule Dolphin.Mission.Executor do
 
   # --- :start and :flying: the vehicle's state ----------------------------------
 
-  def handle_event(:info, {:dolphin, {:vehicle_view, id}, {:view, st}}, state, %{vehicle: id} = data) when state in [:start, :flying] do
+  def handle_event(:info, {:dolphin, {:vehicle, id}, {:view, st}}, state, %{vehicle: id} = data) when state in [:start, :flying] do
     data = %{data | view: st, flight: Flight.reported(data.flight, st)}
     # While MISSION_START's answer is awaited, what the vehicle shows is kept for the judging.
     if state == :flying, do: judge(data, st), else: {:keep_state, %{data | flight: Flight.observe(data.flight, st)}}

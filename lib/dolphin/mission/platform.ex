@@ -143,21 +143,21 @@ defmodule Dolphin.Mission.Platform do
   # Waits for the vehicle to be heard again (as long as the script runs), then holds it.
   defp guard(vehicle, owner, opts, caller) do
     ref = Process.monitor(owner)
-    PubSub.subscribe({:vehicle, vehicle})
+    PubSub.subscribe(:vehicles)
     send(caller, {:"$dolphin_guarding", self()})
     await_return(vehicle, ref, opts)
   end
 
   defp await_return(vehicle, ref, opts) do
     receive do
-      {:dolphin, {:vehicle, ^vehicle}, {:vehicle_reconnected, ^vehicle}} ->
+      {:dolphin, :vehicles, {:vehicle_reconnected, ^vehicle}} ->
         held = Dolphin.Vehicles.Manoeuvres.hold(vehicle) == :ok
         Events.emit(:vehicle_returned, %{run: opts[:run], task_id: opts[:task_id], vehicle: vehicle, held: held})
 
       {:DOWN, ^ref, :process, _, _} ->
         :ok
 
-      # The vehicle's other news (none while it is lost).
+      # The other vehicles' news.
       _other ->
         await_return(vehicle, ref, opts)
     end

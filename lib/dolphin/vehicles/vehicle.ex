@@ -1,14 +1,15 @@
 defmodule Dolphin.Vehicles.Vehicle do
   @moduledoc false
   # One process per discovered vehicle: folds its frames into a
-  # Dolphin.Vehicles.State, publishes what changed (and the new
-  # Dolphin.Vehicles.View when the view changed), watches for silence (lost /
+  # Dolphin.Vehicles.State, puts its Dolphin.Vehicles.View in
+  # Dolphin.Vehicles.Views when the view changed (which announces it, and the
+  # loss or reconnection the view shows), watches for silence (lost /
   # reconnected) and asks the vehicle for the telemetry the ground station needs.
   # It holds nothing that the next telemetry does not restore, so a crash only
   # costs the state until the next frames.
   use GenServer, restart: :permanent
 
-  alias Dolphin.{Clock, PubSub, Events}
+  alias Dolphin.{Clock, Events}
   alias Dolphin.Link.Connection
   alias Dolphin.MAVLink.Ardupilotmega, as: M
   alias Dolphin.Vehicles.{CommandProtocol, MissionProtocol, Paths, State, View}
@@ -234,10 +235,7 @@ defmodule Dolphin.Vehicles.Vehicle do
 
     if on_time? and not s.lost and last != nil and now - last > s.timeout_ms do
       # The view first: whoever hears of the loss finds the view saying so.
-      s = publish_view(%{s | lost: true})
-      PubSub.publish(:vehicles, {:vehicle_lost, s.sysid})
-      PubSub.publish({:vehicle, s.sysid}, {:vehicle_lost, s.sysid})
-      {:noreply, s}
+      {:noreply, publish_view(%{s | lost: true})}
     else
       {:noreply, s}
     end
@@ -253,15 +251,12 @@ defmodule Dolphin.Vehicles.Vehicle do
   defp path_changed(s, {from, to, reason}),
     do: Events.emit(:path_changed, %{vehicle: s.sysid, from: Paths.via_text(from), to: Paths.via_text(to), reason: reason})
 
-  # The new state, and its changes to the vehicle's subscribers.
+  # The new state, and its view when it changed: only a change of a public
+  # field can change the view (link counters change with every frame).
   defp publish(s, new) do
     case State.changes(s.state, new) do
-      [] ->
-        %{s | state: new}
-
-      changes ->
-        PubSub.publish({:vehicle, s.sysid}, {:state, s.sysid, changes})
-        publish_view(%{s | state: new})
+      [] -> %{s | state: new}
+      _changes -> publish_view(%{s | state: new})
     end
   end
 
@@ -284,8 +279,6 @@ defmodule Dolphin.Vehicles.Vehicle do
   # vehicle may have rebooted and forgotten the rates).
   defp reconnected(s) do
     s = publish_view(%{s | lost: false})
-    PubSub.publish(:vehicles, {:vehicle_reconnected, s.sysid})
-    PubSub.publish({:vehicle, s.sysid}, {:vehicle_reconnected, s.sysid})
     if s.requests_left == 0, do: send(self(), :request_telemetry)
     %{s | lost: false, requests_left: @request_tries}
   end

@@ -6,7 +6,7 @@ defmodule Dolphin.Vehicles.View do
 
   The vehicle's owner (its process in `Dolphin.Vehicles`, through
   `Dolphin.Vehicles.Views.put/1`, or a fake source) publishes a new view on
-  topic `{:vehicle_view, id}` of `Dolphin.PubSub` each time one of these
+  topic `{:vehicle, id}` of `Dolphin.PubSub` each time one of these
   fields changes, as `{:view, %View{}}`: subscribers take the latest view
   whole and never rebuild one from changes. What changed between two views
   that a user hears of is `transitions/2`.

@@ -11,15 +11,25 @@ defmodule Dolphin.Vehicles.Views do
 
     1. the row is replaced;
     2. `{:view, view}` is published on `Dolphin.PubSub` topic
-       `{:vehicle_view, id}` (the engine's condition watchers follow it);
+       `{:vehicle, id}`, the vehicle's one topic (the engine's condition
+       watchers follow it);
     3. the transitions from the previous row (`Dolphin.Vehicles.View.transitions/2`)
        are emitted as `Dolphin.Events` events: `vehicle_discovered` once
        the type is known, `mode_changed`, `armed`, `disarmed`,
        `mission_item_reached`, `vehicle_lost`, `vehicle_reconnected`;
-    4. `{:vehicle_changed, id}` is published on topic `:vehicles` when what a
+    4. the same transitions' `{:vehicle_discovered, id}`, `{:vehicle_lost, id}`
+       and `{:vehicle_reconnected, id}` are published on topic `:vehicles`,
+       after the view (whoever hears of a loss finds the view saying so);
+    5. `{:vehicle_changed, id}` is published on topic `:vehicles` when what a
        pick matches on, but the position, changed (`type`, `payloads`,
        `connected?`, or a first view): the fleet serves its waiting picks
        again then, and on a slow tick for picks by region.
+
+  Every source of views announces through here (a vehicle of this node, the
+  cluster's mirror of another node's, `Dolphin.Fleet.FakeSource`), so those
+  notices have one writer and always agree with the views. Deleting a view
+  (`delete/1`, the vehicle is forgotten) publishes `{:vehicle_forgotten, id}`
+  on `:vehicles`.
 
       Dolphin.Vehicles.Views.get(1)     # {:ok, %Dolphin.Vehicles.View{battery: 0.86, ...}}
       Dolphin.Vehicles.Views.ids()      # [1, 2, 3]
@@ -75,27 +85,43 @@ defmodule Dolphin.Vehicles.Views do
   @spec ids() :: [non_neg_integer()]
   def ids, do: @table |> :ets.select([{{:"$1", :_}, [], [:"$1"]}]) |> Enum.sort()
 
-  @doc "Forgets a vehicle's view (the vehicle is forgotten: a view put later is a discovery again)."
+  @doc """
+  Forgets a vehicle's view (the vehicle is forgotten: a view put later is a
+  discovery again), and says so with `{:vehicle_forgotten, id}` on
+  `:vehicles` if there was one.
+  """
   @spec delete(non_neg_integer()) :: :ok
   def delete(id) do
-    :ets.delete(@table, id)
-    :ok
+    case :ets.take(@table, id) do
+      [] -> :ok
+      [_] -> forgotten(id)
+    end
   end
 
+  # The notices on topic :vehicles that a view's transitions make.
+  @notices [:vehicle_discovered, :vehicle_lost, :vehicle_reconnected]
+
   @doc false
-  # Steps 2 to 4 of a write, for every owner of views (Dolphin.Fleet.FakeSource
+  # Steps 2 to 5 of a write, for every owner of views (Dolphin.Fleet.FakeSource
   # keeps its own table): `events?` false keeps the telemetry quiet (a dry
-  # run's stand-in vehicles).
+  # run's stand-in vehicles), not the notices.
   @spec announce(View.t() | nil, View.t(), boolean()) :: :ok
   def announce(old, %View{id: id} = new, events?) do
-    PubSub.publish({:vehicle_view, id}, {:view, new})
-    if events?, do: Enum.each(View.transitions(old, new), fn {event, meta} -> Events.emit(event, meta) end)
+    PubSub.publish({:vehicle, id}, {:view, new})
+    transitions = View.transitions(old, new)
+    if events?, do: Enum.each(transitions, fn {event, meta} -> Events.emit(event, meta) end)
+    for {event, _} <- transitions, event in @notices, do: PubSub.publish(:vehicles, {event, id})
 
     if old == nil or old.type != new.type or old.payloads != new.payloads or old.connected? != new.connected?,
       do: PubSub.publish(:vehicles, {:vehicle_changed, id})
 
     :ok
   end
+
+  @doc false
+  # The notice of a vehicle forgotten, for every owner of views.
+  @spec forgotten(non_neg_integer()) :: :ok
+  def forgotten(id), do: PubSub.publish(:vehicles, {:vehicle_forgotten, id})
 
   @impl true
   def init(:ok) do

@@ -122,7 +122,7 @@ defmodule Dolphin.Web.Hub do
     if MapSet.member?(s.watched, id) do
       s
     else
-      Vehicles.subscribe_view(id)
+      Vehicles.subscribe(id)
 
       case Vehicles.view(id) do
         {:ok, view} -> %{s | live: Live.view(s.live, view, Clock.now_ms()), watched: MapSet.put(s.watched, id), dirty: true}
@@ -153,7 +153,7 @@ defmodule Dolphin.Web.Hub do
   @impl true
   def handle_info({:dolphin, :vehicles, {:vehicle_discovered, id}}, s), do: {:noreply, watch(id, s)}
 
-  def handle_info({:dolphin, {:vehicle_view, _id}, {:view, view}}, s) do
+  def handle_info({:dolphin, {:vehicle, _id}, {:view, view}}, s) do
     {:noreply, %{s | live: Live.view(s.live, view, Clock.now_ms()), dirty: true}}
   end
 

@@ -40,7 +40,8 @@ defmodule Dolphin.Engine.ReassignTest do
     failsafe = tp("hot", duration: 1, result: {:fail, {:vehicle_fault, "battery failsafe"}})
     # Every vehicle fails it in turn: then no vehicle is left, and both reasons are said.
     assert {{:error, %Failure{reason: {:not_reassigned, {:vehicle_fault, "battery failsafe"}, why}} = f}, events} = run_events(reassign(failsafe))
-    assert why =~ "no vehicle among the vehicles the script picked"
+    assert {:no_vehicle, nil, _requirements} = why
+    assert Failure.format_reason(why) =~ "no vehicle among the vehicles the script picked"
     assert Failure.message(f) =~ "battery failsafe; no other vehicle could take it over"
     assert [%{from: v1, to: v2}] = Enum.filter(events, &(&1.event == :task_reassigned))
     assert v1 != v2
@@ -58,7 +59,8 @@ defmodule Dolphin.Engine.ReassignTest do
     FakeSource.lose(ctx.source, a)
     # b runs "south" and c is not in from: nobody can take "north" over.
     assert {:error, %Failure{name: "north", reason: {:not_reassigned, {:vehicle_lost, ^a}, why}}} = await(run, 5_000)
-    assert why =~ "among #{VehicleSet.format(VehicleSet.new([a, b]))}"
+    assert {:no_vehicle, %VehicleSet{}, _} = why
+    assert Failure.format_reason(why) =~ "among #{VehicleSet.format(VehicleSet.new([a, b]))}"
 
     [d, e] = fake_vehicles(ctx, 2, pick: true)
     {:ok, run} = start(reassign(on(tp("west", duration: :infinity), [d]), from: [d, c]) ||| on(tp("east", duration: :infinity), [e]))

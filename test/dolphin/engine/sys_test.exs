@@ -52,7 +52,7 @@ defmodule Dolphin.Engine.SysTest do
     me = self()
     :ok = :sys.install(until_pid, {fn acc, event, _name -> send(me, {:sys_event, event}) && acc end, nil})
     FakeSource.set(ctx.source, a, battery: 0.2)
-    assert_receive {:sys_event, {:in, {:dolphin, {:vehicle_view, ^a}, _}}}, 5_000
+    assert_receive {:sys_event, {:in, {:dolphin, {:vehicle, ^a}, _}}}, 5_000
     assert {:ok, :done} = await(run, 10_000)
   end
 

@@ -4,7 +4,7 @@ defmodule Dolphin.Engine.WatcherTest do
   alias Dolphin.Engine.{Cond, Signals, Snapshot, Watcher}
   alias Dolphin.Vehicles.View
 
-  defp topics, do: Registry.keys(Dolphin.PubSub, self()) |> Enum.filter(&match?({t, _} when t in [:vehicle_view, :dolphin_signals], &1)) |> Enum.sort()
+  defp topics, do: Registry.keys(Dolphin.PubSub, self()) |> Enum.filter(&match?({t, _} when t in [:vehicle, :dolphin_signals], &1)) |> Enum.sort()
 
   test "a condition gets its snapshot as its argument; what it reads is followed, and let go when it is forgotten", ctx do
     [a, b] = fake_vehicles(ctx, 2, battery: 0.9)
@@ -13,13 +13,13 @@ defmodule Dolphin.Engine.WatcherTest do
 
     w = Watcher.new(FakeSource.source(ctx.source))
     assert {{:ok, false}, w} = Watcher.evaluate(w, :low, reads)
-    assert topics() == [{:vehicle_view, a}]
+    assert topics() == [{:vehicle, a}]
     assert Map.keys(w.vehicles) == [a]
     assert Watcher.reads?(w, :low, {:vehicle, a})
 
     # A change of what it read comes as a whole view, and the next evaluation reads it.
     FakeSource.set(ctx.source, a, battery: 0.2)
-    assert_receive {:dolphin, {:vehicle_view, ^a}, {:view, %View{battery: 0.2} = view}}, 5_000
+    assert_receive {:dolphin, {:vehicle, ^a}, {:view, %View{battery: 0.2} = view}}, 5_000
     w = Watcher.update(w, view)
     # The snapshot is what it reads: the source is not asked again.
     :ets.insert(ctx.source, {a, %{view | battery: 0.9}})
@@ -28,7 +28,7 @@ defmodule Dolphin.Engine.WatcherTest do
     # It reads another vehicle now: followed too, while the condition is watched.
     :atomics.put(use_b, 1, 1)
     assert {{:ok, false}, w} = Watcher.evaluate(w, :low, reads)
-    assert topics() == Enum.sort([{:vehicle_view, a}, {:vehicle_view, b}])
+    assert topics() == Enum.sort([{:vehicle, a}, {:vehicle, b}])
 
     # Views of vehicles not followed are ignored; forgetting the condition lets everything go.
     assert Watcher.update(w, %{view | id: 1}).vehicles == w.vehicles
@@ -54,11 +54,11 @@ defmodule Dolphin.Engine.WatcherTest do
     assert {{:ok, %View{id: ^a}}, w} = Watcher.follow(w, a)
 
     assert {{:ok, false}, w} = Watcher.evaluate(w, :sig, Cond.new(fn snap -> Snapshot.poll(snap, :go) end))
-    assert topics() == [{:dolphin_signals, table}, {:vehicle_view, a}]
+    assert topics() == [{:dolphin_signals, table}, {:vehicle, a}]
     Signals.post(table, :go, 1)
     assert {{:ok, true}, w} = Watcher.evaluate(w, :sig, Cond.new(fn snap -> Snapshot.poll(snap, :go) end))
     w = Watcher.forget(w, :sig)
-    assert topics() == [{:vehicle_view, a}]
+    assert topics() == [{:vehicle, a}]
     assert Map.keys(w.vehicles) == [a]
   end
 

@@ -48,9 +48,9 @@ defmodule Dolphin.Vehicles.LinkQualityTest do
       %{gcs_port: GroundStation.open()}
     end
 
-    defp flush_changes do
+    defp flush_views do
       receive do
-        {:dolphin, {:vehicle, _}, {:state, _, changes}} -> changes ++ flush_changes()
+        {:dolphin, {:vehicle, _}, {:view, view}} -> [view | flush_views()]
       after
         0 -> []
       end
@@ -78,7 +78,7 @@ defmodule Dolphin.Vehicles.LinkQualityTest do
       assert f.loss_rt > 0.25 and f.loss_rt < 0.8, inspect(f)
       assert is_number(f.rtt_ms)
       # Subscribers are told the figures.
-      assert Enum.any?(flush_changes(), &match?({:link_quality, %{loss_in: i}} when is_number(i), &1))
+      assert Enum.any?(flush_views(), &match?(%{link: %{loss_in: i}} when is_number(i), &1))
     end
   end
 end

@@ -65,14 +65,11 @@ defmodule Dolphin.Vehicles.MissionProtocolTest do
   defp meaning(item), do: %{item | seq: 0, mission_type: 0, target_system: 0, target_component: 0}
 
 
-  # The vehicle's mission state as published, once it satisfies `fun`.
+  # The vehicle's mission as its views say, once it satisfies `fun`.
   defp await_mission(sysid, fun) do
     receive do
-      {:dolphin, {:vehicle, ^sysid}, {:state, ^sysid, changes}} ->
-        case Keyword.fetch(changes, :mission) do
-          {:ok, mission} -> if fun.(mission), do: mission, else: await_mission(sysid, fun)
-          :error -> await_mission(sysid, fun)
-        end
+      {:dolphin, {:vehicle, ^sysid}, {:view, %{mission: mission}}} ->
+        if fun.(mission), do: mission, else: await_mission(sysid, fun)
     after
       Clock.to_real_ms(30_000) -> flunk("vehicle #{sysid}: no mission state as expected")
     end

@@ -14,7 +14,7 @@ defmodule Dolphin.Vehicles.ViewsTest do
     on_exit(fn -> Vehicles.forget(@id) end)
     Dolphin.Events.subscribe()
     Vehicles.subscribe(:all)
-    Vehicles.subscribe_view(@id)
+    Vehicles.subscribe(@id)
     :ok
   end
 
@@ -27,13 +27,13 @@ defmodule Dolphin.Vehicles.ViewsTest do
     assert Vehicles.view(@id) == {:ok, view}
     assert @id in Views.ids() and @id in Vehicles.list()
     assert view in Views.all()
-    assert_receive {:dolphin, {:vehicle_view, @id}, {:view, ^view}}
+    assert_receive {:dolphin, {:vehicle, @id}, {:view, ^view}}
     assert_receive {:dolphin, :events, %{event: :vehicle_discovered, vehicle: @id, type: :uav}}
     assert_receive {:dolphin, :vehicles, {:vehicle_changed, @id}}
 
     # A change of battery and mode: published, announced, but nothing picks match on.
     :ok = Views.put(%{view | battery: 0.8, mode: :auto})
-    assert_receive {:dolphin, {:vehicle_view, @id}, {:view, %View{battery: 0.8}}}
+    assert_receive {:dolphin, {:vehicle, @id}, {:view, %View{battery: 0.8}}}
     assert_receive {:dolphin, :events, %{event: :mode_changed, vehicle: @id, mode: :auto}}
     refute_received {:dolphin, :vehicles, {:vehicle_changed, @id}}
 
@@ -58,6 +58,45 @@ defmodule Dolphin.Vehicles.ViewsTest do
     refute_received {:dolphin, :events, %{event: :mode_changed, vehicle: @id}}
   end
 
+  test "the notices on :vehicles follow from the views, each after the view that shows it" do
+    :ok = Views.put(%View{id: @id, mode: :stabilize})
+    refute_received {:dolphin, :vehicles, {:vehicle_discovered, @id}}
+    :ok = Views.put(%View{id: @id, type: :uav})
+    :ok = Views.put(%View{id: @id, type: :uav, connected?: false})
+    :ok = Views.put(%View{id: @id, type: :uav, connected?: false, battery: 0.5})
+    :ok = Views.put(%View{id: @id, type: :uav, battery: 0.5})
+    :ok = Views.delete(@id)
+    :ok = Views.delete(@id)
+
+    notices =
+      for {:dolphin, topic, what} <- messages(), topic in [{:vehicle, @id}, :vehicles], what != {:vehicle_changed, @id} do
+        case what do
+          {:view, view} -> {:view, view.type, view.connected?}
+          notice -> notice
+        end
+      end
+
+    assert notices == [
+             {:view, nil, true},
+             {:view, :uav, true},
+             {:vehicle_discovered, @id},
+             {:view, :uav, false},
+             {:vehicle_lost, @id},
+             {:view, :uav, false},
+             {:view, :uav, true},
+             {:vehicle_reconnected, @id},
+             {:vehicle_forgotten, @id}
+           ]
+  end
+
+  defp messages do
+    receive do
+      message -> [message | messages()]
+    after
+      0 -> []
+    end
+  end
+
   test "a put that is not a view is a caller mistake" do
     assert_raise ArgumentError, ~r/a view is a %Dolphin.Vehicles.View{} with a system id, got: %{id: 3}/, fn -> Views.put(%{id: 3}) end
   end
@@ -77,6 +116,14 @@ defmodule Dolphin.Vehicles.ViewsTest do
     assert_receive {:dolphin, :events, %{event: :mode_changed, vehicle: ^a, mode: :guided}}
     refute_received {:dolphin, :events, %{vehicle: ^b}}
     assert [%View{id: ^b, mode: :guided}] = FakeSource.views(quiet)
+    # Quiet in the events, not in the notices.
+    assert_received {:dolphin, :vehicles, {:vehicle_discovered, ^b}}
+    FakeSource.lose(quiet, b)
+    assert_received {:dolphin, :vehicles, {:vehicle_lost, ^b}}
+    FakeSource.reconnect(quiet, b)
+    assert_received {:dolphin, :vehicles, {:vehicle_reconnected, ^b}}
+    FakeSource.remove(quiet, b)
+    assert_received {:dolphin, :vehicles, {:vehicle_forgotten, ^b}}
     assert_raise ArgumentError, ~r/events: must be true or false, got: :yes/, fn -> FakeSource.start_link(name: :views_bad, events: :yes) end
   end
 end
