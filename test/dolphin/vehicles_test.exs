@@ -115,6 +115,13 @@ defmodule Dolphin.VehiclesTest do
     Wait.until(fn -> match?({:ok, %{link: %{received: 4}}}, Vehicles.state(12)) end)
     refute 250 in Vehicles.list()
     assert {:error, :unknown_vehicle} = Vehicles.state(250)
+
+    # When it was last heard is read without a call, as its state says it.
+    {:ok, state} = Vehicles.state(12)
+    assert Dolphin.Vehicles.Views.last_heard_ms(12) == state.link.last_seen_ms
+    assert Dolphin.Vehicles.Views.last_heard_ms(250) == nil
+    :ok = Vehicles.forget(12)
+    assert Dolphin.Vehicles.Views.last_heard_ms(12) == nil
   end
 
   test "a silent vehicle is lost after its timeout in clock time, and reconnects when heard", %{port: port, peer: peer} do

@@ -27,6 +27,7 @@ defmodule Dolphin.Cluster.Station do
   use GenServer
 
   alias Dolphin.{Clock, PubSub, Vehicles}
+  alias Dolphin.Vehicles.Views
 
   @heard_every_ms 250
 
@@ -97,10 +98,11 @@ defmodule Dolphin.Cluster.Station do
     # A restarted vehicle process has a new pid: the controllers learn it here.
     s = refresh_pids(s)
 
+    # Read without a call to any vehicle: the views and the vehicles' heard cells.
     heard =
-      for {id, _pid} <- s.vehicles, {:ok, st} <- [Vehicles.state(id)], into: %{} do
-        age = if st.link.last_seen_ms, do: max(now - st.link.last_seen_ms, 0)
-        {id, {age, Map.take(Dolphin.Vehicles.State.link_figures(st), [:rtt_ms, :loss_in, :loss_out])}}
+      for {id, _pid} <- s.vehicles, {:ok, view} <- [Vehicles.view(id)], into: %{} do
+        last = Views.last_heard_ms(id)
+        {id, {last && max(now - last, 0), view.link}}
       end
 
     tell(s, {:heard, heard})

@@ -12,14 +12,16 @@ defmodule Dolphin.Vehicles.Vehicle do
   alias Dolphin.{Clock, Events}
   alias Dolphin.Link.Connection
   alias Dolphin.MAVLink.Ardupilotmega, as: M
-  alias Dolphin.Vehicles.{CommandProtocol, MissionProtocol, Paths, State, View}
+  alias Dolphin.Vehicles.{CommandProtocol, MissionProtocol, Paths, State, View, Views}
 
-  defstruct [:sysid, :paths, :judge_due, :state, :timeout_ms, :check_due_ms, :requests_left, lost: false, view: nil, ops: %{}, queued: %{}]
+  defstruct [:sysid, :paths, :judge_due, :state, :heard, :timeout_ms, :check_due_ms, :requests_left, lost: false, view: nil, ops: %{}, queued: %{}]
 
   # The process's state. `paths`: one path per link (and address) the vehicle
   # is heard on (Dolphin.Vehicles.Paths), the one it was discovered on in
   # use; `judge_due`: when they are judged next (real ms). `state`: the
-  # vehicle as its frames say (Dolphin.Vehicles.State). `check_due_ms`: when
+  # vehicle as its frames say (Dolphin.Vehicles.State); `heard`: the cell in
+  # which its last frame's time is written for readers (Dolphin.Vehicles.Views.heard/2).
+  # `check_due_ms`: when
   # the next silence check is due (clock ms): one that runs much later than
   # that does not judge (see :check_link). `view`: the view last published
   # (Dolphin.Vehicles.View), nil before the first. `requests_left`: telemetry
@@ -32,6 +34,7 @@ defmodule Dolphin.Vehicles.Vehicle do
           paths: Paths.t(),
           judge_due: integer(),
           state: State.t(),
+          heard: :atomics.atomics_ref(),
           timeout_ms: pos_integer(),
           check_due_ms: integer(),
           requests_left: non_neg_integer(),
@@ -89,9 +92,13 @@ defmodule Dolphin.Vehicles.Vehicle do
     real = real_ms()
     Process.send_after(self(), :judge_paths, judge_period())
 
+    heard = Views.heard_cell(sysid)
+    Views.heard(heard, now)
+
     {:ok,
      %__MODULE__{
        sysid: sysid,
+       heard: heard,
        paths: Paths.new(link, now, real),
        judge_due: real + judge_period(),
        # Seen now (it was just heard, or its process restarted): silence from
@@ -117,6 +124,7 @@ defmodule Dolphin.Vehicles.Vehicle do
         {:noreply, publish(s, %{s.state | link_quality: Paths.quality(paths)})}
 
       :fresh ->
+        Views.heard(s.heard, now)
         s = publish(s, %{State.apply(s.state, frame, now) | link_quality: Paths.quality(paths)})
         route_to_op(s, frame)
 
@@ -268,7 +276,7 @@ defmodule Dolphin.Vehicles.Vehicle do
         s
 
       view ->
-        Dolphin.Vehicles.Views.put(view)
+        Views.put(view)
         %{s | view: view}
     end
   end

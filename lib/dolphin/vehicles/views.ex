@@ -34,6 +34,15 @@ defmodule Dolphin.Vehicles.Views do
       Dolphin.Vehicles.Views.get(1)     # {:ok, %Dolphin.Vehicles.View{battery: 0.86, ...}}
       Dolphin.Vehicles.Views.ids()      # [1, 2, 3]
 
+  ## When each vehicle was last heard
+
+  A view changes when what it shows changes, not with every frame; when a
+  vehicle's last frame came does. Each vehicle's process therefore also
+  keeps that time (clock ms) in an `:atomics` cell of its own
+  (`heard_cell/1`), a write per frame that costs next to nothing and wakes
+  nobody; `last_heard_ms/1` reads it, for the cluster's station, which tells
+  controllers how long ago each vehicle was heard.
+
   The table's owner is a small process under the application's supervisor,
   started before the vehicles' supervisor: the vehicles restart after it.
   """
@@ -44,6 +53,7 @@ defmodule Dolphin.Vehicles.Views do
   alias Dolphin.Vehicles.View
 
   @table __MODULE__
+  @heard Module.concat(__MODULE__, Heard)
 
   @doc false
   @spec start_link(keyword()) :: GenServer.on_start()
@@ -92,9 +102,39 @@ defmodule Dolphin.Vehicles.Views do
   """
   @spec delete(non_neg_integer()) :: :ok
   def delete(id) do
+    :ets.delete(@heard, id)
+
     case :ets.take(@table, id) do
       [] -> :ok
       [_] -> forgotten(id)
+    end
+  end
+
+  @doc """
+  The cell in which vehicle `id`'s owner writes when it last heard the
+  vehicle (`heard/2`): the same cell for as long as the vehicle is not
+  forgotten, so a restarted process goes on with it.
+  """
+  @spec heard_cell(non_neg_integer()) :: :atomics.atomics_ref()
+  def heard_cell(id) do
+    # Slot 1: clock ms (any integer: the clock's origin is arbitrary); slot 2: 1 once written.
+    :ets.insert_new(@heard, {id, :atomics.new(2, signed: true)})
+    :ets.lookup_element(@heard, id, 2)
+  end
+
+  @doc "Writes in a vehicle's cell that it was heard at `clock_ms`."
+  @spec heard(:atomics.atomics_ref(), integer()) :: :ok
+  def heard(cell, clock_ms) do
+    :atomics.put(cell, 1, clock_ms)
+    :atomics.put(cell, 2, 1)
+  end
+
+  @doc "When vehicle `id` was last heard (clock ms), or nil (never, or not a vehicle of this node)."
+  @spec last_heard_ms(non_neg_integer()) :: integer() | nil
+  def last_heard_ms(id) do
+    case :ets.lookup(@heard, id) do
+      [{^id, cell}] -> if :atomics.get(cell, 2) == 1, do: :atomics.get(cell, 1)
+      [] -> nil
     end
   end
 
@@ -126,6 +166,7 @@ defmodule Dolphin.Vehicles.Views do
   @impl true
   def init(:ok) do
     :ets.new(@table, [:named_table, :public, :set, read_concurrency: true])
+    :ets.new(@heard, [:named_table, :public, :set, read_concurrency: true])
     {:ok, nil}
   end
 end
