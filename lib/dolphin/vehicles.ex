@@ -40,10 +40,12 @@ defmodule Dolphin.Vehicles do
   `vehicle_lost`, ...). Nobody else keeps a copy to maintain: a subscriber
   takes the latest view whole, and nobody rebuilds a vehicle from its
   changes. The view carries what the ground station's readers need — the
-  mission as the vehicle reports it (`mission`), its `home` and MAV_STATE
-  besides what conditions read — so the mission executor, the manoeuvres
-  and the console's helpers read views too; `state/1`, a call to the
-  vehicle's process, is for debugging and the console's listing. A vehicle heard by another ground station node can be put in the
+  mission as the vehicle reports it (`mission`), its `home`, MAV_STATE,
+  MAV_TYPE, autopilot and last STATUSTEXTs besides what conditions read —
+  so the mission executor, the manoeuvres, `set_mode/3`, the cluster's
+  station and the console's helpers read views too; `state/1`, a call to
+  the vehicle's process, is for debugging and the console's listing (its
+  link counters, which change with every frame, are in no view). A vehicle heard by another ground station node can be put in the
   table too: it is then listed and read here like a local one.
 
   ## Paths: one vehicle heard on several links
@@ -118,8 +120,8 @@ defmodule Dolphin.Vehicles do
   """
   @spec status_texts(byte()) :: [{integer(), String.t()}]
   def status_texts(sysid) do
-    case state(sysid) do
-      {:ok, st} -> st.status_texts
+    case view(sysid) do
+      {:ok, view} -> view.status_texts
       _ -> []
     end
   end
@@ -352,8 +354,8 @@ defmodule Dolphin.Vehicles do
   """
   @spec set_mode(byte(), atom(), command_opts()) :: {:ok, :accepted} | {:error, CommandError.t()}
   def set_mode(sysid, mode, opts \\ []) do
-    with {:ok, state} <- state(sysid),
-         {:ok, number} <- mode_number(state, mode) do
+    with {:ok, view} <- view(sysid),
+         {:ok, number} <- mode_number(view, mode) do
       params = if is_tuple(number), do: [1, elem(number, 0), elem(number, 1)], else: [1, number]
       command(sysid, :mav_cmd_do_set_mode, params, opts)
     else
@@ -365,14 +367,14 @@ defmodule Dolphin.Vehicles do
     end
   end
 
-  defp mode_number(%{autopilot: autopilot, type: type}, mode) when autopilot in [:ardupilot, :px4] do
+  defp mode_number(%{autopilot: autopilot, mav_type: type}, mode) when autopilot in [:ardupilot, :px4] do
     case Modes.number(autopilot, type, mode) do
       {:ok, n} -> {:ok, n}
       :error -> {:error, "no mode #{inspect(mode)} on this vehicle; it has #{inspect(Modes.names(autopilot, type))}"}
     end
   end
 
-  defp mode_number(_state, mode), do: {:error, "mode #{inspect(mode)}: the vehicle's autopilot is not known yet"}
+  defp mode_number(_view, mode), do: {:error, "mode #{inspect(mode)}: the vehicle's autopilot is not known yet"}
 
   @doc "Takes off to `altitude` metres (relative to home)."
   def takeoff(sysid, altitude, opts \\ []), do: command(sysid, :mav_cmd_nav_takeoff, [0, 0, 0, 0, 0, 0, altitude], opts)

@@ -109,10 +109,17 @@ defmodule Dolphin.VehiclesTest do
     UDPPeer.send_message(peer, port, %M.GlobalPositionInt{lat: 411_780_000, lon: -85_960_000, relative_alt: 10_000}, sysid: 12, seq: 2)
     assert_receive {:dolphin, {:vehicle, 12}, {:view, %View{battery: 0.55, position: %{lat: 41.178}, relative_altitude: 10.0}}}, 10_000
 
+    # What the autopilot says is in the view, for readers that report it.
+    before = Vehicles.status_texts(12)
+    UDPPeer.send_message(peer, port, %M.Statustext{severity: 4, text: "PreArm: Need Position Estimate"}, sysid: 12, seq: 3)
+    assert_receive {:dolphin, {:vehicle, 12}, {:view, %View{status_texts: [{4, "PreArm: Need Position Estimate"} | _]} = view}}, 10_000
+    assert {view.mav_type, view.autopilot, view.type} == {2, :ardupilot, :uav}
+    assert Dolphin.Vehicles.State.texts_since(before, Vehicles.status_texts(12)) == [{4, "PreArm: Need Position Estimate"}]
+
     # A GCS's heartbeat (another ground station on the link) is not a vehicle.
     UDPPeer.send_message(peer, port, %M.Heartbeat{type: 6, autopilot: 8}, sysid: 250)
-    UDPPeer.send_message(peer, port, copter(), sysid: 12, seq: 3)
-    Wait.until(fn -> match?({:ok, %{link: %{received: 4}}}, Vehicles.state(12)) end)
+    UDPPeer.send_message(peer, port, copter(), sysid: 12, seq: 4)
+    Wait.until(fn -> match?({:ok, %{link: %{received: 5}}}, Vehicles.state(12)) end)
     refute 250 in Vehicles.list()
     assert {:error, :unknown_vehicle} = Vehicles.state(250)
 

@@ -15,6 +15,8 @@ defmodule Dolphin.Vehicles.View do
   | --- | --- |
   | `id` | system id |
   | `type` | `:uav`, `:ugv`, `:usv`, `:uuv`, `:other`, or `nil` while unknown |
+  | `mav_type` | its HEARTBEAT's MAV_TYPE number (2 a quadrotor, ...), `nil` while unknown |
+  | `autopilot` | `:ardupilot`, `:px4`, `:generic` or `nil` while unknown |
   | `payloads` | sorted list of atoms, e.g. `[:camera]` |
   | `battery` | remaining fraction 0.0..1.0, `nil` until reported |
   | `position` | `Dolphin.Geo.Location` (height above mean sea level) or `nil` |
@@ -27,10 +29,13 @@ defmodule Dolphin.Vehicles.View do
   | `home` | `Dolphin.Geo.Location` of its home, or `nil` until reported |
   | `system_status` | MAV_STATE number (0 UNINIT, 1 BOOT, ... 4 ACTIVE), `nil` until reported |
   | `link` | `%{rtt_ms, loss_in, loss_out}`: round trip and loss each way, `nil`s until measured (`Dolphin.Vehicles.LinkQuality`) |
+  | `status_texts` | the autopilot's last STATUSTEXTs, `{severity, text}`, newest first (see `Dolphin.Vehicles.State`); what it said since an earlier view is `Dolphin.Vehicles.State.texts_since/2` of the two |
   """
 
   defstruct id: nil,
             type: nil,
+            mav_type: nil,
+            autopilot: nil,
             payloads: [],
             battery: nil,
             position: nil,
@@ -43,12 +48,15 @@ defmodule Dolphin.Vehicles.View do
             mission: %{current: nil, total: nil, state: nil, reached: nil},
             home: nil,
             system_status: nil,
-            link: %{rtt_ms: nil, loss_in: nil, loss_out: nil}
+            link: %{rtt_ms: nil, loss_in: nil, loss_out: nil},
+            status_texts: []
 
   @type class :: :uav | :ugv | :usv | :uuv | :other
   @type t :: %__MODULE__{
           id: non_neg_integer(),
           type: class() | nil,
+          mav_type: non_neg_integer() | nil,
+          autopilot: atom() | nil,
           payloads: [atom()],
           battery: float() | nil,
           position: Dolphin.Geo.Location.t() | nil,
@@ -61,7 +69,8 @@ defmodule Dolphin.Vehicles.View do
           mission: %{current: non_neg_integer() | nil, total: non_neg_integer() | nil, state: atom() | nil, reached: non_neg_integer() | nil},
           home: Dolphin.Geo.Location.t() | nil,
           system_status: non_neg_integer() | nil,
-          link: %{rtt_ms: non_neg_integer() | nil, loss_in: float() | nil, loss_out: float() | nil}
+          link: %{rtt_ms: non_neg_integer() | nil, loss_in: float() | nil, loss_out: float() | nil},
+          status_texts: [{non_neg_integer(), String.t()}]
         }
 
   @uav [1, 2, 3, 4, 7, 8, 13, 14, 15, 16, 17, 19, 20, 21, 22, 23, 24, 25, 28, 29, 35, 43, 47]
@@ -103,6 +112,8 @@ defmodule Dolphin.Vehicles.View do
     %__MODULE__{
       id: state.sysid,
       type: class(state.type),
+      mav_type: state.type,
+      autopilot: state.autopilot,
       payloads: Enum.sort(Enum.uniq(Enum.to_list(state.components) ++ payloads)),
       battery: state.battery,
       position: position,
@@ -115,7 +126,8 @@ defmodule Dolphin.Vehicles.View do
       mission: state.mission,
       home: state.home && Dolphin.Geo.Location.new(state.home.lat, state.home.lon, state.home.alt),
       system_status: state.system_status,
-      link: Map.take(Dolphin.Vehicles.State.link_figures(state), [:rtt_ms, :loss_in, :loss_out])
+      link: Map.take(Dolphin.Vehicles.State.link_figures(state), [:rtt_ms, :loss_in, :loss_out]),
+      status_texts: state.status_texts
     }
   end
 
