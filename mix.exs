@@ -49,11 +49,15 @@ defmodule Dolphin.MixProject.StartSignals do
   # `mix dolphin.check` reads "no errors". From here until the task's
   # first line (Dolphin.CLI.Signals takes over this handler) it ends the
   # command with 143. (SIGINT cannot be caught before the project's C
-  # library is loaded: it still opens the BREAK menu.)
+  # library is loaded: it still opens the BREAK menu.) `mix test` keeps it to
+  # the end: a suite stopped by SIGTERM (a CI job's time limit, or
+  # scripts/test stopping its other parts) must not exit 0, the status of a
+  # suite that passed.
   @behaviour :gen_event
 
   def install(["dolphin." <> _ = task | _]), do: install(task)
   def install(["mavlink." <> _ = task | _]), do: install(task)
+  def install(["test" | _]), do: install("test")
 
   def install(task) when is_binary(task) do
     # IEx keeps its own meanings of the signals; OTP's handler is replaced once.
@@ -71,6 +75,11 @@ defmodule Dolphin.MixProject.StartSignals do
   def init({task, _swapped_out}), do: {:ok, task}
 
   @impl true
+  def handle_event(:sigterm, "test") do
+    IO.puts(:stderr, "mix test: terminated (SIGTERM): the suite did not finish")
+    System.halt(143)
+  end
+
   def handle_event(:sigterm, task) do
     IO.puts(:stderr, "mix #{task}: terminated (SIGTERM) while mix was starting it: nothing ran")
     System.halt(143)

@@ -22,6 +22,13 @@ defmodule Dolphin.Vehicles.Settings do
     :ok
   end
 
+  @doc "Forgets what was set for vehicle `sysid`: it gets the defaults again."
+  @spec clear(non_neg_integer()) :: :ok
+  def clear(sysid) do
+    :ets.delete(@table, {:timeout, sysid})
+    :ok
+  end
+
   @doc "The connection timeout set for vehicle `sysid`, or `default`."
   @spec timeout(non_neg_integer(), pos_integer()) :: pos_integer()
   def timeout(sysid, default) do

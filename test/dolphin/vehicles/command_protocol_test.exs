@@ -28,8 +28,13 @@ defmodule Dolphin.Vehicles.CommandProtocolTest do
       Clock.set_speedup(1)
       DynamicSupervisor.terminate_child(Dolphin.Link.Supervisor, link)
       Vehicles.forget(sysid)
+      Dolphin.Vehicles.Settings.clear(sysid)
     end)
 
+    # The scripted vehicle is silent between a test's exchanges: never lost
+    # (a reconnection would ask for telemetry again, and its commands would
+    # mix with a test's), however long a busy machine holds the test up.
+    {:error, :unknown_vehicle} = Vehicles.set_timeout(sysid, 3_600_000)
     UDPPeer.send_message(peer, port, %M.Heartbeat{type: 2, autopilot: 3, custom_mode: 0}, sysid: sysid)
     Wait.until(fn -> match?({:ok, %{autopilot: :ardupilot}}, Vehicles.state(sysid)) end)
     # Position telemetry: the vehicle process stops asking for telemetry; its

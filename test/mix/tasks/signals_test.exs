@@ -93,4 +93,15 @@ defmodule Mix.Tasks.SignalsTest do
     assert output =~ "mix dolphin.check: terminated (SIGTERM) while mix was starting it: nothing ran"
     refute_defaults(output)
   end
+
+  # OTP's own SIGTERM would end the suite with 0, a pass.
+  test "SIGTERM ends mix test with 143, saying the suite did not finish", %{tmp_dir: dir} do
+    port = start(["test", "test/dolphin/clock_test.exs"], [{"MIX_BUILD_PATH", Path.join(dir, "build")}])
+    wait_for(port, ~r/Compiling \d+ files/)
+    kill(port, "TERM")
+    output = wait_exit(port, 143)
+
+    assert output =~ "mix test: terminated (SIGTERM): the suite did not finish"
+    refute_defaults(output)
+  end
 end
