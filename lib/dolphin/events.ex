@@ -11,6 +11,8 @@ defmodule Dolphin.Events do
     {:claim_conflict, [:vehicle, :kept, :dropped], "after a netsplit, both sides had claimed the vehicle (`Dolphin.Fleet.Claims`): the claim of the owner on node `kept` stays, the other's (on `dropped`) was dropped without stopping anything"},
     {:path_changed, [:vehicle, :from, :to, :reason],
      "the vehicle is now sent to on another of the links it is heard on: `from` and `to` are the links' names, `reason` is `silent` (the path in use went silent) or `better` (the other is clearly less lossy or quicker)"},
+    {:system_id_shared, [:vehicle, :path, :uid, :vehicle_uid],
+     "another vehicle (its autopilot's unique id `uid`) uses the system id of `vehicle` (unique id `vehicle_uid`) on the path `path`: that path is refused, nothing of it is taken for the vehicle and nothing is sent on it"},
     {:mode_changed, [:vehicle, :mode], "the vehicle reported another flight mode"},
     {:armed, [:vehicle], "the vehicle reported it is armed"},
     {:disarmed, [:vehicle], "the vehicle reported it is disarmed"},

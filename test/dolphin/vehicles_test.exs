@@ -48,10 +48,53 @@ defmodule Dolphin.VehiclesTest do
     assert [%{via: {^name, {_, ^radio_port}}, in_use?: true, frames: 1}, %{via: {^name, {_, ^relay_port}}, in_use?: false, frames: 1}] = Vehicles.paths(12)
     assert {:ok, %{link: %{received: 1}}} = Vehicles.state(12)
 
+    # The relay's path is the vehicle's once its autopilot and the radio's
+    # report one unique id (asked on both).
+    assert [%{identity: :same}, %{identity: :pending}] = Vehicles.paths(12)
+
+    for socket <- [peer, relay] do
+      UDPPeer.receive_until(socket, &match?(%M.CommandLong{command: 520, target_system: 12}, &1.message), 10_000)
+      UDPPeer.send_message(socket, port, %M.AutopilotVersion{uid: 7}, sysid: 12)
+    end
+
+    Wait.until(fn -> match?([%{identity: :same, uid: 7}, %{identity: :same, uid: 7}], Vehicles.paths(12)) end)
+    assert {:ok, %{uid: 7}} = Vehicles.view(12)
+
     :ok = Vehicles.send_message(12, %M.Statustext{severity: 6, text: "to the path in use"})
     assert %Frame{} = UDPPeer.receive_until(peer, &match?(%M.Statustext{}, &1.message), 10_000)
     # Sent once, by the same link just before: a copy to the relay would be there by now.
     assert_raise ExUnit.AssertionError, fn -> UDPPeer.receive_until(relay, &match?(%M.Statustext{}, &1.message), 300) end
+  end
+
+  test "another vehicle with the same system id on another address is refused, never merged", %{port: port, peer: peer} do
+    other = UDPPeer.open()
+    Vehicles.subscribe(:all)
+    Dolphin.Events.subscribe()
+    UDPPeer.send_message(peer, port, copter(4), sysid: 12)
+    assert_receive {:dolphin, :vehicles, {:vehicle_discovered, 12}}, 10_000
+    # Another copter, in LOITER, also system id 12 (both left the factory so).
+    UDPPeer.send_message(other, port, copter(5), sysid: 12)
+
+    # Each answers the question of its identity with its own unique id.
+    for {socket, uid} <- [{peer, 7}, {other, 9}] do
+      UDPPeer.receive_until(socket, &match?(%M.CommandLong{command: 520}, &1.message), 10_000)
+      UDPPeer.send_message(socket, port, %M.AutopilotVersion{uid: uid}, sysid: 12, seq: 1)
+    end
+
+    {:ok, other_port} = :inet.port(other)
+    assert_receive {:dolphin, :events, %{event: :system_id_shared, vehicle: 12, uid: 9, vehicle_uid: 7, path: path} = event}, 10_000
+    assert path =~ "from 127.0.0.1:#{other_port}"
+    assert Dolphin.EventText.event_text(event) =~ "vehicle 12: another vehicle with system id 12 is heard on #{path} (unique id 9, not 7)"
+
+    # Nothing of the other is taken for the vehicle; nothing is sent to it.
+    UDPPeer.send_message(other, port, %M.SysStatus{battery_remaining: 90}, sysid: 12, seq: 2)
+    UDPPeer.send_message(peer, port, %M.SysStatus{battery_remaining: 40}, sysid: 12, seq: 2)
+    Wait.until(fn -> match?({:ok, %{battery: 0.4}}, Vehicles.view(12)) end)
+    assert {:ok, %{mode: :guided, uid: 7, battery: 0.4}} = Vehicles.view(12)
+    assert [%{in_use?: true, identity: :same}, %{identity: :refused, uid: 9, frames: 3}] = Vehicles.paths(12)
+    :ok = Vehicles.send_message(12, %M.Statustext{severity: 6, text: "to the vehicle"})
+    assert %Frame{} = UDPPeer.receive_until(peer, &match?(%M.Statustext{}, &1.message), 10_000)
+    assert_raise ExUnit.AssertionError, fn -> UDPPeer.receive_until(other, &match?(%M.Statustext{}, &1.message), 300) end
   end
 
   test "a forgotten vehicle is gone at once, and heard again it is discovered anew", %{port: port, peer: peer} do

@@ -139,11 +139,17 @@ defmodule Dolphin.Console.Format do
     rows =
       Enum.map(paths, fn p ->
         figures = [if(p.loss, do: "loss #{round(p.loss * 100)} %", else: "loss ?"), if(p.rtt_ms, do: "#{round(p.rtt_ms)} ms", else: "? ms"), "#{p.frames} frames"]
-        ["  " <> if(p.in_use?, do: "*", else: " "), Dolphin.Vehicles.Paths.via_text(p.via), Atom.to_string(p.state), Enum.join(figures, ", "), "heard " <> seen(p.seen_ms, false)]
+        ["  " <> if(p.in_use?, do: "*", else: " "), Dolphin.Vehicles.Paths.via_text(p.via), path_state(p), Enum.join(figures, ", "), "heard " <> seen(p.seen_ms, false)]
       end)
 
     "vehicle #{id} paths:\n" <> pad_columns(rows)
   end
+
+  # A path not (yet) known to be the vehicle's says so (Dolphin.Vehicles.Paths,
+  # "Another vehicle with the same system id").
+  defp path_state(%{identity: :pending}), do: "identifying"
+  defp path_state(%{identity: :refused, uid: uid}), do: "another vehicle (unique id #{uid})"
+  defp path_state(p), do: Atom.to_string(p.state)
 
   # Columns lined up (each cell padded to its column's widest).
   defp pad_columns(rows) do

@@ -66,6 +66,7 @@ defmodule Dolphin.Sim.Copter do
   }
 
   defstruct sysid: 1,
+            uid: 1,
             config: @defaults,
             origin: %{lat: 0.0, lon: 0.0, alt: 0.0},
             plane: nil,
@@ -121,6 +122,7 @@ defmodule Dolphin.Sim.Copter do
 
     %__MODULE__{
       sysid: sysid,
+      uid: unique_id(),
       config: config,
       origin: origin,
       plane: Geo.tangent_plane(origin),
@@ -130,6 +132,14 @@ defmodule Dolphin.Sim.Copter do
       missions: MissionServer.new(request_int: config.request_int),
       params: Streams.default_params(sysid, config)
     }
+  end
+
+  # The autopilot's unique id (AUTOPILOT_VERSION uid), as a board's serial
+  # number: random, so that two simulated vehicles with one system id, in
+  # one ground station or in two, are told apart as real ones are.
+  defp unique_id do
+    <<uid::64>> = :crypto.strong_rand_bytes(8)
+    max(uid, 1)
   end
 
   @doc "Reboots: the state of a fresh boot where the vehicle stands, its missions kept (they live in its storage)."

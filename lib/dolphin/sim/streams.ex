@@ -197,7 +197,7 @@ defmodule Dolphin.Sim.Streams do
     # MISSION_FLOAT, PARAM_FLOAT, MISSION_INT, COMMAND_INT, SET_POSITION_TARGET_GLOBAL_INT, MAVLINK2, MISSION_FENCE, MISSION_RALLY
     capabilities = 1 ||| 2 ||| 4 ||| 8 ||| 256 ||| 8192 ||| 16_384 ||| 32_768
 
-    %M.AutopilotVersion{capabilities: capabilities, flight_sw_version: 0x04060000, uid: c.sysid, vendor_id: 0x1209, product_id: 0x5740}
+    %M.AutopilotVersion{capabilities: capabilities, flight_sw_version: 0x04060000, uid: c.uid, vendor_id: 0x1209, product_id: 0x5740}
   end
 
   def message(%{home: nil}, 242), do: nil

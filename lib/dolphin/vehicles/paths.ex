@@ -46,6 +46,28 @@ defmodule Dolphin.Vehicles.Paths do
       iex> p = Paths.new("radio-a", 0, 0)
       iex> Paths.in_use(p)
       "radio-a"
+
+  ## Another vehicle with the same system id
+
+  Most vehicles leave the factory as system id 1, so the same system id on
+  another link, or from another address of a `udpin` link, may be another
+  vehicle rather than this one heard again. A path is therefore *pending*
+  from its first frame until it is identified: its frames count in its own
+  figures but are not the vehicle's (`heard/5` says `:unidentified`), and it
+  is never the path in use. `identity_asks/3` names the paths to ask for
+  their autopilot's unique id (AUTOPILOT_VERSION `uid`; a pending path and,
+  while one is pending and its uid is not known, the path in use) — every
+  second of clock time, at most 5 times each; `identified/3` records what
+  a path's autopilot answered; `settle/3` decides:
+
+    * both uids known, both non-zero and different: another vehicle. The
+      path is `:refused` for good; its frames are never the vehicle's, it is
+      sent nothing;
+    * otherwise, once the uids are known or the asking is over: the same
+      vehicle (an autopilot that reports no uid, or does not answer, cannot
+      be told apart; it is taken to be the same, as a redundant radio is).
+
+  The first path a vehicle is heard on is its own: it is never pending.
   """
 
   alias Dolphin.MAVLink.Ardupilotmega.Timesync
@@ -64,6 +86,11 @@ defmodule Dolphin.Vehicles.Paths do
   @rtt_margin_ms 20
   # How long (real ms) another path must stay clearly better before it takes over.
   @better_for_real_ms 2_000
+  # Asking a path for its autopilot's uid: this many times, this often (clock
+  # ms, and at least the real floor), before taking it as unidentifiable.
+  @identity_asks 5
+  @identity_ask_every_ms 1_000
+  @identity_ask_real_floor_ms 100
 
   defstruct paths: %{}, in_use: nil, recent: %{}, fresh: %{}, challenger: nil
 
@@ -74,6 +101,8 @@ defmodule Dolphin.Vehicles.Paths do
   """
   @type via :: term()
   @type path_state :: :active | :standby | :silent
+  @typedoc "Whether a path is the vehicle's (see \"Another vehicle with the same system id\")."
+  @type identity :: :same | :pending | :refused
   @type t :: %__MODULE__{
           paths: %{via() => map()},
           in_use: via() | nil,
@@ -90,15 +119,31 @@ defmodule Dolphin.Vehicles.Paths do
           rtt_ms: non_neg_integer() | nil,
           last_heard_ms: integer(),
           frames: non_neg_integer(),
-          in_use?: boolean()
+          in_use?: boolean(),
+          identity: identity(),
+          uid: non_neg_integer() | nil
         }
 
   @doc "The paths of a vehicle first heard on `via` at `now_ms` (clock) and `real_ms` (real): that path in use."
   @spec new(via(), integer(), integer()) :: t()
-  def new(via, now_ms, real_ms), do: %__MODULE__{paths: %{via => path(via, now_ms, real_ms, :active)}, in_use: via}
+  def new(via, now_ms, real_ms), do: %__MODULE__{paths: %{via => path(via, now_ms, real_ms, :active, :same)}, in_use: via}
 
-  defp path(via, now_ms, real_ms, state),
-    do: %{via: via, state: state, last_heard_ms: now_ms, last_heard_real_ms: real_ms, frames: 0, lost: 0, seqs: %{}, quality: LinkQuality.new()}
+  defp path(via, now_ms, real_ms, state, identity) do
+    %{
+      via: via,
+      state: state,
+      identity: identity,
+      uid: nil,
+      asks: 0,
+      asked: nil,
+      last_heard_ms: now_ms,
+      last_heard_real_ms: real_ms,
+      frames: 0,
+      lost: 0,
+      seqs: %{},
+      quality: LinkQuality.new()
+    }
+  end
 
   @doc "The path in use."
   @spec in_use(t()) :: via()
@@ -111,14 +156,94 @@ defmodule Dolphin.Vehicles.Paths do
   @doc """
   A frame heard on `via` at `now_ms` (clock) and `real_ms` (real): counted in
   that path's figures (a TIMESYNC answer to this path's request gives a round
-  trip), and judged `:fresh` or `:duplicate` (see "De-duplication").
+  trip), and judged `:fresh` or `:duplicate` (see "De-duplication"), or
+  `:unidentified` on a path not known to be this vehicle's (see "Another
+  vehicle with the same system id": a new path is pending).
   """
-  @spec heard(t(), via(), Frame.t(), integer(), integer()) :: {:fresh | :duplicate, t()}
+  @spec heard(t(), via(), Frame.t(), integer(), integer()) :: {:fresh | :duplicate | :unidentified, t()}
   def heard(%__MODULE__{} = p, via, %Frame{} = frame, now_ms, real_ms) do
-    path = Map.get_lazy(p.paths, via, fn -> path(via, now_ms, real_ms, :standby) end)
+    path = Map.get_lazy(p.paths, via, fn -> path(via, now_ms, real_ms, :standby, :pending) end)
     path = path |> count(frame, now_ms, real_ms) |> timesync_answer(frame.message, real_ms)
     path = if path.state == :silent, do: %{path | state: :standby}, else: path
-    dedup(%{p | paths: Map.put(p.paths, via, path)}, via, frame, real_ms)
+    p = %{p | paths: Map.put(p.paths, via, path)}
+
+    # Not this vehicle's (yet): nothing of it may mark a frame of the
+    # vehicle's own paths as a copy.
+    if path.identity == :same, do: dedup(p, via, frame, real_ms), else: {:unidentified, p}
+  end
+
+  @doc """
+  Records the unique id (AUTOPILOT_VERSION `uid`, 0 for none) that the
+  autopilot heard on `via` reported.
+  """
+  @spec identified(t(), via(), non_neg_integer()) :: t()
+  def identified(%__MODULE__{} = p, via, uid) do
+    case p.paths do
+      %{^via => path} -> %{p | paths: Map.put(p.paths, via, %{path | uid: uid})}
+      _ -> p
+    end
+  end
+
+  @doc """
+  The paths to ask now (at `now_ms` clock, `real_ms` real) for their
+  autopilot's unique id, counted as asked: the pending ones whose uid is not
+  known, and the path in use while a path is pending and its own uid is not
+  known (see "Another vehicle with the same system id").
+  """
+  @spec identity_asks(t(), integer(), integer()) :: {[via()], t()}
+  def identity_asks(%__MODULE__{} = p, now_ms, real_ms) do
+    pending = for {via, %{identity: :pending, uid: nil} = path} <- p.paths, ask_due?(path, now_ms, real_ms), do: via
+    own = p.paths[p.in_use]
+    any_pending? = Enum.any?(p.paths, fn {_, path} -> path.identity == :pending end)
+    asks = Enum.sort(pending) ++ if(any_pending? and own.uid == nil and ask_due?(own, now_ms, real_ms), do: [p.in_use], else: [])
+
+    paths = Enum.reduce(asks, p.paths, fn via, paths -> Map.update!(paths, via, &%{&1 | asks: &1.asks + 1, asked: {now_ms, real_ms}}) end)
+    {asks, %{p | paths: paths}}
+  end
+
+  defp ask_due?(%{asks: 0}, _now_ms, _real_ms), do: true
+  defp ask_due?(%{asks: asks}, _now_ms, _real_ms) when asks >= @identity_asks, do: false
+  defp ask_due?(path, now_ms, real_ms), do: waited?(path, now_ms, real_ms)
+
+  defp waited?(%{asked: {at, real_at}}, now_ms, real_ms),
+    do: now_ms - at >= @identity_ask_every_ms and real_ms - real_at >= @identity_ask_real_floor_ms
+
+  # Asked as often as it is asked, and no answer in the last wait.
+  defp gave_up?(%{uid: nil, asks: asks} = path, now_ms, real_ms), do: asks >= @identity_asks and waited?(path, now_ms, real_ms)
+  defp gave_up?(_path, _now_ms, _real_ms), do: false
+
+  @doc """
+  Decides the pending paths that can be decided at `now_ms` (clock) and
+  `real_ms` (real) (see "Another vehicle with the same system id"): the
+  paths, and `{via, :same | :unidentifiable | {:refused, uid, vehicle_uid}}`
+  for each path decided (`:unidentifiable`: taken as the same vehicle for
+  want of uids to compare).
+  """
+  @spec settle(t(), integer(), integer()) :: {t(), [{via(), :same | :unidentifiable | {:refused, non_neg_integer(), non_neg_integer()}}]}
+  def settle(%__MODULE__{} = p, now_ms, real_ms) do
+    own = p.paths[p.in_use]
+
+    decisions =
+      for {via, %{identity: :pending} = path} <- Enum.sort(p.paths), decision = decide(path, own, now_ms, real_ms), decision != nil, do: {via, decision}
+
+    paths =
+      Enum.reduce(decisions, p.paths, fn {via, decision}, paths ->
+        Map.update!(paths, via, &%{&1 | identity: if(match?({:refused, _, _}, decision), do: :refused, else: :same)})
+      end)
+
+    {%{p | paths: paths}, decisions}
+  end
+
+  defp decide(%{uid: uid}, %{uid: own}, _now_ms, _real_ms) when is_integer(uid) and is_integer(own) do
+    cond do
+      uid != 0 and own != 0 and uid != own -> {:refused, uid, own}
+      uid == own and uid != 0 -> :same
+      true -> :unidentifiable
+    end
+  end
+
+  defp decide(path, own, now_ms, real_ms) do
+    if gave_up?(path, now_ms, real_ms) or (is_integer(path.uid) and gave_up?(own, now_ms, real_ms)), do: :unidentifiable
   end
 
   # Sequence numbers are per component; a gap on this path is frames this path lost.
@@ -180,7 +305,8 @@ defmodule Dolphin.Vehicles.Paths do
   """
   @spec timesync(t(), integer(), integer()) :: {[{via(), integer()}], t()}
   def timesync(%__MODULE__{} = p, ts1, real_ms) do
-    requests = p.paths |> Map.keys() |> Enum.sort() |> Enum.with_index(ts1)
+    # Another vehicle's path is sent nothing.
+    requests = for({via, path} <- p.paths, path.identity != :refused, do: via) |> Enum.sort() |> Enum.with_index(ts1)
 
     paths =
       Enum.reduce(requests, p.paths, fn {via, stamp}, paths ->
@@ -220,7 +346,8 @@ defmodule Dolphin.Vehicles.Paths do
         {via, %{path | state: if(silent?, do: :silent, else: path.state)}}
       end)
 
-    heard = paths |> Map.values() |> Enum.reject(&(&1.state == :silent)) |> Enum.sort_by(&{score(&1), &1.via})
+    # Only the vehicle's own paths may be used.
+    heard = paths |> Map.values() |> Enum.reject(&(&1.state == :silent or &1.identity != :same)) |> Enum.sort_by(&{score(&1), &1.via})
     current = paths[p.in_use]
 
     {in_use, reason, challenger} =
@@ -326,7 +453,9 @@ defmodule Dolphin.Vehicles.Paths do
         rtt_ms: path.quality.rtt_ms,
         last_heard_ms: path.last_heard_ms,
         frames: path.frames,
-        in_use?: path.via == p.in_use
+        in_use?: path.via == p.in_use,
+        identity: path.identity,
+        uid: path.uid
       }
     end)
   end

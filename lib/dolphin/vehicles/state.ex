@@ -14,6 +14,7 @@ defmodule Dolphin.Vehicles.State do
   | `mission` | MISSION_CURRENT, MISSION_ITEM_REACHED | `%{current, total, state, reached}` of the mission on the vehicle: all `nil` again when a new one is uploaded or it is cleared (`mission_replaced/1`) |
   | `landed` | EXTENDED_SYS_STATE | `:on_ground`, `:in_air`, `:takeoff`, `:landing` or nil |
   | `status_texts` | STATUSTEXT | the last 20 `{severity, text}`, newest first |
+  | `uid` | AUTOPILOT_VERSION (autopilot component) | the autopilot's unique id (0: it has none), `nil` until reported |
   | `components` | HEARTBEAT of other components | e.g. `:camera`, `:gimbal` |
   | `link` | every frame | `%{received, lost, last_seen_ms}`: `lost` counts sequence gaps |
   | `link_quality` | TIMESYNC answers, sequence gaps | a `Dolphin.Vehicles.LinkQuality`: round trip and loss both ways (`link_figures/1`) |
@@ -42,6 +43,7 @@ defmodule Dolphin.Vehicles.State do
             mission: %{current: nil, total: nil, state: nil, reached: nil},
             landed: nil,
             status_texts: [],
+            uid: nil,
             components: MapSet.new(),
             link: %{received: 0, lost: 0, last_seen_ms: nil},
             link_quality: LinkQuality.new(),
@@ -112,6 +114,9 @@ defmodule Dolphin.Vehicles.State do
         system_status: hb.system_status
     }
   end
+
+  defp message(state, compid, %M.AutopilotVersion{uid: uid}) when compid == 1 or compid == state.autopilot_compid,
+    do: %{state | uid: uid}
 
   defp message(state, _compid, %M.SysStatus{battery_remaining: remaining}) when remaining >= 0 and remaining <= 100,
     do: %{state | battery: remaining / 100}
@@ -216,7 +221,7 @@ defmodule Dolphin.Vehicles.State do
   @spec changes(t(), t()) :: [{atom(), term()}]
   def changes(old, new) do
     fields =
-      for field <- [:type, :autopilot, :mode, :armed, :system_status, :position, :home, :battery, :mission, :landed, :status_texts, :components],
+      for field <- [:type, :autopilot, :mode, :armed, :system_status, :position, :home, :battery, :mission, :landed, :status_texts, :uid, :components],
           Map.fetch!(old, field) != Map.fetch!(new, field),
           do: {field, Map.fetch!(new, field)}
 

@@ -11,6 +11,7 @@ defmodule Dolphin.Vehicles.Vehicle do
 
   alias Dolphin.{Clock, Events}
   alias Dolphin.Link.Connection
+  alias Dolphin.MAVLink.Frame
   alias Dolphin.MAVLink.Ardupilotmega, as: M
   alias Dolphin.Vehicles.{CommandProtocol, MissionProtocol, Paths, State, View, Views}
 
@@ -112,20 +113,25 @@ defmodule Dolphin.Vehicles.Vehicle do
 
   @impl true
   def handle_cast({:frame, frame, link}, s) do
-    s = if s.lost, do: reconnected(s), else: s
     now = Clock.now_ms()
     {verdict, paths} = Paths.heard(s.paths, link, frame, now, real_ms())
-    s = %{s | paths: paths}
+    s = %{s | paths: identify(paths, link, frame)}
+    s = if s.lost and verdict != :unidentified, do: reconnected(s), else: s
 
     case verdict do
+      # A path not known to be this vehicle's (pending, or another vehicle
+      # with the same system id): nothing of it is the vehicle's.
+      :unidentified ->
+        {:noreply, s}
+
       # A copy of a frame already heard on another path: it counted for its
       # path's figures, and goes no further (the state and the protocols had it).
       :duplicate ->
-        {:noreply, publish(s, %{s.state | link_quality: Paths.quality(paths)})}
+        {:noreply, publish(s, %{s.state | link_quality: Paths.quality(s.paths)})}
 
       :fresh ->
         Views.heard(s.heard, now)
-        s = publish(s, %{State.apply(s.state, frame, now) | link_quality: Paths.quality(paths)})
+        s = publish(s, %{State.apply(s.state, frame, now) | link_quality: Paths.quality(s.paths)})
         route_to_op(s, frame)
 
         # Position telemetry flowing means the requests were heard.
@@ -209,6 +215,8 @@ defmodule Dolphin.Vehicles.Vehicle do
     on_time? = now - s.judge_due <= period
     s = %{s | judge_due: now + period}
 
+    s = identity_checks(s, now)
+
     if on_time? do
       {paths, change} = Paths.judge(s.paths, Clock.now_ms(), now)
       s = %{s | paths: paths}
@@ -250,6 +258,25 @@ defmodule Dolphin.Vehicles.Vehicle do
   end
 
   defp real_ms, do: System.monotonic_time(:millisecond)
+
+  # What the autopilot heard on a path says it is: its unique id.
+  defp identify(paths, via, %Frame{compid: 1, message: %M.AutopilotVersion{uid: uid}}), do: Paths.identified(paths, via, uid)
+  defp identify(paths, _via, _frame), do: paths
+
+  # New paths: asked for their autopilot's uid (MAV_CMD_REQUEST_AUTOPILOT_CAPABILITIES,
+  # which every ArduPilot answers with AUTOPILOT_VERSION), then decided
+  # (Dolphin.Vehicles.Paths, "Another vehicle with the same system id").
+  defp identity_checks(s, real) do
+    now = Clock.now_ms()
+    {asks, paths} = Paths.identity_asks(s.paths, now, real)
+    for via <- asks, do: Connection.send_via(via, s.sysid, %M.CommandLong{target_system: s.sysid, target_component: 1, command: 520, param1: 1.0})
+    {paths, decisions} = Paths.settle(paths, now, real)
+
+    for {via, {:refused, uid, own}} <- decisions,
+        do: Events.emit(:system_id_shared, %{vehicle: s.sysid, path: Paths.via_text(via), uid: uid, vehicle_uid: own})
+
+    %{s | paths: paths}
+  end
 
   defp judge_period, do: max(Clock.to_real_ms(@judge_every_ms), @judge_real_ms)
 

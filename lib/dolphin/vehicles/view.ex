@@ -16,7 +16,8 @@ defmodule Dolphin.Vehicles.View do
   | `id` | system id |
   | `type` | `:uav`, `:ugv`, `:usv`, `:uuv`, `:other`, or `nil` while unknown |
   | `mav_type` | its HEARTBEAT's MAV_TYPE number (2 a quadrotor, ...), `nil` while unknown |
-  | `autopilot` | `:ardupilot`, `:px4`, `:generic` or `nil` while unknown |
+  | `autopilot` | `:ardupilot`, `:px4`, `:other` or `nil` while unknown |
+  | `uid` | its autopilot's unique id (AUTOPILOT_VERSION; 0: it has none), `nil` until reported |
   | `payloads` | sorted list of atoms, e.g. `[:camera]` |
   | `battery` | remaining fraction 0.0..1.0, `nil` until reported |
   | `position` | `Dolphin.Geo.Location` (height above mean sea level) or `nil` |
@@ -36,6 +37,7 @@ defmodule Dolphin.Vehicles.View do
             type: nil,
             mav_type: nil,
             autopilot: nil,
+            uid: nil,
             payloads: [],
             battery: nil,
             position: nil,
@@ -57,6 +59,7 @@ defmodule Dolphin.Vehicles.View do
           type: class() | nil,
           mav_type: non_neg_integer() | nil,
           autopilot: atom() | nil,
+          uid: non_neg_integer() | nil,
           payloads: [atom()],
           battery: float() | nil,
           position: Dolphin.Geo.Location.t() | nil,
@@ -114,6 +117,7 @@ defmodule Dolphin.Vehicles.View do
       type: class(state.type),
       mav_type: state.type,
       autopilot: state.autopilot,
+      uid: state.uid,
       payloads: Enum.sort(Enum.uniq(Enum.to_list(state.components) ++ payloads)),
       battery: state.battery,
       position: position,

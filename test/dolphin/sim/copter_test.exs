@@ -394,6 +394,14 @@ defmodule Dolphin.Sim.CopterTest do
     assert distance_m(c, {@home.lat, @home.lon}) < 2.5
   end
 
+  test "AUTOPILOT_VERSION on request, with a unique id of its own, as a board's serial number" do
+    {c, out} = tell(boot(), %M.CommandLong{target_system: 1, target_component: 1, command: 520, param1: 1.0})
+    assert [%M.AutopilotVersion{uid: uid}] = for(%M.AutopilotVersion{} = m <- out, do: m) ++ for({_, _, %M.AutopilotVersion{} = m} <- out, do: m)
+    assert uid == c.uid and uid > 0
+    # Another vehicle with the same system id is another autopilot.
+    assert boot().uid != c.uid
+  end
+
   test "unknown modes and commands are refused with an ack" do
     c = ready()
     {c, 4, _} = command(c, 176, [1, 99])

@@ -42,6 +42,8 @@ defmodule Dolphin.Vehicles.PathsFlightTest do
     Wait.until(fn -> match?({:ok, %{home: %{}}}, Vehicles.state(1)) end)
     # Both paths heard, and a round trip measured on each.
     Wait.until(fn -> match?([%{rtt_ms: r1}, %{rtt_ms: r2}] when is_number(r1) and is_number(r2), Vehicles.paths(1)) end)
+    # Each known to be the vehicle's (its autopilot's unique id, asked on both).
+    Wait.until(fn -> Enum.all?(Vehicles.paths(1), &(&1.identity == :same)) end)
     {:ok, _} = Dolphin.Fleet.pick(Dolphin.Fleet, self(), id: 1)
     {:ok, %{home: h}} = Vehicles.state(1)
     Dolphin.Geo.location(h.lat, h.lon, h.alt)
@@ -72,6 +74,9 @@ defmodule Dolphin.Vehicles.PathsFlightTest do
     home = start_copter(splitter)
 
     assert Vehicles.list() == [1]
+    # Both paths are the vehicle's: the simulated autopilot reported one unique id on both.
+    assert [%{identity: :same, uid: uid}, %{identity: :same, uid: uid}] = Vehicles.paths(1)
+    assert is_integer(uid) and uid > 0
     assert [%{in_use?: true, state: :active, frames: f1}, %{in_use?: false, state: :standby, frames: f2}] = Vehicles.paths(1)
     assert f1 > 0 and f2 > 0
     assert Enum.sort(Enum.map(Vehicles.paths(1), &side(&1.via, ports))) == [:a, :b]
@@ -88,7 +93,7 @@ defmodule Dolphin.Vehicles.PathsFlightTest do
     assert reached == Enum.uniq(reached)
     assert [1, 2, 3] -- reached == []
     # Nothing lost, no path changed on a clean pair of links.
-    assert [] == for({:dolphin, :events, %{event: e} = event} <- msgs, e in [:vehicle_lost, :path_changed], do: event)
+    assert [] == for({:dolphin, :events, %{event: e} = event} <- msgs, e in [:vehicle_lost, :path_changed, :system_id_shared], do: event)
     # The state's counts are of frames, not of copies.
     {:ok, st} = Vehicles.state(1)
     [p1, p2] = Vehicles.paths(1)

@@ -17,22 +17,34 @@ defmodule Dolphin.Vehicles.PathsTest do
 
   defp feed(paths, events), do: Enum.map_reduce(events, paths, fn {via, f, t}, p -> Paths.heard(p, via, f, t, t) end)
 
+  # The paths of one vehicle first heard on `first`, then heard once on each
+  # of `others` (a frame of component 250, which no test uses otherwise) and
+  # identified as the vehicle's: both autopilots report unique id 7.
+  defp vehicle([first | others]) do
+    Enum.reduce(others, Paths.new(first, 0, 0) |> Paths.identified(first, 7), fn via, p ->
+      {:unidentified, p} = Paths.heard(p, via, frame(0, 0, 250), 0, 0)
+      {p, [{^via, :same}]} = p |> Paths.identified(via, 7) |> Paths.settle(0, 0)
+      p
+    end)
+  end
+
   describe "de-duplication" do
     test "a copy on another path is a duplicate, counted for its path" do
-      p = Paths.new(:a, 0, 0)
+      p = vehicle([:a, :b])
       {verdicts, p} = feed(p, [{:a, frame(0), 1}, {:b, frame(0), 5}, {:b, frame(1), 6}, {:a, frame(1), 8}])
       assert verdicts == [:fresh, :duplicate, :fresh, :duplicate]
-      assert Enum.map(Paths.list(p), &{&1.via, &1.frames}) == [{:a, 2}, {:b, 2}]
+      # b's first frame was the one it was identified with.
+      assert Enum.map(Paths.list(p), &{&1.via, &1.frames}) == [{:a, 2}, {:b, 3}]
     end
 
     test "the same frame again on the same path is fresh (a network's duplicate, a reboot)" do
-      {verdicts, _} = feed(Paths.new(:a, 0, 0), [{:a, frame(0), 1}, {:a, frame(0), 2}, {:b, frame(0), 3}, {:b, frame(0), 4}])
+      {verdicts, _} = feed(vehicle([:a, :b]), [{:a, frame(0), 1}, {:a, frame(0), 2}, {:b, frame(0), 3}, {:b, frame(0), 4}])
       assert verdicts == [:fresh, :fresh, :duplicate, :fresh]
     end
 
     test "other components, other bytes, or too late are not copies" do
       {verdicts, _} =
-        feed(Paths.new(:a, 0, 0), [
+        feed(vehicle([:a, :b]), [
           {:a, frame(0, 0, 1), 0},
           {:b, frame(0, 0, 2), 1},
           {:b, frame(0, 7, 1), 2},
@@ -77,7 +89,7 @@ defmodule Dolphin.Vehicles.PathsTest do
             |> Enum.sort_by(&elem(&1, 0))
             |> Enum.map(&elem(&1, 1))
 
-          {verdicts, _} = feed(Paths.new(:a, 0, 0), events)
+          {verdicts, _} = feed(vehicle([:a, :b]), events)
           assert Enum.count(verdicts, &(&1 == :fresh)) == length(heard)
           assert Enum.count(verdicts, &(&1 == :duplicate)) == Enum.count(heard, &(elem(&1, 0) == :both))
         end),
@@ -88,7 +100,7 @@ defmodule Dolphin.Vehicles.PathsTest do
 
   describe "figures per path" do
     test "loss from each path's own sequence numbers; TIMESYNC answers only for their path" do
-      p = Paths.new(:a, 0, 0)
+      p = vehicle([:a, :b])
       # a hears every frame, b every other one.
       {_, p} = feed(p, for(i <- 0..39, via <- [:a, :b], via == :a or rem(i, 2) == 0, do: {via, frame(i), i}))
       {[a: 100, b: 101], p} = Paths.timesync(p, 100, 50)
@@ -117,7 +129,7 @@ defmodule Dolphin.Vehicles.PathsTest do
     defp via_compid(:c), do: 3
 
     test "a path in use that goes silent is replaced by the best heard one" do
-      p = Paths.new(:a, 0, 0) |> heard_at(:b, 10) |> heard_at(:c, 10) |> with_quality(:b, 0.2, 40) |> with_quality(:c, 0.0, 90)
+      p = vehicle([:a, :b, :c]) |> heard_at(:b, 10) |> heard_at(:c, 10) |> with_quality(:b, 0.2, 40) |> with_quality(:c, 0.0, 90)
       assert {p, nil} = Paths.judge(p, 1_000, 1_000)
       assert Enum.map(Paths.list(p), &{&1.via, &1.state}) == [a: :active, b: :standby, c: :standby]
 
@@ -134,15 +146,18 @@ defmodule Dolphin.Vehicles.PathsTest do
 
     test "silence needs 1.5 s of clock time and a real-time floor" do
       # 2 s of clock time but only 100 ms of real time (a speed-up of 20): not silent yet.
-      {:fresh, p} = Paths.heard(Paths.new(:a, 0, 0), :b, frame(0, 0, 2), 2_000, 100)
+      {:fresh, p} = Paths.heard(vehicle([:a, :b]), :b, frame(0, 0, 2), 2_000, 100)
       assert {_, nil} = Paths.judge(p, 2_000, 100)
       assert {_, {:a, :b, :silent}} = Paths.judge(p, 2_000, 250)
     end
 
     test "an address a link no longer hears the vehicle from is forgotten; a silent link is not" do
-      {_, p} = Paths.heard(Paths.new({:l1, {{10, 0, 0, 1}, 1}}, 0, 0), {:l2, {{10, 0, 0, 2}, 1}}, frame(0, 0, 2), 0, 0)
-      # The vehicle comes back on link 1 from another port.
-      {_, p} = Paths.heard(p, {:l1, {{10, 0, 0, 1}, 2}}, frame(1), 5_000, 5_000)
+      p = vehicle([{:l1, {{10, 0, 0, 1}, 1}}, {:l2, {{10, 0, 0, 2}, 1}}])
+      # The vehicle comes back on link 1 from another port: the vehicle once
+      # its autopilot says so, then the path in use.
+      {:unidentified, p} = Paths.heard(p, {:l1, {{10, 0, 0, 1}, 2}}, frame(1), 5_000, 5_000)
+      {p, nil} = Paths.judge(p, 5_000, 5_000)
+      {p, [_]} = p |> Paths.identified({:l1, {{10, 0, 0, 1}, 2}}, 7) |> Paths.settle(5_000, 5_000)
       {p, _} = Paths.judge(p, 5_000, 5_000)
       assert Paths.in_use(p) == {:l1, {{10, 0, 0, 1}, 2}}
       assert length(Paths.list(Paths.forget_silent(p, 20_000, 20_000))) == 3
@@ -150,14 +165,14 @@ defmodule Dolphin.Vehicles.PathsTest do
     end
 
     test "every path silent: the path in use stays" do
-      p = Paths.new(:a, 0, 0) |> heard_at(:b, 0)
+      p = vehicle([:a, :b]) |> heard_at(:b, 0)
       assert {p, nil} = Paths.judge(p, 5_000, 5_000)
       assert Paths.in_use(p) == :a
       assert Enum.map(Paths.list(p), & &1.state) == [:silent, :silent]
     end
 
     test "another path takes over only when clearly better" do
-      p = Paths.new(:a, 0, 0) |> heard_at(:b, 0)
+      p = vehicle([:a, :b]) |> heard_at(:b, 0)
       # Judged at 100 ms and again 2 s of real time later (heard in between).
       twice = fn p ->
         {p, nil} = Paths.judge(p, 100, 100)
@@ -185,7 +200,7 @@ defmodule Dolphin.Vehicles.PathsTest do
 
       check(
         forall(gen, fn wobbles ->
-          p = Paths.new(:a, 0, 0) |> heard_at(:b, 0)
+          p = vehicle([:a, :b]) |> heard_at(:b, 0)
 
           Enum.reduce(wobbles, p, fn {la, lb, ra, rb}, p ->
             {p, change} = p |> with_quality(:a, la / 100, ra) |> with_quality(:b, lb / 100, rb) |> Paths.judge(10, 10)
@@ -195,6 +210,68 @@ defmodule Dolphin.Vehicles.PathsTest do
         end),
         numtests: 200
       )
+    end
+  end
+
+  describe "another vehicle with the same system id" do
+    test "a new path is pending: its frames are not the vehicle's, it is never used, it is asked for its uid" do
+      {:fresh, p} = Paths.heard(Paths.new(:a, 0, 0), :a, frame(0), 0, 0)
+      {:unidentified, p} = Paths.heard(p, :b, frame(1), 10, 10)
+      # The same frame on both: not a copy (b may be another vehicle's).
+      {:unidentified, p} = Paths.heard(p, :b, frame(0), 20, 20)
+      {:fresh, p} = Paths.heard(p, :a, frame(1), 30, 30)
+      assert [%{via: :a, identity: :same}, %{via: :b, identity: :pending, uid: nil}] = Paths.list(p)
+
+      # The path in use silent, b heard: a stays (b is not known to be the vehicle).
+      {:unidentified, p} = Paths.heard(p, :b, frame(2), 5_000, 5_000)
+      assert {p, nil} = Paths.judge(p, 5_000, 5_000)
+      assert Paths.in_use(p) == :a
+
+      # Both asked at once (a's uid is not known either), then every second of clock time.
+      assert {[:b, :a], p} = Paths.identity_asks(p, 5_000, 5_000)
+      assert {[], p} = Paths.identity_asks(p, 5_500, 5_500)
+      assert {[:b, :a], p} = Paths.identity_asks(p, 6_000, 5_600)
+      assert {p, []} = Paths.settle(p, 6_000, 5_600)
+      p = Paths.identified(p, :a, 7)
+      assert {[:b], _} = Paths.identity_asks(p, 7_000, 5_700)
+    end
+
+    test "two unique ids: another vehicle, refused for good and sent nothing" do
+      {:unidentified, p} = Paths.heard(Paths.new(:a, 0, 0), :b, frame(0, 0, 2), 0, 0)
+      {p, [b: {:refused, 9, 7}]} = p |> Paths.identified(:a, 7) |> Paths.identified(:b, 9) |> Paths.settle(0, 0)
+      assert [%{via: :a}, %{via: :b, identity: :refused, uid: 9}] = Paths.list(p)
+      assert {:unidentified, p} = Paths.heard(p, :b, frame(1, 0, 2), 10, 10)
+      assert {[], p} = Paths.identity_asks(p, 5_000, 5_000)
+      assert {[a: 100], _} = Paths.timesync(p, 100, 10)
+      # Nothing more to decide, ever.
+      assert {_, []} = Paths.settle(p, 100_000, 100_000)
+    end
+
+    test "the same unique id: the same vehicle; none to compare: taken for the same" do
+      {:unidentified, p} = Paths.heard(Paths.new(:a, 0, 0), :b, frame(0, 0, 2), 0, 0)
+      # b answered first: decided once a's uid is known.
+      p = Paths.identified(p, :b, 7)
+      assert {p, []} = Paths.settle(p, 0, 0)
+      {p, [b: :same]} = p |> Paths.identified(:a, 7) |> Paths.settle(0, 0)
+      assert {:fresh, _} = Paths.heard(p, :b, frame(1, 0, 2), 10, 10)
+
+      # An autopilot without a unique id reports 0.
+      {:unidentified, p} = Paths.heard(Paths.new(:a, 0, 0), :b, frame(0, 0, 2), 0, 0)
+      assert {_, [b: :unidentifiable]} = p |> Paths.identified(:a, 7) |> Paths.identified(:b, 0) |> Paths.settle(0, 0)
+
+      # No answer: asked 5 times, a second apart, then taken for the same.
+      {:unidentified, p} = Paths.heard(Paths.new(:a, 0, 0), :b, frame(0, 0, 2), 0, 0)
+
+      p =
+        Enum.reduce(0..4, p, fn k, p ->
+          assert {[:b, :a], p} = Paths.identity_asks(p, k * 1_000, k * 1_000)
+          assert {p, []} = Paths.settle(p, k * 1_000, k * 1_000)
+          p
+        end)
+
+      assert {[], p} = Paths.identity_asks(p, 5_000, 5_000)
+      assert {p, [b: :unidentifiable]} = Paths.settle(p, 5_000, 5_000)
+      assert [%{identity: :same}, %{identity: :same}] = Paths.list(p)
     end
   end
 end
