@@ -93,6 +93,11 @@ defmodule Dolphin.MixProject.StartSignals do
 
   @impl true
   def handle_call(_request, task), do: {:ok, :ok, task}
+
+  # Swapped out by Dolphin.CLI.Signals: how to put this handler back.
+  @impl true
+  def terminate(:swap, task), do: {__MODULE__, task}
+  def terminate(_reason, _task), do: :ok
 end
 
 Dolphin.MixProject.StartSignals.install(System.argv())

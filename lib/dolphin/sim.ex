@@ -113,6 +113,8 @@ defmodule Dolphin.Sim do
         child =
           {Dolphin.Sim.Vehicle,
            sysid: sysid,
+           # Chosen here, so that a vehicle process restarted by its supervisor keeps it.
+           uid: Dolphin.Sim.Copter.unique_id(),
            gcs: gcs,
            home: home,
            seed: Keyword.get(opts, :seed, 1),

@@ -120,8 +120,14 @@ defmodule Dolphin.Vehicles do
   """
   @spec status_texts(byte()) :: [{integer(), String.t()}]
   def status_texts(sysid) do
-    case view(sysid) do
-      {:ok, view} -> view.status_texts
+    # A vehicle of this node: its view holds what it said before any answer
+    # its process gave since (it puts the view first). Another station's:
+    # its view comes by way of that station, maybe after the answer, so ask
+    # its process.
+    reply = if whereis_local(sysid), do: view(sysid), else: state(sysid)
+
+    case reply do
+      {:ok, known} -> known.status_texts
       _ -> []
     end
   end

@@ -95,6 +95,26 @@ defmodule Dolphin.SITLTest do
     end
   end
 
+  test "two ArduCopters with one system id on two links: the second is another vehicle by its unique id, refused" do
+    Clock.set_speedup(Backend.speedup(:sitl))
+    Dolphin.Events.subscribe()
+    {:ok, first} = SITL.start(1, first_sysid: 7)
+    # Its fleet is ready at once (vehicle 7 is): its autopilot is heard when it has booted.
+    {:ok, second} = SITL.start(1, first_sysid: 7)
+
+    try do
+      assert_receive {:dolphin, :events, %{event: :system_id_shared, vehicle: 7, uid: other, vehicle_uid: own}}, 60_000
+      # ArduPilot's SITL reports a unique id of its own per instance, as a board its serial number.
+      assert other > 0 and own > 0 and other != own
+      assert [%{in_use?: true, identity: :same, uid: ^own}, %{identity: :refused, uid: ^other}] = Vehicles.paths(7)
+      assert {:ok, %{uid: ^own}} = Vehicles.view(7)
+    after
+      SITL.stop(second)
+      SITL.stop(first)
+      Clock.set_speedup(1)
+    end
+  end
+
   test "the SITL fleet charges a landed vehicle: MAV_CMD_BATTERY_RESET sets the charge, which then rises" do
     [id] = Backend.start(:sitl, 1)
     Wait.until(fn -> match?({:ok, %{battery: b}} when is_number(b), Vehicles.state(id)) end, 500)

@@ -243,6 +243,11 @@ defmodule Dolphin.CLI.Signals do
     end
   end
 
+  # The handlers that act on SIGTERM when no task catches it: OTP's
+  # (init:stop/0), and mix.exs's (exit 143) while mix starts a task or runs
+  # the test suite.
+  @sigterm_handlers [:erl_signal_handler, Dolphin.MixProject.StartSignals]
+
   # SIGTERM to `relay` through the signal server, in place of whichever
   # handler was there (OTP's, or mix.exs's while mix started the task) in
   # one step, so that no SIGTERM finds none; SIGINT through the C library.
@@ -254,27 +259,43 @@ defmodule Dolphin.CLI.Signals do
         :ok = :gen_event.add_handler(:erl_signal_server, __MODULE__, relay)
 
       handlers ->
-        if __MODULE__ in handlers do
+        cond do
           # One left by a relay that was killed.
-          :ok = :gen_event.call(:erl_signal_server, __MODULE__, {:relay, relay})
-        else
-          [first | others] = handlers
-          :ok = :gen_event.swap_handler(:erl_signal_server, {first, :swap}, {__MODULE__, relay})
-          Enum.each(others, &:gen_event.delete_handler(:erl_signal_server, &1, :swap))
+          __MODULE__ in handlers ->
+            :ok = :gen_event.call(:erl_signal_server, __MODULE__, {:relay, relay})
+
+          # The handler that acts on SIGTERM now (OTP's, or mix.exs's), in
+          # one step; handlers of other signals (ExUnit's SIGQUIT) stay.
+          default = Enum.find(handlers, &(&1 in @sigterm_handlers)) ->
+            :ok = :gen_event.swap_handler(:erl_signal_server, {default, :swap}, {__MODULE__, relay})
+
+          true ->
+            :ok = :gen_event.add_handler(:erl_signal_server, __MODULE__, relay)
         end
+
+        # Elixir's own SIGTERM traps would act on it too.
+        for {System.SignalHandler, {:sigterm, _}} = trap <- handlers, do: :gen_event.delete_handler(:erl_signal_server, trap, :swap)
     end
 
     if intercept_sigint(relay) == :ok, do: [:sigint, :sigterm], else: [:sigterm]
   end
 
+  # The handler that was there goes back (`mix test`'s keeps a killed suite
+  # from exiting 0; see mix.exs), else OTP's.
   defp uninstall do
     restore_sigint()
     handlers = :gen_event.which_handlers(:erl_signal_server)
 
     cond do
-      __MODULE__ in handlers -> :ok = :gen_event.swap_handler(:erl_signal_server, {__MODULE__, :swap}, {:erl_signal_handler, []})
-      :erl_signal_handler in handlers -> :ok
-      true -> :ok = :gen_event.add_handler(:erl_signal_server, :erl_signal_handler, [])
+      __MODULE__ in handlers ->
+        {module, args} = :gen_event.call(:erl_signal_server, __MODULE__, :swapped_out)
+        :ok = :gen_event.swap_handler(:erl_signal_server, {__MODULE__, :swap}, {module, args})
+
+      Enum.any?(handlers, &(&1 in @sigterm_handlers)) ->
+        :ok
+
+      true ->
+        :ok = :gen_event.add_handler(:erl_signal_server, :erl_signal_handler, [])
     end
 
     Process.unregister(@relay)
@@ -282,23 +303,28 @@ defmodule Dolphin.CLI.Signals do
 
   # --- the handler in :erl_signal_server ---
 
+  # The state: the relay, and the handler to put back on release: the one
+  # swapped out if it said how to restore it (`{module, args}` from its
+  # terminate/2), else OTP's.
   @impl :gen_event
-  def init({relay, _swapped_out}), do: {:ok, relay}
-  def init(relay), do: {:ok, relay}
+  def init({relay, {module, _args} = swapped_out}) when is_atom(module), do: {:ok, {relay, swapped_out}}
+  def init({relay, _swapped_out}), do: {:ok, {relay, {:erl_signal_handler, []}}}
+  def init(relay), do: {:ok, {relay, {:erl_signal_handler, []}}}
 
   @impl :gen_event
-  def handle_event(:sigterm, relay) do
+  def handle_event(:sigterm, {relay, _} = state) do
     send(relay, {:dolphin_signal, :sigterm})
-    {:ok, relay}
+    {:ok, state}
   end
 
   # The other signals keep OTP's actions (SIGUSR1: a crash dump, SIGQUIT: halt).
-  def handle_event(other, relay) do
+  def handle_event(other, state) do
     {:ok, _} = :erl_signal_handler.handle_event(other, [])
-    {:ok, relay}
+    {:ok, state}
   end
 
   @impl :gen_event
-  def handle_call({:relay, relay}, _old), do: {:ok, :ok, relay}
-  def handle_call(_request, relay), do: {:ok, :ok, relay}
+  def handle_call({:relay, relay}, {_old, swapped_out}), do: {:ok, :ok, {relay, swapped_out}}
+  def handle_call(:swapped_out, {_relay, swapped_out} = state), do: {:ok, swapped_out, state}
+  def handle_call(_request, state), do: {:ok, :ok, state}
 end

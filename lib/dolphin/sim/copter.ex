@@ -134,10 +134,15 @@ defmodule Dolphin.Sim.Copter do
     }
   end
 
-  # The autopilot's unique id (AUTOPILOT_VERSION uid), as a board's serial
-  # number: random, so that two simulated vehicles with one system id, in
-  # one ground station or in two, are told apart as real ones are.
-  defp unique_id do
+  @doc """
+  A new autopilot's unique id (AUTOPILOT_VERSION `uid`), as a board's serial
+  number: random, so that two simulated vehicles with one system id, in one
+  ground station or in two, are told apart as real ones are. A vehicle keeps
+  its own through reboots (`reboot/1`, and `Dolphin.Sim` gives a restarted
+  vehicle process the one it started with).
+  """
+  @spec unique_id() :: pos_integer()
+  def unique_id do
     <<uid::64>> = :crypto.strong_rand_bytes(8)
     max(uid, 1)
   end
@@ -147,7 +152,7 @@ defmodule Dolphin.Sim.Copter do
   def reboot(%__MODULE__{} = c) do
     {lat, lon} = latlon(c, c.n, c.e)
     fresh = new(c.sysid, %{lat: lat, lon: lon, alt: c.origin.alt}, c.config)
-    %{fresh | missions: c.missions, battery: c.battery, params: c.params, out: c.out}
+    %{fresh | uid: c.uid, missions: c.missions, battery: c.battery, params: c.params, out: c.out}
   end
 
   @doc "What the vehicle has said since the last flush, oldest first."

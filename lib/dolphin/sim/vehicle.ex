@@ -46,6 +46,7 @@ defmodule Dolphin.Sim.Vehicle do
       {:ok, socket} ->
         seed = Keyword.get(opts, :seed, 1)
         model = Copter.new(sysid, Keyword.fetch!(opts, :home), Map.new(Keyword.get(opts, :config, %{})))
+        model = %{model | uid: Keyword.get(opts, :uid, model.uid)}
         faults = Faults.new(Keyword.get(opts, :faults, %{}), {seed, sysid})
 
         s = %{

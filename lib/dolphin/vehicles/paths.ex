@@ -54,20 +54,28 @@ defmodule Dolphin.Vehicles.Paths do
   vehicle rather than this one heard again. A path is therefore *pending*
   from its first frame until it is identified: its frames count in its own
   figures but are not the vehicle's (`heard/5` says `:unidentified`), and it
-  is never the path in use. `identity_asks/3` names the paths to ask for
-  their autopilot's unique id (AUTOPILOT_VERSION `uid`; a pending path and,
-  while one is pending and its uid is not known, the path in use) — every
-  second of clock time, at most 5 times each; `identified/3` records what
-  a path's autopilot answered; `settle/3` decides:
+  is never the path in use.
 
-    * both uids known, both non-zero and different: another vehicle. The
-      path is `:refused` for good; its frames are never the vehicle's, it is
-      sent nothing;
-    * otherwise, once the uids are known or the asking is over: the same
-      vehicle (an autopilot that reports no uid, or does not answer, cannot
-      be told apart; it is taken to be the same, as a redundant radio is).
+  The first path a vehicle is heard on is its own: it is never pending, and
+  the unique id its autopilot reports (AUTOPILOT_VERSION,
+  `Dolphin.Vehicles.State.unique_id/1`) is the vehicle's, kept for as long
+  as the vehicle is (`uid/1`; a restarted process is given it back with
+  `identified/3`). `identity_asks/3` names the paths to ask for their
+  autopilot's unique id — the path in use until the vehicle's is known, and
+  each pending path — every second of clock time (and at least half a second
+  of real time: at a speed-up an autopilot still needs its time to answer),
+  at most 5 times each (the path in use again when a new path is pending);
+  `identified/3` records what a path's autopilot answered; `settle/3` decides:
 
-  The first path a vehicle is heard on is its own: it is never pending.
+    * the vehicle's and the path's ids known, non-zero and different:
+      another vehicle. The path is `:refused` for good; its frames are never
+      the vehicle's, it is sent nothing;
+    * the same id: the same vehicle;
+    * no id to compare (an autopilot that reports 0; one that does not
+      answer 5 times; the vehicle's own not known while its path in use is
+      silent or did not answer): taken to be the same vehicle, as a
+      redundant radio is — two vehicles that cannot be told apart are
+      not.
   """
 
   alias Dolphin.MAVLink.Ardupilotmega.Timesync
@@ -90,9 +98,9 @@ defmodule Dolphin.Vehicles.Paths do
   # ms, and at least the real floor), before taking it as unidentifiable.
   @identity_asks 5
   @identity_ask_every_ms 1_000
-  @identity_ask_real_floor_ms 100
+  @identity_ask_real_floor_ms 500
 
-  defstruct paths: %{}, in_use: nil, recent: %{}, fresh: %{}, challenger: nil
+  defstruct paths: %{}, in_use: nil, recent: %{}, fresh: %{}, challenger: nil, uid: nil
 
   @typedoc """
   A path's name: what the link gives with each frame (a
@@ -108,7 +116,8 @@ defmodule Dolphin.Vehicles.Paths do
           in_use: via() | nil,
           recent: %{byte() => %{byte() => {integer(), MapSet.t(), integer(), non_neg_integer()}}},
           fresh: %{byte() => non_neg_integer()},
-          challenger: nil | {via(), integer()}
+          challenger: nil | {via(), integer()},
+          uid: non_neg_integer() | nil
         }
 
   @typedoc "A path as `list/1` shows it."
@@ -162,8 +171,8 @@ defmodule Dolphin.Vehicles.Paths do
   """
   @spec heard(t(), via(), Frame.t(), integer(), integer()) :: {:fresh | :duplicate | :unidentified, t()}
   def heard(%__MODULE__{} = p, via, %Frame{} = frame, now_ms, real_ms) do
-    path = Map.get_lazy(p.paths, via, fn -> path(via, now_ms, real_ms, :standby, :pending) end)
-    path = path |> count(frame, now_ms, real_ms) |> timesync_answer(frame.message, real_ms)
+    p = if Map.has_key?(p.paths, via), do: p, else: new_path(p, via, now_ms, real_ms)
+    path = p.paths[via] |> count(frame, now_ms, real_ms) |> timesync_answer(frame.message, real_ms)
     path = if path.state == :silent, do: %{path | state: :standby}, else: path
     p = %{p | paths: Map.put(p.paths, via, path)}
 
@@ -172,17 +181,31 @@ defmodule Dolphin.Vehicles.Paths do
     if path.identity == :same, do: dedup(p, via, frame, real_ms), else: {:unidentified, p}
   end
 
+  # A pending path; while the vehicle's own unique id is not known, the path
+  # in use is asked again from now on.
+  defp new_path(p, via, now_ms, real_ms) do
+    paths = Map.put(p.paths, via, path(via, now_ms, real_ms, :standby, :pending))
+    paths = if p.uid == nil, do: Map.update!(paths, p.in_use, &%{&1 | asks: 0, asked: nil}), else: paths
+    %{p | paths: paths}
+  end
+
   @doc """
-  Records the unique id (AUTOPILOT_VERSION `uid`, 0 for none) that the
-  autopilot heard on `via` reported.
+  Records the unique id (`Dolphin.Vehicles.State.unique_id/1`, 0 for none)
+  that the autopilot heard on `via` reported; on a path of the vehicle's own
+  it is the vehicle's.
   """
   @spec identified(t(), via(), non_neg_integer()) :: t()
   def identified(%__MODULE__{} = p, via, uid) do
     case p.paths do
+      %{^via => %{identity: :same} = path} -> %{p | paths: Map.put(p.paths, via, %{path | uid: uid}), uid: uid}
       %{^via => path} -> %{p | paths: Map.put(p.paths, via, %{path | uid: uid})}
       _ -> p
     end
   end
+
+  @doc "The vehicle's unique id, as the autopilot on its own paths reported it (nil until then)."
+  @spec uid(t()) :: non_neg_integer() | nil
+  def uid(%__MODULE__{uid: uid}), do: uid
 
   @doc """
   The paths to ask now (at `now_ms` clock, `real_ms` real) for their
@@ -194,8 +217,7 @@ defmodule Dolphin.Vehicles.Paths do
   def identity_asks(%__MODULE__{} = p, now_ms, real_ms) do
     pending = for {via, %{identity: :pending, uid: nil} = path} <- p.paths, ask_due?(path, now_ms, real_ms), do: via
     own = p.paths[p.in_use]
-    any_pending? = Enum.any?(p.paths, fn {_, path} -> path.identity == :pending end)
-    asks = Enum.sort(pending) ++ if(any_pending? and own.uid == nil and ask_due?(own, now_ms, real_ms), do: [p.in_use], else: [])
+    asks = Enum.sort(pending) ++ if(p.uid == nil and ask_due?(own, now_ms, real_ms), do: [p.in_use], else: [])
 
     paths = Enum.reduce(asks, p.paths, fn via, paths -> Map.update!(paths, via, &%{&1 | asks: &1.asks + 1, asked: {now_ms, real_ms}}) end)
     {asks, %{p | paths: paths}}
@@ -221,10 +243,15 @@ defmodule Dolphin.Vehicles.Paths do
   """
   @spec settle(t(), integer(), integer()) :: {t(), [{via(), :same | :unidentifiable | {:refused, non_neg_integer(), non_neg_integer()}}]}
   def settle(%__MODULE__{} = p, now_ms, real_ms) do
+    # The vehicle's id cannot come: its path in use did not answer, or is silent.
     own = p.paths[p.in_use]
+    own_unknowable? = p.uid == nil and (gave_up?(own, now_ms, real_ms) or silent?(own, now_ms, real_ms))
 
     decisions =
-      for {via, %{identity: :pending} = path} <- Enum.sort(p.paths), decision = decide(path, own, now_ms, real_ms), decision != nil, do: {via, decision}
+      for {via, %{identity: :pending} = path} <- Enum.sort(p.paths),
+          decision = decide(path.uid, p.uid, own_unknowable? or gave_up?(path, now_ms, real_ms)),
+          decision != nil,
+          do: {via, decision}
 
     paths =
       Enum.reduce(decisions, p.paths, fn {via, decision}, paths ->
@@ -234,17 +261,15 @@ defmodule Dolphin.Vehicles.Paths do
     {%{p | paths: paths}, decisions}
   end
 
-  defp decide(%{uid: uid}, %{uid: own}, _now_ms, _real_ms) when is_integer(uid) and is_integer(own) do
-    cond do
-      uid != 0 and own != 0 and uid != own -> {:refused, uid, own}
-      uid == own and uid != 0 -> :same
-      true -> :unidentifiable
-    end
-  end
+  # A pending path's id against the vehicle's; `over?`: no more to wait for.
+  defp decide(0, _own, _over?), do: :unidentifiable
+  defp decide(uid, 0, _over?) when is_integer(uid), do: :unidentifiable
+  defp decide(uid, uid, _over?) when is_integer(uid), do: :same
+  defp decide(uid, own, _over?) when is_integer(uid) and is_integer(own), do: {:refused, uid, own}
+  defp decide(_uid, _own, true), do: :unidentifiable
+  defp decide(_uid, _own, false), do: nil
 
-  defp decide(path, own, now_ms, real_ms) do
-    if gave_up?(path, now_ms, real_ms) or (is_integer(path.uid) and gave_up?(own, now_ms, real_ms)), do: :unidentifiable
-  end
+  defp silent?(path, now_ms, real_ms), do: now_ms - path.last_heard_ms > @silence_ms and real_ms - path.last_heard_real_ms > @silence_real_floor_ms
 
   # Sequence numbers are per component; a gap on this path is frames this path lost.
   defp count(path, %Frame{compid: compid, seq: seq}, now_ms, real_ms) do
@@ -340,11 +365,7 @@ defmodule Dolphin.Vehicles.Paths do
   """
   @spec judge(t(), integer(), integer()) :: {t(), nil | {via(), via(), :silent | :better}}
   def judge(%__MODULE__{} = p, now_ms, real_ms) do
-    paths =
-      Map.new(p.paths, fn {via, path} ->
-        silent? = now_ms - path.last_heard_ms > @silence_ms and real_ms - path.last_heard_real_ms > @silence_real_floor_ms
-        {via, %{path | state: if(silent?, do: :silent, else: path.state)}}
-      end)
+    paths = Map.new(p.paths, fn {via, path} -> {via, %{path | state: if(silent?(path, now_ms, real_ms), do: :silent, else: path.state)}} end)
 
     # Only the vehicle's own paths may be used.
     heard = paths |> Map.values() |> Enum.reject(&(&1.state == :silent or &1.identity != :same)) |> Enum.sort_by(&{score(&1), &1.via})

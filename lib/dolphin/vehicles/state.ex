@@ -14,7 +14,7 @@ defmodule Dolphin.Vehicles.State do
   | `mission` | MISSION_CURRENT, MISSION_ITEM_REACHED | `%{current, total, state, reached}` of the mission on the vehicle: all `nil` again when a new one is uploaded or it is cleared (`mission_replaced/1`) |
   | `landed` | EXTENDED_SYS_STATE | `:on_ground`, `:in_air`, `:takeoff`, `:landing` or nil |
   | `status_texts` | STATUSTEXT | the last 20 `{severity, text}`, newest first |
-  | `uid` | AUTOPILOT_VERSION (autopilot component) | the autopilot's unique id (0: it has none), `nil` until reported |
+  | `uid` | AUTOPILOT_VERSION (autopilot component) | the autopilot's unique id (`unique_id/1`; 0: it has none), `nil` until reported |
   | `components` | HEARTBEAT of other components | e.g. `:camera`, `:gimbal` |
   | `link` | every frame | `%{received, lost, last_seen_ms}`: `lost` counts sequence gaps |
   | `link_quality` | TIMESYNC answers, sequence gaps | a `Dolphin.Vehicles.LinkQuality`: round trip and loss both ways (`link_figures/1`) |
@@ -115,8 +115,8 @@ defmodule Dolphin.Vehicles.State do
     }
   end
 
-  defp message(state, compid, %M.AutopilotVersion{uid: uid}) when compid == 1 or compid == state.autopilot_compid,
-    do: %{state | uid: uid}
+  defp message(state, compid, %M.AutopilotVersion{} = version) when compid == 1 or compid == state.autopilot_compid,
+    do: %{state | uid: unique_id(version)}
 
   defp message(state, _compid, %M.SysStatus{battery_remaining: remaining}) when remaining >= 0 and remaining <= 100,
     do: %{state | battery: remaining / 100}
@@ -211,6 +211,25 @@ defmodule Dolphin.Vehicles.State do
   def texts_since(before, now) do
     k = Enum.find(0..length(now), fn k -> Enum.drop(now, k) == Enum.take(before, length(now) - k) end)
     Enum.take(now, k)
+  end
+
+  @doc """
+  An autopilot's unique id from its AUTOPILOT_VERSION, as one integer: its
+  `uid2` (18 bytes, big-endian) when it has one, as ArduPilot's has (its
+  `uid` is 0), else its `uid`; 0 when it reports neither.
+
+      iex> alias Dolphin.MAVLink.Ardupilotmega.AutopilotVersion
+      iex> Dolphin.Vehicles.State.unique_id(%AutopilotVersion{uid: 0, uid2: [0x31, 0x2a] ++ List.duplicate(0, 16)})
+      0x312A00000000000000000000000000000000
+      iex> Dolphin.Vehicles.State.unique_id(%AutopilotVersion{uid: 77})
+      77
+  """
+  @spec unique_id(M.AutopilotVersion.t()) :: non_neg_integer()
+  def unique_id(%M.AutopilotVersion{uid: uid, uid2: uid2}) do
+    case :binary.decode_unsigned(:erlang.list_to_binary(uid2)) do
+      0 -> uid
+      long -> long
+    end
   end
 
   @doc """

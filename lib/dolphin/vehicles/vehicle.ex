@@ -95,16 +95,23 @@ defmodule Dolphin.Vehicles.Vehicle do
 
     heard = Views.heard_cell(sysid)
     Views.heard(heard, now)
+    # A restarted process: the vehicle's unique id, which its view kept,
+    # stays the one new paths are compared with.
+    last_view = with {:ok, view} <- Views.get(sysid), do: view, else: (_ -> nil)
+    uid = last_view && last_view.uid
+    paths = Paths.new(link, now, real)
+    paths = if uid, do: Paths.identified(paths, link, uid), else: paths
 
     {:ok,
      %__MODULE__{
        sysid: sysid,
        heard: heard,
-       paths: Paths.new(link, now, real),
+       paths: paths,
+       view: last_view,
        judge_due: real + judge_period(),
        # Seen now (it was just heard, or its process restarted): silence from
        # here on makes it lost.
-       state: put_in(State.new(sysid).link.last_seen_ms, now),
+       state: %{put_in(State.new(sysid).link.last_seen_ms, now) | uid: uid},
        timeout_ms: timeout,
        check_due_ms: now + check_period(timeout),
        requests_left: @request_tries
@@ -242,6 +249,9 @@ defmodule Dolphin.Vehicles.Vehicle do
   def handle_info(:check_link, s) do
     period = check_period(s.timeout_ms)
     Clock.send_after(self(), :check_link, period)
+    # The vehicle's heard cell, made anew if it was deleted meanwhile (the
+    # vehicle forgotten while this process lived on).
+    s = %{s | heard: Views.heard_cell(s.sysid)}
     now = Clock.now_ms()
     on_time? = now - s.check_due_ms <= period
     # Paths silent for as long as the vehicle timeout (a vehicle that came
@@ -260,7 +270,7 @@ defmodule Dolphin.Vehicles.Vehicle do
   defp real_ms, do: System.monotonic_time(:millisecond)
 
   # What the autopilot heard on a path says it is: its unique id.
-  defp identify(paths, via, %Frame{compid: 1, message: %M.AutopilotVersion{uid: uid}}), do: Paths.identified(paths, via, uid)
+  defp identify(paths, via, %Frame{compid: 1, message: %M.AutopilotVersion{} = version}), do: Paths.identified(paths, via, State.unique_id(version))
   defp identify(paths, _via, _frame), do: paths
 
   # New paths: asked for their autopilot's uid (MAV_CMD_REQUEST_AUTOPILOT_CAPABILITIES,
@@ -297,6 +307,23 @@ defmodule Dolphin.Vehicles.Vehicle do
 
   # The view, to Dolphin.Vehicles.Views (which tells its subscribers and
   # emits its transitions), when it is not the one they have.
+  # Not before the vehicle's type is known (its autopilot's HEARTBEAT): a
+  # vehicle is announced once, with its type, and a restarted process does
+  # not put a blank view over the one it had — only whether the vehicle is
+  # heard changes in it until then.
+  defp publish_view(%{state: %{type: nil}, view: nil} = s), do: s
+
+  defp publish_view(%{state: %{type: nil}, view: last} = s) do
+    case %{last | connected?: not s.lost} do
+      ^last ->
+        s
+
+      view ->
+        Views.put(view)
+        %{s | view: view}
+    end
+  end
+
   defp publish_view(s) do
     case view(s) do
       same when same == s.view ->

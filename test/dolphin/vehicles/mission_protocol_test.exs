@@ -75,8 +75,12 @@ defmodule Dolphin.Vehicles.MissionProtocolTest do
     end
   end
 
-  defp reached(sysid, link, seq),
-    do: Vehicles.route(%Dolphin.MAVLink.Frame{sysid: sysid, compid: 1, seq: 0, message: %M.MissionItemReached{seq: seq}}, {link, nil})
+  # As if the vehicle had said it, on the path it is heard on (a frame on
+  # another path would be another vehicle's until identified).
+  defp reached(sysid, _link, seq) do
+    [%{via: via} | _] = Vehicles.paths(sysid)
+    Vehicles.route(%Dolphin.MAVLink.Frame{sysid: sysid, compid: 1, seq: 0, message: %M.MissionItemReached{seq: seq}}, via)
+  end
 
   test "an upload or a clear makes the vehicle forget the previous mission's progress, and say so", %{port: port, link: link} do
     {sysid, _vehicle} = vehicle(port, [])

@@ -216,24 +216,33 @@ defmodule Dolphin.Vehicles.PathsTest do
   describe "another vehicle with the same system id" do
     test "a new path is pending: its frames are not the vehicle's, it is never used, it is asked for its uid" do
       {:fresh, p} = Paths.heard(Paths.new(:a, 0, 0), :a, frame(0), 0, 0)
+      # The vehicle's own id is asked from its discovery on.
+      assert {[:a], p} = Paths.identity_asks(p, 0, 0)
       {:unidentified, p} = Paths.heard(p, :b, frame(1), 10, 10)
       # The same frame on both: not a copy (b may be another vehicle's).
       {:unidentified, p} = Paths.heard(p, :b, frame(0), 20, 20)
       {:fresh, p} = Paths.heard(p, :a, frame(1), 30, 30)
       assert [%{via: :a, identity: :same}, %{via: :b, identity: :pending, uid: nil}] = Paths.list(p)
 
+      # Both asked (a again: its id is not known yet), then every second of clock time.
+      assert {[:b, :a], p} = Paths.identity_asks(p, 30, 30)
+      assert {[], p} = Paths.identity_asks(p, 500, 500)
+      assert {[:b, :a], p} = Paths.identity_asks(p, 1_030, 530)
+      assert {p, []} = Paths.settle(p, 1_030, 530)
+      p = Paths.identified(p, :a, 7)
+      assert Paths.uid(p) == 7
+      assert {[:b], p} = Paths.identity_asks(p, 2_030, 1_030)
+
       # The path in use silent, b heard: a stays (b is not known to be the vehicle).
       {:unidentified, p} = Paths.heard(p, :b, frame(2), 5_000, 5_000)
       assert {p, nil} = Paths.judge(p, 5_000, 5_000)
       assert Paths.in_use(p) == :a
+      assert {_, []} = Paths.settle(p, 5_000, 5_000)
+    end
 
-      # Both asked at once (a's uid is not known either), then every second of clock time.
-      assert {[:b, :a], p} = Paths.identity_asks(p, 5_000, 5_000)
-      assert {[], p} = Paths.identity_asks(p, 5_500, 5_500)
-      assert {[:b, :a], p} = Paths.identity_asks(p, 6_000, 5_600)
-      assert {p, []} = Paths.settle(p, 6_000, 5_600)
-      p = Paths.identified(p, :a, 7)
-      assert {[:b], _} = Paths.identity_asks(p, 7_000, 5_700)
+    test "the vehicle's own id unknown and its path in use silent (a reboot onto a new port): a new path that answers joins at once" do
+      {:unidentified, p} = Paths.heard(Paths.new(:a, 0, 0), :b, frame(0, 0, 2), 5_000, 5_000)
+      assert {_, [b: :unidentifiable]} = p |> Paths.identified(:b, 9) |> Paths.settle(5_000, 5_000)
     end
 
     test "two unique ids: another vehicle, refused for good and sent nothing" do
@@ -264,6 +273,8 @@ defmodule Dolphin.Vehicles.PathsTest do
 
       p =
         Enum.reduce(0..4, p, fn k, p ->
+          # (a heard all along: its silence would end the wait.)
+          {:fresh, p} = Paths.heard(p, :a, frame(k), k * 1_000, k * 1_000)
           assert {[:b, :a], p} = Paths.identity_asks(p, k * 1_000, k * 1_000)
           assert {p, []} = Paths.settle(p, k * 1_000, k * 1_000)
           p
