@@ -273,8 +273,9 @@ defmodule Dolphin.Vehicles.Vehicle do
   defp identify(paths, via, %Frame{compid: 1, message: %M.AutopilotVersion{} = version}), do: Paths.identified(paths, via, State.unique_id(version))
   defp identify(paths, _via, _frame), do: paths
 
-  # New paths: asked for their autopilot's uid (MAV_CMD_REQUEST_AUTOPILOT_CAPABILITIES,
-  # which every ArduPilot answers with AUTOPILOT_VERSION), then decided
+  # The path in use until the vehicle's unique id is known, and each new
+  # path: asked for their autopilot's (MAV_CMD_REQUEST_AUTOPILOT_CAPABILITIES,
+  # which ArduPilot answers with AUTOPILOT_VERSION); new paths then decided
   # (Dolphin.Vehicles.Paths, "Another vehicle with the same system id").
   defp identity_checks(s, real) do
     now = Clock.now_ms()

@@ -74,12 +74,20 @@ defmodule Dolphin.Mission.ReassignTest do
 
     setup do
       Dolphin.Fleet.set_source({Dolphin.Fleet.MAVLinkSource, nil})
-      on_exit(&GroundStation.forget_vehicles/0)
+      on_exit(fn ->
+        GroundStation.forget_vehicles()
+        for id <- [1, 2], do: Dolphin.Vehicles.Settings.clear(id)
+      end)
+
       %{port: GroundStation.open()}
     end
 
     # Two copters, picked; returns the first one's home.
     defp start_fleet(port) do
+      # Lost after a minute of clock time (1.2 s of real time at 50x), not 20 s:
+      # on a loaded machine the simulated copters, in this VM, can fall silent
+      # for 0.4 s without being gone. (Set before they are heard; undone in stop_fleet/0.)
+      for id <- [1, 2], do: Vehicles.set_timeout(id, 60_000)
       # The battery failsafe on (RTL when low), as a fleet would fly.
       {:ok, ids} = Sim.start(gcs: port, count: 2, speedup: @speedup, ekf_ready_ms: 5_000, battery_failsafe: :rtl)
       Wait.until(fn -> Enum.all?(ids, &match?({:ok, %{home: %{}}}, Vehicles.state(&1))) end, 1_500, fn -> "homes of #{inspect(ids)}" end)
@@ -91,6 +99,7 @@ defmodule Dolphin.Mission.ReassignTest do
     defp stop_fleet do
       Dolphin.Fleet.release_all(Dolphin.Fleet, self())
       GroundStation.forget_vehicles()
+      for id <- [1, 2], do: Dolphin.Vehicles.Settings.clear(id)
     end
 
     defp plain_survey(home),
