@@ -17,8 +17,10 @@ defmodule Dolphin.Check do
 
     * the script compiles (a syntax error, an unknown word);
     * it is run dry: against stand-ins for the described fleet
-      (`Dolphin.Check.FleetFile`, or the vehicles of `--sim N`), on a clock
-      2,000 times faster than real time, with the real fleet's picks and the
+      (`Dolphin.Check.FleetFile`, or the vehicles of `--sim N`), on a
+      virtual clock that moves to the next thing due once everything has
+      reacted (so its findings do not depend on how busy the machine
+      is), with the real fleet's picks and the
       engine's allocation — so a `pick` that nothing can serve, or a
       concurrent composition without enough distinct vehicles, fails as it
       would in flight, and is reported with its line and why;
@@ -220,19 +222,20 @@ defmodule Dolphin.Check do
       nil
     end
 
-    {:ok, pid} = Dolphin.Script.start(script, fleet: fleet, clock: Dolphin.Check.Clock, ask: ask, output: fn _ -> :ok end, platform_opts: [missions: Dolphin.Fleet.source(fleet)])
-    real = div(horizon, Dolphin.Check.Clock.speedup())
+    Dolphin.Check.Clock.run(horizon, fn ->
+      {:ok, pid} = Dolphin.Script.start(script, fleet: fleet, clock: Dolphin.Check.Clock, ask: ask, output: fn _ -> :ok end, platform_opts: [missions: Dolphin.Fleet.source(fleet)])
 
-    case Dolphin.Script.await(pid, real) do
-      {:error, :timeout} ->
-        where = code_place(pid)
-        Dolphin.Script.stop(pid, :check_horizon)
-        _ = Dolphin.Script.await(pid, 30_000)
-        where
+      receive do
+        {Dolphin.Script, ^pid, result} ->
+          result
 
-      result ->
-        result
-    end
+        {Dolphin.Check.Clock, :horizon} ->
+          where = code_place(pid)
+          Dolphin.Script.stop(pid, :check_horizon)
+          _ = Dolphin.Script.await(pid, 30_000)
+          where
+      end
+    end)
   end
 
   defp caller_line(file) do

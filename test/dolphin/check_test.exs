@@ -91,12 +91,11 @@ defmodule Dolphin.CheckTest do
   end
 
   test "a flight cut short before the pack runs out is no error; one that runs it out before its stop is", %{fleet: fleet} do
-    # The dry run's clock runs 2,000 times faster than real time: on a loaded
-    # machine every late step costs it seconds of clock time, and the script
-    # flies for about an hour of it. A horizon of six hours lets it end there too.
+    # The script flies for about an hour of the dry run's clock: a horizon of
+    # six hours lets it end.
     report = check("cut_short.exs", fleet, horizon_ms: 6 * 3_600_000)
     assert [%{mission: "Long", battery_start: 1.0}, %{mission: "Back", battery_start: back}, %{mission: "Long"} | _] = report.missions
-    # The stop came on the condition (how far below 60 % depends on the machine's load).
+    # The stop came on the condition.
     assert back < 0.6
     assert [%{line: 23, message: message}] = Enum.filter(report.findings, &(&1.kind == :energy))
     assert message =~ "the pack would be empty after"

@@ -35,9 +35,8 @@ defmodule Dolphin.Check.Flight do
   end
 
   @impl true
-  # The flight's time moves by whole ticks, not by the clock's reading: at
-  # the check's speed-up a millisecond of real delay is seconds of clock
-  # time, and the battery a condition saw must be the one a stop leaves.
+  # The flight's time moves by whole ticks, not by the clock's reading: the
+  # battery a condition saw must be the one a stop leaves.
   def handle_info(:tick, s) do
     elapsed_s = if s.finite?, do: min(s.elapsed_s + @tick_ms / 1000, s.time_s), else: s.elapsed_s + @tick_ms / 1000
     s = %{s | elapsed_s: elapsed_s}
