@@ -69,11 +69,7 @@ defmodule Dolphin.Check.Clock do
   def now_ms, do: :atomics.get(cells(), @now)
 
   @impl Dolphin.Engine.TimeSource
-  def send_after(pid, msg, ms) do
-    ref = make_ref()
-    GenServer.cast(@name, {:at, now_ms() + max(round(ms), 0), pid, msg, ref})
-    ref
-  end
+  def send_after(pid, msg, ms), do: schedule(pid, msg, ms, make_ref())
 
   @impl Dolphin.Engine.TimeSource
   def cancel(ref) do
@@ -84,7 +80,7 @@ defmodule Dolphin.Check.Clock do
   @impl Dolphin.Engine.TimeSource
   def sleep(ms) do
     ref = make_ref()
-    GenServer.cast(@name, {:at, now_ms() + max(round(ms), 0), self(), {__MODULE__, :wake, ref}, ref})
+    schedule(self(), {__MODULE__, :wake, ref}, ms, ref)
 
     receive do
       {__MODULE__, :wake, ^ref} -> :ok
@@ -97,6 +93,11 @@ defmodule Dolphin.Check.Clock do
   def real_ms(_ms), do: 5_000
 
   defp cells, do: :persistent_term.get(@cells)
+
+  defp schedule(pid, msg, ms, ref) do
+    GenServer.cast(@name, {:at, now_ms() + max(round(ms), 0), pid, msg, ref})
+    ref
+  end
 
   @impl GenServer
   def init({horizon_ms, owner}) do
@@ -131,8 +132,7 @@ defmodule Dolphin.Check.Clock do
 
     cond do
       not idle?() and (s.busy_since == nil or real - s.busy_since < @patience_real_ms) ->
-        Process.send_after(self(), :look, 1)
-        {:noreply, %{s | busy_since: s.busy_since || real}}
+        look_again(1, %{s | busy_since: s.busy_since || real})
 
       # Nothing set on this clock: the script waits on something else (a
       # pick), or has ended. After a while of real time, for ever.
@@ -142,7 +142,7 @@ defmodule Dolphin.Check.Clock do
         cond do
           ended? -> {:noreply, %{s | empty_since: nil}}
           real - since >= @real_wait_ms -> {:noreply, %{horizon(s) | empty_since: nil}}
-          true -> Process.send_after(self(), :look, 10) && {:noreply, %{s | empty_since: since}}
+          true -> look_again(10, %{s | empty_since: since})
         end
 
       true ->
@@ -161,6 +161,11 @@ defmodule Dolphin.Check.Clock do
     :atomics.put(s.cells, @ended, 1)
     send(s.owner, {__MODULE__, :horizon})
     s
+  end
+
+  defp look_again(real_ms, s) do
+    Process.send_after(self(), :look, real_ms)
+    {:noreply, s}
   end
 
   # Nothing runs or waits to run on the VM's schedulers but this process.
