@@ -20,7 +20,9 @@ defmodule Dolphin.Vehicles do
 
   Events: `{:vehicle_discovered, sysid}`, `{:vehicle_lost, sysid}` (silent for
   longer than its timeout: 20 s of `Dolphin.Clock` time by default, set with
-  `set_timeout/2` or `config :dolphin, vehicle_timeout_ms:`),
+  `set_timeout/2` or `config :dolphin, vehicle_timeout_ms:`; at a
+  speed-up never less than min(timeout, 5 s) of real time, because a
+  simulation on a busy host falls behind its speed-up),
   `{:vehicle_reconnected, sysid}`, `{:vehicle_forgotten, sysid}` (`forget/1`),
   all derived from the vehicles' views by `Dolphin.Vehicles.Views`, and per
   vehicle its views, `{:view, view}`.

@@ -15,6 +15,8 @@ defmodule Dolphin.Vehicles.Vehicle do
   alias Dolphin.MAVLink.Ardupilotmega, as: M
   alias Dolphin.Vehicles.{CommandProtocol, MissionProtocol, Paths, State, View, Views}
 
+  @lost_floor_real_ms 5_000
+
   defstruct [:sysid, :paths, :judge_due, :state, :heard, :timeout_ms, :check_due_ms, :requests_left, lost: false, view: nil, ops: %{}, queued: %{}]
 
   # The process's state. `paths`: one path per link (and address) the vehicle
@@ -259,7 +261,7 @@ defmodule Dolphin.Vehicles.Vehicle do
     s = %{s | check_due_ms: now + period, paths: Paths.forget_silent(s.paths, now, s.timeout_ms)}
     last = s.state.link.last_seen_ms
 
-    if on_time? and not s.lost and last != nil and now - last > s.timeout_ms do
+    if on_time? and not s.lost and last != nil and now - last > lost_after_ms(s.timeout_ms, Clock.speedup()) do
       # The view first: whoever hears of the loss finds the view saying so.
       {:noreply, publish_view(%{s | lost: true})}
     else
@@ -268,6 +270,25 @@ defmodule Dolphin.Vehicles.Vehicle do
   end
 
   defp real_ms, do: System.monotonic_time(:millisecond)
+
+  @doc """
+  The silence, in clock time, after which a vehicle with timeout
+  `timeout_ms` (clock time) is lost at speed-up `speedup`: its timeout, and
+  at a speed-up never less than min(timeout, 5 s) of real time. A sped-up
+  vehicle is a simulation, and a simulation on a busy host falls behind its
+  speed-up (ArduCopter SITL at 15x beside two busy loops went 1.3 s of real
+  time without a frame: 20 s of clock time). At 1x the floor is the timeout
+  itself.
+
+      iex> Dolphin.Vehicles.Vehicle.lost_after_ms(20_000, 1)
+      20000
+      iex> Dolphin.Vehicles.Vehicle.lost_after_ms(20_000, 15)
+      75000
+      iex> Dolphin.Vehicles.Vehicle.lost_after_ms(2_000, 10)
+      20000
+  """
+  @spec lost_after_ms(pos_integer(), number()) :: pos_integer()
+  def lost_after_ms(timeout_ms, speedup), do: max(timeout_ms, round(min(timeout_ms, @lost_floor_real_ms) * speedup))
 
   # What the autopilot heard on a path says it is: its unique id.
   defp identify(paths, via, %Frame{compid: 1, message: %M.AutopilotVersion{} = version}), do: Paths.identified(paths, via, State.unique_id(version))

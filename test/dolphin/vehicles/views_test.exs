@@ -6,6 +6,7 @@ defmodule Dolphin.Vehicles.ViewsTest do
   alias Dolphin.Vehicles.{View, Views}
 
   doctest Dolphin.Vehicles.View, only: [transitions: 2]
+  doctest Dolphin.Vehicles.Vehicle, only: [lost_after_ms: 2]
 
   # A vehicle no process of this node owns (as one heard by another node would be).
   @id 241
