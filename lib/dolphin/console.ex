@@ -43,6 +43,11 @@ defmodule Dolphin.Console do
     * `answer/2` — answers a script's `ask`;
     * `web/2` — a live view of the fleet in the browser (`Dolphin.Web`).
 
+  A vehicle is given by its id as `vehicles/0` lists it: its system id, or
+  for another vehicle with a system id already in use, its name
+  `"SYSID@NETWORK"` (`Dolphin.Vehicles.Id`; the first vehicle of a system id
+  answers to its own such name too).
+
   Altitudes given to `takeoff/3` and `goto/5` are metres above home (as
   QGroundControl's), unlike the script language's, which are above mean sea
   level. Times the console prints are clock times (`Dolphin.Clock`: with a
@@ -56,7 +61,7 @@ defmodule Dolphin.Console do
   alias Dolphin.{Engine, Mission}
   alias Dolphin.Console.{Arguments, EventLog, Format, Runs, Overview, Vehicle}
 
-  @type vehicle_id :: non_neg_integer()
+  @type vehicle_id :: Dolphin.Vehicles.Id.t()
 
   @typedoc "What the helpers return: `IEx.dont_display_result()` (they print for themselves)."
   @type printed :: atom()

@@ -113,7 +113,7 @@ defmodule Dolphin.EventText do
     do: "vehicle #{e.vehicle}: now through #{e.to} (#{if e.reason in [:silent, "silent"], do: "#{e.from} went silent", else: "better than #{e.from}"})"
 
   def event_text(%{event: :system_id_shared} = e),
-    do: "vehicle #{e.vehicle}: another vehicle with system id #{e.vehicle} is heard on #{e.path} (unique id #{e.uid}, not #{e.vehicle_uid}); ignored until it is given its own system id"
+    do: "vehicle #{e.vehicle}: another vehicle with its system id is heard on #{e.path} (unique id #{e.uid}, not #{e.vehicle_uid}): that is vehicle #{e.other}"
 
   def event_text(%{event: :mode_changed} = e), do: "vehicle #{e.vehicle} mode #{Format.mode(e.mode)}"
   def event_text(%{event: :armed} = e), do: "vehicle #{e.vehicle} armed"

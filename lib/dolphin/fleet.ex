@@ -175,8 +175,8 @@ defmodule Dolphin.Fleet do
 
     id = Keyword.get(opts, :id)
 
-    unless id == nil or Enum.all?(List.wrap(id), &(is_integer(&1) and &1 >= 0)),
-      do: raise(ArgumentError, "pick id must be a system id or a list of them, got: #{inspect(id)}")
+    unless id == nil or Enum.all?(List.wrap(id), &Dolphin.Vehicles.Id.valid?/1),
+      do: raise(ArgumentError, "pick id must be a vehicle id (a system id, or a name \"SYSID@NETWORK\") or a list of them, got: #{inspect(id)}")
 
     timeout = Keyword.get(opts, :timeout, :infinity)
 
@@ -420,7 +420,7 @@ defmodule Dolphin.Fleet do
 
   defp matches?(req, %View{} = v) do
     (req.type == nil or v.type in List.wrap(req.type)) and Enum.all?(req.payload, &(&1 in v.payloads)) and
-      (req.region == nil or (v.position != nil and Geo.contains?(req.region, v.position))) and (req.id == nil or v.id in req.id)
+      (req.region == nil or (v.position != nil and Geo.contains?(req.region, v.position))) and (req.id == nil or Enum.any?(req.id, &View.named?(v, &1)))
   end
 
   defp pick_error(s, req) do

@@ -64,6 +64,12 @@ defmodule Dolphin.Sim do
       or an endpoint string `"udpout:HOST:PORT"`;
     * `:count` — how many (default 1), with system ids from `:first_sysid`
       (default 1), or `:sysids` — the exact ids;
+    * `:network` — a name for these vehicles as a group that may reuse the
+      system ids of vehicles started without it or on another network (most
+      vehicles leave the factory as system id 1: several networks of them,
+      each on its own link, are several vehicles with one system id, see
+      `Dolphin.Vehicles.Id`); the vehicles are then named `{network, sysid}`
+      in this module's functions;
     * `:home` — the location they are spread around, `#{@spacing |> round()}` m
       apart in rows of #{@per_row} (default: the report's, 40.444233, -7.375234,
       820 m); or `:homes` — one location per vehicle;
@@ -93,7 +99,7 @@ defmodule Dolphin.Sim do
   at most what a copter could do (`:cruise_speed` 50 m/s, `:hover_current`
   200 A, ...), and the faults as `set_faults/2` takes them.
 
-  Returns the system ids started, or a `Dolphin.Sim.Error` (`:bad_option`)
+  Returns the vehicles started (system ids; `{network, sysid}` with `:network`), or a `Dolphin.Sim.Error` (`:bad_option`)
   that says which option was wrong and what it takes.
   """
   @spec start(keyword()) :: {:ok, [byte()]} | {:error, Dolphin.Sim.Error.t()}
@@ -101,18 +107,21 @@ defmodule Dolphin.Sim do
     with {:ok, gcs} <- gcs(Keyword.get(opts, :gcs)),
          {:ok, sysids} <- sysids(opts),
          {:ok, config} <- config(opts),
-         :ok <- free(sysids),
+         :ok <- free(Enum.map(sysids, &sim_id(opts[:network], &1))),
          :ok <- faults(opts),
          {:ok, homes, charger} <- places(opts, length(sysids)),
          :ok <- speedup(opts[:speedup]) do
       cameras = cameras(opts[:camera], sysids)
       config = Map.put(config, :charger, charger)
 
+      network = opts[:network]
+
       Enum.zip(sysids, homes)
       |> Enum.reduce_while({:ok, []}, fn {sysid, home}, {:ok, started} ->
         child =
           {Dolphin.Sim.Vehicle,
            sysid: sysid,
+           network: network,
            # Chosen here, so that a vehicle process restarted by its supervisor keeps it.
            uid: Dolphin.Sim.Copter.unique_id(),
            gcs: gcs,
@@ -122,7 +131,7 @@ defmodule Dolphin.Sim do
            config: Map.put(config, :camera, sysid in cameras)}
 
         case DynamicSupervisor.start_child(Dolphin.Sim.Supervisor, child) do
-          {:ok, _pid} -> {:cont, {:ok, [sysid | started]}}
+          {:ok, _pid} -> {:cont, {:ok, [sim_id(network, sysid) | started]}}
           {:error, why} -> {:halt, {:error, %Dolphin.Sim.Error{reason: :start_failed, message: "simulated vehicle #{sysid}: #{inspect(why)}"}}}
         end
       end)
@@ -219,6 +228,9 @@ defmodule Dolphin.Sim do
   catch
     :exit, {:noproc, _} -> {:error, :unknown_vehicle}
   end
+
+  defp sim_id(nil, sysid), do: sysid
+  defp sim_id(network, sysid), do: {network, sysid}
 
   defp whereis(sysid) do
     case Registry.lookup(Dolphin.Registry, {:sim, sysid}) do

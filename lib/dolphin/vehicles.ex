@@ -4,8 +4,12 @@ defmodule Dolphin.Vehicles do
 
   A vehicle is discovered from its first HEARTBEAT (from any component but a
   ground station's) and gets a process under `Dolphin.Vehicles.Supervisor`,
-  registered by system id. Links hand every frame to `route/2`, which casts it
-  to that process and never waits.
+  registered by its id (`Dolphin.Vehicles.Id`: its system id, or
+  `"SYSID@NETWORK"` for another vehicle with a system id already in use,
+  told apart by its autopilot's unique id). Links hand every frame to
+  `route/2`, which casts it to that process and never waits. Every function
+  here that takes a vehicle takes its id, or the qualified name of the
+  first vehicle of a system id (`resolve/1`).
 
       Dolphin.Vehicles.subscribe(:all)      # {:dolphin, :vehicles, {:vehicle_discovered, 1}}, ...
       Dolphin.Vehicles.list()               # [1, 2, 3]
@@ -18,12 +22,12 @@ defmodule Dolphin.Vehicles do
   protocol (`Dolphin.Vehicles.CommandProtocol`: retransmission, IN_PROGRESS)
   and return `{:ok, :accepted}` or `{:error, %Dolphin.CommandError{}}`.
 
-  Events: `{:vehicle_discovered, sysid}`, `{:vehicle_lost, sysid}` (silent for
+  Events: `{:vehicle_discovered, id}`, `{:vehicle_lost, id}` (silent for
   longer than its timeout: 20 s of `Dolphin.Clock` time by default, set with
-  `set_timeout/2` or `config :dolphin, vehicle_timeout_ms:`; at a
-  speed-up never less than min(timeout, 5 s) of real time, because a
-  simulation on a busy host falls behind its speed-up),
-  `{:vehicle_reconnected, sysid}`, `{:vehicle_forgotten, sysid}` (`forget/1`),
+  `set_timeout/2`, kept exactly, or `config :dolphin, vehicle_timeout_ms:`;
+  the default at a speed-up never less than min(timeout, 3 s) of real time,
+  because a simulation on a busy host falls behind its speed-up),
+  `{:vehicle_reconnected, id}`, `{:vehicle_forgotten, id}` (`forget/1`),
   all derived from the vehicles' views by `Dolphin.Vehicles.Views`, and per
   vehicle its views, `{:view, view}`.
 
@@ -35,7 +39,7 @@ defmodule Dolphin.Vehicles do
   changes, the view before the loss or reconnection event when the vehicle
   goes silent or is heard again. That table holds the latest view of each
   vehicle for anyone to read (`view/1`, `list/0`: no call to the vehicle's
-  process), publishes it on the vehicle's topic `{:vehicle, sysid}`
+  process), publishes it on the vehicle's topic `{:vehicle, id}`
   (`subscribe/1`), says when the vehicle is discovered, lost or heard again
   (topic `:vehicles`) and turns its transitions into the `Dolphin.Events`
   events of vehicles (`vehicle_discovered`, `mode_changed`, `armed`,
@@ -53,7 +57,7 @@ defmodule Dolphin.Vehicles do
   ## Paths: one vehicle heard on several links
 
   The same system id heard on several links (two radios, a radio and a
-  relay) is one vehicle with several paths, one per link and, on a `udpin`
+  relay), with the same autopilot unique id, is one vehicle with several paths, one per link and, on a `udpin`
   link, per address it sends from (`Dolphin.Vehicles.Paths`; `paths/1` lists
   them, the console's `vehicles()` shows them):
 
@@ -86,6 +90,7 @@ defmodule Dolphin.Vehicles do
   """
 
   alias Dolphin.CommandError
+  alias Dolphin.Vehicles.Id
   alias Dolphin.MAVLink.Frame
   alias Dolphin.MAVLink.Ardupilotmega, as: M
   alias Dolphin.MAVLink.Ardupilotmega.Heartbeat
@@ -96,8 +101,8 @@ defmodule Dolphin.Vehicles do
   @gcs_type 6
   @no_autopilot 8
 
-  @doc "The system ids of the known vehicles, ascending: those with a view in `Dolphin.Vehicles.Views`, and local ones not yet through their first frame."
-  @spec list() :: [byte()]
+  @doc "The ids of the known vehicles, ascending (system ids, then qualified names): those with a view in `Dolphin.Vehicles.Views`, and local ones not yet through their first frame."
+  @spec list() :: [Id.t()]
   def list do
     Dolphin.Registry
     |> Registry.select([{{{:vehicle, :"$1"}, :_, :_}, [], [:"$1"]}])
@@ -107,9 +112,9 @@ defmodule Dolphin.Vehicles do
   end
 
   @doc "Whether a vehicle has been heard and has booted (`Dolphin.Vehicles.State.ready?/1`)."
-  @spec ready?(byte()) :: boolean()
-  def ready?(sysid) do
-    case state(sysid) do
+  @spec ready?(Id.t()) :: boolean()
+  def ready?(id) do
+    case state(id) do
       {:ok, st} -> Dolphin.Vehicles.State.ready?(st)
       _ -> false
     end
@@ -120,13 +125,13 @@ defmodule Dolphin.Vehicles do
   for a vehicle not known); with `Dolphin.Vehicles.State.texts_since/2`, what
   it said during an exchange.
   """
-  @spec status_texts(byte()) :: [{integer(), String.t()}]
-  def status_texts(sysid) do
+  @spec status_texts(Id.t()) :: [{integer(), String.t()}]
+  def status_texts(id) do
     # A vehicle of this node: its view holds what it said before any answer
     # its process gave since (it puts the view first). Another station's:
     # its view comes by way of that station, maybe after the answer, so ask
     # its process.
-    reply = if whereis_local(sysid), do: view(sysid), else: state(sysid)
+    reply = if whereis_local(id), do: view(id), else: state(id)
 
     case reply do
       {:ok, known} -> known.status_texts
@@ -135,12 +140,14 @@ defmodule Dolphin.Vehicles do
   end
 
   @doc "The latest view of a vehicle (see \"One owner of a vehicle's state\"), read from `Dolphin.Vehicles.Views`."
-  @spec view(byte()) :: {:ok, Dolphin.Vehicles.View.t()} | {:error, :unknown_vehicle}
-  def view(sysid) do
-    with {:error, :unknown_vehicle} <- Dolphin.Vehicles.Views.get(sysid) do
+  @spec view(Id.t()) :: {:ok, Dolphin.Vehicles.View.t()} | {:error, :unknown_vehicle}
+  def view(id) do
+    id = resolve(id)
+
+    with {:error, :unknown_vehicle} <- Dolphin.Vehicles.Views.get(id) do
       # Discovered an instant ago: its process has not taken its first frame
       # (it will at once, before anything else), so it has no row yet.
-      case call_vehicle(sysid, :view) do
+      case call_vehicle(id, :view) do
         {:ok, view} -> {:ok, view}
         _ -> {:error, :unknown_vehicle}
       end
@@ -153,9 +160,9 @@ defmodule Dolphin.Vehicles do
   the operator's console. What the rest of the ground station reads is the
   vehicle's view (`view/1`, `Dolphin.Vehicles.Views`), read without a call.
   """
-  @spec state(byte()) :: {:ok, Dolphin.Vehicles.State.t()} | {:error, :unknown_vehicle}
-  def state(sysid) do
-    case call_vehicle(sysid, :state) do
+  @spec state(Id.t()) :: {:ok, Dolphin.Vehicles.State.t()} | {:error, :unknown_vehicle}
+  def state(id) do
+    case call_vehicle(id, :state) do
       {:ok, state} -> {:ok, state}
       _ -> {:error, :unknown_vehicle}
     end
@@ -163,10 +170,10 @@ defmodule Dolphin.Vehicles do
 
   # Calls a vehicle's process: `:no_vehicle` if there is none, `:gone` if it
   # went away before answering (it may between look-up and call).
-  defp call_vehicle(sysid, request, timeout \\ 5_000) do
-    case whereis(sysid) do
+  defp call_vehicle(id, request, timeout \\ 5_000) do
+    case whereis(id) do
       nil -> :no_vehicle
-      pid -> call_pid(sysid, pid, request, timeout, 1)
+      pid -> call_pid(id, pid, request, timeout, 1)
     end
   end
 
@@ -174,13 +181,13 @@ defmodule Dolphin.Vehicles do
   # away during the call may be heard by another station: the call is made
   # once more on the route its router has now (Dolphin.Vehicles.Routes), so that a failover does not
   # fail the task that was using the vehicle.
-  defp call_pid(sysid, pid, request, timeout, retries) do
+  defp call_pid(id, pid, request, timeout, retries) do
     {:ok, GenServer.call(pid, request, timeout)}
   catch
     :exit, reason ->
       with true <- retries > 0 and node(pid) != node() and node_gone?(reason),
-           new when is_pid(new) and new != pid <- Dolphin.Vehicles.Routes.reroute(sysid, pid) do
-        call_pid(sysid, new, request, timeout, retries - 1)
+           new when is_pid(new) and new != pid <- Dolphin.Vehicles.Routes.reroute(id, pid) do
+        call_pid(id, new, request, timeout, retries - 1)
       else
         _ -> :gone
       end
@@ -201,30 +208,30 @@ defmodule Dolphin.Vehicles do
   not known. For a vehicle of another ground station (`Dolphin.Cluster`),
   the paths of the station chosen to reach it.
   """
-  @spec paths(byte()) :: [Dolphin.Vehicles.Paths.summary()]
-  def paths(sysid) do
-    case call_vehicle(sysid, :paths) do
+  @spec paths(Id.t()) :: [Dolphin.Vehicles.Paths.summary()]
+  def paths(id) do
+    case call_vehicle(id, :paths) do
       {:ok, paths} -> paths
       _ -> []
     end
   end
 
   @doc "Sends a message to a vehicle on the path in use."
-  @spec send_message(byte(), struct()) :: :ok | {:error, :unknown_vehicle}
-  def send_message(sysid, message) do
-    case whereis(sysid) do
+  @spec send_message(Id.t(), struct()) :: :ok | {:error, :unknown_vehicle}
+  def send_message(id, message) do
+    case whereis(id) do
       nil -> {:error, :unknown_vehicle}
       pid -> GenServer.cast(pid, {:send, message})
     end
   end
 
   @doc "Sets after how much clock time without a frame a vehicle is lost."
-  @spec set_timeout(byte(), pos_integer()) :: :ok | {:error, :unknown_vehicle}
-  def set_timeout(sysid, ms) when is_integer(ms) and ms > 0 do
+  @spec set_timeout(Id.t(), pos_integer()) :: :ok | {:error, :unknown_vehicle}
+  def set_timeout(id, ms) when is_integer(ms) and ms > 0 do
     # Kept outside the process: a restarted vehicle process keeps it.
-    :ok = Dolphin.Vehicles.Settings.put_timeout(sysid, ms)
+    :ok = Dolphin.Vehicles.Settings.put_timeout(id, ms)
 
-    case call_vehicle(sysid, {:set_timeout, ms}) do
+    case call_vehicle(id, {:set_timeout, ms}) do
       {:ok, :ok} -> :ok
       _ -> {:error, :unknown_vehicle}
     end
@@ -232,25 +239,50 @@ defmodule Dolphin.Vehicles do
 
   @doc """
   Subscribes the caller to one vehicle's views (`{:dolphin, {:vehicle,
-  sysid}, {:view, view}}`, one per change), or to `:all` the fleet's
-  notices (`{:dolphin, :vehicles, {:vehicle_discovered, sysid}}`, ...).
+  id}, {:view, view}}`, one per change), or to `:all` the fleet's
+  notices (`{:dolphin, :vehicles, {:vehicle_discovered, id}}`, ...).
   """
-  @spec subscribe(byte() | :all) :: :ok
+  @spec subscribe(Id.t() | :all) :: :ok
   def subscribe(:all), do: PubSub.subscribe(:vehicles)
-  def subscribe(sysid), do: PubSub.subscribe({:vehicle, sysid})
+  def subscribe(id), do: PubSub.subscribe({:vehicle, id})
 
   @doc """
   The process of a vehicle, or nil: this node's own, else its route
   (`Dolphin.Vehicles.Routes`: in a cluster of ground stations, the
   vehicle's process on the station chosen to reach it).
   """
-  @spec whereis(byte()) :: pid() | nil
-  def whereis(sysid), do: whereis_local(sysid) || Dolphin.Vehicles.Routes.get(sysid)
+  @spec whereis(Id.t()) :: pid() | nil
+  def whereis(id), do: whereis_local(id) || Dolphin.Vehicles.Routes.get(id) || whereis_named(id)
+
+  # The first vehicle heard with a system id, by its qualified name.
+  defp whereis_named(name) when is_binary(name) do
+    case resolve(name) do
+      ^name -> nil
+      id -> whereis(id)
+    end
+  end
+
+  defp whereis_named(_id), do: nil
+
+  @doc """
+  The id of the vehicle named `name` (`Dolphin.Vehicles.Id`): `name` itself,
+  or for the qualified name of the first vehicle heard with a system id,
+  that system id. A name no vehicle answers to is returned as it is.
+  """
+  @spec resolve(Id.t()) :: Id.t()
+  def resolve(name) when is_binary(name) do
+    case Dolphin.Vehicles.Views.get(name) do
+      {:ok, _} -> name
+      _ -> Enum.find_value(Dolphin.Vehicles.Views.all(), name, &(Dolphin.Vehicles.View.named?(&1, name) && &1.id))
+    end
+  end
+
+  def resolve(id), do: id
 
   @doc "This node's own process of a vehicle, or nil: never a route to another ground station's."
-  @spec whereis_local(byte()) :: pid() | nil
-  def whereis_local(sysid) do
-    case Registry.lookup(Dolphin.Registry, {:vehicle, sysid}) do
+  @spec whereis_local(Id.t()) :: pid() | nil
+  def whereis_local(id) do
+    case Registry.lookup(Dolphin.Registry, {:vehicle, id}) do
       [{pid, _}] -> pid
       [] -> nil
     end
@@ -259,24 +291,24 @@ defmodule Dolphin.Vehicles do
   @doc """
   Forgets a vehicle: its process stops and its view is deleted from
   `Dolphin.Vehicles.Views` (no "lost" event, but `{:vehicle_forgotten,
-  sysid}`; a vehicle picked stays picked, unavailable, until released); it
+  id}`; a vehicle picked stays picked, unavailable, until released); it
   is discovered anew, with a `vehicle_discovered` event, if it speaks again.
   For vehicles known to be gone for good, such as a finished simulation's.
   """
-  @spec forget(byte()) :: :ok
-  def forget(sysid) do
-    pid = whereis_local(sysid)
+  @spec forget(Id.t()) :: :ok
+  def forget(id) do
+    pid = whereis_local(id)
 
     if pid, do: DynamicSupervisor.terminate_child(Dolphin.Vehicles.Supervisor, pid)
 
-    if pid == nil and Dolphin.Vehicles.Routes.get(sysid) do
+    if pid == nil and Dolphin.Vehicles.Routes.get(id) do
       # A routed vehicle (another station's) is forgotten here only, by its
       # router (its station keeps it).
-      Dolphin.Vehicles.Routes.forget(sysid)
+      Dolphin.Vehicles.Routes.forget(id)
     else
       # A vehicle put in the table from elsewhere has no process here; the
       # table says it is forgotten.
-      Dolphin.Vehicles.Views.delete(sysid)
+      Dolphin.Vehicles.Views.delete(id)
     end
 
     :ok
@@ -292,10 +324,10 @@ defmodule Dolphin.Vehicles do
   @typedoc "A command parameter: a number, or `:nan`, `:infinity`, `:neg_infinity` (NaN is MAVLink's \"unset\", e.g. keep the current yaw)."
   @type param :: number() | :nan | :infinity | :neg_infinity
 
-  @spec command(byte(), atom() | non_neg_integer(), [param()], command_opts()) :: {:ok, :accepted} | {:error, CommandError.t()}
-  def command(sysid, command, params \\ [], opts \\ []) when length(params) <= 7 do
+  @spec command(Id.t(), atom() | non_neg_integer(), [param()], command_opts()) :: {:ok, :accepted} | {:error, CommandError.t()}
+  def command(id, command, params \\ [], opts \\ []) when length(params) <= 7 do
     params = Enum.map(params, &param!/1) ++ List.duplicate(0.0, 7 - length(params))
-    run(sysid, command, %{params: params, int: false, frame: 0}, opts)
+    run(id, command, %{params: params, int: false, frame: 0}, opts)
   end
 
   @doc """
@@ -303,32 +335,32 @@ defmodule Dolphin.Vehicles do
   degrees, `alt` in metres) in `frame` (default
   MAV_FRAME_GLOBAL_RELATIVE_ALT_INT, 6).
   """
-  @spec command_int(byte(), atom() | non_neg_integer(), [param()], {number(), number(), number()}, command_opts()) ::
+  @spec command_int(Id.t(), atom() | non_neg_integer(), [param()], {number(), number(), number()}, command_opts()) ::
           {:ok, :accepted} | {:error, CommandError.t()}
-  def command_int(sysid, command, params, {lat, lon, alt}, opts \\ []) when length(params) <= 4 do
+  def command_int(id, command, params, {lat, lon, alt}, opts \\ []) when length(params) <= 4 do
     params = Enum.map(params, &param!/1) ++ List.duplicate(0.0, 4 - length(params))
 
     unless is_number(lat) and is_number(lon) and abs(lat) <= 90 and abs(lon) <= 180 and is_number(alt),
       do: raise(ArgumentError, "command_int position must be {lat, lon, alt} in degrees and metres, got: #{inspect({lat, lon, alt})}")
 
     position = [round(lat * 1.0e7), round(lon * 1.0e7), alt * 1.0]
-    run(sysid, command, %{params: params ++ position, int: true, frame: Keyword.get(opts, :frame, 6)}, opts)
+    run(id, command, %{params: params ++ position, int: true, frame: Keyword.get(opts, :frame, 6)}, opts)
   end
 
-  defp run(sysid, command, request, opts) do
-    {:ok, id} = command_id(command)
-    name = if is_atom(command), do: command, else: id
+  defp run(id, command, request, opts) do
+    {:ok, number} = command_id(command)
+    name = if is_atom(command), do: command, else: number
 
     request =
       Map.merge(request, %{
-        command: id,
+        command: number,
         target_component: Keyword.get(opts, :target_component, 1),
         progress_to: Keyword.get(opts, :progress_to)
       })
 
-    gone = %CommandError{command: name, vehicle: sysid, result: :vehicle_gone, attempts: 0}
+    gone = %CommandError{command: name, vehicle: id, result: :vehicle_gone, attempts: 0}
 
-    case call_vehicle(sysid, {:command, request, opts}, :infinity) do
+    case call_vehicle(id, {:command, request, opts}, :infinity) do
       {:ok, reply} -> reply
       :no_vehicle -> {:error, %{gone | detail: "no such vehicle"}}
       :gone -> {:error, gone}
@@ -351,27 +383,27 @@ defmodule Dolphin.Vehicles do
   end
 
   @doc "Arms the motors (`force: true` overrides pre-arm checks, as ArduPilot's magic number 21196 does)."
-  def arm(sysid, opts \\ []), do: command(sysid, :mav_cmd_component_arm_disarm, [1, if(opts[:force], do: 21_196, else: 0)], opts)
+  def arm(id, opts \\ []), do: command(id, :mav_cmd_component_arm_disarm, [1, if(opts[:force], do: 21_196, else: 0)], opts)
 
   @doc "Disarms the motors."
-  def disarm(sysid, opts \\ []), do: command(sysid, :mav_cmd_component_arm_disarm, [0, if(opts[:force], do: 21_196, else: 0)], opts)
+  def disarm(id, opts \\ []), do: command(id, :mav_cmd_component_arm_disarm, [0, if(opts[:force], do: 21_196, else: 0)], opts)
 
   @doc """
   Sets the flight mode by name (`:guided`, `:auto`, `:brake`, `:rtl`, ... for
   ArduPilot; `:mission`, `:posctl`, ... for PX4; see `Dolphin.Vehicles.Modes`).
   """
-  @spec set_mode(byte(), atom(), command_opts()) :: {:ok, :accepted} | {:error, CommandError.t()}
-  def set_mode(sysid, mode, opts \\ []) do
-    with {:ok, view} <- view(sysid),
+  @spec set_mode(Id.t(), atom(), command_opts()) :: {:ok, :accepted} | {:error, CommandError.t()}
+  def set_mode(id, mode, opts \\ []) do
+    with {:ok, view} <- view(id),
          {:ok, number} <- mode_number(view, mode) do
       params = if is_tuple(number), do: [1, elem(number, 0), elem(number, 1)], else: [1, number]
-      command(sysid, :mav_cmd_do_set_mode, params, opts)
+      command(id, :mav_cmd_do_set_mode, params, opts)
     else
       {:error, :unknown_vehicle} ->
-        {:error, %CommandError{command: :mav_cmd_do_set_mode, vehicle: sysid, result: :vehicle_gone, attempts: 0, detail: "no such vehicle"}}
+        {:error, %CommandError{command: :mav_cmd_do_set_mode, vehicle: id, result: :vehicle_gone, attempts: 0, detail: "no such vehicle"}}
 
       {:error, detail} ->
-        {:error, %CommandError{command: :mav_cmd_do_set_mode, vehicle: sysid, result: :not_sent, attempts: 0, detail: detail}}
+        {:error, %CommandError{command: :mav_cmd_do_set_mode, vehicle: id, result: :not_sent, attempts: 0, detail: detail}}
     end
   end
 
@@ -385,39 +417,39 @@ defmodule Dolphin.Vehicles do
   defp mode_number(_view, mode), do: {:error, "mode #{inspect(mode)}: the vehicle's autopilot is not known yet"}
 
   @doc "Takes off to `altitude` metres (relative to home)."
-  def takeoff(sysid, altitude, opts \\ []), do: command(sysid, :mav_cmd_nav_takeoff, [0, 0, 0, 0, 0, 0, altitude], opts)
+  def takeoff(id, altitude, opts \\ []), do: command(id, :mav_cmd_nav_takeoff, [0, 0, 0, 0, 0, 0, altitude], opts)
 
   @doc "Lands where the vehicle is."
-  def land(sysid, opts \\ []), do: command(sysid, :mav_cmd_nav_land, [], opts)
+  def land(id, opts \\ []), do: command(id, :mav_cmd_nav_land, [], opts)
 
   @doc "Returns to launch."
-  def return_to_launch(sysid, opts \\ []), do: command(sysid, :mav_cmd_nav_return_to_launch, [], opts)
+  def return_to_launch(id, opts \\ []), do: command(id, :mav_cmd_nav_return_to_launch, [], opts)
 
   @doc "Starts the uploaded mission (ArduCopter switches to AUTO itself)."
-  def start_mission(sysid, opts \\ []), do: command(sysid, :mav_cmd_mission_start, [0, 0], opts)
+  def start_mission(id, opts \\ []), do: command(id, :mav_cmd_mission_start, [0, 0], opts)
 
   @doc "Makes mission item `seq` the current one."
-  def set_current_item(sysid, seq, opts \\ []), do: command(sysid, :mav_cmd_do_set_mission_current, [seq], opts)
+  def set_current_item(id, seq, opts \\ []), do: command(id, :mav_cmd_do_set_mission_current, [seq], opts)
 
   @doc "Sets home: `:current` (where the vehicle is) or `{lat, lon, alt}` (degrees, metres AMSL; sent as COMMAND_INT)."
-  def set_home(sysid, where, opts \\ [])
-  def set_home(sysid, :current, opts), do: command(sysid, :mav_cmd_do_set_home, [1], opts)
+  def set_home(id, where, opts \\ [])
+  def set_home(id, :current, opts), do: command(id, :mav_cmd_do_set_home, [1], opts)
   # COMMAND_INT: latitude and longitude exact (float32 in COMMAND_LONG would cost ~0.4 m).
-  def set_home(sysid, {lat, lon, alt}, opts),
-    do: command_int(sysid, :mav_cmd_do_set_home, [0], {lat, lon, alt}, Keyword.put_new(opts, :frame, 0))
+  def set_home(id, {lat, lon, alt}, opts),
+    do: command_int(id, :mav_cmd_do_set_home, [0], {lat, lon, alt}, Keyword.put_new(opts, :frame, 0))
 
   @doc "Changes the speed (m/s; `type:` `:ground` (default) or `:air`)."
-  def change_speed(sysid, speed, opts \\ []) do
+  def change_speed(id, speed, opts \\ []) do
     type = if opts[:type] == :air, do: 0, else: 1
-    command(sysid, :mav_cmd_do_change_speed, [type, speed, -1], opts)
+    command(id, :mav_cmd_do_change_speed, [type, speed, -1], opts)
   end
 
   @doc "Asks for message `msgid` every `interval_us` µs (-1 stops it)."
-  def set_message_interval(sysid, msgid, interval_us, opts \\ []),
-    do: command(sysid, :mav_cmd_set_message_interval, [msgid, interval_us], opts)
+  def set_message_interval(id, msgid, interval_us, opts \\ []),
+    do: command(id, :mav_cmd_set_message_interval, [msgid, interval_us], opts)
 
   @doc "Reboots the autopilot."
-  def reboot(sysid, opts \\ []), do: command(sysid, :mav_cmd_preflight_reboot_shutdown, [1], opts)
+  def reboot(id, opts \\ []), do: command(id, :mav_cmd_preflight_reboot_shutdown, [1], opts)
 
   @typedoc """
   Options of a mission transfer: `:mission_type` (`:mission`, `:fence`,
@@ -436,18 +468,18 @@ defmodule Dolphin.Vehicles do
   MISSION_ACK never came: `download_mission/2` tells whether it holds the
   mission (a mission task always reads its upload back before it flies).
   """
-  @spec upload_mission(byte(), [struct()], mission_opts()) :: :ok | {:error, Dolphin.MissionError.t()}
-  def upload_mission(sysid, items, opts \\ []), do: transfer(sysid, :upload, %{items: items}, opts)
+  @spec upload_mission(Id.t(), [struct()], mission_opts()) :: :ok | {:error, Dolphin.MissionError.t()}
+  def upload_mission(id, items, opts \\ []), do: transfer(id, :upload, %{items: items}, opts)
 
   @doc "Downloads a mission (or fence or rally list) as `MISSION_ITEM_INT` structs."
-  @spec download_mission(byte(), mission_opts()) :: {:ok, [struct()]} | {:error, Dolphin.MissionError.t()}
-  def download_mission(sysid, opts \\ []), do: transfer(sysid, :download, %{}, opts)
+  @spec download_mission(Id.t(), mission_opts()) :: {:ok, [struct()]} | {:error, Dolphin.MissionError.t()}
+  def download_mission(id, opts \\ []), do: transfer(id, :download, %{}, opts)
 
   @doc "Clears the vehicle's mission (or fence or rally list)."
-  @spec clear_mission(byte(), mission_opts()) :: :ok | {:error, Dolphin.MissionError.t()}
-  def clear_mission(sysid, opts \\ []), do: transfer(sysid, :clear, %{}, opts)
+  @spec clear_mission(Id.t(), mission_opts()) :: :ok | {:error, Dolphin.MissionError.t()}
+  def clear_mission(id, opts \\ []), do: transfer(id, :clear, %{}, opts)
 
-  defp transfer(sysid, operation, request, opts) do
+  defp transfer(id, operation, request, opts) do
     type = Keyword.get(opts, :mission_type, :mission)
 
     unless type in [:mission, :fence, :rally],
@@ -455,9 +487,9 @@ defmodule Dolphin.Vehicles do
 
     if operation == :upload, do: check_items!(request.items)
     request = Map.merge(request, %{operation: operation, mission_type: type, progress_to: Keyword.get(opts, :progress_to)})
-    gone = %Dolphin.MissionError{operation: operation, vehicle: sysid, mission_type: type, result: :vehicle_gone}
+    gone = %Dolphin.MissionError{operation: operation, vehicle: id, mission_type: type, result: :vehicle_gone}
 
-    case call_vehicle(sysid, {:mission, request, opts}, :infinity) do
+    case call_vehicle(id, {:mission, request, opts}, :infinity) do
       {:ok, reply} -> reply
       :no_vehicle -> {:error, %{gone | detail: "no such vehicle"}}
       :gone -> {:error, gone}
@@ -490,15 +522,36 @@ defmodule Dolphin.Vehicles do
   # vehicle on its first HEARTBEAT from a vehicle component.
   @spec route(Frame.t(), term()) :: :ok
   def route(%Frame{sysid: sysid} = frame, link) do
-    case whereis_local(sysid) do
-      nil -> discover(frame, link)
+    id = Dolphin.Vehicles.Views.vehicle_on(sysid, link)
+
+    case whereis_local(id) do
+      nil -> discover(id, frame, link)
       pid -> GenServer.cast(pid, {:frame, frame, link})
     end
   end
 
-  defp discover(%Frame{message: %Heartbeat{type: type, autopilot: autopilot}} = frame, link)
+  @doc false
+  # Path `via`, on which vehicle `sysid` refused to be heard because the
+  # autopilot there reported unique id `uid`, not its own: the path is
+  # another vehicle's — one with that system id and that unique id heard
+  # elsewhere already, else a new one named by its network
+  # (Dolphin.Vehicles.Id). Its frames go to that vehicle from now on (a new
+  # one is discovered by its next heartbeat). Returns the vehicle's id.
+  @spec heard_elsewhere(byte(), term(), non_neg_integer()) :: Dolphin.Vehicles.Id.t()
+  def heard_elsewhere(sysid, via, uid) do
+    owner =
+      Enum.find_value(Dolphin.Vehicles.Views.all(), fn view ->
+        if Id.sysid(view.id) == sysid and view.uid == uid and whereis_local(view.id), do: view.id
+      end)
+
+    id = owner || Id.qualified(sysid, via)
+    :ok = Dolphin.Vehicles.Views.assign(sysid, via, id)
+    id
+  end
+
+  defp discover(id, %Frame{message: %Heartbeat{type: type, autopilot: autopilot}} = frame, link)
        when type != @gcs_type and autopilot != @no_autopilot do
-    case DynamicSupervisor.start_child(Dolphin.Vehicles.Supervisor, {Dolphin.Vehicles.Vehicle, {frame.sysid, link, []}}) do
+    case DynamicSupervisor.start_child(Dolphin.Vehicles.Supervisor, {Dolphin.Vehicles.Vehicle, {id, link, []}}) do
       # Its first view, put once the process has taken this frame, says
       # it is discovered.
       {:ok, pid} ->
@@ -515,5 +568,5 @@ defmodule Dolphin.Vehicles do
     :exit, _ -> :ok
   end
 
-  defp discover(_frame, _link), do: :ok
+  defp discover(_id, _frame, _link), do: :ok
 end

@@ -102,7 +102,7 @@ defmodule Dolphin.ConsoleTest do
 
   test "bad ids and lost vehicles are refused, and nothing is sent", %{io: io} do
     arm("1")
-    assert out(io) =~ ~s{a vehicle is given by its system id (an integer, as vehicles() lists them), got: "1"}
+    assert out(io) =~ ~s{a vehicle is given by its id as vehicles() lists it (a system id, or a name "SYSID@NETWORK" for another vehicle with that system id), got: "1"}
     takeoff(9, 10)
     assert out(io) == "no vehicle 9: the known vehicles are 1, 2 (see vehicles())\n"
     takeoff(1, -5)

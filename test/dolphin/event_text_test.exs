@@ -14,7 +14,7 @@ defmodule Dolphin.EventTextTest do
         parent_id: nil, kind: :mission, progress: %{current: 1, total: 3}, result: :done, condition: "battery(v) < 0.3",
         branch: nil, text: "hello", key: :k, value: 1, script: "x.exs", from: 1, to: 3, resume_seq: 6, held: true,
         station: :"gs1@host", heard: 2, stations: [:"gs1@host", :"gs2@host"], kept: :"gs1@host", dropped: :"gs2@host",
-        path: "udpin:0.0.0.0:14550 from 10.0.0.7:14555", uid: 9, vehicle_uid: 7
+        path: "udpin:0.0.0.0:14550 from 10.0.0.7:14555", uid: 9, vehicle_uid: 7, other: "1@10.0.0.7:14555"
       }
 
       for {name, fields} <- Dolphin.Events.catalogue() do

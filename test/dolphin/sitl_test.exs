@@ -95,22 +95,32 @@ defmodule Dolphin.SITLTest do
     end
   end
 
-  test "two ArduCopters with one system id on two links: the second is another vehicle by its unique id, refused" do
+  test "two ArduCopters with one system id on two links: the second is another vehicle by its unique id, and each is commanded apart" do
     Clock.set_speedup(Backend.speedup(:sitl))
     Dolphin.Events.subscribe()
+    Vehicles.subscribe(:all)
     {:ok, first} = SITL.start(1, first_sysid: 7)
     # Its fleet is ready at once (vehicle 7 is): its autopilot is heard when it has booted.
     {:ok, second} = SITL.start(1, first_sysid: 7)
 
     try do
-      assert_receive {:dolphin, :events, %{event: :system_id_shared, vehicle: 7, uid: other, vehicle_uid: own}}, 60_000
+      assert_receive {:dolphin, :events, %{event: :system_id_shared, vehicle: 7, uid: other, vehicle_uid: own, other: name}}, 60_000
       # ArduPilot's SITL reports a unique id of its own per instance, as a board its serial number.
       assert other > 0 and own > 0 and other != own
+      assert "7@" <> _ = name
       assert [%{in_use?: true, identity: :same, uid: ^own}, %{identity: :refused, uid: ^other}] = Vehicles.paths(7)
       assert {:ok, %{uid: ^own}} = Vehicles.view(7)
+
+      # The second is a vehicle of its own, and commands reach the right one.
+      assert_receive {:dolphin, :vehicles, {:vehicle_discovered, ^name}}, 60_000
+      Wait.until(fn -> match?({:ok, %{uid: ^other}}, Vehicles.view(name)) end, 500, fn -> "#{name}'s unique id" end)
+      assert {:ok, :accepted} = Vehicles.set_mode(name, :alt_hold)
+      assert {:ok, :accepted} = Vehicles.set_mode(7, :acro)
+      Wait.until(fn -> match?({:ok, %{mode: :alt_hold}}, Vehicles.view(name)) and match?({:ok, %{mode: :acro}}, Vehicles.view(7)) end, 500, fn -> "7 in ACRO and #{name} in ALT_HOLD" end)
     after
       SITL.stop(second)
       SITL.stop(first)
+      for id <- Vehicles.list(), is_binary(id), do: Vehicles.forget(id)
       Clock.set_speedup(1)
     end
   end

@@ -66,7 +66,7 @@ defmodule Dolphin.VehiclesTest do
     assert_raise ExUnit.AssertionError, fn -> UDPPeer.receive_until(relay, &match?(%M.Statustext{}, &1.message), 300) end
   end
 
-  test "another vehicle with the same system id on another address is refused, never merged", %{port: port, peer: peer} do
+  test "another vehicle with the same system id on another address is another vehicle, never merged", %{port: port, peer: peer} do
     other = UDPPeer.open()
     Vehicles.subscribe(:all)
     Dolphin.Events.subscribe()
@@ -82,19 +82,32 @@ defmodule Dolphin.VehiclesTest do
     end
 
     {:ok, other_port} = :inet.port(other)
-    assert_receive {:dolphin, :events, %{event: :system_id_shared, vehicle: 12, uid: 9, vehicle_uid: 7, path: path} = event}, 10_000
+    name = "12@127.0.0.1:#{other_port}"
+    on_exit(fn -> Vehicles.forget(name) end)
+    assert_receive {:dolphin, :events, %{event: :system_id_shared, vehicle: 12, uid: 9, vehicle_uid: 7, path: path, other: ^name} = event}, 10_000
     assert path =~ "from 127.0.0.1:#{other_port}"
-    assert Dolphin.EventText.event_text(event) =~ "vehicle 12: another vehicle with system id 12 is heard on #{path} (unique id 9, not 7)"
+    assert Dolphin.EventText.event_text(event) =~ "vehicle 12: another vehicle with its system id is heard on #{path} (unique id 9, not 7): that is vehicle #{name}"
 
-    # Nothing of the other is taken for the vehicle; nothing is sent to it.
-    UDPPeer.send_message(other, port, %M.SysStatus{battery_remaining: 90}, sysid: 12, seq: 2)
+    # Nothing of the other is taken for the vehicle; the other is a vehicle
+    # of its own from its next heartbeat, named by the address it sends from.
+    UDPPeer.send_message(other, port, copter(5), sysid: 12, seq: 2)
+    assert_receive {:dolphin, :vehicles, {:vehicle_discovered, ^name}}, 10_000
+    UDPPeer.send_message(other, port, %M.SysStatus{battery_remaining: 90}, sysid: 12, seq: 3)
     UDPPeer.send_message(peer, port, %M.SysStatus{battery_remaining: 40}, sysid: 12, seq: 2)
     Wait.until(fn -> match?({:ok, %{battery: 0.4}}, Vehicles.view(12)) end)
-    assert {:ok, %{mode: :guided, uid: 7, battery: 0.4}} = Vehicles.view(12)
-    assert [%{in_use?: true, identity: :same}, %{identity: :refused, uid: 9, frames: 3}] = Vehicles.paths(12)
+    Wait.until(fn -> match?({:ok, %{battery: 0.9}}, Vehicles.view(name)) end)
+    assert {:ok, %{mode: :guided, uid: 7, battery: 0.4, network: "127.0.0.1:" <> _}} = Vehicles.view(12)
+    assert {:ok, %{mode: :loiter, battery: 0.9, network: network}} = Vehicles.view(name)
+    assert network == "127.0.0.1:#{other_port}"
+    assert [%{in_use?: true, identity: :same}, %{identity: :refused, uid: 9, frames: 2}] = Vehicles.paths(12)
+
+    # Each is sent what is meant for it, and nothing else.
     :ok = Vehicles.send_message(12, %M.Statustext{severity: 6, text: "to the vehicle"})
-    assert %Frame{} = UDPPeer.receive_until(peer, &match?(%M.Statustext{}, &1.message), 10_000)
-    assert_raise ExUnit.AssertionError, fn -> UDPPeer.receive_until(other, &match?(%M.Statustext{}, &1.message), 300) end
+    assert %Frame{} = UDPPeer.receive_until(peer, &match?(%M.Statustext{text: "to the vehicle"}, &1.message), 10_000)
+    assert_raise ExUnit.AssertionError, fn -> UDPPeer.receive_until(other, &match?(%M.Statustext{text: "to the vehicle"}, &1.message), 300) end
+    :ok = Vehicles.send_message(name, %M.Statustext{severity: 6, text: "to the other"})
+    assert %Frame{} = UDPPeer.receive_until(other, &match?(%M.Statustext{text: "to the other"}, &1.message), 10_000)
+    assert_raise ExUnit.AssertionError, fn -> UDPPeer.receive_until(peer, &match?(%M.Statustext{text: "to the other"}, &1.message), 300) end
   end
 
   test "a forgotten vehicle is gone at once, and heard again it is discovered anew", %{port: port, peer: peer} do
@@ -178,7 +191,8 @@ defmodule Dolphin.VehiclesTest do
     Vehicles.subscribe(:all)
     UDPPeer.send_message(peer, port, copter(), sysid: 13)
     assert_receive {:dolphin, :vehicles, {:vehicle_discovered, 13}}, 10_000
-    # 20 s of clock time at 200x: 100 ms of real time.
+    # 20 s of clock time at 200x is 100 ms of real time, but a sped-up
+    # vehicle is lost after at least min(timeout, 3 s) of real time: 3 s.
     Clock.set_speedup(200)
     assert_receive {:dolphin, :vehicles, {:vehicle_lost, 13}}, 10_000
     assert {:ok, %{connected?: false}} = Vehicles.view(13)

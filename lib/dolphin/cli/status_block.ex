@@ -50,7 +50,7 @@ defmodule Dolphin.CLI.StatusBlock do
 
     alt = if v.relative_altitude, do: "alt #{String.pad_leading(Integer.to_string(round(v.relative_altitude)), 4)} m", else: "alt    ? m"
 
-    line = "#{String.pad_leading(Integer.to_string(v.id), 3)}  #{mode} #{state} #{battery(v.battery)}  #{alt}  #{String.pad_trailing(item, 10)}"
+    line = "#{String.pad_leading(Dolphin.Fleet.VehicleSet.format(v.id), 3)}  #{mode} #{state} #{battery(v.battery)}  #{alt}  #{String.pad_trailing(item, 10)}"
 
     line =
       case Dolphin.Console.Format.link_figures(v.link || %{}) do

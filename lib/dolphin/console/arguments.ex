@@ -21,11 +21,17 @@ defmodule Dolphin.Console.Arguments do
   # changes nothing), :any (reads what the ground station already has).
   # {:ok, :free}, {:ok, {:stop_first, task}} (force: true and a task flies
   # it), or {:error, %UsageError{}}.
-  @spec vehicle(term(), %{integer() => info()}, :control | :link | :any, boolean()) ::
+  @spec vehicle(term(), %{Dolphin.Vehicles.Id.t() => info()}, :control | :link | :any, boolean()) ::
           {:ok, :free | {:stop_first, map()}} | {:error, UsageError.t()}
   def vehicle(id, known, needs, force \\ false)
 
-  def vehicle(id, known, needs, force) when is_integer(id) and id >= 0 do
+  def vehicle(id, known, needs, force) when (is_integer(id) and id >= 0) or is_binary(id) do
+    if Dolphin.Vehicles.Id.valid?(id), do: known_vehicle(id, known, needs, force), else: {:error, %UsageError{reason: :not_a_vehicle_id, value: id}}
+  end
+
+  def vehicle(other, _known, _needs, _force), do: {:error, %UsageError{reason: :not_a_vehicle_id, value: other}}
+
+  defp known_vehicle(id, known, needs, force) do
     case Map.fetch(known, id) do
       :error ->
         {:error, %UsageError{reason: :unknown_vehicle, value: id, detail: known |> Map.keys() |> Enum.sort()}}
@@ -49,8 +55,6 @@ defmodule Dolphin.Console.Arguments do
         end
     end
   end
-
-  def vehicle(other, _known, _needs, _force), do: {:error, %UsageError{reason: :not_a_vehicle_id, value: other}}
 
   @doc false
   # A mode name: :guided, "GUIDED", "guided", :GUIDED -> :guided.

@@ -162,7 +162,7 @@ defmodule Dolphin.Console.Format do
       ["ID", "TYPE", "MODE", "ARMED", "BATTERY", "POSITION", "ALT", "LINK", "SEEN", "TASK"],
       Enum.map(rows, fn r ->
         [
-          Integer.to_string(r.id),
+          Dolphin.Fleet.VehicleSet.format(r.id),
           r.type || "-",
           mode(r.mode),
           if(r.armed, do: "yes", else: "no"),

@@ -45,7 +45,7 @@ defmodule Dolphin.Console.UsageError do
   @impl true
   def message(%__MODULE__{reason: reason, value: value, detail: detail}), do: text(reason, value, detail)
 
-  defp text(:not_a_vehicle_id, other, _), do: "a vehicle is given by its system id (an integer, as vehicles() lists them), got: #{inspect(other)}"
+  defp text(:not_a_vehicle_id, other, _), do: "a vehicle is given by its id as vehicles() lists it (a system id, or a name \"SYSID@NETWORK\" for another vehicle with that system id), got: #{inspect(other)}"
   defp text(:unknown_vehicle, id, []), do: "no vehicle #{id}: no vehicle is known yet (is a link connected? see vehicles())"
   defp text(:unknown_vehicle, id, known), do: "no vehicle #{id}: the known vehicles are #{Enum.join(known, ", ")} (see vehicles())"
   defp text(:fake_vehicle, id, _), do: "vehicle #{id} is a fake vehicle of the fake platform: it takes no MAVLink commands"

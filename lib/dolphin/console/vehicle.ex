@@ -330,6 +330,9 @@ defmodule Dolphin.Console.Vehicle do
   # Checks the id and the options, stops the vehicle's task if told to force,
   # then runs `fun` with the vehicle's view (Dolphin.Vehicles.View).
   defp command(id, needs, opts, allowed, fun) do
+    # A vehicle named by its qualified name ("1@radio2") is the one that answers to it.
+    id = Vehicles.resolve(id)
+
     with {:ok, opts} <- Arguments.options(opts, allowed),
          vehicles = Overview.vehicles(),
          {:ok, verdict} <- Arguments.vehicle(id, Overview.known(vehicles), needs, opts[:force] == true),

@@ -1,7 +1,9 @@
 defmodule Dolphin.Fleet.VehicleSet do
   @moduledoc """
-  A set of vehicles, named by system id: what `pick` returns and `release`,
-  `on` and `execute` take.
+  A set of vehicles, named by their ids (`Dolphin.Vehicles.Id`: a system id,
+  or a qualified name `"SYSID@NETWORK"` for another vehicle with that system
+  id): what `pick` returns and `release`, `on` and `execute` take. System
+  ids come first, ascending, then qualified names.
 
       iex> a = Dolphin.Fleet.VehicleSet.new([3, 1])
       #Vehicles<[1, 3]>
@@ -16,20 +18,19 @@ defmodule Dolphin.Fleet.VehicleSet do
 
   defstruct ids: []
 
-  @type id :: non_neg_integer()
+  @type id :: Dolphin.Vehicles.Id.t()
   @type t :: %__MODULE__{ids: [id()]}
 
-  @doc "A set of the given system ids (or of the vehicles of other sets)."
+  @doc "A set of the given vehicle ids (or of the vehicles of other sets)."
   @spec new([id() | t()] | id() | t()) :: t()
   def new(%__MODULE__{} = set), do: set
-  def new(id) when is_integer(id), do: new([id])
+  def new(id) when is_integer(id) or is_binary(id), do: new([id])
 
   def new(ids) when is_list(ids) do
     ids =
       Enum.flat_map(ids, fn
-        id when is_integer(id) and id >= 0 -> [id]
         %__MODULE__{ids: ids} -> ids
-        other -> raise ArgumentError, "a vehicle is a system id (a non-negative integer), got: #{inspect(other)}"
+        id -> if Dolphin.Vehicles.Id.valid?(id), do: [id], else: raise(ArgumentError, "a vehicle is a system id (an integer 0..255) or a name \"SYSID@NETWORK\", got: #{inspect(id)}")
       end)
 
     %__MODULE__{ids: ids |> Enum.uniq() |> Enum.sort()}
@@ -37,7 +38,7 @@ defmodule Dolphin.Fleet.VehicleSet do
 
   def new(other), do: raise(ArgumentError, "expected vehicle ids or a vehicle set, got: #{inspect(other)}")
 
-  @doc "The system ids, ascending."
+  @doc "The vehicle ids: system ids ascending, then qualified names."
   @spec ids(t()) :: [id()]
   def ids(%__MODULE__{ids: ids}), do: ids
 
@@ -62,8 +63,8 @@ defmodule Dolphin.Fleet.VehicleSet do
   def size(%__MODULE__{ids: ids}), do: length(ids)
 
   @doc """
-  System ids as text for people: one id as its number, a list of ids or a set
-  as a bracketed list of numbers. Every message, event line and table that
+  Vehicle ids as text for people: one id as its number (or its qualified
+  name), a list of ids or a set as a bracketed list of them. Every message, event line and table that
   names vehicles prints them through this.
 
       iex> Dolphin.Fleet.VehicleSet.format([9, 99])
@@ -72,28 +73,33 @@ defmodule Dolphin.Fleet.VehicleSet do
       "[99]"
       iex> Dolphin.Fleet.VehicleSet.format(99)
       "99"
+      iex> Dolphin.Fleet.VehicleSet.format([1, "1@radio2"])
+      "[1, 1@radio2]"
   """
   # `inspect/1` would print a list whose ids all happen to be printable
   # character codes as a charlist ([99] as 'c'), so the list is spelled out.
   @spec format(t() | [id()] | id()) :: String.t()
   def format(%__MODULE__{ids: ids}), do: format(ids)
   def format(id) when is_integer(id), do: Integer.to_string(id)
+  def format(id) when is_binary(id), do: id
   def format(ids) when is_list(ids), do: "[" <> Enum.map_join(ids, ", ", &format/1) <> "]"
   def format(other), do: inspect(other, charlists: :as_lists)
 
-  @doc "The one vehicle of a one-vehicle set (or a bare system id); raises `ArgumentError` otherwise."
+  @doc "The one vehicle of a one-vehicle set (or a bare vehicle id); raises `ArgumentError` otherwise."
   @spec one!(t() | id(), atom()) :: id()
   def one!(set, function \\ :vehicle)
   def one!(%__MODULE__{ids: [id]}, _function), do: id
-  def one!(id, _function) when is_integer(id) and id >= 0, do: id
 
-  def one!(other, function),
-    do: raise(ArgumentError, "#{function} needs a one-vehicle set, got: #{inspect(other, charlists: :as_lists)}")
+  def one!(id, function) do
+    if Dolphin.Vehicles.Id.valid?(id),
+      do: id,
+      else: raise(ArgumentError, "#{function} needs a one-vehicle set, got: #{inspect(id, charlists: :as_lists)}")
+  end
 
   defimpl Enumerable do
     def count(%{ids: ids}), do: {:ok, length(ids)}
     def member?(%{ids: ids}, %Dolphin.Fleet.VehicleSet{ids: [id]}), do: {:ok, id in ids}
-    def member?(%{ids: ids}, id) when is_integer(id), do: {:ok, id in ids}
+    def member?(%{ids: ids}, id) when is_integer(id) or is_binary(id), do: {:ok, id in ids}
     def member?(_set, _other), do: {:ok, false}
     def slice(_set), do: {:error, __MODULE__}
 

@@ -208,7 +208,7 @@ defmodule Dolphin.Report.HTML do
     (function(){
       document.querySelectorAll('.legend input').forEach(function(box){
         box.addEventListener('change', function(){
-          document.querySelectorAll('.v-' + box.dataset.vehicle).forEach(function(el){
+          document.querySelectorAll('.v-' + CSS.escape(box.dataset.vehicle)).forEach(function(el){
             if(el.tagName !== 'LABEL') el.classList.toggle('hidden', !box.checked);
           });
         });

@@ -24,16 +24,23 @@ defmodule Dolphin.Sim.Vehicle do
   @step_ms 50
   @max_catch_up 40
 
-  def child_spec(opts), do: %{id: {__MODULE__, Keyword.fetch!(opts, :sysid)}, start: {__MODULE__, :start_link, [opts]}, restart: :transient}
+  def child_spec(opts), do: %{id: {__MODULE__, key(opts)}, start: {__MODULE__, :start_link, [opts]}, restart: :transient}
 
   # `register: false` leaves the process unnamed (benchmarks run several
   # fleets whose system ids repeat, each sending to its own ground station).
   def start_link(opts) do
-    sysid = Keyword.fetch!(opts, :sysid)
-
     if Keyword.get(opts, :register, true),
-      do: GenServer.start_link(__MODULE__, opts, name: {:via, Registry, {Dolphin.Registry, {:sim, sysid}}}),
+      do: GenServer.start_link(__MODULE__, opts, name: {:via, Registry, {Dolphin.Registry, {:sim, key(opts)}}}),
       else: GenServer.start_link(__MODULE__, opts)
+  end
+
+  # How Dolphin.Sim names the vehicle: its system id, or {network, system id}
+  # for a vehicle of a named network (which may reuse another's system ids).
+  defp key(opts) do
+    case Keyword.get(opts, :network) do
+      nil -> Keyword.fetch!(opts, :sysid)
+      network -> {network, Keyword.fetch!(opts, :sysid)}
+    end
   end
 
   @impl true

@@ -137,7 +137,7 @@ defmodule Dolphin.Vehicles.CommandProtocol do
   end
 
   defp error(data, result, detail) do
-    %CommandError{command: name(data.command), vehicle: data.sysid, result: result, attempts: data.sent, detail: detail}
+    %CommandError{command: name(data.command), vehicle: Map.get(data, :vehicle, data.sysid), result: result, attempts: data.sent, detail: detail}
   end
 
   defp name(command) do

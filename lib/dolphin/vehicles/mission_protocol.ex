@@ -625,7 +625,7 @@ defmodule Dolphin.Vehicles.MissionProtocol do
   end
 
   defp fail(data, result, detail) do
-    error = %MissionError{operation: data.operation, vehicle: data.sysid, mission_type: data.mission_type, result: result, detail: detail}
+    error = %MissionError{operation: data.operation, vehicle: Map.get(data, :vehicle, data.sysid), mission_type: data.mission_type, result: result, detail: detail}
 
     finish(data, {:error, error})
   end

@@ -69,7 +69,8 @@ defmodule Dolphin.Vehicles.Paths do
 
     * the vehicle's and the path's ids known, non-zero and different:
       another vehicle. The path is `:refused` for good; its frames are never
-      the vehicle's, it is sent nothing;
+      the vehicle's, it is sent nothing (the vehicle's process then gives
+      the path to that other vehicle, `Dolphin.Vehicles.Id`);
     * the same id: the same vehicle;
     * no id to compare (an autopilot that reports 0; one that does not
       answer 5 times; the vehicle's own not known while its path in use is

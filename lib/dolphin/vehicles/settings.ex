@@ -30,7 +30,7 @@ defmodule Dolphin.Vehicles.Settings do
   end
 
   @doc "The connection timeout set for vehicle `sysid`, or `default`."
-  @spec timeout(non_neg_integer(), pos_integer()) :: pos_integer()
+  @spec timeout(Dolphin.Vehicles.Id.t(), pos_integer() | nil) :: pos_integer() | nil
   def timeout(sysid, default) do
     case :ets.lookup(@table, {:timeout, sysid}) do
       [{_, ms}] -> ms

@@ -31,7 +31,7 @@ defmodule Dolphin.Vehicles.State do
   @gimbal_type 26
   @camera_compids 100..105
 
-  defstruct sysid: nil,
+  defstruct id: nil,
             type: nil,
             autopilot: nil,
             mode: nil,
@@ -53,8 +53,8 @@ defmodule Dolphin.Vehicles.State do
   @type t :: %__MODULE__{}
 
   @doc "The state of a vehicle not heard from yet."
-  @spec new(byte()) :: t()
-  def new(sysid), do: %__MODULE__{sysid: sysid}
+  @spec new(Dolphin.Vehicles.Id.t()) :: t()
+  def new(id), do: %__MODULE__{id: id}
 
   @doc "Folds one frame from the vehicle into its state."
   @spec apply(t(), Frame.t(), integer()) :: t()
@@ -182,7 +182,7 @@ defmodule Dolphin.Vehicles.State do
   would go unnoticed.
   """
   @spec mission_replaced(t()) :: t()
-  def mission_replaced(%__MODULE__{} = state), do: %{state | mission: new(state.sysid).mission}
+  def mission_replaced(%__MODULE__{} = state), do: %{state | mission: new(state.id).mission}
 
   @doc """
   Whether the vehicle says it is still booting (HEARTBEAT `system_status`

@@ -15,9 +15,10 @@ defmodule Dolphin.Vehicles.Vehicle do
   alias Dolphin.MAVLink.Ardupilotmega, as: M
   alias Dolphin.Vehicles.{CommandProtocol, MissionProtocol, Paths, State, View, Views}
 
-  @lost_floor_real_ms 5_000
+  @lost_floor_real_ms 3_000
+  @late_real_ms 100
 
-  defstruct [:sysid, :paths, :judge_due, :state, :heard, :timeout_ms, :check_due_ms, :requests_left, lost: false, view: nil, ops: %{}, queued: %{}]
+  defstruct [:id, :sysid, :network, :paths, :judge_due, :state, :heard, :timeout_ms, :check_due_ms, :requests_left, exact_timeout?: false, lost: false, view: nil, ops: %{}, queued: %{}]
 
   # The process's state. `paths`: one path per link (and address) the vehicle
   # is heard on (Dolphin.Vehicles.Paths), the one it was discovered on in
@@ -33,12 +34,15 @@ defmodule Dolphin.Vehicles.Vehicle do
   # each %{pid, from, monitor, what}; `queued`: what waits for each key, a
   # queue of {module, request, opts, monitor}.
   @type t :: %__MODULE__{
+          id: Dolphin.Vehicles.Id.t(),
           sysid: byte(),
+          network: String.t(),
           paths: Paths.t(),
           judge_due: integer(),
           state: State.t(),
           heard: :atomics.atomics_ref(),
           timeout_ms: pos_integer(),
+          exact_timeout?: boolean(),
           check_due_ms: integer(),
           requests_left: non_neg_integer(),
           lost: boolean(),
@@ -75,18 +79,21 @@ defmodule Dolphin.Vehicles.Vehicle do
   @judge_every_ms 100
   @judge_real_ms 50
 
-  def child_spec({sysid, _link, _opts} = args),
-    do: %{id: {__MODULE__, sysid}, start: {__MODULE__, :start_link, [args]}, restart: :permanent}
+  def child_spec({id, _link, _opts} = args),
+    do: %{id: {__MODULE__, id}, start: {__MODULE__, :start_link, [args]}, restart: :permanent}
 
-  def start_link({sysid, _link, _opts} = args),
-    do: GenServer.start_link(__MODULE__, args, name: {:via, Registry, {Dolphin.Registry, {:vehicle, sysid}}})
+  def start_link({id, _link, _opts} = args),
+    do: GenServer.start_link(__MODULE__, args, name: {:via, Registry, {Dolphin.Registry, {:vehicle, id}}})
 
   @impl true
-  def init({sysid, link, opts}) do
+  def init({id, link, opts}) do
+    sysid = Dolphin.Vehicles.Id.sysid(id)
     # Command protocols are linked to this process: their exits come as messages.
     Process.flag(:trap_exit, true)
-    # A timeout set for this vehicle (Dolphin.Vehicles.set_timeout/2) survives restarts.
-    timeout = Dolphin.Vehicles.Settings.timeout(sysid, Keyword.get(opts, :timeout_ms, Application.get_env(:dolphin, :vehicle_timeout_ms, 20_000)))
+    # A timeout set for this vehicle (Dolphin.Vehicles.set_timeout/2) survives
+    # restarts, and is kept exactly (lost_after_ms/2 is for the default's).
+    set = Dolphin.Vehicles.Settings.timeout(id, Keyword.get(opts, :timeout_ms))
+    timeout = set || Application.get_env(:dolphin, :vehicle_timeout_ms, 20_000)
 
     send(self(), :request_telemetry)
     send(self(), {:timesync, 0})
@@ -95,26 +102,29 @@ defmodule Dolphin.Vehicles.Vehicle do
     real = real_ms()
     Process.send_after(self(), :judge_paths, judge_period())
 
-    heard = Views.heard_cell(sysid)
+    heard = Views.heard_cell(id)
     Views.heard(heard, now)
     # A restarted process: the vehicle's unique id, which its view kept,
     # stays the one new paths are compared with.
-    last_view = with {:ok, view} <- Views.get(sysid), do: view, else: (_ -> nil)
+    last_view = with {:ok, view} <- Views.get(id), do: view, else: (_ -> nil)
     uid = last_view && last_view.uid
     paths = Paths.new(link, now, real)
     paths = if uid, do: Paths.identified(paths, link, uid), else: paths
 
     {:ok,
      %__MODULE__{
+       id: id,
        sysid: sysid,
+       network: Dolphin.Vehicles.Id.network(link),
        heard: heard,
        paths: paths,
        view: last_view,
        judge_due: real + judge_period(),
        # Seen now (it was just heard, or its process restarted): silence from
        # here on makes it lost.
-       state: %{put_in(State.new(sysid).link.last_seen_ms, now) | uid: uid},
+       state: %{put_in(State.new(id).link.last_seen_ms, now) | uid: uid},
        timeout_ms: timeout,
+       exact_timeout?: set != nil,
        check_due_ms: now + check_period(timeout),
        requests_left: @request_tries
      }}
@@ -159,7 +169,7 @@ defmodule Dolphin.Vehicles.Vehicle do
   def handle_call(:view, _from, s), do: {:reply, s.view || view(s), s}
 
   def handle_call(:paths, _from, s), do: {:reply, Paths.list(s.paths), s}
-  def handle_call({:set_timeout, ms}, _from, s), do: {:reply, :ok, %{s | timeout_ms: ms}}
+  def handle_call({:set_timeout, ms}, _from, s), do: {:reply, :ok, %{s | timeout_ms: ms, exact_timeout?: true}}
 
   # One command of an id at a time (a COMMAND_ACK names only the command id),
   # one mission transfer at a time; the rest wait their turn. The protocol
@@ -172,7 +182,7 @@ defmodule Dolphin.Vehicles.Vehicle do
   # whereis/1 no longer gives it, and a vehicle heard again at once is
   # discovered anew rather than cast to a dead process.
   @impl true
-  def terminate(_reason, s), do: Registry.unregister(Dolphin.Registry, {:vehicle, s.sysid})
+  def terminate(_reason, s), do: Registry.unregister(Dolphin.Registry, {:vehicle, s.id})
 
   @impl true
   def handle_info(:request_telemetry, %{requests_left: 0} = s), do: {:noreply, s}
@@ -243,25 +253,26 @@ defmodule Dolphin.Vehicles.Vehicle do
   end
 
   # Silence is judged only by a check that runs on time. One that runs more than
-  # a period late means this machine held the ground station up (a loaded host,
-  # a paused VM; at a speed-up a pause of timeout / speed-up is enough): the
-  # vehicle's frames of that while may still wait in the link's socket and
-  # mailbox, so the silence may be ours, not the vehicle's. The next check,
-  # once they are read, judges.
+  # a period late (and more than 100 ms of real time: at a high speed-up a
+  # period is a few real milliseconds, less than a loaded host's scheduler
+  # makes any timer late) means this machine held the ground station up (a
+  # loaded host, a paused VM): the vehicle's frames of that while may still
+  # wait in the link's socket and mailbox, so the silence may be ours, not the
+  # vehicle's. The next check, once they are read, judges.
   def handle_info(:check_link, s) do
     period = check_period(s.timeout_ms)
     Clock.send_after(self(), :check_link, period)
     # The vehicle's heard cell, made anew if it was deleted meanwhile (the
     # vehicle forgotten while this process lived on).
-    s = %{s | heard: Views.heard_cell(s.sysid)}
+    s = %{s | heard: Views.heard_cell(s.id)}
     now = Clock.now_ms()
-    on_time? = now - s.check_due_ms <= period
+    on_time? = now - s.check_due_ms <= max(period, @late_real_ms * Clock.speedup())
     # Paths silent for as long as the vehicle timeout (a vehicle that came
     # back from another address) are forgotten.
     s = %{s | check_due_ms: now + period, paths: Paths.forget_silent(s.paths, now, s.timeout_ms)}
     last = s.state.link.last_seen_ms
 
-    if on_time? and not s.lost and last != nil and now - last > lost_after_ms(s.timeout_ms, Clock.speedup()) do
+    if on_time? and not s.lost and last != nil and now - last > silence_limit_ms(s) do
       # The view first: whoever hears of the loss finds the view saying so.
       {:noreply, publish_view(%{s | lost: true})}
     else
@@ -272,9 +283,11 @@ defmodule Dolphin.Vehicles.Vehicle do
   defp real_ms, do: System.monotonic_time(:millisecond)
 
   @doc """
-  The silence, in clock time, after which a vehicle with timeout
-  `timeout_ms` (clock time) is lost at speed-up `speedup`: its timeout, and
-  at a speed-up never less than min(timeout, 5 s) of real time. A sped-up
+  The silence, in clock time, after which a vehicle with the default
+  timeout `timeout_ms` (clock time; 20 s, or `config :dolphin,
+  vehicle_timeout_ms:`) is lost at speed-up `speedup`: that timeout, and at
+  a speed-up never less than min(timeout, 3 s) of real time (a timeout set
+  for a vehicle, `Dolphin.Vehicles.set_timeout/2`, is kept exactly). A sped-up
   vehicle is a simulation, and a simulation on a busy host falls behind its
   speed-up (ArduCopter SITL at 15x beside two busy loops went 1.3 s of real
   time without a frame: 20 s of clock time). At 1x the floor is the timeout
@@ -283,12 +296,16 @@ defmodule Dolphin.Vehicles.Vehicle do
       iex> Dolphin.Vehicles.Vehicle.lost_after_ms(20_000, 1)
       20000
       iex> Dolphin.Vehicles.Vehicle.lost_after_ms(20_000, 15)
-      75000
+      45000
       iex> Dolphin.Vehicles.Vehicle.lost_after_ms(2_000, 10)
       20000
   """
   @spec lost_after_ms(pos_integer(), number()) :: pos_integer()
   def lost_after_ms(timeout_ms, speedup), do: max(timeout_ms, round(min(timeout_ms, @lost_floor_real_ms) * speedup))
+
+  # A timeout set for the vehicle is what its setter asked for, to the letter.
+  defp silence_limit_ms(%{exact_timeout?: true, timeout_ms: ms}), do: ms
+  defp silence_limit_ms(s), do: lost_after_ms(s.timeout_ms, Clock.speedup())
 
   # What the autopilot heard on a path says it is: its unique id.
   defp identify(paths, via, %Frame{compid: 1, message: %M.AutopilotVersion{} = version}), do: Paths.identified(paths, via, State.unique_id(version))
@@ -304,8 +321,11 @@ defmodule Dolphin.Vehicles.Vehicle do
     for via <- asks, do: Connection.send_via(via, s.sysid, %M.CommandLong{target_system: s.sysid, target_component: 1, command: 520, param1: 1.0})
     {paths, decisions} = Paths.settle(paths, now, real)
 
-    for {via, {:refused, uid, own}} <- decisions,
-        do: Events.emit(:system_id_shared, %{vehicle: s.sysid, path: Paths.via_text(via), uid: uid, vehicle_uid: own})
+    # Another vehicle with this system id: the path is that vehicle's.
+    for {via, {:refused, uid, own}} <- decisions do
+      other = Dolphin.Vehicles.heard_elsewhere(s.sysid, via, uid)
+      Events.emit(:system_id_shared, %{vehicle: s.id, path: Paths.via_text(via), uid: uid, vehicle_uid: own, other: other})
+    end
 
     %{s | paths: paths}
   end
@@ -316,7 +336,7 @@ defmodule Dolphin.Vehicles.Vehicle do
   defp send_message(s, message), do: Connection.send_via(Paths.in_use(s.paths), s.sysid, message)
 
   defp path_changed(s, {from, to, reason}),
-    do: Events.emit(:path_changed, %{vehicle: s.sysid, from: Paths.via_text(from), to: Paths.via_text(to), reason: reason})
+    do: Events.emit(:path_changed, %{vehicle: s.id, from: Paths.via_text(from), to: Paths.via_text(to), reason: reason})
 
   # The new state, and its view when it changed: only a change of a public
   # field can change the view (link counters change with every frame).
@@ -357,7 +377,8 @@ defmodule Dolphin.Vehicles.Vehicle do
     end
   end
 
-  defp view(s), do: View.of(s.state, s.lost, Application.get_env(:dolphin, :vehicle_payloads, %{}) |> Map.get(s.sysid, []) |> List.wrap())
+  defp view(s),
+    do: %{View.of(s.state, s.lost, Application.get_env(:dolphin, :vehicle_payloads, %{}) |> Map.get(s.id, []) |> List.wrap()) | network: s.network}
 
   # Heard again after a silence: say so, and ask for telemetry again (the
   # vehicle may have rebooted and forgotten the rates).
@@ -383,7 +404,7 @@ defmodule Dolphin.Vehicles.Vehicle do
 
   # `from` is nil for the vehicle process's own requests (nobody to answer).
   defp run_op(s, key, module, request, opts, from) do
-    request = Map.merge(request, %{sysid: s.sysid, reply_to: from})
+    request = Map.merge(request, %{sysid: s.sysid, vehicle: s.id, reply_to: from})
     monitor = if from, do: Process.monitor(elem(from, 0))
 
     if Map.has_key?(s.ops, key) do
@@ -439,10 +460,10 @@ defmodule Dolphin.Vehicles.Vehicle do
   end
 
   defp crashed(s, {:mission, operation, type}, reason),
-    do: %Dolphin.MissionError{operation: operation, vehicle: s.sysid, mission_type: type, result: :error, detail: "stopped: #{op_words(reason)}"}
+    do: %Dolphin.MissionError{operation: operation, vehicle: s.id, mission_type: type, result: :error, detail: "stopped: #{op_words(reason)}"}
 
   defp crashed(s, {:command, command}, reason),
-    do: %Dolphin.CommandError{command: command, vehicle: s.sysid, result: :failed, attempts: 0, detail: "stopped: #{op_words(reason)}"}
+    do: %Dolphin.CommandError{command: command, vehicle: s.id, result: :failed, attempts: 0, detail: "stopped: #{op_words(reason)}"}
 
   # Why a protocol exchange ended without an answer, in words.
   defp op_words(:caller_gone), do: "its caller went away"

@@ -13,7 +13,8 @@ defmodule Dolphin.Vehicles.View do
 
   | field | meaning |
   | --- | --- |
-  | `id` | system id |
+  | `id` | the vehicle's id: its system id, or its qualified name `"SYSID@NETWORK"` when another vehicle has that system id (`Dolphin.Vehicles.Id`) |
+  | `network` | where it was first heard (`Dolphin.Vehicles.Id.network/1`), `nil` for a vehicle no link of this node hears |
   | `type` | `:uav`, `:ugv`, `:usv`, `:uuv`, `:other`, or `nil` while unknown |
   | `mav_type` | its HEARTBEAT's MAV_TYPE number (2 a quadrotor, ...), `nil` while unknown |
   | `autopilot` | `:ardupilot`, `:px4`, `:other` or `nil` while unknown |
@@ -34,6 +35,7 @@ defmodule Dolphin.Vehicles.View do
   """
 
   defstruct id: nil,
+            network: nil,
             type: nil,
             mav_type: nil,
             autopilot: nil,
@@ -55,7 +57,8 @@ defmodule Dolphin.Vehicles.View do
 
   @type class :: :uav | :ugv | :usv | :uuv | :other
   @type t :: %__MODULE__{
-          id: non_neg_integer(),
+          id: Dolphin.Vehicles.Id.t(),
+          network: String.t() | nil,
           type: class() | nil,
           mav_type: non_neg_integer() | nil,
           autopilot: atom() | nil,
@@ -96,6 +99,20 @@ defmodule Dolphin.Vehicles.View do
   def class(_), do: :other
 
   @doc """
+  Whether `name` names the vehicle of `view`: its id, or its qualified name
+  `"SYSID@NETWORK"` (which the first vehicle heard with a system id answers
+  to as well, `Dolphin.Vehicles.Id`).
+
+      iex> v = %Dolphin.Vehicles.View{id: 1, network: "radio1"}
+      iex> {Dolphin.Vehicles.View.named?(v, 1), Dolphin.Vehicles.View.named?(v, "1@radio1"), Dolphin.Vehicles.View.named?(v, "1@radio2")}
+      {true, true, false}
+  """
+  @spec named?(t(), Dolphin.Vehicles.Id.t()) :: boolean()
+  def named?(%__MODULE__{id: id}, id), do: true
+  def named?(%__MODULE__{id: id, network: network}, name) when is_binary(name) and is_binary(network), do: is_integer(id) and name == "#{id}@#{network}"
+  def named?(_view, _name), do: false
+
+  @doc """
   The view of a vehicle's `Dolphin.Vehicles.State`: `lost` says whether it
   is silent, `payloads` are configured payloads added to its components'.
 
@@ -113,7 +130,7 @@ defmodule Dolphin.Vehicles.View do
       end
 
     %__MODULE__{
-      id: state.sysid,
+      id: state.id,
       type: class(state.type),
       mav_type: state.type,
       autopilot: state.autopilot,

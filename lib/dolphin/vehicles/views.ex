@@ -43,7 +43,16 @@ defmodule Dolphin.Vehicles.Views do
   nobody; `last_heard_ms/1` reads it, for the cluster's station, which tells
   controllers how long ago each vehicle was heard.
 
-  The table's owner is a small process under the application's supervisor,
+  ## Which vehicle a path is
+
+  Vehicles that share a system id are told apart by where they are heard
+  (`Dolphin.Vehicles.Id`). A third table says which vehicle each path that
+  is not its system id's first vehicle belongs to: `vehicle_on/2` is the id
+  that a frame with a system id heard on a path is for (the system id itself
+  unless `assign/3` gave the path to another vehicle), read by the router on
+  every frame; forgetting a vehicle forgets its paths.
+
+  The tables' owner is a small process under the application's supervisor,
   started before the vehicles' supervisor: the vehicles restart after it.
   """
 
@@ -54,6 +63,7 @@ defmodule Dolphin.Vehicles.Views do
 
   @table __MODULE__
   @heard Module.concat(__MODULE__, Heard)
+  @paths Module.concat(__MODULE__, Paths)
 
   @doc false
   @spec start_link(keyword()) :: GenServer.on_start()
@@ -65,7 +75,7 @@ defmodule Dolphin.Vehicles.Views do
   transitions.
   """
   @spec put(View.t()) :: :ok
-  def put(%View{id: id} = view) when is_integer(id) and id >= 0 do
+  def put(%View{id: id} = view) when is_integer(id) or is_binary(id) do
     old =
       case :ets.lookup(@table, id) do
         [{^id, old}] -> old
@@ -76,10 +86,10 @@ defmodule Dolphin.Vehicles.Views do
     announce(old, view, true)
   end
 
-  def put(other), do: raise(ArgumentError, "a view is a %Dolphin.Vehicles.View{} with a system id, got: #{inspect(other)}")
+  def put(other), do: raise(ArgumentError, "a view is a %Dolphin.Vehicles.View{} with a vehicle id, got: #{inspect(other)}")
 
   @doc "A vehicle's latest view."
-  @spec get(non_neg_integer()) :: {:ok, View.t()} | {:error, :unknown_vehicle}
+  @spec get(Dolphin.Vehicles.Id.t()) :: {:ok, View.t()} | {:error, :unknown_vehicle}
   def get(id) do
     case :ets.lookup(@table, id) do
       [{^id, view}] -> {:ok, view}
@@ -87,12 +97,12 @@ defmodule Dolphin.Vehicles.Views do
     end
   end
 
-  @doc "Every vehicle's latest view, by ascending id."
+  @doc "Every vehicle's latest view, by ascending id (system ids, then qualified names)."
   @spec all() :: [View.t()]
   def all, do: @table |> :ets.tab2list() |> Enum.sort() |> Enum.map(&elem(&1, 1))
 
   @doc "The ids of the vehicles with a view, ascending."
-  @spec ids() :: [non_neg_integer()]
+  @spec ids() :: [Dolphin.Vehicles.Id.t()]
   def ids, do: @table |> :ets.select([{{:"$1", :_}, [], [:"$1"]}]) |> Enum.sort()
 
   @doc """
@@ -100,9 +110,10 @@ defmodule Dolphin.Vehicles.Views do
   discovery again), and says so with `{:vehicle_forgotten, id}` on
   `:vehicles` if there was one.
   """
-  @spec delete(non_neg_integer()) :: :ok
+  @spec delete(Dolphin.Vehicles.Id.t()) :: :ok
   def delete(id) do
     :ets.delete(@heard, id)
+    :ets.match_delete(@paths, {:_, id})
 
     case :ets.take(@table, id) do
       [] -> :ok
@@ -115,7 +126,7 @@ defmodule Dolphin.Vehicles.Views do
   vehicle (`heard/2`): the same cell for as long as the vehicle is not
   forgotten, so a restarted process goes on with it.
   """
-  @spec heard_cell(non_neg_integer()) :: :atomics.atomics_ref()
+  @spec heard_cell(Dolphin.Vehicles.Id.t()) :: :atomics.atomics_ref()
   def heard_cell(id) do
     # Slot 1: clock ms (any integer: the clock's origin is arbitrary); slot 2: 1 once written.
     :ets.insert_new(@heard, {id, :atomics.new(2, signed: true)})
@@ -130,7 +141,7 @@ defmodule Dolphin.Vehicles.Views do
   end
 
   @doc "When vehicle `id` was last heard (clock ms), or nil (never, or not a vehicle of this node)."
-  @spec last_heard_ms(non_neg_integer()) :: integer() | nil
+  @spec last_heard_ms(Dolphin.Vehicles.Id.t()) :: integer() | nil
   def last_heard_ms(id) do
     case :ets.lookup(@heard, id) do
       [{^id, cell}] -> if :atomics.get(cell, 2) == 1, do: :atomics.get(cell, 1)
@@ -158,15 +169,39 @@ defmodule Dolphin.Vehicles.Views do
     :ok
   end
 
+  @doc """
+  The id of the vehicle that a frame from system `sysid` heard on path `via`
+  is for: `sysid` itself, unless the path was given to another vehicle with
+  that system id (`assign/3`).
+  """
+  @spec vehicle_on(non_neg_integer(), term()) :: Dolphin.Vehicles.Id.t()
+  def vehicle_on(sysid, via) do
+    case :ets.lookup(@paths, {sysid, via}) do
+      [{_, id}] -> id
+      [] -> sysid
+    end
+  end
+
+  @doc """
+  Gives path `via` of system `sysid` to vehicle `id` (another vehicle with
+  that system id): its frames are that vehicle's from now on.
+  """
+  @spec assign(non_neg_integer(), term(), Dolphin.Vehicles.Id.t()) :: :ok
+  def assign(sysid, via, id) do
+    :ets.insert(@paths, {{sysid, via}, id})
+    :ok
+  end
+
   @doc false
   # The notice of a vehicle forgotten, for every owner of views.
-  @spec forgotten(non_neg_integer()) :: :ok
+  @spec forgotten(Dolphin.Vehicles.Id.t()) :: :ok
   def forgotten(id), do: PubSub.publish(:vehicles, {:vehicle_forgotten, id})
 
   @impl true
   def init(:ok) do
     :ets.new(@table, [:named_table, :public, :set, read_concurrency: true])
     :ets.new(@heard, [:named_table, :public, :set, read_concurrency: true])
+    :ets.new(@paths, [:named_table, :public, :set, read_concurrency: true])
     {:ok, nil}
   end
 end

@@ -213,14 +213,14 @@ defmodule Dolphin.Web.Live do
       function hide(){
         document.querySelectorAll('.legend input').forEach(function(box){ box.checked = !hidden[box.dataset.vehicle]; });
         Object.keys(hidden).forEach(function(id){
-          document.querySelectorAll('.v-' + id).forEach(function(el){ if(el.tagName !== 'LABEL') el.classList.add('hidden'); });
+          document.querySelectorAll('.v-' + CSS.escape(String(id))).forEach(function(el){ if(el.tagName !== 'LABEL') el.classList.add('hidden'); });
         });
       }
       document.addEventListener('change', function(ev){
         var box = ev.target;
         if(!box.dataset || !box.dataset.vehicle) return;
         if(box.checked) delete hidden[box.dataset.vehicle]; else hidden[box.dataset.vehicle] = true;
-        document.querySelectorAll('.v-' + box.dataset.vehicle).forEach(function(el){
+        document.querySelectorAll('.v-' + CSS.escape(box.dataset.vehicle)).forEach(function(el){
           if(el.tagName !== 'LABEL') el.classList.toggle('hidden', !box.checked);
         });
       });

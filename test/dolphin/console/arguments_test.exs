@@ -21,7 +21,7 @@ defmodule Dolphin.Console.ArgumentsTest do
     end
 
     test "not an id, an unknown id, no vehicles at all" do
-      assert "a vehicle is given by its system id" <> _ = why = message(Arguments.vehicle("1", @known, :control))
+      assert "a vehicle is given by its id as vehicles() lists it" <> _ = why = message(Arguments.vehicle("1", @known, :control))
       assert why =~ ~s(got: "1")
       assert Arguments.vehicle(-1, @known, :any) |> elem(0) == :error
       assert "no vehicle 9: the known vehicles are 1, 2, 3, 7 (see vehicles())" = message(Arguments.vehicle(9, @known, :any))

@@ -99,7 +99,7 @@ defmodule Dolphin.Vehicles.ViewsTest do
   end
 
   test "a put that is not a view is a caller mistake" do
-    assert_raise ArgumentError, ~r/a view is a %Dolphin.Vehicles.View{} with a system id, got: %{id: 3}/, fn -> Views.put(%{id: 3}) end
+    assert_raise ArgumentError, ~r/a view is a %Dolphin.Vehicles.View{} with a vehicle id, got: %{id: 3}/, fn -> Views.put(%{id: 3}) end
   end
 
   test "a test source's vehicles are announced the same way, or quietly with events: false" do

@@ -1,0 +1,93 @@
+defmodule Dolphin.Vehicles.Id do
+  @moduledoc """
+  A vehicle is where it is heard plus its MAVLink system id.
+
+  Most vehicles leave the factory as system id 1, so a fleet may hold
+  several vehicles with one system id, each on its own *network*: a link
+  (`--connect`), or on a `udpin` link one remote address. The first vehicle
+  heard with a system id is named by the id alone (`1`), as every script
+  and example names its vehicles; another with the same system id, on
+  another network, is named by a *qualified name*, `"SYSID@NETWORK"`: the
+  system id and the network it was first heard on, e.g.
+  `"1@127.0.0.1:14561"` (a `udpin` link's remote address) or
+  `"1@udpout:127.0.0.1:14570"` (a link, by its name). Every vehicle also
+  answers to its qualified name, the first one included
+  (`Dolphin.Vehicles.resolve/1`), so a script that must not depend on which
+  vehicle was heard first names both by network.
+
+  A vehicle id is therefore a system id (an integer) or a qualified name (a
+  string): `Dolphin.Vehicles`, the fleet's `pick(id: ...)`, events, the
+  console and the reports carry it as it is.
+
+      iex> Dolphin.Vehicles.Id.sysid(3)
+      3
+      iex> Dolphin.Vehicles.Id.sysid("1@127.0.0.1:14561")
+      1
+      iex> Dolphin.Vehicles.Id.qualified(1, {"udpin:127.0.0.1:14550", {{127, 0, 0, 1}, 14561}})
+      "1@127.0.0.1:14561"
+      iex> Dolphin.Vehicles.Id.qualified(1, {"radio2", nil})
+      "1@radio2"
+      iex> Dolphin.Vehicles.Id.parse("1@radio2")
+      {:ok, "1@radio2"}
+      iex> Dolphin.Vehicles.Id.parse("1")
+      {:ok, 1}
+      iex> Dolphin.Vehicles.Id.parse("300@radio2")
+      :error
+  """
+
+  @typedoc "A system id (the first vehicle heard with it) or a qualified name, `\"SYSID@NETWORK\"`."
+  @type t :: non_neg_integer() | String.t()
+
+  @doc "The MAVLink system id of vehicle `id`."
+  @spec sysid(t()) :: non_neg_integer()
+  def sysid(id) when is_integer(id), do: id
+
+  def sysid(id) when is_binary(id) do
+    {:ok, sysid, _network} = split(id)
+    sysid
+  end
+
+  @doc """
+  The qualified name of the vehicle with system id `sysid` heard first on
+  path `via` (`t:Dolphin.Vehicles.Paths.via/0`): its network is the remote
+  address on a `udpin` link, else the link's name.
+  """
+  @spec qualified(0..255, term()) :: String.t()
+  def qualified(sysid, via), do: "#{sysid}@#{network(via)}"
+
+  @doc "The network of path `via`: a `udpin` link's remote address, else the link's name."
+  @spec network(term()) :: String.t()
+  def network({_link, {ip, port}}) when is_tuple(ip) and is_integer(port), do: "#{:inet.ntoa(ip)}:#{port}"
+  def network({link, nil}), do: network(link)
+  def network(link) when is_binary(link), do: link
+  def network(link), do: inspect(link)
+
+  @doc """
+  A vehicle id from what a user wrote: a system id (an integer, or digits)
+  or a qualified name `"SYSID@NETWORK"`; `:error` for anything else.
+  """
+  @spec parse(term()) :: {:ok, t()} | :error
+  def parse(id) when is_integer(id) and id >= 0, do: {:ok, id}
+
+  def parse(text) when is_binary(text) do
+    case Integer.parse(text) do
+      {id, ""} when id >= 0 -> {:ok, id}
+      _ -> with {:ok, _sysid, _network} <- split(text), do: {:ok, text}
+    end
+  end
+
+  def parse(_other), do: :error
+
+  @doc "Whether `id` is a vehicle id: a system id or a well-formed qualified name."
+  @spec valid?(term()) :: boolean()
+  def valid?(id), do: parse(id) == {:ok, id}
+
+  defp split(text) do
+    with [digits, network] when network != "" <- String.split(text, "@", parts: 2),
+         {sysid, ""} when sysid in 0..255 <- Integer.parse(digits) do
+      {:ok, sysid, network}
+    else
+      _ -> :error
+    end
+  end
+end
