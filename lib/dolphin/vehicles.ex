@@ -228,6 +228,7 @@ defmodule Dolphin.Vehicles do
   @doc "Sets after how much clock time without a frame a vehicle is lost."
   @spec set_timeout(Id.t(), pos_integer()) :: :ok | {:error, :unknown_vehicle}
   def set_timeout(id, ms) when is_integer(ms) and ms > 0 do
+    id = resolve(id)
     # Kept outside the process: a restarted vehicle process keeps it.
     :ok = Dolphin.Vehicles.Settings.put_timeout(id, ms)
 
@@ -244,7 +245,7 @@ defmodule Dolphin.Vehicles do
   """
   @spec subscribe(Id.t() | :all) :: :ok
   def subscribe(:all), do: PubSub.subscribe(:vehicles)
-  def subscribe(id), do: PubSub.subscribe({:vehicle, id})
+  def subscribe(id), do: PubSub.subscribe({:vehicle, resolve(id)})
 
   @doc """
   The process of a vehicle, or nil: this node's own, else its route
@@ -297,7 +298,10 @@ defmodule Dolphin.Vehicles do
   """
   @spec forget(Id.t()) :: :ok
   def forget(id) do
+    id = resolve(id)
     pid = whereis_local(id)
+    # What was set for it is not inherited by another vehicle given its id later.
+    Dolphin.Vehicles.Settings.clear(id)
 
     if pid, do: DynamicSupervisor.terminate_child(Dolphin.Vehicles.Supervisor, pid)
 
@@ -539,13 +543,14 @@ defmodule Dolphin.Vehicles do
   # one is discovered by its next heartbeat). Returns the vehicle's id.
   @spec heard_elsewhere(byte(), term(), non_neg_integer()) :: Dolphin.Vehicles.Id.t()
   def heard_elsewhere(sysid, via, uid) do
+    # That autopilot's other paths may have been given away already, before
+    # its vehicle had a view (two paths refused in one pass).
     owner =
-      Enum.find_value(Dolphin.Vehicles.Views.all(), fn view ->
-        if Id.sysid(view.id) == sysid and view.uid == uid and whereis_local(view.id), do: view.id
-      end)
+      Dolphin.Vehicles.Views.assigned(sysid, uid) ||
+        Enum.find_value(Dolphin.Vehicles.Views.all(), fn view -> if Id.sysid(view.id) == sysid and view.uid == uid, do: view.id end)
 
     id = owner || Id.qualified(sysid, via)
-    :ok = Dolphin.Vehicles.Views.assign(sysid, via, id)
+    :ok = Dolphin.Vehicles.Views.assign(sysid, via, id, uid)
     id
   end
 

@@ -114,9 +114,17 @@ defmodule Dolphin.SITLTest do
       # The second is a vehicle of its own, and commands reach the right one.
       assert_receive {:dolphin, :vehicles, {:vehicle_discovered, ^name}}, 60_000
       Wait.until(fn -> match?({:ok, %{uid: ^other}}, Vehicles.view(name)) end, 500, fn -> "#{name}'s unique id" end)
+      # Booted through (a mode set before ArduCopter reads its RC mode switch
+      # at start-up is replaced by the switch's): its EKF uses GPS.
+      for id <- [7, name] do
+        Wait.until(fn -> match?({:ok, %{status_texts: texts}} when is_list(texts), Vehicles.view(id)) and Enum.any?(elem(Vehicles.view(id), 1).status_texts, fn {_, t} -> t =~ "is using GPS" end) end, 3_000, fn -> "vehicle #{id} using GPS" end)
+      end
+
       assert {:ok, :accepted} = Vehicles.set_mode(name, :alt_hold)
       assert {:ok, :accepted} = Vehicles.set_mode(7, :acro)
-      Wait.until(fn -> match?({:ok, %{mode: :alt_hold}}, Vehicles.view(name)) and match?({:ok, %{mode: :acro}}, Vehicles.view(7)) end, 500, fn -> "7 in ACRO and #{name} in ALT_HOLD" end)
+      Wait.until(fn -> match?({:ok, %{mode: :alt_hold}}, Vehicles.view(name)) and match?({:ok, %{mode: :acro}}, Vehicles.view(7)) end, 3_000, fn ->
+        "7 in ACRO and #{name} in ALT_HOLD: #{inspect(for id <- [7, name], do: Vehicles.view(id) |> elem(1) |> Map.take([:mode, :network, :status_texts]))}"
+      end)
     after
       SITL.stop(second)
       SITL.stop(first)

@@ -108,6 +108,9 @@ defmodule Dolphin.VehiclesTest do
     :ok = Vehicles.send_message(name, %M.Statustext{severity: 6, text: "to the other"})
     assert %Frame{} = UDPPeer.receive_until(other, &match?(%M.Statustext{text: "to the other"}, &1.message), 10_000)
     assert_raise ExUnit.AssertionError, fn -> UDPPeer.receive_until(peer, &match?(%M.Statustext{text: "to the other"}, &1.message), 300) end
+
+    # The ground station's heartbeat reaches both (their GCS failsafes need it).
+    for socket <- [peer, other], do: assert(%Frame{} = UDPPeer.receive_until(socket, &match?(%M.Heartbeat{type: 6}, &1.message), 10_000))
   end
 
   test "a forgotten vehicle is gone at once, and heard again it is discovered anew", %{port: port, peer: peer} do

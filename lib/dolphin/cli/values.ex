@@ -18,6 +18,9 @@ defmodule Dolphin.CLI.Values do
     * `:vehicles` — a number of vehicles, 1..254: each needs a system id of
       its own (1..254; 255 is the ground station's);
     * `:sysid` — a system id, 1..254;
+    * `:vehicle_id` — a vehicle as `vehicles()` names it: a system id
+      1..254, or `SYSID@NETWORK` for another vehicle with that system id
+      (`Dolphin.Vehicles.Id`);
     * `:speedup` — a speed-up of the clock, 0.01..1000 (`Dolphin.Clock`'s
       limits: beyond 1000 the simulated vehicles cannot keep up);
     * `:location` — `LAT,LON,ALT`: latitude -90..90, longitude -180..180
@@ -50,6 +53,7 @@ defmodule Dolphin.CLI.Values do
   @type kind ::
           :vehicles
           | :sysid
+          | :vehicle_id
           | :speedup
           | :location
           | :seconds
@@ -228,6 +232,14 @@ defmodule Dolphin.CLI.Values do
 
   defp value(:vehicles, text), do: integer(text, 1..@max_sysid, "a number of vehicles from 1 to #{@max_sysid} (each needs a system id of its own)")
   defp value(:sysid, text), do: integer(text, 1..@max_sysid, "a system id from 1 to #{@max_sysid} (255 is the ground station's)")
+
+  defp value(:vehicle_id, text) do
+    if String.contains?(text, "@") do
+      with :error <- Dolphin.Vehicles.Id.parse(text), do: {:error, "a system id from 1 to #{@max_sysid}, or SYSID@NETWORK as vehicles() lists it"}
+    else
+      value(:sysid, text)
+    end
+  end
 
   defp value(:integer, text) do
     case Integer.parse(text) do

@@ -117,20 +117,26 @@ defmodule Dolphin.Cluster.Choice do
   def lost?(hearings), do: not Enum.any?(hearings, fn {_station, h} -> h.view.connected? end)
 
   @doc """
-  Whether two views of one system id, from two stations, are two different
-  vehicles: `{:conflict, why}` when their classes differ (both known) or,
-  both with a position, they are farther apart than #{round(@max_apart_m)} m;
-  `:same` otherwise.
+  Whether two views of one vehicle id, from two stations, are two different
+  vehicles: `{:conflict, why}` when their autopilots' unique ids differ
+  (both known and not 0), their classes differ (both known) or, both with a
+  position, they are farther apart than #{round(@max_apart_m)} m; `:same`
+  otherwise.
 
       iex> v = %Dolphin.Vehicles.View{id: 3, type: :uav}
       iex> Dolphin.Cluster.Choice.conflict(v, %{v | type: :usv})
       {:conflict, "one station hears a uav, the other a usv"}
       iex> Dolphin.Cluster.Choice.conflict(v, %{v | type: nil})
       :same
+      iex> Dolphin.Cluster.Choice.conflict(%{v | uid: 7}, %{v | uid: 9})
+      {:conflict, "the two stations hear two autopilots (unique ids 7 and 9)"}
   """
   @spec conflict(View.t(), View.t()) :: :same | {:conflict, String.t()}
   def conflict(%View{} = a, %View{} = b) do
     cond do
+      a.uid not in [nil, 0] and b.uid not in [nil, 0] and a.uid != b.uid ->
+        {:conflict, "the two stations hear two autopilots (unique ids #{a.uid} and #{b.uid})"}
+
       a.type != nil and b.type != nil and a.type != b.type ->
         {:conflict, "one station hears a #{a.type}, the other a #{b.type}"}
 

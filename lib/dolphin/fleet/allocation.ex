@@ -60,8 +60,8 @@ defmodule Dolphin.Fleet.Allocation do
   @doc "Whether a vehicle satisfies a task's requirements and restrictions."
   @spec matches?(leaf(), View.t()) :: boolean()
   def matches?(%{requirements: req, allowed: allowed}, %View{} = v) do
-    (allowed == nil or v.id in allowed) and type_ok?(req[:type], v.type) and
-      Enum.all?(List.wrap(req[:payloads]), &(&1 in v.payloads)) and (req[:id] in [nil, v.id])
+    (allowed == nil or Enum.any?(allowed, &View.named?(v, &1))) and type_ok?(req[:type], v.type) and
+      Enum.all?(List.wrap(req[:payloads]), &(&1 in v.payloads)) and (req[:id] == nil or View.named?(v, req[:id]))
   end
 
   defp type_ok?(nil, _), do: true

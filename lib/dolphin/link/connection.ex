@@ -134,6 +134,8 @@ defmodule Dolphin.Link.Connection do
          socket: socket,
          backoff: @backoff_min,
          peers: %{},
+         # Every address heard from: vehicles that share a system id each have one.
+         heard_from: MapSet.new(),
          seq: 0,
          gcs: {Keyword.get_lazy(opts, :gcs_sysid, fn -> Application.get_env(:dolphin, :gcs_sysid, 255) end), Keyword.get(opts, :gcs_compid, 190)},
          router: Keyword.get(opts, :router, &Dolphin.Vehicles.route/2),
@@ -301,7 +303,7 @@ defmodule Dolphin.Link.Connection do
       record_in(state, frame)
       # A reply addressed to another ground station on the link is not ours.
       if for_us?(frame.message, gcs_sysid), do: state.router.(frame, {state.name, if(state.endpoint.kind == :udpin, do: from)})
-      if from == :tcp, do: state, else: %{state | peers: Map.put(state.peers, frame.sysid, from)}
+      if from == :tcp, do: state, else: %{state | peers: Map.put(state.peers, frame.sysid, from), heard_from: MapSet.put(state.heard_from, from)}
     end)
   end
 
@@ -364,7 +366,7 @@ defmodule Dolphin.Link.Connection do
 
   defp destinations(%{endpoint: %{kind: :udpout} = ep}, _sysid), do: [{ep.address, ep.port}]
   defp destinations(_state, {:address, address}), do: [address]
-  defp destinations(%{peers: peers}, 0), do: peers |> Map.values() |> Enum.uniq()
+  defp destinations(%{heard_from: addresses}, 0), do: MapSet.to_list(addresses)
 
   defp destinations(%{peers: peers}, sysid) do
     case Map.fetch(peers, sysid) do

@@ -54,7 +54,7 @@ defmodule Dolphin.Sim.Vehicle do
         seed = Keyword.get(opts, :seed, 1)
         model = Copter.new(sysid, Keyword.fetch!(opts, :home), Map.new(Keyword.get(opts, :config, %{})))
         model = %{model | uid: Keyword.get(opts, :uid, model.uid)}
-        faults = Faults.new(Keyword.get(opts, :faults, %{}), {seed, sysid})
+        faults = Faults.new(Keyword.get(opts, :faults, %{}), {seed, key(opts)})
 
         s = %{
           sysid: sysid,
@@ -62,7 +62,7 @@ defmodule Dolphin.Sim.Vehicle do
           gcs: {address, port},
           model: model,
           faults_out: faults,
-          faults_in: Faults.new(Faults.to_map(faults), {seed, sysid, :in}),
+          faults_in: Faults.new(Faults.to_map(faults), {seed, key(opts), :in}),
           seqs: %{},
           clock_origin: Clock.now_ms(),
           lag_ms: 0,

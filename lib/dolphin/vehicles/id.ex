@@ -33,6 +33,8 @@ defmodule Dolphin.Vehicles.Id do
       {:ok, 1}
       iex> Dolphin.Vehicles.Id.parse("300@radio2")
       :error
+      iex> Dolphin.Vehicles.Id.parse("01@radio2")
+      :error
   """
 
   @typedoc "A system id (the first vehicle heard with it) or a qualified name, `\"SYSID@NETWORK\"`."
@@ -60,7 +62,7 @@ defmodule Dolphin.Vehicles.Id do
   def network({_link, {ip, port}}) when is_tuple(ip) and is_integer(port), do: "#{:inet.ntoa(ip)}:#{port}"
   def network({link, nil}), do: network(link)
   def network(link) when is_binary(link), do: link
-  def network(link), do: inspect(link)
+  def network(link), do: link |> inspect() |> String.replace(~r/\s+/, "")
 
   @doc """
   A vehicle id from what a user wrote: a system id (an integer, or digits)
@@ -84,7 +86,9 @@ defmodule Dolphin.Vehicles.Id do
 
   defp split(text) do
     with [digits, network] when network != "" <- String.split(text, "@", parts: 2),
-         {sysid, ""} when sysid in 0..255 <- Integer.parse(digits) do
+         {sysid, ""} when sysid in 0..255 <- Integer.parse(digits),
+         # One spelling per vehicle: "1@x", never "01@x".
+         true <- Integer.to_string(sysid) == digits do
       {:ok, sysid, network}
     else
       _ -> :error

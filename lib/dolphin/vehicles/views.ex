@@ -49,8 +49,9 @@ defmodule Dolphin.Vehicles.Views do
   (`Dolphin.Vehicles.Id`). A third table says which vehicle each path that
   is not its system id's first vehicle belongs to: `vehicle_on/2` is the id
   that a frame with a system id heard on a path is for (the system id itself
-  unless `assign/3` gave the path to another vehicle), read by the router on
-  every frame; forgetting a vehicle forgets its paths.
+  unless `assign/4` gave the path to another vehicle), read by the router on
+  every frame. An assignment outlives the vehicle: a vehicle forgotten and
+  heard again on its path is discovered anew under the same name.
 
   The tables' owner is a small process under the application's supervisor,
   started before the vehicles' supervisor: the vehicles restart after it.
@@ -113,7 +114,6 @@ defmodule Dolphin.Vehicles.Views do
   @spec delete(Dolphin.Vehicles.Id.t()) :: :ok
   def delete(id) do
     :ets.delete(@heard, id)
-    :ets.match_delete(@paths, {:_, id})
 
     case :ets.take(@table, id) do
       [] -> :ok
@@ -172,24 +172,34 @@ defmodule Dolphin.Vehicles.Views do
   @doc """
   The id of the vehicle that a frame from system `sysid` heard on path `via`
   is for: `sysid` itself, unless the path was given to another vehicle with
-  that system id (`assign/3`).
+  that system id (`assign/4`).
   """
   @spec vehicle_on(non_neg_integer(), term()) :: Dolphin.Vehicles.Id.t()
   def vehicle_on(sysid, via) do
     case :ets.lookup(@paths, {sysid, via}) do
-      [{_, id}] -> id
+      [{_, id, _uid}] -> id
       [] -> sysid
     end
   end
 
   @doc """
-  Gives path `via` of system `sysid` to vehicle `id` (another vehicle with
-  that system id): its frames are that vehicle's from now on.
+  Gives path `via` of system `sysid` to vehicle `id`, another vehicle with
+  that system id, whose autopilot reports unique id `uid`: its frames are
+  that vehicle's from now on.
   """
-  @spec assign(non_neg_integer(), term(), Dolphin.Vehicles.Id.t()) :: :ok
-  def assign(sysid, via, id) do
-    :ets.insert(@paths, {{sysid, via}, id})
+  @spec assign(non_neg_integer(), term(), Dolphin.Vehicles.Id.t(), non_neg_integer()) :: :ok
+  def assign(sysid, via, id, uid) do
+    :ets.insert(@paths, {{sysid, via}, id, uid})
     :ok
+  end
+
+  @doc "The vehicle that paths of system `sysid` with autopilot unique id `uid` were given to, or nil."
+  @spec assigned(non_neg_integer(), non_neg_integer()) :: Dolphin.Vehicles.Id.t() | nil
+  def assigned(sysid, uid) do
+    case :ets.match(@paths, {{sysid, :_}, :"$1", uid}) do
+      [[id] | _] -> id
+      [] -> nil
+    end
   end
 
   @doc false

@@ -90,7 +90,7 @@ defmodule Dolphin.Web.Live do
   end
 
   # The platform task each vehicle flies now: vehicle => {task id, kind, name}.
-  defp running(running, %{"event" => "task_started", "vehicle" => v} = e) when is_integer(v), do: Map.put(running, v, {e["task_id"], e["kind"], e["name"]})
+  defp running(running, %{"event" => "task_started", "vehicle" => v} = e) when is_integer(v) or is_binary(v), do: Map.put(running, v, {e["task_id"], e["kind"], e["name"]})
 
   defp running(running, %{"event" => "task_finished", "task_id" => id}) do
     running |> Enum.reject(fn {_, {task, _, _}} -> task == id end) |> Map.new()

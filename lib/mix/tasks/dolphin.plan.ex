@@ -76,7 +76,8 @@ defmodule Mix.Tasks.Dolphin.Plan do
   and what is allowed); 130 / 143 — Ctrl-C / SIGTERM stopped it. The
   message says what went wrong. `--home` takes latitude -90..90, longitude
   -180..180 and altitude -1000..10000 m; speeds, `--timeout` more than 0;
-  `--vehicle` a system id 1..254.
+  `--vehicle` a system id 1..254, or `SYSID@NETWORK` for another vehicle
+  with that system id (as the run's `vehicles()` names it).
   """
 
   use Mix.Task
@@ -86,7 +87,7 @@ defmodule Mix.Tasks.Dolphin.Plan do
   alias Dolphin.Console.{Format, MissionFile, MissionSource}
   alias Dolphin.Mission
 
-  @options [home: :location, cruise_speed: :speed, hover_speed: :speed, items: :boolean, name: :name, connect: :endpoint, vehicle: :sysid, timeout: :wait]
+  @options [home: :location, cruise_speed: :speed, hover_speed: :speed, items: :boolean, name: :name, connect: :endpoint, vehicle: :vehicle_id, timeout: :wait]
 
   @usage """
   usage: mix dolphin.plan export FILE NAME OUT.plan [--home LAT,LON,ALT] [--cruise-speed M_S] [--hover-speed M_S]
@@ -259,6 +260,8 @@ defmodule Mix.Tasks.Dolphin.Plan do
     now = System.monotonic_time(:millisecond)
     heard = Dolphin.Vehicles.list()
     first_heard = first_heard || (heard != [] && now) || nil
+    # The first vehicle of a system id answers to its qualified name too.
+    wanted = wanted && Dolphin.Vehicles.resolve(wanted)
 
     cond do
       wanted != nil and wanted in heard and Dolphin.Vehicles.ready?(wanted) ->

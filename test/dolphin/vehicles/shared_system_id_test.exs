@@ -10,6 +10,8 @@ defmodule Dolphin.Vehicles.SharedSystemIdTest do
   alias Dolphin.{Events, Sim, Vehicles}
   alias Dolphin.Test.{GroundStation, Wait}
 
+  doctest Dolphin.Vehicles.Id
+
   @moduletag timeout: 300_000
 
   @speedup 10
@@ -132,6 +134,30 @@ defmodule Dolphin.Vehicles.SharedSystemIdTest do
     # The script names them as vehicles() lists them.
     assert {:ok, %{result: :done}} = Dolphin.Script.run(hops([vehicle_on(first), vehicle_on(second)]))
     assert flown_heights(sims) == [15, 20]
+  end
+
+  test "the paths of one other autopilot, given away before its vehicle has a view, make one vehicle, and are its for good" do
+    via = fn port -> {"test-shared-#{port}", {{127, 0, 0, 1}, port}} end
+    # Two paths of autopilot 99 refused in one pass: one vehicle.
+    first = Vehicles.heard_elsewhere(201, via.(5001), 99)
+    assert first == "201@127.0.0.1:5001"
+    assert Vehicles.heard_elsewhere(201, via.(5002), 99) == first
+    # Another autopilot with that system id: another vehicle.
+    assert Vehicles.heard_elsewhere(201, via.(5003), 77) == "201@127.0.0.1:5003"
+    assert Dolphin.Vehicles.Views.vehicle_on(201, via.(5002)) == first
+    # Forgetting the vehicle keeps its paths its own: heard again, it is discovered under the same name.
+    :ok = Vehicles.forget(first)
+    assert Dolphin.Vehicles.Views.vehicle_on(201, via.(5001)) == first
+    assert Dolphin.Vehicles.Views.vehicle_on(201, {"elsewhere", nil}) == 201
+  end
+
+  test "a fleet of fake vehicles may name one by its qualified name" do
+    name = :"fake_shared_#{System.unique_integer([:positive])}"
+    start_supervised!({Dolphin.Fleet.FakeSource, name: name})
+    :ok = Dolphin.Fleet.FakeSource.add(name, 1)
+    :ok = Dolphin.Fleet.FakeSource.add(name, "1@radio2")
+    assert Dolphin.Fleet.FakeSource.list(name) == [1, "1@radio2"]
+    assert Enum.map(Dolphin.Fleet.FakeSource.views(name), & &1.id) == [1, "1@radio2"]
   end
 
   test "a vehicle id is a system id or a qualified name; anything else is refused where a user gives it" do

@@ -132,6 +132,8 @@ defmodule Mix.Tasks.Dolphin.PlanTest do
     assert "--home 91,0,0: the latitude 91 is not within -90..90" <> _ = message(Plan.main(["export", @example, "x", "o.plan", "--home", "91,0,0"]))
     assert "--cruise-speed 0: a speed in metres per second, more than 0" <> _ = message(Plan.main(["export", @example, "x", "o.plan", "--cruise-speed", "0"]))
     assert "--vehicle 0: a system id from 1 to 254" <> _ = message(Plan.main(["upload", "a.plan", "--connect", "udpin:127.0.0.1:14550", "--vehicle", "0"]))
+    assert "--vehicle 1@: a system id from 1 to 254, or SYSID@NETWORK as vehicles() lists it" <> _ =
+             message(Plan.main(["upload", "a.plan", "--connect", "udpin:127.0.0.1:14550", "--vehicle", "1@"]))
     assert "--timeout 0: a number of seconds, more than 0" <> _ = message(Plan.main(["upload", "a.plan", "--connect", "udpin:127.0.0.1:14550", "--timeout", "0"]))
     assert "--connect udpin:127.0.0.1:0: the port is 1..65535" <> _ = message(Plan.main(["upload", "a.plan", "--connect", "udpin:127.0.0.1:0"]))
     assert "--name \"\": a name that is not empty" <> _ = message(Plan.main(["import", "a.plan", "--name", ""]))
