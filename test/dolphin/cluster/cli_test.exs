@@ -132,7 +132,8 @@ defmodule Dolphin.Cluster.CLITest do
 
     assert_receive {:dolphin, :events, %{event: :vehicle_conflict, vehicle: 30, stations: [first, second], reason: why}}, 20_000
     assert {first, second} == {gs1.node, gs2.node}
-    assert why =~ "m apart"
+    # By their autopilots' unique ids once both are known, else by where they are.
+    assert why =~ ~r/two autopilots \(unique ids \d+ and \d+\)|m apart/
     assert node(Dolphin.Vehicles.whereis(30)) == gs1.node
 
     # It stays with the first station, however long the other hears it.
