@@ -7,33 +7,14 @@ defmodule Dolphin.ClusterTest do
   @moduletag timeout: 120_000
 
   alias Dolphin.{Events, Vehicles}
-  alias Dolphin.Test.{Cluster, Wait}
+  alias Dolphin.Test.{Cluster, Hops, Wait}
 
   @speedup 50
 
   setup do: Cluster.setup_controller(@speedup)
 
-  defp hop_script(ids) do
-    missions =
-      for {id, i} <- Enum.with_index(ids, 1) do
-        """
-        v#{i} = pick(id: #{id}, timeout: seconds(60))
-        execute wait_for(position(v#{i}) != nil)
-        h#{i} = position(v#{i})
-        hop#{i} =
-          mission "Hop #{id}" do
-            home h#{i}
-            take_off %{h#{i} | h: h#{i}.h + 15}
-            move 30, 0, 0
-            return_home_and_land()
-          end
-        """
-      end
-
-    tasks = Enum.map_join(1..length(ids), ", ", &"v#{&1} => hop#{&1}")
-    {:ok, script} = Dolphin.Script.compile_string("use Dolphin.Script\n" <> Enum.join(missions) <> "execute %{#{tasks}}\n", "hops.exs")
-    script
-  end
+  # Each vehicle 15 m up, 30 m north and home.
+  defp hop_script(ids), do: Hops.script(for id <- ids, do: {id, 15, 30})
 
   test "a script on the controller flies vehicles of two stations to completion" do
     gs1 = Cluster.start_station("gs1", sysids: [1])

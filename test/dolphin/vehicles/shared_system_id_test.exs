@@ -8,7 +8,7 @@ defmodule Dolphin.Vehicles.SharedSystemIdTest do
   use ExUnit.Case, async: false
 
   alias Dolphin.{Events, Sim, Vehicles}
-  alias Dolphin.Test.{GroundStation, Wait}
+  alias Dolphin.Test.{GroundStation, Hops, Wait}
 
   doctest Dolphin.Vehicles.Id
 
@@ -45,27 +45,7 @@ defmodule Dolphin.Vehicles.SharedSystemIdTest do
 
   # Each vehicle (by `names`, what the script calls it) flies a hop of its
   # own: up to 10 + 5 i metres, i x 20 m north, home.
-  defp hops(names) do
-    picks =
-      for {name, i} <- Enum.with_index(names, 1) do
-        """
-        v#{i} = pick(id: #{inspect(name)}, timeout: seconds(60))
-        execute wait_for(position(v#{i}) != nil)
-        h#{i} = position(v#{i})
-        hop#{i} =
-          mission "Hop #{i}" do
-            home h#{i}
-            take_off %{h#{i} | h: h#{i}.h + #{10 + 5 * i}}
-            move #{20 * i}, 0, 0
-            return_home_and_land()
-          end
-        """
-      end
-
-    tasks = Enum.map_join(1..length(names), ", ", &"v#{&1} => hop#{&1}")
-    {:ok, script} = Dolphin.Script.compile_string("use Dolphin.Script\n" <> Enum.join(picks) <> "execute %{#{tasks}}\n", "hops.exs")
-    script
-  end
+  defp hops(names), do: Hops.script(for {name, i} <- Enum.with_index(names, 1), do: {name, 10 + 5 * i, 20 * i})
 
   # The take-off height above home of the mission on simulated vehicle `sim`.
   defp take_off_height(sim) do
