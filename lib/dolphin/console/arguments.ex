@@ -25,11 +25,9 @@ defmodule Dolphin.Console.Arguments do
           {:ok, :free | {:stop_first, map()}} | {:error, UsageError.t()}
   def vehicle(id, known, needs, force \\ false)
 
-  def vehicle(id, known, needs, force) when (is_integer(id) and id >= 0) or is_binary(id) do
+  def vehicle(id, known, needs, force) do
     if Dolphin.Vehicles.Id.valid?(id), do: known_vehicle(id, known, needs, force), else: {:error, %UsageError{reason: :not_a_vehicle_id, value: id}}
   end
-
-  def vehicle(other, _known, _needs, _force), do: {:error, %UsageError{reason: :not_a_vehicle_id, value: other}}
 
   defp known_vehicle(id, known, needs, force) do
     case Map.fetch(known, id) do

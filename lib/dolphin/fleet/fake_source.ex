@@ -34,6 +34,7 @@ defmodule Dolphin.Fleet.FakeSource do
 
   @behaviour Dolphin.Fleet.Source
 
+  import Dolphin.Vehicles.Id, only: [is_id: 1]
   alias Dolphin.Vehicles.View
 
   # The table's row of the `events` option (vehicles' keys are integers).
@@ -62,7 +63,7 @@ defmodule Dolphin.Fleet.FakeSource do
 
   @doc "Adds a vehicle (or replaces one) and publishes its view: a new one is discovered (`{:vehicle_discovered, id}` on `:vehicles`)."
   @spec add(atom(), Dolphin.Vehicles.Id.t(), keyword()) :: :ok
-  def add(name, id, attrs \\ []) when (is_integer(id) and id >= 0) or is_binary(id) do
+  def add(name, id, attrs \\ []) when is_id(id) do
     vehicle = struct!(%View{id: id, type: :uav, battery: 1.0, position: Dolphin.Geo.Location.new(41.1780, -8.5980, 100), mission_progress: {0, 0}}, check!(attrs))
     put(name, %{vehicle | id: id, payloads: Enum.sort(vehicle.payloads)})
   end
@@ -138,7 +139,7 @@ defmodule Dolphin.Fleet.FakeSource do
   # Source callbacks
 
   @impl Dolphin.Fleet.Source
-  def list(name), do: for({id, %View{}} when is_integer(id) or is_binary(id) <- :ets.tab2list(name), do: id) |> Enum.sort()
+  def list(name), do: for({id, %View{}} when is_id(id) <- :ets.tab2list(name), do: id) |> Enum.sort()
 
   @impl Dolphin.Fleet.Source
   def views(name), do: name |> :ets.select([{{:"$1", :"$2"}, [{:orelse, {:is_integer, :"$1"}, {:is_binary, :"$1"}}], [:"$2"]}]) |> Enum.sort_by(& &1.id)

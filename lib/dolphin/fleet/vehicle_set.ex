@@ -16,6 +16,8 @@ defmodule Dolphin.Fleet.VehicleSet do
   `Enum.filter/2` work as Dolphin's `ns | {pred}` does.
   """
 
+  import Dolphin.Vehicles.Id, only: [is_id: 1]
+
   defstruct ids: []
 
   @type id :: Dolphin.Vehicles.Id.t()
@@ -24,7 +26,7 @@ defmodule Dolphin.Fleet.VehicleSet do
   @doc "A set of the given vehicle ids (or of the vehicles of other sets)."
   @spec new([id() | t()] | id() | t()) :: t()
   def new(%__MODULE__{} = set), do: set
-  def new(id) when is_integer(id) or is_binary(id), do: new([id])
+  def new(id) when is_id(id), do: new([id])
 
   def new(ids) when is_list(ids) do
     ids =
@@ -97,9 +99,11 @@ defmodule Dolphin.Fleet.VehicleSet do
   end
 
   defimpl Enumerable do
+    import Dolphin.Vehicles.Id, only: [is_id: 1]
+
     def count(%{ids: ids}), do: {:ok, length(ids)}
     def member?(%{ids: ids}, %Dolphin.Fleet.VehicleSet{ids: [id]}), do: {:ok, id in ids}
-    def member?(%{ids: ids}, id) when is_integer(id) or is_binary(id), do: {:ok, id in ids}
+    def member?(%{ids: ids}, id) when is_id(id), do: {:ok, id in ids}
     def member?(_set, _other), do: {:ok, false}
     def slice(_set), do: {:error, __MODULE__}
 

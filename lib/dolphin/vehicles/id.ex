@@ -40,6 +40,12 @@ defmodule Dolphin.Vehicles.Id do
   @typedoc "A system id (the first vehicle heard with it) or a qualified name, `\"SYSID@NETWORK\"`."
   @type t :: non_neg_integer() | String.t()
 
+  @doc """
+  Whether `term` has the shape of a vehicle id (a guard): a non-negative
+  integer or a string. `valid?/1` checks a name's spelling too.
+  """
+  defguard is_id(term) when (is_integer(term) and term >= 0) or is_binary(term)
+
   @doc "The MAVLink system id of vehicle `id`."
   @spec sysid(t()) :: non_neg_integer()
   def sysid(id) when is_integer(id), do: id

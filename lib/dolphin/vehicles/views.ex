@@ -60,6 +60,7 @@ defmodule Dolphin.Vehicles.Views do
   use GenServer
 
   alias Dolphin.{PubSub, Events}
+  import Dolphin.Vehicles.Id, only: [is_id: 1]
   alias Dolphin.Vehicles.View
 
   @table __MODULE__
@@ -76,7 +77,7 @@ defmodule Dolphin.Vehicles.Views do
   transitions.
   """
   @spec put(View.t()) :: :ok
-  def put(%View{id: id} = view) when is_integer(id) or is_binary(id) do
+  def put(%View{id: id} = view) when is_id(id) do
     old =
       case :ets.lookup(@table, id) do
         [{^id, old}] -> old
