@@ -72,7 +72,7 @@ defmodule Mix.Tasks.FlagValuesTest do
     assert forward =~ "mix dolphin.console: --forward tcp:127.0.0.1:5760: udpout:HOST:PORT here, not tcp"
   end
 
-  test "mix dolphin.plan: a bad --home is bad usage; a plan that is wrong is said in its terms", %{tmp_dir: dir} do
+  test "mix dolphin.plan: a bad --home or --vehicle is bad usage; a plan that is wrong is said in its terms", %{tmp_dir: dir} do
     truncated = Path.join(dir, "truncated.plan")
     File.write!(truncated, ~s|{\n  "fileType": "Plan",\n  "version": 1,\n|)
     array = Path.join(dir, "array.plan")
@@ -80,13 +80,14 @@ defmodule Mix.Tasks.FlagValuesTest do
     example = Path.expand("../../../examples/single_vehicle.exs", __DIR__)
 
     # A directory named for a file to read is bad usage, as a missing file is.
-    assert [{2, home}, {1, json}, {1, empty}, {2, directory}, {2, missions}] =
+    assert [{2, home}, {1, json}, {1, empty}, {2, directory}, {2, missions}, {2, vehicle}] =
              run_all([
                ["dolphin.plan", "export", example, "Survey Area", Path.join(dir, "o.plan"), "--home", "91,0,0"],
                ["dolphin.plan", "import", truncated],
                ["dolphin.plan", "import", array],
                ["dolphin.plan", "import", dir],
-               ["dolphin.plan", "list", dir]
+               ["dolphin.plan", "list", dir],
+               ["dolphin.plan", "upload", truncated, "--connect", "udpin:127.0.0.1:14550", "--vehicle", "1@"]
              ])
 
     assert home =~ "mix dolphin.plan: --home 91,0,0: the latitude 91 is not within -90..90"
@@ -96,6 +97,8 @@ defmodule Mix.Tasks.FlagValuesTest do
     assert empty =~ ~s|#{array}: not a QGroundControl plan: the file holds an array ([]), not an object with "fileType": "Plan"|
     assert directory =~ "mix dolphin.plan: #{dir} is a directory, not a plan file"
     assert missions =~ "#{dir}: cannot read: it is a directory, not a script or a file of missions"
+    # A vehicle is a system id, or a name SYSID@NETWORK as vehicles() lists it.
+    assert vehicle =~ "mix dolphin.plan: --vehicle 1@: a system id from 1 to 254, or SYSID@NETWORK as vehicles() lists it"
   end
 
   test "mix dolphin.check: the compiler's warnings in the script's terms, in a fresh VM", %{tmp_dir: dir} do
