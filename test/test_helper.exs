@@ -34,4 +34,7 @@ browser_exclude =
     [:browser]
   end
 
-ExUnit.start(exclude: sitl_exclude ++ shared_exclude ++ browser_exclude)
+# Most time goes to tests that fly simulated fleets, each in a
+# Dolphin.Instance of its own, which wait on their vehicles far more than they
+# compute: more of them at once than the default (twice the cores).
+ExUnit.start(exclude: sitl_exclude ++ shared_exclude ++ browser_exclude, max_cases: max(8, System.schedulers_online() * 2))

@@ -6,34 +6,20 @@ defmodule Dolphin.Application do
   @impl true
   def start(_type, _args) do
     children = [
-      # Vehicles and links by name ({:vehicle, sysid}, {:link, name}).
-      {Registry, keys: :unique, name: Dolphin.Registry},
-      Dolphin.PubSub,
-      # The vehicles' views (Dolphin.Vehicles.Views): the table outlives
-      # each vehicle's process, and the vehicles restart after it.
-      Dolphin.Vehicles.Views,
-      # Where vehicles without a process here are reached (Dolphin.Vehicles.Routes):
-      # written by the cluster's mirror, read by every command.
-      Dolphin.Vehicles.Routes,
-      # What was set for each vehicle (timeouts): it outlives the vehicles' processes.
-      Dolphin.Vehicles.Settings,
-      # Vehicles before links: a link routes frames to vehicles from its first datagram.
-      {DynamicSupervisor, name: Dolphin.Vehicles.Supervisor, strategy: :one_for_one},
       # Several ground stations (Dolphin.Cluster): the :pg scope of their
-      # groups, and the mirror of other stations' vehicles, which routes
-      # them (so before the fleet).
+      # groups, before the default instance, whose mirror of other
+      # stations' vehicles is in it.
       %{id: :cluster_scope, start: {:pg, :start_link, [Dolphin.Cluster.Scope]}},
-      Dolphin.Cluster.Mirror,
-      # The frames each .tlog recorded lately (links sharing a file record a frame once).
-      Dolphin.Link.Recorded,
-      {DynamicSupervisor, name: Dolphin.Link.Supervisor, strategy: :one_for_one},
-      # The configured links, once the tree they live in is up; a bad endpoint
-      # in the configuration stops the start with the reason.
-      %{id: :configured_links, start: {Dolphin.Link, :start_configured, []}, restart: :transient},
       # The holders of this node's cluster-wide claims on vehicles (Dolphin.Fleet.Claims).
       {Task.Supervisor, name: Dolphin.Fleet.ClaimHolders},
-      # Who is available, picked, busy; then the runs of task trees, which use it.
-      Dolphin.Fleet,
+      # The frames each .tlog recorded lately (links sharing a file record a
+      # frame once): by file, so one table serves every instance.
+      Dolphin.Link.Recorded,
+      # The default instance (Dolphin.Instance): the vehicles, their views,
+      # pub/sub and clock, the links, the fleet, the simulated and SITL
+      # vehicles. It is the cluster's, and opens the configured links.
+      {Dolphin.Instance, name: Dolphin.Instance.default(), cluster: true, links: true},
+      # The runs of task trees, in whichever instance their context names.
       Dolphin.Engine.Supervisor,
       # Vehicles whose mission went to another (reassign), held when heard again.
       {Task.Supervisor, name: Dolphin.Mission.Guards},
@@ -48,17 +34,11 @@ defmodule Dolphin.Application do
       # This node's station for other nodes' controllers: nothing here
       # depends on it (its crash restarts only itself; controllers
       # subscribe again when it rejoins its group).
-      Dolphin.Cluster.Station,
-      # Simulated vehicles (Dolphin.Sim) and ArduPilot SITL instances
-      # (Dolphin.SITL): empty until asked for; they speak to links over UDP.
-      Dolphin.Sim.Supervisor,
-      {DynamicSupervisor, name: Dolphin.SITL.Supervisor, strategy: :one_for_one}
+      Dolphin.Cluster.Station
     ]
 
-    # rest_for_one: everything after a crashed child depends on it. A crashed
-    # registry takes down (and restarts) the processes registered in it rather
-    # than leaving them running nameless; a crashed link supervisor leaves the
-    # vehicles alone.
+    # rest_for_one: everything after a crashed child depends on it (the
+    # engine, scripts and views on the instance's vehicles and fleet).
     Supervisor.start_link(children, strategy: :rest_for_one, name: Dolphin.Supervisor)
   end
 end

@@ -16,7 +16,9 @@ defmodule Dolphin.Clock do
   `now_ms/0` is monotonic clock time in milliseconds. Changing the speed-up
   (`set_speedup/1`) keeps `now_ms/0` continuous: the clock goes on from where it
   was, at the new rate. The factor is kept in `:persistent_term` (read on every
-  call, written only when it changes).
+  call, written only when it changes), one per `Dolphin.Instance`: a clock
+  is the calling process's instance's, so two instances in one BEAM (two
+  tests) fly at their own speed-ups.
 
   ## Limits
 
@@ -36,7 +38,6 @@ defmodule Dolphin.Clock do
   clock time (`max_wait_ms/1`).
   """
 
-  @key {__MODULE__, :state}
   @min_speedup 0.01
   @max_speedup 1000
   @max_timer_ms 4_294_967_295
@@ -55,7 +56,7 @@ defmodule Dolphin.Clock do
   """
   @spec set_speedup(number()) :: :ok
   def set_speedup(k) do
-    if speedup?(k), do: :persistent_term.put(@key, {k, System.monotonic_time(:microsecond), now_ms()}), else: raise(ArgumentError, speedup_rule(k))
+    if speedup?(k), do: :persistent_term.put(key(), {k, System.monotonic_time(:microsecond), now_ms()}), else: raise(ArgumentError, speedup_rule(k))
   end
 
   @doc """
@@ -132,5 +133,7 @@ defmodule Dolphin.Clock do
   @spec sleep(number()) :: :ok
   def sleep(clock_ms), do: Process.sleep(to_real_ms(clock_ms))
 
-  defp state, do: :persistent_term.get(@key, {1, 0, 0})
+  defp state, do: :persistent_term.get(key(), {1, 0, 0})
+
+  defp key, do: {__MODULE__, Dolphin.Instance.current()}
 end

@@ -290,19 +290,29 @@ defmodule Dolphin.Engine do
     end
   end
 
-  @doc "The running runs: `%{run, pid, owner, task}`."
+  @doc "The running runs of the calling process's `Dolphin.Instance`: `%{run, pid, owner, task}`."
   @spec runs() :: [map()]
   def runs do
+    instance = Dolphin.Instance.current()
+
     Registry.select(Dolphin.Engine.Registry, [{{{:run, :"$1"}, :"$2", :"$3"}, [], [{{:"$1", :"$2", :"$3"}}]}])
+    |> Enum.filter(fn {_, _, meta} -> meta.instance == instance end)
     |> Enum.map(fn {id, pid, meta} -> %{run: id, pid: pid, owner: meta.owner, task: meta.task} end)
     |> Enum.sort_by(& &1.run)
   end
 
-  @doc "The running tasks, by id: `%{task_id, run, parent_id, kind, name, vehicle, pid}` (for a console's tree view)."
+  @doc """
+  The running tasks of the calling process's `Dolphin.Instance` (whose
+  vehicles they fly), by id: `%{task_id, run, parent_id, kind, name,
+  vehicle, pid}` (for a console's tree view).
+  """
   @spec tasks() :: [map()]
   def tasks do
+    instance = Dolphin.Instance.current()
+
     Registry.select(Dolphin.Engine.Registry, [{{{:task, :"$1"}, :"$2", :"$3"}, [], [{{:"$1", :"$2", :"$3"}}]}])
-    |> Enum.map(fn {id, pid, meta} -> Map.merge(meta, %{task_id: id, pid: pid}) end)
+    |> Enum.filter(fn {_, _, meta} -> meta.instance == instance end)
+    |> Enum.map(fn {id, pid, meta} -> meta |> Map.delete(:instance) |> Map.merge(%{task_id: id, pid: pid}) end)
     |> Enum.sort_by(& &1.task_id)
   end
 

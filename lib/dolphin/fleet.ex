@@ -75,23 +75,29 @@ defmodule Dolphin.Fleet do
   # --- API ---
 
   @doc """
-  Starts a fleet. Options: `:name` (default `Dolphin.Fleet`), `:source`
-  (default `config :dolphin, vehicle_source:` or `{Dolphin.Fleet.MAVLinkSource, nil}`),
+  Starts a fleet. Options: `:name` (required), `:source` (default
+  `config :dolphin, vehicle_source:` or `{Dolphin.Fleet.MAVLinkSource, nil}`),
   `:events` (emit the events of picks, default true; vehicles' own events
-  are their source's).
+  are their source's), `:claims` (claim picked vehicles cluster-wide, see
+  `Dolphin.Fleet.Claims`; default true: a `Dolphin.Instance` other than
+  the default, which is no cluster's, starts its fleet without).
+
+  Each `Dolphin.Instance` starts one (`Dolphin.Fleet` in the default
+  instance): the functions below without a fleet use the calling process's
+  instance's.
   """
   @spec start_link(keyword()) :: GenServer.on_start()
-  def start_link(opts \\ []) do
-    name = Keyword.get(opts, :name, __MODULE__)
-    GenServer.start_link(__MODULE__, Keyword.put(opts, :name, name), name: name)
+  def start_link(opts) do
+    name = Keyword.fetch!(opts, :name)
+    GenServer.start_link(__MODULE__, opts, name: name)
   end
 
   @doc false
-  def child_spec(opts), do: %{id: Keyword.get(opts, :name, __MODULE__), start: {__MODULE__, :start_link, [opts]}}
+  def child_spec(opts), do: %{id: Keyword.fetch!(opts, :name), start: {__MODULE__, :start_link, [opts]}}
 
   @doc "The fleet's vehicle source."
   @spec source(fleet()) :: Source.t()
-  def source(fleet \\ __MODULE__) do
+  def source(fleet \\ here()) do
     case is_atom(fleet) && :persistent_term.get({__MODULE__, fleet}, nil) do
       source when is_tuple(source) -> source
       _ -> GenServer.call(fleet, :source)
@@ -100,7 +106,7 @@ defmodule Dolphin.Fleet do
 
   @doc "Changes the vehicle source (forgetting the vehicles of the old one); used by `mix dolphin.run --fake`."
   @spec set_source(fleet(), Source.t()) :: :ok
-  def set_source(fleet \\ __MODULE__, {m, _} = source) when is_atom(m), do: GenServer.call(fleet, {:set_source, source})
+  def set_source(fleet \\ here(), {m, _} = source) when is_atom(m), do: GenServer.call(fleet, {:set_source, source})
 
   @doc """
   Every known vehicle with its status: `%{vehicle: View.t(), picked_by: pid | nil, busy: run_id | nil}`.
@@ -108,7 +114,7 @@ defmodule Dolphin.Fleet do
   listed with a view of its id only, not connected.
   """
   @spec vehicles(fleet()) :: [%{vehicle: View.t(), picked_by: pid() | nil, busy: integer() | nil}]
-  def vehicles(fleet \\ __MODULE__), do: GenServer.call(fleet, :vehicles)
+  def vehicles(fleet \\ here()), do: GenServer.call(fleet, :vehicles)
 
   @doc "Picks vehicles for `owner` (see the module doc). Raises `ArgumentError` for an unknown or malformed option."
   @spec pick(fleet(), pid(), keyword()) :: {:ok, VehicleSet.t()} | {:error, PickError.t()}
@@ -207,14 +213,19 @@ defmodule Dolphin.Fleet do
   def init(opts) do
     name = Keyword.fetch!(opts, :name)
     source = Keyword.get_lazy(opts, :source, fn -> Application.get_env(:dolphin, :vehicle_source, {Dolphin.Fleet.MAVLinkSource, nil}) end)
+    claims? = Keyword.get(opts, :claims, true)
     PubSub.subscribe(:vehicles)
-    # Claims released on other nodes, and nodes gone with their claims, may
-    # make waiting picks servable.
-    :ok = Claims.watch()
-    :ok = :net_kernel.monitor_nodes(true)
+
+    if claims? do
+      # Claims released on other nodes, and nodes gone with their claims, may
+      # make waiting picks servable.
+      :ok = Claims.watch()
+      :ok = :net_kernel.monitor_nodes(true)
+    end
 
     s = %{
       name: name,
+      claims?: claims?,
       source: nil,
       events: Keyword.get(opts, :events, true),
       # vehicle id => owner pid
@@ -353,7 +364,7 @@ defmodule Dolphin.Fleet do
 
   defp release_vehicles(s, owner, ids) do
     mine = Enum.filter(ids, &(s.picked[&1] == owner))
-    if mine != [], do: Claims.release(mine)
+    if mine != [] and s.claims?, do: Claims.release(mine)
     if s.events and mine != [], do: Events.emit(:released, %{vehicles: Enum.sort(mine)})
     %{s | picked: Map.drop(s.picked, mine)}
   end
@@ -397,7 +408,7 @@ defmodule Dolphin.Fleet do
 
     with true <- length(matching) >= w.req.count,
          ids = matching |> Enum.take(w.req.count) |> Enum.map(& &1.id),
-         :ok <- Claims.claim(ids, w.owner) do
+         :ok <- if(s.claims?, do: Claims.claim(ids, w.owner), else: :ok) do
       {:given, give(s, w, ids)}
     else
       false -> {:kept, s, matching}
@@ -456,4 +467,7 @@ defmodule Dolphin.Fleet do
       _ -> %{s | monitors: Map.put(s.monitors, pid, Process.monitor(pid))}
     end
   end
+
+  # The fleet of the calling process's instance.
+  defp here, do: Dolphin.Instance.names().fleet
 end

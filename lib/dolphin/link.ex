@@ -68,7 +68,7 @@ defmodule Dolphin.Link do
          {:ok, forward} <- parse_all(Keyword.get(opts, :forward, [])) do
       opts = Keyword.put(opts, :forward, forward)
 
-      case DynamicSupervisor.start_child(Dolphin.Link.Supervisor, {Dolphin.Link.Connection, [endpoint: ep] ++ opts}) do
+      case DynamicSupervisor.start_child(Dolphin.Instance.names().links, {Dolphin.Link.Connection, [endpoint: ep] ++ opts}) do
         {:ok, pid} -> {:ok, pid}
         {:error, {:already_started, _}} -> {:error, %EndpointError{endpoint: endpoint, reason: :already_connected}}
         {:error, {{:cannot_open, where, why}, _}} -> {:error, %EndpointError{endpoint: where, reason: :cannot_open, detail: why}}
@@ -86,7 +86,7 @@ defmodule Dolphin.Link do
   @spec disconnect(pid()) :: :ok
   def disconnect(link) do
     # :not_found: it was stopped already.
-    _ = DynamicSupervisor.terminate_child(Dolphin.Link.Supervisor, link)
+    _ = DynamicSupervisor.terminate_child(Dolphin.Instance.names().links, link)
     :ok
   end
 

@@ -18,29 +18,33 @@ defmodule Dolphin.PubSub do
   anyone may read; a subscriber takes what a notice carries whole (the
   engine's condition watchers hold the latest views as their snapshot) and
   never rebuilds the owner's data from changes.
+
+  Each `Dolphin.Instance` has its own (named `Dolphin.PubSub` in the
+  default instance): a process subscribes and publishes in the instance it
+  works in.
   """
 
-  @registry __MODULE__
-
   @doc false
-  def child_spec(_opts), do: Registry.child_spec(keys: :duplicate, name: @registry, partitions: 1)
+  def child_spec(opts), do: Registry.child_spec(keys: :duplicate, name: Keyword.fetch!(opts, :name), partitions: 1)
 
   @doc "Subscribes the calling process to `topic`."
   @spec subscribe(term()) :: :ok
   def subscribe(topic) do
-    {:ok, _} = Registry.register(@registry, topic, nil)
+    {:ok, _} = Registry.register(registry(), topic, nil)
     :ok
   end
 
   @doc "Unsubscribes the calling process from `topic`."
   @spec unsubscribe(term()) :: :ok
-  def unsubscribe(topic), do: Registry.unregister(@registry, topic)
+  def unsubscribe(topic), do: Registry.unregister(registry(), topic)
 
   @doc "Sends `{:dolphin, topic, event}` to every subscriber of `topic`."
   @spec publish(term(), term()) :: :ok
   def publish(topic, event) do
-    Registry.dispatch(@registry, topic, fn entries ->
+    Registry.dispatch(registry(), topic, fn entries ->
       for {pid, _} <- entries, do: send(pid, {:dolphin, topic, event})
     end)
   end
+
+  defp registry, do: Dolphin.Instance.names().pubsub
 end

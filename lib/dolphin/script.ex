@@ -136,7 +136,7 @@ defmodule Dolphin.Script do
   @spec start(t(), keyword()) :: {:ok, pid()}
   def start(%__MODULE__{} = script, opts \\ []) do
     # The caller's context (its fleet, clock) is the script's, unless the options say otherwise.
-    ctx = Context.new(Keyword.take(opts, [:fleet, :clock, :tick_ms, :stop_timeout_ms, :ask, :output, :platform_opts]))
+    ctx = Context.new(Keyword.take(opts, [:instance, :fleet, :clock, :tick_ms, :stop_timeout_ms, :ask, :output, :platform_opts]))
     Runner.start_link(script, ctx, opts, {self(), __MODULE__})
   end
 

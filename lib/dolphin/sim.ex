@@ -130,7 +130,7 @@ defmodule Dolphin.Sim do
            faults: Keyword.get(opts, :faults, %{}),
            config: Map.put(config, :camera, sysid in cameras)}
 
-        case DynamicSupervisor.start_child(Dolphin.Sim.Supervisor, child) do
+        case DynamicSupervisor.start_child(Dolphin.Instance.names().sims, child) do
           {:ok, _pid} -> {:cont, {:ok, [sim_id(network, sysid) | started]}}
           {:error, why} -> {:halt, {:error, %Dolphin.Sim.Error{reason: :start_failed, message: "simulated vehicle #{sysid}: #{inspect(why)}"}}}
         end
@@ -163,7 +163,7 @@ defmodule Dolphin.Sim do
   def stop(sysid) do
     case whereis(sysid) do
       nil -> :ok
-      pid -> DynamicSupervisor.terminate_child(Dolphin.Sim.Supervisor, pid) |> then(fn _ -> :ok end)
+      pid -> DynamicSupervisor.terminate_child(Dolphin.Instance.names().sims, pid) |> then(fn _ -> :ok end)
     end
   end
 
@@ -171,7 +171,7 @@ defmodule Dolphin.Sim do
   @spec vehicles() :: [byte()]
   def vehicles do
     # The registry forgets a dead process a moment after it dies: ask the process.
-    Registry.select(Dolphin.Registry, [{{{:sim, :"$1"}, :"$2", :_}, [], [{{:"$1", :"$2"}}]}])
+    Registry.select(Dolphin.Instance.names().registry, [{{{:sim, :"$1"}, :"$2", :_}, [], [{{:"$1", :"$2"}}]}])
     |> Enum.filter(fn {_id, pid} -> Process.alive?(pid) end)
     |> Enum.map(&elem(&1, 0))
     |> Enum.sort()
@@ -213,7 +213,7 @@ defmodule Dolphin.Sim do
           # An abnormal exit: the supervisor restarts the (transient) vehicle.
           Process.exit(pid, :kill)
         else
-          DynamicSupervisor.terminate_child(Dolphin.Sim.Supervisor, pid)
+          DynamicSupervisor.terminate_child(Dolphin.Instance.names().sims, pid)
         end
 
         :ok
@@ -233,7 +233,7 @@ defmodule Dolphin.Sim do
   defp sim_id(network, sysid), do: {network, sysid}
 
   defp whereis(sysid) do
-    case Registry.lookup(Dolphin.Registry, {:sim, sysid}) do
+    case Registry.lookup(Dolphin.Instance.names().registry, {:sim, sysid}) do
       [{pid, _}] -> if Process.alive?(pid), do: pid
       [] -> nil
     end

@@ -150,10 +150,10 @@ defmodule Dolphin.SITL do
   @doc "Stops what `start/2` started: the instances, their link, and the ground station forgets the vehicles."
   @spec stop(t()) :: :ok
   def stop(%{link: link, sysids: sysids, instances: instances, numbers: numbers} = fleet) do
-    if pid = fleet.charger, do: DynamicSupervisor.terminate_child(Dolphin.SITL.Supervisor, pid)
+    if pid = fleet.charger, do: DynamicSupervisor.terminate_child(Dolphin.Instance.names().sitls, pid)
     # The link first: a frame still on its way would make a forgotten vehicle known again.
     Dolphin.Link.disconnect(link)
-    Enum.each(instances, &DynamicSupervisor.terminate_child(Dolphin.SITL.Supervisor, &1))
+    Enum.each(instances, &DynamicSupervisor.terminate_child(Dolphin.Instance.names().sitls, &1))
     release_instances(numbers)
     remove_payload(sysids, :camera)
     Enum.each(sysids, &Dolphin.Vehicles.forget/1)
@@ -234,7 +234,7 @@ defmodule Dolphin.SITL do
   end
 
   defp start_instance(spec) do
-    {:ok, pid} = DynamicSupervisor.start_child(Dolphin.SITL.Supervisor, {Instance, spec})
+    {:ok, pid} = DynamicSupervisor.start_child(Dolphin.Instance.names().sitls, {Instance, spec})
     pid
   end
 
@@ -283,7 +283,7 @@ defmodule Dolphin.SITL do
   defp start_charger(_sysids, rate) when rate <= 0, do: nil
 
   defp start_charger(sysids, rate) do
-    {:ok, pid} = DynamicSupervisor.start_child(Dolphin.SITL.Supervisor, {Charger, sysids: sysids, per_s: rate})
+    {:ok, pid} = DynamicSupervisor.start_child(Dolphin.Instance.names().sitls, {Charger, sysids: sysids, per_s: rate})
     pid
   end
 

@@ -104,7 +104,7 @@ defmodule Dolphin.Vehicles do
   @doc "The ids of the known vehicles, ascending (system ids, then qualified names): those with a view in `Dolphin.Vehicles.Views`, and local ones not yet through their first frame."
   @spec list() :: [Id.t()]
   def list do
-    Dolphin.Registry
+    Dolphin.Instance.names().registry
     |> Registry.select([{{{:vehicle, :"$1"}, :_, :_}, [], [:"$1"]}])
     |> Enum.concat(Dolphin.Vehicles.Views.ids())
     |> Enum.uniq()
@@ -283,7 +283,7 @@ defmodule Dolphin.Vehicles do
   @doc "This node's own process of a vehicle, or nil: never a route to another ground station's."
   @spec whereis_local(Id.t()) :: pid() | nil
   def whereis_local(id) do
-    case Registry.lookup(Dolphin.Registry, {:vehicle, id}) do
+    case Registry.lookup(Dolphin.Instance.names().registry, {:vehicle, id}) do
       [{pid, _}] -> pid
       [] -> nil
     end
@@ -303,7 +303,7 @@ defmodule Dolphin.Vehicles do
     # What was set for it is not inherited by another vehicle given its id later.
     Dolphin.Vehicles.Settings.clear(id)
 
-    if pid, do: DynamicSupervisor.terminate_child(Dolphin.Vehicles.Supervisor, pid)
+    if pid, do: DynamicSupervisor.terminate_child(Dolphin.Instance.names().vehicles, pid)
 
     if pid == nil and Dolphin.Vehicles.Routes.get(id) do
       # A routed vehicle (another station's) is forgotten here only, by its
@@ -556,7 +556,7 @@ defmodule Dolphin.Vehicles do
 
   defp discover(id, %Frame{message: %Heartbeat{type: type, autopilot: autopilot}} = frame, link)
        when type != @gcs_type and autopilot != @no_autopilot do
-    case DynamicSupervisor.start_child(Dolphin.Vehicles.Supervisor, {Dolphin.Vehicles.Vehicle, {id, link, []}}) do
+    case DynamicSupervisor.start_child(Dolphin.Instance.names().vehicles, {Dolphin.Vehicles.Vehicle, {id, link, []}}) do
       # Its first view, put once the process has taken this frame, says
       # it is discovered.
       {:ok, pid} ->

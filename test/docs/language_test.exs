@@ -8,8 +8,13 @@ defmodule Dolphin.Docs.LanguageTest do
   #   <!-- compile -->                                    compile it only (long flights)
   #
   # A block without a marker is a mistake: examples that are never run rot.
-  # Changes the application's fleet source and the clock's speed-up: not async.
-  use ExUnit.Case, async: false
+  # Its own Dolphin.Instance (its vehicles, links and clock): async.
+  use ExUnit.Case, async: true
+
+  setup do
+    Dolphin.Test.Instance.start!()
+    :ok
+  end
 
   alias Dolphin.Test.GroundStation
   alias Mix.Tasks.Dolphin.Run
@@ -59,7 +64,7 @@ defmodule Dolphin.Docs.LanguageTest do
   end
 
   setup do
-    on_exit(&GroundStation.forget_vehicles/0)
+    Dolphin.Test.Instance.on_exit(&GroundStation.forget_vehicles/0)
   end
 
   test "every elixir block of docs/language.md says how it is checked" do

@@ -72,21 +72,29 @@ defmodule Dolphin.Docs.ReadmeTest do
     assert broken == [], "broken links: #{Enum.join(broken, ", ")}"
   end
 
-  test "docs/architecture.md's supervision tree names every child of Dolphin.Supervisor, in order" do
+  test "docs/architecture.md's supervision tree names every child of Dolphin.Supervisor and of the default instance, in order" do
     doc = File.read!(Path.join(@root, "docs/architecture.md"))
     [_, tree] = String.split(doc, "Dolphin.Supervisor (rest_for_one", parts: 2)
     [tree | _] = String.split(tree, "```", parts: 2)
-    drawn = for line <- String.split(tree, "\n"), [_, name] <- [Regex.run(~r/^[├└]─ (\S+(?: links)?)/u, line)], do: name
+    lines = String.split(tree, "\n")
+    drawn = for line <- lines, [_, name] <- [Regex.run(~r/^[├└]─ (\S+(?: links)?)/u, line)], do: name
+    # The default instance's children: the lines drawn under it, up to the next child of the root.
+    under_instance = lines |> Enum.drop_while(&(not String.starts_with?(&1, "├─ Dolphin.Instance"))) |> tl() |> Enum.take_while(&String.starts_with?(&1, "│"))
+    drawn_in_instance = for line <- under_instance, [_, name] <- [Regex.run(~r/^│    [├└]─ (\S+(?: links)?)/u, line)], do: name
 
-    running =
-      for {id, _pid, _type, _modules} <- Enum.reverse(Supervisor.which_children(Dolphin.Supervisor)) do
+    named = fn supervisor ->
+      for {id, _pid, _type, _modules} <- Enum.reverse(Supervisor.which_children(supervisor)) do
         case id do
           :cluster_scope -> "Dolphin.Cluster.Scope"
           :configured_links -> "configured links"
+          {Dolphin.Instance, Dolphin} -> "Dolphin.Instance"
           module -> inspect(module)
         end
       end
+    end
 
-    assert drawn == running
+    assert drawn == named.(Dolphin.Supervisor)
+    [instance] = for {{Dolphin.Instance, Dolphin}, pid, :supervisor, _} <- Supervisor.which_children(Dolphin.Supervisor), do: pid
+    assert drawn_in_instance == named.(instance)
   end
 end

@@ -1,7 +1,12 @@
 defmodule Dolphin.VehiclesTest do
-  # A scripted MAVLink peer talks to a real UDP link on 127.0.0.1. Changes the
-  # global clock speed-up and shares the vehicle registry: not async.
-  use ExUnit.Case, async: false
+  # A scripted MAVLink peer talks to a real UDP link on 127.0.0.1. Its own
+  # Dolphin.Instance (its vehicles, links and clock): async.
+  use ExUnit.Case, async: true
+
+  setup do
+    Dolphin.Test.Instance.start!()
+    :ok
+  end
 
   alias Dolphin.Test.Wait
 
@@ -21,9 +26,9 @@ defmodule Dolphin.VehiclesTest do
     port = Connection.port(name)
     peer = UDPPeer.open()
 
-    on_exit(fn ->
+    Dolphin.Test.Instance.on_exit(fn ->
       Clock.set_speedup(1)
-      DynamicSupervisor.terminate_child(Dolphin.Link.Supervisor, link)
+      DynamicSupervisor.terminate_child(Dolphin.Instance.names().links, link)
       Enum.each(Vehicles.list(), &Vehicles.forget/1)
     end)
 
@@ -83,7 +88,7 @@ defmodule Dolphin.VehiclesTest do
 
     {:ok, other_port} = :inet.port(other)
     name = "12@127.0.0.1:#{other_port}"
-    on_exit(fn -> Vehicles.forget(name) end)
+    Dolphin.Test.Instance.on_exit(fn -> Vehicles.forget(name) end)
     assert_receive {:dolphin, :events, %{event: :system_id_shared, vehicle: 12, uid: 9, vehicle_uid: 7, path: path, other: ^name} = event}, 10_000
     assert path =~ "from 127.0.0.1:#{other_port}"
     assert Dolphin.EventText.event_text(event) =~ "vehicle 12: another vehicle with its system id is heard on #{path} (unique id 9, not 7): that is vehicle #{name}"
@@ -224,7 +229,7 @@ defmodule Dolphin.VehiclesTest do
     assert_receive {:dolphin, :vehicles, {:vehicle_discovered, 17}}, 10_000
     Wait.until(fn -> match?({:ok, %{link: %{received: 1}}}, Vehicles.state(17)) end)
     vehicle = Vehicles.whereis(17)
-    [{link, _}] = Registry.lookup(Dolphin.Registry, {:link, name})
+    [{link, _}] = Registry.lookup(Dolphin.Instance.names().registry, {:link, name})
 
     # The whole ground station held up (as a loaded host does) for longer than
     # the timeout and a check period, while the vehicle went on sending: its
@@ -254,9 +259,9 @@ defmodule Dolphin.VehiclesTest do
     UDPPeer.send_message(peer, port, copter(17), sysid: 14, seq: 1)
     Wait.until(fn -> match?({:ok, %{mode: :brake}}, Vehicles.state(14)) end)
 
-    [{link, _}] = Registry.lookup(Dolphin.Registry, {:link, name})
+    [{link, _}] = Registry.lookup(Dolphin.Instance.names().registry, {:link, name})
     Process.exit(link, :kill)
-    Wait.until(fn -> match?([{p, _}] when p != link, Registry.lookup(Dolphin.Registry, {:link, name})) end)
+    Wait.until(fn -> match?([{p, _}] when p != link, Registry.lookup(Dolphin.Instance.names().registry, {:link, name})) end)
     assert 14 in Vehicles.list()
   end
 
@@ -264,8 +269,8 @@ defmodule Dolphin.VehiclesTest do
     UDPPeer.send_message(peer, port, copter(), sysid: 15)
     UDPPeer.receive_until(peer, &match?(%M.RequestDataStream{}, &1.message))
     # Stop the link so the file is flushed and closed.
-    [{link, _}] = Registry.lookup(Dolphin.Registry, {:link, name})
-    :ok = DynamicSupervisor.terminate_child(Dolphin.Link.Supervisor, link)
+    [{link, _}] = Registry.lookup(Dolphin.Instance.names().registry, {:link, name})
+    :ok = DynamicSupervisor.terminate_child(Dolphin.Instance.names().links, link)
 
     {records, reader} = Tlog.read(Tlog.reader(), File.read!(tlog))
     {[], _} = Tlog.finish(reader)

@@ -5,12 +5,12 @@ defmodule Dolphin.Examples.LossyLinkTest do
   # impairment proxy between them that loses 30 % of the datagrams each way,
   # duplicates 5 % and reorders 5 % — flies what it flies over a clean link:
   # the same missions, ending alike, reaching the same items. Five runs, each
-  # with other faults (the proxy's seed).
+  # with other faults (the proxy's seed): five modules, each in a
+  # Dolphin.Instance of its own, flying side by side (below).
   #
   # On ArduCopter SITL the same (one run): tagged :sitl.
   use ExUnit.Case, async: false
 
-  alias Dolphin.Sim
   alias Dolphin.Test.{ExampleRun, GroundStation, UDPProxy}
 
   @moduletag :tmp_dir
@@ -29,37 +29,31 @@ defmodule Dolphin.Examples.LossyLinkTest do
   end
 
   # A proxy in front of `port`, told apart by `label`.
-  defp proxy(port, label, seed), do: start_supervised!({UDPProxy, gcs: port, seed: seed, both: @faults}, id: {:proxy, label})
+  def proxy(port, label, seed),
+    do: start_supervised!({UDPProxy, gcs: port, seed: seed, both: @faults}, id: {:proxy, label})
 
-  defp stats_and_stop(proxy, label) do
+  def stats_and_stop(proxy, label) do
     stats = UDPProxy.stats(proxy)
     :ok = stop_supervised({:proxy, label})
     GroundStation.forget_vehicles()
     stats
   end
 
-  test "two_vehicles.exs on the simulator over 30 % loss, 5 % duplicates and 5 % reordering flies as over a clean link, 5 runs of 5", %{tmp_dir: dir} do
-    clean = ExampleRun.run(dir, "two_vehicles", "-clean", ["--sim", "2", "--speedup", "25"], "14m")
-    assert clean.code == 0, clean.output
-
-    for seed <- 1..5 do
-      label = "-lossy#{seed}"
-      port = GroundStation.free_udp_port()
-      proxy = proxy(port, label, seed)
-      {:ok, [1, 2]} = Sim.start(count: 2, gcs: UDPProxy.port(proxy), speedup: 25)
-      lossy = ExampleRun.run(dir, "two_vehicles", label, ["--connect", "udpin:127.0.0.1:#{port}", "--speedup", "25"], "14m")
-      stats = stats_and_stop(proxy, label)
-
-      assert lossy.code == 0, "run #{seed}: " <> lossy.output
-      assert stats.to_gcs.dropped > 0 and stats.to_vehicle.dropped > 0
-      assert lossy.result == clean.result, "run #{seed}"
-      ExampleRun.assert_same_history(clean, lossy, @least, {"a clean link", "the lossy link (run #{seed})"})
-    end
-  end
+  @doc false
+  def least, do: @least
 
   @tag :sitl
-  test "two_vehicles.exs on ArduCopter SITL over 30 % loss, 5 % duplicates and 5 % reordering flies as over a clean link", %{tmp_dir: dir} do
-    clean = ExampleRun.run(dir, "two_vehicles", "-sitl-clean", ["--sitl", "2", "--speedup", "15"], "14m")
+  test "two_vehicles.exs on ArduCopter SITL over 30 % loss, 5 % duplicates and 5 % reordering flies as over a clean link",
+       %{tmp_dir: dir} do
+    clean =
+      ExampleRun.run(
+        dir,
+        "two_vehicles",
+        "-sitl-clean",
+        ["--sitl", "2", "--speedup", "15"],
+        "14m"
+      )
+
     assert clean.code == 0, clean.output
 
     # SITL's link is the run's own (--sitl); the proxy stands between.
@@ -77,13 +71,85 @@ defmodule Dolphin.Examples.LossyLinkTest do
       UDPProxy.port(proxy)
     end
 
-    lossy = ExampleRun.run(dir, "two_vehicles", "-sitl-lossy", ["--sitl", "2", "--speedup", "15"], "14m", sitl: [send_to: send_to])
+    lossy =
+      ExampleRun.run(
+        dir,
+        "two_vehicles",
+        "-sitl-lossy",
+        ["--sitl", "2", "--speedup", "15"],
+        "14m",
+        sitl: [send_to: send_to]
+      )
+
     assert_received {:proxy, proxy}
     stats = stats_and_stop(proxy, "-sitl")
 
     assert lossy.code == 0, lossy.output <> ExampleRun.pace_note(lossy)
     assert stats.to_gcs.dropped > 0 and stats.to_vehicle.dropped > 0
     assert lossy.result == clean.result
-    ExampleRun.assert_same_history(clean, lossy, @least_sitl, {"a clean link", "the lossy link"}, ExampleRun.pace_note(lossy))
+
+    ExampleRun.assert_same_history(
+      clean,
+      lossy,
+      @least_sitl,
+      {"a clean link", "the lossy link"},
+      ExampleRun.pace_note(lossy)
+    )
+  end
+end
+
+# The simulator's five runs, one module each (each its own instance, its own
+# clean run to compare with): they fly side by side.
+for seed <- 1..5 do
+  defmodule Module.concat(Dolphin.Examples.LossyLinkTest, "Seed#{seed}") do
+    use ExUnit.Case, async: true
+
+    alias Dolphin.Examples.LossyLinkTest
+    alias Dolphin.Sim
+    alias Dolphin.Test.{ExampleRun, GroundStation, UDPProxy}
+
+    @moduletag :tmp_dir
+    @moduletag timeout: 900_000
+    @seed seed
+
+    setup do
+      Dolphin.Test.Instance.start!()
+      :ok
+    end
+
+    test "two_vehicles.exs on the simulator over 30 % loss, 5 % duplicates and 5 % reordering flies as over a clean link, run #{@seed} of 5",
+         %{tmp_dir: dir} do
+      seed = unquote(seed)
+
+      clean = ExampleRun.run(dir, "two_vehicles", "-clean", ["--sim", "2", "--speedup", "25"], "14m")
+
+      assert clean.code == 0, clean.output
+      label = "-lossy#{seed}"
+      port = GroundStation.free_udp_port()
+      proxy = LossyLinkTest.proxy(port, label, seed)
+      {:ok, [1, 2]} = Sim.start(count: 2, gcs: UDPProxy.port(proxy), speedup: 25)
+
+      lossy =
+        ExampleRun.run(
+          dir,
+          "two_vehicles",
+          label,
+          ["--connect", "udpin:127.0.0.1:#{port}", "--speedup", "25"],
+          "14m"
+        )
+
+      stats = LossyLinkTest.stats_and_stop(proxy, label)
+
+      assert lossy.code == 0, "run #{seed}: " <> lossy.output
+      assert stats.to_gcs.dropped > 0 and stats.to_vehicle.dropped > 0
+      assert lossy.result == clean.result, "run #{seed}"
+
+      ExampleRun.assert_same_history(
+        clean,
+        lossy,
+        LossyLinkTest.least(),
+        {"a clean link", "the lossy link (run #{seed})"}
+      )
+    end
   end
 end

@@ -1,4 +1,5 @@
-defmodule Dolphin.Examples.ScenariosTest do
+defmodule Dolphin.Examples.Scenario do
+  @moduledoc false
   # The report's scenarios and the other examples, run as a user runs them —
   # `mix dolphin.run examples/NAME.exs --sim N --speedup 25 --events FILE` —
   # against the simulator over UDP on 127.0.0.1, judged from the event log
@@ -8,29 +9,54 @@ defmodule Dolphin.Examples.ScenariosTest do
   # At 25× a vehicle's 1 s mission re-request is 40 ms of real time and its
   # 20 s link timeout 0.8 s: on a shared, busy machine 50× made stalls of a
   # few hundred milliseconds read as lost vehicles and cancelled uploads.
-  # Changes the clock's speed-up and runs simulated fleets: not async.
-  use ExUnit.Case, async: false
+  #
+  # Each example is a test module of its own, in a Dolphin.Instance of its
+  # own (its vehicles, links, clock): the examples fly side by side.
 
-  alias Dolphin.MAVLink.Ardupilotmega.GlobalPositionInt
-  alias Dolphin.MAVLink.{JSON, Tlog}
+  defmacro __using__(_opts) do
+    quote do
+      use ExUnit.Case, async: true
+
+      import Dolphin.Examples.Scenario
+      alias Dolphin.MAVLink.Ardupilotmega.GlobalPositionInt
+      alias Dolphin.MAVLink.Tlog
+
+      @moduletag :scenario
+      @moduletag :tmp_dir
+      @moduletag timeout: 600_000
+
+      @examples Path.expand("../../examples", __DIR__)
+
+      setup do
+        Dolphin.Test.Instance.start!()
+        :ok
+      end
+    end
+  end
+
+  alias Dolphin.MAVLink.JSON
   alias Dolphin.Test.GroundStation
   alias Mix.Tasks.Dolphin.Run
-
-  @moduletag :scenario
-  @moduletag :tmp_dir
-  @moduletag timeout: 600_000
 
   @examples Path.expand("../../examples", __DIR__)
 
   # Runs an example on `sim` simulated vehicles, or `{:fake, n}` fake ones;
   # returns the exit status, the output and the events.
-  defp run_example(dir, name, sim, extra \\ []) do
+  def run_example(dir, name, sim, extra \\ []) do
     events = Path.join(dir, "#{name}.jsonl")
     {:ok, out} = StringIO.open("")
     {:ok, err} = StringIO.open("")
     tlog = Path.join(dir, "#{name}.tlog")
-    vehicles = with {:fake, n} <- sim, do: ["--fake", "#{n}"], else: (n -> ["--sim", "#{n}", "--tlog", tlog])
-    argv = [Path.join(@examples, "#{name}.exs")] ++ vehicles ++ ["--speedup", "25", "--events", events, "--quiet"] ++ extra
+
+    vehicles =
+      with {:fake, n} <- sim,
+           do: ["--fake", "#{n}"],
+           else: (n -> ["--sim", "#{n}", "--tlog", tlog])
+
+    argv =
+      [Path.join(@examples, "#{name}.exs")] ++
+        vehicles ++ ["--speedup", "25", "--events", events, "--quiet"] ++ extra
+
     code = Run.main(argv, out: out, err: err)
     GroundStation.forget_vehicles()
     output = elem(StringIO.contents(out), 1) <> elem(StringIO.contents(err), 1)
@@ -39,23 +65,31 @@ defmodule Dolphin.Examples.ScenariosTest do
       events
       |> File.read!()
       |> String.split("\n", trim: true)
-      |> Enum.map(fn line -> {:ok, e} = JSON.decode(line); e end)
+      |> Enum.map(fn line ->
+        {:ok, e} = JSON.decode(line)
+        e
+      end)
 
     {code, output, parsed}
   end
 
-  # The simulated vehicles of one run are not those of the next (whose system
-  # ids start at 1 again): the ground station forgets them.
-  setup do
-    on_exit(&GroundStation.forget_vehicles/0)
-  end
+  def events(all, name), do: Enum.filter(all, &(&1["event"] == name))
 
-  defp events(all, name), do: Enum.filter(all, &(&1["event"] == name))
+  def tasks(all, result, name),
+    do:
+      Enum.filter(
+        all,
+        &(&1["event"] == "task_finished" and &1["kind"] == "mission" and &1["result"] == result and
+            &1["name"] == name)
+      )
+end
 
-  defp tasks(all, result, name),
-    do: Enum.filter(all, &(&1["event"] == "task_finished" and &1["kind"] == "mission" and &1["result"] == result and &1["name"] == name))
+defmodule Dolphin.Examples.ScenariosTest.Listing2 do
+  # The report's Listing 2: examples/single_vehicle.exs.
+  use Dolphin.Examples.Scenario
 
-  test "Listing 2: two full rounds; the survey stops within 1 s of the battery crossing 30 %, the vehicle lands at home", %{tmp_dir: dir} do
+  test "Listing 2: two full rounds; the survey stops within 1 s of the battery crossing 30 %, the vehicle lands at home",
+       %{tmp_dir: dir} do
     {code, output, all} = run_example(dir, "single_vehicle", 1, ["--for", "28m"])
     assert code == 0, output
 
@@ -65,7 +99,12 @@ defmodule Dolphin.Examples.ScenariosTest do
 
     # Each stop follows the battery condition (until's condition_met) within 1 s of clock time.
     for stop <- Enum.take(stopped, 2) do
-      met = all |> events("condition_met") |> Enum.filter(&(&1["condition"] =~ "< 0.3" and &1["t_ms"] <= stop["t_ms"])) |> List.last()
+      met =
+        all
+        |> events("condition_met")
+        |> Enum.filter(&(&1["condition"] =~ "< 0.3" and &1["t_ms"] <= stop["t_ms"]))
+        |> List.last()
+
       assert met, "no condition_met before #{inspect(stop)}"
       assert stop["t_ms"] - met["t_ms"] <= 1_000
     end
@@ -74,55 +113,104 @@ defmodule Dolphin.Examples.ScenariosTest do
     disarms = events(all, "disarmed")
     assert length(disarms) >= 2
     [first_return | _] = returned
-    next_start = all |> events("task_started") |> Enum.find(&(&1["name"] == "Survey Area" and &1["t_ms"] > first_return["t_ms"]))
+
+    next_start =
+      all
+      |> events("task_started")
+      |> Enum.find(&(&1["name"] == "Survey Area" and &1["t_ms"] > first_return["t_ms"]))
+
     assert next_start
     # Recharging from near empty to 90 % at 0.5 %/s takes minutes.
     assert next_start["t_ms"] - first_return["t_ms"] > 60_000
   end
+end
+
+defmodule Dolphin.Examples.ScenariosTest.Listing3 do
+  # The report's Listing 3: examples/two_vehicles.exs.
+  use Dolphin.Examples.Scenario
 
   test "Listing 3: the two surveys get different vehicles and both come back", %{tmp_dir: dir} do
     {code, output, all} = run_example(dir, "two_vehicles", 2, ["--for", "15m"])
     assert code == 0, output
-    north = all |> events("task_started") |> Enum.find(&(&1["kind"] == "mission" and &1["name"] == "Survey Area 1"))
-    south = all |> events("task_started") |> Enum.find(&(&1["kind"] == "mission" and &1["name"] == "Survey Area 2"))
+
+    north =
+      all
+      |> events("task_started")
+      |> Enum.find(&(&1["kind"] == "mission" and &1["name"] == "Survey Area 1"))
+
+    south =
+      all
+      |> events("task_started")
+      |> Enum.find(&(&1["kind"] == "mission" and &1["name"] == "Survey Area 2"))
+
     assert north["vehicle"] != south["vehicle"]
-    assert Enum.sort(Enum.map(tasks(all, "done", "Return to base"), & &1["vehicle"])) |> Enum.take(2) |> Enum.sort() == Enum.sort([north["vehicle"], south["vehicle"]])
+
+    assert Enum.sort(Enum.map(tasks(all, "done", "Return to base"), & &1["vehicle"]))
+           |> Enum.take(2)
+           |> Enum.sort() == Enum.sort([north["vehicle"], south["vehicle"]])
+
     assert [%{"items" => 42} | _] = events(all, "mission_uploaded") |> Enum.filter(&(&1["name"] == "Survey Area 1"))
   end
+end
 
-  test "resilient_survey.exs: the north copter destroyed half-way, the one standing by flies the passes not flown, each once", %{tmp_dir: dir} do
+defmodule Dolphin.Examples.ScenariosTest.ResilientSurvey do
+  # examples/resilient_survey.exs: a reassignment.
+  use Dolphin.Examples.Scenario
+
+  test "resilient_survey.exs: the north copter destroyed half-way, the one standing by flies the passes not flown, each once",
+       %{tmp_dir: dir} do
     {code, output, all} = run_example(dir, "resilient_survey", 3)
     assert code == 0, output
     assert output =~ "both surveys complete"
 
-    started = fn name -> all |> events("task_started") |> Enum.filter(&(&1["kind"] == "mission" and &1["name"] == name)) end
+    started = fn name ->
+      all
+      |> events("task_started")
+      |> Enum.filter(&(&1["kind"] == "mission" and &1["name"] == name))
+    end
+
     [%{"vehicle" => north}, %{"vehicle" => standby}] = started.("Survey North")
     [%{"vehicle" => south}] = started.("Survey South")
+
     assert [%{"from" => ^north, "to" => ^standby, "resume_seq" => resume}] = events(all, "task_reassigned")
+
     assert standby not in [north, south]
     assert [%{"vehicle" => ^standby}] = tasks(all, "done", "Survey North")
     assert [%{"vehicle" => ^south}] = tasks(all, "done", "Survey South")
 
     # Survey North's items: 1 take-off, 2..13 six passes, 14 the landing. The
     # standby's item s (from 2, after its take-off) is the survey's s - 2 + resume.
-    reached = fn v -> for %{"event" => "mission_item_reached", "vehicle" => ^v, "seq" => s} <- all, do: s end
+    reached = fn v ->
+      for %{"event" => "mission_item_reached", "vehicle" => ^v, "seq" => s} <- all, do: s
+    end
+
     first = MapSet.new(reached.(north))
     second = MapSet.new(for s <- reached.(standby), s >= 2, do: s - 2 + resume)
 
     for a <- 2..12//2 do
-      assert Enum.count([first, second], &(a in &1 and (a + 1) in &1)) == 1, "pass #{a}-#{a + 1}: #{inspect({first, resume, second})}"
+      assert Enum.count([first, second], &(a in &1 and (a + 1) in &1)) == 1,
+             "pass #{a}-#{a + 1}: #{inspect({first, resume, second})}"
     end
   end
+end
+
+defmodule Dolphin.Examples.ScenariosTest.ContinuousRelay do
+  # examples/relay_continuous.exs, judged from the positions in its .tlog.
+  use Dolphin.Examples.Scenario
 
   # The areas of examples/relay_continuous.exs: 300 m north and south of the
+
   # base, watched at 870 m (50 m up) circling with a 30 m radius.
+
   @relay_areas [
     north: Dolphin.Geo.location(40.446933, -7.375234, 870),
     south: Dolphin.Geo.location(40.441533, -7.375234, 870)
   ]
+
   @relay_reach 30 + 20
 
-  test "the continuous relay keeps a vehicle on station over each area every second, from the first arrival to the end", %{tmp_dir: dir} do
+  test "the continuous relay keeps a vehicle on station over each area every second, from the first arrival to the end",
+       %{tmp_dir: dir} do
     # 13 minutes: three shifts of about 165 s each after the first arrival
     # (a minute in), then the first vehicle, recharged, back on station.
     {code, output, all} = run_example(dir, "relay_continuous", 6, ["--for", "13m"])
@@ -137,16 +225,22 @@ defmodule Dolphin.Examples.ScenariosTest do
     by_vehicle = Enum.group_by(samples, &elem(&1, 0))
     assert map_size(by_vehicle) == 6
     # The end of the run: the last report every vehicle got to send.
-    run_end = by_vehicle |> Enum.map(fn {_, s} -> s |> Enum.map(&elem(&1, 1)) |> Enum.max() end) |> Enum.min()
+    run_end =
+      by_vehicle
+      |> Enum.map(fn {_, s} -> s |> Enum.map(&elem(&1, 1)) |> Enum.max() end)
+      |> Enum.min()
 
     watchers =
       for {name, point} <- @relay_areas do
-        on_station? = fn {_, _, at, _} -> Dolphin.Geo.distance(at, point) <= @relay_reach and at.h >= point.h - 5 end
+        on_station? = fn {_, _, at, _} ->
+          Dolphin.Geo.distance(at, point) <= @relay_reach and at.h >= point.h - 5
+        end
 
         # Each vehicle's time on station: from one report to the next when both
         # find it there (reports at most 2 s apart: one may be lost on the way).
         spans =
-          for {_, reports} <- by_vehicle, [a, b] <- Enum.chunk_every(Enum.sort_by(reports, &elem(&1, 1)), 2, 1, :discard),
+          for {_, reports} <- by_vehicle,
+              [a, b] <- Enum.chunk_every(Enum.sort_by(reports, &elem(&1, 1)), 2, 1, :discard),
               on_station?.(a) and on_station?.(b) and elem(b, 1) - elem(a, 1) <= 2_000,
               do: {elem(a, 1), elem(b, 1)}
 
@@ -161,20 +255,33 @@ defmodule Dolphin.Examples.ScenariosTest do
           end)
           |> Enum.reverse()
 
-        holes = merged |> Enum.chunk_every(2, 1, :discard) |> Enum.map(fn [{_, left}, {came, _}] -> {left, came} end) |> Enum.filter(fn {left, _} -> left < run_end end)
-        assert holes == [], "the #{name} area was left without a vehicle on station (from, to ms of clock time): #{inspect(holes)}"
+        holes =
+          merged
+          |> Enum.chunk_every(2, 1, :discard)
+          |> Enum.map(fn [{_, left}, {came, _}] -> {left, came} end)
+          |> Enum.filter(fn {left, _} -> left < run_end end)
+
+        assert holes == [],
+               "the #{name} area was left without a vehicle on station (from, to ms of clock time): #{inspect(holes)}"
+
         assert {_, covered_to} = hd(merged)
-        assert covered_to >= run_end - 1_000, "the #{name} area was watched up to #{covered_to} ms, the run went on to #{run_end} ms"
+
+        assert covered_to >= run_end - 1_000,
+               "the #{name} area was watched up to #{covered_to} ms, the run went on to #{run_end} ms"
 
         # The ring went round: a vehicle watched, landed, and watched again (it
         # takes off only at 90 %: it recharged).
         watched = for {v, reports} <- by_vehicle, Enum.any?(reports, on_station?), do: v
-        assert length(watched) == 3, "the #{name} area was watched by #{inspect(watched)}, not a ring of three"
+
+        assert length(watched) == 3,
+               "the #{name} area was watched by #{inspect(watched)}, not a ring of three"
 
         assert Enum.any?(watched, fn v ->
                  by_vehicle[v]
                  |> Enum.sort_by(&elem(&1, 1))
-                 |> Enum.map(fn r -> if on_station?.(r), do: :on, else: if(elem(r, 3) < 1, do: :ground, else: :air) end)
+                 |> Enum.map(fn r ->
+                   if on_station?.(r), do: :on, else: if(elem(r, 3) < 1, do: :ground, else: :air)
+                 end)
                  |> Enum.reject(&(&1 == :air))
                  |> Enum.dedup()
                  |> Enum.drop_while(&(&1 != :on))
@@ -190,6 +297,7 @@ defmodule Dolphin.Examples.ScenariosTest do
   end
 
   # {sysid, time_boot_ms, location, relative altitude in metres} of every GLOBAL_POSITION_INT in a .tlog.
+
   defp tlog_positions(path) do
     {records, reader} = Tlog.read(Tlog.reader(), File.read!(path))
     {rest, _} = Tlog.finish(reader)
@@ -197,44 +305,98 @@ defmodule Dolphin.Examples.ScenariosTest do
     for {_, %{sysid: sysid, message: %GlobalPositionInt{} = m}} <- records ++ rest,
         do: {sysid, m.time_boot_ms, Dolphin.Geo.location(m.lat / 1.0e7, m.lon / 1.0e7, m.alt / 1000), m.relative_alt / 1000}
   end
+end
+
+defmodule Dolphin.Examples.ScenariosTest.Listing4 do
+  # The report's Listing 4: examples/relay.exs.
+  use Dolphin.Examples.Scenario
 
   test "Listing 4, faithful: pairs take turns", %{tmp_dir: dir} do
     {code, output, all} = run_example(dir, "relay", 4, ["--for", "20m"])
     assert code == 0, output
-    flown = all |> events("task_started") |> Enum.filter(&(&1["kind"] == "mission" and &1["name"] =~ "Survey Area")) |> Enum.map(& &1["vehicle"])
+
+    flown =
+      all
+      |> events("task_started")
+      |> Enum.filter(&(&1["kind"] == "mission" and &1["name"] =~ "Survey Area"))
+      |> Enum.map(& &1["vehicle"])
+
     # The second pair is different from the first.
     assert length(flown) >= 4
     assert MapSet.disjoint?(MapSet.new(Enum.take(flown, 2)), MapSet.new(Enum.slice(flown, 2, 2)))
   end
+end
 
-  test "the other examples finish as designed", %{tmp_dir: dir} do
+defmodule Dolphin.Examples.ScenariosTest.StandbyPatrols do
+  # examples/standby_patrols.exs.
+  use Dolphin.Examples.Scenario
+
+  test "standby_patrols.exs: each tower watched until the patrols end", %{tmp_dir: dir} do
     {code, output, all} = run_example(dir, "standby_patrols", 2)
     assert code == 0, output
-    assert length(events(all, "task_finished") |> Enum.filter(&(&1["name"] =~ "Tower" and &1["result"] == "stopped"))) == 4
 
+    assert length(
+             events(all, "task_finished")
+             |> Enum.filter(&(&1["name"] =~ "Tower" and &1["result"] == "stopped"))
+           ) == 4
+  end
+end
+
+defmodule Dolphin.Examples.ScenariosTest.SearchAndSignal do
+  # examples/search_and_signal.exs.
+  use Dolphin.Examples.Scenario
+
+  test "search_and_signal.exs: the find is posted once and consumed once, the look stopped", %{
+    tmp_dir: dir
+  } do
     {code, output, all} = run_example(dir, "search_and_signal", 3)
     assert code == 0, output
     assert [%{"key" => "found"}] = events(all, "signal_posted")
     assert [%{"key" => "found"}] = events(all, "signal_consumed")
-    assert [_] = all |> events("task_finished") |> Enum.filter(&(&1["name"] =~ "Look at" and &1["result"] == "stopped"))
 
+    assert [_] =
+             all
+             |> events("task_finished")
+             |> Enum.filter(&(&1["name"] =~ "Look at" and &1["result"] == "stopped"))
+  end
+end
+
+defmodule Dolphin.Examples.ScenariosTest.PhotoPatrol do
+  # examples/photo_patrol.exs.
+  use Dolphin.Examples.Scenario
+
+  test "photo_patrol.exs: the patrol stopped, home reached, the patrol over", %{tmp_dir: dir} do
     {code, output, all} = run_example(dir, "photo_patrol", 3)
     assert code == 0, output
     assert [%{"result" => "stopped"}] = tasks(all, "stopped", "Field patrol")
     assert [_] = tasks(all, "done", "Home")
     assert output =~ "patrol over"
   end
+end
 
-  test "dry_run.exs on fake vehicles: the scout's survey stops on its drained battery, the photos wait for the signal, one_of picks the scout, a failure is handled", %{tmp_dir: dir} do
+defmodule Dolphin.Examples.ScenariosTest.DryRun do
+  # examples/dry_run.exs on fake vehicles.
+  use Dolphin.Examples.Scenario
+
+  test "dry_run.exs on fake vehicles: the scout's survey stops on its drained battery, the photos wait for the signal, one_of picks the scout, a failure is handled",
+       %{tmp_dir: dir} do
     {code, output, all} = run_example(dir, "dry_run", {:fake, 3})
     assert code == 0, output
     assert %{"result" => "done"} = all |> events("script_finished") |> List.last()
-    finished = fn name -> all |> events("task_finished") |> Enum.filter(&(&1["kind"] == "test" and &1["name"] == name)) end
+
+    finished = fn name ->
+      all
+      |> events("task_finished")
+      |> Enum.filter(&(&1["kind"] == "test" and &1["name"] == name))
+    end
 
     # The survey runs until the action drains the scout's battery a minute in, then the scout returns.
     assert [%{"result" => "stopped", "vehicle" => scout, "t_ms" => stopped}] = finished.("survey")
     assert stopped >= 60_000
-    assert all |> events("condition_met") |> Enum.any?(&(&1["condition"] == "battery(scout) < 0.3" and &1["t_ms"] <= stopped))
+
+    assert all
+           |> events("condition_met")
+           |> Enum.any?(&(&1["condition"] == "battery(scout) < 0.3" and &1["t_ms"] <= stopped))
 
     # The spare's photos start only once :go is posted (20 s in) and take their two minutes.
     assert [%{"key" => "go", "t_ms" => posted}] = events(all, "signal_posted")
@@ -254,11 +416,22 @@ defmodule Dolphin.Examples.ScenariosTest do
     assert [_, %{"result" => "done", "vehicle" => ^spare}] = finished.("return home")
     assert List.last(messages) == "Done!"
   end
+end
+
+defmodule Dolphin.Examples.ScenariosTest.Tours do
+  # The two tours, `mix run` scripts each in a VM of its own.
+  use Dolphin.Examples.Scenario
 
   # The tours are plain `mix run` scripts: run as the header says, in a VM of their own.
+
   defp mix_run(name) do
     root = Path.expand("../..", __DIR__)
-    System.cmd(System.find_executable("mix"), ["run", Path.join(@examples, "#{name}.exs")], cd: root, env: [{"MIX_ENV", "#{Mix.env()}"}], stderr_to_stdout: true)
+
+    System.cmd(System.find_executable("mix"), ["run", Path.join(@examples, "#{name}.exs")],
+      cd: root,
+      env: [{"MIX_ENV", "#{Mix.env()}"}],
+      stderr_to_stdout: true
+    )
   end
 
   test "codec_tour.exs: truncated payloads, the intact frames recovered from a damaged stream, a signature checked, the .tlog read by pymavlink" do
@@ -268,10 +441,15 @@ defmodule Dolphin.Examples.ScenariosTest do
     assert output =~ ~r/SYS_STATUS +id +1 +43 bytes on the wire \(payload 31 of 43\)/
     assert output =~ ~r/HEARTBEAT +id +0 +21 bytes on the wire \(payload 9 of 9\)/
     # The flipped and the cut frame are lost, every other one comes through, the garbage skipped.
-    assert output =~ "recovered 5 frames: HEARTBEAT, SYS_STATUS, MISSION_ITEM_INT, STATUSTEXT, HEARTBEAT\n"
+    assert output =~
+             "recovered 5 frames: HEARTBEAT, SYS_STATUS, MISSION_ITEM_INT, STATUSTEXT, HEARTBEAT\n"
+
     assert output =~ ~r/2 candidate frames failed their CRC/
     assert output =~ "the waypoint's yaw is still :nan"
-    assert output =~ "COMMAND_LONG :mav_cmd_component_arm_disarm: accepted with the fleet key, bad_signature with another"
+
+    assert output =~
+             "COMMAND_LONG :mav_cmd_component_arm_disarm: accepted with the fleet key, bad_signature with another"
+
     # pymavlink reads back all six frames, with their values.
     assert output =~ "SYS_STATUS {'battery_remaining': 87}"
     assert output =~ "GLOBAL_POSITION_INT {'lat': 411780000}"
@@ -286,8 +464,12 @@ defmodule Dolphin.Examples.ScenariosTest do
     # What scripts/pymavlink_vehicle.py sends: GUIDED, armed, 77 %, 20 m up.
     assert output =~ "state: mode :guided, armed true, battery 77 %, at 41.178, -8.596, 20.0 m up"
     assert output =~ "set mode :brake -> {:ok, :accepted}"
-    assert output =~ ~r/set mode :warp  -> "MAV_CMD_DO_SET_MODE not sent to vehicle 1 \(no mode :warp on this vehicle/
+
+    assert output =~
+             ~r/set mode :warp  -> "MAV_CMD_DO_SET_MODE not sent to vehicle 1 \(no mode :warp on this vehicle/
+
     assert output =~ "accepted by the vehicle (MISSION_ACK 0)"
+
     # The vehicle's side: the mode change (DO_SET_MODE 176, custom mode) and all six items as sent.
     assert output =~ "vehicle got COMMAND_LONG 176 (param1 1.0)"
     assert output =~ "vehicle holds 6 items:"

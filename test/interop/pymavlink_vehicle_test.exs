@@ -2,7 +2,13 @@ defmodule Dolphin.Interop.PymavlinkVehicleTest do
   # The ground station against a vehicle made with pymavlink (the reference
   # implementation) over UDP on 127.0.0.1: discovery, telemetry, a command,
   # a mission upload, each checked from both sides.
-  use ExUnit.Case, async: false
+  use ExUnit.Case, async: true
+
+  # A Dolphin.Instance of its own: its vehicles, links and clock are no other test's.
+  setup do
+    Dolphin.Test.Instance.start!()
+    :ok
+  end
 
   alias Dolphin.Test.Wait
 
@@ -21,8 +27,8 @@ defmodule Dolphin.Interop.PymavlinkVehicleTest do
     python = Dolphin.Test.Pymavlink.python()
     {:ok, link} = Link.connect("udpin:127.0.0.1:0", name: "pymavlink-vehicle")
 
-    on_exit(fn ->
-      DynamicSupervisor.terminate_child(Dolphin.Link.Supervisor, link)
+    Dolphin.Test.Instance.on_exit(fn ->
+      DynamicSupervisor.terminate_child(Dolphin.Instance.names().links, link)
       Vehicles.forget(@sysid)
     end)
 

@@ -1,9 +1,14 @@
 defmodule Dolphin.Interop.SimPymavlinkTest do
   # The simulator flown by an outside ground station made with pymavlink (the
-  # reference implementation): discover, request streams, upload a mission,
-  # GUIDED + arm + MISSION_START, watch it complete and land at home.
-  # Changes the clock speed-up: not async.
-  use ExUnit.Case, async: false
+  # reference implementation): discover, request streams, upload a mission, GUIDED +
+  # arm + MISSION_START, watch it complete and land at home. Its own Dolphin.Instance
+  # (its vehicles, links and clock): async.
+  use ExUnit.Case, async: true
+
+  setup do
+    Dolphin.Test.Instance.start!()
+    :ok
+  end
 
   @moduletag :interop
 
@@ -17,7 +22,7 @@ defmodule Dolphin.Interop.SimPymavlinkTest do
   test "pymavlink as the ground station flies a simulated copter through a mission" do
     python = Dolphin.Test.Pymavlink.python()
     port = Dolphin.Test.GroundStation.free_udp_port()
-    on_exit(fn -> Sim.stop(); Clock.set_speedup(1) end)
+    Dolphin.Test.Instance.on_exit(fn -> Sim.stop(); Clock.set_speedup(1) end)
 
     gcs = Port.open({:spawn_executable, python}, [:binary, :exit_status, {:line, 65_536}, args: [@script, "#{port}", "9", "#{@speedup}"]])
     assert %{"ready" => true} = next(gcs)

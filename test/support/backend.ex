@@ -35,7 +35,8 @@ defmodule Dolphin.Test.Backend do
       end
 
     Process.put({__MODULE__, hd(fleet.sysids)}, {backend, fleet})
-    on_exit(fn -> stop(backend, fleet) end)
+    instance = Dolphin.Instance.current()
+    on_exit(fn -> Dolphin.Test.Instance.within(instance, fn -> stop(backend, fleet) end) end)
     fleet.sysids
   end
 
@@ -52,7 +53,7 @@ defmodule Dolphin.Test.Backend do
   @doc "Stops the vehicles `start/3` returned (their picks are released with them)."
   def stop([first | _] = sysids) do
     {backend, fleet} = Process.delete({__MODULE__, first})
-    _ = Dolphin.Fleet.release(Dolphin.Fleet, self(), sysids)
+    _ = Dolphin.Fleet.release(Dolphin.Instance.names().fleet, self(), sysids)
     stop(backend, fleet)
   end
 

@@ -14,10 +14,13 @@ defmodule Dolphin.Test.GroundStation do
   def open do
     name = "test-gcs-#{System.unique_integer([:positive])}"
     {:ok, link} = Link.connect("udpin:127.0.0.1:0", name: name)
+    instance = Dolphin.Instance.current()
 
     on_exit(fn ->
-      forget_vehicles()
-      DynamicSupervisor.terminate_child(Dolphin.Link.Supervisor, link)
+      Dolphin.Test.Instance.within(instance, fn ->
+        forget_vehicles()
+        Link.disconnect(link)
+      end)
     end)
 
     Dolphin.Link.Connection.port(name)

@@ -6,9 +6,12 @@ defmodule Dolphin.Engine.Context do
   of every engine process working for it (node processes, action code), so
   that the script vocabulary (`pick`, `battery`, `post`, ...) needs no
   explicit argument. Outside a script, `current/0` is the default context:
-  the application's fleet, `Dolphin.Clock`, the calling process as owner.
+  the fleet of the calling process's `Dolphin.Instance`, `Dolphin.Clock`,
+  the calling process as owner.
 
-  Fields: `fleet` (a `Dolphin.Fleet` name or pid), `source`, `clock` (a
+  Fields: `instance` (the `Dolphin.Instance` whose vehicles, views, events
+  and clock the runs use: every process the context is put in works in
+  it), `fleet` (a `Dolphin.Fleet` name or pid), `source`, `clock` (a
   `Dolphin.Engine.TimeSource`), `owner` (pid), `signals` (a
   `Dolphin.Engine.Signals` table), `tick_ms` (the slow re-evaluation tick of
   conditions, default 1000), `stop_timeout_ms` (bound on a platform task's
@@ -21,7 +24,8 @@ defmodule Dolphin.Engine.Context do
   see `Dolphin.Mission.Platform`).
   """
 
-  defstruct fleet: Dolphin.Fleet,
+  defstruct instance: nil,
+            fleet: nil,
             source: nil,
             clock: Dolphin.Engine.TimeSource.Clock,
             owner: nil,
@@ -41,20 +45,32 @@ defmodule Dolphin.Engine.Context do
   @spec current() :: t()
   def current do
     case Process.get(@key) do
-      nil -> %__MODULE__{owner: self()}
+      nil -> complete(%__MODULE__{owner: self()})
       %__MODULE__{owner: nil} = ctx -> %{ctx | owner: self()}
       ctx -> ctx
     end
   end
 
-  @doc "Makes `ctx` the calling process's context."
+  @doc "Makes `ctx` the calling process's context, and its instance the process's (`Dolphin.Instance.put/1`)."
   @spec put(t()) :: t() | nil
-  def put(%__MODULE__{} = ctx), do: Process.put(@key, ctx)
+  def put(%__MODULE__{} = ctx) do
+    ctx = complete(ctx)
+    Dolphin.Instance.put(ctx.instance)
+    Process.put(@key, ctx)
+  end
+
+  # The instance (the caller's) and its fleet, when not given.
+  defp complete(%__MODULE__{instance: nil} = ctx), do: complete(%{ctx | instance: Dolphin.Instance.current()})
+  defp complete(%__MODULE__{fleet: nil, instance: instance} = ctx), do: %{ctx | fleet: Dolphin.Instance.names(instance).fleet}
+  defp complete(ctx), do: ctx
 
   @doc "A context from options (`:fleet`, `:clock`, `:owner`, ...) over the current one."
   @spec new(keyword()) :: t()
   def new(opts) do
-    ctx = struct!(current(), Keyword.take(opts, Map.keys(Map.from_struct(%__MODULE__{}))))
+    base = current()
+    # Another instance than the current context's brings its own fleet.
+    base = if Keyword.has_key?(opts, :instance), do: %{base | fleet: nil, source: nil}, else: base
+    ctx = complete(struct!(base, Keyword.take(opts, Map.keys(Map.from_struct(%__MODULE__{})))))
     %{ctx | source: ctx.source || Dolphin.Fleet.source(ctx.fleet)}
   end
 

@@ -103,7 +103,7 @@ defmodule Dolphin.Engine.Run do
     Context.put(ctx)
     Process.link(caller)
     run = %{id: run_id, pid: self()}
-    Registry.register(Dolphin.Engine.Registry, {:run, run_id}, %{caller: caller, owner: ctx.owner, task: task})
+    Registry.register(Dolphin.Engine.Registry, {:run, run_id}, %{caller: caller, owner: ctx.owner, task: task, instance: ctx.instance})
     :proc_lib.init_ack({:ok, self()})
 
     case prepare(task, ctx, run, []) do

@@ -175,7 +175,7 @@ defmodule Dolphin.Engine.Runner do
       debug: :sys.debug_options([])
     }
 
-    Registry.register(Dolphin.Engine.Registry, {:task, s.id}, %{run: run.id, parent_id: parent_id, kind: s.kind, name: s.name, vehicle: s.vehicle})
+    Registry.register(Dolphin.Engine.Registry, {:task, s.id}, %{run: run.id, parent_id: parent_id, kind: s.kind, name: s.name, vehicle: s.vehicle, instance: ctx.instance})
     emit(s, :task_started, %{parent_id: parent_id, kind: s.kind, name: s.name, vehicle: s.vehicle})
 
     {effects, cstate} = s.mod.init(task)

@@ -111,7 +111,7 @@ defmodule Dolphin.Link.Connection do
   def info(name), do: GenServer.call(via(name), :info)
 
   defp name(opts), do: Keyword.get_lazy(opts, :name, fn -> Endpoint.to_string(Keyword.fetch!(opts, :endpoint)) end)
-  defp via(name), do: {:via, Registry, {Dolphin.Registry, {:link, name}}}
+  defp via(name), do: {:via, Registry, {Dolphin.Instance.names().registry, {:link, name}}}
 
   @impl true
   def init(opts) do

@@ -54,7 +54,13 @@ defmodule Dolphin.Script.Compiler do
   # The compiler's warnings (an unused variable, ...) name the module the
   # script is compiled into, which means nothing to its author: they are
   # caught and printed in the script's terms, `file:line: warning: ...`.
+  # :standard_error is the VM's: two scripts compiled at once (two runs, two
+  # instances) take turns with it.
   defp compile_reporting_warnings(wrapped, file, module, ast) do
+    :global.trans({{__MODULE__, :standard_error}, self()}, fn -> compile_capturing(wrapped, file, module, ast) end, [node()], :infinity)
+  end
+
+  defp compile_capturing(wrapped, file, module, ast) do
     {:ok, capture} = StringIO.open("")
     original = Process.whereis(:standard_error)
 

@@ -40,6 +40,8 @@ defmodule Dolphin.Script.Runner do
 
   @impl GenServer
   def init({script, base, opts, {caller, _tag} = reply_to}) do
+    # Under the application's supervisor, working in the context's instance.
+    Dolphin.Instance.put(base.instance)
     Process.flag(:trap_exit, true)
     Process.link(caller)
     signals = Signals.new()

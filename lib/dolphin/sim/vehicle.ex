@@ -30,7 +30,7 @@ defmodule Dolphin.Sim.Vehicle do
   # fleets whose system ids repeat, each sending to its own ground station).
   def start_link(opts) do
     if Keyword.get(opts, :register, true),
-      do: GenServer.start_link(__MODULE__, opts, name: {:via, Registry, {Dolphin.Registry, {:sim, key(opts)}}}),
+      do: GenServer.start_link(__MODULE__, opts, name: {:via, Registry, {Dolphin.Instance.names().registry, {:sim, key(opts)}}}),
       else: GenServer.start_link(__MODULE__, opts)
   end
 

@@ -23,16 +23,15 @@ defmodule Dolphin.Vehicles.Routes do
 
   use GenServer
 
-  @table __MODULE__
-
   @doc false
+  # Started by its Dolphin.Instance, which names it.
   @spec start_link(keyword()) :: GenServer.on_start()
-  def start_link(_opts \\ []), do: GenServer.start_link(__MODULE__, :ok, name: __MODULE__)
+  def start_link(opts), do: GenServer.start_link(__MODULE__, Keyword.fetch!(opts, :name), name: Keyword.fetch!(opts, :name))
 
   @doc "The process a vehicle's commands go to when this node has none of its own, or nil."
   @spec get(non_neg_integer()) :: pid() | nil
   def get(id) do
-    case :ets.lookup(@table, id) do
+    case :ets.lookup(table(), id) do
       [{^id, pid, _router}] -> pid
       [] -> nil
     end
@@ -47,15 +46,15 @@ defmodule Dolphin.Vehicles.Routes do
   """
   @spec put(non_neg_integer(), pid()) :: :ok
   def put(id, pid) when is_pid(pid) do
-    :ok = GenServer.call(__MODULE__, {:router, self()})
-    :ets.insert(@table, {id, pid, self()})
+    :ok = GenServer.call(table(), {:router, self()})
+    :ets.insert(table(), {id, pid, self()})
     :ok
   end
 
   @doc "Removes the route of vehicle `id`."
   @spec delete(non_neg_integer()) :: :ok
   def delete(id) do
-    :ets.delete(@table, id)
+    :ets.delete(table(), id)
     :ok
   end
 
@@ -84,15 +83,15 @@ defmodule Dolphin.Vehicles.Routes do
   end
 
   defp router(id) do
-    case :ets.lookup(@table, id) do
+    case :ets.lookup(table(), id) do
       [{^id, _pid, router}] -> router
       [] -> nil
     end
   end
 
   @impl true
-  def init(:ok) do
-    :ets.new(@table, [:named_table, :public, :set, read_concurrency: true])
+  def init(table) do
+    :ets.new(table, [:named_table, :public, :set, read_concurrency: true])
     {:ok, %{routers: %{}}}
   end
 
@@ -107,7 +106,9 @@ defmodule Dolphin.Vehicles.Routes do
 
   @impl true
   def handle_info({:DOWN, _ref, :process, pid, _reason}, s) do
-    :ets.match_delete(@table, {:_, :_, pid})
+    :ets.match_delete(table(), {:_, :_, pid})
     {:noreply, %{s | routers: Map.delete(s.routers, pid)}}
   end
+
+  defp table, do: Dolphin.Instance.names().routes
 end

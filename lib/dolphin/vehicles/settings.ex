@@ -9,38 +9,39 @@ defmodule Dolphin.Vehicles.Settings do
 
   use GenServer
 
-  @table __MODULE__
-
   @doc false
+  # Started by its Dolphin.Instance, which names it.
   @spec start_link(keyword()) :: GenServer.on_start()
-  def start_link(_opts \\ []), do: GenServer.start_link(__MODULE__, :ok, name: __MODULE__)
+  def start_link(opts), do: GenServer.start_link(__MODULE__, Keyword.fetch!(opts, :name), name: Keyword.fetch!(opts, :name))
 
   @doc "Keeps `ms` as vehicle `sysid`'s connection timeout."
   @spec put_timeout(non_neg_integer(), pos_integer()) :: :ok
   def put_timeout(sysid, ms) when is_integer(ms) and ms > 0 do
-    :ets.insert(@table, {{:timeout, sysid}, ms})
+    :ets.insert(table(), {{:timeout, sysid}, ms})
     :ok
   end
 
   @doc "Forgets what was set for vehicle `sysid`: it gets the defaults again."
   @spec clear(non_neg_integer()) :: :ok
   def clear(sysid) do
-    :ets.delete(@table, {:timeout, sysid})
+    :ets.delete(table(), {:timeout, sysid})
     :ok
   end
 
   @doc "The connection timeout set for vehicle `sysid`, or `default`."
   @spec timeout(Dolphin.Vehicles.Id.t(), pos_integer() | nil) :: pos_integer() | nil
   def timeout(sysid, default) do
-    case :ets.lookup(@table, {:timeout, sysid}) do
+    case :ets.lookup(table(), {:timeout, sysid}) do
       [{_, ms}] -> ms
       [] -> default
     end
   end
 
   @impl true
-  def init(:ok) do
-    :ets.new(@table, [:named_table, :public, :set, read_concurrency: true])
+  def init(table) do
+    :ets.new(table, [:named_table, :public, :set, read_concurrency: true])
     {:ok, nil}
   end
+
+  defp table, do: Dolphin.Instance.names().settings
 end

@@ -83,7 +83,7 @@ defmodule Dolphin.Vehicles.Vehicle do
     do: %{id: {__MODULE__, id}, start: {__MODULE__, :start_link, [args]}, restart: :permanent}
 
   def start_link({id, _link, _opts} = args),
-    do: GenServer.start_link(__MODULE__, args, name: {:via, Registry, {Dolphin.Registry, {:vehicle, id}}})
+    do: GenServer.start_link(__MODULE__, args, name: {:via, Registry, {Dolphin.Instance.names().registry, {:vehicle, id}}})
 
   @impl true
   def init({id, link, opts}) do
@@ -182,7 +182,7 @@ defmodule Dolphin.Vehicles.Vehicle do
   # whereis/1 no longer gives it, and a vehicle heard again at once is
   # discovered anew rather than cast to a dead process.
   @impl true
-  def terminate(_reason, s), do: Registry.unregister(Dolphin.Registry, {:vehicle, s.id})
+  def terminate(_reason, s), do: Registry.unregister(Dolphin.Instance.names().registry, {:vehicle, s.id})
 
   @impl true
   def handle_info(:request_telemetry, %{requests_left: 0} = s), do: {:noreply, s}

@@ -63,13 +63,10 @@ defmodule Dolphin.Vehicles.Views do
   import Dolphin.Vehicles.Id, only: [is_id: 1]
   alias Dolphin.Vehicles.View
 
-  @table __MODULE__
-  @heard Module.concat(__MODULE__, Heard)
-  @paths Module.concat(__MODULE__, Paths)
-
   @doc false
-  @spec start_link(keyword()) :: GenServer.on_start()
-  def start_link(_opts \\ []), do: GenServer.start_link(__MODULE__, :ok, name: __MODULE__)
+  # Started by its Dolphin.Instance, with the instance's names.
+  @spec start_link(Dolphin.Instance.Names.t()) :: GenServer.on_start()
+  def start_link(names), do: GenServer.start_link(__MODULE__, names, name: names.views)
 
   @doc """
   Writes a vehicle's view and announces it (see the module doc). Called by
@@ -78,13 +75,15 @@ defmodule Dolphin.Vehicles.Views do
   """
   @spec put(View.t()) :: :ok
   def put(%View{id: id} = view) when is_id(id) do
+    table = table()
+
     old =
-      case :ets.lookup(@table, id) do
+      case :ets.lookup(table, id) do
         [{^id, old}] -> old
         [] -> nil
       end
 
-    :ets.insert(@table, {id, view})
+    :ets.insert(table, {id, view})
     announce(old, view, true)
   end
 
@@ -93,7 +92,7 @@ defmodule Dolphin.Vehicles.Views do
   @doc "A vehicle's latest view."
   @spec get(Dolphin.Vehicles.Id.t()) :: {:ok, View.t()} | {:error, :unknown_vehicle}
   def get(id) do
-    case :ets.lookup(@table, id) do
+    case :ets.lookup(table(), id) do
       [{^id, view}] -> {:ok, view}
       [] -> {:error, :unknown_vehicle}
     end
@@ -101,11 +100,11 @@ defmodule Dolphin.Vehicles.Views do
 
   @doc "Every vehicle's latest view, by ascending id (system ids, then qualified names)."
   @spec all() :: [View.t()]
-  def all, do: @table |> :ets.tab2list() |> Enum.sort() |> Enum.map(&elem(&1, 1))
+  def all, do: table() |> :ets.tab2list() |> Enum.sort() |> Enum.map(&elem(&1, 1))
 
   @doc "The ids of the vehicles with a view, ascending."
   @spec ids() :: [Dolphin.Vehicles.Id.t()]
-  def ids, do: @table |> :ets.select([{{:"$1", :_}, [], [:"$1"]}]) |> Enum.sort()
+  def ids, do: table() |> :ets.select([{{:"$1", :_}, [], [:"$1"]}]) |> Enum.sort()
 
   @doc """
   Forgets a vehicle's view (the vehicle is forgotten: a view put later is a
@@ -114,9 +113,10 @@ defmodule Dolphin.Vehicles.Views do
   """
   @spec delete(Dolphin.Vehicles.Id.t()) :: :ok
   def delete(id) do
-    :ets.delete(@heard, id)
+    names = Dolphin.Instance.names()
+    :ets.delete(names.heard, id)
 
-    case :ets.take(@table, id) do
+    case :ets.take(names.views, id) do
       [] -> :ok
       [_] -> forgotten(id)
     end
@@ -130,8 +130,9 @@ defmodule Dolphin.Vehicles.Views do
   @spec heard_cell(Dolphin.Vehicles.Id.t()) :: :atomics.atomics_ref()
   def heard_cell(id) do
     # Slot 1: clock ms (any integer: the clock's origin is arbitrary); slot 2: 1 once written.
-    :ets.insert_new(@heard, {id, :atomics.new(2, signed: true)})
-    :ets.lookup_element(@heard, id, 2)
+    heard = Dolphin.Instance.names().heard
+    :ets.insert_new(heard, {id, :atomics.new(2, signed: true)})
+    :ets.lookup_element(heard, id, 2)
   end
 
   @doc "Writes in a vehicle's cell that it was heard at `clock_ms`."
@@ -144,7 +145,7 @@ defmodule Dolphin.Vehicles.Views do
   @doc "When vehicle `id` was last heard (clock ms), or nil (never, or not a vehicle of this node)."
   @spec last_heard_ms(Dolphin.Vehicles.Id.t()) :: integer() | nil
   def last_heard_ms(id) do
-    case :ets.lookup(@heard, id) do
+    case :ets.lookup(Dolphin.Instance.names().heard, id) do
       [{^id, cell}] -> if :atomics.get(cell, 2) == 1, do: :atomics.get(cell, 1)
       [] -> nil
     end
@@ -177,7 +178,7 @@ defmodule Dolphin.Vehicles.Views do
   """
   @spec vehicle_on(non_neg_integer(), term()) :: Dolphin.Vehicles.Id.t()
   def vehicle_on(sysid, via) do
-    case :ets.lookup(@paths, {sysid, via}) do
+    case :ets.lookup(paths(), {sysid, via}) do
       [{_, id, _uid}] -> id
       [] -> sysid
     end
@@ -190,14 +191,14 @@ defmodule Dolphin.Vehicles.Views do
   """
   @spec assign(non_neg_integer(), term(), Dolphin.Vehicles.Id.t(), non_neg_integer()) :: :ok
   def assign(sysid, via, id, uid) do
-    :ets.insert(@paths, {{sysid, via}, id, uid})
+    :ets.insert(paths(), {{sysid, via}, id, uid})
     :ok
   end
 
   @doc "The vehicle that paths of system `sysid` with autopilot unique id `uid` were given to, or nil."
   @spec assigned(non_neg_integer(), non_neg_integer()) :: Dolphin.Vehicles.Id.t() | nil
   def assigned(sysid, uid) do
-    case :ets.match(@paths, {{sysid, :_}, :"$1", uid}) do
+    case :ets.match(paths(), {{sysid, :_}, :"$1", uid}) do
       [[id] | _] -> id
       [] -> nil
     end
@@ -209,10 +210,11 @@ defmodule Dolphin.Vehicles.Views do
   def forgotten(id), do: PubSub.publish(:vehicles, {:vehicle_forgotten, id})
 
   @impl true
-  def init(:ok) do
-    :ets.new(@table, [:named_table, :public, :set, read_concurrency: true])
-    :ets.new(@heard, [:named_table, :public, :set, read_concurrency: true])
-    :ets.new(@paths, [:named_table, :public, :set, read_concurrency: true])
+  def init(names) do
+    for table <- [names.views, names.heard, names.paths], do: :ets.new(table, [:named_table, :public, :set, read_concurrency: true])
     {:ok, nil}
   end
+
+  defp table, do: Dolphin.Instance.names().views
+  defp paths, do: Dolphin.Instance.names().paths
 end

@@ -26,8 +26,8 @@ defmodule Dolphin.Web.Hub do
   @max_clients 100
 
   @doc false
-  # Under Dolphin.Web.Supervisor, not linked to the caller.
-  def start(opts), do: DynamicSupervisor.start_child(Dolphin.Web.Supervisor, {__MODULE__, opts})
+  # Under Dolphin.Web.Supervisor, not linked to the caller; showing the caller's instance.
+  def start(opts), do: DynamicSupervisor.start_child(Dolphin.Web.Supervisor, {__MODULE__, Keyword.put_new(opts, :instance, Dolphin.Instance.current())})
 
   @doc false
   def start_link(opts), do: GenServer.start_link(__MODULE__, opts, Keyword.take(opts, [:name]))
@@ -47,6 +47,7 @@ defmodule Dolphin.Web.Hub do
 
   @impl true
   def init(opts) do
+    if instance = opts[:instance], do: Dolphin.Instance.put(instance)
     port = Keyword.fetch!(opts, :port)
     bind = Keyword.get(opts, :bind, "127.0.0.1")
 

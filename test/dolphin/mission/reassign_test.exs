@@ -1,8 +1,13 @@
 defmodule Dolphin.Mission.ReassignTest do
-  # A survey whose copter is lost mid-flight, taken over by another simulated
-  # copter (over UDP on 127.0.0.1): the passes not flown are flown, each once.
-  # Changes the clock speed-up and uses the global fleet: not async.
-  use ExUnit.Case, async: false
+  # A survey whose copter is lost mid-flight, taken over by another simulated copter
+  # (over UDP on 127.0.0.1): the passes not flown are flown, each once. Its own
+  # Dolphin.Instance (its vehicles, links and clock): async.
+  use ExUnit.Case, async: true
+
+  setup do
+    Dolphin.Test.Instance.start!()
+    :ok
+  end
 
   import Dolphin.Property
 
@@ -74,7 +79,7 @@ defmodule Dolphin.Mission.ReassignTest do
 
     setup do
       Dolphin.Fleet.set_source({Dolphin.Fleet.MAVLinkSource, nil})
-      on_exit(fn ->
+      Dolphin.Test.Instance.on_exit(fn ->
         GroundStation.forget_vehicles()
         for id <- [1, 2], do: Dolphin.Vehicles.Settings.clear(id)
       end)
@@ -91,13 +96,13 @@ defmodule Dolphin.Mission.ReassignTest do
       # The battery failsafe on (RTL when low), as a fleet would fly.
       {:ok, ids} = Sim.start(gcs: port, count: 2, speedup: @speedup, ekf_ready_ms: 5_000, battery_failsafe: :rtl)
       Wait.until(fn -> Enum.all?(ids, &match?({:ok, %{home: %{}}}, Vehicles.state(&1))) end, 1_500, fn -> "homes of #{inspect(ids)}" end)
-      for id <- ids, do: {:ok, _} = Dolphin.Fleet.pick(Dolphin.Fleet, self(), id: id)
+      for id <- ids, do: {:ok, _} = Dolphin.Fleet.pick(Dolphin.Instance.names().fleet, self(), id: id)
       {:ok, %{home: h}} = Vehicles.state(1)
       Dolphin.Geo.location(h.lat, h.lon, h.alt)
     end
 
     defp stop_fleet do
-      Dolphin.Fleet.release_all(Dolphin.Fleet, self())
+      Dolphin.Fleet.release_all(Dolphin.Instance.names().fleet, self())
       GroundStation.forget_vehicles()
       for id <- [1, 2], do: Dolphin.Vehicles.Settings.clear(id)
     end
@@ -196,7 +201,7 @@ defmodule Dolphin.Mission.ReassignTest do
       {:ok, [1]} = Sim.start(gcs: port, sysids: [1], speedup: @speedup, ekf_ready_ms: 100_000_000, home: Dolphin.Geo.location(40.4446, -7.3752, 820))
       {:ok, [2]} = Sim.start(gcs: port, sysids: [2], speedup: @speedup, ekf_ready_ms: 5_000)
       Wait.until(fn -> match?({:ok, _}, Vehicles.state(1)) and match?({:ok, %{home: %{}}}, Vehicles.state(2)) end, 1_500, fn -> "vehicles 1 and 2" end)
-      for id <- [1, 2], do: {:ok, _} = Dolphin.Fleet.pick(Dolphin.Fleet, self(), id: id)
+      for id <- [1, 2], do: {:ok, _} = Dolphin.Fleet.pick(Dolphin.Instance.names().fleet, self(), id: id)
       {:ok, %{home: h}} = Vehicles.state(2)
       home = Dolphin.Geo.location(h.lat, h.lon, h.alt)
       Events.subscribe()

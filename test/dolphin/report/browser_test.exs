@@ -1,6 +1,11 @@
 defmodule Dolphin.Report.BrowserTest do
-  # A simulated run (UDP on 127.0.0.1, the clock sped up): not async.
-  use ExUnit.Case, async: false
+  # Its own Dolphin.Instance (its vehicles, links and clock): async.
+  use ExUnit.Case, async: true
+
+  setup do
+    Dolphin.Test.Instance.start!()
+    :ok
+  end
 
   alias Dolphin.Test.Browser
 
@@ -10,7 +15,7 @@ defmodule Dolphin.Report.BrowserTest do
 
   # The run's vehicles stay known to this node's ground station: forgotten after.
   setup do
-    on_exit(&Dolphin.Test.GroundStation.forget_vehicles/0)
+    Dolphin.Test.Instance.on_exit(&Dolphin.Test.GroundStation.forget_vehicles/0)
   end
 
   # Two vehicles: one flies "North" to its end, the other flies "East" until

@@ -1,9 +1,14 @@
 defmodule Dolphin.Test.UDPProxySimTest do
-  # A simulated ArduCopter behind the impairment proxy (as SITL would be), and
-  # the ground station's mission protocol through it: up to 30 % loss each
-  # way, 10 % duplicates, 10 % reordering, a different mix for every seed.
-  # Changes the clock speed-up and shares the vehicle registry: not async.
-  use ExUnit.Case, async: false
+  # A simulated ArduCopter behind the impairment proxy (as SITL would be), and the
+  # ground station's mission protocol through it: up to 30 % loss each way, 10 %
+  # duplicates, 10 % reordering, a different mix for every seed. Its own
+  # Dolphin.Instance (its vehicles, links and clock): async.
+  use ExUnit.Case, async: true
+
+  setup do
+    Dolphin.Test.Instance.start!()
+    :ok
+  end
 
   alias Dolphin.{Sim, Vehicles}
   alias Dolphin.MAVLink.Ardupilotmega, as: M

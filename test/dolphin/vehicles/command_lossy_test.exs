@@ -1,8 +1,13 @@
 defmodule Dolphin.Vehicles.CommandLossyTest do
-  # Commands to a scripted vehicle (test/support/scripted_vehicle.ex) over a
-  # link that drops, duplicates and reorders frames both ways. Changes the
-  # clock speed-up: not async.
-  use ExUnit.Case, async: false
+  # Commands to a scripted vehicle (test/support/scripted_vehicle.ex) over a link that
+  # drops, duplicates and reorders frames both ways. Its own Dolphin.Instance (its
+  # vehicles, links and clock): async.
+  use ExUnit.Case, async: true
+
+  setup do
+    Dolphin.Test.Instance.start!()
+    :ok
+  end
 
   import Dolphin.Property
 
@@ -22,9 +27,9 @@ defmodule Dolphin.Vehicles.CommandLossyTest do
     sysid = 230
     {:ok, vehicle} = ScriptedVehicle.start_link(port: Connection.port("cmd-lossy"), sysid: sysid, speedup: @speedup, seed: 7)
 
-    on_exit(fn ->
+    Dolphin.Test.Instance.on_exit(fn ->
       Clock.set_speedup(1)
-      DynamicSupervisor.terminate_child(Dolphin.Link.Supervisor, link)
+      DynamicSupervisor.terminate_child(Dolphin.Instance.names().links, link)
       Vehicles.forget(sysid)
     end)
 

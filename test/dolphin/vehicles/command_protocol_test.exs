@@ -1,7 +1,12 @@
 defmodule Dolphin.Vehicles.CommandProtocolTest do
-  # A scripted vehicle answers (or not) the commands of the ground station over
-  # UDP on 127.0.0.1. Changes the clock speed-up: not async.
-  use ExUnit.Case, async: false
+  # A scripted vehicle answers (or not) the commands of the ground station over UDP on
+  # 127.0.0.1. Its own Dolphin.Instance (its vehicles, links and clock): async.
+  use ExUnit.Case, async: true
+
+  setup do
+    Dolphin.Test.Instance.start!()
+    :ok
+  end
 
   alias Dolphin.Test.Wait
 
@@ -24,9 +29,9 @@ defmodule Dolphin.Vehicles.CommandProtocolTest do
     # buffer fill up with them while a busy machine holds the test back.
     Clock.set_speedup(10)
 
-    on_exit(fn ->
+    Dolphin.Test.Instance.on_exit(fn ->
       Clock.set_speedup(1)
-      DynamicSupervisor.terminate_child(Dolphin.Link.Supervisor, link)
+      DynamicSupervisor.terminate_child(Dolphin.Instance.names().links, link)
       Vehicles.forget(sysid)
       Dolphin.Vehicles.Settings.clear(sysid)
     end)
@@ -165,7 +170,11 @@ defmodule Dolphin.Vehicles.CommandProtocolTest do
   test "a command queued by a caller that went away is never sent", %{peer: peer, port: port, sysid: sysid} do
     t1 = Task.async(fn -> Vehicles.arm(sysid, @one_attempt) end)
     next_command(peer, 400)
-    {pid, ref} = spawn_monitor(fn -> Vehicles.command(sysid, 400, [4]) end)
+    instance = Dolphin.Instance.current()
+    {pid, ref} = spawn_monitor(fn ->
+      Dolphin.Instance.put(instance)
+      Vehicles.command(sysid, 400, [4])
+    end)
     Wait.until(fn -> :queue.len(Map.get(:sys.get_state(Vehicles.whereis(sysid)).queued, 400, :queue.new())) == 1 end)
     Process.exit(pid, :kill)
     assert_receive {:DOWN, ^ref, :process, ^pid, :killed}

@@ -1,8 +1,13 @@
 defmodule Dolphin.Vehicles.LinkQualityTest do
-  # The link's figures as a pure state machine, then measured on simulated
-  # vehicles over a clean link and behind the impairment proxy. Changes the
-  # clock and shares the vehicle registry: not async.
-  use ExUnit.Case, async: false
+  # The link's figures as a pure state machine, then measured on simulated vehicles
+  # over a clean link and behind the impairment proxy. Its own Dolphin.Instance (its
+  # vehicles, links and clock): async.
+  use ExUnit.Case, async: true
+
+  setup do
+    Dolphin.Test.Instance.start!()
+    :ok
+  end
 
   alias Dolphin.{Sim, Vehicles}
   alias Dolphin.Vehicles.{LinkQuality, State}

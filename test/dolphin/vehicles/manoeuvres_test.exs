@@ -1,7 +1,12 @@
 defmodule Dolphin.Vehicles.ManoeuvresTest do
-  # ArduCopter's manoeuvres against a simulated copter over UDP on 127.0.0.1.
-  # Changes the clock speed-up and uses the application's vehicles: not async.
-  use ExUnit.Case, async: false
+  # ArduCopter's manoeuvres against a simulated copter over UDP on 127.0.0.1. Its own
+  # Dolphin.Instance (its vehicles, links and clock): async.
+  use ExUnit.Case, async: true
+
+  setup do
+    Dolphin.Test.Instance.start!()
+    :ok
+  end
 
   alias Dolphin.{CommandError, ManoeuvreError, Sim, Vehicles}
   alias Dolphin.Test.Wait

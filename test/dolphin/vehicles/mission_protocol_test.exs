@@ -1,8 +1,13 @@
 defmodule Dolphin.Vehicles.MissionProtocolTest do
-  # The ground station's mission protocol against a scripted ArduCopter-like
-  # vehicle (test/support/scripted_vehicle.ex) over UDP on 127.0.0.1, clean and
-  # lossy. Changes the clock speed-up: not async.
-  use ExUnit.Case, async: false
+  # The ground station's mission protocol against a scripted ArduCopter-like vehicle
+  # (test/support/scripted_vehicle.ex) over UDP on 127.0.0.1, clean and lossy. Its own
+  # Dolphin.Instance (its vehicles, links and clock): async.
+  use ExUnit.Case, async: true
+
+  setup do
+    Dolphin.Test.Instance.start!()
+    :ok
+  end
 
   alias Dolphin.Test.Wait
 
@@ -29,9 +34,9 @@ defmodule Dolphin.Vehicles.MissionProtocolTest do
     {:ok, link} = Link.connect("udpin:127.0.0.1:0", name: name)
     Clock.set_speedup(@speedup)
 
-    on_exit(fn ->
+    Dolphin.Test.Instance.on_exit(fn ->
       Clock.set_speedup(1)
-      DynamicSupervisor.terminate_child(Dolphin.Link.Supervisor, link)
+      DynamicSupervisor.terminate_child(Dolphin.Instance.names().links, link)
     end)
 
     %{port: Connection.port(name), link: name}
@@ -43,7 +48,7 @@ defmodule Dolphin.Vehicles.MissionProtocolTest do
     Wait.until(fn -> Vehicles.whereis(sysid) end)
 
     # Forgotten, view and all: a later test counts the vehicles it knows.
-    on_exit(fn -> Vehicles.forget(sysid) end)
+    Dolphin.Test.Instance.on_exit(fn -> Vehicles.forget(sysid) end)
 
     {sysid, pid}
   end

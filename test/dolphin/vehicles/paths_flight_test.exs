@@ -1,9 +1,14 @@
 defmodule Dolphin.Vehicles.PathsFlightTest do
-  # One simulated copter heard by two radios (Dolphin.Test.RadioSplitter in
-  # front of two ground-station links on 127.0.0.1): one vehicle with two
-  # paths, flown while the path in use is cut. Changes the clock speed-up and
-  # uses the global fleet and vehicle registry: not async.
-  use ExUnit.Case, async: false
+  # One simulated copter heard by two radios (Dolphin.Test.RadioSplitter in front of
+  # two ground-station links on 127.0.0.1): one vehicle with two paths, flown while
+  # the path in use is cut. Its own Dolphin.Instance (its vehicles, links and clock):
+  # async.
+  use ExUnit.Case, async: true
+
+  setup do
+    Dolphin.Test.Instance.start!()
+    :ok
+  end
 
   @moduletag timeout: 600_000
 
@@ -44,7 +49,7 @@ defmodule Dolphin.Vehicles.PathsFlightTest do
     Wait.until(fn -> match?([%{rtt_ms: r1}, %{rtt_ms: r2}] when is_number(r1) and is_number(r2), Vehicles.paths(1)) end)
     # Each known to be the vehicle's (its autopilot's unique id, asked on both).
     Wait.until(fn -> Enum.all?(Vehicles.paths(1), &(&1.identity == :same)) end)
-    {:ok, _} = Dolphin.Fleet.pick(Dolphin.Fleet, self(), id: 1)
+    {:ok, _} = Dolphin.Fleet.pick(Dolphin.Instance.names().fleet, self(), id: 1)
     {:ok, %{home: h}} = Vehicles.state(1)
     Dolphin.Geo.location(h.lat, h.lon, h.alt)
   end
@@ -119,8 +124,8 @@ defmodule Dolphin.Vehicles.PathsFlightTest do
 
     # The mission is flown here (the test process picked the vehicle); the
     # path in use is cut from beside it once the mission is under way (the
-    # take-off reached).
-    spawn_link(fn ->
+    # take-off reached). (A Task: it works in the test's instance.)
+    Task.start_link(fn ->
       Events.subscribe()
       receive do: ({:dolphin, :events, %{event: :mission_item_reached, vehicle: 1, seq: 1}} -> :ok)
       cut = in_use(ports)

@@ -1,11 +1,15 @@
 defmodule Dolphin.Vehicles.SharedSystemIdTest do
-  # Vehicles that all left the factory as system id 1 (simulated vehicles of
-  # separate networks, each with its own autopilot unique id), heard on three
-  # links, or on one udpin port from two addresses: each is a vehicle of its
-  # own, named by its system id (the first heard) or "1@NETWORK", and each
-  # flies its own mission. Real UDP on 127.0.0.1; changes the global clock
-  # speed-up: not async.
-  use ExUnit.Case, async: false
+  # Vehicles that all left the factory as system id 1 (simulated vehicles of separate
+  # networks, each with its own autopilot unique id), heard on three links, or on one
+  # udpin port from two addresses: each is a vehicle of its own, named by its system
+  # id (the first heard) or "1@NETWORK", and each flies its own mission. Real UDP on
+  # 127.0.0.1. Its own Dolphin.Instance (its vehicles, links and clock): async.
+  use ExUnit.Case, async: true
+
+  setup do
+    Dolphin.Test.Instance.start!()
+    :ok
+  end
 
   alias Dolphin.{Events, Sim, Vehicles}
   alias Dolphin.Test.{GroundStation, Hops, Wait}
@@ -17,7 +21,7 @@ defmodule Dolphin.Vehicles.SharedSystemIdTest do
   @speedup 10
 
   setup do
-    on_exit(&GroundStation.forget_vehicles/0)
+    Dolphin.Test.Instance.on_exit(&GroundStation.forget_vehicles/0)
     Events.subscribe()
     :ok
   end

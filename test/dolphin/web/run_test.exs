@@ -1,6 +1,11 @@
 defmodule Dolphin.Web.RunTest do
-  # Simulated vehicles over UDP on 127.0.0.1 and the clock sped up: not async.
-  use ExUnit.Case, async: false
+  # Its own Dolphin.Instance (its vehicles, links and clock): async.
+  use ExUnit.Case, async: true
+
+  setup do
+    Dolphin.Test.Instance.start!()
+    :ok
+  end
 
   alias Dolphin.Test.Wait
   alias Mix.Tasks.Dolphin.Run
@@ -11,7 +16,7 @@ defmodule Dolphin.Web.RunTest do
   setup do
     {:ok, _} = Application.ensure_all_started(:inets)
     Dolphin.Test.GroundStation.forget_vehicles()
-    on_exit(&Dolphin.Test.GroundStation.forget_vehicles/0)
+    Dolphin.Test.Instance.on_exit(&Dolphin.Test.GroundStation.forget_vehicles/0)
   end
 
   # One vehicle flies 400 m north and back: long enough to be seen moving.

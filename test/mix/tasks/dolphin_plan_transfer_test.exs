@@ -1,8 +1,13 @@
 defmodule Mix.Tasks.Dolphin.PlanTransferTest do
-  # `mix dolphin.plan upload` and `download` against simulated vehicles on
-  # 127.0.0.1, clean and behind the impairment proxy. Shares the vehicle
-  # registry and the clock: not async.
-  use ExUnit.Case, async: false
+  # `mix dolphin.plan upload` and `download` against simulated vehicles on 127.0.0.1,
+  # clean and behind the impairment proxy. Its own Dolphin.Instance (its vehicles,
+  # links and clock): async.
+  use ExUnit.Case, async: true
+
+  setup do
+    Dolphin.Test.Instance.start!()
+    :ok
+  end
 
   alias Dolphin.{Mission, Sim}
   alias Dolphin.Test.{GroundStation, UDPProxy, Wait}
@@ -12,7 +17,7 @@ defmodule Mix.Tasks.Dolphin.PlanTransferTest do
   @example Path.expand("../../../examples/single_vehicle.exs", __DIR__)
 
   setup %{tmp_dir: dir} do
-    on_exit(&GroundStation.forget_vehicles/0)
+    Dolphin.Test.Instance.on_exit(&GroundStation.forget_vehicles/0)
     plan = Path.join(dir, "survey.plan")
     {:ok, _} = Plan.main(["export", @example, "Survey Area", plan])
     %{plan: plan, port: GroundStation.free_udp_port()}
@@ -60,7 +65,7 @@ defmodule Mix.Tasks.Dolphin.PlanTransferTest do
 
   # The socket of the link that listens on `port`, once there is one.
   defp link_socket(port) do
-    Enum.find_value(DynamicSupervisor.which_children(Dolphin.Link.Supervisor), fn {_, link, _, _} ->
+    Enum.find_value(DynamicSupervisor.which_children(Dolphin.Instance.names().links), fn {_, link, _, _} ->
       with {:links, linked} <- Process.info(link, :links),
            do: Enum.find(linked, &(is_port(&1) and :inet.port(&1) == {:ok, port}))
     end)
