@@ -65,12 +65,16 @@ defmodule Dolphin.Script.Compiler do
     original = Process.whereis(:standard_error)
 
     try do
-      Process.unregister(:standard_error)
+      if original, do: Process.unregister(:standard_error)
       Process.register(capture, :standard_error)
       Code.compile_quoted(wrapped, file)
     after
-      Process.unregister(:standard_error)
-      Process.register(original, :standard_error)
+      # Given back as found, unless someone else took the name meanwhile.
+      if Process.whereis(:standard_error) == capture do
+        Process.unregister(:standard_error)
+        if original && Process.alive?(original), do: Process.register(original, :standard_error)
+      end
+
       {:ok, {_, warnings}} = StringIO.close(capture)
       if warnings != "", do: IO.write(:stderr, script_warnings(warnings, module, ast))
     end
