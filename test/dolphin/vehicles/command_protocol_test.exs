@@ -47,12 +47,20 @@ defmodule Dolphin.Vehicles.CommandProtocolTest do
     # to mix with a test's.
     UDPPeer.send_message(peer, port, %M.GlobalPositionInt{}, sysid: sysid, seq: 1)
 
+    # (A command may end between the look at its process and the wait for its
+    # frame, on a busy machine: then no frame comes, and the next look sees it gone.)
     Wait.until(fn ->
       :sys.get_state(Vehicles.whereis(sysid)).ops == %{} or
-        (UDPPeer.receive_until(peer, &match?(%M.CommandLong{command: 511}, &1.message), 5_000) &&
-           UDPPeer.send_message(peer, port, %M.CommandAck{command: 511, result: 0, target_system: 255, target_component: 190}, sysid: sysid) && false)
+        (answer_interval_request(peer, port, sysid) && false)
     end)
     %{peer: peer, port: port, sysid: sysid, link: name}
+  end
+
+  defp answer_interval_request(peer, port, sysid) do
+    UDPPeer.receive_until(peer, &match?(%M.CommandLong{command: 511}, &1.message), 1_000)
+    UDPPeer.send_message(peer, port, %M.CommandAck{command: 511, result: 0, target_system: 255, target_component: 190}, sysid: sysid)
+  rescue
+    ExUnit.AssertionError -> nil
   end
 
   # The test answers each command itself, after however long a busy machine
