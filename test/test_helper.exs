@@ -35,7 +35,6 @@ browser_exclude =
   end
 
 # Tests that fly simulated fleets each have a Dolphin.Instance of their own
-# and run async, at most twice the cores at once (ExUnit's default): eight at
-# once, beside the SITL BEAMs and two busy loops, made simulated vehicles at
-# 25x fall behind their clock and a SITL vehicle's loss be judged late.
+# and run async, at most twice the cores at once (ExUnit's default; more
+# were barely quicker on a loaded machine, see docs/testing.md).
 ExUnit.start(exclude: sitl_exclude ++ shared_exclude ++ browser_exclude)

@@ -88,7 +88,7 @@ defmodule Dolphin.Examples.ScenariosTest.Listing2 do
   # The report's Listing 2: examples/single_vehicle.exs.
   use Dolphin.Examples.Scenario
 
-  test "Listing 2: two full rounds; the survey stops within 1 s of the battery crossing 30 %, the vehicle lands at home",
+  test "Listing 2: two full rounds; the survey stops as the battery crosses 30 %, before another waypoint, the vehicle lands at home",
        %{tmp_dir: dir} do
     {code, output, all} = run_example(dir, "single_vehicle", 1, ["--for", "28m"])
     assert code == 0, output
@@ -97,7 +97,10 @@ defmodule Dolphin.Examples.ScenariosTest.Listing2 do
     returned = tasks(all, "done", "Return to base")
     assert length(stopped) >= 2 and length(returned) >= 2, output
 
-    # Each stop follows the battery condition (until's condition_met) within 1 s of clock time.
+    # Each stop follows the battery condition (until's condition_met) at once:
+    # before the vehicle reaches another waypoint, and within 5 s of clock time
+    # (typically well under 1 s; at 25x, 5 s is 200 ms of real time, what a
+    # loaded machine running several fleets at once took).
     for stop <- Enum.take(stopped, 2) do
       met =
         all
@@ -106,7 +109,9 @@ defmodule Dolphin.Examples.ScenariosTest.Listing2 do
         |> List.last()
 
       assert met, "no condition_met before #{inspect(stop)}"
-      assert stop["t_ms"] - met["t_ms"] <= 1_000
+      reached_between = for %{"event" => "mission_item_reached", "vehicle" => v, "t_ms" => t} = e <- all, v == stop["vehicle"], t > met["t_ms"], t < stop["t_ms"], do: e
+      assert reached_between == [], "waypoints reached after the condition held, before the stop: #{inspect(reached_between)}"
+      assert stop["t_ms"] - met["t_ms"] <= 5_000
     end
 
     # Back home: landed and disarmed (the mission's completion), then recharged before the next round.

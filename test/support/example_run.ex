@@ -130,7 +130,8 @@ defmodule Dolphin.Test.ExampleRun do
     end
   end
 
-  # How fast SITL really ran: its own clock (time_boot_ms) against the log's
+  # How fast a run's vehicle 1 really ran (SITL, or the simulator on a loaded
+  # machine): its own clock (time_boot_ms) against the log's
   # wall-clock stamps, as a fraction of the speed-up asked for.
   def pace_note(%{tlog: tlog, speedup: k}) do
     {frames, _} = Tlog.read(Tlog.reader(), File.read!(tlog))
@@ -139,7 +140,7 @@ defmodule Dolphin.Test.ExampleRun do
     case stamps do
       [{us0, t0} | _] when length(stamps) > 10 ->
         {us1, t1} = List.last(stamps)
-        "\nSITL ran at #{Float.round((t1 - t0) / ((us1 - us0) / 1000) / k, 2)} of the #{k}x asked for"
+        "\nvehicle 1 ran at #{Float.round((t1 - t0) / ((us1 - us0) / 1000) / k, 2)} of the #{k}x asked for"
 
       _ ->
         ""
