@@ -78,9 +78,12 @@ defmodule Dolphin.Vehicles.LinkQualityTest do
       # Once 20 TIMESYNCs have had their chance, the figures are the link's.
       outcomes = fn -> with {:ok, st} <- Vehicles.state(1), do: length(st.link_quality.outcomes) end
       Wait.until(fn -> outcomes.() == 20 end, 40_000, fn -> "TIMESYNCs judged: #{inspect(outcomes.())}" end)
+      # Twenty samples of a 30 % loss (51 % for a round trip): within three
+      # standard deviations (a loaded run of the suite, fleets flying beside
+      # it, saw 4 round trips of 20 lost).
       f = figures(1)
-      assert f.loss_in > 0.15 and f.loss_in < 0.45, inspect(f)
-      assert f.loss_rt > 0.25 and f.loss_rt < 0.8, inspect(f)
+      assert f.loss_in > 0.1 and f.loss_in < 0.5, inspect(f)
+      assert f.loss_rt > 0.15 and f.loss_rt < 0.85, inspect(f)
       assert is_number(f.rtt_ms)
       # Subscribers are told the figures.
       assert Enum.any?(flush_views(), &match?(%{link: %{loss_in: i}} when is_number(i), &1))
