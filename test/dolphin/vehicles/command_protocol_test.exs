@@ -47,10 +47,14 @@ defmodule Dolphin.Vehicles.CommandProtocolTest do
     # to mix with a test's.
     UDPPeer.send_message(peer, port, %M.GlobalPositionInt{}, sysid: sysid, seq: 1)
 
-    # (A command may end between the look at its process and the wait for its
-    # frame, on a busy machine: then no frame comes, and the next look sees it gone.)
+    # Settled: the position heard (no further round of requests), nothing in
+    # flight or queued. (A command may end between the look at its process
+    # and the wait for its frame, on a busy machine: then no frame comes, and
+    # the next look sees it gone.)
     Wait.until(fn ->
-      :sys.get_state(Vehicles.whereis(sysid)).ops == %{} or
+      vehicle = :sys.get_state(Vehicles.whereis(sysid))
+
+      (vehicle.requests_left == 0 and vehicle.ops == %{} and Enum.all?(Map.values(vehicle.queued), &:queue.is_empty/1)) or
         (answer_interval_request(peer, port, sysid) && false)
     end)
     %{peer: peer, port: port, sysid: sysid, link: name}
