@@ -79,7 +79,8 @@ defmodule Dolphin.Test.ExampleRun do
     all
     |> Enum.filter(&(&1["event"] == "task_finished" and &1["kind"] == "mission"))
     |> Enum.reject(&(bounded? and &1["result"] == "stopped" and &1["t_ms"] >= ending - 2_000))
-    |> Enum.group_by(& &1["name"], &%{result: &1["result"], reached: Map.get(reached, &1["task_id"], [])})
+    # (why: a failure's reason, for the messages; never compared.)
+    |> Enum.group_by(& &1["name"], &%{result: &1["result"], reached: Map.get(reached, &1["task_id"], []), why: &1["reason"]})
   end
 
   @doc """
