@@ -52,10 +52,9 @@ return_home =
   end
 
 # On station: near the point and at the watch height (a vehicle still climbing
-# or already descending home is not). A condition of its own: unknown, not
-# an error, while a vehicle has not reported its position yet, and `v`
-# followed exactly wherever it is used.
-on_station = fn v, point -> condition(near?(position(v), point, radius + 20) and altitude(v) >= height - 5) end
+# or already descending home is not; nor is one whose position or altitude is
+# not reported yet: `near?` is then nil, which `== true` turns into false).
+on_station = fn v, point -> near?(position(v), point, radius + 20) == true and is_number(altitude(v)) and altitude(v) >= height - 5 end
 
 # One turn on station: until the relief `n` is there (or, with no relief
 # coming, down to 30 %), then home.
