@@ -293,10 +293,7 @@ defmodule Dolphin.Engine do
   @doc "The running runs of the calling process's `Dolphin.Instance`: `%{run, pid, owner, task}`."
   @spec runs() :: [map()]
   def runs do
-    instance = Dolphin.Instance.current()
-
-    Registry.select(Dolphin.Engine.Registry, [{{{:run, :"$1"}, :"$2", :"$3"}, [], [{{:"$1", :"$2", :"$3"}}]}])
-    |> Enum.filter(fn {_, _, meta} -> meta.instance == instance end)
+    registered(:run)
     |> Enum.map(fn {id, pid, meta} -> %{run: id, pid: pid, owner: meta.owner, task: meta.task} end)
     |> Enum.sort_by(& &1.run)
   end
@@ -308,12 +305,15 @@ defmodule Dolphin.Engine do
   """
   @spec tasks() :: [map()]
   def tasks do
-    instance = Dolphin.Instance.current()
-
-    Registry.select(Dolphin.Engine.Registry, [{{{:task, :"$1"}, :"$2", :"$3"}, [], [{{:"$1", :"$2", :"$3"}}]}])
-    |> Enum.filter(fn {_, _, meta} -> meta.instance == instance end)
+    registered(:task)
     |> Enum.map(fn {id, pid, meta} -> meta |> Map.delete(:instance) |> Map.merge(%{task_id: id, pid: pid}) end)
     |> Enum.sort_by(& &1.task_id)
+  end
+
+  # The runs (or tasks) registered by the calling process's instance: {id, pid, meta}.
+  defp registered(kind) do
+    instance = Dolphin.Instance.current()
+    Registry.select(Dolphin.Engine.Registry, [{{{kind, :"$1"}, :"$2", :"$3"}, [], [{{:"$1", :"$2", :"$3"}}]}]) |> Enum.filter(fn {_, _, meta} -> meta.instance == instance end)
   end
 
   @doc false

@@ -34,7 +34,7 @@ defmodule Dolphin.Check.LiveFleet do
           _ -> {:ok, Enum.map(known, &vehicle/1), Enum.map(unknown, & &1.id)}
         end
       after
-        Enum.each(links, &DynamicSupervisor.terminate_child(Dolphin.Instance.names().links, &1))
+        Enum.each(links, &Dolphin.Link.disconnect/1)
         for id <- Vehicles.list(), not MapSet.member?(before, id), do: Vehicles.forget(id)
       end
     end
@@ -48,7 +48,7 @@ defmodule Dolphin.Check.LiveFleet do
         connect(rest, [pid | links])
 
       {:error, why} ->
-        Enum.each(links, &DynamicSupervisor.terminate_child(Dolphin.Instance.names().links, &1))
+        Enum.each(links, &Dolphin.Link.disconnect/1)
         {:error, Dolphin.CommandLineError.failed("--connect #{ep}", why)}
     end
   end
