@@ -69,7 +69,7 @@ mav.mav.request_data_stream_send(sysid, 1, m.MAV_DATA_STREAM_ALL, 4, 1)
 command(m.MAV_CMD_SET_MESSAGE_INTERVAL, 245, 1000000)
 command(m.MAV_CMD_REQUEST_MESSAGE, 242, accept_failure=True)  # refused until home is set
 home = None
-deadline = time.time() + real(120)
+deadline = time.time() + max(real(120), 60.0)  # a loaded machine slows the vehicle's clock, not ours
 while home is None and time.time() < deadline:
     msg = mav.recv_match(type="HOME_POSITION", blocking=True, timeout=real(5))
     if msg is None:
@@ -112,7 +112,7 @@ while True:
 say(uploaded=len(items), requests=sorted(set(requests)))
 
 command(m.MAV_CMD_DO_SET_MODE, 1, 4)
-deadline = time.time() + real(120)
+deadline = time.time() + max(real(120), 60.0)  # a loaded machine slows the vehicle's clock, not ours
 while command(m.MAV_CMD_COMPONENT_ARM_DISARM, 1, accept_failure=True) != 0:
     if time.time() > deadline:
         fail("never armed")
