@@ -20,7 +20,9 @@ defmodule Dolphin.Check do
       (`Dolphin.Check.FleetFile`, or the vehicles of `--sim N`), on a
       virtual clock that moves to the next thing due once everything has
       reacted (so its findings do not depend on how busy the machine
-      is), with the real fleet's picks and the
+      is), in an instance of its own (`Dolphin.Instance`: its stand-ins'
+      views, picks and events reach no live view or event log, its picks
+      claim nothing in a cluster), with the real fleet's picks and the
       engine's allocation — so a `pick` that nothing can serve, or a
       concurrent composition without enough distinct vehicles, fails as it
       would in flight, and is reported with its line and why;
@@ -103,7 +105,7 @@ defmodule Dolphin.Check do
   caller purges it. Options as `run/2`'s.
   """
   @spec check_script(Dolphin.Script.t(), keyword()) :: t()
-  def check_script(%Dolphin.Script{} = script, opts \\ []), do: dry_run(script, opts)
+  def check_script(%Dolphin.Script{} = script, opts \\ []), do: in_own_instance(fn -> dry_run(script, opts) end)
 
   @doc "The stand-in fleet of `--sim N`: N UAVs with a camera, full, on the ground at the simulator's home."
   @spec sim_fleet(pos_integer()) :: [Dolphin.Check.FleetFile.vehicle()]
@@ -155,6 +157,41 @@ defmodule Dolphin.Check do
 
   # --- the dry run ---
 
+  # A dry run works in an instance of its own (Dolphin.Instance), so that its
+  # stand-ins' views, its picks and its script's events are nobody else's: a
+  # live view or event log of the caller's instance does not show them, and
+  # its picks claim nothing in a cluster. Dry runs take turns (the check's
+  # clock is one per VM anyway), so one instance name serves them all.
+  @dry_run_instance Dolphin.Check.DryRun
+
+  defp in_own_instance(fun) do
+    :global.trans({__MODULE__, :dry_run}, fn ->
+      sup = start_dry_run_instance()
+      previous = Dolphin.Instance.put(@dry_run_instance)
+
+      try do
+        fun.()
+      after
+        Dolphin.Instance.put(previous)
+        Process.unlink(sup)
+        Dolphin.Instance.stop(@dry_run_instance)
+      end
+    end, [node()])
+  end
+
+  # The instance of a dry run whose caller was killed may still be stopping.
+  defp start_dry_run_instance do
+    case Dolphin.Instance.start_link(name: @dry_run_instance) do
+      {:ok, sup} ->
+        sup
+
+      {:error, {:already_started, old}} ->
+        ref = Process.monitor(old)
+        Process.exit(old, :shutdown)
+        receive do: ({:DOWN, ^ref, _, _, _} -> start_dry_run_instance())
+    end
+  end
+
   defp dry_run(script, opts) do
     vehicles = Keyword.get_lazy(opts, :fleet, fn -> sim_fleet(Keyword.get(opts, :sim, 1)) end)
     limits = %{max_distance: Keyword.get(opts, :max_distance, @max_distance), max_height: Keyword.get(opts, :max_height, @max_height)}
@@ -171,7 +208,7 @@ defmodule Dolphin.Check do
     for v <- vehicles,
         do: FakeSource.add(test, v.id, type: v.type, payloads: v.payloads, battery: v.battery, position: v.position, relative_altitude: if(v.airborne?, do: 20.0, else: 0.0))
 
-    {:ok, fleet} = Dolphin.Fleet.start_link(name: fleet_name, source: {Source, %{test: test, recorder: recorder}})
+    {:ok, fleet} = Dolphin.Fleet.start_link(name: fleet_name, source: {Source, %{test: test, recorder: recorder}}, claims: false)
 
     try do
       busy = busy_loops(script)

@@ -102,6 +102,17 @@ defmodule Dolphin.CheckTest do
     assert message =~ "before anything stopped it"
   end
 
+  test "a dry run is nobody else's: no event, view or pick of it reaches the caller's instance", %{fleet: fleet} do
+    Dolphin.Test.Instance.start!()
+    Dolphin.Events.subscribe()
+    report = check("ok.exs", fleet)
+    assert [%{mission: "Hop"}] = report.missions
+    refute_received {:dolphin, :events, _}
+    assert Dolphin.Vehicles.list() == []
+    assert Dolphin.Fleet.vehicles() == []
+    refute Dolphin.Instance.running?(Dolphin.Check.DryRun)
+  end
+
   test "a condition never met with the fleet's values is a note, not an error", %{fleet: fleet} do
     fleet = Enum.map(fleet, &%{&1 | battery: 0.5})
     report = check("waits.exs", fleet, horizon_ms: 600_000)
