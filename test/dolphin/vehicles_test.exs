@@ -210,6 +210,19 @@ defmodule Dolphin.VehiclesTest do
     assert {:ok, %{connected?: true, mode: :loiter}} = Vehicles.view(13)
   end
 
+  test "a timeout set for a vehicle is checked at its own pace from then on, not at the old one's", %{port: port, peer: peer} do
+    UDPPeer.send_message(peer, port, copter(), sysid: 18)
+    pid = Wait.until(fn -> Vehicles.whereis(18) end)
+    # The default timeout (20 s of clock time) is checked every 2 s.
+    :ok = Vehicles.set_timeout(18, 1_000)
+    s = :sys.get_state(pid)
+    assert s.timeout_ms == 1_000
+    # Its silence is now looked at every 100 ms of clock time (here 1x).
+    remaining = Process.read_timer(s.check_timer)
+    assert is_integer(remaining) and remaining <= 100
+    assert s.check_due_ms - Clock.now_ms() <= 100
+  end
+
   test "a restarted vehicle process is lost when silent, and keeps the timeout set for it", %{port: port, peer: peer} do
     Vehicles.subscribe(:all)
     UDPPeer.send_message(peer, port, copter(), sysid: 16)

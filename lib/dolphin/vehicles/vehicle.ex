@@ -18,7 +18,7 @@ defmodule Dolphin.Vehicles.Vehicle do
   @lost_floor_real_ms 3_000
   @late_real_ms 100
 
-  defstruct [:id, :sysid, :network, :paths, :judge_due, :state, :heard, :timeout_ms, :check_due_ms, :requests_left, exact_timeout?: false, lost: false, view: nil, ops: %{}, queued: %{}]
+  defstruct [:id, :sysid, :network, :paths, :judge_due, :state, :heard, :timeout_ms, :check_due_ms, :check_timer, :requests_left, exact_timeout?: false, lost: false, view: nil, ops: %{}, queued: %{}]
 
   # The process's state. `paths`: one path per link (and address) the vehicle
   # is heard on (Dolphin.Vehicles.Paths), the one it was discovered on in
@@ -27,7 +27,8 @@ defmodule Dolphin.Vehicles.Vehicle do
   # which its last frame's time is written for readers (Dolphin.Vehicles.Views.heard/2).
   # `check_due_ms`: when
   # the next silence check is due (clock ms): one that runs much later than
-  # that does not judge (see :check_link). `view`: the view last published
+  # that does not judge (see :check_link); `check_timer`: its timer, made
+  # anew when the timeout changes (a shorter one is checked at its own pace). `view`: the view last published
   # (Dolphin.Vehicles.View), nil before the first. `requests_left`: telemetry
   # requests to repeat until position telemetry comes. `ops`: operations
   # under way, by key (a command id, or :mission: one transfer at a time),
@@ -44,6 +45,7 @@ defmodule Dolphin.Vehicles.Vehicle do
           timeout_ms: pos_integer(),
           exact_timeout?: boolean(),
           check_due_ms: integer(),
+          check_timer: reference(),
           requests_left: non_neg_integer(),
           lost: boolean(),
           view: View.t() | nil,
@@ -97,7 +99,7 @@ defmodule Dolphin.Vehicles.Vehicle do
 
     send(self(), :request_telemetry)
     send(self(), {:timesync, 0})
-    Clock.send_after(self(), :check_link, check_period(timeout))
+    check_timer = Clock.send_after(self(), :check_link, check_period(timeout))
     now = Clock.now_ms()
     real = real_ms()
     Process.send_after(self(), :judge_paths, judge_period())
@@ -126,6 +128,7 @@ defmodule Dolphin.Vehicles.Vehicle do
        timeout_ms: timeout,
        exact_timeout?: set != nil,
        check_due_ms: now + check_period(timeout),
+       check_timer: check_timer,
        requests_left: @request_tries
      }}
   end
@@ -169,7 +172,12 @@ defmodule Dolphin.Vehicles.Vehicle do
   def handle_call(:view, _from, s), do: {:reply, s.view || view(s), s}
 
   def handle_call(:paths, _from, s), do: {:reply, Paths.list(s.paths), s}
-  def handle_call({:set_timeout, ms}, _from, s), do: {:reply, :ok, %{s | timeout_ms: ms, exact_timeout?: true}}
+  def handle_call({:set_timeout, ms}, _from, s) do
+    Process.cancel_timer(s.check_timer)
+    period = check_period(ms)
+    check_timer = Clock.send_after(self(), :check_link, period)
+    {:reply, :ok, %{s | timeout_ms: ms, exact_timeout?: true, check_timer: check_timer, check_due_ms: Clock.now_ms() + period}}
+  end
 
   # One command of an id at a time (a COMMAND_ACK names only the command id),
   # one mission transfer at a time; the rest wait their turn. The protocol
@@ -260,8 +268,14 @@ defmodule Dolphin.Vehicles.Vehicle do
   # wait in the link's socket and mailbox, so the silence may be ours, not the
   # vehicle's. The next check, once they are read, judges.
   def handle_info(:check_link, s) do
+    # A check of the timeout before the last set_timeout/2, already sent when
+    # it was cancelled: the new timer's check is still to come.
+    if is_integer(Process.read_timer(s.check_timer)), do: {:noreply, s}, else: check_link(s)
+  end
+
+  defp check_link(s) do
     period = check_period(s.timeout_ms)
-    Clock.send_after(self(), :check_link, period)
+    s = %{s | check_timer: Clock.send_after(self(), :check_link, period)}
     # The vehicle's heard cell, made anew if it was deleted meanwhile (the
     # vehicle forgotten while this process lived on).
     s = %{s | heard: Views.heard_cell(s.id)}
