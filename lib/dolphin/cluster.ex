@@ -80,6 +80,19 @@ defmodule Dolphin.Cluster do
     end
   end
 
+  # Only the default instance is part of a cluster: its mirror is the one
+  # that follows other stations, its fleet the one that claims.
+  defp in_cluster_instance(node) do
+    instance = Dolphin.Instance.current()
+
+    if instance == Dolphin.Instance.default() do
+      :ok
+    else
+      detail = "cannot join #{node} from instance #{inspect(instance)}: only the default instance (#{inspect(Dolphin.Instance.default())}) is part of a cluster"
+      {:error, %Error{reason: :not_cluster_instance, node: node, detail: detail}}
+    end
+  end
+
   defp wait_epmd(0), do: {:error, %Error{reason: :distribution, detail: "EPMD was started but does not answer"}}
 
   defp wait_epmd(n) do
@@ -101,7 +114,8 @@ defmodule Dolphin.Cluster do
   def join(node, opts \\ []) do
     node = if is_binary(node), do: String.to_atom(node), else: node
 
-    with :ok <- alive(node),
+    with :ok <- in_cluster_instance(node),
+         :ok <- alive(node),
          :ok <- connect(node),
          :ok <- agree_speedup(node, opts[:speedup]) do
       case Mirror.follow(node, Keyword.get(opts, :timeout_ms, 5_000)) do

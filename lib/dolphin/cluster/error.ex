@@ -3,7 +3,8 @@ defmodule Dolphin.Cluster.Error do
   Why a node could not start distribution or join a ground station:
   `reason` is `:distribution`, `:not_distributed`, `:unreachable`,
   `:refused` (the node exists but refused the connection: probably another
-  cookie), `:speedup` or `:no_station`; `detail` says it in words.
+  cookie), `:speedup`, `:no_station` or `:not_cluster_instance` (joined from
+  a process working in an instance other than the default, `Dolphin.Instance`); `detail` says it in words.
 
       iex> Exception.message(%Dolphin.Cluster.Error{reason: :unreachable, node: :"gs1@h", detail: "cannot reach gs1@h: EPMD on h does not answer"})
       "cannot reach gs1@h: EPMD on h does not answer"

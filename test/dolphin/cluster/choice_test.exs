@@ -46,4 +46,10 @@ defmodule Dolphin.Cluster.ChoiceTest do
     assert why =~ "m apart"
     assert Choice.conflict(@view, near) == :same
   end
+
+  test "a process working in an instance other than the default cannot join a station: only the default is part of a cluster" do
+    Dolphin.Test.Instance.start!()
+    assert {:error, %Dolphin.Cluster.Error{reason: :not_cluster_instance, detail: detail}} = Dolphin.Cluster.join(:"gs1@127.0.0.1")
+    assert detail =~ ~r/cannot join gs1@127.0.0.1 from instance :dolphin_test_\d+: only the default instance \(Dolphin\) is part of a cluster/
+  end
 end
