@@ -66,6 +66,7 @@ defmodule Dolphin.Check do
 
   alias Dolphin.Check.{Finding, Recorder, Source}
   alias Dolphin.Fleet.FakeSource
+  alias Dolphin.Vehicles.View
 
   defstruct file: nil, findings: [], missions: []
 
@@ -107,9 +108,9 @@ defmodule Dolphin.Check do
   @spec check_script(Dolphin.Script.t(), keyword()) :: t()
   def check_script(%Dolphin.Script{} = script, opts \\ []), do: in_own_instance(fn -> dry_run(script, opts) end)
 
-  @doc "The stand-in fleet of `--sim N`: N UAVs with a camera, full, on the ground at the simulator's home."
+  @doc "The stand-in fleet of `--sim N`: N copters with a camera, full, on the ground at the simulator's home."
   @spec sim_fleet(pos_integer()) :: [Dolphin.Check.FleetFile.vehicle()]
-  def sim_fleet(n), do: for(id <- 1..n, do: %{id: id, type: :uav, payloads: [:camera], battery: 1.0, position: @sim_home, airborne?: false})
+  def sim_fleet(n), do: for(id <- 1..n, do: %{id: id, type: :uav, airframe: :copter, payloads: [:camera], battery: 1.0, position: @sim_home, airborne?: false})
 
   @doc "Whether the report has an error."
   @spec errors?(t()) :: boolean()
@@ -206,7 +207,7 @@ defmodule Dolphin.Check do
     {:ok, recorder} = Recorder.start_link(%{test: test, file: script.file, limits: limits, vehicles: by_id})
 
     for v <- vehicles,
-        do: FakeSource.add(test, v.id, type: v.type, payloads: v.payloads, battery: v.battery, position: v.position, relative_altitude: if(v.airborne?, do: 20.0, else: 0.0))
+        do: FakeSource.add(test, v.id, type: v.type, airframe: Map.get(v, :airframe, View.stand_in_airframe(v.type)), payloads: v.payloads, battery: v.battery, position: v.position, relative_altitude: if(v.airborne?, do: 20.0, else: 0.0))
 
     {:ok, fleet} = Dolphin.Fleet.start_link(name: fleet_name, source: {Source, %{test: test, recorder: recorder}}, claims: false)
 

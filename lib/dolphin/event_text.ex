@@ -96,7 +96,7 @@ defmodule Dolphin.EventText do
   """
   @spec event_text(map()) :: String.t()
   def event_text(%{event: :message, text: text}), do: "message: #{text}"
-  def event_text(%{event: :vehicle_discovered} = e), do: "vehicle #{e.vehicle} discovered (#{e.type || "type unknown"})"
+  def event_text(%{event: :vehicle_discovered} = e), do: "vehicle #{e.vehicle} discovered (#{Dolphin.Vehicles.View.describe_kind(%Dolphin.Vehicles.View{type: e.type, airframe: e[:airframe]})})"
   def event_text(%{event: :vehicle_lost} = e), do: "vehicle #{e.vehicle} lost"
   def event_text(%{event: :vehicle_reconnected} = e), do: "vehicle #{e.vehicle} reconnected"
   def event_text(%{event: :station_joined} = e), do: "ground station #{e.station} joined (#{e.heard} vehicle(s))"

@@ -1,7 +1,7 @@
 defmodule Dolphin.Events do
   # The catalogue: {name, fields, meaning}. The moduledoc and emit/3 both read it.
   @events [
-    {:vehicle_discovered, [:vehicle, :type], "a vehicle was heard for the first time (announced with its autopilot's first HEARTBEAT); `type` is `uav`, `ugv`, `usv`, `uuv` or `other`"},
+    {:vehicle_discovered, [:vehicle, :type, :airframe], "a vehicle was heard for the first time (announced with its autopilot's first HEARTBEAT); `type` is `uav`, `ugv`, `usv`, `uuv` or `other`, `airframe` `copter`, `plane`, `quadplane`, `rover`, `boat`, `sub` or null (a MAV_TYPE no mission is made for: raw missions only)"},
     {:vehicle_lost, [:vehicle], "a vehicle was silent for longer than its connection timeout"},
     {:vehicle_reconnected, [:vehicle], "a lost vehicle was heard again"},
     {:station_joined, [:station, :heard], "a controller began to follow the ground station on node `station`, which hears `heard` vehicles (`Dolphin.Cluster`)"},

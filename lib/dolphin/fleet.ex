@@ -66,7 +66,8 @@ defmodule Dolphin.Fleet do
   alias Dolphin.Vehicles.View
 
   @types [:uav, :ugv, :usv, :uuv, :other]
-  @pick_keys [:count, :type, :payload, :region, :id, :timeout]
+  @airframes View.airframes()
+  @pick_keys [:count, :type, :airframe, :payload, :region, :id, :timeout]
   # How often picks waiting on a region are checked again (clock ms), besides events.
   @region_tick 1_000
 
@@ -173,6 +174,11 @@ defmodule Dolphin.Fleet do
     unless type == nil or Enum.all?(List.wrap(type), &(&1 in @types)),
       do: raise(ArgumentError, "pick type must be one of #{inspect(@types)} (or a list of them), got: #{inspect(type)}")
 
+    airframe = Keyword.get(opts, :airframe)
+
+    unless airframe == nil or Enum.all?(List.wrap(airframe), &(&1 in @airframes)),
+      do: raise(ArgumentError, "pick airframe must be one of #{inspect(@airframes)} (or a list of them), got: #{inspect(airframe)}")
+
     payload = List.wrap(Keyword.get(opts, :payload))
     unless Enum.all?(payload, &is_atom/1), do: raise(ArgumentError, "pick payload must be an atom or a list of atoms, got: #{inspect(payload)}")
 
@@ -189,7 +195,7 @@ defmodule Dolphin.Fleet do
     unless timeout == :infinity or (is_integer(timeout) and timeout >= 0),
       do: raise(ArgumentError, "pick timeout must be milliseconds or :infinity, got: #{inspect(timeout)}")
 
-    %{count: count, type: type, payload: payload, region: region, id: id && List.wrap(id), timeout: timeout}
+    %{count: count, type: type, airframe: airframe, payload: payload, region: region, id: id && List.wrap(id), timeout: timeout}
   end
 
   def requirement!(other), do: raise(ArgumentError, "pick options must be a keyword list, got: #{inspect(other)}")
@@ -199,6 +205,7 @@ defmodule Dolphin.Fleet do
     [
       "#{req.count} vehicle#{if req.count > 1, do: "s"}",
       req.type && "type #{inspect(req.type)}",
+      req[:airframe] && "airframe #{inspect(req.airframe)}",
       req.payload != [] && "payload #{inspect(req.payload)}",
       req.region && "in #{inspect(req.region)}",
       req.id && "id #{VehicleSet.format(req.id)}"
@@ -430,7 +437,7 @@ defmodule Dolphin.Fleet do
     do: v.connected? and s.picked[id] == nil and s.busy[id] == nil and not MapSet.member?(s.claimed_elsewhere, id)
 
   defp matches?(req, %View{} = v) do
-    (req.type == nil or v.type in List.wrap(req.type)) and Enum.all?(req.payload, &(&1 in v.payloads)) and
+    (req.type == nil or v.type in List.wrap(req.type)) and (req.airframe == nil or v.airframe in List.wrap(req.airframe)) and Enum.all?(req.payload, &(&1 in v.payloads)) and
       (req.region == nil or (v.position != nil and Geo.contains?(req.region, v.position))) and (req.id == nil or Enum.any?(req.id, &View.named?(v, &1)))
   end
 
@@ -448,7 +455,7 @@ defmodule Dolphin.Fleet do
             true -> "available"
           end
 
-        "#{id} (#{v.type || "type unknown"}#{if v.payloads != [], do: " " <> inspect(v.payloads), else: ""}, #{status})"
+        "#{id} (#{View.describe_kind(v)}#{if v.payloads != [], do: " " <> inspect(v.payloads), else: ""}, #{status})"
       end)
 
     n = Enum.count(vehicles, &(available?(s, &1) and matches?(req, &1)))

@@ -178,6 +178,55 @@ defmodule Dolphin.Mission do
   @spec item_count(t()) :: pos_integer()
   def item_count(%__MODULE__{} = mission), do: length(to_items(mission))
 
+  # What each airframe can fly, by command: take-offs and landings are for
+  # what flies; everything else every airframe flies in its own way (see
+  # docs/missions.md). A raw `item` is the script's own business.
+  @flying [:copter, :plane, :quadplane]
+  @airborne_only [:take_off, :take_off_with_yaw, :landing_point, :return_home_and_land]
+
+  @doc """
+  The airframes (`Dolphin.Vehicles.View.airframes/0`) that can fly every
+  command of `mission`, or `nil` for a mission of raw items only (`item`),
+  which any vehicle may be given, one of unknown airframe too. A take-off or
+  a landing needs a vehicle that flies: a copter, plane or quadplane.
+
+      iex> alias Dolphin.Mission.Command, as: C
+      iex> Dolphin.Mission.airframes(Dolphin.Mission.new("go", [C.move(10, 0, 0), C.speed(3)]))
+      [:copter, :plane, :quadplane, :rover, :boat, :sub]
+      iex> Dolphin.Mission.airframes(Dolphin.Mission.new("up", [C.take_off(41.0, -8.0, 120), C.move(10, 0, 0)]))
+      [:copter, :plane, :quadplane]
+      iex> Dolphin.Mission.airframes(Dolphin.Mission.new("raw", [C.item(183, params: [9, 1900, 0, 0])]))
+      nil
+  """
+  @spec airframes(t()) :: [Dolphin.Vehicles.View.airframe()] | nil
+  def airframes(%__MODULE__{commands: commands}) do
+    kinds = for %Command{kind: kind} <- commands, kind != :item, do: kind
+
+    cond do
+      commands != [] and kinds == [] -> nil
+      Enum.any?(kinds, &(&1 in @airborne_only)) -> @flying
+      true -> Dolphin.Vehicles.View.airframes()
+    end
+  end
+
+  @doc """
+  The commands of `mission` that an `airframe` cannot fly (`airframes/1`),
+  as `{index in the mission's commands, kind}`: what the pre-flight check and
+  an allocation refusal name.
+
+      iex> alias Dolphin.Mission.Command, as: C
+      iex> Dolphin.Mission.unflyable(Dolphin.Mission.new("up", [C.take_off(41.0, -8.0, 120), C.move(10, 0, 0), C.return_home_and_land()]), :boat)
+      [{0, :take_off}, {2, :return_home_and_land}]
+  """
+  @spec unflyable(t(), Dolphin.Vehicles.View.airframe() | nil) :: [{non_neg_integer(), atom()}]
+  def unflyable(%__MODULE__{commands: commands}, airframe) do
+    for {%Command{kind: kind}, i} <- Enum.with_index(commands), kind != :item, not flies?(kind, airframe), do: {i, kind}
+  end
+
+  defp flies?(_kind, nil), do: false
+  defp flies?(kind, airframe) when kind in @airborne_only, do: airframe in @flying
+  defp flies?(_kind, _airframe), do: true
+
   @typedoc "How a mission ends (see `ending/1`)."
   @type ending ::
           {:landing, non_neg_integer()} | {:loiter_forever, non_neg_integer()} | {:loops_forever, non_neg_integer()} | {:reached, non_neg_integer()}

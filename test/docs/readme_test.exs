@@ -38,7 +38,7 @@ defmodule Dolphin.Docs.ReadmeTest do
 
   test "the console sample's vehicles() table is what the console prints for those vehicles" do
     link = %{received: 100, lost: 0, rtt_ms: 0.0, loss_in: 0.0, loss_out: 0.0}
-    base = %{type: "quadrotor", mode: "STABILIZE", armed: false, battery: 1.0, lat: 40.444233, alt: 0.0, link: link, lost?: false, activity: nil}
+    base = %{type: "uav", airframe: "copter", mode: "STABILIZE", armed: false, battery: 1.0, lat: 40.444233, alt: 0.0, link: link, lost?: false, activity: nil}
 
     printed =
       Dolphin.Console.Format.vehicles([

@@ -95,9 +95,9 @@ defmodule Dolphin.ConsoleTest do
   test "vehicles() shows the fleet; helpers return IEx's no-result", %{io: io} do
     assert vehicles() == IEx.dont_display_result()
     [header, one, two] = String.split(out(io), "\n", trim: true)
-    assert header =~ ~r/^ID\s+TYPE\s+MODE\s+ARMED\s+BATTERY\s+POSITION\s+ALT\s+LINK\s+SEEN\s+TASK$/
-    assert one =~ ~r/^ 1  quadrotor  STABILIZE\s+no\s+100 %  40\.44\d+, -7\.37\d+\s+0\.0 m  100 %(, \d+ ms)?\s+\d+ ms ago\s+-$/
-    assert two =~ ~r/^ 2  quadrotor/
+    assert header =~ ~r/^ID\s+TYPE\s+AIRFRAME\s+MODE\s+ARMED\s+BATTERY\s+POSITION\s+ALT\s+LINK\s+SEEN\s+TASK$/
+    assert one =~ ~r/^ 1  uav\s+copter\s+STABILIZE\s+no\s+100 %  40\.44\d+, -7\.37\d+\s+0\.0 m  100 %(, \d+ ms)?\s+\d+ ms ago\s+-$/
+    assert two =~ ~r/^ 2  uav\s+copter/
   end
 
   test "bad ids and lost vehicles are refused, and nothing is sent", %{io: io} do
@@ -130,7 +130,7 @@ defmodule Dolphin.ConsoleTest do
     messages(2)
     assert out(io) =~ "vehicle 2 is lost; its last messages:"
     vehicles()
-    assert out(io) =~ ~r/\n 2  quadrotor.*LOST /
+    assert out(io) =~ ~r/\n 2  uav\s+copter.*LOST /
     {:ok, one} = Vehicles.state(1)
     refute one.armed
   end
@@ -192,7 +192,7 @@ defmodule Dolphin.ConsoleTest do
     assert text =~ ~s{run #{id} task mission "Patrol" (started from this console, running for}
     assert text =~ ~r/└─ \d+ mission "Patrol"  vehicle 2\s+item 2\/2/
     vehicles()
-    assert out(io) =~ ~r/\n 2  quadrotor  AUTO .* \d+ mission "Patrol" \(run #{id}\)\n/
+    assert out(io) =~ ~r/\n 2  uav\s+copter\s+AUTO .* \d+ mission "Patrol" \(run #{id}\)\n/
 
     land(2)
     assert out(io) =~ ~r/^vehicle 2 is flying task \d+ mission "Patrol" \(run #{id}\): nothing sent\. Add force: true/

@@ -32,11 +32,20 @@ defmodule Dolphin.FleetTest do
       assert Fleet.picked(ctx.fleet, self()) == VehicleSet.new([uav, cam, boat])
     end
 
+    test "by airframe: the report's three side-scan submarines, not the boat nor the copter; an unknown airframe is refused at once", ctx do
+      subs = fake_vehicles(ctx, 3, type: :uuv, payloads: [:sidescan])
+      [_boat] = fake_vehicles(ctx, 1, type: :usv, payloads: [:sidescan])
+      [_copter] = fake_vehicles(ctx, 1, payloads: [:sidescan])
+      assert {:ok, %VehicleSet{ids: ^subs}} = pick(ctx, count: 3, type: :uuv, airframe: :sub, payload: :sidescan, timeout: 0)
+      assert {:error, %PickError{requirement: "1 vehicle, airframe [:plane, :quadplane]"}} = pick(ctx, airframe: [:plane, :quadplane], timeout: 0)
+      assert_raise ArgumentError, ~r/pick airframe must be one of \[:copter, :plane, :quadplane, :rover, :boat, :sub\] \(or a list of them\), got: :submarine/, fn -> pick(ctx, airframe: :submarine) end
+    end
+
     test "a pick that cannot be served in time fails, naming the requirement", ctx do
       [v] = fake_vehicles(ctx, 1, type: :ugv)
       assert {:error, %PickError{requirement: "2 vehicles, type :uav, payload [:camera]", message: m}} = pick(ctx, count: 2, type: :uav, payload: :camera, timeout: 10)
       assert m =~ "pick timed out after 10 ms"
-      assert m =~ "#{v} (ugv, available)"
+      assert m =~ "#{v} (ugv rover, available)"
     end
 
     test "release_all/2 releases an owner's vehicles and drops its waiting picks at once, while it still lives", ctx do

@@ -88,7 +88,7 @@ defmodule Dolphin.IdsTextTest do
 
         assert Format.task_state(nil, %{event: :task_progress, progress: %{vehicles: [id]}}) |> names_id!(id)
 
-        row = %{id: id, type: "quadrotor", mode: :guided, armed: true, battery: 0.5, lat: 1.0, lon: 2.0, alt: 3.0, link: nil, seen_ms: 10, lost?: false, activity: nil}
+        row = %{id: id, type: "uav", airframe: "copter", mode: :guided, armed: true, battery: 0.5, lat: 1.0, lon: 2.0, alt: 3.0, link: nil, seen_ms: 10, lost?: false, activity: nil}
         names_id!(Format.vehicles([row]), id)
 
         tree = Format.task_tree([], [%{run: 1, text: "run 1"}], [%{run: 1, task_id: 5, parent_id: nil, kind: :fly, name: "go", vehicle: id}], %{})

@@ -1,45 +1,60 @@
 defmodule Dolphin.Check.FleetFile do
   @moduledoc """
   The fleet a pre-flight check (`Dolphin.Check`, `mix dolphin.check --fleet
-  FILE`) assumes: a JSON file such as
+  FILE`) assumes, and what a run (`mix dolphin.run --fleet FILE`, `mix
+  dolphin.console --fleet FILE`) adds to the vehicles it hears: a JSON file
+  such as
 
       {"vehicles": [
-        {"id": 1, "type": "uav", "payloads": ["camera"], "battery": 1.0,
+        {"id": 1, "airframe": "copter", "payloads": ["camera"], "battery": 1.0,
          "position": [40.444233, -7.375234, 820]},
         {"id": 2, "type": "uav", "battery": 0.6, "position": [40.4445, -7.3755, 820],
-         "airborne": false}
+         "airborne": false},
+        {"id": 7, "airframe": "sub", "payloads": ["sidescan"], "position": [38.39, -8.81, 0]}
       ]}
 
   Each vehicle: `id` (its MAVLink system id, 0..255, unique; required),
   `type` (`"uav"`, `"ugv"`, `"usv"`, `"uuv"` or `"other"`, as `pick(type:
-  ...)` names them; default `"uav"`), `payloads` (names such as `"camera"`
-  or `"thermal_camera"`, as `pick(payload: ...)` writes them; default none),
-  `battery` (the charge it starts with, 0.0..1.0; default 1.0), `position`
-  (`[lat, lon, height above sea level]`, where it stands — its home;
-  required), `airborne` (default false: on the ground).
+  ...)` names them), `airframe` (`"copter"`, `"plane"`, `"quadplane"`,
+  `"rover"`, `"boat"` or `"sub"`, as `pick(airframe: ...)` names them) — each
+  defaults from the other (a `"sub"` is a `"uuv"`; a `"usv"` a `"boat"`), a
+  uav copter when neither is given —, `payloads` (names such as `"camera"`,
+  `"thermal_camera"` or `"sidescan"`, as `pick(payload: ...)` writes them;
+  default none), `battery` (the charge it starts with, 0.0..1.0; default
+  1.0), `position` (`[lat, lon, height above sea level]`, where it stands —
+  its home; required), `airborne` (default false: on the ground).
+
+  In a run, a vehicle's type and airframe are what its heartbeat says: the
+  file gives it only its payloads — those it cannot announce over MAVLink
+  (a side-scan sonar, a smoke sensor) — by system id.
 
   A file that cannot be used is an error naming every problem in it: each
   field of each vehicle that is wrong, or where the JSON text breaks (byte
   and line).
 
       iex> Dolphin.Check.FleetFile.parse(~s({"vehicles":[{"id":3,"payloads":["camera"],"position":[41.0,-8.0,100]}]}))
-      {:ok, [%{id: 3, type: :uav, payloads: [:camera], battery: 1.0, position: %Dolphin.Geo.Location{lat: 41.0, lon: -8.0, h: 100.0}, airborne?: false}]}
-      iex> {:error, e} = Dolphin.Check.FleetFile.parse(~s({"vehicles":[{"id":300,"type":"boat","position":[41.0,-8.0,100]}]}))
+      {:ok, [%{id: 3, type: :uav, airframe: :copter, payloads: [:camera], battery: 1.0, position: %Dolphin.Geo.Location{lat: 41.0, lon: -8.0, h: 100.0}, airborne?: false}]}
+      iex> {:ok, [v]} = Dolphin.Check.FleetFile.parse(~s({"vehicles":[{"id":4,"airframe":"sub","payloads":["sidescan"],"position":[38.4,-8.8,0]}]}))
+      iex> {v.type, v.airframe, v.payloads}
+      {:uuv, :sub, [:sidescan]}
+      iex> {:error, e} = Dolphin.Check.FleetFile.parse(~s({"vehicles":[{"id":300,"type":"boat","position":[41.0,-8.0,100]},{"id":5,"type":"usv","airframe":"plane","position":[41.0,-8.0,0]}]}))
       iex> e.problems
-      [~s<vehicle #1: "id" must be an integer system id 0..255, got 300>, ~s<vehicle #1: unknown type "boat" (one of uav, ugv, usv, uuv, other)>]
+      [~s<vehicle #1: "id" must be an integer system id 0..255, got 300>, ~s<vehicle #1: unknown type "boat" (one of uav, ugv, usv, uuv, other)>, ~s<vehicle #2: airframe "plane" is a uav, not a usv>]
   """
 
   alias Dolphin.Check.FleetFileError
   alias Dolphin.Geo.Location
+  alias Dolphin.Vehicles.View
   alias Dolphin.MAVLink.{JSON, JSONError}
 
   # The vehicle classes a pick asks for (Dolphin.Vehicles.View.class/1), by
   # their names in the file: written out, so that no name read from a file
   # has to exist as an atom already.
   @types [{"uav", :uav}, {"ugv", :ugv}, {"usv", :usv}, {"uuv", :uuv}, {"other", :other}]
+  @airframes for a <- View.airframes(), do: {Atom.to_string(a), a}
   @payload_name ~r/^[a-z][a-z0-9_]{0,63}$/
 
-  @type vehicle :: %{id: 0..255, type: atom(), payloads: [atom()], battery: float(), position: Location.t(), airborne?: boolean()}
+  @type vehicle :: %{id: 0..255, type: atom(), airframe: View.airframe() | nil, payloads: [atom()], battery: float(), position: Location.t(), airborne?: boolean()}
 
   @doc "Reads and parses a fleet file."
   @spec read(Path.t()) :: {:ok, [vehicle()]} | {:error, FleetFileError.t()}
@@ -97,18 +112,22 @@ defmodule Dolphin.Check.FleetFile do
   defp vehicle(%{} = v) do
     fields = [
       id: field(v, "id", :required, &(is_integer(&1) and &1 in 0..255), "an integer system id 0..255"),
-      type: v |> field("type", "uav", &is_binary/1, "a string") |> and_then(&type/1),
+      type: v |> field("type", nil, &is_binary/1, "a string") |> and_then(&type/1),
+      airframe: v |> field("airframe", nil, &is_binary/1, "a string") |> and_then(&airframe/1),
       payloads: v |> field("payloads", [], &(is_list(&1) and Enum.all?(&1, fn p -> is_binary(p) end)), "a list of strings") |> and_then(&payloads/1),
       battery: field(v, "battery", 1.0, &(is_number(&1) and &1 >= 0 and &1 <= 1), "a number from 0.0 to 1.0"),
       position: field(v, "position", :required, &position?/1, "[latitude, longitude, height above sea level], latitude -90..90, longitude -180..180"),
       airborne: field(v, "airborne", false, &is_boolean/1, "true or false")
     ]
 
+    fields = fields ++ [kind: kind(fields[:type], fields[:airframe])]
+
     case for({_k, {:error, why}} <- fields, do: why) do
       [] ->
         f = Map.new(fields, fn {k, {:ok, value}} -> {k, value} end)
         [lat, lon, h] = f.position
-        {:ok, %{id: f.id, type: f.type, payloads: Enum.sort(f.payloads), battery: f.battery * 1.0, position: %Location{lat: lat * 1.0, lon: lon * 1.0, h: h * 1.0}, airborne?: f.airborne}}
+        {type, airframe} = f.kind
+        {:ok, %{id: f.id, type: type, airframe: airframe, payloads: Enum.sort(f.payloads), battery: f.battery * 1.0, position: %Location{lat: lat * 1.0, lon: lon * 1.0, h: h * 1.0}, airborne?: f.airborne}}
 
       whys ->
         {:error, whys}
@@ -131,12 +150,37 @@ defmodule Dolphin.Check.FleetFile do
   defp and_then({:ok, value}, fun), do: fun.(value)
   defp and_then(error, _fun), do: error
 
+  defp type(nil), do: {:ok, nil}
+
   defp type(name) do
     case List.keyfind(@types, name, 0) do
       {_, type} -> {:ok, type}
       nil -> {:error, "unknown type #{inspect(name)} (one of #{@types |> Enum.map(&elem(&1, 0)) |> Enum.join(", ")})"}
     end
   end
+
+  defp airframe(nil), do: {:ok, nil}
+
+  defp airframe(name) do
+    case List.keyfind(@airframes, name, 0) do
+      {_, airframe} -> {:ok, airframe}
+      nil -> {:error, "unknown airframe #{inspect(name)} (one of #{@airframes |> Enum.map(&elem(&1, 0)) |> Enum.join(", ")})"}
+    end
+  end
+
+  # The type and airframe, each the other's default (a uav copter when neither is given).
+  defp kind({:ok, nil}, {:ok, nil}), do: {:ok, {:uav, :copter}}
+  defp kind({:ok, type}, {:ok, nil}), do: {:ok, {type, View.stand_in_airframe(type)}}
+  defp kind({:ok, nil}, {:ok, airframe}), do: {:ok, {View.airframe_class(airframe), airframe}}
+
+  defp kind({:ok, type}, {:ok, airframe}) do
+    if View.airframe_class(airframe) == type,
+      do: {:ok, {type, airframe}},
+      else: {:error, "airframe \"#{airframe}\" is a #{View.airframe_class(airframe)}, not a #{type}"}
+  end
+
+  # A problem with either is said by its own field.
+  defp kind(_type, _airframe), do: {:ok, nil}
 
   # A payload is whatever the operator's vehicles carry: any name a script
   # could write as an atom (`pick(payload: :thermal_camera)`). The file is the

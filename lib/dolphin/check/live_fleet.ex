@@ -57,6 +57,8 @@ defmodule Dolphin.Check.LiveFleet do
     %{
       id: v.id,
       type: v.type || :uav,
+      # As heard: a vehicle of unknown airframe stands in as one (raw missions only).
+      airframe: v.airframe,
       payloads: v.payloads,
       battery: v.battery || 1.0,
       position: v.position,

@@ -87,7 +87,7 @@ defmodule Dolphin.CLI.Vehicles do
     previous = Dolphin.Fleet.source()
     :ok = Dolphin.Fleet.set_source(FakeSource.source(name))
     defer.(fn -> Dolphin.Fleet.set_source(previous) end)
-    for id <- 1..n, do: FakeSource.add(name, id, type: :uav)
+    for id <- 1..n, do: FakeSource.add(name, id, type: :uav, airframe: :copter)
     IO.puts(out, "#{n} fake vehicle(s) [1..#{n}] of the fake platform (no MAVLink: missions cannot fly on them)")
     :ok
   end

@@ -118,7 +118,7 @@ defmodule Dolphin.Console.Format do
   # --- vehicles ------------------------------------------------------------------
 
   @doc false
-  # The vehicles() table. Each row: %{id, type, mode, armed, battery, lat, lon,
+  # The vehicles() table. Each row: %{id, type, airframe, mode, armed, battery, lat, lon,
   # alt (above home), link: nil | %{received, lost}, seen_ms (since the last
   # frame, or nil), lost?, activity}, and optionally paths (those of
   # Dolphin.Vehicles.paths/1, each with seen_ms): a vehicle heard on more than
@@ -159,11 +159,12 @@ defmodule Dolphin.Console.Format do
 
   defp vehicles_table(rows) do
     table(
-      ["ID", "TYPE", "MODE", "ARMED", "BATTERY", "POSITION", "ALT", "LINK", "SEEN", "TASK"],
+      ["ID", "TYPE", "AIRFRAME", "MODE", "ARMED", "BATTERY", "POSITION", "ALT", "LINK", "SEEN", "TASK"],
       Enum.map(rows, fn r ->
         [
           Dolphin.Fleet.VehicleSet.format(r.id),
           r.type || "-",
+          r.airframe || "-",
           mode(r.mode),
           if(r.armed, do: "yes", else: "no"),
           battery(r.battery),
@@ -174,7 +175,7 @@ defmodule Dolphin.Console.Format do
           r.activity || "-"
         ]
       end),
-      [0, 4, 6]
+      [0, 5, 7]
     )
   end
 
@@ -217,12 +218,7 @@ defmodule Dolphin.Console.Format do
   @spec type_name(non_neg_integer() | nil) :: String.t() | nil
   def type_name(nil), do: nil
 
-  def type_name(n) do
-    case Dolphin.MAVLink.Ardupilotmega.enum_name(:mav_type, n) do
-      {:ok, atom} -> atom |> Atom.to_string() |> String.replace_prefix("mav_type_", "") |> String.replace("_", " ")
-      _ -> "type #{n}"
-    end
-  end
+  def type_name(n), do: Dolphin.Vehicles.View.mav_type_name(n)
 
   @doc false
   # A task in one line: `17 mission "Survey Area"`.

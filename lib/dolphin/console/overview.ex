@@ -65,7 +65,8 @@ defmodule Dolphin.Console.Overview do
 
     %{
       id: v.id,
-      type: Format.type_name(s.type),
+      type: s.type && to_string(Dolphin.Vehicles.View.class(s.type)),
+      airframe: airframe(s),
       mode: s.mode,
       armed: s.armed,
       battery: s.battery,
@@ -84,6 +85,7 @@ defmodule Dolphin.Console.Overview do
     %{
       id: v.id,
       type: "#{f.type || "?"} (fake)",
+      airframe: f.airframe && to_string(f.airframe),
       mode: f.mode,
       armed: f.armed?,
       battery: f.battery,
@@ -95,6 +97,16 @@ defmodule Dolphin.Console.Overview do
       lost?: not f.connected?,
       activity: activity(v, console_runs)
     }
+  end
+
+  # What flies it, or what its heartbeat says when no mission is made for that.
+  defp airframe(%{type: nil}), do: nil
+
+  defp airframe(s) do
+    case Dolphin.Vehicles.View.airframe(s.type, s.autopilot) do
+      nil -> "unknown (#{Format.type_name(s.type)})"
+      airframe -> to_string(airframe)
+    end
   end
 
   defp activity(v, console_runs) do

@@ -116,7 +116,7 @@ defmodule Dolphin.Engine.Failure do
   defp format_exception(other), do: inspect(other)
 
   defp requirement_words(req) do
-    case Enum.filter([req[:type] && "type #{inspect(req[:type])}", req[:payloads] not in [nil, []] && "payloads #{inspect(req[:payloads])}"], & &1) do
+    case Enum.filter([req[:type] && "type #{inspect(req[:type])}", req[:airframe] && "airframe #{inspect(req[:airframe])}", req[:payloads] not in [nil, []] && "payloads #{inspect(req[:payloads])}"], & &1) do
       [] -> ""
       said -> " (" <> Enum.join(said, ", ") <> ")"
     end

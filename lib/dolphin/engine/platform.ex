@@ -47,8 +47,13 @@ defmodule Dolphin.Engine.Platform do
 
   @type spec :: term()
   @type vehicle_type :: :uav | :ugv | :usv | :uuv | :other
-  @typedoc "`type` (one class or a list), `payloads` (all required), `id` (one system id)."
-  @type requirements :: %{optional(:type) => vehicle_type() | [vehicle_type()] | nil, optional(:payloads) => [atom()], optional(:id) => non_neg_integer() | nil}
+  @typedoc "`type` (one class or a list), `airframe` (one or a list, `Dolphin.Vehicles.View.airframes/0`), `payloads` (all required), `id` (one system id)."
+  @type requirements :: %{
+          optional(:type) => vehicle_type() | [vehicle_type()] | nil,
+          optional(:airframe) => Dolphin.Vehicles.View.airframe() | [Dolphin.Vehicles.View.airframe()] | nil,
+          optional(:payloads) => [atom()],
+          optional(:id) => non_neg_integer() | nil
+        }
 
   @doc "The task's name in events, errors and the console (a mission's name)."
   @callback name(spec()) :: String.t()

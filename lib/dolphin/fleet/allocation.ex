@@ -60,7 +60,7 @@ defmodule Dolphin.Fleet.Allocation do
   @doc "Whether a vehicle satisfies a task's requirements and restrictions."
   @spec matches?(leaf(), View.t()) :: boolean()
   def matches?(%{requirements: req, allowed: allowed}, %View{} = v) do
-    (allowed == nil or Enum.any?(allowed, &View.named?(v, &1))) and type_ok?(req[:type], v.type) and
+    (allowed == nil or Enum.any?(allowed, &View.named?(v, &1))) and type_ok?(req[:type], v.type) and type_ok?(req[:airframe], v.airframe) and
       Enum.all?(List.wrap(req[:payloads]), &(&1 in v.payloads)) and (req[:id] == nil or View.named?(v, req[:id]))
   end
 
@@ -140,6 +140,7 @@ defmodule Dolphin.Fleet.Allocation do
     parts =
       [
         req[:type] && "type #{inspect(req[:type])}",
+        req[:airframe] && "airframe #{inspect(req[:airframe])}",
         req[:payloads] not in [nil, []] && "payload #{inspect(req[:payloads])}",
         req[:id] && "id #{VehicleSet.format(req[:id])}",
         allowed && "one of #{VehicleSet.format(allowed)} (on)"
@@ -150,5 +151,5 @@ defmodule Dolphin.Fleet.Allocation do
   end
 
   defp describe_vehicles([]), do: "none (pick vehicles first; busy or lost ones do not count)"
-  defp describe_vehicles(vs), do: Enum.map_join(vs, ", ", fn v -> "#{v.id} (#{v.type}#{if v.payloads != [], do: " " <> inspect(v.payloads), else: ""})" end)
+  defp describe_vehicles(vs), do: Enum.map_join(vs, ", ", fn v -> "#{v.id} (#{View.describe_kind(v)}#{if v.payloads != [], do: " " <> inspect(v.payloads), else: ""})" end)
 end

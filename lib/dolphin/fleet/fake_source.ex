@@ -13,7 +13,8 @@ defmodule Dolphin.Fleet.FakeSource do
       :ok = Dolphin.Fleet.FakeSource.lose(:fakes, 1)                 # {:view, ...connected?: false}, {:vehicle_lost, 1}
 
   A vehicle's attributes are the fields of `Dolphin.Vehicles.View` (`type`
-  defaults to `:uav`, `battery` to 1.0, `position` to a point near Porto,
+  defaults to `:uav`, `airframe` to the type's usual one,
+  `Dolphin.Vehicles.View.stand_in_airframe/1` — a fake uav is a copter —, `battery` to 1.0, `position` to a point near Porto,
   `mission_progress` to `{0, 0}`, no mission; `nil` is a value not reported
   yet); a change is a keyword list of those fields. The state lives in a
   public ETS table named after the source, so `set/3` publishes from the
@@ -64,7 +65,10 @@ defmodule Dolphin.Fleet.FakeSource do
   @doc "Adds a vehicle (or replaces one) and publishes its view: a new one is discovered (`{:vehicle_discovered, id}` on `:vehicles`)."
   @spec add(atom(), Dolphin.Vehicles.Id.t(), keyword()) :: :ok
   def add(name, id, attrs \\ []) when is_id(id) do
-    vehicle = struct!(%View{id: id, type: :uav, battery: 1.0, position: Dolphin.Geo.Location.new(41.1780, -8.5980, 100), mission_progress: {0, 0}}, check!(attrs))
+    attrs = check!(attrs)
+    # An airframe not given is the class's usual one (a fake uav is a copter).
+    attrs = Keyword.put_new_lazy(attrs, :airframe, fn -> View.stand_in_airframe(Keyword.get(attrs, :type, :uav)) end)
+    vehicle = struct!(%View{id: id, type: :uav, battery: 1.0, position: Dolphin.Geo.Location.new(41.1780, -8.5980, 100), mission_progress: {0, 0}}, attrs)
     put(name, %{vehicle | id: id, payloads: Enum.sort(vehicle.payloads)})
   end
 

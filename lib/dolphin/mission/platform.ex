@@ -72,11 +72,13 @@ defmodule Dolphin.Mission.Platform do
   def kind(_mission), do: :mission
 
   @impl true
-  def requirements(%Mission{commands: commands}) do
+  # The airframes that can fly every command of the mission
+  # (`Dolphin.Mission.airframes/1`): a mission of raw items only (`item`)
+  # may go to a vehicle of any airframe, even an unknown one.
+  def requirements(%Mission{commands: commands} = mission) do
     kinds = Enum.map(commands, & &1.kind)
-    type = if Enum.any?(kinds, &(&1 in [:take_off, :take_off_with_yaw])), do: :uav, else: nil
     payloads = if Enum.any?(kinds, &(&1 in @camera_commands)), do: [:camera], else: []
-    %{type: type, payloads: payloads}
+    %{airframe: Mission.airframes(mission), payloads: payloads}
   end
 
   @impl true

@@ -16,6 +16,7 @@ defmodule Dolphin.Vehicles.View do
   | `id` | the vehicle's id: its system id, or its qualified name `"SYSID@NETWORK"` when another vehicle has that system id (`Dolphin.Vehicles.Id`) |
   | `network` | where it was first heard (`Dolphin.Vehicles.Id.network/1`), `nil` for a vehicle no link of this node hears |
   | `type` | `:uav`, `:ugv`, `:usv`, `:uuv`, `:other`, or `nil` while unknown |
+  | `airframe` | `:copter`, `:plane`, `:quadplane`, `:rover`, `:boat`, `:sub` (`airframe/2`), or `nil`: unknown, or a MAV_TYPE no mission of the language is made for |
   | `mav_type` | its HEARTBEAT's MAV_TYPE number (2 a quadrotor, ...), `nil` while unknown |
   | `autopilot` | `:ardupilot`, `:px4`, `:other` or `nil` while unknown |
   | `uid` | its autopilot's unique id (AUTOPILOT_VERSION; 0: it has none), `nil` until reported |
@@ -37,6 +38,7 @@ defmodule Dolphin.Vehicles.View do
   defstruct id: nil,
             network: nil,
             type: nil,
+            airframe: nil,
             mav_type: nil,
             autopilot: nil,
             uid: nil,
@@ -56,10 +58,12 @@ defmodule Dolphin.Vehicles.View do
             status_texts: []
 
   @type class :: :uav | :ugv | :usv | :uuv | :other
+  @type airframe :: :copter | :plane | :quadplane | :rover | :boat | :sub
   @type t :: %__MODULE__{
           id: Dolphin.Vehicles.Id.t(),
           network: String.t() | nil,
           type: class() | nil,
+          airframe: airframe() | nil,
           mav_type: non_neg_integer() | nil,
           autopilot: atom() | nil,
           uid: non_neg_integer() | nil,
@@ -98,6 +102,111 @@ defmodule Dolphin.Vehicles.View do
   def class(12), do: :uuv
   def class(_), do: :other
 
+  # MAV_TYPE numbers by airframe: the multirotors and helicopters ArduCopter
+  # flies, fixed wing, the VTOL types a quadplane reports, ground rover,
+  # surface boat, submarine.
+  @copter [2, 3, 4, 13, 14, 15, 29, 35, 43]
+  @quadplane [19, 20, 21, 22, 23, 24, 25]
+  @airframes [:copter, :plane, :quadplane, :rover, :boat, :sub]
+
+  @doc "The airframes, as `pick(airframe: ...)` names them."
+  @spec airframes() :: [airframe()]
+  def airframes, do: @airframes
+
+  @doc """
+  The airframe of a vehicle whose HEARTBEAT says MAV_TYPE `mav_type` and
+  autopilot `autopilot` (as `Dolphin.Vehicles.State` names it): how its
+  missions fly (take-off, loiter, landing, what a stop does). Only a flight
+  stack's vehicle has one (an `:other` autopilot — a companion computer, a
+  gimbal — has none), and only a MAV_TYPE whose missions the language knows:
+  anything else (an airship, a balloon) is `nil`, never guessed.
+
+      iex> Dolphin.Vehicles.View.airframe(2, :ardupilot)
+      :copter
+      iex> Dolphin.Vehicles.View.airframe(1, :ardupilot)
+      :plane
+      iex> Dolphin.Vehicles.View.airframe(11, :ardupilot)
+      :boat
+      iex> Dolphin.Vehicles.View.airframe(12, :ardupilot)
+      :sub
+      iex> Dolphin.Vehicles.View.airframe(7, :ardupilot)
+      nil
+      iex> Dolphin.Vehicles.View.airframe(2, :other)
+      nil
+  """
+  @spec airframe(non_neg_integer() | nil, atom() | nil) :: airframe() | nil
+  def airframe(mav_type, autopilot) when autopilot in [:ardupilot, :px4] do
+    cond do
+      mav_type in @copter -> :copter
+      mav_type == 1 -> :plane
+      mav_type in @quadplane -> :quadplane
+      mav_type == 10 -> :rover
+      mav_type == 11 -> :boat
+      mav_type == 12 -> :sub
+      true -> nil
+    end
+  end
+
+  def airframe(_mav_type, _autopilot), do: nil
+
+  @doc """
+  The airframe a stand-in of class `type` has when its description names
+  none (a fleet file's vehicle, a fake vehicle): the class's most common one.
+  Never used for a vehicle heard over MAVLink, whose airframe is its
+  heartbeat's (`airframe/2`).
+
+      iex> Enum.map([:uav, :ugv, :usv, :uuv, :other], &Dolphin.Vehicles.View.stand_in_airframe/1)
+      [:copter, :rover, :boat, :sub, nil]
+  """
+  @spec stand_in_airframe(class() | nil) :: airframe() | nil
+  def stand_in_airframe(:uav), do: :copter
+  def stand_in_airframe(:ugv), do: :rover
+  def stand_in_airframe(:usv), do: :boat
+  def stand_in_airframe(:uuv), do: :sub
+  def stand_in_airframe(_), do: nil
+
+  @doc """
+  The class of an airframe.
+
+      iex> Dolphin.Vehicles.View.airframe_class(:quadplane)
+      :uav
+  """
+  @spec airframe_class(airframe()) :: class()
+  def airframe_class(airframe) when airframe in [:copter, :plane, :quadplane], do: :uav
+  def airframe_class(:rover), do: :ugv
+  def airframe_class(:boat), do: :usv
+  def airframe_class(:sub), do: :uuv
+
+  @doc """
+  How a vehicle's class and airframe read: `"uav copter"`, `"uuv sub"`,
+  `"uav, airframe unknown (airship)"` (what its MAV_TYPE says, when the
+  airframe is unknown), `"type unknown"` before its first heartbeat.
+
+      iex> Dolphin.Vehicles.View.describe_kind(%Dolphin.Vehicles.View{type: :uav, airframe: :plane, mav_type: 1})
+      "uav plane"
+      iex> Dolphin.Vehicles.View.describe_kind(%Dolphin.Vehicles.View{type: :uav, mav_type: 7})
+      "uav, airframe unknown (airship)"
+  """
+  @spec describe_kind(t()) :: String.t()
+  def describe_kind(%__MODULE__{type: nil, airframe: nil}), do: "type unknown"
+  def describe_kind(%__MODULE__{type: type, airframe: nil, mav_type: nil}), do: "#{type}, airframe unknown"
+  def describe_kind(%__MODULE__{type: type, airframe: nil, mav_type: n}), do: "#{type}, airframe unknown (#{mav_type_name(n)})"
+  def describe_kind(%__MODULE__{type: type, airframe: airframe}), do: "#{type} #{airframe}"
+
+  @doc """
+  A MAV_TYPE number in words: `2` is `"quadrotor"`, an unknown number `"MAV_TYPE 99"`.
+
+      iex> Dolphin.Vehicles.View.mav_type_name(11)
+      "surface boat"
+  """
+  @spec mav_type_name(non_neg_integer()) :: String.t()
+  def mav_type_name(n) do
+    case Dolphin.MAVLink.Ardupilotmega.enum_name(:mav_type, n) do
+      {:ok, atom} -> atom |> Atom.to_string() |> String.replace_prefix("mav_type_", "") |> String.replace("_", " ")
+      _ -> "MAV_TYPE #{n}"
+    end
+  end
+
   @doc """
   Whether `name` names the vehicle of `view`: its id, or its qualified name
   `"SYSID@NETWORK"` (which the first vehicle heard with a system id answers
@@ -132,6 +241,7 @@ defmodule Dolphin.Vehicles.View do
     %__MODULE__{
       id: state.id,
       type: class(state.type),
+      airframe: airframe(state.type, state.autopilot),
       mav_type: state.type,
       autopilot: state.autopilot,
       uid: state.uid,
@@ -167,7 +277,7 @@ defmodule Dolphin.Vehicles.View do
 
       iex> alias Dolphin.Vehicles.View
       iex> View.transitions(nil, %View{id: 3, type: :uav, mode: :guided})
-      [{:vehicle_discovered, %{vehicle: 3, type: :uav}}]
+      [{:vehicle_discovered, %{vehicle: 3, type: :uav, airframe: nil}}]
       iex> View.transitions(%View{id: 3, type: :uav}, %View{id: 3, type: :uav, mode: :auto, armed?: true, mission_progress: {2, 5}})
       [{:mode_changed, %{vehicle: 3, mode: :auto}}, {:armed, %{vehicle: 3}}, {:mission_item_reached, %{vehicle: 3, seq: 2}}]
       iex> View.transitions(%View{id: 3, type: :uav}, %View{id: 3, type: :uav, connected?: false})
@@ -175,7 +285,7 @@ defmodule Dolphin.Vehicles.View do
   """
   @spec transitions(t() | nil, t()) :: [{atom(), map()}]
   def transitions(old, %__MODULE__{} = new) do
-    discovered = if new.type != nil and (old == nil or old.type == nil), do: [{:vehicle_discovered, %{vehicle: new.id, type: new.type}}], else: []
+    discovered = if new.type != nil and (old == nil or old.type == nil), do: [{:vehicle_discovered, %{vehicle: new.id, type: new.type, airframe: new.airframe}}], else: []
 
     case old do
       nil -> discovered

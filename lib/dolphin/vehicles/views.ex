@@ -165,7 +165,7 @@ defmodule Dolphin.Vehicles.Views do
     if events?, do: Enum.each(transitions, fn {event, meta} -> Events.emit(event, meta) end)
     for {event, _} <- transitions, event in @notices, do: PubSub.publish(:vehicles, {event, id})
 
-    if old == nil or old.type != new.type or old.payloads != new.payloads or old.connected? != new.connected?,
+    if old == nil or old.type != new.type or old.airframe != new.airframe or old.payloads != new.payloads or old.connected? != new.connected?,
       do: PubSub.publish(:vehicles, {:vehicle_changed, id})
 
     :ok

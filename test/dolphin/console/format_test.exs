@@ -47,7 +47,7 @@ defmodule Dolphin.Console.FormatTest do
   describe "vehicles" do
     defp row(attrs) do
       Map.merge(
-        %{id: 1, type: "quadrotor", mode: :guided, armed: true, battery: 0.87, lat: 40.444233, lon: -7.375234, alt: 20.0,
+        %{id: 1, type: "uav", airframe: "copter", mode: :guided, armed: true, battery: 0.87, lat: 40.444233, lon: -7.375234, alt: 20.0,
           link: %{received: 97, lost: 3}, seen_ms: 120, lost?: false, activity: nil},
         Map.new(attrs)
       )
@@ -57,9 +57,9 @@ defmodule Dolphin.Console.FormatTest do
       text = Format.vehicles([row([]), row(id: 12, mode: :brake, armed: false, battery: nil, lost?: true, seen_ms: 23_400, link: %{received: 50, lost: 0}, activity: "picked by a script")])
       [header, one, twelve] = String.split(text, "\n")
 
-      for column <- ~w(ID TYPE MODE ARMED BATTERY POSITION ALT LINK SEEN TASK), do: assert(header =~ column)
-      assert one =~ ~r/^\s+1  quadrotor  GUIDED\s+yes\s+87 %  40.444233, -7.375234  20.0 m  97 % \(3 lost\)  120 ms ago\s+-$/
-      assert twelve =~ ~r/^12  quadrotor  BRAKE\s+no\s+-  .*100 %\s+LOST 23.4 s  picked by a script$/
+      for column <- ~w(ID TYPE AIRFRAME MODE ARMED BATTERY POSITION ALT LINK SEEN TASK), do: assert(header =~ column)
+      assert one =~ ~r/^\s+1  uav\s+copter\s+GUIDED\s+yes\s+87 %  40.444233, -7.375234  20.0 m  97 % \(3 lost\)  120 ms ago\s+-$/
+      assert twelve =~ ~r/^12  uav\s+copter\s+BRAKE\s+no\s+-  .*100 %\s+LOST 23.4 s  picked by a script$/
     end
 
     test "a vehicle heard on more than one link: a line per path, the one in use marked" do

@@ -10,7 +10,7 @@ defmodule Dolphin.Fleet.AllocationTest do
   doctest Dolphin.Fleet.Allocation
 
   defp tp(name, opts \\ []), do: FakePlatform.task(name, opts)
-  defp v(id, type \\ :uav, payloads \\ []), do: %View{id: id, type: type, payloads: payloads}
+  defp v(id, type \\ :uav, payloads \\ []), do: %View{id: id, type: type, airframe: View.stand_in_airframe(type), payloads: payloads}
 
   defp solve(task, vehicles) do
     {tree, _} = Task.number(Task.new!(task), 1)
@@ -58,11 +58,25 @@ defmodule Dolphin.Fleet.AllocationTest do
     assert {:ok, %{"a" => 1, "b" => 2, "c" => 3}} = solve(task, [v(2, :ugv), v(1, :uav), v(3, :usv)])
   end
 
+  test "an airframe requirement: a take-off goes to what flies, a raw mission to any vehicle, one of unknown airframe too" do
+    home = Dolphin.Geo.location(40.444233, -7.375234, 820)
+    up = Dolphin.Mission.new("up", [Dolphin.Mission.Command.take_off(home), Dolphin.Mission.Command.move(10, 0, 0)])
+    raw = Dolphin.Mission.new("raw", [Dolphin.Mission.Command.item(16, position: home)])
+    boat = v(1, :usv)
+    plane = %{v(2) | airframe: :plane}
+    airship = %View{id: 3, type: :uav, mav_type: 7}
+    assert {:ok, %{"up" => 2}} = solve(up, [boat, airship, plane])
+    assert {:error, %AllocationError{message: m}} = solve(up, [boat, airship])
+    assert m =~ "no vehicle matches airframe [:copter, :plane, :quadplane]"
+    assert m =~ "1 (usv boat), 3 (uav, airframe unknown (airship))"
+    assert {:ok, %{"raw" => 3}} = solve(raw, [airship])
+  end
+
   test "impossibility names the task that cannot be served" do
     assert {:error, %AllocationError{task_name: "boat", message: m}} = solve(tp("plane") >>> tp("boat", type: :usv), [v(1)])
     assert m =~ ~s(cannot allocate a vehicle to "boat")
     assert m =~ "no vehicle matches type :usv"
-    assert m =~ "1 (uav)"
+    assert m =~ "1 (uav copter)"
 
     assert {:error, %AllocationError{task_name: "third", message: m}} = solve(tp("first") ||| tp("second") ||| tp("third"), [v(1), v(2)])
     assert m =~ ~s(needed at the same time by "first")

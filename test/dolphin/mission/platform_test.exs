@@ -246,11 +246,12 @@ defmodule Dolphin.Mission.PlatformTest do
     assert %{seq: 1} = Enum.find(events, &match?(%{event: :mission_item_reached, vehicle: 1}, &1))
   end
 
-  test "requirements: a mission that takes photos needs a camera" do
+  test "requirements: a mission that takes photos needs a camera, one that takes off something that flies, a raw one any airframe" do
     home = Dolphin.Geo.location(40.444233, -7.375234, 820)
     photo = Mission.new("photo") |> Mission.add(C.home(home)) |> Mission.add(C.take_off(home)) |> Mission.add(C.capture_photo())
-    assert Dolphin.Mission.Platform.requirements(photo) == %{type: :uav, payloads: [:camera]}
-    assert Dolphin.Mission.Platform.requirements(Mission.new("x")) == %{type: nil, payloads: []}
+    assert Dolphin.Mission.Platform.requirements(photo) == %{airframe: [:copter, :plane, :quadplane], payloads: [:camera]}
+    assert Dolphin.Mission.Platform.requirements(Mission.new("x", [C.move(10, 0, 0)])) == %{airframe: [:copter, :plane, :quadplane, :rover, :boat, :sub], payloads: []}
+    assert Dolphin.Mission.Platform.requirements(Mission.new("raw", [C.item(16, position: home)])) == %{airframe: nil, payloads: []}
   end
 
   defp steps do

@@ -188,11 +188,13 @@ defmodule Dolphin.SITL.DifferentialTest do
           Vehicles.send_message(id, %{m | target_system: id, target_component: 1, mission_type: 0})
         end
 
-        # Well inside the vehicle's 1 s re-request.
+        # Every step is answered: the first answer, however late a loaded
+        # machine makes it (else it would be counted in the next step), then
+        # what comes with it, well inside the vehicle's 1 s re-request.
+        answered = fn -> for {_, ^id, m} <- Enum.drop(FrameRecorder.frames(recorder), before), answer = mission_answer(m), uniq: true, do: answer end
+        Wait.until(fn -> answered.() != [] end, 500)
         Dolphin.Clock.sleep(400)
-
-        got =
-          for {_, ^id, m} <- Enum.drop(FrameRecorder.frames(recorder), before), answer = mission_answer(m), uniq: true, do: answer
+        got = answered.()
 
         {step, Enum.sort(got)}
       end

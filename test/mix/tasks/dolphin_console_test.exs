@@ -84,15 +84,15 @@ defmodule Mix.Tasks.Dolphin.ConsoleTest do
     poll(port, "IO.inspect(battery(1))", &(&1 =~ ~r/^1\.0$/m))
 
     table = ieval(port, "vehicles()")
-    assert table =~ ~r/^ID\s+TYPE\s+MODE\s+ARMED/m
-    assert table =~ ~r/^ 1  quadrotor  STABILIZE\s+no /m
-    assert table =~ ~r/^ 2  quadrotor  STABILIZE\s+no /m
+    assert table =~ ~r/^ID\s+TYPE\s+AIRFRAME\s+MODE\s+ARMED/m
+    assert table =~ ~r/^ 1  uav\s+copter\s+STABILIZE\s+no /m
+    assert table =~ ~r/^ 2  uav\s+copter\s+STABILIZE\s+no /m
 
     assert ieval(port, "takeoff(1, 10)") =~ "vehicle 1: take-off to 10.0 m above home accepted"
     poll(port, "vehicles()", fn t -> altitude(t, 1) >= 9.0 end)
 
     assert ieval(port, "land(1)") =~ "vehicle 1: land accepted"
-    poll(port, "vehicles()", fn t -> t =~ ~r/^ 1  quadrotor  LAND\s+no /m end)
+    poll(port, "vehicles()", fn t -> t =~ ~r/^ 1  uav\s+copter\s+LAND\s+no /m end)
 
     script = Path.join(dir, "patrol.exs")
 
@@ -156,7 +156,7 @@ defmodule Mix.Tasks.Dolphin.ConsoleTest do
 
     port = open_session("iex -S mix dolphin.run #{script} --sim 1 --speedup 20 --no-tlog")
     wait_for(port, ~r/iex\(1\)> /, 120_000)
-    poll(port, "vehicles()", &(&1 =~ ~r/^ 1  quadrotor /m))
+    poll(port, "vehicles()", &(&1 =~ ~r/^ 1  uav\s+copter /m))
     # The script's question waits in tasks() until answered; then it flies and ends.
     poll(port, "tasks()", &(&1 =~ "Which way?"))
     answered = ieval(port, ~s|answer("north")|)
@@ -249,7 +249,7 @@ defmodule Mix.Tasks.Dolphin.ConsoleTest do
   end
 
   defp altitude(table, id) do
-    case Regex.run(~r/^\s*#{id}  quadrotor .*?\s(-?\d+\.\d) m  /m, table) do
+    case Regex.run(~r/^\s*#{id}  uav\s+copter .*?\s(-?\d+\.\d) m  /m, table) do
       [_, alt] -> String.to_float(alt)
       nil -> -1.0
     end

@@ -208,7 +208,7 @@ defmodule Mix.Tasks.Dolphin.RunTest do
       tlog = Path.join(dir, "run.tlog")
       assert {0, out, ""} = main([path, "--sim", "2", "--speedup", "10", "--tlog", tlog])
       assert out =~ "2 simulated vehicle(s) [1, 2]"
-      assert out =~ "vehicle 1 discovered (uav)"
+      assert out =~ "vehicle 1 discovered (uav copter)"
       assert out =~ ~r/message: vehicle #Vehicles<\[1\]> battery (1\.0|0\.\d+|nil)/
       assert File.stat!(tlog).size > 0
     end
