@@ -76,12 +76,14 @@ defmodule Dolphin.DSL do
   Picks vehicles for the script and returns them as a vehicle set: blocks
   until `count` *available* vehicles (connected, picked by nobody, not busy)
   match every filter. Options: `count:` (default 1), `type:` (`:uav`,
-  `:ugv`, `:usv`, `:uuv`, `:other` or a list), `payload:` (an atom or a list,
-  all required), `region:` (an `area/2`), `id:` (a system id or a list),
+  `:ugv`, `:usv`, `:uuv`, `:other` or a list), `airframe:` (`:copter`,
+  `:plane`, `:quadplane`, `:rover`, `:boat`, `:sub` or a list), `payload:`
+  (an atom or a list, all required), `region:` (an `area/2`), `id:` (a system id or a list),
   `timeout:` (clock ms, default `:infinity`).
 
       v = pick(type: :uav, timeout: seconds(30))
       pair = pick(count: 2, payload: :camera, region: area(base, km(2)))
+      subs = pick(count: 3, type: :uuv, airframe: :sub, payload: :sidescan)
 
   A timeout stops the script with a `Dolphin.Fleet.PickError` naming the
   requirement and the known vehicles (`pick timed out after 30000 ms: wanted

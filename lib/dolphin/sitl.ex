@@ -47,7 +47,7 @@ defmodule Dolphin.SITL do
   for none): ArduPilot's camera library is configured (`CAM1_TYPE 1`, a
   servo-triggered camera, which SITL simulates) so that the mission items
   IMAGE_START_CAPTURE / IMAGE_STOP_CAPTURE take photos, and the vehicles are
-  given the `:camera` payload (`config :dolphin, vehicle_payloads:`), as SITL
+  given the `:camera` payload (`Dolphin.Vehicles.put_payloads/2`), as SITL
   announces no camera component of its own.
 
   ## Charging
@@ -267,18 +267,11 @@ defmodule Dolphin.SITL do
   defp camera_params(true), do: %{"CAM1_TYPE" => 1}
   defp camera_params(_), do: %{}
 
-  # Payloads the fleet gives these system ids besides their components'.
-  defp add_payload(sysids, payload) do
-    payloads = Application.get_env(:dolphin, :vehicle_payloads, %{})
-    payloads = Enum.reduce(sysids, payloads, fn id, acc -> Map.update(acc, id, [payload], &Enum.uniq([payload | List.wrap(&1)])) end)
-    Application.put_env(:dolphin, :vehicle_payloads, payloads)
-  end
+  # Payloads the fleet gives these system ids besides their components' (in
+  # the caller's instance: Dolphin.Vehicles.put_payloads/2).
+  defp add_payload(sysids, payload), do: Enum.each(sysids, &Dolphin.Vehicles.put_payloads(&1, [payload | Dolphin.Vehicles.given_payloads(&1)]))
 
-  defp remove_payload(sysids, payload) do
-    payloads = Application.get_env(:dolphin, :vehicle_payloads, %{})
-    payloads = Enum.reduce(sysids, payloads, fn id, acc -> Map.update(acc, id, [], &List.delete(List.wrap(&1), payload)) end)
-    Application.put_env(:dolphin, :vehicle_payloads, payloads)
-  end
+  defp remove_payload(sysids, payload), do: Enum.each(sysids, &Dolphin.Vehicles.put_payloads(&1, List.delete(Dolphin.Vehicles.given_payloads(&1), payload)))
 
   defp start_charger(_sysids, rate) when rate <= 0, do: nil
 

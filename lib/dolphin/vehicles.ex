@@ -239,6 +239,25 @@ defmodule Dolphin.Vehicles do
   end
 
   @doc """
+  Gives vehicle `id` (a system id, or a qualified name) `payloads` besides
+  those its components announce: what it carries that MAVLink cannot say (a
+  side-scan sonar; `mix dolphin.run --fleet FILE` gives a fleet file's),
+  replacing what was given before (`[]`: nothing). Kept for a vehicle not
+  heard yet, and through its process's restarts; its view changes at once.
+  """
+  @spec put_payloads(Id.t(), [atom()]) :: :ok
+  def put_payloads(id, payloads) when is_list(payloads) do
+    unless Enum.all?(payloads, &is_atom/1), do: raise(ArgumentError, "payloads are atoms, got: #{inspect(payloads)}")
+    :ok = Dolphin.Vehicles.Settings.put_payloads(id, payloads)
+    if pid = whereis(id), do: GenServer.cast(pid, :settings_changed)
+    :ok
+  end
+
+  @doc "The payloads given to vehicle `id` with `put_payloads/2` (not its components')."
+  @spec given_payloads(Id.t()) :: [atom()]
+  def given_payloads(id), do: Dolphin.Vehicles.Settings.payloads(id)
+
+  @doc """
   Subscribes the caller to one vehicle's views (`{:dolphin, {:vehicle,
   id}, {:view, view}}`, one per change), or to `:all` the fleet's
   notices (`{:dolphin, :vehicles, {:vehicle_discovered, id}}`, ...).

@@ -210,6 +210,17 @@ defmodule Dolphin.VehiclesTest do
     assert {:ok, %{connected?: true, mode: :loiter}} = Vehicles.view(13)
   end
 
+  test "payloads given to a vehicle (a fleet file's) are in its view from its first one, and a change shows at once", %{port: port, peer: peer} do
+    :ok = Vehicles.put_payloads(19, [:sidescan])
+    Vehicles.subscribe(19)
+    UDPPeer.send_message(peer, port, copter(), sysid: 19)
+    assert_receive {:dolphin, {:vehicle, 19}, {:view, %{payloads: [:sidescan], airframe: :copter}}}, 10_000
+    :ok = Vehicles.put_payloads(19, [:smoke, :sidescan, :smoke])
+    assert_receive {:dolphin, {:vehicle, 19}, {:view, %{payloads: [:sidescan, :smoke]}}}, 10_000
+    assert Vehicles.given_payloads(19) == [:sidescan, :smoke]
+    assert_raise ArgumentError, ~r/payloads are atoms/, fn -> Vehicles.put_payloads(19, ["sonar"]) end
+  end
+
   test "a timeout set for a vehicle is checked at its own pace from then on, not at the old one's", %{port: port, peer: peer} do
     UDPPeer.send_message(peer, port, copter(), sysid: 18)
     pid = Wait.until(fn -> Vehicles.whereis(18) end)

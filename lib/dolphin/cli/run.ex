@@ -68,7 +68,7 @@ defmodule Dolphin.CLI.Run do
         :ok
 
       true ->
-        report = Dolphin.Check.check_script(script, sim: n, energy: :warning)
+        report = Dolphin.Check.check_script(script, fleet: stand_ins(n, opts[:fleet]), energy: :warning)
         errors? = Dolphin.Check.errors?(report)
 
         if report.findings != [] and (errors? or !opts[:quiet]) do
@@ -83,6 +83,20 @@ defmodule Dolphin.CLI.Run do
           :ok
         end
     end
+  end
+
+  # The simulated fleet, carrying what the fleet file (--fleet) gives each
+  # of its system ids besides the simulator's camera.
+  defp stand_ins(n, nil), do: Dolphin.Check.sim_fleet(n)
+
+  defp stand_ins(n, path) do
+    given =
+      case Vehicles.fleet_file(path) do
+        {:ok, vehicles} -> Map.new(vehicles, &{&1.id, &1.payloads})
+        {:error, _} -> %{}
+      end
+
+    for v <- Dolphin.Check.sim_fleet(n), do: %{v | payloads: Enum.sort(Enum.uniq(v.payloads ++ Map.get(given, v.id, [])))}
   end
 
   @doc "Runs `script` (see the options above) and says how it ended."

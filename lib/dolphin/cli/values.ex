@@ -218,6 +218,7 @@ defmodule Dolphin.CLI.Values do
       sitl: :vehicles,
       sitl_bin: {:file, "SITL binary"},
       sitl_defaults: {:keep, {:file, "parameter file"}},
+      fleet: {:file, "fleet file"},
       seed: :integer,
       speedup: :speedup,
       tlog: :output,

@@ -15,7 +15,8 @@ defmodule Dolphin.CLI.Vehicles do
   def start(opts, out, defer) do
     link_opts = Enum.reject([tlog: opts[:tlog], forward: Keyword.get_values(opts, :forward)], fn {_, v} -> v in [nil, []] end)
 
-    with :ok <- connect_all(Keyword.get_values(opts, :connect), link_opts, defer) do
+    with :ok <- fleet_payloads(opts[:fleet], out, defer),
+         :ok <- connect_all(Keyword.get_values(opts, :connect), link_opts, defer) do
       cond do
         n = opts[:sim] -> start_sim(n, opts, link_opts, out, defer)
         n = opts[:sitl] -> start_sitl(n, opts, link_opts, out, defer)
@@ -24,6 +25,30 @@ defmodule Dolphin.CLI.Vehicles do
         opts[:connect] != nil or opts[:join] != nil or Application.get_env(:dolphin, :links, []) != [] -> :ok
         true -> listen_default(link_opts, out, defer)
       end
+    end
+  end
+
+  @doc false
+  # The fleet file's vehicles (--fleet FILE), or an error naming its problems.
+  @spec fleet_file(Path.t()) :: {:ok, [Dolphin.Check.FleetFile.vehicle()]} | {:error, Dolphin.CommandLineError.t()}
+  def fleet_file(path) do
+    with {:error, e} <- Dolphin.Check.FleetFile.read(path), do: {:error, Dolphin.CommandLineError.failed("--fleet #{path}", e)}
+  end
+
+  # What the fleet file says each vehicle carries, given to it (by system id)
+  # before it is heard, and taken back when the run ends.
+  defp fleet_payloads(nil, _out, _defer), do: :ok
+
+  defp fleet_payloads(path, out, defer) do
+    with {:ok, vehicles} <- fleet_file(path) do
+      given =
+        for %{id: id, payloads: payloads} <- vehicles, payloads != [] do
+          Dolphin.Vehicles.put_payloads(id, payloads ++ Dolphin.Vehicles.given_payloads(id))
+          defer.(fn -> Dolphin.Vehicles.put_payloads(id, Dolphin.Vehicles.given_payloads(id) -- payloads) end)
+          "#{id} #{inspect(payloads)}"
+        end
+
+      IO.puts(out, "payloads from #{path}: #{if given == [], do: "none", else: Enum.join(given, ", ")}")
     end
   end
 

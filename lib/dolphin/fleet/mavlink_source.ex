@@ -4,9 +4,11 @@ defmodule Dolphin.Fleet.MAVLinkSource do
   as a `Dolphin.Fleet.Source`; its `arg` is unused.
 
   Each vehicle's process publishes its `Dolphin.Vehicles.View` (see
-  `Dolphin.Vehicles.View.of/3`): the heartbeat's MAV_TYPE as a class, payloads
-  from its components (a camera component gives `:camera`) plus configured
-  ones (`config :dolphin, vehicle_payloads: %{2 => [:sidescan]}`), battery,
+  `Dolphin.Vehicles.View.of/3`): the heartbeat's MAV_TYPE as a class and an
+  airframe, payloads from its components (a camera component gives
+  `:camera`) plus those given to it (`Dolphin.Vehicles.put_payloads/2`, a
+  fleet file's: `--fleet FILE`) and configured ones (`config :dolphin,
+  vehicle_payloads: %{2 => [:sidescan]}`), battery,
   position, relative altitude, mode, armed, landed state, mission progress,
   link figures, read from `Dolphin.Vehicles.Views`, which already publishes
   and emits what a source must (including vehicles heard by other nodes

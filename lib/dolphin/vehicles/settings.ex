@@ -1,9 +1,11 @@
 defmodule Dolphin.Vehicles.Settings do
   @moduledoc """
   What an operator or a script set for a vehicle that must outlive the
-  vehicle's process: its connection timeout (`Dolphin.Vehicles.set_timeout/2`),
-  which a restarted process (a crash, a vehicle forgotten and heard again)
-  keeps. One public ETS table, read by the vehicle's process as it starts,
+  vehicle's process: its connection timeout (`Dolphin.Vehicles.set_timeout/2`)
+  and the payloads it carries that it cannot announce over MAVLink
+  (`Dolphin.Vehicles.put_payloads/2`: a fleet file's, a SITL camera), which
+  a restarted process (a crash, a vehicle forgotten and heard again) keeps,
+  and which are set before the vehicle is first heard. One public ETS table, read by the vehicle's process as it starts,
   owned by this small process, started before the vehicles' supervisor.
   """
 
@@ -21,11 +23,32 @@ defmodule Dolphin.Vehicles.Settings do
     :ok
   end
 
-  @doc "Forgets what was set for vehicle `sysid`: it gets the defaults again."
+  @doc "Forgets the timeout set for vehicle `sysid`: it gets the default again."
   @spec clear(non_neg_integer()) :: :ok
   def clear(sysid) do
     :ets.delete(table(), {:timeout, sysid})
     :ok
+  end
+
+  @doc "Keeps `payloads` (sorted, without duplicates) as those vehicle `id` carries besides its components'; `[]` forgets them."
+  @spec put_payloads(Dolphin.Vehicles.Id.t(), [atom()]) :: :ok
+  def put_payloads(id, []) do
+    :ets.delete(table(), {:payloads, id})
+    :ok
+  end
+
+  def put_payloads(id, payloads) when is_list(payloads) do
+    :ets.insert(table(), {{:payloads, id}, payloads |> Enum.uniq() |> Enum.sort()})
+    :ok
+  end
+
+  @doc "The payloads kept for vehicle `id` (`put_payloads/2`), `[]` when none."
+  @spec payloads(Dolphin.Vehicles.Id.t()) :: [atom()]
+  def payloads(id) do
+    case :ets.lookup(table(), {:payloads, id}) do
+      [{_, payloads}] -> payloads
+      [] -> []
+    end
   end
 
   @doc "The connection timeout set for vehicle `sysid`, or `default`."

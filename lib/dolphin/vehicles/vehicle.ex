@@ -13,7 +13,7 @@ defmodule Dolphin.Vehicles.Vehicle do
   alias Dolphin.Link.Connection
   alias Dolphin.MAVLink.Frame
   alias Dolphin.MAVLink.Ardupilotmega, as: M
-  alias Dolphin.Vehicles.{CommandProtocol, MissionProtocol, Paths, State, View, Views}
+  alias Dolphin.Vehicles.{CommandProtocol, MissionProtocol, Paths, Settings, State, View, Views}
 
   @lost_floor_real_ms 3_000
   @late_real_ms 100
@@ -94,7 +94,7 @@ defmodule Dolphin.Vehicles.Vehicle do
     Process.flag(:trap_exit, true)
     # A timeout set for this vehicle (Dolphin.Vehicles.set_timeout/2) survives
     # restarts, and is kept exactly (lost_after_ms/2 is for the default's).
-    set = Dolphin.Vehicles.Settings.timeout(id, Keyword.get(opts, :timeout_ms))
+    set = Settings.timeout(id, Keyword.get(opts, :timeout_ms))
     timeout = set || Application.get_env(:dolphin, :vehicle_timeout_ms, 20_000)
 
     send(self(), :request_telemetry)
@@ -161,6 +161,8 @@ defmodule Dolphin.Vehicles.Vehicle do
         {:noreply, %{s | requests_left: requests_left}}
     end
   end
+
+  def handle_cast(:settings_changed, s), do: {:noreply, publish_view(s)}
 
   def handle_cast({:send, message}, s) do
     send_message(s, message)
@@ -391,8 +393,12 @@ defmodule Dolphin.Vehicles.Vehicle do
     end
   end
 
-  defp view(s),
-    do: %{View.of(s.state, s.lost, Application.get_env(:dolphin, :vehicle_payloads, %{}) |> Map.get(s.id, []) |> List.wrap()) | network: s.network}
+  # Payloads given to the vehicle (Settings: a fleet file's, SITL's camera)
+  # and configured ones (`config :dolphin, vehicle_payloads:`).
+  defp view(s) do
+    configured = Application.get_env(:dolphin, :vehicle_payloads, %{}) |> Map.get(s.id, []) |> List.wrap()
+    %{View.of(s.state, s.lost, Settings.payloads(s.id) ++ configured) | network: s.network}
+  end
 
   # Heard again after a silence: say so, and ask for telemetry again (the
   # vehicle may have rebooted and forgotten the rates).

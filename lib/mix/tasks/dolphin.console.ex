@@ -32,6 +32,10 @@ defmodule Mix.Tasks.Dolphin.Console do
     * `--sitl N` — start N ArduCopter SITL instances (`Dolphin.SITL`) on a
       local link; `--sitl-bin PATH` and `--sitl-defaults FILE` as for
       `mix dolphin.run`; they stop with the VM
+    * `--fleet FILE` — a fleet file (`Dolphin.Check.FleetFile`, the JSON file
+      `mix dolphin.check --fleet` reads): each vehicle it lists carries its
+      `payloads` (those MAVLink cannot announce: `"sidescan"`, `"smoke"`), by
+      system id, for `pick(payload: ...)`
     * `--seed N` — the simulator's seed
     * `--speedup K` — run K times faster than real time (`Dolphin.Clock`),
       from 0.01 to 1000
@@ -65,7 +69,7 @@ defmodule Mix.Tasks.Dolphin.Console do
 
   @options Dolphin.CLI.Values.fleet_options() ++ Dolphin.CLI.Cluster.switches()
 
-  @usage "usage: iex -S mix dolphin.console [--connect ENDPOINT]... [--sim N | --sitl N] [--speedup K] [--seed N]  [--tlog FILE] [--forward ENDPOINT]... [--sname NAME | --name NAME@HOST] [--cookie C] [--join NODE]..."
+  @usage "usage: iex -S mix dolphin.console [--connect ENDPOINT]... [--sim N | --sitl N] [--fleet FILE] [--speedup K] [--seed N]  [--tlog FILE] [--forward ENDPOINT]... [--sname NAME | --name NAME@HOST] [--cookie C] [--join NODE]..."
 
   @impl Mix.Task
   def run(argv) do
@@ -160,6 +164,22 @@ defmodule Mix.Tasks.Dolphin.Console do
   end
 
   defp vehicles(opts, endpoints, link_opts) do
+    with {:ok, fleet_lines} <- fleet_payloads(opts[:fleet]),
+         {:ok, lines} <- start_vehicles(opts, endpoints, link_opts),
+         do: {:ok, fleet_lines ++ lines}
+  end
+
+  # What the fleet file says each vehicle carries (for the session's life).
+  defp fleet_payloads(nil), do: {:ok, []}
+
+  defp fleet_payloads(path) do
+    with {:ok, vehicles} <- Dolphin.CLI.Vehicles.fleet_file(path) do
+      given = for %{id: id, payloads: payloads} <- vehicles, payloads != [], do: Dolphin.Vehicles.put_payloads(id, payloads)
+      {:ok, ["payloads of #{length(given)} vehicle(s) from #{path}"]}
+    end
+  end
+
+  defp start_vehicles(opts, endpoints, link_opts) do
     cond do
       n = opts[:sim] -> start_sim(n, opts, link_opts)
       n = opts[:sitl] -> start_sitl(n, opts, link_opts)

@@ -34,6 +34,11 @@ defmodule Mix.Tasks.Dolphin.Run do
     * `--fake N` — N fake vehicles of the fake platform
       (`Dolphin.Fleet.FakeSource`, no MAVLink): to try a script's logic with
       `Dolphin.Engine.FakePlatform` tasks
+    * `--fleet FILE` — a fleet file (`Dolphin.Check.FleetFile`, the JSON file
+      `mix dolphin.check --fleet` reads): each vehicle it lists carries its
+      `payloads` (those MAVLink cannot announce: `"sidescan"`, `"smoke"`), by
+      system id, for `pick(payload: ...)`; the pre-flight check of `--sim`
+      and `--sitl` counts them too
     * `--seed N` — the simulator's seed
     * `--speedup K` — run K times faster than real time (`Dolphin.Clock`),
       from 0.01 to 1000 (beyond, the simulated vehicles cannot keep up)
@@ -161,7 +166,7 @@ defmodule Mix.Tasks.Dolphin.Run do
                no_check: :boolean
              ] ++ Dolphin.CLI.Cluster.switches()
 
-  @usage "usage: mix dolphin.run SCRIPT [--connect ENDPOINT]... [--sim N | --sitl N | --fake N] [--speedup K] [--for DURATION] [--events FILE] [--tlog FILE | --no-tlog] [--forward ENDPOINT]... [--quiet] [--report FILE] [--web PORT [--web-bind ADDRESS]] [--no-check] [--sname NAME | --name NAME@HOST] [--cookie C] [--join NODE]..."
+  @usage "usage: mix dolphin.run SCRIPT [--connect ENDPOINT]... [--sim N | --sitl N | --fake N] [--fleet FILE] [--speedup K] [--for DURATION] [--events FILE] [--tlog FILE | --no-tlog] [--forward ENDPOINT]... [--quiet] [--report FILE] [--web PORT [--web-bind ADDRESS]] [--no-check] [--sname NAME | --name NAME@HOST] [--cookie C] [--join NODE]..."
 
   @impl Mix.Task
   def run(argv) do

@@ -214,6 +214,34 @@ defmodule Mix.Tasks.Dolphin.RunTest do
     end
 
     @tag timeout: 120_000
+    test "--fleet FILE gives the vehicles what they carry by system id: a pick for a side-scan sonar gets vehicle 2; a bad file names its problem", %{tmp_dir: dir} do
+      path =
+        script(dir, "sonar.exs", """
+        use Dolphin.Script
+        v = pick(payload: :sidescan, timeout: seconds(30))
+        message("sonar on \#{inspect(v)}")
+        release(v)
+        """)
+
+      fleet = Path.join(dir, "fleet.json")
+      File.write!(fleet, ~s({"vehicles": [{"id": 2, "payloads": ["sidescan"], "position": [40.444233, -7.375234, 820]}]}))
+      assert {0, out, ""} = main([path, "--sim", "2", "--speedup", "10", "--no-tlog", "--fleet", fleet])
+      assert out =~ "payloads from #{fleet}: 2 [:sidescan]"
+      assert out =~ "message: sonar on #Vehicles<[2]>"
+      # Given for the run only.
+      assert Dolphin.Vehicles.given_payloads(2) == []
+
+      # The pre-flight check's stand-ins carry it too: without the file, no vehicle has a sonar.
+      assert {1, out, _} = main([path, "--sim", "2", "--speedup", "10", "--no-tlog"])
+      assert out =~ "the pre-flight check found errors: nothing flies"
+
+      File.write!(fleet, ~s({"vehicles": [{"id": 2, "payloads": ["side scan"], "position": [40.4, -7.3, 820]}]}))
+      assert {1, _, err} = main([path, "--sim", "2", "--speedup", "10", "--no-tlog", "--no-check", "--fleet", fleet])
+      assert err =~ "--fleet #{fleet}"
+      assert err =~ ~s|payload names are lower-case letters, digits and _ (as in "thermal_camera"), got "side scan"|
+    end
+
+    @tag timeout: 120_000
     test "one clock for the events and the summary: the run's, from before its vehicles started", %{tmp_dir: dir} do
       path = script(dir, "wait.exs", "use Dolphin.Script\npick(timeout: seconds(60))\nforever do\n  pause(seconds(1))\nend\n")
       events = Path.join(dir, "events.jsonl")
