@@ -140,8 +140,9 @@ defmodule Dolphin.ReportTest do
     # The condition is under task 1 > 2, whose only vehicle is 1: on its lane.
     assert html =~ "condition met: battery(v) &lt; 0.9"
 
-    # Plots and summary.
+    # Plots and summary, which says what each vehicle is (its heartbeat's type and airframe).
     for plot <- ~w(battery height speed link), do: assert(html =~ ~s(class="plot plot-#{plot}"))
+    assert html =~ ~r{<td><span class="swatch"></span>1</td><td>uav copter</td>}
     assert html =~ ~s(id="script-result">failed)
     assert html =~ "<b>East</b>: the vehicle left its mission"
 

@@ -100,13 +100,13 @@ defmodule Dolphin.Report.HTML do
 
   defp summary(model) do
     [
-      "<table class=\"summary\"><thead><tr><th>vehicle</th><th>flight time</th><th>distance</th><th>items reached</th><th>photos</th><th>lowest battery</th><th>failures</th></tr></thead><tbody>",
+      "<table class=\"summary\"><thead><tr><th>vehicle</th><th>kind</th><th>flight time</th><th>distance</th><th>items reached</th><th>photos</th><th>lowest battery</th><th>failures</th></tr></thead><tbody>",
       Enum.map(model.vehicles, fn v ->
         s = v.summary
 
         [
           ~s(<tr class="v-#{v.id}" data-vehicle="#{v.id}" style="--c:#{color(v.index)}"><td><span class="swatch"></span>#{v.id}</td>),
-          "<td>#{clock(s.flight_s)}</td><td>#{distance(s.distance_m)}</td><td>#{s.reached}</td><td>#{s.photos}</td>",
+          "<td>#{esc(v.kind || "—")}</td><td>#{clock(s.flight_s)}</td><td>#{distance(s.distance_m)}</td><td>#{s.reached}</td><td>#{s.photos}</td>",
           "<td>#{if s.lowest_battery, do: "#{s.lowest_battery} %", else: "—"}</td><td class=\"failures\">",
           case s.failures do
             [] -> "none"

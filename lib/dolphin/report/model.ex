@@ -5,6 +5,7 @@ defmodule Dolphin.Report.Model do
   # seconds from the log's first record, simplified to what the eye can tell.
 
   alias Dolphin.Report.{FlightLog, Simplify}
+  alias Dolphin.Vehicles.View
 
   # Douglas–Peucker tolerance for tracks and planned paths, in metres.
   @track_tolerance_m 1.0
@@ -110,6 +111,7 @@ defmodule Dolphin.Report.Model do
     %{
       id: v.id,
       index: index,
+      kind: kind(v),
       track: points |> Enum.map(fn {_, x, y, _, _} -> {x, y} end) |> Simplify.track(@track_tolerance_m),
       home: home(v.home, project),
       takeoffs: takeoffs,
@@ -134,6 +136,10 @@ defmodule Dolphin.Report.Model do
       }
     }
   end
+
+  # Its type and airframe, as its heartbeats said (Dolphin.Vehicles.View).
+  defp kind(%{type: nil}), do: nil
+  defp kind(v), do: View.describe_kind(%View{type: View.class(v.type), airframe: View.airframe(v.type, v.autopilot), mav_type: v.type})
 
   defp home(nil, _project), do: nil
   defp home({lat, lon, _}, project), do: project.(lat, lon)

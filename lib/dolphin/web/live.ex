@@ -36,7 +36,8 @@ defmodule Dolphin.Web.Live do
     ts = now_ms * 1000
     old = Map.get(live.views, id)
     v = Map.get(live.vehicles, id) || %FlightLog.Vehicle{id: id}
-    v = %{v | type: view.type}
+    # As a log's heartbeat would say it (the report's model reads both).
+    v = %{v | type: view.mav_type, autopilot: view.autopilot}
     {v, added} = position(v, view, ts)
     v = if view.battery && (old == nil or pct(old.battery) != pct(view.battery)), do: %{v | battery: bounded([{ts, pct(view.battery)} | v.battery])}, else: v
     v = if view.mode && (old == nil or old.mode != view.mode), do: %{v | modes: bounded([{ts, view.mode} | v.modes])}, else: v
