@@ -108,9 +108,22 @@ defmodule Dolphin.Check do
   @spec check_script(Dolphin.Script.t(), keyword()) :: t()
   def check_script(%Dolphin.Script{} = script, opts \\ []), do: in_own_instance(fn -> dry_run(script, opts) end)
 
-  @doc "The stand-in fleet of `--sim N`: N copters with a camera, full, on the ground at the simulator's home."
-  @spec sim_fleet(pos_integer()) :: [Dolphin.Check.FleetFile.vehicle()]
-  def sim_fleet(n), do: for(id <- 1..n, do: %{id: id, type: :uav, airframe: :copter, payloads: [:camera], battery: 1.0, position: @sim_home, airborne?: false})
+  @doc """
+  The stand-in fleet of `--sim N` (N copters) or `--sitl plane:1,boat:2`
+  (airframes and counts, in system id order): each with a camera, full, on
+  the ground (or the surface) at the simulator's home.
+  """
+  @spec sim_fleet(pos_integer() | [{atom(), pos_integer()}]) :: [Dolphin.Check.FleetFile.vehicle()]
+  def sim_fleet(n) when is_integer(n), do: sim_fleet(copter: n)
+
+  def sim_fleet(fleet) when is_list(fleet) do
+    airframes = Enum.flat_map(fleet, fn {airframe, n} -> List.duplicate(airframe, n) end)
+
+    for {airframe, id} <- Enum.with_index(airframes, 1) do
+      position = if airframe == :sub, do: %{@sim_home | h: 0.0}, else: @sim_home
+      %{id: id, type: View.airframe_class(airframe), airframe: airframe, payloads: [:camera], battery: 1.0, position: position, airborne?: false}
+    end
+  end
 
   @doc "Whether the report has an error."
   @spec errors?(t()) :: boolean()

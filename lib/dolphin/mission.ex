@@ -161,34 +161,53 @@ defmodule Dolphin.Mission do
   @doc """
   The `MISSION_ITEM_INT` structs (`Dolphin.MAVLink.Ardupilotmega.MissionItemInt`)
   to upload, seq 0 (home) first. See the module doc for what each command
-  becomes. Option `home:` supplies (or overrides) the home position.
+  becomes. Option `home:` supplies (or overrides) the home position;
+  `airframe:` (`Dolphin.Vehicles.View.airframes/0`; default a copter's items)
+  the vehicle's, for what differs: a plane's landing (`landing_point`,
+  `return_home_and_land`) is two items, DO_LAND_START then NAV_LAND, its
+  landing sequence; a submarine's heights are depths below its home at the
+  surface, in frame GLOBAL_RELATIVE_ALT_INT (6).
+
+      iex> alias Dolphin.Mission.Command, as: C
+      iex> home = Dolphin.Geo.location(40.444233, -7.375234, 0)
+      iex> dive = Dolphin.Mission.new("dive", [C.home(home), C.move(50, 0, -5), C.return_home_and_land()])
+      iex> for i <- Dolphin.Mission.to_items(dive, airframe: :sub), do: {i.command, i.frame, i.z}
+      [{16, 5, 0.0}, {16, 6, -5.0}, {21, 6, 0.0}]
+      iex> glide = Dolphin.Mission.new("glide", [C.home(home), C.take_off(Dolphin.Geo.location(40.444233, -7.375234, 60)), C.return_home_and_land()])
+      iex> for i <- Dolphin.Mission.to_items(glide, airframe: :plane), do: i.command
+      [16, 22, 189, 21]
 
   Raises `ArgumentError` when the mission has no home and no absolute position
-  to take it from, or when a jump targets an item that does not exist.
+  to take it from, when a jump targets an item that does not exist, or when a
+  submarine's item is above the surface.
   """
   @spec to_items(t(), keyword()) :: [struct()]
   def to_items(mission, opts \\ [])
 
   def to_items(%__MODULE__{} = mission, opts) do
     mission = if home = Keyword.get(opts, :home), do: put_home(mission, home), else: mission
-    Items.to_items(mission)
+    Items.to_items(mission, Keyword.get(opts, :airframe))
   end
 
   @doc "The number of items `to_items/1` gives, home included."
   @spec item_count(t()) :: pos_integer()
   def item_count(%__MODULE__{} = mission), do: length(to_items(mission))
 
-  # What each airframe can fly, by command: take-offs and landings are for
-  # what flies; everything else every airframe flies in its own way (see
+  # What each airframe can fly, by command: take-offs are for what flies;
+  # landings for what flies and submarines (ArduSub's NAV_LAND surfaces);
+  # everything else every airframe flies in its own way (see
   # docs/missions.md). A raw `item` is the script's own business.
   @flying [:copter, :plane, :quadplane]
-  @airborne_only [:take_off, :take_off_with_yaw, :landing_point, :return_home_and_land]
+  @landing [:copter, :plane, :quadplane, :sub]
+  @take_offs [:take_off, :take_off_with_yaw]
+  @landings [:landing_point, :return_home_and_land]
 
   @doc """
   The airframes (`Dolphin.Vehicles.View.airframes/0`) that can fly every
   command of `mission`, or `nil` for a mission of raw items only (`item`),
-  which any vehicle may be given, one of unknown airframe too. A take-off or
-  a landing needs a vehicle that flies: a copter, plane or quadplane.
+  which any vehicle may be given, one of unknown airframe too. A take-off
+  needs a vehicle that flies (a copter, plane or quadplane); a landing one
+  that flies or a submarine (which surfaces).
 
       iex> alias Dolphin.Mission.Command, as: C
       iex> Dolphin.Mission.airframes(Dolphin.Mission.new("go", [C.move(10, 0, 0), C.speed(3)]))
@@ -204,7 +223,8 @@ defmodule Dolphin.Mission do
 
     cond do
       commands != [] and kinds == [] -> nil
-      Enum.any?(kinds, &(&1 in @airborne_only)) -> @flying
+      Enum.any?(kinds, &(&1 in @take_offs)) -> @flying
+      Enum.any?(kinds, &(&1 in @landings)) -> @landing
       true -> Dolphin.Vehicles.View.airframes()
     end
   end
@@ -217,6 +237,8 @@ defmodule Dolphin.Mission do
       iex> alias Dolphin.Mission.Command, as: C
       iex> Dolphin.Mission.unflyable(Dolphin.Mission.new("up", [C.take_off(41.0, -8.0, 120), C.move(10, 0, 0), C.return_home_and_land()]), :boat)
       [{0, :take_off}, {2, :return_home_and_land}]
+      iex> Dolphin.Mission.unflyable(Dolphin.Mission.new("dive", [C.move(10, 0, -5), C.return_home_and_land()]), :sub)
+      []
   """
   @spec unflyable(t(), Dolphin.Vehicles.View.airframe() | nil) :: [{non_neg_integer(), atom()}]
   def unflyable(%__MODULE__{commands: commands}, airframe) do
@@ -224,7 +246,8 @@ defmodule Dolphin.Mission do
   end
 
   defp flies?(_kind, nil), do: false
-  defp flies?(kind, airframe) when kind in @airborne_only, do: airframe in @flying
+  defp flies?(kind, airframe) when kind in @take_offs, do: airframe in @flying
+  defp flies?(kind, airframe) when kind in @landings, do: airframe in @landing
   defp flies?(_kind, _airframe), do: true
 
   @typedoc "How a mission ends (see `ending/1`)."
@@ -256,10 +279,20 @@ defmodule Dolphin.Mission do
       iex> Dolphin.Mission.ending(Dolphin.Mission.new("s", [C.home(home), C.move_and_loiter_pos(1, 1, 50), C.capture_photo()]))
       {:loiter_forever, 1}
   """
-  @spec ending(t() | [struct()]) :: ending()
-  def ending(%__MODULE__{} = mission), do: mission |> to_items() |> ending()
+  @spec ending(t() | [struct()], atom() | nil) :: ending()
+  def ending(mission_or_items, airframe \\ nil)
+  def ending(%__MODULE__{} = mission, airframe), do: mission |> to_items(airframe: airframe) |> ending(airframe)
 
-  def ending(items) when is_list(items) do
+  # ArduSub's NAV_LAND surfaces, is reported reached, and the sub stays armed
+  # at the surface: a waypoint's end, not a landing's.
+  def ending(items, :sub) when is_list(items) do
+    case ending(items, nil) do
+      {:landing, seq} -> {:reached, seq}
+      other -> other
+    end
+  end
+
+  def ending(items, _airframe) when is_list(items) do
     jump = Items.command_number(:mav_cmd_do_jump)
 
     forever = Enum.find(items, &(&1.command == jump and &1.param2 == -1.0))

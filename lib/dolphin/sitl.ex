@@ -91,10 +91,15 @@ defmodule Dolphin.SITL do
   port SITL sends to, for something standing between them such as a test's
   impairment proxy), and the link's options (`:tlog`, `:forward`).
   """
-  @spec start(pos_integer(), keyword()) :: {:ok, t()} | {:error, Error.t()}
-  def start(count, opts \\ []) when is_integer(count) and count > 0 do
-    with {:ok, bin} <- find_binary(opts),
-         {:ok, defaults} <- find_defaults(bin, opts),
+  @spec start(pos_integer() | [{atom(), pos_integer()}], keyword()) :: {:ok, t()} | {:error, Error.t()}
+  def start(fleet, opts \\ [])
+
+  def start(count, opts) when is_integer(count) and count > 0, do: start([copter: count], opts)
+
+  def start(fleet, opts) when is_list(fleet) do
+    with {:ok, airframes} <- vehicle_airframes(fleet),
+         {:ok, kinds} <- find_kinds(Enum.uniq(airframes), opts),
+         count = length(airframes),
          {:ok, homes} <- homes(count, opts) do
       {link_opts, opts} = Keyword.split(opts, [:tlog, :forward])
       name = {:dolphin_sitl, System.unique_integer([:positive])}
@@ -111,14 +116,21 @@ defmodule Dolphin.SITL do
           root = Path.join(System.tmp_dir!(), "dolphin-sitl-#{System.unique_integer([:positive])}")
 
           specs =
-            for {{sysid, home}, instance} <- Enum.zip(Enum.zip(sysids, homes), numbers) do
+            for {{{sysid, home}, instance}, airframe} <- Enum.zip(Enum.zip(Enum.zip(sysids, homes), numbers), airframes) do
+              kind = kinds[airframe]
+
               %{
-                bin: bin,
-                defaults: defaults,
-                params: Map.merge(camera_params(Keyword.get(opts, :camera, true)), Map.new(Keyword.get(opts, :params, %{}))),
+                bin: kind.bin,
+                firmware: kind.firmware,
+                model: kind.model,
+                defaults: kind.defaults,
+                params: Enum.reduce([camera_params(Keyword.get(opts, :camera, true)), kind.params, Map.new(Keyword.get(opts, :params, %{}))], &Map.merge(&2, &1)),
                 sysid: sysid,
                 instance: instance,
-                home: home,
+                # A submarine's home is at the surface: ArduSub's depth is its
+                # barometer's, whose surface is at sea level (a home above it
+                # leaves the sub at a fixed height whatever it does).
+                home: if(airframe == :sub, do: %{home | alt: 0.0}, else: home),
                 speedup: Dolphin.Clock.speedup(),
                 gcs_port: send_to.(port),
                 dir: Path.join(root, "vehicle-#{sysid}")
@@ -170,6 +182,88 @@ defmodule Dolphin.SITL do
     Instance.kill(pid)
   end
 
+  # What each airframe runs: ArduPilot's binary, its physics model, its
+  # parameter defaults (ArduPilot's own files, beside the binary) and the
+  # parameters we add. A plane's mission lands through a landing sequence
+  # (DO_LAND_START), which ArduPlane refuses to arm with unless RTL_AUTOLAND
+  # says how RTL uses it ("Arm: DO_LAND_START set and RTL_AUTOLAND
+  # disabled"): 2, RTL goes to the landing sequence at once, so that a plane
+  # sent home lands as its mission would.
+  @kinds %{
+    copter: %{firmware: "ArduCopter", binary: "arducopter", model: "+", defaults: ["copter.parm"], params: %{}},
+    plane: %{firmware: "ArduPlane", binary: "arduplane", model: "plane", defaults: ["plane.parm"], params: %{"RTL_AUTOLAND" => 2}},
+    rover: %{firmware: "ArduRover", binary: "ardurover", model: "rover", defaults: ["rover.parm"], params: %{}},
+    boat: %{firmware: "ArduRover", binary: "ardurover", model: "motorboat", defaults: ["rover.parm", "motorboat.parm"], params: %{}},
+    sub: %{firmware: "ArduSub", binary: "ardusub", model: "vectored", defaults: ["sub.parm"], params: %{}}
+  }
+
+  @doc "The airframes SITL flies here (`start/2`'s fleet): each has its firmware's binary and model."
+  @spec airframes() :: [atom()]
+  def airframes, do: [:copter, :plane, :rover, :boat, :sub]
+
+  # A count of copters, or [airframe: count, ...]: one airframe per vehicle, in order.
+  defp vehicle_airframes(fleet) do
+    case Enum.find(fleet, fn entry -> not match?({a, n} when is_atom(a) and is_integer(n) and n > 0, entry) end) do
+      nil ->
+        case Enum.find(fleet, fn {airframe, _} -> not Map.has_key?(@kinds, airframe) end) do
+          nil -> if fleet == [], do: {:error, %Error{reason: :no_model, detail: "an empty fleet"}}, else: {:ok, Enum.flat_map(fleet, fn {a, n} -> List.duplicate(a, n) end)}
+          {airframe, _} -> {:error, %Error{reason: :no_model, detail: inspect(airframe)}}
+        end
+
+      bad ->
+        {:error, %Error{reason: :no_model, detail: inspect(bad)}}
+    end
+  end
+
+  # Each airframe's binary and defaults: the copter's as find_binary/1 and
+  # :defaults say; the others' in $ARDUPILOT_SITL_DIR, else beside the
+  # copter's binary (when one is found), else in ../shared/sitl/.
+  defp find_kinds(airframes, opts) do
+    Enum.reduce_while(airframes, {:ok, %{}}, fn airframe, {:ok, acc} ->
+      kind = @kinds[airframe]
+
+      found =
+        with {:ok, bin} <- binary_of(airframe, opts),
+             {:ok, defaults} <- defaults_of(airframe, bin, opts),
+             do: {:ok, Map.merge(kind, %{bin: bin, defaults: defaults})}
+
+      case found do
+        {:ok, k} -> {:cont, {:ok, Map.put(acc, airframe, k)}}
+        {:error, e} -> {:halt, {:error, %{e | firmware: kind.firmware}}}
+      end
+    end)
+  end
+
+  defp binary_of(:copter, opts), do: find_binary(opts)
+
+  defp binary_of(airframe, opts) do
+    name = @kinds[airframe].binary
+    copter_dir = with {:ok, bin} <- find_binary(opts), do: Path.dirname(bin)
+    dirs = [System.get_env("ARDUPILOT_SITL_DIR"), if(is_binary(copter_dir), do: copter_dir), Path.expand("../shared/sitl", File.cwd!())]
+
+    case Enum.find(for(dir <- dirs, dir not in [nil, ""], do: Path.join(dir, name)), &File.regular?/1) do
+      nil -> {:error, %Error{reason: :no_binary, path: name}}
+      path -> if executable?(path), do: {:ok, Path.expand(path)}, else: {:error, %Error{reason: :not_executable, path: path, from: "beside the copter's"}}
+    end
+  end
+
+  defp defaults_of(:copter, bin, opts), do: find_defaults(bin, opts)
+
+  defp defaults_of(airframe, bin, _opts) do
+    files = for f <- @kinds[airframe].defaults, do: Path.join(Path.dirname(bin), f)
+
+    case Enum.reject(files, &File.regular?/1) do
+      [] -> {:ok, files}
+      missing -> {:error, %Error{reason: :no_defaults, path: bin, detail: Enum.map(missing, &Path.basename/1)}}
+    end
+  end
+
+  @doc "Whether SITL can fly `airframe` here (a copter by default): its binary and defaults are found (what its tests check first)."
+  @spec available?(atom()) :: boolean()
+  def available?(airframe \\ :copter)
+  def available?(:copter), do: match?({:ok, _}, find_binary())
+  def available?(airframe) when is_map_key(@kinds, airframe), do: match?({:ok, _}, find_kinds([airframe], []))
+
   @doc """
   The SITL binary to run: `:bin`, else `$ARDUPILOT_SITL`, else
   `../shared/sitl/arducopter` beside the project when it exists.
@@ -191,9 +285,6 @@ defmodule Dolphin.SITL do
     end
   end
 
-  @doc "Whether a SITL binary can be found (what the SITL tests check first)."
-  @spec available?() :: boolean()
-  def available?, do: match?({:ok, _}, find_binary())
 
   @doc false
   def default_binary do

@@ -215,7 +215,7 @@ defmodule Dolphin.CLI.Values do
     [
       connect: {:keep, :endpoint},
       sim: :vehicles,
-      sitl: :vehicles,
+      sitl: :sitl_fleet,
       sitl_bin: {:file, "SITL binary"},
       sitl_defaults: {:keep, {:file, "parameter file"}},
       fleet: {:file, "fleet file"},
@@ -230,6 +230,32 @@ defmodule Dolphin.CLI.Values do
 
   defp value(:boolean, given), do: {:ok, given}
   defp value(:string, given), do: {:ok, given}
+
+  # N copters, or airframes and counts: "plane:1,boat:2,sub:3".
+  defp value(:sitl_fleet, text) do
+    if String.contains?(text, ":") do
+      parts = for part <- String.split(text, ",", trim: true), do: String.split(part, ":")
+      known = Enum.map(Dolphin.SITL.airframes(), &Atom.to_string/1)
+
+      fleet =
+        Enum.map(parts, fn
+          [name, n] ->
+            case {name in known, value(:vehicles, n)} do
+              {true, {:ok, count}} -> {String.to_existing_atom(name), count}
+              _ -> :error
+            end
+
+          _ ->
+            :error
+        end)
+
+      if :error not in fleet and fleet |> Keyword.values() |> Enum.sum() <= @max_sysid,
+        do: {:ok, fleet},
+        else: {:error, "a number of copters, or airframes and counts such as plane:1,boat:2,sub:3 (airframes: #{Enum.join(known, ", ")}; #{@max_sysid} vehicles at most)"}
+    else
+      value(:vehicles, text)
+    end
+  end
 
   defp value(:vehicles, text), do: integer(text, 1..@max_sysid, "a number of vehicles from 1 to #{@max_sysid} (each needs a system id of its own)")
   defp value(:sysid, text), do: integer(text, 1..@max_sysid, "a system id from 1 to #{@max_sysid} (255 is the ground station's)")

@@ -96,13 +96,19 @@ defmodule Dolphin.CLI.Vehicles do
     case Dolphin.SITL.start(n, Enum.reject(sitl_opts, fn {_, v} -> v in [nil, []] end)) do
       {:ok, fleet} ->
         defer.(fn -> Dolphin.SITL.stop(fleet) end)
-        IO.puts(out, "#{n} ArduCopter SITL instance(s), vehicles #{Enum.join(fleet.sysids, ", ")}, on 127.0.0.1:#{fleet.port} at #{Dolphin.Clock.speedup()}x")
+        IO.puts(out, "#{sitl_words(n)}, vehicles #{Enum.join(fleet.sysids, ", ")}, on 127.0.0.1:#{fleet.port} at #{Dolphin.Clock.speedup()}x")
         :ok
 
       {:error, why} ->
         {:error, Dolphin.CommandLineError.failed(nil, why)}
     end
   end
+
+  @doc false
+  # What --sitl started, in words: "2 ArduCopter SITL instance(s)", "3 SITL instance(s): 1 plane, 2 boat".
+  @spec sitl_words(pos_integer() | keyword()) :: String.t()
+  def sitl_words(n) when is_integer(n), do: "#{n} ArduCopter SITL instance(s)"
+  def sitl_words(fleet), do: "#{fleet |> Keyword.values() |> Enum.sum()} SITL instance(s) (#{Enum.map_join(fleet, ", ", fn {a, n} -> "#{n} #{a}" end)})"
 
   defp start_fake(n, out, defer) do
     name = :"dolphin_run_fakes_#{System.unique_integer([:positive])}"

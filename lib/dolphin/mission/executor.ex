@@ -74,6 +74,8 @@ defmodule Dolphin.Mission.Executor do
       vehicle: vehicle,
       owner: opts.owner,
       arm_timeout_ms: Map.get(opts, :arm_timeout_ms, @arm_timeout_ms),
+      # How its missions fly (Dolphin.Vehicles.View.airframe/2), from its view once known.
+      airframe: nil,
       # Where the vehicle was first seen armed on the ground in :flying, while it stays so.
       grounded: nil,
       items: nil,
@@ -100,9 +102,11 @@ defmodule Dolphin.Mission.Executor do
 
   @impl true
   def handle_event(:enter, _old, :hold, data) do
+    data = %{data | airframe: airframe(data.vehicle)}
+
     case items(data) do
       {:ok, items} ->
-        ending = Mission.ending(items)
+        ending = Mission.ending(items, data.airframe)
         # At once: the first look at the vehicle needs no wait.
         {:keep_state, %{data | items: items, ending: ending, flight: Flight.new(ending)}, [{:state_timeout, 0, :look}]}
 
@@ -121,7 +125,7 @@ defmodule Dolphin.Mission.Executor do
   end
 
   def handle_event(:enter, _old, :verify, data), do: exchange(data, fn -> Vehicles.download_mission(data.vehicle) end)
-  def handle_event(:enter, _old, :guided, data), do: exchange(data, fn -> Manoeuvres.guided(data.vehicle) end)
+  def handle_event(:enter, _old, :guided, data), do: exchange(data, fn -> Manoeuvres.guided(data.vehicle, within: data.arm_timeout_ms) end)
   def handle_event(:enter, _old, :arm, data), do: exchange(data, fn -> Manoeuvres.arm_when_ready(data.vehicle, within: data.arm_timeout_ms) end)
 
   def handle_event(:enter, _old, :start, data),
@@ -307,6 +311,9 @@ defmodule Dolphin.Mission.Executor do
   # A copter on the ground can only start a mission that takes off (ArduCopter
   # refuses the others: "Auto: Missing Takeoff Cmd"). One that only comes back
   # and lands is already done when the vehicle stands at its landing point.
+  # (A rover, boat or submarine starts where it is.)
+  defp on_the_ground(%{airframe: airframe}, _st) when airframe in [:rover, :boat, :sub], do: :ok
+
   defp on_the_ground(data, st) do
     takes_off? = Enum.any?(data.items, &(&1.command == @takeoff))
     grounded? = not st.armed? and st.landed in [:on_ground, nil]
@@ -330,14 +337,21 @@ defmodule Dolphin.Mission.Executor do
 
   defp landing_here?(_data, _st), do: false
 
-  defp items(%{mission: mission, vehicle: vehicle}) do
+  defp airframe(vehicle) do
+    case Vehicles.view(vehicle) do
+      {:ok, %{airframe: airframe}} -> airframe
+      _ -> nil
+    end
+  end
+
+  defp items(%{mission: mission, vehicle: vehicle, airframe: airframe}) do
     home =
       case {mission.home, Vehicles.view(vehicle)} do
         {nil, {:ok, %{home: %Dolphin.Geo.Location{} = home}}} -> [home: home]
         _ -> []
       end
 
-    {:ok, Mission.to_items(mission, home)}
+    {:ok, Mission.to_items(mission, [airframe: airframe] ++ home)}
   rescue
     e in ArgumentError -> {:error, {:cannot_make_items, Exception.message(e)}}
   end
@@ -369,7 +383,10 @@ defmodule Dolphin.Mission.Executor do
   end
 
   # Armed on the ground (where a take-off that does not climb leaves it): a
-  # timer from the first time it is seen so, cancelled once it is not.
+  # timer from the first time it is seen so, cancelled once it is not. (A
+  # rover, boat or submarine is never in the air: nothing to watch.)
+  defp watch_grounded(%{airframe: airframe} = data, _st) when airframe in [:rover, :boat, :sub], do: {data, []}
+
   defp watch_grounded(data, st) do
     cond do
       not on_ground_armed?(st) and data.grounded != nil ->

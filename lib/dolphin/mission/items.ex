@@ -22,7 +22,8 @@ defmodule Dolphin.Mission.Items do
     :mav_cmd_do_jump,
     :mav_cmd_do_change_speed,
     :mav_cmd_image_start_capture,
-    :mav_cmd_image_stop_capture
+    :mav_cmd_image_stop_capture,
+    :mav_cmd_do_land_start
   ]
 
   # Command numbers from the dialect's MAV_CMD enum, at compile time.
@@ -30,6 +31,8 @@ defmodule Dolphin.Mission.Items do
 
   {:ok, global_int} = M.enum_value(:mav_frame, :mav_frame_global_int)
   {:ok, mission_frame} = M.enum_value(:mav_frame, :mav_frame_mission)
+  {:ok, relative_int} = M.enum_value(:mav_frame, :mav_frame_global_relative_alt_int)
+  @relative_int relative_int
   @global_int global_int
   @mission_frame mission_frame
 
@@ -39,27 +42,52 @@ defmodule Dolphin.Mission.Items do
   @doc false
   def command_number(name), do: Map.fetch!(@cmd, name)
 
-  @spec to_items(Mission.t()) :: [struct()]
-  def to_items(%Mission{} = mission) do
+  # `airframe` (nil: a copter's items) changes what some commands are: a
+  # plane's landing starts its landing sequence (DO_LAND_START, which RTL and
+  # DO_LAND_START jump to); a submarine's heights are depths in
+  # GLOBAL_RELATIVE_ALT_INT (ArduSub skips GLOBAL_INT items, "Bad alt
+  # frame", and any height above its home, the surface).
+  @spec to_items(Mission.t(), atom() | nil) :: [struct()]
+  def to_items(%Mission{} = mission, airframe \\ nil) do
     home = home!(mission)
-    state = %{home: home, prev: home, photo: 0}
+    state = %{home: home, prev: home, photo: 0, airframe: airframe}
 
     {items, _state} = Enum.flat_map_reduce(mission.commands, state, &items/2)
     # Item 0 is home: ArduPilot accepts it and keeps its own.
     items = [nav(:mav_cmd_nav_waypoint, home, {0, 0, 0, 0}) | items] |> Enum.with_index() |> Enum.map(fn {item, seq} -> %{item | seq: seq} end)
     check_jumps!(mission, items)
-    items
+    if airframe == :sub, do: depths!(mission, items, home), else: items
+  end
+
+  # Item 0 stays home as given (ArduPilot keeps its own); every other
+  # position relative to it, never above the surface.
+  defp depths!(mission, [home_item | items], home) do
+    [
+      home_item
+      | Enum.map(items, fn
+          %{frame: @global_int} = item ->
+            depth = item.z - home.h
+
+            if depth > 0.5,
+              do: raise(ArgumentError, "mission #{inspect(mission.name)}: item #{item.seq} is #{Float.round(depth, 1)} m above the surface; a submarine's heights are depths, at most 0 (the surface, its home's height #{home.h} m)")
+
+            %{item | frame: @relative_int, z: min(depth, 0.0)}
+
+          item ->
+            item
+        end)
+    ]
   end
 
   @doc false
   # Which items each command gave: `{kind, first seq, count}` in order (home,
   # item 0, excluded). Dolphin.Mission.Resume needs a survey's passes.
   @spec spans(Mission.t()) :: [{atom(), pos_integer(), non_neg_integer()}]
-  def spans(%Mission{} = mission) do
+  def spans(%Mission{} = mission, airframe \\ nil) do
     home = home!(mission)
 
     {spans, {_state, _next}} =
-      Enum.map_reduce(mission.commands, {%{home: home, prev: home, photo: 0}, 1}, fn %Command{kind: kind} = c, {state, next} ->
+      Enum.map_reduce(mission.commands, {%{home: home, prev: home, photo: 0, airframe: airframe}, 1}, fn %Command{kind: kind} = c, {state, next} ->
         {items, state} = items(c, state)
         {{kind, next, length(items)}, {state, next + length(items)}}
       end)
@@ -99,7 +127,7 @@ defmodule Dolphin.Mission.Items do
         goto(time(a[:position], a[:time], a[:radius]), a[:position], state)
 
       :landing_point ->
-        goto(land(a[:position], a[:yaw], a[:land_mode]), a[:position], state)
+        goto(landing(state, a[:position], a[:yaw], a[:land_mode]), a[:position], state)
 
       :move ->
         p = relative(state.prev, a)
@@ -142,7 +170,7 @@ defmodule Dolphin.Mission.Items do
         goto(unlim(p, a[:radius]), p, state)
 
       :return_home_and_land ->
-        goto(land(state.home, a[:yaw], a[:land_mode]), state.home, state)
+        goto(landing(state, state.home, a[:yaw], a[:land_mode]), state.home, state)
 
       :altitude ->
         p = Location.at_height(state.prev, a[:altitude])
@@ -201,7 +229,7 @@ defmodule Dolphin.Mission.Items do
     end
   end
 
-  defp goto(item, position, state), do: {[item], %{state | prev: position}}
+  defp goto(items, position, state), do: {List.wrap(items), %{state | prev: position}}
 
   defp relative(from, a), do: Geo.offset(from, a[:north], a[:east], a[:up])
 
@@ -212,6 +240,12 @@ defmodule Dolphin.Mission.Items do
   defp turns(p, turns, radius), do: nav(:mav_cmd_nav_loiter_turns, p, {turns, 0, radius, 0})
   defp time(p, seconds, radius), do: nav(:mav_cmd_nav_loiter_time, p, {seconds, 0, radius, 0})
   defp land(p, yaw, mode), do: nav(:mav_cmd_nav_land, p, {0, mode, 0, yaw})
+
+  # A plane lands through a landing sequence that starts where it is marked.
+  defp landing(%{airframe: airframe}, p, yaw, mode) when airframe in [:plane, :quadplane],
+    do: [nav(:mav_cmd_do_land_start, p, {0, 0, 0, 0}), land(p, yaw, mode)]
+
+  defp landing(_state, p, yaw, mode), do: land(p, yaw, mode)
 
   defp nav(name, %Location{} = p, params) do
     %{with_params(base(), params) | command: Map.fetch!(@cmd, name), frame: @global_int, x: e7(p.lat), y: e7(p.lon), z: p.h / 1}

@@ -15,7 +15,7 @@ defmodule Dolphin.SITL.Instance do
   # How long SITL may take to exit after SIGTERM before it is killed (real ms).
   @term_grace_ms 2_000
 
-  defstruct [:sysid, :instance, :port, :os_pid, :dir, :cmdline, lines: :queue.new(), count: 0, exit_status: nil]
+  defstruct [:sysid, :firmware, :instance, :port, :os_pid, :dir, :cmdline, lines: :queue.new(), count: 0, exit_status: nil]
 
   def start_link(spec), do: GenServer.start_link(__MODULE__, spec)
 
@@ -45,7 +45,7 @@ defmodule Dolphin.SITL.Instance do
       end
 
     args =
-      ~w(--model + --speedup #{format_number(spec.speedup)} -I #{spec.instance} --sysid #{spec.sysid}) ++
+      ~w(--model #{spec.model} --speedup #{format_number(spec.speedup)} -I #{spec.instance} --sysid #{spec.sysid}) ++
         ["--home", home_arg(spec.home), "--defaults", Enum.join(defaults, ","), "-w"] ++
         ~w(--serial0 udpclient:127.0.0.1:#{spec.gcs_port} --serial1 none --serial2 none)
 
@@ -57,6 +57,7 @@ defmodule Dolphin.SITL.Instance do
     {:ok,
      %__MODULE__{
        sysid: spec.sysid,
+       firmware: spec.firmware,
        instance: spec.instance,
        port: port,
        os_pid: os_pid,
@@ -83,7 +84,7 @@ defmodule Dolphin.SITL.Instance do
   # SITL exited by itself (a crash, a bad option): the ground station will see
   # the vehicle lost; the log says why.
   def handle_info({port, {:exit_status, status}}, %{port: port} = s) do
-    Logger.warning("ArduCopter SITL of vehicle #{s.sysid} exited with status #{status}; its last lines:\n" <> Enum.join(:queue.to_list(s.lines), "\n"))
+    Logger.warning("#{s.firmware} SITL of vehicle #{s.sysid} exited with status #{status}; its last lines:\n" <> Enum.join(:queue.to_list(s.lines), "\n"))
     {:noreply, %{s | exit_status: status, port: nil}}
   end
 

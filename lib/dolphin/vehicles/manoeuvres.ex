@@ -30,8 +30,9 @@ defmodule Dolphin.Vehicles.Manoeuvres do
   alias Dolphin.{Clock, CommandError, ManoeuvreError, Vehicles}
   alias Dolphin.Vehicles.State
 
-  # Modes in which the autopilot itself brings the vehicle down.
-  @landing_modes [:rtl, :land, :smart_rtl, :auto_rtl]
+  # Modes in which the autopilot itself brings the vehicle down (or a
+  # submarine up).
+  @landing_modes [:rtl, :land, :smart_rtl, :auto_rtl, :qland, :qrtl, :surface]
   # Refusals of an arm command that pass once the autopilot is ready (pre-arm
   # checks fail as FAILED or DENIED; a busy or silent autopilot as the others).
   @not_ready [:failed, :temporarily_rejected, :denied, :timeout]
@@ -75,26 +76,51 @@ defmodule Dolphin.Vehicles.Manoeuvres do
       {:error, :unknown_vehicle} -> :ok
       {:ok, %{mode: mode}} when mode in @landing_modes -> :ok
       {:ok, %{armed?: false}} when not fresh? -> :ok
-      {:ok, %{mode: mode}} when mode in [:brake, :guided] and not fresh? -> :ok
-      {:ok, %{landed: :on_ground}} when not fresh? -> disarm_or_brake(vehicle)
-      {:ok, _} -> brake(vehicle)
+      {:ok, %{mode: mode, airframe: airframe}} when not fresh? -> if mode in hold_modes(airframe), do: :ok, else: hold_unless_landed(vehicle, airframe, opts)
+      {:ok, %{airframe: airframe}} -> brake(vehicle, airframe)
     end
   end
+
+  defp hold_unless_landed(vehicle, airframe, _opts) do
+    case Vehicles.view(vehicle) do
+      {:ok, %{landed: :on_ground}} -> disarm_or_brake(vehicle, airframe)
+      _ -> brake(vehicle, airframe)
+    end
+  end
+
+  @doc """
+  The modes that hold a vehicle of `airframe` where it is, the first the one
+  a stop asks for: a copter brakes (BRAKE), a plane circles the point
+  (LOITER: it cannot stand still), a rover or boat holds position (LOITER:
+  HOLD only cuts the throttle, and a boat drifts in it), a submarine holds
+  position and depth (POSHOLD); GUIDED (HOLD for a rover or boat) when the
+  first is refused.
+
+      iex> Dolphin.Vehicles.Manoeuvres.hold_modes(:plane)
+      [:loiter, :guided]
+  """
+  @spec hold_modes(atom() | nil) :: [atom()]
+  def hold_modes(airframe) when airframe in [:plane, :quadplane], do: [:loiter, :guided]
+  def hold_modes(airframe) when airframe in [:rover, :boat], do: [:loiter, :hold]
+  def hold_modes(:sub), do: [:poshold, :guided]
+  def hold_modes(_copter), do: [:brake, :guided]
 
   # An accepted DO_SET_MODE means the mode has changed (ArduPilot acks after
   # the switch); the heartbeat shows it within a second.
-  defp brake(vehicle) do
-    with {:error, _} <- command(vehicle, "BRAKE", fn -> Vehicles.set_mode(vehicle, :brake) end),
-         {:error, e} <- command(vehicle, "GUIDED", fn -> Vehicles.set_mode(vehicle, :guided) end) do
-      {:error, %ManoeuvreError{manoeuvre: :hold, vehicle: vehicle, action: "holding position", refusal: e, texts: e.texts}}
-    end
+  defp brake(vehicle, airframe) do
+    Enum.reduce_while(hold_modes(airframe), nil, fn mode, _ ->
+      case command(vehicle, mode |> Atom.to_string() |> String.upcase(), fn -> Vehicles.set_mode(vehicle, mode) end) do
+        :ok -> {:halt, :ok}
+        {:error, e} -> {:cont, {:error, %ManoeuvreError{manoeuvre: :hold, vehicle: vehicle, action: "holding position", refusal: e, texts: e.texts}}}
+      end
+    end)
   end
 
   # "On the ground" may be a second old: a vehicle that refuses the disarm is flying.
-  defp disarm_or_brake(vehicle) do
+  defp disarm_or_brake(vehicle, airframe) do
     case command(vehicle, "disarming on the ground", fn -> Vehicles.disarm(vehicle) end) do
       :ok -> :ok
-      {:error, _} -> brake(vehicle)
+      {:error, _} -> brake(vehicle, airframe)
     end
   end
 
@@ -147,13 +173,31 @@ defmodule Dolphin.Vehicles.Manoeuvres do
 
   @doc """
   Switches to GUIDED, unless the vehicle is in GUIDED already (then nothing
-  is sent). `report:` as for `arm_when_ready/2`.
+  is sent); a refusal that passes once the autopilot has a position is
+  asked again for `within:` ms of clock time (default 0: once). `report:`
+  as for `arm_when_ready/2`.
   """
   @spec guided(byte(), keyword()) :: result()
   def guided(vehicle, opts \\ []) do
+    within = Keyword.get(opts, :within, 0)
+    deadline = Clock.now_ms() + within
+
     case Vehicles.view(vehicle) do
       {:ok, %{mode: :guided}} -> :ok
-      _ -> command(vehicle, "switching to GUIDED", fn -> Vehicles.set_mode(vehicle, :guided) end) |> reported(:guided, opts)
+      _ -> guided_until(vehicle, deadline) |> reported(:guided, opts)
+    end
+  end
+
+  # ArduSub (and ArduPlane) refuse GUIDED until their EKF has a position
+  # ("Mode change failed: GUIDED requires position"): asked again every
+  # second of clock time while such a refusal may pass, until the deadline.
+  defp guided_until(vehicle, deadline) do
+    case command(vehicle, "switching to GUIDED", fn -> Vehicles.set_mode(vehicle, :guided) end) do
+      {:error, %ManoeuvreError{refusal: %CommandError{result: result}}} = error when result in @not_ready ->
+        if Clock.now_ms() >= deadline, do: error, else: (Clock.sleep(@arm_retry_ms); guided_until(vehicle, deadline))
+
+      other ->
+        other
     end
   end
 

@@ -30,7 +30,8 @@ defmodule Mix.Tasks.Dolphin.Console do
     * `--sim N` — start N simulated vehicles (`Dolphin.Sim`: ArduCopters with
       a camera) on a local link (127.0.0.1); N from 1 to 254, as for `--sitl`
     * `--sitl N` — start N ArduCopter SITL instances (`Dolphin.SITL`) on a
-      local link; `--sitl-bin PATH` and `--sitl-defaults FILE` as for
+      local link (`--sitl plane:1,boat:2,sub:3`: those airframes, as for
+      `mix dolphin.run`); `--sitl-bin PATH` and `--sitl-defaults FILE` as for
       `mix dolphin.run`; they stop with the VM
     * `--fleet FILE` — a fleet file (`Dolphin.Check.FleetFile`, the JSON file
       `mix dolphin.check --fleet` reads): each vehicle it lists carries its
@@ -69,7 +70,7 @@ defmodule Mix.Tasks.Dolphin.Console do
 
   @options Dolphin.CLI.Values.fleet_options() ++ Dolphin.CLI.Cluster.switches()
 
-  @usage "usage: iex -S mix dolphin.console [--connect ENDPOINT]... [--sim N | --sitl N] [--fleet FILE] [--speedup K] [--seed N]  [--tlog FILE] [--forward ENDPOINT]... [--sname NAME | --name NAME@HOST] [--cookie C] [--join NODE]..."
+  @usage "usage: iex -S mix dolphin.console [--connect ENDPOINT]... [--sim N | --sitl N|AIRFRAME:N,...] [--fleet FILE] [--speedup K] [--seed N]  [--tlog FILE] [--forward ENDPOINT]... [--sname NAME | --name NAME@HOST] [--cookie C] [--join NODE]..."
 
   @impl Mix.Task
   def run(argv) do
@@ -211,7 +212,7 @@ defmodule Mix.Tasks.Dolphin.Console do
     sitl_opts = [bin: opts[:sitl_bin], defaults: Keyword.get_values(opts, :sitl_defaults)] ++ link_opts
 
     case Dolphin.SITL.start(n, Enum.reject(sitl_opts, fn {_, v} -> v in [nil, []] end)) do
-      {:ok, fleet} -> {:ok, ["#{n} ArduCopter SITL instance(s), vehicles #{Enum.join(fleet.sysids, ", ")}, on 127.0.0.1:#{fleet.port}"]}
+      {:ok, fleet} -> {:ok, ["#{Dolphin.CLI.Vehicles.sitl_words(n)}, vehicles #{Enum.join(fleet.sysids, ", ")}, on 127.0.0.1:#{fleet.port}"]}
       {:error, e} -> {:error, %CommandLineError{reason: :failed, message: Exception.message(e), cause: e}}
     end
   end

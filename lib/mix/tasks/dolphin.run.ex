@@ -26,7 +26,11 @@ defmodule Mix.Tasks.Dolphin.Run do
       camera) on a local link; N from 1 to 254 (one system id each), as for
       `--sitl` and `--fake`
     * `--sitl N` — start N ArduCopter SITL instances (`Dolphin.SITL`: ArduPilot's
-      own flight code) on a local link, at the run's speed-up
+      own flight code) on a local link, at the run's speed-up; `--sitl
+      plane:1,boat:2,sub:3` starts those airframes (copter, plane, rover,
+      boat, sub: ArduCopter, ArduPlane, ArduRover, ArduSub), system ids in
+      that order; the other firmwares' binaries are looked for in
+      `$ARDUPILOT_SITL_DIR`, beside the copter's, then in `../shared/sitl/`
     * `--sitl-bin PATH` — the SITL binary (else `$ARDUPILOT_SITL`, else
       `../shared/sitl/arducopter` beside the project)
     * `--sitl-defaults FILE` — its parameter defaults (else `copter.parm` beside
@@ -166,7 +170,7 @@ defmodule Mix.Tasks.Dolphin.Run do
                no_check: :boolean
              ] ++ Dolphin.CLI.Cluster.switches()
 
-  @usage "usage: mix dolphin.run SCRIPT [--connect ENDPOINT]... [--sim N | --sitl N | --fake N] [--fleet FILE] [--speedup K] [--for DURATION] [--events FILE] [--tlog FILE | --no-tlog] [--forward ENDPOINT]... [--quiet] [--report FILE] [--web PORT [--web-bind ADDRESS]] [--no-check] [--sname NAME | --name NAME@HOST] [--cookie C] [--join NODE]..."
+  @usage "usage: mix dolphin.run SCRIPT [--connect ENDPOINT]... [--sim N | --sitl N|AIRFRAME:N,... | --fake N] [--fleet FILE] [--speedup K] [--for DURATION] [--events FILE] [--tlog FILE | --no-tlog] [--forward ENDPOINT]... [--quiet] [--report FILE] [--web PORT [--web-bind ADDRESS]] [--no-check] [--sname NAME | --name NAME@HOST] [--cookie C] [--join NODE]..."
 
   @impl Mix.Task
   def run(argv) do

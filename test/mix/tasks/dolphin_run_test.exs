@@ -44,6 +44,9 @@ defmodule Mix.Tasks.Dolphin.RunTest do
       assert {2, _, _} = main([ok, "--speedup", "0"])
       assert {2, _, err} = main([ok, "--connect", "carrier-pigeon:1"])
       assert err =~ "--connect carrier-pigeon:1"
+      assert {2, _, err} = main([ok, "--sitl", "blimp:1,boat:2"])
+      assert err =~ "--sitl blimp:1,boat:2: a number of copters, or airframes and counts such as plane:1,boat:2,sub:3 (airframes: copter, plane, rover, boat, sub"
+      assert {2, _, _} = main([ok, "--sitl", "boat:0"])
     end
   end
 

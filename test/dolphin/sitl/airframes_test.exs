@@ -1,0 +1,189 @@
+defmodule Dolphin.SITL.AirframesTest do
+  # Planes, rovers, boats and submarines on their own ArduPilot firmware
+  # (ArduPlane, ArduRover, ArduSub SITL): each flies a mission of the
+  # commands its airframe flies, start to end, then a second one that is
+  # stopped half way and leaves it holding as its airframe holds
+  # (docs/ardupilot.md, "Other airframes"). Runs SITL processes and changes
+  # the clock's speed-up: not async.
+  use ExUnit.Case, async: false
+
+  alias Dolphin.{Engine, Geo, Mission, SITL, Vehicles}
+  alias Dolphin.Geo.Location
+  alias Dolphin.Mission.Command, as: C
+  alias Dolphin.Test.Wait
+
+  @moduletag :sitl
+  @moduletag timeout: 600_000
+  @speedup 10
+
+  setup do
+    Dolphin.Fleet.set_source({Dolphin.Fleet.MAVLinkSource, nil})
+    Dolphin.Clock.set_speedup(@speedup)
+
+    on_exit(fn ->
+      Dolphin.Fleet.release_all(Dolphin.Fleet, self())
+      Dolphin.Clock.set_speedup(1)
+    end)
+
+    :ok
+  end
+
+  # Starts one vehicle of `airframe`, picked by this test; its id and home.
+  defp start(airframe) do
+    {:ok, fleet} = SITL.start([{airframe, 1}])
+    on_exit(fn -> SITL.stop(fleet) end)
+    [id] = fleet.sysids
+    Wait.until(fn -> match?({:ok, %{home: %Location{}, position: %Location{}}}, Vehicles.view(id)) end, 3_000)
+    {:ok, view} = Vehicles.view(id)
+    {:ok, _} = Dolphin.Fleet.pick(Dolphin.Fleet, self(), id: id)
+    {id, view}
+  end
+
+  defp fly(mission, id), do: Engine.run(Engine.on(mission, [id]))
+
+  # Stopped after `ms` of clock time; the mode it holds in, once the heartbeat says so.
+  defp stopped(mission, id, ms, mode) do
+    assert {:ok, :done} = Engine.run(Engine.during(ms, Engine.on(mission, [id])))
+    Wait.until(fn -> match?({:ok, %{mode: ^mode}}, Vehicles.view(id)) end, 500)
+    {:ok, view} = Vehicles.view(id)
+    view
+  end
+
+  defp distance(%Location{} = a, %Location{} = b), do: Geo.distance(Geo.location(a.lat, a.lon), Geo.location(b.lat, b.lon))
+
+  defp reached(id) do
+    Dolphin.Events.subscribe()
+    fn -> for({:dolphin, :events, %{event: :mission_item_reached, vehicle: ^id, seq: seq}} <- drain(), do: seq) end
+  end
+
+  defp drain do
+    receive do
+      m -> [m | drain()]
+    after
+      0 -> []
+    end
+  end
+
+  for airframe <- [:plane, :rover, :boat, :sub], not SITL.available?(airframe) do
+    IO.puts("SITL tests of the #{airframe} skipped: no #{airframe} SITL binary (put ArduPilot's SITL binaries in ARDUPILOT_SITL_DIR, or ../shared/sitl/ beside the project)")
+  end
+
+  if SITL.available?(:plane) do
+    test "a plane takes off at its pitch, circles its loiter, lands through its landing sequence and disarms; stopped, it circles (LOITER)" do
+      {id, view} = start(:plane)
+      assert {view.type, view.airframe, view.mav_type} == {:uav, :plane, 1}
+      home = view.home
+      seen = reached(id)
+
+      circuit =
+        Mission.new("Circuit", [
+          C.home(home),
+          C.take_off(Location.at_height(home, home.h + 60), 15),
+          C.move(500, 0, 0),
+          C.move_and_loiter_turns(0, 0, 0, 1, 80),
+          C.move(-300, 0, -20),
+          C.return_home_and_land()
+        ])
+
+      # Items: 1 take-off, 2 waypoint, 3 loiter, 4 approach, 5 DO_LAND_START, 6 NAV_LAND.
+      assert [_, %{command: 22, param1: 15.0}, _, _, _, %{command: 189}, %{command: 21}] = Mission.to_items(circuit, airframe: :plane)
+      assert {:ok, :done} = fly(circuit, id)
+      # The take-off, the waypoint and the loiter are reported reached; the land item never is (as ArduCopter's).
+      assert [1, 2, 3] -- seen.() == []
+      {:ok, landed} = Vehicles.view(id)
+      assert landed.armed? == false
+      assert Enum.any?(Vehicles.status_texts(id), fn {_, text} -> text =~ "Landing approach start" end)
+      assert distance(landed.position, home) < 150
+
+      # It cannot stand still: a stop leaves it circling where it was, in LOITER.
+      loiter = Mission.new("Orbit", [C.home(home), C.take_off(Location.at_height(home, home.h + 60)), C.move_and_loiter_pos(300, 0, 0, 80)])
+      held = stopped(loiter, id, 60_000, :loiter)
+      assert held.armed? and held.relative_altitude > 20
+    end
+  end
+
+  for {airframe, mav_type, class} <- [{:rover, 10, :ugv}, {:boat, 11, :usv}], SITL.available?(airframe) do
+    @airframe airframe
+    @mav_type mav_type
+    @class class
+    test "a #{airframe} drives its mission with no take-off (heights ignored), holds at its timed loiter, and a stop holds it in LOITER" do
+      {id, view} = start(@airframe)
+      assert {view.type, view.airframe, view.mav_type} == {@class, @airframe, @mav_type}
+      home = view.home
+      seen = reached(id)
+
+      route = Mission.new("Route", [C.home(home), C.move(60, 0, 0), C.loiter_time(Geo.offset(home, 60, 0, 0), 10), C.move(0, 40, 0), C.speed(3), C.return_home()])
+      # Nothing in it takes off: a rover or a boat is given it.
+      assert Mission.airframes(route) |> Enum.member?(@airframe)
+      assert {:ok, :done} = fly(route, id)
+      # A waypoint followed by a DO item is reported by the DO item's seq (as ArduCopter does).
+      got = seen.()
+      assert [1, 2] -- got == [] and (3 in got or 4 in got)
+      {:ok, back} = Vehicles.view(id)
+      # Its last waypoint reached (ArduRover stays in AUTO, armed, at the end).
+      assert distance(back.position, home) < 8
+      assert back.mode == :auto and back.armed?
+
+      far = Mission.new("Away", [C.home(home), C.move(300, 0, 0)])
+      held = stopped(far, id, 20_000, :loiter)
+      assert held.armed?
+      assert distance(held.position, home) > 20
+    end
+  end
+
+  if SITL.available?(:sub) do
+    test "a submarine dives to its depths (negative heights), holds its timed loiter, surfaces with its landing, and a stop holds it in POSHOLD" do
+      {id, view} = start(:sub)
+      assert {view.type, view.airframe, view.mav_type} == {:uuv, :sub, 12}
+      home = view.home
+      seen = reached(id)
+
+      dive =
+        Mission.new("Dive", [
+          C.home(home),
+          C.move(30, 0, -5),
+          C.loiter_time(Geo.offset(home, 30, 0, -5), 10),
+          C.move(0, 20, -3),
+          C.return_home_and_land()
+        ])
+
+      # Depths relative to the surface, frame GLOBAL_RELATIVE_ALT_INT.
+      items = Mission.to_items(dive, airframe: :sub)
+      assert for(i <- tl(items), do: {i.command, i.frame, Float.round(i.z, 2)}) == [{16, 6, -5.0}, {19, 6, -5.0}, {16, 6, -8.0}, {21, 6, 0.0}]
+      assert {:ok, :done} = fly(dive, id)
+      # ArduSub reports its NAV_LAND reached: it surfaces where it is and stays armed.
+      assert 4 in seen.()
+      {:ok, up} = Vehicles.view(id)
+      assert up.position.h > -1.5 and up.armed?
+
+      deep = Mission.new("Deep", [C.home(home), C.move(60, 0, -6)])
+      held = stopped(deep, id, 30_000, :poshold)
+      assert held.armed? and held.position.h < -0.5
+    end
+  end
+
+  if SITL.available?(:rover) and SITL.available?(:sub) do
+    @tag :tmp_dir
+    test "mix dolphin.run --sitl rover:1,sub:1: a script picks the submarine by its airframe, and the pre-flight check refuses a take-off on it", %{tmp_dir: dir} do
+      script = fn name, body -> Path.join(dir, name) |> tap(&File.write!(&1, "use Dolphin.Script\n" <> body)) end
+      run = fn argv ->
+        {:ok, out} = StringIO.open("")
+        {:ok, err} = StringIO.open("")
+        code = Mix.Tasks.Dolphin.Run.main(argv, out: out, err: err)
+        {code, elem(StringIO.contents(out), 1), elem(StringIO.contents(err), 1)}
+      end
+
+      pick = script.("pick.exs", "v = pick(airframe: :sub, timeout: seconds(60))\nmessage(\"the sub is \#{inspect(v)}\")\nrelease(v)\n")
+      assert {0, out, ""} = run.([pick, "--sitl", "rover:1,sub:1", "--speedup", "#{@speedup}", "--no-tlog"])
+      assert out =~ "2 SITL instance(s) (1 rover, 1 sub), vehicles 1, 2"
+      assert out =~ "vehicle 2 discovered (uuv sub)"
+      assert out =~ "message: the sub is #Vehicles<[2]>"
+
+      fly = script.("up.exs", "v = pick(airframe: :sub, timeout: seconds(60))\nexecute %{v => mission(\"Up\", do: take_off(location(40.44, -7.37, 20)))}\n")
+      assert {1, out, _} = run.([fly, "--sitl", "rover:1,sub:1", "--speedup", "#{@speedup}", "--no-tlog"])
+      assert out =~ "no vehicle matches airframe [:copter, :plane, :quadplane]"
+      assert out =~ "the vehicles at hand: 2 (uuv sub [:camera])"
+      assert out =~ "the pre-flight check found errors: nothing flies"
+    end
+  end
+end
