@@ -1,15 +1,28 @@
 defmodule Dolphin.SITL do
   @moduledoc """
-  A fleet of real ArduCopters: N instances of ArduPilot's software-in-the-loop
-  build (ArduCopter's own flight code on a physics model) on a local link, as
-  `mix dolphin.run SCRIPT --sitl N` and `mix dolphin.console --sitl N` start
-  them. Everything a script does on `--sim N` it does here against the real
+  A fleet of real ArduPilot vehicles: instances of ArduPilot's
+  software-in-the-loop build (its own flight code on a physics model) on a
+  local link, as `mix dolphin.run SCRIPT --sitl N` (N copters) or `--sitl
+  plane:1,boat:2,sub:3` and `mix dolphin.console --sitl ...` start them.
+  Everything a script does on `--sim N` it does here against the real
   autopilot's mission engine, arming checks, EKF and failsafes.
 
-      {:ok, fleet} = Dolphin.SITL.start(2, speedup: 10)
+      {:ok, fleet} = Dolphin.SITL.start(2)
       fleet.sysids
       #=> [1, 2]
       Dolphin.SITL.stop(fleet)
+
+      {:ok, mixed} = Dolphin.SITL.start(copter: 1, plane: 1, boat: 1, sub: 1)
+
+  Each airframe runs its firmware with its model and ArduPilot's parameter
+  defaults for it: copter ArduCopter (`+`, `copter.parm`), plane ArduPlane
+  (`plane`, `plane.parm`, RTL_AUTOLAND 2: ArduPlane refuses to arm with a
+  landing sequence in its mission otherwise), rover ArduRover (`rover`,
+  `rover.parm`), boat ArduRover (`motorboat`, `rover.parm` and
+  `motorboat.parm`), sub ArduSub (`vectored`, `sub.parm`, its home at sea
+  level: its depth is its barometer's). The copter's binary is found as
+  below; the others' in `$ARDUPILOT_SITL_DIR`, else beside the copter's,
+  else in `../shared/sitl/`, each with its parameter files beside it.
 
   Each instance gets:
 

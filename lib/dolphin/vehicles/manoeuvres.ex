@@ -1,19 +1,24 @@
 defmodule Dolphin.Vehicles.Manoeuvres do
   @moduledoc """
-  ArduCopter's manoeuvres, as a ground station has to ask for them: hold
+  ArduPilot's manoeuvres, as a ground station has to ask for them: hold
   position, arm when the autopilot is ready, take off, land, go to a point.
   The mission executor (`Dolphin.Mission.Platform`) and the console
   (`Dolphin.Console`) both fly vehicles through this module, so what
   ArduCopter needs is written once:
 
-    * **hold** — BRAKE, else GUIDED; never LOITER, which is flown by a pilot's
-      sticks and sinks without RC throttle. A vehicle still on the ground is
-      disarmed instead; one its autopilot is bringing down (RTL, LAND: a
-      failsafe or the pilot decided) is left alone.
+    * **hold** — as the vehicle's airframe holds (`hold_modes/1`): a copter
+      BRAKE, else GUIDED (never LOITER, which is flown by a pilot's sticks and
+      sinks without RC throttle); a plane circles in LOITER; a rover or boat
+      LOITER (HOLD only cuts the throttle); a submarine POSHOLD. A vehicle
+      still on the ground is disarmed instead; one its autopilot is bringing
+      down (RTL, LAND, a submarine's SURFACE: a failsafe or the pilot
+      decided) is left alone.
     * **arm when ready** — ArduCopter refuses to arm for about a minute after
       boot ("PreArm: Need Position Estimate"): the arm command is sent again
       every second of clock time while the refusal may pass, for a bounded
-      time. It does not arm in AUTO: GUIDED first.
+      time. It does not arm in AUTO: GUIDED first (which ArduSub and
+      ArduPlane also refuse until they have a position: asked again the same
+      way, `guided/2`).
     * **take off** — GUIDED, arm when ready, NAV_TAKEOFF (altitude above home).
     * **land**, **go to** — NAV_LAND; DO_REPOSITION in GUIDED.
 
