@@ -216,7 +216,7 @@ defmodule Dolphin.Check do
 
     # Stand-ins: their discoveries and changes are no event of the real run.
     {:ok, ts} = FakeSource.start_link(name: test, events: false)
-    by_id = Map.new(vehicles, &{&1.id, %{payloads: &1.payloads, home: &1.position, airborne?: &1.airborne?}})
+    by_id = Map.new(vehicles, &{&1.id, %{payloads: &1.payloads, home: &1.position, airborne?: &1.airborne?, airframe: Map.get(&1, :airframe, View.stand_in_airframe(&1.type))}})
     {:ok, recorder} = Recorder.start_link(%{test: test, file: script.file, limits: limits, vehicles: by_id})
 
     for v <- vehicles,

@@ -113,6 +113,19 @@ defmodule Dolphin.CheckTest do
     refute Dolphin.Instance.running?(Dolphin.Check.DryRun)
   end
 
+  test "a mixed fleet: a boat's heights are warned about, a submarine's depths are no error, a take-off on a boat is refused with the line" do
+    {:ok, fleet} = FleetFile.read(Path.join(@dir, "mixed_fleet.json"))
+    report = check("mixed_fleet.exs", fleet)
+    assert [%{mission: "Patrol", vehicle: 31}, %{mission: "Dive", vehicle: 32}] = Enum.sort_by(report.missions, & &1.vehicle)
+    # The move up and the return over home at the height it left.
+    assert [%{severity: :warning, line: 23, message: ignored}, %{line: 23}] = Enum.filter(report.findings, &(&1.kind == :height_ignored))
+    assert ignored =~ ~s|mission "Patrol" on vehicle 31: item 2 (NAV_WAYPOINT) is 30 m above home: a boat drives at its own height|
+    refute Enum.any?(report.findings, &(&1.kind in [:below_ground, :no_take_off]))
+    assert %{severity: :error, line: 31, message: refused} = Enum.find(report.findings, &(&1.severity == :error))
+    assert refused =~ "no vehicle matches airframe [:copter, :plane, :quadplane]"
+    assert refused =~ "31 (usv boat)"
+  end
+
   test "a condition never met with the fleet's values is a note, not an error", %{fleet: fleet} do
     fleet = Enum.map(fleet, &%{&1 | battery: 0.5})
     report = check("waits.exs", fleet, horizon_ms: 600_000)

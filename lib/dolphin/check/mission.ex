@@ -50,7 +50,8 @@ defmodule Dolphin.Check.Mission do
           required(:battery) => float() | nil,
           required(:position) => Location.t() | nil,
           required(:airborne?) => boolean(),
-          optional(:at) => Location.t() | nil
+          optional(:at) => Location.t() | nil,
+          optional(:airframe) => atom() | nil
         }
   @type limits :: %{max_distance: number(), max_height: number()}
   @type problem :: {:error | :warning | :note, atom(), String.t()}
@@ -74,7 +75,7 @@ defmodule Dolphin.Check.Mission do
   def check(%M{} = mission, vehicle, limits) do
     home_opt = if mission.home == nil and vehicle.position, do: [home: vehicle.position], else: []
 
-    case items(mission, home_opt) do
+    case items(mission, [airframe: Map.get(vehicle, :airframe)] ++ home_opt) do
       {:ok, items} ->
         name = "mission #{inspect(mission.name)} on vehicle #{vehicle.id}"
         estimate = estimate(mission.name, vehicle, items)
@@ -107,13 +108,30 @@ defmodule Dolphin.Check.Mission do
     home_loc = location(home, nil)
     count = length(items)
 
-    positions =
-      for item <- items, positioned?(item), problem <- position_problems(name, item, home_loc, limits), do: problem
-
-    positions ++ take_off(name, rest, vehicle) ++ Enum.flat_map(rest, &params(name, &1, count, vehicle))
+    airframe = Map.get(vehicle, :airframe)
+    positions = for item <- items, positioned?(item), problem <- position_problems(name, item, home_loc, limits, airframe), do: problem
+    take_off = if airframe in [:rover, :boat, :sub], do: [], else: take_off(name, rest, vehicle)
+    positions ++ take_off ++ Enum.flat_map(rest, &params(name, &1, count, vehicle))
   end
 
-  defp position_problems(name, item, home, limits) do
+  # A submarine's heights are depths (Dolphin.Mission.to_items/2 refuses one
+  # above the surface); a rover or boat drives at its own height whatever
+  # the item says: a height that differs is said, as a warning.
+  defp position_problems(name, item, home, limits, airframe) when airframe in [:sub, :rover, :boat] do
+    loc = location(item, home)
+    height = loc.h - home.h
+
+    far =
+      for p <- position_problems(name, item, home, limits, nil), match?({_, kind, _} when kind in [:position, :too_far], p), do: p
+
+    cond do
+      item.seq == 0 or airframe == :sub -> far
+      abs(height) > 1.0 -> far ++ [{:warning, :height_ignored, "#{name}: #{describe(item)} is #{metres(height)} above home: a #{airframe} drives at its own height, whatever the item says"}]
+      true -> far
+    end
+  end
+
+  defp position_problems(name, item, home, limits, _airframe) do
     {lat, lon} = {item.x / 1.0e7, item.y / 1.0e7}
     what = "#{name}: #{describe(item)}"
 

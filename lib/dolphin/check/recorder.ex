@@ -38,7 +38,7 @@ defmodule Dolphin.Check.Recorder do
   def handle_call({:mission, mission, id, line}, _from, s) do
     fleet = Map.get(s.vehicles, id, %{payloads: [], home: nil, airborne?: false})
     battery = case FakeSource.vehicle(s.test, id), do: ({:ok, view} -> view.battery; _ -> nil)
-    vehicle = %{id: id, payloads: fleet.payloads, battery: battery, position: fleet.home, airborne?: fleet.airborne?, at: Map.get(fleet, :at)}
+    vehicle = %{id: id, payloads: fleet.payloads, battery: battery, position: fleet.home, airborne?: fleet.airborne?, at: Map.get(fleet, :at), airframe: Map.get(fleet, :airframe)}
     {problems, energy, estimate} = Dolphin.Check.Mission.check(mission, vehicle, s.limits)
     estimate = estimate && Map.merge(estimate, %{line: line, energy: energy})
     # What the report keeps of an estimate (the flight needs the rest).
