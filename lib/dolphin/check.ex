@@ -111,16 +111,19 @@ defmodule Dolphin.Check do
   @doc """
   The stand-in fleet of `--sim N` (N copters) or `--sitl plane:1,boat:2`
   (airframes and counts, in system id order): each with a camera, full, on
-  the ground (or the surface) at the simulator's home.
+  the ground (or the surface) at the simulator's home, or at `home`
+  (`{lat, lon, alt}`, as `--home` gives it).
   """
-  @spec sim_fleet(pos_integer() | [{atom(), pos_integer()}]) :: [Dolphin.Check.FleetFile.vehicle()]
-  def sim_fleet(n) when is_integer(n), do: sim_fleet(copter: n)
+  @spec sim_fleet(pos_integer() | [{atom(), pos_integer()}], {number(), number(), number()} | nil) :: [Dolphin.Check.FleetFile.vehicle()]
+  def sim_fleet(fleet, home \\ nil)
+  def sim_fleet(n, home) when is_integer(n), do: sim_fleet([copter: n], home)
 
-  def sim_fleet(fleet) when is_list(fleet) do
+  def sim_fleet(fleet, home) when is_list(fleet) do
     airframes = Enum.flat_map(fleet, fn {airframe, n} -> List.duplicate(airframe, n) end)
+    base = with {lat, lon, alt} <- home, do: %Dolphin.Geo.Location{lat: lat * 1.0, lon: lon * 1.0, h: alt * 1.0}, else: (nil -> @sim_home)
 
     for {airframe, id} <- Enum.with_index(airframes, 1) do
-      position = if airframe == :sub, do: %{@sim_home | h: 0.0}, else: @sim_home
+      position = if airframe == :sub, do: %{base | h: 0.0}, else: base
       %{id: id, type: View.airframe_class(airframe), airframe: airframe, payloads: [:camera], battery: 1.0, position: position, airborne?: false}
     end
   end

@@ -68,7 +68,7 @@ defmodule Dolphin.CLI.Run do
         :ok
 
       true ->
-        report = Dolphin.Check.check_script(script, fleet: stand_ins(n, opts[:fleet]), energy: :warning)
+        report = Dolphin.Check.check_script(script, fleet: stand_ins(n, opts[:home], opts[:fleet]), energy: :warning)
         errors? = Dolphin.Check.errors?(report)
 
         if report.findings != [] and (errors? or !opts[:quiet]) do
@@ -87,16 +87,16 @@ defmodule Dolphin.CLI.Run do
 
   # The simulated fleet, carrying what the fleet file (--fleet) gives each
   # of its system ids besides the simulator's camera.
-  defp stand_ins(n, nil), do: Dolphin.Check.sim_fleet(n)
+  defp stand_ins(n, home, nil), do: Dolphin.Check.sim_fleet(n, home)
 
-  defp stand_ins(n, path) do
+  defp stand_ins(n, home, path) do
     given =
       case Vehicles.fleet_file(path) do
         {:ok, vehicles} -> Map.new(vehicles, &{&1.id, &1.payloads})
         {:error, _} -> %{}
       end
 
-    for v <- Dolphin.Check.sim_fleet(n), do: %{v | payloads: Enum.sort(Enum.uniq(v.payloads ++ Map.get(given, v.id, [])))}
+    for v <- Dolphin.Check.sim_fleet(n, home), do: %{v | payloads: Enum.sort(Enum.uniq(v.payloads ++ Map.get(given, v.id, [])))}
   end
 
   @doc "Runs `script` (see the options above) and says how it ended."

@@ -219,6 +219,7 @@ defmodule Dolphin.CLI.Values do
       sitl_bin: {:file, "SITL binary"},
       sitl_defaults: {:keep, {:file, "parameter file"}},
       fleet: {:file, "fleet file"},
+      home: :home,
       seed: :integer,
       speedup: :speedup,
       tlog: :output,
@@ -230,6 +231,26 @@ defmodule Dolphin.CLI.Values do
 
   defp value(:boolean, given), do: {:ok, given}
   defp value(:string, given), do: {:ok, given}
+
+  # Where simulated or SITL vehicles start: "LAT,LON" or "LAT,LON,ALT" (metres above sea level).
+  defp value(:home, text) do
+    numbers = for part <- String.split(text, ","), do: number(String.trim(part))
+
+    place =
+      case numbers do
+        [{:ok, lat}, {:ok, lon}] -> {lat, lon, 0.0}
+        [{:ok, lat}, {:ok, lon}, {:ok, alt}] -> {lat, lon, alt}
+        _ -> nil
+      end
+
+    case place do
+      {lat, lon, _alt} when lat >= -90 and lat <= 90 and lon >= -180 and lon <= 180 ->
+        {:ok, place}
+
+      _ ->
+        {:error, "a place as LAT,LON or LAT,LON,ALT (degrees, latitude -90..90, longitude -180..180; metres above sea level)"}
+    end
+  end
 
   # N copters, or airframes and counts: "plane:1,boat:2,sub:3".
   defp value(:sitl_fleet, text) do

@@ -79,7 +79,7 @@ defmodule Dolphin.CLI.Vehicles do
   end
 
   defp start_sim(n, opts, link_opts, out, defer) do
-    case Dolphin.Sim.Local.start(n, [seed: Keyword.get(opts, :seed, 1)] ++ link_opts) do
+    case Dolphin.Sim.Local.start(n, [seed: Keyword.get(opts, :seed, 1), home: opts[:home]] ++ link_opts) do
       {:ok, sim} ->
         defer.(fn -> Dolphin.Sim.Local.stop(sim) end)
         IO.puts(out, "#{n} simulated vehicle(s) #{Dolphin.Fleet.VehicleSet.format(sim.sysids)} on 127.0.0.1:#{sim.port}")
@@ -91,7 +91,7 @@ defmodule Dolphin.CLI.Vehicles do
   end
 
   defp start_sitl(n, opts, link_opts, out, defer) do
-    sitl_opts = [bin: opts[:sitl_bin], defaults: Keyword.get_values(opts, :sitl_defaults)] ++ link_opts ++ Keyword.get(opts, :sitl_extra, [])
+    sitl_opts = [bin: opts[:sitl_bin], defaults: Keyword.get_values(opts, :sitl_defaults), home: opts[:home]] ++ link_opts ++ Keyword.get(opts, :sitl_extra, [])
 
     case Dolphin.SITL.start(n, Enum.reject(sitl_opts, fn {_, v} -> v in [nil, []] end)) do
       {:ok, fleet} ->

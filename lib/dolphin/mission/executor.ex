@@ -101,19 +101,10 @@ defmodule Dolphin.Mission.Executor do
   # --- entering a step ----------------------------------------------------------
 
   @impl true
-  def handle_event(:enter, _old, :hold, data) do
-    data = %{data | airframe: airframe(data.vehicle)}
-
-    case items(data) do
-      {:ok, items} ->
-        ending = Mission.ending(items, data.airframe)
-        # At once: the first look at the vehicle needs no wait.
-        {:keep_state, %{data | items: items, ending: ending, flight: Flight.new(ending)}, [{:state_timeout, 0, :look}]}
-
-      {:error, cause} ->
-        fail(:hold, data, cause)
-    end
-  end
+  # At once: the first look at the vehicle needs no wait. (Its items are
+  # made once it is known: they depend on its airframe, and on its home
+  # when the mission gives none.)
+  def handle_event(:enter, _old, :hold, data), do: {:keep_state, data, [{:state_timeout, 0, :look}]}
 
   def handle_event(:enter, _old, :clear, data), do: exchange(data, fn -> Vehicles.clear_mission(data.vehicle) end)
 
@@ -143,6 +134,15 @@ defmodule Dolphin.Mission.Executor do
     case Vehicles.view(data.vehicle) do
       {:ok, st} ->
         cond do
+          # A mission without a home flies from the vehicle's, which it
+          # reports once its position estimate has an origin (ArduSub and
+          # ArduPlane a while after boot): waited for as the boot is.
+          data.items == nil and data.mission.home == nil and st.home == nil and Clock.now_ms() < data.boot_deadline ->
+            {:keep_state_and_data, [{:state_timeout, Clock.to_real_ms(@boot_poll_ms), :look}]}
+
+          data.items == nil ->
+            with_items(data, st)
+
           not Dolphin.Vehicles.State.booting?(st) -> look(data, st)
           Clock.now_ms() >= data.boot_deadline -> fail(:hold, data, {:booting, if(st.system_status == 0, do: :uninit, else: :boot), div(@boot_timeout_ms, 1000)})
           # ArduCopter answers the mission protocol while it boots, before its
@@ -337,17 +337,24 @@ defmodule Dolphin.Mission.Executor do
 
   defp landing_here?(_data, _st), do: false
 
-  defp airframe(vehicle) do
-    case Vehicles.view(vehicle) do
-      {:ok, %{airframe: airframe}} -> airframe
-      _ -> nil
+  # The items for this vehicle (its airframe, its home), then a look at it again at once.
+  defp with_items(data, st) do
+    data = %{data | airframe: st.airframe}
+
+    case items(data, st) do
+      {:ok, items} ->
+        ending = Mission.ending(items, data.airframe)
+        {:keep_state, %{data | items: items, ending: ending, flight: Flight.new(ending)}, [{:state_timeout, 0, :look}]}
+
+      {:error, cause} ->
+        fail(:hold, data, cause)
     end
   end
 
-  defp items(%{mission: mission, vehicle: vehicle, airframe: airframe}) do
+  defp items(%{mission: mission, airframe: airframe}, st) do
     home =
-      case {mission.home, Vehicles.view(vehicle)} do
-        {nil, {:ok, %{home: %Dolphin.Geo.Location{} = home}}} -> [home: home]
+      case {mission.home, st.home} do
+        {nil, %Dolphin.Geo.Location{} = home} -> [home: home]
         _ -> []
       end
 

@@ -18,14 +18,15 @@ defmodule Dolphin.Sim.Local do
   def start(count, opts \\ []) do
     name = {:dolphin_local_sim, System.unique_integer([:positive])}
     {seed, opts} = Keyword.pop(opts, :seed, 1)
-    {first, link_opts} = Keyword.pop(opts, :first_sysid, 1)
+    {first, opts} = Keyword.pop(opts, :first_sysid, 1)
+    {home, link_opts} = Keyword.pop(opts, :home)
 
     case Dolphin.Link.connect("udpin:127.0.0.1:0", [name: name] ++ link_opts) do
       {:ok, link} ->
         port = Dolphin.Link.Connection.port(name)
         # Camera drones: every simulated vehicle carries a camera (component 100).
         # They boot as ArduCopter does: 2 s of MAV_STATE BOOT refusing uploads.
-        sim_opts = [count: count, first_sysid: first, gcs: {{127, 0, 0, 1}, port}, speedup: Dolphin.Clock.speedup(), seed: seed, camera: true, boot_ms: 2_000]
+        sim_opts = [count: count, first_sysid: first, gcs: {{127, 0, 0, 1}, port}, speedup: Dolphin.Clock.speedup(), seed: seed, camera: true, boot_ms: 2_000] ++ if(home, do: [home: home], else: [])
 
         case Dolphin.Sim.start(sim_opts) do
           {:ok, sysids} ->

@@ -37,6 +37,9 @@ defmodule Mix.Tasks.Dolphin.Console do
       `mix dolphin.check --fleet` reads): each vehicle it lists carries its
       `payloads` (those MAVLink cannot announce: `"sidescan"`, `"smoke"`), by
       system id, for `pick(payload: ...)`
+    * `--home LAT,LON[,ALT]` — where `--sim` and `--sitl` vehicles start
+      (around that point, 30 m apart; default the report's, in Serra da
+      Estrela; a submarine starts at the surface)
     * `--seed N` — the simulator's seed
     * `--speedup K` — run K times faster than real time (`Dolphin.Clock`),
       from 0.01 to 1000
@@ -70,7 +73,7 @@ defmodule Mix.Tasks.Dolphin.Console do
 
   @options Dolphin.CLI.Values.fleet_options() ++ Dolphin.CLI.Cluster.switches()
 
-  @usage "usage: iex -S mix dolphin.console [--connect ENDPOINT]... [--sim N | --sitl N|AIRFRAME:N,...] [--fleet FILE] [--speedup K] [--seed N]  [--tlog FILE] [--forward ENDPOINT]... [--sname NAME | --name NAME@HOST] [--cookie C] [--join NODE]..."
+  @usage "usage: iex -S mix dolphin.console [--connect ENDPOINT]... [--sim N | --sitl N|AIRFRAME:N,...] [--fleet FILE] [--home LAT,LON] [--speedup K] [--seed N]  [--tlog FILE] [--forward ENDPOINT]... [--sname NAME | --name NAME@HOST] [--cookie C] [--join NODE]..."
 
   @impl Mix.Task
   def run(argv) do
@@ -201,7 +204,7 @@ defmodule Mix.Tasks.Dolphin.Console do
 
   defp start_sim(n, opts, link_opts) do
     # The console's simulated fleet lives as long as the VM.
-    case Dolphin.Sim.Local.start(n, [seed: Keyword.get(opts, :seed, 1)] ++ link_opts) do
+    case Dolphin.Sim.Local.start(n, [seed: Keyword.get(opts, :seed, 1), home: opts[:home]] ++ link_opts) do
       {:ok, sim} -> {:ok, ["#{n} simulated vehicle(s) #{Dolphin.Fleet.VehicleSet.format(sim.sysids)} on 127.0.0.1:#{sim.port}"]}
       {:error, e} -> {:error, %CommandLineError{reason: :failed, message: Exception.message(e), cause: e}}
     end
@@ -209,7 +212,7 @@ defmodule Mix.Tasks.Dolphin.Console do
 
   defp start_sitl(n, opts, link_opts) do
     # Like the simulated fleet, the console's SITL instances live as long as the VM.
-    sitl_opts = [bin: opts[:sitl_bin], defaults: Keyword.get_values(opts, :sitl_defaults)] ++ link_opts
+    sitl_opts = [bin: opts[:sitl_bin], defaults: Keyword.get_values(opts, :sitl_defaults), home: opts[:home]] ++ link_opts
 
     case Dolphin.SITL.start(n, Enum.reject(sitl_opts, fn {_, v} -> v in [nil, []] end)) do
       {:ok, fleet} -> {:ok, ["#{Dolphin.CLI.Vehicles.sitl_words(n)}, vehicles #{Enum.join(fleet.sysids, ", ")}, on 127.0.0.1:#{fleet.port}"]}

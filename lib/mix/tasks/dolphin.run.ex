@@ -43,6 +43,9 @@ defmodule Mix.Tasks.Dolphin.Run do
       `payloads` (those MAVLink cannot announce: `"sidescan"`, `"smoke"`), by
       system id, for `pick(payload: ...)`; the pre-flight check of `--sim`
       and `--sitl` counts them too
+    * `--home LAT,LON[,ALT]` — where `--sim` and `--sitl` vehicles start
+      (around that point, 30 m apart; default the report's, in Serra da
+      Estrela; a submarine starts at the surface)
     * `--seed N` — the simulator's seed
     * `--speedup K` — run K times faster than real time (`Dolphin.Clock`),
       from 0.01 to 1000 (beyond, the simulated vehicles cannot keep up)
@@ -170,7 +173,7 @@ defmodule Mix.Tasks.Dolphin.Run do
                no_check: :boolean
              ] ++ Dolphin.CLI.Cluster.switches()
 
-  @usage "usage: mix dolphin.run SCRIPT [--connect ENDPOINT]... [--sim N | --sitl N|AIRFRAME:N,... | --fake N] [--fleet FILE] [--speedup K] [--for DURATION] [--events FILE] [--tlog FILE | --no-tlog] [--forward ENDPOINT]... [--quiet] [--report FILE] [--web PORT [--web-bind ADDRESS]] [--no-check] [--sname NAME | --name NAME@HOST] [--cookie C] [--join NODE]..."
+  @usage "usage: mix dolphin.run SCRIPT [--connect ENDPOINT]... [--sim N | --sitl N|AIRFRAME:N,... | --fake N] [--fleet FILE] [--home LAT,LON] [--speedup K] [--for DURATION] [--events FILE] [--tlog FILE | --no-tlog] [--forward ENDPOINT]... [--quiet] [--report FILE] [--web PORT [--web-bind ADDRESS]] [--no-check] [--sname NAME | --name NAME@HOST] [--cookie C] [--join NODE]..."
 
   @impl Mix.Task
   def run(argv) do
