@@ -30,6 +30,8 @@ defmodule Dolphin.Property do
   import ExUnit.Assertions, only: [flunk: 1]
 
   @failure {__MODULE__, :failure}
+  # The first failure of a run, kept through shrinking: what a flaky case did.
+  @first_failure {__MODULE__, :first_failure}
 
   # PropEr is called through a variable module: the app does not list :proper
   # (a test-only library), and a literal call would make the compiler warn.
@@ -44,16 +46,19 @@ defmodule Dolphin.Property do
   defp holds?(fun, value) do
     case fun.(value) do
       result when result in [false, nil] ->
-        Process.put(@failure, "the property returned #{inspect(result)}")
-        false
+        failed("the property returned #{inspect(result)}", value)
 
       _ ->
         true
     end
   catch
-    kind, reason ->
-      Process.put(@failure, Exception.format(kind, reason, __STACKTRACE__))
-      false
+    kind, reason -> failed(Exception.format(kind, reason, __STACKTRACE__), value)
+  end
+
+  defp failed(why, value) do
+    Process.put(@failure, why)
+    if Process.get(@first_failure) == nil, do: Process.put(@first_failure, {value, why})
+    false
   end
 
   @doc "Checks a property (see the module doc); returns `:ok` or fails the test."
@@ -61,6 +66,7 @@ defmodule Dolphin.Property do
   def check(property, opts \\ []) do
     {numtests, opts} = Keyword.pop(opts, :numtests, 100)
     Process.delete(@failure)
+    Process.delete(@first_failure)
 
     case proper().quickcheck(property, [:quiet, {:numtests, numtests} | opts]) do
       true ->
@@ -71,7 +77,12 @@ defmodule Dolphin.Property do
         # Run the shrunk counterexample once more, so that the failure shown is its own.
         Process.delete(@failure)
         proper().check(property, counterexample, [:quiet])
-        why = Process.delete(@failure) || "(the counterexample passed when run again: is the property deterministic?)"
+        first = Process.delete(@first_failure)
+
+        why =
+          Process.delete(@failure) ||
+            "(the counterexample passed when run again: is the property deterministic?) The first case that failed, " <>
+              "#{inspect(elem(first, 0), limit: 500)}, failed so:\n\n#{elem(first, 1)}"
 
         flunk("""
         property failed; shrunk counterexample:
