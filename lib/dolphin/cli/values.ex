@@ -214,7 +214,7 @@ defmodule Dolphin.CLI.Values do
   def fleet_options do
     [
       connect: {:keep, :endpoint},
-      sim: :vehicles,
+      sim: :sim_fleet,
       sitl: :sitl_fleet,
       sitl_bin: {:file, "SITL binary"},
       sitl_defaults: {:keep, {:file, "parameter file"}},
@@ -250,6 +250,13 @@ defmodule Dolphin.CLI.Values do
       _ ->
         {:error, "a place as LAT,LON or LAT,LON,ALT (degrees, latitude -90..90, longitude -180..180; metres above sea level)"}
     end
+  end
+
+  # The simulator's copters; another airframe is said to fly on SITL.
+  defp value(:sim_fleet, text) do
+    if String.contains?(text, ":"),
+      do: {:error, "a number of copters: the simulator flies copters only (planes, rovers, boats and submarines fly on SITL: --sitl #{text})"},
+      else: value(:vehicles, text)
   end
 
   # N copters, or airframes and counts: "plane:1,boat:2,sub:3".

@@ -28,15 +28,18 @@ defmodule Dolphin.SITL.AirframesTest do
     :ok
   end
 
-  # Starts one vehicle of `airframe`, picked by this test; its id and home.
-  defp start(airframe) do
+  # Starts one vehicle of `airframe`, picked by this test, and checks that
+  # its heartbeat says {type, airframe, MAV_TYPE} `kind`; its id, its home,
+  # and a function giving the items it reported reached so far.
+  defp start(airframe, kind) do
     {:ok, fleet} = SITL.start([{airframe, 1}])
     on_exit(fn -> SITL.stop(fleet) end)
     [id] = fleet.sysids
     Wait.until(fn -> match?({:ok, %{home: %Location{}, position: %Location{}}}, Vehicles.view(id)) end, 3_000)
     {:ok, view} = Vehicles.view(id)
+    assert {view.type, view.airframe, view.mav_type} == kind
     {:ok, _} = Dolphin.Fleet.pick(Dolphin.Fleet, self(), id: id)
-    {id, view}
+    {id, view.home, reached(id)}
   end
 
   defp fly(mission, id), do: Engine.run(Engine.on(mission, [id]))
@@ -70,10 +73,7 @@ defmodule Dolphin.SITL.AirframesTest do
 
   if SITL.available?(:plane) do
     test "a plane takes off at its pitch, circles its loiter, lands through its landing sequence and disarms; stopped, it circles (LOITER)" do
-      {id, view} = start(:plane)
-      assert {view.type, view.airframe, view.mav_type} == {:uav, :plane, 1}
-      home = view.home
-      seen = reached(id)
+      {id, home, seen} = start(:plane, {:uav, :plane, 1})
 
       circuit =
         Mission.new("Circuit", [
@@ -107,10 +107,7 @@ defmodule Dolphin.SITL.AirframesTest do
     @mav_type mav_type
     @class class
     test "a #{airframe} drives its mission with no take-off (heights ignored), holds at its timed loiter, and a stop holds it in LOITER" do
-      {id, view} = start(@airframe)
-      assert {view.type, view.airframe, view.mav_type} == {@class, @airframe, @mav_type}
-      home = view.home
-      seen = reached(id)
+      {id, home, seen} = start(@airframe, {@class, @airframe, @mav_type})
 
       route = Mission.new("Route", [C.home(home), C.move(60, 0, 0), C.loiter_time(Geo.offset(home, 60, 0, 0), 10), C.move(0, 40, 0), C.speed(3), C.return_home()])
       # Nothing in it takes off: a rover or a boat is given it.
@@ -133,10 +130,7 @@ defmodule Dolphin.SITL.AirframesTest do
 
   if SITL.available?(:sub) do
     test "a submarine dives to its depths (negative heights), holds its timed loiter, surfaces with its landing, and a stop holds it in POSHOLD" do
-      {id, view} = start(:sub)
-      assert {view.type, view.airframe, view.mav_type} == {:uuv, :sub, 12}
-      home = view.home
-      seen = reached(id)
+      {id, home, seen} = start(:sub, {:uuv, :sub, 12})
 
       dive =
         Mission.new("Dive", [
