@@ -252,38 +252,10 @@ defmodule Dolphin.CLI.Values do
     end
   end
 
-  # The simulator's copters; another airframe is said to fly on SITL.
-  defp value(:sim_fleet, text) do
-    if String.contains?(text, ":"),
-      do: {:error, "a number of copters: the simulator flies copters only (planes, rovers, boats and submarines fly on SITL: --sitl #{text})"},
-      else: value(:vehicles, text)
-  end
-
-  # N copters, or airframes and counts: "plane:1,boat:2,sub:3".
-  defp value(:sitl_fleet, text) do
-    if String.contains?(text, ":") do
-      parts = for part <- String.split(text, ",", trim: true), do: String.split(part, ":")
-      known = Enum.map(Dolphin.SITL.airframes(), &Atom.to_string/1)
-
-      fleet =
-        Enum.map(parts, fn
-          [name, n] ->
-            case {name in known, value(:vehicles, n)} do
-              {true, {:ok, count}} -> {String.to_existing_atom(name), count}
-              _ -> :error
-            end
-
-          _ ->
-            :error
-        end)
-
-      if :error not in fleet and fleet |> Keyword.values() |> Enum.sum() <= @max_sysid,
-        do: {:ok, fleet},
-        else: {:error, "a number of copters, or airframes and counts such as plane:1,boat:2,sub:3 (airframes: #{Enum.join(known, ", ")}; #{@max_sysid} vehicles at most)"}
-    else
-      value(:vehicles, text)
-    end
-  end
+  # N copters, or airframes and counts: "copter:2,boat:1,sub:3" (the
+  # simulator's; a plane flies on SITL), "plane:1,boat:2,sub:3" (SITL's).
+  defp value(:sim_fleet, text), do: fleet_spec(text, Dolphin.Sim.airframes(), "--sitl #{text}")
+  defp value(:sitl_fleet, text), do: fleet_spec(text, Dolphin.SITL.airframes(), nil)
 
   defp value(:vehicles, text), do: integer(text, 1..@max_sysid, "a number of vehicles from 1 to #{@max_sysid} (each needs a system id of its own)")
   defp value(:sysid, text), do: integer(text, 1..@max_sysid, "a system id from 1 to #{@max_sysid} (255 is the ground station's)")
@@ -411,6 +383,32 @@ defmodule Dolphin.CLI.Values do
 
   defp value({:file, what}, path) do
     if File.dir?(path), do: {:error, "a directory, not a #{what}"}, else: {:ok, path}
+  end
+
+  defp fleet_spec(text, airframes, elsewhere) do
+    if String.contains?(text, ":") do
+      known = Enum.map(airframes, &Atom.to_string/1)
+
+      fleet =
+        for part <- String.split(text, ",", trim: true) do
+          with [name, n] <- String.split(part, ":"),
+               true <- name in known,
+               {:ok, count} <- value(:vehicles, n) do
+            {String.to_existing_atom(name), count}
+          else
+            _ -> :error
+          end
+        end
+
+      if :error not in fleet and fleet |> Keyword.values() |> Enum.sum() <= @max_sysid do
+        {:ok, fleet}
+      else
+        other = if elsewhere, do: "; the others fly on SITL: #{elsewhere}", else: ""
+        {:error, "a number of copters, or airframes and counts such as #{Enum.at(known, -2)}:1,#{List.last(known)}:3 (airframes: #{Enum.join(known, ", ")}#{other}; #{@max_sysid} vehicles at most)"}
+      end
+    else
+      value(:vehicles, text)
+    end
   end
 
   defp integer(text, range, rule) do

@@ -82,7 +82,7 @@ defmodule Dolphin.CLI.Vehicles do
     case Dolphin.Sim.Local.start(n, [seed: Keyword.get(opts, :seed, 1), home: opts[:home]] ++ link_opts) do
       {:ok, sim} ->
         defer.(fn -> Dolphin.Sim.Local.stop(sim) end)
-        IO.puts(out, "#{n} simulated vehicle(s) #{Dolphin.Fleet.VehicleSet.format(sim.sysids)} on 127.0.0.1:#{sim.port}")
+        IO.puts(out, "#{sim_words(n)} #{Dolphin.Fleet.VehicleSet.format(sim.sysids)} on 127.0.0.1:#{sim.port}")
         :ok
 
       {:error, why} ->
@@ -103,6 +103,12 @@ defmodule Dolphin.CLI.Vehicles do
         {:error, Dolphin.CommandLineError.failed(nil, why)}
     end
   end
+
+  @doc false
+  # What --sim started, in words: "2 simulated vehicle(s)", "4 simulated vehicle(s) (1 boat, 3 sub)".
+  @spec sim_words(pos_integer() | keyword()) :: String.t()
+  def sim_words(n) when is_integer(n), do: "#{n} simulated vehicle(s)"
+  def sim_words(fleet), do: "#{fleet |> Keyword.values() |> Enum.sum()} simulated vehicle(s) (#{Enum.map_join(fleet, ", ", fn {a, n} -> "#{n} #{a}" end)})"
 
   @doc false
   # What --sitl started, in words: "2 ArduCopter SITL instance(s)", "3 SITL instance(s): 1 plane, 2 boat".

@@ -32,6 +32,9 @@ defmodule Dolphin.Sim.Copter do
   @autopilot 1
 
   @defaults %{
+    # :copter (ArduCopter), or ArduRover's :rover and :boat, ArduSub's :sub
+    # (see airframe_defaults/1 and docs/simulator.md).
+    airframe: :copter,
     camera: false,
     cruise_speed: 10.0,
     climb_speed: 2.5,
@@ -115,10 +118,41 @@ defmodule Dolphin.Sim.Copter do
   @doc false
   def defaults, do: @defaults
 
+  @doc false
+  # What differs from a copter's settings, as ArduRover and ArduSub SITL flew
+  # (docs/ardupilot.md, "Other airframes"): a rover or boat drives at
+  # WP_SPEED 5 m/s, turns with an effective radius of about 5 m (its circle
+  # speed on a 10 m circle), draws ~12 A at cruise and nothing standing; a
+  # submarine moves at 1 m/s (WPNAV_SPEED 100), climbs and dives at ~1.3 m/s,
+  # draws ~8 A while armed (about 10 % of 3300 mAh in 2–3 minutes). The
+  # accelerations stand for how they slow down to a waypoint and round a
+  # corner: chosen so that the differential test's routes take the time
+  # ArduRover and ArduSub took (test/dolphin/sitl/airframes_test.exs).
+  def airframe_defaults(airframe) when airframe in [:rover, :boat],
+    do: %{cruise_speed: 5.0, accel: 0.6, brake_accel: 3.0, circle_speed: 5.0, circle_rate: 30.0, wp_radius: 3.0, hover_current: 12.4, ekf_ready_ms: 15_000}
+
+  def airframe_defaults(:sub),
+    do: %{cruise_speed: 1.0, accel: 0.12, brake_accel: 1.0, climb_speed: 1.27, descent_speed: 1.27, accel_z: 0.15, circle_speed: 1.0, circle_rate: 30.0, wp_radius: 1.0, hover_current: 8.0}
+
+  def airframe_defaults(_copter), do: %{}
+
+  @doc false
+  # The HEARTBEAT's MAV_TYPE of each airframe.
+  def mav_type(%{config: %{airframe: :rover}}), do: 10
+  def mav_type(%{config: %{airframe: :boat}}), do: 11
+  def mav_type(%{config: %{airframe: :sub}}), do: 12
+  def mav_type(_copter), do: 2
+
+  @doc false
+  # Whether it flies (takes off, lands, hovers): a copter; rovers, boats and
+  # submarines move only armed, and have no land detector.
+  def flies?(%{config: %{airframe: airframe}}), do: airframe == :copter
+
   @doc "A vehicle just booted at `origin` (`%{lat, lon, alt}`), on the ground, disarmed."
   @spec new(byte(), map(), map()) :: t()
   def new(sysid, origin, config \\ %{}) do
-    config = Map.merge(@defaults, config)
+    airframe = Map.get(config, :airframe, :copter)
+    config = @defaults |> Map.merge(airframe_defaults(airframe)) |> Map.merge(config)
 
     %__MODULE__{
       sysid: sysid,
@@ -127,6 +161,8 @@ defmodule Dolphin.Sim.Copter do
       origin: origin,
       plane: Geo.tangent_plane(origin),
       alt: origin.alt,
+      # ArduRover and ArduSub boot in MANUAL.
+      mode: if(airframe == :copter, do: :stabilize, else: :manual),
       speed: config.cruise_speed,
       battery: config.battery,
       missions: MissionServer.new(request_int: config.request_int),
@@ -188,6 +224,10 @@ defmodule Dolphin.Sim.Copter do
   def ground(c), do: c.origin.alt
 
   @doc false
+  # A submarine's surface: where it booted (its depth is 0 there).
+  def surface(c), do: c.origin.alt
+
+  @doc false
   def home_alt(%{home: nil} = c), do: ground(c)
   def home_alt(%{home: home}), do: home.alt
 
@@ -199,7 +239,9 @@ defmodule Dolphin.Sim.Copter do
   def ready?(c), do: c.time_ms >= c.config.ekf_ready_ms
 
   @doc false
-  def in_air?(c), do: c.landed in [:in_air, :landing, :takeoff] and c.alt > ground(c) + 0.05
+  # A rover, boat or submarine is "in the air" (under way) while armed.
+  def in_air?(%{config: %{airframe: :copter}} = c), do: c.landed in [:in_air, :landing, :takeoff] and c.alt > ground(c) + 0.05
+  def in_air?(c), do: c.armed
 
   @doc false
   # Altitude AMSL of a z given in a MAV_FRAME.

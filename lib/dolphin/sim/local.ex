@@ -1,9 +1,11 @@
 defmodule Dolphin.Sim.Local do
   @moduledoc """
   A simulated fleet on a local link, as the command-line tools start it
-  (`mix dolphin.run --sim N`, `mix dolphin.console --sim N`): a ground-station
-  link on 127.0.0.1, N simulated ArduCopters with cameras sending to it at the
-  clock's speed-up, and a wait until the fleet knows them all.
+  (`mix dolphin.run --sim N`, `mix dolphin.console --sim N`, `--sim
+  copter:2,boat:1,sub:3`): a ground-station link on 127.0.0.1, N simulated
+  ArduCopters (or those airframes, system ids in that order) with cameras
+  sending to it at the clock's speed-up, and a wait until the fleet knows
+  them all.
   """
 
   @typedoc "What `start/2` started: the link, its port and the simulated system ids."
@@ -14,9 +16,13 @@ defmodule Dolphin.Sim.Local do
   `:first_sysid` (default 1), and the link's options (`:tlog`, `:forward`). Returns once the fleet knows every
   vehicle (or after 10 s of real time), or an error saying what failed.
   """
-  @spec start(pos_integer(), keyword()) :: {:ok, t()} | {:error, Dolphin.Sim.Error.t()}
-  def start(count, opts \\ []) do
+  @spec start(pos_integer() | [{atom(), pos_integer()}], keyword()) :: {:ok, t()} | {:error, Dolphin.Sim.Error.t()}
+  def start(fleet, opts \\ [])
+  def start(count, opts) when is_integer(count), do: start([copter: count], opts)
+
+  def start(fleet, opts) when is_list(fleet) do
     name = {:dolphin_local_sim, System.unique_integer([:positive])}
+    count = fleet |> Keyword.values() |> Enum.sum()
     {seed, opts} = Keyword.pop(opts, :seed, 1)
     {first, opts} = Keyword.pop(opts, :first_sysid, 1)
     {home, link_opts} = Keyword.pop(opts, :home)
@@ -26,9 +32,9 @@ defmodule Dolphin.Sim.Local do
         port = Dolphin.Link.Connection.port(name)
         # Camera drones: every simulated vehicle carries a camera (component 100).
         # They boot as ArduCopter does: 2 s of MAV_STATE BOOT refusing uploads.
-        sim_opts = [count: count, first_sysid: first, gcs: {{127, 0, 0, 1}, port}, speedup: Dolphin.Clock.speedup(), seed: seed, camera: true, boot_ms: 2_000] ++ if(home, do: [home: home], else: [])
+        sim_opts = [gcs: {{127, 0, 0, 1}, port}, speedup: Dolphin.Clock.speedup(), seed: seed, camera: true, boot_ms: 2_000]
 
-        case Dolphin.Sim.start(sim_opts) do
+        case start_groups(fleet, first, count, home, sim_opts) do
           {:ok, sysids} ->
             await_fleet(sysids)
             {:ok, %{link: link, port: port, sysids: sysids}}
@@ -41,6 +47,33 @@ defmodule Dolphin.Sim.Local do
       {:error, e} ->
         {:error, %Dolphin.Sim.Error{reason: :start_failed, message: "--sim: cannot open a local link: #{Exception.message(e)}"}}
     end
+  end
+
+  # One Dolphin.Sim.start per airframe, the homes of the whole fleet spread
+  # once (a submarine's at the surface, sea level), system ids in order.
+  defp start_groups(fleet, first, count, home, sim_opts) do
+    homes = Dolphin.Sim.homes(count, if(home, do: [home: home], else: []))
+
+    fleet
+    |> Enum.reduce_while({:ok, [], first, homes}, fn {airframe, n}, {:ok, started, next, homes} ->
+      {mine, rest} = Enum.split(homes, n)
+      mine = if airframe == :sub, do: Enum.map(mine, &%{&1 | alt: 0.0}), else: mine
+
+      case Dolphin.Sim.start(sim_opts ++ [count: n, first_sysid: next, homes: mine, airframe: airframe]) do
+        {:ok, sysids} -> {:cont, {:ok, started ++ sysids, next + n, rest}}
+        {:error, e} -> {:halt, {:error, e, started}}
+      end
+    end)
+    |> case do
+      {:ok, sysids, _, _} ->
+        {:ok, sysids}
+
+      {:error, e, started} ->
+        Enum.each(started, &Dolphin.Sim.stop/1)
+        {:error, e}
+    end
+  rescue
+    e in ArgumentError -> {:error, %Dolphin.Sim.Error{reason: :bad_option, message: Exception.message(e)}}
   end
 
   @doc """

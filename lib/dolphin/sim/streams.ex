@@ -212,6 +212,9 @@ defmodule Dolphin.Sim.Streams do
     }
   end
 
+  # ArduRover and ArduSub say nothing of a landed state (MAV_LANDED_STATE_UNDEFINED).
+  def message(%{config: %{airframe: airframe}}, 245) when airframe != :copter, do: %M.ExtendedSysState{vtol_state: 0, landed_state: 0}
+
   def message(c, 245) do
     landed =
       case c.landed do
@@ -228,7 +231,8 @@ defmodule Dolphin.Sim.Streams do
 
   @doc "The autopilot's HEARTBEAT."
   def heartbeat(c) do
-    {:ok, custom_mode} = Modes.number(:ardupilot, 2, c.mode)
+    type = Dolphin.Sim.Copter.mav_type(c)
+    {:ok, custom_mode} = Modes.number(:ardupilot, type, c.mode)
     # CUSTOM_MODE_ENABLED | STABILIZE_ENABLED, GUIDED_ENABLED in the autonomous modes, SAFETY_ARMED.
     base = 1 ||| 16
     base = if c.mode in [:auto, :guided, :rtl, :land, :brake, :smart_rtl, :circle], do: base ||| 8, else: base
@@ -242,7 +246,7 @@ defmodule Dolphin.Sim.Streams do
         true -> 3
       end
 
-    %M.Heartbeat{type: 2, autopilot: 3, base_mode: base, custom_mode: custom_mode, system_status: status, mavlink_version: 3}
+    %M.Heartbeat{type: type, autopilot: 3, base_mode: base, custom_mode: custom_mode, system_status: status, mavlink_version: 3}
   end
 
   @doc "A camera component's HEARTBEAT."

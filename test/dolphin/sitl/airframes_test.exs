@@ -34,6 +34,24 @@ defmodule Dolphin.SITL.AirframesTest do
   defp start(airframe, kind) do
     {:ok, fleet} = SITL.start([{airframe, 1}])
     on_exit(fn -> SITL.stop(fleet) end)
+    vehicle(fleet, kind)
+  end
+
+  # `fun` given the vehicle (as start/2 gives it) on `backend`, the built-in
+  # simulator or SITL, which is stopped after.
+  defp on_backend(backend, airframe, kind, fun) do
+    {start, stop} = if backend == :sitl, do: {&SITL.start/1, &SITL.stop/1}, else: {&Dolphin.Sim.Local.start/1, &Dolphin.Sim.Local.stop/1}
+    {:ok, fleet} = start.([{airframe, 1}])
+
+    try do
+      fun.(vehicle(fleet, kind))
+    after
+      Dolphin.Fleet.release_all(Dolphin.Fleet, self())
+      stop.(fleet)
+    end
+  end
+
+  defp vehicle(fleet, kind) do
     [id] = fleet.sysids
     Wait.until(fn -> match?({:ok, %{home: %Location{}, position: %Location{}}}, Vehicles.view(id)) end, 3_000)
     {:ok, view} = Vehicles.view(id)
@@ -43,6 +61,36 @@ defmodule Dolphin.SITL.AirframesTest do
   end
 
   defp fly(mission, id), do: Engine.run(Engine.on(mission, [id]))
+
+  # Flies `mission` and says how it went: the result, the items reported
+  # reached, the clock time from arming to the end, and the vehicle's view then.
+  defp flown(mission, id, seen) do
+    Dolphin.Events.subscribe()
+    result = fly(mission, id)
+    done_ms = Dolphin.Clock.now_ms()
+    events = drain()
+
+    armed_ms =
+      Enum.find_value(events, fn
+        {:dolphin, :events, %{event: :armed, vehicle: ^id, at_ms: at}} -> at
+        _ -> nil
+      end)
+
+    reached = for({:dolphin, :events, %{event: :mission_item_reached, vehicle: ^id, seq: s}} <- events, uniq: true, do: s) ++ seen.()
+    {:ok, view} = Vehicles.view(id)
+    %{result: result, reached: Enum.sort(Enum.uniq(reached)), driving_ms: armed_ms && done_ms - armed_ms, view: view}
+  end
+
+  # The built-in simulator and ArduPilot flew it alike: the same items
+  # reported, the same end, in about the same time (within 35 %: the
+  # simulator does not model the corners, the currents, the drift).
+  defp alike(sim, sitl, what) do
+    table = "#{what}: simulator #{inspect(Map.drop(sim, [:view]))}, ArduPilot #{inspect(Map.drop(sitl, [:view]))}"
+    assert sim.result == sitl.result, table
+    assert sim.reached == sitl.reached, table
+    assert {sim.view.mode, sim.view.armed?} == {sitl.view.mode, sitl.view.armed?}, table
+    assert abs(sim.driving_ms - sitl.driving_ms) <= 0.35 * sitl.driving_ms, table
+  end
 
   # Stopped after `ms` of clock time; the mode it holds in, once the heartbeat says so.
   defp stopped(mission, id, ms, mode) do
@@ -106,33 +154,37 @@ defmodule Dolphin.SITL.AirframesTest do
     @airframe airframe
     @mav_type mav_type
     @class class
-    test "a #{airframe} drives its mission with no take-off (heights ignored), holds at its timed loiter, and a stop holds it in LOITER" do
-      {id, home, seen} = start(@airframe, {@class, @airframe, @mav_type})
+    test "a #{airframe} drives its mission with no take-off (heights ignored), holds at its timed loiter, and a stop holds it in LOITER; the simulator's alike" do
+      route = fn home -> Mission.new("Route", [C.home(home), C.move(60, 0, 0), C.loiter_time(Geo.offset(home, 60, 0, 0), 10), C.move(0, 40, 0), C.speed(3), C.return_home()]) end
 
-      route = Mission.new("Route", [C.home(home), C.move(60, 0, 0), C.loiter_time(Geo.offset(home, 60, 0, 0), 10), C.move(0, 40, 0), C.speed(3), C.return_home()])
-      # Nothing in it takes off: a rover or a boat is given it.
-      assert Mission.airframes(route) |> Enum.member?(@airframe)
-      assert {:ok, :done} = fly(route, id)
-      # A waypoint followed by a DO item is reported by the DO item's seq (as ArduCopter does).
-      got = seen.()
-      assert [1, 2] -- got == [] and (3 in got or 4 in got)
-      {:ok, back} = Vehicles.view(id)
-      # Its last waypoint reached (ArduRover stays in AUTO, armed, at the end).
-      assert distance(back.position, home) < 8
-      assert back.mode == :auto and back.armed?
+      [sim, sitl] =
+        for backend <- [:sim, :sitl] do
+          on_backend(backend, @airframe, {@class, @airframe, @mav_type}, fn {id, home, seen} ->
+            # Nothing in it takes off: a rover or a boat is given it.
+            assert Mission.airframes(route.(home)) |> Enum.member?(@airframe)
+            run = flown(route.(home), id, seen)
+            assert {:ok, :done} = run.result
+            # A waypoint followed by a DO item is reported by the DO item's seq (as ArduCopter does).
+            assert [1, 2] -- run.reached == [] and (3 in run.reached or 4 in run.reached), "#{backend}: #{inspect(run.reached)}"
+            # Its last waypoint reached (ArduRover stays in AUTO, armed, at the end).
+            assert distance(run.view.position, home) < 8, "#{backend}"
+            assert run.view.mode == :auto and run.view.armed?, "#{backend}"
 
-      far = Mission.new("Away", [C.home(home), C.move(300, 0, 0)])
-      held = stopped(far, id, 20_000, :loiter)
-      assert held.armed?
-      assert distance(held.position, home) > 20
+            far = Mission.new("Away", [C.home(home), C.move(300, 0, 0)])
+            held = stopped(far, id, 20_000, :loiter)
+            assert held.armed?, "#{backend}"
+            assert distance(held.position, home) > 20, "#{backend}"
+            run
+          end)
+        end
+
+      alike(sim, sitl, "#{@airframe}'s route")
     end
   end
 
   if SITL.available?(:sub) do
-    test "a submarine dives to its depths (negative heights), holds its timed loiter, surfaces with its landing, and a stop holds it in POSHOLD" do
-      {id, home, seen} = start(:sub, {:uuv, :sub, 12})
-
-      dive =
+    test "a submarine dives to its depths (negative heights), holds its timed loiter, surfaces with its landing, and a stop holds it in POSHOLD; the simulator's alike" do
+      dive = fn home ->
         Mission.new("Dive", [
           C.home(home),
           C.move(30, 0, -5),
@@ -140,19 +192,29 @@ defmodule Dolphin.SITL.AirframesTest do
           C.move(0, 20, -3),
           C.return_home_and_land()
         ])
+      end
 
-      # Depths relative to the surface, frame GLOBAL_RELATIVE_ALT_INT.
-      items = Mission.to_items(dive, airframe: :sub)
-      assert for(i <- tl(items), do: {i.command, i.frame, Float.round(i.z, 2)}) == [{16, 6, -5.0}, {19, 6, -5.0}, {16, 6, -8.0}, {21, 6, 0.0}]
-      assert {:ok, :done} = fly(dive, id)
-      # ArduSub reports its NAV_LAND reached: it surfaces where it is and stays armed.
-      assert 4 in seen.()
-      {:ok, up} = Vehicles.view(id)
-      assert up.position.h > -1.5 and up.armed?
+      [sim, sitl] =
+        for backend <- [:sim, :sitl] do
+          on_backend(backend, :sub, {:uuv, :sub, 12}, fn {id, home, seen} ->
+            # Depths relative to the surface, frame GLOBAL_RELATIVE_ALT_INT.
+            items = Mission.to_items(dive.(home), airframe: :sub)
+            assert for(i <- tl(items), do: {i.command, i.frame, Float.round(i.z, 2)}) == [{16, 6, -5.0}, {19, 6, -5.0}, {16, 6, -8.0}, {21, 6, 0.0}]
+            run = flown(dive.(home), id, seen)
+            assert {:ok, :done} = run.result
+            # ArduSub reports its NAV_LAND reached: it goes to its point, surfaces there and stays armed.
+            assert 4 in run.reached, "#{backend}"
+            assert run.view.position.h > -1.5 and run.view.armed?, "#{backend}"
+            assert distance(run.view.position, home) < 5, "#{backend}"
 
-      deep = Mission.new("Deep", [C.home(home), C.move(60, 0, -6)])
-      held = stopped(deep, id, 30_000, :poshold)
-      assert held.armed? and held.position.h < -0.5
+            deep = Mission.new("Deep", [C.home(home), C.move(60, 0, -6)])
+            held = stopped(deep, id, 30_000, :poshold)
+            assert held.armed? and held.position.h < -0.5, "#{backend}"
+            run
+          end)
+        end
+
+      alike(sim, sitl, "the sub's dive")
     end
   end
 
@@ -160,6 +222,7 @@ defmodule Dolphin.SITL.AirframesTest do
     @tag :tmp_dir
     test "mix dolphin.run --sitl rover:1,sub:1: a script picks the submarine by its airframe, and the pre-flight check refuses a take-off on it", %{tmp_dir: dir} do
       script = fn name, body -> Path.join(dir, name) |> tap(&File.write!(&1, "use Dolphin.Script\n" <> body)) end
+
       run = fn argv ->
         {:ok, out} = StringIO.open("")
         {:ok, err} = StringIO.open("")

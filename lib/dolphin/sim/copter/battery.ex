@@ -15,10 +15,15 @@ defmodule Dolphin.Sim.Copter.Battery do
   @spec step(Copter.t(), float()) :: Copter.t()
   def step(c, dt) do
     if c.armed do
+      speed = :math.sqrt(c.vn * c.vn + c.ve * c.ve)
+
       effort =
-        cond do
-          not in_air?(c) -> 0.15
-          true -> 1.0 + 0.1 * :math.sqrt(c.vn * c.vn + c.ve * c.ve) / 10 + 0.2 * max(c.vz, 0) / 2.5
+        case c.config.airframe do
+          # ArduRover draws in proportion to its speed, nothing standing.
+          ground when ground in [:rover, :boat] -> speed / c.config.cruise_speed
+          # ArduSub's thrusters hold it whatever it does.
+          :sub -> 1.0
+          :copter -> if in_air?(c), do: 1.0 + 0.1 * speed / 10 + 0.2 * max(c.vz, 0) / 2.5, else: 0.15
         end
 
       amps = c.config.hover_current * effort

@@ -14,7 +14,7 @@ defmodule Dolphin.Sim.Copter.Flight do
   #   {:land, n, e} / {:land_at, n, e} / {:descend}
   #   {:rtl, :climb | :return}
 
-  import Dolphin.Sim.Copter, only: [ground: 1, home_alt: 1, home_ne: 1, in_air?: 1, resolve_alt: 2, ne: 3, distance_to: 3]
+  import Dolphin.Sim.Copter, only: [ground: 1, home_alt: 1, home_ne: 1, in_air?: 1, resolve_alt: 2, ne: 3, distance_to: 3, surface: 1, flies?: 1]
 
   alias Dolphin.Sim.Copter
   alias Dolphin.Sim.Copter.{Mission, Modes}
@@ -46,6 +46,9 @@ defmodule Dolphin.Sim.Copter.Flight do
   # that is what makes turns round and BRAKE overshoot.
   # Disarmed in the air (a forced disarm): it falls.
   @spec fly(Copter.t(), float()) :: Copter.t()
+  # Disarmed, a rover, boat or submarine stops where it is.
+  def fly(%{armed: false, config: %{airframe: airframe}} = c, _dt) when airframe != :copter, do: %{c | vn: 0.0, ve: 0.0, vz: 0.0}
+
   def fly(%{armed: false} = c, dt) do
     if in_air?(c), do: %{c | vn: 0.0, ve: 0.0, vz: -8.0, alt: max(c.alt - 8.0 * dt, ground(c))}, else: %{c | vn: 0.0, ve: 0.0, vz: 0.0}
   end
@@ -59,8 +62,15 @@ defmodule Dolphin.Sim.Copter.Flight do
     max_dz = c.config.accel_z * dt
     vz = c.vz + max(-max_dz, min(max_dz, wz - c.vz))
     heading = if vn * vn + ve * ve > 1.0, do: :math.fmod(atan2_degrees(ve, vn) + 360, 360), else: c.heading
-    %{c | vn: vn, ve: ve, vz: vz, n: c.n + vn * dt, e: c.e + ve * dt, alt: max(c.alt + vz * dt, ground(c)), heading: heading}
+    {vz, alt} = vertical(c, vz, c.alt + vz * dt)
+    %{c | vn: vn, ve: ve, vz: vz, n: c.n + vn * dt, e: c.e + ve * dt, alt: alt, heading: heading}
   end
+
+  # A copter stays above its ground, a rover or boat at its own height, a
+  # submarine at or below its surface.
+  defp vertical(%{config: %{airframe: :copter}} = c, vz, alt), do: {vz, max(alt, ground(c))}
+  defp vertical(%{config: %{airframe: :sub}} = c, vz, alt), do: {vz, min(alt, surface(c))}
+  defp vertical(c, _vz, _alt), do: {0.0, c.alt}
 
   # Same order of operations as the flights recorded against ArduCopter.
   defp atan2_degrees(y, x), do: :math.atan2(y, x) * 180 / @pi
@@ -182,6 +192,9 @@ defmodule Dolphin.Sim.Copter.Flight do
   @spec touchdown(Copter.t()) :: Copter.t()
   def touchdown(c) do
     cond do
+      not flies?(c) ->
+        c
+
       c.landed == :takeoff and c.alt > ground(c) + 1.0 ->
         %{c | landed: :in_air}
 

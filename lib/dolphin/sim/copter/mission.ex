@@ -5,7 +5,7 @@ defmodule Dolphin.Sim.Copter.Mission do
   # once), when it is reached, and how ArduCopter reports the progress
   # (MISSION_CURRENT, MISSION_ITEM_REACHED, "Mission: 2 WP").
 
-  import Dolphin.Sim.Copter, only: [say: 2, text: 3, in_air?: 1, target_alt: 3, set_home: 2, position: 1, ne: 3, distance_to: 3]
+  import Dolphin.Sim.Copter, only: [say: 2, text: 3, in_air?: 1, target_alt: 3, set_home: 2, position: 1, ne: 3, distance_to: 3, surface: 1, home_ne: 1]
 
   alias Dolphin.MAVLink.Ardupilotmega, as: M
   alias Dolphin.Sim.{Copter, MissionServer, Streams}
@@ -130,8 +130,27 @@ defmodule Dolphin.Sim.Copter.Mission do
         {lat, lon} -> ne(c, lat, lon)
       end
 
-    alt = if item.z == 0 and item.frame in [3, 6, 10, 11], do: c.alt, else: target_alt(c, item.frame, item.z)
+    alt =
+      cond do
+        # A rover or boat drives at its own height, whatever the item says.
+        c.config.airframe in [:rover, :boat] -> c.alt
+        item.z == 0 and item.frame in [3, 6, 10, 11] -> c.alt
+        true -> target_alt(c, item.frame, item.z)
+      end
+
     {n, e, alt}
+  end
+
+  # ArduRover skips a take-off and a landing without a report; ArduSub
+  # ignores a take-off, and its landing goes to its point at its depth, rises
+  # to the surface there and is reported reached; a rover's RTL drives home
+  # (docs/ardupilot.md).
+  defp run_item(%{config: %{airframe: airframe}} = c, %{command: command} = item) when airframe != :copter and command in [20, 21, 22] do
+    case {airframe, command} do
+      {:sub, 21} -> with({n, e, _} <- item_target(c, %{item | z: 0.0, frame: 3}), do: %{c | nav: {:goto, n, e, c.alt}})
+      {ground, 20} when ground in [:rover, :boat] -> with({hn, he} <- home_ne(c), do: %{c | nav: {:goto, hn, he, c.alt}})
+      _ -> start_item(%{c | item: nil}, c.current + 1)
+    end
   end
 
   # From the ground ArduCopter climbs at least a metre, whatever height the
@@ -292,6 +311,22 @@ defmodule Dolphin.Sim.Copter.Mission do
       {:goto, _, _, alt} -> if abs(c.alt - alt) < 0.5, do: item_reached(c), else: c
       _ -> c
     end
+  end
+
+  # A submarine's landing is reached at the surface, a rover's RTL at home.
+  defp check_item(%{config: %{airframe: :sub}} = c, 21, _item) do
+    top = surface(c)
+
+    case c.nav do
+      _ when c.alt >= top - 0.2 -> item_reached(c)
+      {:goto, n, e, alt} when alt < top -> if distance_to(c, n, e) <= c.config.wp_radius, do: %{c | nav: {:goto, n, e, top}}, else: c
+      _ -> c
+    end
+  end
+
+  defp check_item(%{config: %{airframe: ground}} = c, 20, _item) when ground in [:rover, :boat] do
+    {hn, he} = home_ne(c)
+    if distance_to(c, hn, he) <= c.config.wp_radius, do: item_reached(c), else: c
   end
 
   # RTL and LAND items are reached when the vehicle has landed and disarmed.

@@ -6,7 +6,7 @@ defmodule Dolphin.Sim.Copter.Modes do
   # disarm on the ground (land detector, DISARM_DELAY), and the GCS failsafe's
   # switch to RTL. Answers are MAV_RESULT codes, as the command protocol acks.
 
-  import Dolphin.Sim.Copter, only: [text: 3, in_air?: 1, ready?: 1]
+  import Dolphin.Sim.Copter, only: [text: 3, in_air?: 1, ready?: 1, flies?: 1, mav_type: 1, home_ne: 1, surface: 1]
 
   alias Dolphin.Sim.{Copter, MissionServer}
   alias Dolphin.Sim.Copter.Mission
@@ -37,7 +37,9 @@ defmodule Dolphin.Sim.Copter.Modes do
     reason =
       cond do
         force? -> nil
-        c.mode in @not_armable -> "Arm: #{c.mode |> Atom.to_string() |> String.upcase()} mode not armable"
+        # ArduRover arms in AUTO (it waits there); ArduSub arms in any mode, without a position.
+        flies?(c) and c.mode in @not_armable -> "Arm: #{c.mode |> Atom.to_string() |> String.upcase()} mode not armable"
+        c.config.airframe == :sub -> nil
         not ready?(c) -> "Arm: Need Position Estimate"
         c.home == nil -> "Arm: Need Position Estimate"
         c.battery < c.config.arm_min_battery or c.arm_blocked -> "Arm: Battery 1 below minimum arming capacity"
@@ -73,9 +75,9 @@ defmodule Dolphin.Sim.Copter.Modes do
     Mission.finish_landing_item(%{c | resume: nil})
   end
 
-  # DISARM_DELAY: armed on the ground with nothing to do.
+  # DISARM_DELAY: armed on the ground with nothing to do (a copter's).
   @spec auto_disarm(Copter.t()) :: Copter.t()
-  def auto_disarm(%{armed: true, landed: :on_ground, nav: :idle, ground_since: since} = c) when since != nil do
+  def auto_disarm(%{armed: true, landed: :on_ground, nav: :idle, ground_since: since, config: %{airframe: :copter}} = c) when since != nil do
     if c.time_ms - since >= c.config.disarm_delay_ms, do: disarm_now(c), else: c
   end
 
@@ -87,7 +89,7 @@ defmodule Dolphin.Sim.Copter.Modes do
   # A mode by its ArduCopter number.
   @spec set_mode(Copter.t(), integer()) :: {result(), Copter.t()}
   def set_mode(c, number) do
-    case Names.name(:ardupilot, 2, number) do
+    case Names.name(:ardupilot, mav_type(c), number) do
       {:custom, _} -> {@failed, c}
       name -> set_mode_named(c, name)
     end
@@ -98,13 +100,13 @@ defmodule Dolphin.Sim.Copter.Modes do
 
   def set_mode_named(c, mode) do
     cond do
-      mode in @needs_position and not ready?(c) ->
+      (mode in @needs_position or (c.config.airframe == :sub and mode == :guided)) and not ready?(c) ->
         {@failed, text(c, 2, "Mode change to #{upcase(mode)} failed: requires position")}
 
       mode == :auto and MissionServer.items(c.missions) == [] ->
         {@failed, text(c, 2, "Mode change to AUTO failed: no mission")}
 
-      mode == :auto and c.armed and not in_air?(c) and not Mission.starts_with_takeoff?(c) ->
+      mode == :auto and flies?(c) and c.armed and not in_air?(c) and not Mission.starts_with_takeoff?(c) ->
         {@failed, text(c, 2, "Auto: Missing Takeoff Cmd")}
 
       true ->
@@ -122,6 +124,21 @@ defmodule Dolphin.Sim.Copter.Modes do
   end
 
   defp leave_mode(c), do: c
+
+  # A rover, boat or submarine: RTL drives home, SURFACE rises where it is
+  # (then ALT_HOLD), every other mode stops it where it is and holds (a
+  # rover's HOLD only cuts the throttle: it coasts to a stop).
+  defp enter_mode(%{config: %{airframe: airframe}} = c, mode) when airframe != :copter and mode != :auto do
+    nav =
+      cond do
+        not c.armed -> :idle
+        mode in [:rtl, :smart_rtl] and airframe != :sub -> with({hn, he} <- home_ne(c), do: {:goto, hn, he, c.alt})
+        mode == :surface -> {:goto, c.n, c.e, surface(c)}
+        true -> {:brake}
+      end
+
+    %{c | mode: mode, nav: nav}
+  end
 
   defp enter_mode(c, :auto) do
     c = %{c | mode: :auto}
@@ -156,7 +173,7 @@ defmodule Dolphin.Sim.Copter.Modes do
 
   # FS_GCS_ENABLE: in the air and nothing heard from the ground station for 5 s.
   @spec gcs_failsafe(Copter.t()) :: Copter.t()
-  def gcs_failsafe(%{config: %{gcs_failsafe: true}, gcs_heard_ms: heard, failsafe: nil} = c) when heard != nil do
+  def gcs_failsafe(%{config: %{gcs_failsafe: true, airframe: :copter}, gcs_heard_ms: heard, failsafe: nil} = c) when heard != nil do
     if in_air?(c) and c.time_ms - heard > 5_000 do
       c = %{text(c, 2, "GCS Failsafe") | failsafe: :gcs}
       {_, c} = set_mode_named(c, :rtl)
