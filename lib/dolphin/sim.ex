@@ -2,8 +2,9 @@ defmodule Dolphin.Sim do
   @moduledoc """
   A built-in fleet of simulated ArduCopters that speak real MAVLink 2 over UDP,
   so that every script runs with no hardware and no external simulator, faster
-  than real time — and ArduRover's rovers and boats and ArduSub's submarines
-  (`airframe: :rover | :boat | :sub`; docs/simulator.md, "Other airframes").
+  than real time — and ArduPlane's planes, ArduRover's rovers and boats and
+  ArduSub's submarines (`airframe: :plane | :rover | :boat | :sub`;
+  docs/simulator.md, "Other airframes").
 
       {:ok, link} = Dolphin.Link.connect("udpin:127.0.0.1:0")
       {:ok, [1, 2, 3]} = Dolphin.Sim.start(count: 3, gcs: Dolphin.Link.Connection.port(link), speedup: 20)
@@ -79,7 +80,7 @@ defmodule Dolphin.Sim do
     * `:speedup` — sets `Dolphin.Clock`'s speed-up factor;
     * `:seed` — seeds the faults' randomness (default 1);
     * `:faults` — faults on every vehicle's link from the start;
-    * any vehicle setting: `:airframe` (`:copter`, default, `:rover`,
+    * any vehicle setting: `:airframe` (`:copter`, default, `:plane`, `:rover`,
       `:boat`, `:sub`: whose firmware it behaves as, with that airframe's
       speeds and currents unless given), `:battery` (initial fraction, default 1.0),
       `:boot_ms` (how long it reports MAV_STATE BOOT and refuses uploads
@@ -148,7 +149,7 @@ defmodule Dolphin.Sim do
 
   @doc "The airframes the simulator flies (`:airframe`): ArduCopter's, ArduRover's rovers and boats, ArduSub's."
   @spec airframes() :: [atom()]
-  def airframes, do: [:copter, :rover, :boat, :sub]
+  def airframes, do: [:copter, :plane, :rover, :boat, :sub]
 
   @doc "Like `start/1`, raising `ArgumentError` on a bad option."
   @spec start!(keyword()) :: [byte()]
@@ -311,7 +312,7 @@ defmodule Dolphin.Sim do
     circle_rate: {{:positive, 90}, "degrees a second"},
     wp_radius: {{:positive, 1000}, "metres"},
     battery_failsafe: {{:one_of, [:none, :rtl, :land]}, nil},
-    airframe: {{:one_of, [:copter, :rover, :boat, :sub]}, nil},
+    airframe: {{:one_of, [:copter, :plane, :rover, :boat, :sub]}, nil},
     gcs_failsafe: {:boolean, nil},
     request_int: {:boolean, nil},
     gcs_sysid: {{:one_of, Enum.to_list(1..255)}, "a system id"}

@@ -252,10 +252,9 @@ defmodule Dolphin.CLI.Values do
     end
   end
 
-  # N copters, or airframes and counts: "copter:2,boat:1,sub:3" (the
-  # simulator's; a plane flies on SITL), "plane:1,boat:2,sub:3" (SITL's).
-  defp value(:sim_fleet, text), do: fleet_spec(text, Dolphin.Sim.airframes(), "--sitl #{text}")
-  defp value(:sitl_fleet, text), do: fleet_spec(text, Dolphin.SITL.airframes(), nil)
+  # N copters, or airframes and counts: "copter:2,plane:1,boat:1,sub:3".
+  defp value(:sim_fleet, text), do: fleet_spec(text, Dolphin.Sim.airframes())
+  defp value(:sitl_fleet, text), do: fleet_spec(text, Dolphin.SITL.airframes())
 
   defp value(:vehicles, text), do: integer(text, 1..@max_sysid, "a number of vehicles from 1 to #{@max_sysid} (each needs a system id of its own)")
   defp value(:sysid, text), do: integer(text, 1..@max_sysid, "a system id from 1 to #{@max_sysid} (255 is the ground station's)")
@@ -385,7 +384,7 @@ defmodule Dolphin.CLI.Values do
     if File.dir?(path), do: {:error, "a directory, not a #{what}"}, else: {:ok, path}
   end
 
-  defp fleet_spec(text, airframes, elsewhere) do
+  defp fleet_spec(text, airframes) do
     if String.contains?(text, ":") do
       known = Enum.map(airframes, &Atom.to_string/1)
 
@@ -403,8 +402,7 @@ defmodule Dolphin.CLI.Values do
       if :error not in fleet and fleet |> Keyword.values() |> Enum.sum() <= @max_sysid do
         {:ok, fleet}
       else
-        other = if elsewhere, do: "; the others fly on SITL: #{elsewhere}", else: ""
-        {:error, "a number of copters, or airframes and counts such as #{Enum.at(known, -2)}:1,#{List.last(known)}:3 (airframes: #{Enum.join(known, ", ")}#{other}; #{@max_sysid} vehicles at most)"}
+        {:error, "a number of copters, or airframes and counts such as #{Enum.at(known, -2)}:1,#{List.last(known)}:3 (airframes: #{Enum.join(known, ", ")}; #{@max_sysid} vehicles at most)"}
       end
     else
       value(:vehicles, text)

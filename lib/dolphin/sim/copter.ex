@@ -32,7 +32,7 @@ defmodule Dolphin.Sim.Copter do
   @autopilot 1
 
   @defaults %{
-    # :copter (ArduCopter), or ArduRover's :rover and :boat, ArduSub's :sub
+    # :copter (ArduCopter), or ArduPlane's :plane, ArduRover's :rover and :boat, ArduSub's :sub
     # (see airframe_defaults/1 and docs/simulator.md).
     airframe: :copter,
     camera: false,
@@ -131,6 +131,9 @@ defmodule Dolphin.Sim.Copter do
   def airframe_defaults(airframe) when airframe in [:rover, :boat],
     do: %{cruise_speed: 5.0, accel: 0.6, brake_accel: 3.0, circle_speed: 5.0, circle_rate: 30.0, wp_radius: 3.0, hover_current: 12.4, ekf_ready_ms: 15_000}
 
+  # ArduPlane: AIRSPEED_CRUISE 22 m/s, WP_RADIUS 50 m, ~11.5 A in cruise.
+  def airframe_defaults(:plane), do: %{cruise_speed: 22.0, climb_speed: 6.0, descent_speed: 4.0, wp_radius: 50.0, hover_current: 11.5}
+
   def airframe_defaults(:sub),
     do: %{cruise_speed: 1.0, accel: 0.12, brake_accel: 1.0, climb_speed: 1.27, descent_speed: 1.27, accel_z: 0.15, circle_speed: 1.0, circle_rate: 30.0, wp_radius: 1.0, hover_current: 8.0}
 
@@ -138,6 +141,7 @@ defmodule Dolphin.Sim.Copter do
 
   @doc false
   # The HEARTBEAT's MAV_TYPE of each airframe.
+  def mav_type(%{config: %{airframe: :plane}}), do: 1
   def mav_type(%{config: %{airframe: :rover}}), do: 10
   def mav_type(%{config: %{airframe: :boat}}), do: 11
   def mav_type(%{config: %{airframe: :sub}}), do: 12
@@ -146,7 +150,7 @@ defmodule Dolphin.Sim.Copter do
   @doc false
   # Whether it flies (takes off, lands, hovers): a copter; rovers, boats and
   # submarines move only armed, and have no land detector.
-  def flies?(%{config: %{airframe: airframe}}), do: airframe == :copter
+  def flies?(%{config: %{airframe: airframe}}), do: airframe in [:copter, :plane]
 
   @doc "A vehicle just booted at `origin` (`%{lat, lon, alt}`), on the ground, disarmed."
   @spec new(byte(), map(), map()) :: t()
@@ -240,7 +244,7 @@ defmodule Dolphin.Sim.Copter do
 
   @doc false
   # A rover, boat or submarine is "in the air" (under way) while armed.
-  def in_air?(%{config: %{airframe: :copter}} = c), do: c.landed in [:in_air, :landing, :takeoff] and c.alt > ground(c) + 0.05
+  def in_air?(%{config: %{airframe: airframe}} = c) when airframe in [:copter, :plane], do: c.landed in [:in_air, :landing, :takeoff] and c.alt > ground(c) + 0.05
   def in_air?(c), do: c.armed
 
   @doc false

@@ -213,7 +213,7 @@ defmodule Dolphin.Sim.Streams do
   end
 
   # ArduRover and ArduSub say nothing of a landed state (MAV_LANDED_STATE_UNDEFINED).
-  def message(%{config: %{airframe: airframe}}, 245) when airframe != :copter, do: %M.ExtendedSysState{vtol_state: 0, landed_state: 0}
+  def message(%{config: %{airframe: airframe}}, 245) when airframe in [:rover, :boat, :sub], do: %M.ExtendedSysState{vtol_state: 0, landed_state: 0}
 
   def message(c, 245) do
     landed =

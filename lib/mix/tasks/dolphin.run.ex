@@ -24,9 +24,9 @@ defmodule Mix.Tasks.Dolphin.Run do
       `udpout:HOST:PORT`, `tcp:HOST:PORT`); repeatable
     * `--sim N` — start N simulated vehicles (`Dolphin.Sim`: ArduCopters with a
       camera) on a local link; N from 1 to 254 (one system id each), as for
-      `--sitl` and `--fake`; `--sim copter:2,rover:1,boat:1,sub:3` those
-      airframes (ArduRover's rovers and boats, ArduSub's submarines; a plane
-      flies on `--sitl`)
+      `--sitl` and `--fake`; `--sim copter:2,plane:1,rover:1,boat:1,sub:3`
+      those airframes (ArduPlane's planes, ArduRover's rovers and boats,
+      ArduSub's submarines), system ids in that order
     * `--sitl N` — start N ArduCopter SITL instances (`Dolphin.SITL`: ArduPilot's
       own flight code) on a local link, at the run's speed-up; `--sitl
       plane:1,boat:2,sub:3` starts those airframes (copter, plane, rover,

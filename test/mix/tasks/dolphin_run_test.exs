@@ -47,8 +47,8 @@ defmodule Mix.Tasks.Dolphin.RunTest do
       assert {2, _, err} = main([ok, "--sitl", "blimp:1,boat:2"])
       assert err =~ "--sitl blimp:1,boat:2: a number of copters, or airframes and counts such as boat:1,sub:3 (airframes: copter, plane, rover, boat, sub; 254 vehicles at most)"
       assert {2, _, _} = main([ok, "--sitl", "boat:0"])
-      assert {2, _, err} = main([ok, "--sim", "plane:1"])
-      assert err =~ "--sim plane:1: a number of copters, or airframes and counts such as boat:1,sub:3 (airframes: copter, rover, boat, sub; the others fly on SITL: --sitl plane:1; 254 vehicles at most)"
+      assert {2, _, err} = main([ok, "--sim", "quadplane:1"])
+      assert err =~ "--sim quadplane:1: a number of copters, or airframes and counts such as boat:1,sub:3 (airframes: copter, plane, rover, boat, sub; 254 vehicles at most)"
     end
   end
 

@@ -23,6 +23,8 @@ defmodule Dolphin.Sim.Copter.Battery do
           ground when ground in [:rover, :boat] -> speed / c.config.cruise_speed
           # ArduSub's thrusters hold it whatever it does.
           :sub -> 1.0
+          # ArduPlane: ~11.5 A in cruise, ~41 A climbing out, nothing on the ground.
+          :plane -> if in_air?(c), do: (speed / c.config.cruise_speed) ** 2 + 2.5 * max(c.vz, 0) / c.config.climb_speed, else: 0.0
           :copter -> if in_air?(c), do: 1.0 + 0.1 * speed / 10 + 0.2 * max(c.vz, 0) / 2.5, else: 0.15
         end
 

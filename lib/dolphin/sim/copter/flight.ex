@@ -25,6 +25,8 @@ defmodule Dolphin.Sim.Copter.Flight do
   # The motors spool up before the copter leaves the ground (about 3 s on
   # ArduCopter SITL between "Arming motors" and the first metre).
   @spec start_takeoff(Copter.t(), float()) :: Copter.t()
+  def start_takeoff(%{config: %{airframe: :plane}} = c, alt), do: Dolphin.Sim.Copter.Plane.start_takeoff(c, alt)
+
   def start_takeoff(c, alt) do
     %{c | nav: {:spool_up, c.time_ms + @spool_up_ms, {:climb, c.n, c.e, alt}}, landed: :takeoff, ground_since: nil}
   end
@@ -46,8 +48,11 @@ defmodule Dolphin.Sim.Copter.Flight do
   # that is what makes turns round and BRAKE overshoot.
   # Disarmed in the air (a forced disarm): it falls.
   @spec fly(Copter.t(), float()) :: Copter.t()
+  # A plane flies as a plane (Dolphin.Sim.Copter.Plane).
+  def fly(%{config: %{airframe: :plane}} = c, dt), do: Dolphin.Sim.Copter.Plane.fly(c, dt)
+
   # Disarmed, a rover, boat or submarine stops where it is.
-  def fly(%{armed: false, config: %{airframe: airframe}} = c, _dt) when airframe != :copter, do: %{c | vn: 0.0, ve: 0.0, vz: 0.0}
+  def fly(%{armed: false, config: %{airframe: airframe}} = c, _dt) when airframe in [:rover, :boat, :sub], do: %{c | vn: 0.0, ve: 0.0, vz: 0.0}
 
   def fly(%{armed: false} = c, dt) do
     if in_air?(c), do: %{c | vn: 0.0, ve: 0.0, vz: -8.0, alt: max(c.alt - 8.0 * dt, ground(c))}, else: %{c | vn: 0.0, ve: 0.0, vz: 0.0}
@@ -190,6 +195,8 @@ defmodule Dolphin.Sim.Copter.Flight do
   # The land detector: in the air past a metre of climb; landed when it
   # touches the ground going down.
   @spec touchdown(Copter.t()) :: Copter.t()
+  def touchdown(%{config: %{airframe: :plane}} = c), do: Dolphin.Sim.Copter.Plane.touchdown(c)
+
   def touchdown(c) do
     cond do
       not flies?(c) ->

@@ -9,14 +9,14 @@ defmodule Dolphin.Sim.Copter.Mission do
 
   alias Dolphin.MAVLink.Ardupilotmega, as: M
   alias Dolphin.Sim.{Copter, MissionServer, Streams}
-  alias Dolphin.Sim.Copter.{Camera, Flight}
+  alias Dolphin.Sim.Copter.{Camera, Flight, Plane}
 
   # Mission item names as ArduPilot announces them ("Mission: 2 WP").
   @item_names %{
     16 => "WP", 17 => "LoitUnlim", 18 => "LoitTurns", 19 => "LoitTime", 20 => "RTL", 21 => "Land",
     22 => "Takeoff", 93 => "Delay", 112 => "CondDelay", 113 => "CondChangeAlt", 114 => "CondDist",
     115 => "CondYaw", 177 => "Jump", 178 => "ChangeSpeed", 179 => "SetHome", 186 => "ChangeAlt",
-    203 => "DigiCamCtrl", 206 => "SetCamTrigDst", 2000 => "ImageStartCapture", 2001 => "ImageStopCapture"
+    189 => "LandStart", 203 => "DigiCamCtrl", 206 => "SetCamTrigDst", 2000 => "ImageStartCapture", 2001 => "ImageStopCapture"
   }
 
   # Items that complete at once (DO commands, jumps) are run in a row; a loop
@@ -101,6 +101,14 @@ defmodule Dolphin.Sim.Copter.Mission do
     end
   end
 
+  # ArduPlane cannot hold: at its mission's end it says so and goes home (RTL),
+  # circling there; MISSION_CURRENT stays on its last item, complete.
+  defp complete_mission(%{config: %{airframe: :plane}} = c) do
+    c = mission_current(%{c | mission_state: 5, item: nil, resume: nil})
+    c = text(c, 6, "Mission complete, changing mode to RTL")
+    %{c | mode: :rtl, nav: if(in_air?(c), do: {:rtl, :climb}, else: :idle)}
+  end
+
   defp complete_mission(c) do
     c = %{c | current: 0, mission_state: 5, item: nil, resume: nil}
     # In the air with nothing more to do, ArduCopter holds where it is.
@@ -145,7 +153,7 @@ defmodule Dolphin.Sim.Copter.Mission do
   # ignores a take-off, and its landing goes to its point at its depth, rises
   # to the surface there and is reported reached; a rover's RTL drives home
   # (docs/ardupilot.md).
-  defp run_item(%{config: %{airframe: airframe}} = c, %{command: command} = item) when airframe != :copter and command in [20, 21, 22] do
+  defp run_item(%{config: %{airframe: airframe}} = c, %{command: command} = item) when airframe in [:rover, :boat, :sub] and command in [20, 21, 22] do
     case {airframe, command} do
       {:sub, 21} -> with({n, e, _} <- item_target(c, %{item | z: 0.0, frame: 3}), do: %{c | nav: {:goto, n, e, c.alt}})
       {ground, 20} when ground in [:rover, :boat] -> with({hn, he} <- home_ne(c), do: %{c | nav: {:goto, hn, he, c.alt}})
@@ -283,6 +291,8 @@ defmodule Dolphin.Sim.Copter.Mission do
         cond do
           dist3(c, n, e, alt) > max(c.config.wp_radius, 1.0) -> c
           command == 18 -> circle_from_edge(c, item, alt)
+          # A plane circles its loiter (LOITER_TIME at WP_LOITER_RAD: ArduPlane keeps no radius for it).
+          c.config.airframe == :plane -> %{c | nav: {:circle, n, e, alt, Plane.flown_radius(if(command == 19, do: 0.0, else: i.param3)), 0.0, nil}, item: %{item | arrived_ms: c.time_ms}}
           true -> %{c | nav: {:hold, n, e, alt}, item: %{item | arrived_ms: c.time_ms}}
         end
 
@@ -334,7 +344,8 @@ defmodule Dolphin.Sim.Copter.Mission do
 
   defp circle_from_edge(c, %{item: i} = item, alt) do
     {n, e, _} = item_target(c, i)
-    %{c | nav: {:circle, n, e, alt, i.param3, 0.0, nil}, item: %{item | arrived_ms: c.time_ms}}
+    radius = if c.config.airframe == :plane, do: Plane.flown_radius(i.param3), else: i.param3
+    %{c | nav: {:circle, n, e, alt, radius, 0.0, nil}, item: %{item | arrived_ms: c.time_ms}}
   end
 
   # ArduCopter reports a final RETURN_TO_LAUNCH reached after the disarm, and

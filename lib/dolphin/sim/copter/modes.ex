@@ -38,7 +38,7 @@ defmodule Dolphin.Sim.Copter.Modes do
       cond do
         force? -> nil
         # ArduRover arms in AUTO (it waits there); ArduSub arms in any mode, without a position.
-        flies?(c) and c.mode in @not_armable -> "Arm: #{c.mode |> Atom.to_string() |> String.upcase()} mode not armable"
+        c.config.airframe == :copter and c.mode in @not_armable -> "Arm: #{c.mode |> Atom.to_string() |> String.upcase()} mode not armable"
         c.config.airframe == :sub -> nil
         not ready?(c) -> "Arm: Need Position Estimate"
         c.home == nil -> "Arm: Need Position Estimate"
@@ -128,7 +128,20 @@ defmodule Dolphin.Sim.Copter.Modes do
   # A rover, boat or submarine: RTL drives home, SURFACE rises where it is
   # (then ALT_HOLD), every other mode stops it where it is and holds (a
   # rover's HOLD only cuts the throttle: it coasts to a stop).
-  defp enter_mode(%{config: %{airframe: airframe}} = c, mode) when airframe != :copter and mode != :auto do
+  # A plane circles wherever it holds: LOITER, GUIDED and the rest where it
+  # is, RTL over home; on the ground nothing moves.
+  defp enter_mode(%{config: %{airframe: :plane}} = c, mode) when mode != :auto do
+    nav =
+      cond do
+        not in_air?(c) -> :idle
+        mode == :rtl -> {:rtl, :climb}
+        true -> {:hold, c.n, c.e, c.alt}
+      end
+
+    %{c | mode: mode, nav: nav}
+  end
+
+  defp enter_mode(%{config: %{airframe: airframe}} = c, mode) when airframe in [:rover, :boat, :sub] and mode != :auto do
     nav =
       cond do
         not c.armed -> :idle
