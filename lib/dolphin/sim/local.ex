@@ -52,14 +52,18 @@ defmodule Dolphin.Sim.Local do
   # One Dolphin.Sim.start per airframe, the homes of the whole fleet spread
   # once (a submarine's at the surface, sea level), system ids in order.
   defp start_groups(fleet, first, count, home, sim_opts) do
-    homes = Dolphin.Sim.homes(count, if(home, do: [home: home], else: []))
+    around = if home, do: [home: home], else: []
+    homes = Dolphin.Sim.homes(count, around)
+    # The fleet's charging station is at the centre its homes are spread
+    # around, as when one start spreads them all (Dolphin.Sim.start/1).
+    [charger] = Dolphin.Sim.homes(1, around)
 
     fleet
     |> Enum.reduce_while({:ok, [], first, homes}, fn {airframe, n}, {:ok, started, next, homes} ->
       {mine, rest} = Enum.split(homes, n)
       mine = if airframe == :sub, do: Enum.map(mine, &%{&1 | alt: 0.0}), else: mine
 
-      case Dolphin.Sim.start(sim_opts ++ [count: n, first_sysid: next, homes: mine, airframe: airframe]) do
+      case Dolphin.Sim.start(sim_opts ++ [count: n, first_sysid: next, homes: mine, charger: charger, airframe: airframe]) do
         {:ok, sysids} -> {:cont, {:ok, started ++ sysids, next + n, rest}}
         {:error, e} -> {:halt, {:error, e, started}}
       end
