@@ -250,7 +250,14 @@ defmodule Dolphin.Check.Mission do
     start = vehicle.battery
     summary = "#{metres(estimate.length_m)}, #{minutes(estimate.time_s)}, #{percent(estimate.battery_used)} of a pack"
 
+    airframe = Map.get(vehicle, :airframe)
+
     cond do
+      # The model below is ArduCopter's (and the simulator's copter): another
+      # airframe's energy and time are not judged by it.
+      airframe not in [nil, :copter] ->
+        [{:note, :energy_model, "#{name}: #{metres(estimate.length_m)} of path; its energy and time are not estimated: the check's model is a copter's, not a #{airframe}'s"}]
+
       start == nil ->
         [{:note, :energy, "#{name}: #{summary}; the vehicle's battery is not known"}]
 

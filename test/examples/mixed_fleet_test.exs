@@ -1,0 +1,64 @@
+defmodule Dolphin.Examples.MixedFleetTest do
+  # examples/mixed_fleet.exs as its header says to run it: a plane, a copter
+  # and a boat picked by airframe, one composition of their three tasks. On
+  # the built-in simulator, and on ArduPlane, ArduCopter and ArduRover SITL
+  # with the same history.
+  use ExUnit.Case, async: false
+
+  alias Dolphin.SITL
+
+  @moduletag :tmp_dir
+  @moduletag timeout: 600_000
+
+  @root Path.expand("../..", __DIR__)
+
+  setup do
+    on_exit(fn ->
+      Dolphin.Test.GroundStation.forget_vehicles()
+      Dolphin.Clock.set_speedup(1)
+    end)
+  end
+
+  # Runs the example on `vehicles`; each mission's vehicle and result, in the
+  # order they finished, and whether the boat left when the copter was at the last spot.
+  defp fly(vehicles, speedup, dir) do
+    events = Path.join(dir, "#{Enum.join(vehicles, "-")}.jsonl")
+    {:ok, out} = StringIO.open("")
+    {:ok, err} = StringIO.open("")
+    argv = [Path.join(@root, "examples/mixed_fleet.exs") | vehicles] ++ ["--home", "38.43462,-8.86118", "--speedup", "#{speedup}", "--no-tlog", "--events", events]
+
+    code = Mix.Tasks.Dolphin.Run.main(argv, out: out, err: err)
+    {_, printed} = StringIO.contents(out)
+    assert code == 0, printed <> elem(StringIO.contents(err), 1)
+    assert printed =~ "picked [1] (1 vehicle, airframe :plane)"
+    assert printed =~ "message: the boat is at the last spot"
+
+    log = events |> File.read!() |> String.split("\n", trim: true) |> Enum.map(&:jiffy.decode(&1, [:return_maps]))
+    finished = for %{"event" => "task_finished", "kind" => "mission"} = e <- log, do: {e["name"], e["vehicle"], e["result"]}
+    {started, _} = Enum.split_while(log, &(&1["event"] != "task_started" or &1["name"] != "To the last spot"))
+    met = Enum.any?(started, &(&1["event"] == "condition_met"))
+    %{finished: finished, boat_waited_for_the_copter: met}
+  end
+
+  defp as_written!(run) do
+    # The survey first; then the inspection and the boat side by side (the boat's short trip ends first).
+    assert [{"Wide survey", 1, "done"} | rest] = run.finished
+    assert Enum.sort(rest) == [{"Inspection", 2, "done"}, {"To the last spot", 3, "done"}]
+    assert run.boat_waited_for_the_copter
+  end
+
+  test "on the simulator: the plane surveys, then the copter inspects the spots while the boat waits for it at the shore and goes to the last", %{tmp_dir: dir} do
+    as_written!(fly(["--sim", "plane:1,copter:1,boat:1"], 25, dir))
+  end
+
+  if SITL.available?(:plane) and SITL.available?(:boat) do
+    @tag :sitl
+    test "on ArduPlane, ArduCopter and ArduRover SITL: the same history as on the simulator", %{tmp_dir: dir} do
+      sitl = fly(["--sitl", "plane:1,copter:1,boat:1"], 10, dir)
+      as_written!(sitl)
+      Dolphin.Test.GroundStation.forget_vehicles()
+      sim = fly(["--sim", "plane:1,copter:1,boat:1"], 10, dir)
+      assert Enum.sort(sim.finished) == Enum.sort(sitl.finished)
+    end
+  end
+end
