@@ -6,11 +6,10 @@ defmodule Dolphin.Examples.MixedFleetTest do
   use ExUnit.Case, async: false
 
   alias Dolphin.SITL
+  alias Dolphin.Test.ExampleRun
 
   @moduletag :tmp_dir
   @moduletag timeout: 600_000
-
-  @root Path.expand("../..", __DIR__)
 
   setup do
     on_exit(fn ->
@@ -22,22 +21,14 @@ defmodule Dolphin.Examples.MixedFleetTest do
   # Runs the example on `vehicles`; each mission's vehicle and result, in the
   # order they finished, and whether the boat left when the copter was at the last spot.
   defp fly(vehicles, speedup, dir) do
-    events = Path.join(dir, "#{Enum.join(vehicles, "-")}.jsonl")
-    {:ok, out} = StringIO.open("")
-    {:ok, err} = StringIO.open("")
-    argv = [Path.join(@root, "examples/mixed_fleet.exs") | vehicles] ++ ["--home", "38.43462,-8.86118", "--speedup", "#{speedup}", "--no-tlog", "--events", events]
-
-    code = Mix.Tasks.Dolphin.Run.main(argv, out: out, err: err)
-    {_, printed} = StringIO.contents(out)
-    assert code == 0, printed <> elem(StringIO.contents(err), 1)
-    assert printed =~ "picked [1] (1 vehicle, airframe :plane)"
-    assert printed =~ "message: the boat is at the last spot"
-
-    log = events |> File.read!() |> String.split("\n", trim: true) |> Enum.map(&:jiffy.decode(&1, [:return_maps]))
+    run = ExampleRun.run(dir, "mixed_fleet", Enum.join(vehicles, "-"), vehicles ++ ["--home", "38.43462,-8.86118", "--speedup", "#{speedup}"], nil)
+    assert run.code == 0, run.output
+    log = run.events
+    assert [%{"vehicles" => [1]}, %{"vehicles" => [2]}, %{"vehicles" => [3]}] = for(%{"event" => "picked"} = e <- log, do: e)
+    assert [%{"text" => "the boat is at the last spot"}] = for(%{"event" => "message"} = e <- log, do: e)
     finished = for %{"event" => "task_finished", "kind" => "mission"} = e <- log, do: {e["name"], e["vehicle"], e["result"]}
     {started, _} = Enum.split_while(log, &(&1["event"] != "task_started" or &1["name"] != "To the last spot"))
-    met = Enum.any?(started, &(&1["event"] == "condition_met"))
-    %{finished: finished, boat_waited_for_the_copter: met}
+    %{finished: finished, boat_waited_for_the_copter: Enum.any?(started, &(&1["event"] == "condition_met"))}
   end
 
   defp as_written!(run) do

@@ -7,6 +7,7 @@ defmodule Dolphin.Examples.SidescanSurveyTest do
   use ExUnit.Case, async: false
 
   alias Dolphin.SITL
+  alias Dolphin.Test.ExampleRun
 
   @moduletag :tmp_dir
   @moduletag timeout: 600_000
@@ -24,21 +25,13 @@ defmodule Dolphin.Examples.SidescanSurveyTest do
   # history: each mission's vehicle and result, and the items each vehicle
   # reported reached.
   defp fly(vehicles, dir) do
-    events = Path.join(dir, "#{Enum.join(vehicles, "-")}.jsonl")
-    {:ok, out} = StringIO.open("")
-    {:ok, err} = StringIO.open("")
-
-    argv =
-      [Path.join(@root, "examples/sidescan_survey.exs") | vehicles] ++
-        ["--home", "38.43462,-8.86118", "--fleet", Path.join(@root, "examples/sidescan_fleet.json"), "--speedup", "10", "--no-tlog", "--events", events]
-
-    code = Mix.Tasks.Dolphin.Run.main(argv, out: out, err: err)
-    {_, printed} = StringIO.contents(out)
-    assert code == 0, printed <> elem(StringIO.contents(err), 1)
-    assert printed =~ "picked [1, 2, 3] (3 vehicles, type :uuv, airframe :sub, payload [:sidescan], in #Area<"
-    assert printed =~ "message: Done!"
-
-    log = events |> File.read!() |> String.split("\n", trim: true) |> Enum.map(&:jiffy.decode(&1, [:return_maps]))
+    args = vehicles ++ ["--home", "38.43462,-8.86118", "--fleet", Path.join(@root, "examples/sidescan_fleet.json"), "--speedup", "10"]
+    run = ExampleRun.run(dir, "sidescan_survey", Enum.join(vehicles, "-"), args, nil)
+    assert run.code == 0, run.output
+    log = run.events
+    assert [%{"requirement" => picked, "vehicles" => [1, 2, 3]}] = for(%{"event" => "picked"} = e <- log, do: e)
+    assert picked =~ "3 vehicles, type :uuv, airframe :sub, payload [:sidescan], in #Area<"
+    assert [%{"text" => "Done!"}] = for(%{"event" => "message"} = e <- log, do: e)
     finished = for %{"event" => "task_finished", "kind" => "mission"} = e <- log, do: {e["name"], e["vehicle"], e["result"]}
     reached = for v <- 1..3, into: %{}, do: {v, for(%{"event" => "mission_item_reached", "vehicle" => ^v, "seq" => s} <- log, uniq: true, do: s) |> Enum.sort()}
     {Enum.sort(finished), reached}

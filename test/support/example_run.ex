@@ -20,7 +20,8 @@ defmodule Dolphin.Test.ExampleRun do
   vehicles: `--sim N`, `--sitl N`, `--connect ENDPOINT`, and `--speedup`),
   `--for FOR_TIME` if given, events and a .tlog written under `dir` (named
   by `label`), `io` given to `Run.main/2` (such as `sitl: [send_to: ...]`). Returns the exit code, the output, how the script ended, the
-  history of its missions (`history/2`) and who was disarmed at the end.
+  history of its missions (`history/2`), who was disarmed at the end, and
+  every event (`events`, as the events file has them).
   """
   def run(dir, name, label, args, for_time, io \\ []) do
     events = Path.join(dir, "#{name}#{label}.jsonl")
@@ -38,6 +39,7 @@ defmodule Dolphin.Test.ExampleRun do
       output: elem(StringIO.contents(out), 1) <> elem(StringIO.contents(err), 1),
       result: all |> Enum.filter(&(&1["event"] == "script_finished")) |> List.last() |> Map.get("result"),
       history: history(all, for_time != nil),
+      events: all,
       disarmed_at_end: disarmed_at_end(all),
       speedup: speedup(args),
       tlog: tlog
