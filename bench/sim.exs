@@ -15,7 +15,10 @@
 #      lag (how far a vehicle is behind the clock when asked) stays under
 #      250 ms of vehicle time (p99).
 #
-#   mix run bench/sim.exs        (make bench runs it too)
+#   3. The same for ten of each other airframe (planes, rovers, boats,
+#      submarines: 40 vehicles), each flying a mission in AUTO.
+#
+#   mix run bench/sim.exs        (make bench runs it too; BENCH_SIM_PART=2 or 3: from that part on)
 
 alias Dolphin.{Clock, Sim}
 alias Dolphin.MAVLink.Frame
@@ -82,7 +85,7 @@ IO.puts("\n1. vehicles at speed-up 1, each flying and sending 15 frames/s (GLOBA
 
 Clock.set_speedup(1)
 
-for n <- if(System.get_env("BENCH_SIM_PART") == "2", do: [], else: [250, 500, 1000, 1500]) do
+for n <- if(System.get_env("BENCH_SIM_PART") in ["2", "3"], do: [], else: [250, 500, 1000, 1500]) do
   fleets = Enum.chunk_every(1..n, 250)
 
   vehicles =
@@ -141,7 +144,7 @@ IO.puts("\n2. 10 vehicles flying against Dolphin's ground station: max lag behin
 {:ok, _} = Dolphin.Link.connect("udpin:127.0.0.1:0", name: "bench-sim")
 port = Dolphin.Link.Connection.port("bench-sim")
 
-for k <- [25, 50, 100, 200, 400, 800] do
+for k <- if(System.get_env("BENCH_SIM_PART") == "3", do: [], else: [25, 50, 100, 200, 400, 800]) do
   Clock.set_speedup(k)
   {:ok, ids} = Sim.start(count: 10, gcs: port, ekf_ready_ms: 0)
   Enum.find_value(1..500, fn _ -> length(Dolphin.Vehicles.list() -- (Dolphin.Vehicles.list() -- ids)) == 10 || (Process.sleep(10) && nil) end)
@@ -192,4 +195,93 @@ for k <- [25, 50, 100, 200, 400, 800] do
 
   Sim.stop()
   for id <- ids, pid = Dolphin.Vehicles.whereis(id), do: DynamicSupervisor.terminate_child(Dolphin.Vehicles.Supervisor, pid)
+end
+
+IO.puts("\n3. ten of each other airframe (planes, rovers, boats, submarines: 40 vehicles) flying a mission, against Dolphin's ground station")
+
+alias Dolphin.Mission.Command, as: C
+
+# A mission each can fly from where it boots: a plane takes off and flies
+# 5 km out; a rover or boat drives 5 km; a submarine dives to 5 m and goes 5 km.
+far_mission = fn airframe, home ->
+  home = Dolphin.Geo.location(home.lat, home.lon, home.alt)
+  out = Dolphin.Geo.offset(home, 5_000, 3_000, 0)
+
+  commands =
+    case airframe do
+      :plane -> [C.home(home), C.take_off(%{home | h: home.h + 80}), C.go_pos(%{out | h: home.h + 80})]
+      :sub -> [C.home(home), C.go_pos(%{out | h: home.h - 5})]
+      _ -> [C.home(home), C.go_pos(out)]
+    end
+
+  Dolphin.Mission.to_items(Dolphin.Mission.new("out", commands), airframe: airframe)
+end
+
+for k <- [25, 50, 100, 200] do
+  Clock.set_speedup(k)
+  # Submarines boot at the surface, at sea level.
+  groups = [plane: 101, rover: 111, boat: 121, sub: 131]
+
+  ids =
+    Enum.flat_map(groups, fn {airframe, first} ->
+      place = if airframe == :sub, do: %{home | alt: 0.0}, else: home
+      {:ok, ids} = Sim.start(count: 10, first_sysid: first, gcs: port, ekf_ready_ms: 0, airframe: airframe, home: place)
+      Enum.map(ids, &{&1, airframe})
+    end)
+
+  Enum.find_value(1..500, fn _ -> Enum.all?(ids, fn {id, _} -> match?({:ok, %{home: %{}}}, Dolphin.Vehicles.view(id)) end) || (Process.sleep(20) && nil) end)
+  ok? = fn result -> match?({:ok, _}, result) or result == :ok end
+  retry = fn f -> Enum.find_value(1..50, fn _ -> ok?.(f.()) || (Process.sleep(100) && nil) end) end
+
+  ids
+  |> Task.async_stream(
+    fn {id, airframe} ->
+      v = Enum.find_value(1..500, fn _ -> with({:ok, %{home: %{}} = v} <- Dolphin.Vehicles.view(id), do: v, else: (_ -> Process.sleep(20) && nil)) end)
+      retry.(fn -> Dolphin.Vehicles.upload_mission(id, far_mission.(airframe, %{lat: v.home.lat, lon: v.home.lon, alt: v.home.h})) end)
+      retry.(fn -> Dolphin.Vehicles.set_mode(id, :guided) end)
+      retry.(fn -> Dolphin.Vehicles.arm(id) end)
+      retry.(fn -> Dolphin.Vehicles.start_mission(id) end)
+    end,
+    max_concurrency: 10,
+    timeout: :infinity
+  )
+  |> Stream.run()
+
+  Clock.sleep(10_000)
+  vehicles = Enum.map(ids, &elem(&1, 0))
+  times = fn -> Map.new(vehicles, fn id -> {:ok, i} = Sim.info(id); {id, i.time_ms} end) end
+  cpu0 = cpu_ms.()
+  t0 = System.monotonic_time(:millisecond)
+  c0 = Clock.now_ms()
+  v0 = times.()
+
+  lags =
+    for _ <- 1..25 do
+      Process.sleep(200)
+      Enum.map(vehicles, fn id -> {:ok, i} = Sim.info(id); i.lag_ms end)
+    end
+    |> List.flatten()
+    |> Enum.sort()
+
+  v1 = times.()
+  clock = Clock.now_ms() - c0
+  elapsed = System.monotonic_time(:millisecond) - t0
+  cpu = cpu_ms.() - cpu0
+  pace = vehicles |> Enum.map(fn id -> (v1[id] - v0[id]) / clock end) |> Enum.min()
+  p99 = Enum.at(lags, round(length(lags) * 0.99) - 1)
+  # Armed: under way (a plane that reached its point at a high speed-up is circling home in RTL).
+  flying = fn id -> match?({:ok, %{armed?: true}}, Dolphin.Vehicles.view(id)) end
+  moving = Enum.count(vehicles, flying)
+  left = for({id, airframe} <- ids, not flying.(id), do: airframe) |> Enum.frequencies() |> Enum.map_join(", ", fn {a, n} -> "#{n} #{a}" end)
+  in_step = pace >= 0.99 and p99 <= 250
+
+  IO.puts(
+    "  speed-up #{String.pad_leading(Integer.to_string(k), 3)}: #{moving} of 40 under way#{if left != "", do: " (not: #{left})"}, slowest vehicle ran at #{Float.round(pace * 100, 1)} % of the clock, " <>
+      "lag p99 #{p99} ms / max #{List.last(lags)} ms of vehicle time, CPU #{round(cpu * 100 / elapsed)} % of one core" <>
+      if(in_step, do: "", else: "  <- not in step")
+  )
+
+  Sim.stop()
+  # Forgotten, not just stopped: the next round's vehicles reuse the system ids with new unique ids.
+  Enum.each(vehicles, &Dolphin.Vehicles.forget/1)
 end
