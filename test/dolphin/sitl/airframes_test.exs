@@ -117,8 +117,10 @@ defmodule Dolphin.SITL.AirframesTest do
     end
   end
 
-  for airframe <- [:plane, :rover, :boat, :sub], not SITL.available?(airframe) do
-    IO.puts("SITL tests of the #{airframe} skipped: no #{airframe} SITL binary (put ArduPilot's SITL binaries in ARDUPILOT_SITL_DIR, or ../shared/sitl/ beside the project)")
+  missing = for airframe <- [:plane, :rover, :boat, :sub], not SITL.available?(airframe), do: airframe
+
+  if missing != [] do
+    IO.puts("SITL tests of the #{Enum.join(missing, ", ")} skipped: no SITL binary for them (put ArduPilot's SITL binaries in ARDUPILOT_SITL_DIR, or ../shared/sitl/ beside the project)")
   end
 
   if SITL.available?(:plane) do
