@@ -81,12 +81,12 @@ defmodule Dolphin.Vehicles.Manoeuvres do
       {:error, :unknown_vehicle} -> :ok
       {:ok, %{mode: mode}} when mode in @landing_modes -> :ok
       {:ok, %{armed?: false}} when not fresh? -> :ok
-      {:ok, %{mode: mode, airframe: airframe}} when not fresh? -> if mode in hold_modes(airframe), do: :ok, else: hold_unless_landed(vehicle, airframe, opts)
+      {:ok, %{mode: mode, airframe: airframe}} when not fresh? -> if mode in hold_modes(airframe), do: :ok, else: hold_unless_landed(vehicle, airframe)
       {:ok, %{airframe: airframe}} -> brake(vehicle, airframe)
     end
   end
 
-  defp hold_unless_landed(vehicle, airframe, _opts) do
+  defp hold_unless_landed(vehicle, airframe) do
     case Vehicles.view(vehicle) do
       {:ok, %{landed: :on_ground}} -> disarm_or_brake(vehicle, airframe)
       _ -> brake(vehicle, airframe)
