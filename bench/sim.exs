@@ -139,6 +139,33 @@ for n <- if(System.get_env("BENCH_SIM_PART") in ["2", "3"], do: [], else: [250, 
   for {pid, _, _, _} <- vehicles, do: (Process.unlink(pid); Process.exit(pid, :kill))
 end
 
+# Over 5 s of real time: how far the slowest of `ids` kept the clock's pace,
+# its lags behind the clock (sorted), and the CPU the VM used (% of one core).
+# In step: every vehicle's time advanced as much as the clock's, and none is
+# more than 5 steps (250 ms of vehicle time) behind it.
+measure = fn ids ->
+  times = fn -> Map.new(ids, fn id -> {:ok, i} = Sim.info(id); {id, i.time_ms} end) end
+  cpu0 = cpu_ms.()
+  t0 = System.monotonic_time(:millisecond)
+  c0 = Clock.now_ms()
+  v0 = times.()
+
+  lags =
+    for _ <- 1..25 do
+      Process.sleep(200)
+      Enum.map(ids, fn id -> {:ok, i} = Sim.info(id); i.lag_ms end)
+    end
+    |> List.flatten()
+    |> Enum.sort()
+
+  v1 = times.()
+  clock = Clock.now_ms() - c0
+  cpu = round((cpu_ms.() - cpu0) * 100 / (System.monotonic_time(:millisecond) - t0))
+  pace = ids |> Enum.map(fn id -> (v1[id] - v0[id]) / clock end) |> Enum.min()
+  p99 = Enum.at(lags, round(length(lags) * 0.99) - 1)
+  %{pace: pace, p99: p99, max: List.last(lags), cpu: cpu, in_step: pace >= 0.99 and p99 <= 250}
+end
+
 IO.puts("\n2. 10 vehicles flying against Dolphin's ground station: max lag behind the clock")
 
 {:ok, _} = Dolphin.Link.connect("udpin:127.0.0.1:0", name: "bench-sim")
@@ -161,40 +188,20 @@ for k <- if(System.get_env("BENCH_SIM_PART") == "3", do: [], else: [25, 50, 100,
   Clock.sleep(15_000)
   for id <- ids, do: retry.(fn -> Dolphin.Vehicles.command_int(id, :mav_cmd_do_reposition, [-1, 0, 0, 0], {far.lat, far.lon, 30}) end)
 
-  times = fn -> Map.new(ids, fn id -> {:ok, i} = Sim.info(id); {id, i.time_ms} end) end
-  cpu0 = cpu_ms.()
-  t0 = System.monotonic_time(:millisecond)
-  c0 = Clock.now_ms()
-  v0 = times.()
-
-  lags =
-    for _ <- 1..25 do
-      Process.sleep(200)
-      Enum.map(ids, fn id -> {:ok, i} = Sim.info(id); i.lag_ms end)
-    end
-    |> List.flatten()
-    |> Enum.sort()
-
-  v1 = times.()
-  clock = Clock.now_ms() - c0
-  elapsed = System.monotonic_time(:millisecond) - t0
-  cpu = cpu_ms.() - cpu0
+  m = measure.(ids)
   {:ok, s} = Dolphin.Vehicles.state(hd(ids))
-  # In step: every vehicle's time advanced as much as the clock's, and none
-  # is more than 5 steps (250 ms of vehicle time) behind it.
-  pace = ids |> Enum.map(fn id -> (v1[id] - v0[id]) / clock end) |> Enum.min()
-  p99 = Enum.at(lags, round(length(lags) * 0.99) - 1)
-  in_step = pace >= 0.99 and p99 <= 250
 
   IO.puts(
-    "  speed-up #{String.pad_leading(Integer.to_string(k), 3)}: slowest vehicle ran at #{Float.round(pace * 100, 1)} % of the clock, " <>
-      "lag p99 #{p99} ms / max #{List.last(lags)} ms of vehicle time, CPU #{round(cpu * 100 / elapsed)} % of one core, " <>
+    "  speed-up #{String.pad_leading(Integer.to_string(k), 3)}: slowest vehicle ran at #{Float.round(m.pace * 100, 1)} % of the clock, " <>
+      "lag p99 #{m.p99} ms / max #{m.max} ms of vehicle time, CPU #{m.cpu} % of one core, " <>
       "vehicle #{hd(ids)} at #{round(s.position.relative_alt)} m" <>
-      if(in_step, do: "", else: "  <- not in step")
+      if(m.in_step, do: "", else: "  <- not in step")
   )
 
   Sim.stop()
-  for id <- ids, pid = Dolphin.Vehicles.whereis(id), do: DynamicSupervisor.terminate_child(Dolphin.Vehicles.Supervisor, pid)
+  # Forgotten, not just stopped: the next round's vehicles reuse the system
+  # ids with new unique ids, and would be other vehicles ("1@...") beside these.
+  Enum.each(ids, &Dolphin.Vehicles.forget/1)
 end
 
 IO.puts("\n3. ten of each other airframe (planes, rovers, boats, submarines: 40 vehicles) flying a mission, against Dolphin's ground station")
@@ -249,39 +256,18 @@ for k <- [25, 50, 100, 200] do
 
   Clock.sleep(10_000)
   vehicles = Enum.map(ids, &elem(&1, 0))
-  times = fn -> Map.new(vehicles, fn id -> {:ok, i} = Sim.info(id); {id, i.time_ms} end) end
-  cpu0 = cpu_ms.()
-  t0 = System.monotonic_time(:millisecond)
-  c0 = Clock.now_ms()
-  v0 = times.()
-
-  lags =
-    for _ <- 1..25 do
-      Process.sleep(200)
-      Enum.map(vehicles, fn id -> {:ok, i} = Sim.info(id); i.lag_ms end)
-    end
-    |> List.flatten()
-    |> Enum.sort()
-
-  v1 = times.()
-  clock = Clock.now_ms() - c0
-  elapsed = System.monotonic_time(:millisecond) - t0
-  cpu = cpu_ms.() - cpu0
-  pace = vehicles |> Enum.map(fn id -> (v1[id] - v0[id]) / clock end) |> Enum.min()
-  p99 = Enum.at(lags, round(length(lags) * 0.99) - 1)
+  m = measure.(vehicles)
   # Armed: under way (a plane that reached its point at a high speed-up is circling home in RTL).
   flying = fn id -> match?({:ok, %{armed?: true}}, Dolphin.Vehicles.view(id)) end
   moving = Enum.count(vehicles, flying)
   left = for({id, airframe} <- ids, not flying.(id), do: airframe) |> Enum.frequencies() |> Enum.map_join(", ", fn {a, n} -> "#{n} #{a}" end)
-  in_step = pace >= 0.99 and p99 <= 250
 
   IO.puts(
-    "  speed-up #{String.pad_leading(Integer.to_string(k), 3)}: #{moving} of 40 under way#{if left != "", do: " (not: #{left})"}, slowest vehicle ran at #{Float.round(pace * 100, 1)} % of the clock, " <>
-      "lag p99 #{p99} ms / max #{List.last(lags)} ms of vehicle time, CPU #{round(cpu * 100 / elapsed)} % of one core" <>
-      if(in_step, do: "", else: "  <- not in step")
+    "  speed-up #{String.pad_leading(Integer.to_string(k), 3)}: #{moving} of 40 under way#{if left != "", do: " (not: #{left})"}, slowest vehicle ran at #{Float.round(m.pace * 100, 1)} % of the clock, " <>
+      "lag p99 #{m.p99} ms / max #{m.max} ms of vehicle time, CPU #{m.cpu} % of one core" <>
+      if(m.in_step, do: "", else: "  <- not in step")
   )
 
   Sim.stop()
-  # Forgotten, not just stopped: the next round's vehicles reuse the system ids with new unique ids.
   Enum.each(vehicles, &Dolphin.Vehicles.forget/1)
 end
