@@ -81,15 +81,17 @@ defmodule Dolphin.Vehicles.Manoeuvres do
       {:error, :unknown_vehicle} -> :ok
       {:ok, %{mode: mode}} when mode in @landing_modes -> :ok
       {:ok, %{armed?: false}} when not fresh? -> :ok
-      {:ok, %{mode: mode, airframe: airframe}} when not fresh? -> if mode in hold_modes(airframe), do: :ok, else: hold_unless_landed(vehicle, airframe)
+      {:ok, %{airframe: airframe} = view} when not fresh? -> hold_as_is(vehicle, airframe, view)
       {:ok, %{airframe: airframe}} -> brake(vehicle, airframe)
     end
   end
 
-  defp hold_unless_landed(vehicle, airframe) do
-    case Vehicles.view(vehicle) do
-      {:ok, %{landed: :on_ground}} -> disarm_or_brake(vehicle, airframe)
-      _ -> brake(vehicle, airframe)
+  # Holding already, or on the ground (disarmed there), from the view just read.
+  defp hold_as_is(vehicle, airframe, view) do
+    cond do
+      view.mode in hold_modes(airframe) -> :ok
+      view.landed == :on_ground -> disarm_or_brake(vehicle, airframe)
+      true -> brake(vehicle, airframe)
     end
   end
 

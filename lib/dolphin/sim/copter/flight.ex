@@ -188,9 +188,11 @@ defmodule Dolphin.Sim.Copter.Flight do
     {%{c | nav: {:circle, n, e, alt, radius, turned, angle}}, {wn, we, wz}}
   end
 
-  defp wrap(a) when a > @pi, do: a - 2 * @pi
-  defp wrap(a) when a < -@pi, do: a + 2 * @pi
-  defp wrap(a), do: a
+  @doc false
+  # An angle difference (radians) brought into -π..π.
+  def wrap(a) when a > @pi, do: a - 2 * @pi
+  def wrap(a) when a < -@pi, do: a + 2 * @pi
+  def wrap(a), do: a
 
   # The land detector: in the air past a metre of climb; landed when it
   # touches the ground going down.

@@ -19,6 +19,7 @@ defmodule Dolphin.Sim.Copter.Plane do
   import Dolphin.Sim.Copter, only: [ground: 1, home_alt: 1, home_ne: 1, distance_to: 3]
 
   alias Dolphin.Sim.Copter
+  alias Dolphin.Sim.Copter.Flight
 
   @g 9.81
   @bank_deg 45.0
@@ -52,7 +53,7 @@ defmodule Dolphin.Sim.Copter.Plane do
   @doc false
   @spec fly(Copter.t(), float()) :: Copter.t()
   # Disarmed or with nothing to do on the ground: it stands.
-  def fly(%{armed: false} = c, _dt), do: if(c.alt > ground(c) + 0.5, do: glide(c), else: still(c))
+  def fly(%{armed: false} = c, dt), do: if(c.alt > ground(c) + 0.5, do: glide(c, dt), else: still(c))
   def fly(%{nav: :idle} = c, _dt), do: still(c)
 
   # On the ground after a landing: it rolls to a stop.
@@ -72,7 +73,7 @@ defmodule Dolphin.Sim.Copter.Plane do
 
   defp still(c), do: %{c | vn: 0.0, ve: 0.0, vz: 0.0}
 
-  defp glide(c), do: %{c | vz: -3.0, alt: max(c.alt - 3.0 * 0.05, ground(c))}
+  defp glide(c, dt), do: %{c | vz: -3.0, alt: max(c.alt - 3.0 * dt, ground(c))}
 
   defp advance(c, heading, speed, dt) do
     h = heading * @pi / 180
@@ -116,7 +117,7 @@ defmodule Dolphin.Sim.Copter.Plane do
     turned =
       case last do
         nil -> turned
-        last -> turned + abs(wrap(angle - last))
+        last -> turned + abs(Flight.wrap(angle - last))
       end
 
     {%{c | nav: {:circle, n, e, alt, radius, turned, angle}}, {circle_bearing(c, n, e, radius), alt}}
@@ -159,10 +160,6 @@ defmodule Dolphin.Sim.Copter.Plane do
     up = speed * :math.sin(pitch * @pi / 180)
     if dz > 0, do: min(dz, up), else: max(dz, -4.0)
   end
-
-  defp wrap(a) when a > @pi, do: a - 2 * @pi
-  defp wrap(a) when a < -@pi, do: a + 2 * @pi
-  defp wrap(a), do: a
 
   @doc false
   # The land detector: flying once its take-off has climbed; landed on the
