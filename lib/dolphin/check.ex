@@ -58,7 +58,9 @@ defmodule Dolphin.Check do
   gives them; default one camera-carrying UAV per `:sim`, default 1, at
   the simulator's home), `:max_distance` (metres from home, default 12,000),
   `:max_height` (metres above home, default 500: the report's scenarios fly
-  380 m above home and survey up to 10 km away), `:horizon_ms` (clock
+  380 m above home and survey up to 10 km away), `:max_depth` (how deep a
+  submarine is sent, metres below the surface, default 100: a BlueROV2's
+  rating), `:horizon_ms` (clock
   time the dry run may last, default an hour), `:energy` (the severity of a
   pack that would run empty: `:error`, the default, or `:warning` — what
   `mix dolphin.run` uses for simulated vehicles, which fly on at 0 %).
@@ -83,6 +85,7 @@ defmodule Dolphin.Check do
   # The report's scenarios fly 380 m above home and survey up to 10 km away.
   @max_distance 12_000
   @max_height 500
+  @max_depth 100
 
   @doc "Checks the script at `path` (see the module doc for options); the findings, errors first."
   @spec run(Path.t(), keyword()) :: t()
@@ -123,7 +126,7 @@ defmodule Dolphin.Check do
     base = with {lat, lon, alt} <- home, do: %Dolphin.Geo.Location{lat: lat * 1.0, lon: lon * 1.0, h: alt * 1.0}, else: (nil -> @sim_home)
 
     for {airframe, id} <- Enum.with_index(airframes, 1) do
-      position = if airframe == :sub, do: %{base | h: 0.0}, else: base
+      position = if Dolphin.Airframe.heights(airframe) == :depth, do: %{base | h: 0.0}, else: base
       %{id: id, type: View.airframe_class(airframe), airframe: airframe, payloads: [:camera], battery: 1.0, position: position, airborne?: false}
     end
   end
@@ -182,18 +185,22 @@ defmodule Dolphin.Check do
   @dry_run_instance Dolphin.Check.DryRun
 
   defp in_own_instance(fun) do
-    :global.trans({__MODULE__, :dry_run}, fn ->
-      sup = start_dry_run_instance()
-      previous = Dolphin.Instance.put(@dry_run_instance)
+    :global.trans(
+      {__MODULE__, :dry_run},
+      fn ->
+        sup = start_dry_run_instance()
+        previous = Dolphin.Instance.put(@dry_run_instance)
 
-      try do
-        fun.()
-      after
-        Dolphin.Instance.put(previous)
-        Process.unlink(sup)
-        Dolphin.Instance.stop(@dry_run_instance)
-      end
-    end, [node()])
+        try do
+          fun.()
+        after
+          Dolphin.Instance.put(previous)
+          Process.unlink(sup)
+          Dolphin.Instance.stop(@dry_run_instance)
+        end
+      end,
+      [node()]
+    )
   end
 
   # The instance of a dry run whose caller was killed may still be stopping.
@@ -211,7 +218,7 @@ defmodule Dolphin.Check do
 
   defp dry_run(script, opts) do
     vehicles = Keyword.get_lazy(opts, :fleet, fn -> sim_fleet(Keyword.get(opts, :sim, 1)) end)
-    limits = %{max_distance: Keyword.get(opts, :max_distance, @max_distance), max_height: Keyword.get(opts, :max_height, @max_height)}
+    limits = %{max_distance: Keyword.get(opts, :max_distance, @max_distance), max_height: Keyword.get(opts, :max_height, @max_height), max_depth: Keyword.get(opts, :max_depth, @max_depth)}
     horizon = Keyword.get(opts, :horizon_ms, @horizon_ms)
     n = System.unique_integer([:positive])
     test = :"dolphin_check_vehicles_#{n}"
@@ -223,7 +230,15 @@ defmodule Dolphin.Check do
     {:ok, recorder} = Recorder.start_link(%{test: test, file: script.file, limits: limits, vehicles: by_id})
 
     for v <- vehicles,
-        do: FakeSource.add(test, v.id, type: v.type, airframe: Map.get(v, :airframe, View.stand_in_airframe(v.type)), payloads: v.payloads, battery: v.battery, position: v.position, relative_altitude: if(v.airborne?, do: 20.0, else: 0.0))
+        do:
+          FakeSource.add(test, v.id,
+            type: v.type,
+            airframe: Map.get(v, :airframe, View.stand_in_airframe(v.type)),
+            payloads: v.payloads,
+            battery: v.battery,
+            position: v.position,
+            relative_altitude: if(v.airborne?, do: 20.0, else: 0.0)
+          )
 
     {:ok, fleet} = Dolphin.Fleet.start_link(name: fleet_name, source: {Source, %{test: test, recorder: recorder}}, claims: false)
 
@@ -316,11 +331,28 @@ defmodule Dolphin.Check do
   defp outcome_findings({:ok, _summary}, _file, _horizon, _asked?), do: []
 
   defp outcome_findings({:pick_waiting, line}, file, _horizon, _asked?) do
-    [%Finding{severity: :error, kind: :pick, file: file, line: line, message: "no vehicle of the fleet can serve this pick (#{source_line(file, line)}): none has the type, payload, id or place it asks for, or they are all taken"}]
+    [
+      %Finding{
+        severity: :error,
+        kind: :pick,
+        file: file,
+        line: line,
+        message: "no vehicle of the fleet can serve this pick (#{source_line(file, line)}): none has the type, payload, id or place it asks for, or they are all taken"
+      }
+    ]
   end
 
   defp outcome_findings({:running, line}, file, horizon, _asked?) do
-    [%Finding{severity: :note, kind: :waiting, file: file, line: line, message: "the script was still running after #{div(horizon, 60_000)} min of clock time in the dry run (a condition never met with the fleet's values, or a loop): what it did until then is checked"}]
+    [
+      %Finding{
+        severity: :note,
+        kind: :waiting,
+        file: file,
+        line: line,
+        message:
+          "the script was still running after #{div(horizon, 60_000)} min of clock time in the dry run (a condition never met with the fleet's values, or a loop): what it did until then is checked"
+      }
+    ]
   end
 
   defp outcome_findings({:error, %Dolphin.Script.Error{} = e}, _file, _horizon, asked?) do

@@ -105,6 +105,7 @@ defmodule Dolphin.Mission do
   supplies or overrides it.
   """
 
+  alias Dolphin.Airframe
   alias Dolphin.Geo.Location
   alias Dolphin.Mission.{Command, Items, Plan}
 
@@ -193,12 +194,10 @@ defmodule Dolphin.Mission do
   @spec item_count(t()) :: pos_integer()
   def item_count(%__MODULE__{} = mission), do: length(to_items(mission))
 
-  # What each airframe can fly, by command: take-offs are for what flies;
-  # landings for what flies and submarines (ArduSub's NAV_LAND surfaces);
-  # everything else every airframe flies in its own way (see
-  # docs/missions.md). A raw `item` is the script's own business.
-  @flying [:copter, :plane, :quadplane]
-  @landing [:copter, :plane, :quadplane, :sub]
+  # What each airframe can fly, by command: take-offs are for what takes
+  # off; landings for what lands (ArduSub's NAV_LAND surfaces), as
+  # Dolphin.Airframe says; everything else every airframe flies in its own
+  # way (see docs/missions.md). A raw `item` is the script's own business.
   @take_offs [:take_off, :take_off_with_yaw]
   @landings [:landing_point, :return_home_and_land]
 
@@ -223,8 +222,8 @@ defmodule Dolphin.Mission do
 
     cond do
       commands != [] and kinds == [] -> nil
-      Enum.any?(kinds, &(&1 in @take_offs)) -> @flying
-      Enum.any?(kinds, &(&1 in @landings)) -> @landing
+      Enum.any?(kinds, &(&1 in @take_offs)) -> Airframe.takes_off()
+      Enum.any?(kinds, &(&1 in @landings)) -> Airframe.lands()
       true -> Dolphin.Vehicles.View.airframes()
     end
   end
@@ -246,8 +245,8 @@ defmodule Dolphin.Mission do
   end
 
   defp flies?(_kind, nil), do: false
-  defp flies?(kind, airframe) when kind in @take_offs, do: airframe in @flying
-  defp flies?(kind, airframe) when kind in @landings, do: airframe in @landing
+  defp flies?(kind, airframe) when kind in @take_offs, do: Airframe.of(airframe).takes_off?()
+  defp flies?(kind, airframe) when kind in @landings, do: Airframe.of(airframe).lands?()
   defp flies?(_kind, _airframe), do: true
 
   @typedoc "How a mission ends (see `ending/1`)."
@@ -284,15 +283,16 @@ defmodule Dolphin.Mission do
   def ending(%__MODULE__{} = mission, airframe), do: mission |> to_items(airframe: airframe) |> ending(airframe)
 
   # ArduSub's NAV_LAND surfaces, is reported reached, and the sub stays armed
-  # at the surface: a waypoint's end, not a landing's.
-  def ending(items, :sub) when is_list(items) do
-    case ending(items, nil) do
-      {:landing, seq} -> {:reached, seq}
-      other -> other
+  # at the surface: a waypoint's end, not a landing's (Dolphin.Airframe's
+  # landing_done/0).
+  def ending(items, airframe) when is_list(items) do
+    case {landing_ending(items), Airframe.of(airframe).landing_done()} do
+      {{:landing, seq}, :reached} -> {:reached, seq}
+      {ending, _} -> ending
     end
   end
 
-  def ending(items, _airframe) when is_list(items) do
+  defp landing_ending(items) do
     jump = Items.command_number(:mav_cmd_do_jump)
 
     forever = Enum.find(items, &(&1.command == jump and &1.param2 == -1.0))

@@ -143,7 +143,7 @@ defmodule Dolphin.SITL do
                 # A submarine's home is at the surface: ArduSub's depth is its
                 # barometer's, whose surface is at sea level (a home above it
                 # leaves the sub at a fixed height whatever it does).
-                home: if(airframe == :sub, do: %{home | alt: 0.0}, else: home),
+                home: if(Dolphin.Airframe.heights(airframe) == :depth, do: %{home | alt: 0.0}, else: home),
                 speedup: Dolphin.Clock.speedup(),
                 gcs_port: send_to.(port),
                 dir: Path.join(root, "vehicle-#{sysid}")
@@ -297,7 +297,6 @@ defmodule Dolphin.SITL do
         {:error, %Error{reason: :no_binary}}
     end
   end
-
 
   @doc false
   def default_binary do

@@ -13,7 +13,8 @@ defmodule Dolphin.Check.Flight do
 
   # Clock time between two battery updates.
   @tick_ms 10_000
-  # Hovering drain per second (Dolphin.Check.Mission's model: 30 A of 3300 mAh).
+  # Holding drain per second with no estimate to say its airframe's
+  # (Dolphin.Check.Mission's copter: 30 A of 3300 mAh).
   @hover_per_s 30.0 / 3.6 / 3300.0
 
   @spec start_link(map()) :: GenServer.on_start()
@@ -26,10 +27,15 @@ defmodule Dolphin.Check.Flight do
     clock = args.clock || Dolphin.Check.Clock
     e = args.estimate
     start_battery = view.battery || 1.0
-    rate = if e && e.time_s > 0, do: e.battery_used / e.time_s, else: @hover_per_s
+    hold_per_s = (e && e.hold_per_s) || @hover_per_s
+    rate = if e && e.time_s > 0, do: e.battery_used / e.time_s, else: hold_per_s
     finite? = e != nil and match?({kind, _} when kind in [:landing, :reached], e.ending)
     airborne? = (view.relative_altitude || 0.0) > 1.0
-    s = %{args | clock: clock} |> Map.merge(%{elapsed_s: 0.0, started_ms: clock.now_ms(), battery: start_battery, rate: rate, finite?: finite?, time_s: (e && e.time_s) || 0.0, airborne?: airborne?})
+
+    s =
+      %{args | clock: clock}
+      |> Map.merge(%{elapsed_s: 0.0, started_ms: clock.now_ms(), battery: start_battery, rate: rate, hold_per_s: hold_per_s, finite?: finite?, time_s: (e && e.time_s) || 0.0, airborne?: airborne?})
+
     clock.send_after(self(), :tick, min(@tick_ms, round(s.time_s * 1000)))
     {:ok, s}
   end
@@ -83,7 +89,13 @@ defmodule Dolphin.Check.Flight do
   end
 
   defp empty_before_stop(%{estimate: e} = s) do
-    empty_s = if s.rate * s.time_s >= s.battery, do: s.battery / s.rate, else: s.time_s + (s.battery - s.rate * s.time_s) / @hover_per_s
+    empty_s =
+      cond do
+        s.rate * s.time_s >= s.battery -> s.battery / s.rate
+        s.hold_per_s > 0 -> s.time_s + (s.battery - s.rate * s.time_s) / s.hold_per_s
+        true -> s.time_s
+      end
+
     # The item it would be flying to then, if it is still on its first way through.
     seq = if empty_s <= s.time_s, do: Enum.find_value(e.path, fn {end_s, _, _, seq} -> if end_s >= empty_s, do: seq end)
 
@@ -99,8 +111,8 @@ defmodule Dolphin.Check.Flight do
      "mission #{inspect(e.mission)} on vehicle #{s.vehicle}: starting with #{round(s.battery * 100)} %, the pack would be empty after #{round(empty_s)} s of flight#{where}, before anything stopped it"}
   end
 
-  # Past the mission's end an endless one hovers.
-  defp used(s, elapsed_s), do: s.rate * min(elapsed_s, s.time_s) + @hover_per_s * max(elapsed_s - s.time_s, 0.0)
+  # Past the mission's end an endless one holds (a copter hovers, a plane circles, a rover stands).
+  defp used(s, elapsed_s), do: s.rate * min(elapsed_s, s.time_s) + s.hold_per_s * max(elapsed_s - s.time_s, 0.0)
 
   defp drain(s, elapsed_s) do
     left = max(s.battery - used(s, elapsed_s), 0.0)

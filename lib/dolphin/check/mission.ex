@@ -2,30 +2,21 @@ defmodule Dolphin.Check.Mission do
   @moduledoc false
   # Pure checks of one mission as a vehicle would be sent it (the items of
   # `Dolphin.Mission.to_items/2`, so that what is checked is what flies):
-  # validity (something to fly, positions, heights, limits, take-off and its
-  # height and pitch, loiter radii, speeds, jumps, camera) and an energy and
-  # time estimate with the simulated ArduCopter's model (Dolphin.Sim.Copter:
-  # cruise, climb and descent speeds, hover current times effort, pack
-  # capacity).
+  # validity (something to fly, positions, heights and depths, limits,
+  # take-off and its height and pitch, loiter radii, speeds, a plane's turns,
+  # jumps, camera) and an energy and time estimate with the vehicle's
+  # airframe's model (Dolphin.Airframe: speeds, climb and descent, current
+  # drawn, pack capacity — the simulator's figures, held to each SITL).
 
-  alias Dolphin.Geo
+  alias Dolphin.{Airframe, Geo}
   alias Dolphin.Geo.Location
   alias Dolphin.Mission, as: M
+  alias Dolphin.Mission.Survey
 
-  # The simulator's copter (Dolphin.Sim.Copter's defaults, Battery.step/2's effort).
-  @cruise 10.0
-  @climb 2.5
-  @descent 1.5
-  @circle_speed 5.0
-  @capacity_mah 3300.0
-  @hover_current 30.0
   @battery_low 0.2
-  # ArduCopter's limits: WPNAV_SPEED up to 20 m/s; loiter radii kept up to 255 m × 10.
-  @max_speed 20.0
-  @max_radius 2550.0
-  # ArduCopter's NAV_TAKEOFF from the ground climbs at least this far above
-  # where it stands (ModeAuto::takeoff_start raises a lower target to it).
-  @least_take_off 1.0
+  # The deepest a submarine is sent unless the check is told otherwise
+  # (`:max_depth`): a BlueROV2's rated depth.
+  @max_depth 100
   # NAV_TAKEOFF's param1 is ArduPlane's least climb angle (ArduCopter ignores it).
   @pitches 0..90
 
@@ -53,7 +44,7 @@ defmodule Dolphin.Check.Mission do
           optional(:at) => Location.t() | nil,
           optional(:airframe) => atom() | nil
         }
-  @type limits :: %{max_distance: number(), max_height: number()}
+  @type limits :: %{required(:max_distance) => number(), required(:max_height) => number(), optional(:max_depth) => number()}
   @type problem :: {:error | :warning | :note, atom(), String.t()}
   @type estimate :: %{
           mission: String.t(),
@@ -83,7 +74,7 @@ defmodule Dolphin.Check.Mission do
         problems =
           case items do
             [_home] -> [nothing_to_fly(name, vehicle)]
-            _ -> validity(name, items, vehicle, limits) ++ take_off_heights(name, estimate) ++ endless(name, estimate)
+            _ -> validity(name, items, vehicle, limits) ++ turns(name, mission, vehicle) ++ take_off_heights(name, estimate, vehicle) ++ endless(name, estimate)
           end
 
         {problems, energy(name, estimate, items, vehicle), Map.drop(estimate, [:empty_at, :empty_home, :low_take_offs])}
@@ -110,28 +101,42 @@ defmodule Dolphin.Check.Mission do
 
     airframe = Map.get(vehicle, :airframe)
     positions = for item <- items, positioned?(item), problem <- position_problems(name, item, home_loc, limits, airframe), do: problem
-    take_off = if airframe in [:rover, :boat, :sub], do: [], else: take_off(name, rest, vehicle)
+    take_off = if Airframe.takes_off?(airframe), do: take_off(name, rest, vehicle), else: []
     positions ++ take_off ++ Enum.flat_map(rest, &params(name, &1, count, vehicle))
   end
 
   # A submarine's heights are depths (Dolphin.Mission.to_items/2 refuses one
-  # above the surface); a rover or boat drives at its own height whatever
-  # the item says: a height that differs is said, as a warning.
-  defp position_problems(name, item, home, limits, airframe) when airframe in [:sub, :rover, :boat] do
-    loc = location(item, home)
-    height = loc.h - home.h
-
-    far =
-      for p <- position_problems(name, item, home, limits, nil), match?({_, kind, _} when kind in [:position, :too_far], p), do: p
-
-    cond do
-      item.seq == 0 or airframe == :sub -> far
-      abs(height) > 1.0 -> far ++ [{:warning, :height_ignored, "#{name}: #{describe(item)} is #{metres(height)} above home: a #{airframe} drives at its own height, whatever the item says"}]
-      true -> far
+  # above the surface), no deeper than the limit; a rover or boat drives at
+  # its own height whatever the item says: a height that differs is said, as
+  # a warning.
+  defp position_problems(name, item, home, limits, airframe) do
+    case Airframe.heights(airframe) do
+      :altitude -> altitude_problems(name, item, home, limits)
+      heights -> surface_problems(name, item, home, limits, airframe, heights)
     end
   end
 
-  defp position_problems(name, item, home, limits, _airframe) do
+  defp surface_problems(name, item, home, limits, airframe, heights) do
+    height = location(item, home).h - home.h
+    far = for p <- altitude_problems(name, item, home, limits), match?({_, kind, _} when kind in [:position, :too_far], p), do: p
+    max_depth = Map.get(limits, :max_depth, @max_depth)
+
+    cond do
+      item.seq == 0 ->
+        far
+
+      heights == :depth and -height > max_depth ->
+        far ++ [{:error, :too_deep, "#{name}: #{describe(item)} is #{metres(-height)} deep (limit #{metres(max_depth)})"}]
+
+      heights == :own and abs(height) > 1.0 ->
+        far ++ [{:warning, :height_ignored, "#{name}: #{describe(item)} is #{metres(height)} above home: a #{airframe} drives at its own height, whatever the item says"}]
+
+      true ->
+        far
+    end
+  end
+
+  defp altitude_problems(name, item, home, limits) do
     {lat, lon} = {item.x / 1.0e7, item.y / 1.0e7}
     what = "#{name}: #{describe(item)}"
 
@@ -188,30 +193,55 @@ defmodule Dolphin.Check.Mission do
 
   # A take-off from the ground to no height: ArduCopter climbs its least
   # take-off and flies on from there, at the ground's height.
-  defp take_off_heights(name, estimate) do
-    for {item, ground, target} <- estimate.low_take_offs do
+  defp take_off_heights(name, estimate, vehicle) do
+    firmware = Airframe.of(Map.get(vehicle, :airframe)).firmware()
+
+    for {item, ground, target, least} <- estimate.low_take_offs do
       {:error, :take_off_height,
        "#{name}: #{describe(item)} goes to #{metres(target)} above sea level, #{metres(target - ground)} above the ground the vehicle takes off from (#{metres(ground)}): " <>
-         "ArduCopter climbs only #{metres(@least_take_off)} and flies on from there (a take-off's height is its location's: `take_off location(lat, lon, h)`)"}
+         "#{firmware} climbs only #{metres(least)} and flies on from there (a take-off's height is its location's: `take_off location(lat, lon, h)`)"}
     end
   end
 
-  defp params(name, %{command: c} = item, _count, _vehicle) when c in [@loiter_unlim, @loiter_turns, @loiter_time] do
+  defp params(name, %{command: c} = item, _count, vehicle) when c in [@loiter_unlim, @loiter_turns, @loiter_time] do
     r = abs(item.param3)
-
-    if r > @max_radius,
-      do: [{:error, :loiter_radius, "#{name}: #{describe(item)} has a loiter radius of #{metres(r)} (ArduCopter keeps at most #{metres(@max_radius)})"}],
-      else: []
-  end
-
-  defp params(name, %{command: @speed} = item, _count, _vehicle) do
-    speed = item.param2
+    airframe = Map.get(vehicle, :airframe)
+    module = Airframe.of(airframe)
+    p = module.performance()
+    flown = abs(module.flown_radius(p, item.param3))
 
     cond do
-      speed == -1.0 -> []
-      speed <= 0 -> [{:error, :speed, "#{name}: #{describe(item)} sets a speed of #{speed} m/s (a speed is positive)"}]
-      speed > @max_speed -> [{:error, :speed, "#{name}: #{describe(item)} sets #{speed} m/s, above ArduCopter's #{@max_speed} m/s"}]
-      true -> []
+      r > p.max_loiter_radius ->
+        [{:error, :loiter_radius, "#{name}: #{describe(item)} has a loiter radius of #{metres(r)} (#{module.firmware()} keeps at most #{metres(p.max_loiter_radius)})"}]
+
+      c == @loiter_turns and r >= 1 and flown > r * 1.5 ->
+        [{:warning, :loiter_radius, "#{name}: #{describe(item)} circles at a radius of #{metres(r)}: a #{airframe} flies it at about #{metres(flown)} (it turns no tighter)"}]
+
+      true ->
+        []
+    end
+  end
+
+  defp params(name, %{command: @speed} = item, _count, vehicle) do
+    speed = item.param2
+    module = Airframe.of(Map.get(vehicle, :airframe))
+    p = module.performance()
+
+    cond do
+      speed == -1.0 ->
+        []
+
+      speed <= 0 ->
+        [{:error, :speed, "#{name}: #{describe(item)} sets a speed of #{speed} m/s (a speed is positive)"}]
+
+      p.max_speed != nil and speed > p.max_speed ->
+        [{:error, :speed, "#{name}: #{describe(item)} sets #{speed} m/s, above #{module.firmware()}'s #{p.max_speed} m/s"}]
+
+      p.min_speed != nil and speed < p.min_speed ->
+        [{:error, :speed, "#{name}: #{describe(item)} sets #{speed} m/s, below #{module.firmware()}'s least airspeed of #{p.min_speed} m/s: it would stall"}]
+
+      true ->
+        []
     end
   end
 
@@ -220,12 +250,11 @@ defmodule Dolphin.Check.Mission do
 
     if is_number(pitch) and pitch >= @pitches.first and pitch <= @pitches.last,
       do: [],
-      else:
-        [
-          {:error, :take_off_pitch,
-           "#{name}: #{describe(item)} has a pitch of #{pitch_text(pitch)}°: a take-off's pitch is its angle of climb, #{@pitches.first}..#{@pitches.last}° " <>
-             "(the second argument of `take_off location, pitch`; its height is the location's)"}
-        ]
+      else: [
+        {:error, :take_off_pitch,
+         "#{name}: #{describe(item)} has a pitch of #{pitch_text(pitch)}°: a take-off's pitch is its angle of climb, #{@pitches.first}..#{@pitches.last}° " <>
+           "(the second argument of `take_off location, pitch`; its height is the location's)"}
+      ]
   end
 
   defp params(name, %{command: @jump} = item, count, _vehicle) do
@@ -244,20 +273,50 @@ defmodule Dolphin.Check.Mission do
 
   defp params(_name, _item, _count, _vehicle), do: []
 
+  # A survey's passes end in a half turn into the next one: a vehicle that
+  # cannot turn that tight (a plane: its turn radius at the speed it flies
+  # the survey, at its bank limit) overshoots every pass end and misses the
+  # ground between — the survey does not cover what it says.
+  defp turns(name, %M{commands: commands}, vehicle) do
+    airframe = Map.get(vehicle, :airframe)
+    module = Airframe.of(airframe)
+    p = module.performance()
+
+    {problems, _speed} =
+      Enum.reduce(commands, {[], p.cruise_speed}, fn
+        %{kind: :speed, args: args}, {acc, speed} ->
+          {acc, if(is_number(args[:speed]) and args[:speed] > 0 and args[:speed_type] in [0, 1], do: args[:speed] * 1.0, else: speed)}
+
+        %{kind: :survey_area, args: a} = command, {acc, speed} ->
+          passes = Survey.pass_count(a[:width], a[:spacing])
+          apart = a[:width] / passes
+          radius = module.turn_radius(p, speed)
+
+          if passes > 1 and apart < 2 * radius,
+            do: {[survey_turn(name, command, apart, radius, speed, airframe) | acc], speed},
+            else: {acc, speed}
+
+        _other, acc ->
+          acc
+      end)
+
+    Enum.reverse(problems)
+  end
+
+  defp survey_turn(name, command, apart, radius, speed, airframe) do
+    {:error, :turn_radius,
+     "#{name}: #{inspect(command)} puts its passes #{metres(apart)} apart, and a #{airframe} at #{Float.round(speed, 1)} m/s turns no tighter than a #{metres(radius)} radius: " <>
+       "it cannot turn from one pass into the next (they must be at least #{metres(2 * radius)} apart: a wider spacing, or a lower speed)"}
+  end
+
   # --- energy and time ---
 
   defp energy(name, estimate, items, vehicle) do
     start = vehicle.battery
     summary = "#{metres(estimate.length_m)}, #{minutes(estimate.time_s)}, #{percent(estimate.battery_used)} of a pack"
-
-    airframe = Map.get(vehicle, :airframe)
+    back = if Airframe.takes_off?(Map.get(vehicle, :airframe)), do: "once home", else: "back home"
 
     cond do
-      # The model below is ArduCopter's (and the simulator's copter): another
-      # airframe's energy and time are not judged by it.
-      airframe not in [nil, :copter] ->
-        [{:note, :energy_model, "#{name}: #{metres(estimate.length_m)} of path; its energy and time are not estimated: the check's model is a copter's, not a #{airframe}'s"}]
-
       start == nil ->
         [{:note, :energy, "#{name}: #{summary}; the vehicle's battery is not known"}]
 
@@ -269,7 +328,10 @@ defmodule Dolphin.Check.Mission do
 
       # (A mission that barely flies — going home, say — is what a low battery calls for.)
       estimate.battery_used > 0.01 and start - estimate.battery_used - estimate.home_used < @battery_low ->
-        [{:warning, :low_reserve, "#{name}: #{summary}, starting with #{percent(start)}: #{percent(max(start - estimate.battery_used - estimate.home_used, 0.0))} left once home (the low-battery level is #{percent(@battery_low)})"}]
+        [
+          {:warning, :low_reserve,
+           "#{name}: #{summary}, starting with #{percent(start)}: #{percent(max(start - estimate.battery_used - estimate.home_used, 0.0))} left #{back} (the low-battery level is #{percent(@battery_low)})"}
+        ]
 
       true ->
         []
@@ -286,21 +348,43 @@ defmodule Dolphin.Check.Mission do
 
   @doc false
   # Length, time and battery use of flying `items` from home (jumps followed,
-  # a jump for ever once), the item where a pack starting at the vehicle's
-  # battery would be empty, and what coming home from the last point costs.
+  # a jump for ever once) with the vehicle's airframe's model, the item where
+  # a pack starting at the vehicle's battery would be empty, what coming home
+  # from the last point costs, and what holding costs per second (past the
+  # end of a mission that does not end by itself).
   @spec estimate(String.t(), vehicle(), [struct()]) :: map()
   def estimate(name, vehicle, [home | _] = items) do
+    airframe = Map.get(vehicle, :airframe)
+    module = Airframe.of(airframe)
+    model = %{module: module, p: module.performance(), heights: module.heights()}
     home_loc = location(home, nil)
     # Where the vehicle is when the mission starts: where the last one left it, else at home.
-    start = %{at: Map.get(vehicle, :at) || home_loc, airborne?: vehicle.airborne?, speed: @cruise, length: 0.0, time: 0.0, used: 0.0, empty_at: nil, path: [], low_take_offs: []}
-    flown = Enum.reduce(flight_order(items), start, fn item, acc -> step(item, home_loc, acc, vehicle.battery) end)
-    {back_time, back_as, back_length} = if flown.airborne?, do: leg(flown.at, %{home_loc | h: flown.at.h}, flown.speed) |> land(flown.at.h, home_loc), else: {0.0, 0.0, 0.0}
-    back_used = fraction(back_as)
-    ending = M.ending(items)
+    # (A vehicle that does not take off is under way from the start.)
+    under_way? = vehicle.airborne? or not module.takes_off?()
+
+    start = %{
+      at: Map.get(vehicle, :at) || home_loc,
+      airborne?: under_way?,
+      speed: model.p.cruise_speed,
+      capacity: model.p.capacity_mah,
+      flies?: module.takes_off?(),
+      length: 0.0,
+      time: 0.0,
+      used: 0.0,
+      empty_at: nil,
+      path: [],
+      low_take_offs: []
+    }
+
+    flown = Enum.reduce(flight_order(items), start, fn item, acc -> step(item, home_loc, acc, vehicle.battery, model) end)
+    {back_time, back_as, back_length} = if flown.airborne?, do: land(model, flown.at, home_loc, flown.speed, false), else: {0.0, 0.0, 0.0}
+    back_used = fraction(model, back_as)
+    ending = M.ending(items, airframe)
 
     %{
       mission: name,
       vehicle: vehicle.id,
+      airframe: airframe,
       length_m: flown.length,
       time_s: flown.time,
       battery_used: flown.used,
@@ -310,10 +394,11 @@ defmodule Dolphin.Check.Mission do
       home_used: back_used,
       home_length_m: back_length,
       home_time_s: back_time,
+      hold_per_s: fraction(model, holding(model)),
       empty_at: flown.empty_at,
       start_at: start.at,
       path: Enum.reverse(flown.path),
-      low_take_offs: flown.low_take_offs |> Enum.reverse() |> Enum.uniq_by(fn {item, _, _} -> item.seq end),
+      low_take_offs: flown.low_take_offs |> Enum.reverse() |> Enum.uniq_by(fn {item, _, _, _} -> item.seq end),
       empty_home: vehicle.battery != nil and flown.empty_at == nil and flown.used + back_used > vehicle.battery
     }
   end
@@ -349,79 +434,101 @@ defmodule Dolphin.Check.Mission do
     end
   end
 
-  # From the ground ArduCopter climbs at least its least take-off; in the
-  # air a take-off to no more height is done at once.
-  defp step(%{command: @take_off} = item, home, acc, start) do
+  # From the ground it climbs at least its least take-off (ArduCopter), as
+  # its airframe climbs out; in the air a take-off to no more height is done at once.
+  defp step(%{command: @take_off} = item, home, acc, start, m) do
     target = location(item, home)
-    low? = not acc.airborne? and target.h - acc.at.h < @least_take_off
-    climb = if acc.airborne?, do: max(target.h - acc.at.h, 0.0), else: max(target.h - acc.at.h, @least_take_off)
-    acc = if low?, do: %{acc | low_take_offs: [{item, acc.at.h, target.h} | acc.low_take_offs]}, else: acc
-    # Spooling up and climbing straight up, at the climb's effort.
-    time = 3.0 + climb / @climb
-    add(%{acc | at: %{acc.at | h: acc.at.h + climb}, airborne?: true}, item, time, amps(0.0, @climb) * time, climb, start)
+    least = m.p.least_take_off
+    low? = not acc.airborne? and least > 0 and target.h - acc.at.h < least
+    climb = if acc.airborne?, do: max(target.h - acc.at.h, 0.0), else: max(target.h - acc.at.h, least)
+    acc = if low?, do: %{acc | low_take_offs: [{item, acc.at.h, target.h, least} | acc.low_take_offs]}, else: acc
+    {rate, ground_speed, lead_s} = m.module.climb_out(m.p, item.param1)
+    climbing = climb / rate
+    time = lead_s + climbing
+    amp_seconds = current(m, ground_speed, rate, true) * time
+    add(%{acc | at: %{acc.at | h: acc.at.h + climb}, airborne?: true}, item, time, amp_seconds, climb + ground_speed * climbing, start)
   end
 
-  defp step(%{command: c} = item, home, acc, start) when c in [@waypoint, @loiter_unlim, @loiter_turns, @loiter_time] do
-    target = location(item, home)
-    {time, mah, length} = leg(acc.at, target, acc.speed)
-    {extra_time, extra_mah, extra_length} = loiter(item)
-    add(%{acc | at: target}, item, time + extra_time, mah + extra_mah, length + extra_length, start)
+  defp step(%{command: c} = item, home, acc, start, m) when c in [@waypoint, @loiter_unlim, @loiter_turns, @loiter_time] do
+    target = at_height(m, location(item, home), acc.at)
+    {time, amp_seconds, length} = leg(m, acc.at, target, acc.speed)
+    {extra_time, extra_as, extra_length} = loiter(m, item)
+    add(%{acc | at: target}, item, time + extra_time, amp_seconds + extra_as, length + extra_length, start)
   end
 
-  defp step(%{command: c} = item, home, acc, start) when c in [@land, @rtl] do
+  defp step(%{command: c} = item, home, acc, start, m) when c in [@land, @rtl] do
     target = if c == @rtl or not positioned?(item), do: home, else: location(item, home)
-    {time, mah, length} = leg(acc.at, %{target | h: acc.at.h}, acc.speed) |> land(acc.at.h, home)
-    add(%{acc | at: %{target | h: home.h}, airborne?: false}, item, time, mah, length, start)
+    {time, amp_seconds, length} = land(m, acc.at, target_ground(m, target, home), acc.speed, true)
+    add(%{acc | at: target_ground(m, target, home), airborne?: not m.module.takes_off?()}, item, time, amp_seconds, length, start)
   end
 
-  defp step(%{command: @delay} = item, _home, acc, start) do
+  defp step(%{command: @delay} = item, _home, acc, start, m) do
     time = max(item.param1, 0.0)
-    add(acc, item, time, if(acc.airborne?, do: amps(0.0, 0.0) * time, else: 0.0), 0.0, start)
+    add(acc, item, time, if(acc.airborne?, do: holding(m) * time, else: 0.0), 0.0, start)
   end
 
-  defp step(%{command: @speed} = item, _home, acc, _start) when item.param2 > 0, do: %{acc | speed: item.param2}
-  defp step(_item, _home, acc, _start), do: acc
+  defp step(%{command: @speed} = item, _home, acc, _start, _m) when item.param2 > 0, do: %{acc | speed: item.param2}
+  defp step(_item, _home, acc, _start, _m), do: acc
 
-  defp loiter(%{command: @loiter_time, param1: seconds}), do: {seconds, amps(0.0, 0.0) * seconds, 0.0}
+  # A rover or boat drives at its own height, whatever the item says.
+  defp at_height(%{heights: :own}, target, at), do: %{target | h: at.h}
+  defp at_height(_m, target, _at), do: target
 
-  defp loiter(%{command: @loiter_turns, param1: turns, param3: radius}) do
-    length = 2 * :math.pi() * abs(radius) * turns
-    time = length / @circle_speed
-    {time, amps(@circle_speed, 0.0) * time, length}
+  # Where a landing ends: on the ground at home's height; a submarine at the surface.
+  defp target_ground(%{heights: :own}, target, home), do: %{target | h: home.h}
+  defp target_ground(_m, target, home), do: %{target | h: home.h}
+
+  # A loiter's time: held for its seconds, or its turns round the circle it flies.
+  defp loiter(m, %{command: @loiter_time, param1: seconds}), do: {seconds, holding(m) * seconds, m.p.hold_speed * seconds}
+
+  defp loiter(m, %{command: @loiter_turns, param1: turns, param3: radius}) do
+    length = 2 * :math.pi() * abs(m.module.flown_radius(m.p, radius)) * turns
+    time = length / m.p.circle_speed
+    {time, current(m, m.p.circle_speed, 0.0, true) * time, length}
   end
 
-  defp loiter(_item), do: {0.0, 0.0, 0.0}
+  defp loiter(_m, _item), do: {0.0, 0.0, 0.0}
 
   # A straight leg: across at the speed, up or down at the climb or descent
   # rate, both at once (the longer one sets the time).
-  defp leg(%Location{} = from, %Location{} = to, speed) do
+  defp leg(m, %Location{} = from, %Location{} = to, speed) do
     across = Geo.distance(from, to)
     dz = to.h - from.h
     t_across = across / speed
-    t_up = if dz > 0, do: dz / @climb, else: -dz / @descent
+    t_up = if dz > 0, do: dz / m.p.climb_speed, else: -dz / m.p.descent_speed
     time = max(t_across, t_up)
     v = if time > 0, do: across / time, else: 0.0
     vz = if time > 0 and dz > 0, do: dz / time, else: 0.0
-    {time, amps(v, vz) * time, :math.sqrt(across * across + dz * dz)}
+    {time, current(m, v, vz, true) * time, :math.sqrt(across * across + dz * dz)}
   end
 
-  # Then straight down to the ground at the descent rate, hovering.
-  defp land({time, mah, length}, from_h, %Location{h: ground}) do
-    down = max(from_h - ground, 0.0)
-    t = down / @descent
-    {time + t, mah + amps(0.0, 0.0) * t, length + down}
+  # A landing at `to` (on the ground): across at its height then straight
+  # down (or up: a submarine surfacing), holding — or down a glide slope,
+  # then the wait on the ground for its own disarm.
+  defp land(%{p: %{landing: :glide}} = m, from, to, speed, disarm?) do
+    {time, amp_seconds, length} = leg(m, from, to, speed)
+    {time + if(disarm?, do: m.p.landed_disarm_s, else: 0.0), amp_seconds, length}
   end
 
-  # Amp-seconds per second at a horizontal and climb speed (Battery.step/2).
-  defp amps(v, vz), do: @hover_current * (1.0 + 0.1 * v / 10 + 0.2 * max(vz, 0) / 2.5)
+  defp land(m, from, to, speed, _disarm?) do
+    {time, amp_seconds, length} = leg(m, from, %{to | h: from.h}, speed)
+    dz = to.h - from.h
+    t = if dz > 0, do: dz / m.p.climb_speed, else: -dz / m.p.descent_speed
+    {time + t, amp_seconds + holding(m) * t, length + abs(dz)}
+  end
+
+  defp current(m, v, vz, airborne?), do: m.module.current(m.p, v, vz, airborne?)
+
+  # Amperes while holding where it is (a plane circling).
+  defp holding(m), do: current(m, m.p.hold_speed, 0.0, true)
 
   # Amp-seconds as a fraction of the pack (mAh = A·s / 3.6).
-  defp fraction(amp_seconds), do: amp_seconds / 3.6 / @capacity_mah
+  defp fraction(m, amp_seconds), do: amp_seconds / 3.6 / m.p.capacity_mah
 
   defp add(acc, item, time, amp_seconds, length, start) do
-    used = acc.used + fraction(amp_seconds)
+    used = acc.used + amp_seconds / 3.6 / acc.capacity
     empty_at = if acc.empty_at == nil and start != nil and used > start, do: item.seq, else: acc.empty_at
-    %{acc | time: acc.time + time, used: used, length: acc.length + length, empty_at: empty_at, path: [{acc.time + time, acc.at, acc.airborne?, item.seq} | acc.path]}
+    %{acc | time: acc.time + time, used: used, length: acc.length + length, empty_at: empty_at, path: [{acc.time + time, acc.at, acc.airborne? and acc.flies?, item.seq} | acc.path]}
   end
 
   # --- items ---

@@ -27,7 +27,7 @@ defmodule Dolphin.Mission.Executor do
 
   @behaviour :gen_statem
 
-  alias Dolphin.{Clock, Mission, Events, Vehicles}
+  alias Dolphin.{Airframe, Clock, Mission, Events, Vehicles}
   alias Dolphin.Engine.Platform
   alias Dolphin.Mission.Executor.Flight
   alias Dolphin.Vehicles.Manoeuvres
@@ -143,12 +143,17 @@ defmodule Dolphin.Mission.Executor do
           data.items == nil ->
             with_items(data, st)
 
-          not Dolphin.Vehicles.State.booting?(st) -> look(data, st)
-          Clock.now_ms() >= data.boot_deadline -> fail(:hold, data, {:booting, if(st.system_status == 0, do: :uninit, else: :boot), div(@boot_timeout_ms, 1000)})
+          not Dolphin.Vehicles.State.booting?(st) ->
+            look(data, st)
+
+          Clock.now_ms() >= data.boot_deadline ->
+            fail(:hold, data, {:booting, if(st.system_status == 0, do: :uninit, else: :boot), div(@boot_timeout_ms, 1000)})
+
           # ArduCopter answers the mission protocol while it boots, before its
           # mission store is set up, refusing any upload with NO_SPACE: a
           # vehicle that reports MAV_STATE UNINIT or BOOT is looked at again.
-          true -> {:keep_state_and_data, [{:state_timeout, Clock.to_real_ms(@boot_poll_ms), :look}]}
+          true ->
+            {:keep_state_and_data, [{:state_timeout, Clock.to_real_ms(@boot_poll_ms), :look}]}
         end
 
       {:error, :unknown_vehicle} ->
@@ -312,13 +317,12 @@ defmodule Dolphin.Mission.Executor do
   # refuses the others: "Auto: Missing Takeoff Cmd"). One that only comes back
   # and lands is already done when the vehicle stands at its landing point.
   # (A rover, boat or submarine starts where it is.)
-  defp on_the_ground(%{airframe: airframe}, _st) when airframe in [:rover, :boat, :sub], do: :ok
-
   defp on_the_ground(data, st) do
     takes_off? = Enum.any?(data.items, &(&1.command == @takeoff))
     grounded? = not st.armed? and st.landed in [:on_ground, nil]
 
     cond do
+      not Airframe.takes_off?(data.airframe) -> :ok
       takes_off? or not grounded? -> :ok
       landing_here?(data, st) -> :already_there
       true -> {:error, :no_take_off}
@@ -392,10 +396,11 @@ defmodule Dolphin.Mission.Executor do
   # Armed on the ground (where a take-off that does not climb leaves it): a
   # timer from the first time it is seen so, cancelled once it is not. (A
   # rover, boat or submarine is never in the air: nothing to watch.)
-  defp watch_grounded(%{airframe: airframe} = data, _st) when airframe in [:rover, :boat, :sub], do: {data, []}
-
   defp watch_grounded(data, st) do
     cond do
+      not Airframe.takes_off?(data.airframe) ->
+        {data, []}
+
       not on_ground_armed?(st) and data.grounded != nil ->
         {%{data | grounded: nil}, [{{:timeout, :grounded}, :cancel}]}
 

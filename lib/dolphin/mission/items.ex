@@ -27,7 +27,10 @@ defmodule Dolphin.Mission.Items do
   ]
 
   # Command numbers from the dialect's MAV_CMD enum, at compile time.
-  @cmd Map.new(commands, fn name -> {:ok, n} = M.enum_value(:mav_cmd, name); {name, n} end)
+  @cmd Map.new(commands, fn name ->
+         {:ok, n} = M.enum_value(:mav_cmd, name)
+         {name, n}
+       end)
 
   {:ok, global_int} = M.enum_value(:mav_frame, :mav_frame_global_int)
   {:ok, mission_frame} = M.enum_value(:mav_frame, :mav_frame_mission)
@@ -56,7 +59,7 @@ defmodule Dolphin.Mission.Items do
     # Item 0 is home: ArduPilot accepts it and keeps its own.
     items = [nav(:mav_cmd_nav_waypoint, home, {0, 0, 0, 0}) | items] |> Enum.with_index() |> Enum.map(fn {item, seq} -> %{item | seq: seq} end)
     check_jumps!(mission, items)
-    if airframe == :sub, do: depths!(mission, items, home), else: items
+    if Dolphin.Airframe.heights(airframe) == :depth, do: depths!(mission, items, home), else: items
   end
 
   # Item 0 stays home as given (ArduPilot keeps its own); every other
@@ -69,7 +72,11 @@ defmodule Dolphin.Mission.Items do
             depth = item.z - home.h
 
             if depth > 0.5,
-              do: raise(ArgumentError, "mission #{inspect(mission.name)}: item #{item.seq} is #{Float.round(depth, 1)} m above the surface; a submarine's heights are depths, at most 0 (the surface, its home's height #{home.h} m)")
+              do:
+                raise(
+                  ArgumentError,
+                  "mission #{inspect(mission.name)}: item #{item.seq} is #{Float.round(depth, 1)} m above the surface; a submarine's heights are depths, at most 0 (the surface, its home's height #{home.h} m)"
+                )
 
             %{item | frame: @relative_int, z: min(depth, 0.0)}
 
@@ -241,11 +248,13 @@ defmodule Dolphin.Mission.Items do
   defp time(p, seconds, radius), do: nav(:mav_cmd_nav_loiter_time, p, {seconds, 0, radius, 0})
   defp land(p, yaw, mode), do: nav(:mav_cmd_nav_land, p, {0, mode, 0, yaw})
 
-  # A plane lands through a landing sequence that starts where it is marked.
-  defp landing(%{airframe: airframe}, p, yaw, mode) when airframe in [:plane, :quadplane],
-    do: [nav(:mav_cmd_do_land_start, p, {0, 0, 0, 0}), land(p, yaw, mode)]
-
-  defp landing(_state, p, yaw, mode), do: land(p, yaw, mode)
+  # A landing as the airframe makes one: a plane's starts its landing
+  # sequence where it is marked (DO_LAND_START, then NAV_LAND).
+  defp landing(%{airframe: airframe}, p, yaw, mode) do
+    for command <- Dolphin.Airframe.of(airframe).landing_commands() do
+      if command == :mav_cmd_nav_land, do: land(p, yaw, mode), else: nav(command, p, {0, 0, 0, 0})
+    end
+  end
 
   defp nav(name, %Location{} = p, params) do
     %{with_params(base(), params) | command: Map.fetch!(@cmd, name), frame: @global_int, x: e7(p.lat), y: e7(p.lon), z: p.h / 1}

@@ -31,42 +31,35 @@ defmodule Dolphin.Sim.Copter do
 
   @autopilot 1
 
-  @defaults %{
-    # :copter (ArduCopter), or ArduPlane's :plane, ArduRover's :rover and :boat, ArduSub's :sub
-    # (see airframe_defaults/1 and docs/simulator.md).
-    airframe: :copter,
-    camera: false,
-    cruise_speed: 10.0,
-    climb_speed: 2.5,
-    descent_speed: 1.5,
-    # Accelerations (m/s²) and CIRCLE_RATE (°/s) as ArduCopter flew the
-    # differential test's missions: its jerk-limited WPNAV_ACCEL of 2.5 m/s²
-    # averages about 1.5 on a leg; BRAKE decelerates hard (BRAKE_DECEL...).
-    accel: 1.5,
-    brake_accel: 8.0,
-    accel_z: 1.0,
-    circle_rate: 20.0,
-    wp_radius: 2.0,
-    rtl_alt: 15.0,
-    circle_speed: 5.0,
-    ekf_ready_ms: 15_000,
-    # How long the vehicle reports MAV_STATE BOOT (ArduCopter SITL: ~2 s);
-    # 0 for none.
-    boot_ms: 0,
-    disarm_delay_ms: 10_000,
-    capacity_mah: 3300.0,
-    hover_current: 30.0,
-    battery: 1.0,
-    charge_rate: 0.005,
-    charger: nil,
-    arm_min_battery: 0.2,
-    battery_low: 0.2,
-    battery_critical: 0.1,
-    battery_failsafe: :none,
-    gcs_failsafe: false,
-    gcs_sysid: 255,
-    request_int: false
-  }
+  # How it moves and what it draws: its airframe's figures (Dolphin.Airframe),
+  # the ones the pre-flight check estimates with.
+  @motion [:cruise_speed, :climb_speed, :descent_speed, :accel, :brake_accel, :accel_z, :circle_rate, :circle_speed, :wp_radius, :hover_current, :capacity_mah]
+
+  @defaults Map.merge(
+              %{
+                # :copter (ArduCopter), or ArduPlane's :plane, ArduRover's :rover and :boat, ArduSub's :sub
+                # (see airframe_defaults/1 and docs/simulator.md).
+                airframe: :copter,
+                camera: false,
+                rtl_alt: 15.0,
+                ekf_ready_ms: 15_000,
+                # How long the vehicle reports MAV_STATE BOOT (ArduCopter SITL: ~2 s);
+                # 0 for none.
+                boot_ms: 0,
+                disarm_delay_ms: 10_000,
+                battery: 1.0,
+                charge_rate: 0.005,
+                charger: nil,
+                arm_min_battery: 0.2,
+                battery_low: 0.2,
+                battery_critical: 0.1,
+                battery_failsafe: :none,
+                gcs_failsafe: false,
+                gcs_sysid: 255,
+                request_int: false
+              },
+              Map.take(Dolphin.Airframe.Copter.performance(), @motion)
+            )
 
   defstruct sysid: 1,
             uid: 1,
@@ -119,25 +112,9 @@ defmodule Dolphin.Sim.Copter do
   def defaults, do: @defaults
 
   @doc false
-  # What differs from a copter's settings, as ArduRover and ArduSub SITL flew
-  # (docs/ardupilot.md, "Other airframes"): a rover or boat drives at
-  # WP_SPEED 5 m/s, turns with an effective radius of about 5 m (its circle
-  # speed on a 10 m circle), draws ~12 A at cruise and nothing standing; a
-  # submarine moves at 1 m/s (WPNAV_SPEED 100), climbs and dives at ~1.3 m/s,
-  # draws ~8 A while armed (about 10 % of 3300 mAh in 2–3 minutes). The
-  # accelerations stand for how they slow down to a waypoint and round a
-  # corner: chosen so that the differential test's routes take the time
-  # ArduRover and ArduSub took (test/dolphin/sitl/airframes_test.exs).
-  def airframe_defaults(airframe) when airframe in [:rover, :boat],
-    do: %{cruise_speed: 5.0, accel: 0.6, brake_accel: 3.0, circle_speed: 5.0, circle_rate: 30.0, wp_radius: 3.0, hover_current: 12.4, ekf_ready_ms: 15_000}
-
-  # ArduPlane: AIRSPEED_CRUISE 22 m/s, WP_RADIUS 50 m, ~11.5 A in cruise.
-  def airframe_defaults(:plane), do: %{cruise_speed: 22.0, climb_speed: 6.0, descent_speed: 4.0, wp_radius: 50.0, hover_current: 11.5}
-
-  def airframe_defaults(:sub),
-    do: %{cruise_speed: 1.0, accel: 0.12, brake_accel: 1.0, climb_speed: 1.27, descent_speed: 1.27, accel_z: 0.15, circle_speed: 1.0, circle_rate: 30.0, wp_radius: 1.0, hover_current: 8.0}
-
-  def airframe_defaults(_copter), do: %{}
+  # What differs from a copter's settings: its airframe's figures
+  # (Dolphin.Airframe.Plane, .Ground, .Sub, each as its SITL flew).
+  def airframe_defaults(airframe), do: Map.take(Dolphin.Airframe.performance(airframe), @motion)
 
   @doc false
   # The HEARTBEAT's MAV_TYPE of each airframe.
@@ -150,7 +127,7 @@ defmodule Dolphin.Sim.Copter do
   @doc false
   # Whether it flies (takes off, lands, hovers): a copter; rovers, boats and
   # submarines move only armed, and have no land detector.
-  def flies?(%{config: %{airframe: airframe}}), do: airframe in [:copter, :plane]
+  def flies?(%{config: %{airframe: airframe}}), do: Dolphin.Airframe.takes_off?(airframe)
 
   @doc "A vehicle just booted at `origin` (`%{lat, lon, alt}`), on the ground, disarmed."
   @spec new(byte(), map(), map()) :: t()
@@ -244,8 +221,7 @@ defmodule Dolphin.Sim.Copter do
 
   @doc false
   # A rover, boat or submarine is "in the air" (under way) while armed.
-  def in_air?(%{config: %{airframe: airframe}} = c) when airframe in [:copter, :plane], do: c.landed in [:in_air, :landing, :takeoff] and c.alt > ground(c) + 0.05
-  def in_air?(c), do: c.armed
+  def in_air?(c), do: if(flies?(c), do: c.landed in [:in_air, :landing, :takeoff] and c.alt > ground(c) + 0.05, else: c.armed)
 
   @doc false
   # Altitude AMSL of a z given in a MAV_FRAME.

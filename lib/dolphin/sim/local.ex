@@ -61,7 +61,7 @@ defmodule Dolphin.Sim.Local do
     fleet
     |> Enum.reduce_while({:ok, [], first, homes}, fn {airframe, n}, {:ok, started, next, homes} ->
       {mine, rest} = Enum.split(homes, n)
-      mine = if airframe == :sub, do: Enum.map(mine, &%{&1 | alt: 0.0}), else: mine
+      mine = if Dolphin.Airframe.heights(airframe) == :depth, do: Enum.map(mine, &%{&1 | alt: 0.0}), else: mine
 
       case Dolphin.Sim.start(sim_opts ++ [count: n, first_sysid: next, homes: mine, charger: charger, airframe: airframe]) do
         {:ok, sysids} -> {:cont, {:ok, started ++ sysids, next + n, rest}}

@@ -213,9 +213,13 @@ defmodule Dolphin.Sim.Streams do
   end
 
   # ArduRover and ArduSub say nothing of a landed state (MAV_LANDED_STATE_UNDEFINED).
-  def message(%{config: %{airframe: airframe}}, 245) when airframe in [:rover, :boat, :sub], do: %M.ExtendedSysState{vtol_state: 0, landed_state: 0}
-
   def message(c, 245) do
+    if Dolphin.Sim.Copter.flies?(c), do: extended_sys_state(c), else: %M.ExtendedSysState{vtol_state: 0, landed_state: 0}
+  end
+
+  def message(_c, _other), do: nil
+
+  defp extended_sys_state(c) do
     landed =
       case c.landed do
         :on_ground -> 1
@@ -226,8 +230,6 @@ defmodule Dolphin.Sim.Streams do
 
     %M.ExtendedSysState{vtol_state: 0, landed_state: landed}
   end
-
-  def message(_c, _other), do: nil
 
   @doc "The autopilot's HEARTBEAT."
   def heartbeat(c) do
@@ -274,7 +276,7 @@ defmodule Dolphin.Sim.Streams do
   # Whole percent, rounded down as ArduPilot does: 29.9 % is reported as 29.
   defp remaining(c), do: trunc(c.battery * 100)
   defp ground_speed(c), do: :math.sqrt(c.vn * c.vn + c.ve * c.ve)
-  defp yaw(c), do: (if c.heading > 180, do: c.heading - 360, else: c.heading) * :math.pi() / 180
+  defp yaw(c), do: if(c.heading > 180, do: c.heading - 360, else: c.heading) * :math.pi() / 180
 
   # --- parameters -------------------------------------------------------------
 

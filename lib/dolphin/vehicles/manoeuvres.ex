@@ -107,10 +107,7 @@ defmodule Dolphin.Vehicles.Manoeuvres do
       [:loiter, :guided]
   """
   @spec hold_modes(atom() | nil) :: [atom()]
-  def hold_modes(airframe) when airframe in [:plane, :quadplane], do: [:loiter, :guided]
-  def hold_modes(airframe) when airframe in [:rover, :boat], do: [:loiter, :hold]
-  def hold_modes(:sub), do: [:poshold, :guided]
-  def hold_modes(_copter), do: [:brake, :guided]
+  def hold_modes(airframe), do: Dolphin.Airframe.of(airframe).hold_modes()
 
   # An accepted DO_SET_MODE means the mode has changed (ArduPilot acks after
   # the switch); the heartbeat shows it within a second.
@@ -201,7 +198,13 @@ defmodule Dolphin.Vehicles.Manoeuvres do
   defp guided_until(vehicle, deadline) do
     case command(vehicle, "switching to GUIDED", fn -> Vehicles.set_mode(vehicle, :guided) end) do
       {:error, %ManoeuvreError{refusal: %CommandError{result: result}}} = error when result in @not_ready ->
-        if Clock.now_ms() >= deadline, do: error, else: (Clock.sleep(@arm_retry_ms); guided_until(vehicle, deadline))
+        if Clock.now_ms() >= deadline,
+          do: error,
+          else:
+            (
+              Clock.sleep(@arm_retry_ms)
+              guided_until(vehicle, deadline)
+            )
 
       other ->
         other
@@ -243,7 +246,7 @@ defmodule Dolphin.Vehicles.Manoeuvres do
   refuses it, says so with what the autopilot said meanwhile; `action`
   names it in the error.
   """
-  @spec command(byte(), String.t(), (-> {:ok, term()} | {:error, CommandError.t()})) :: result()
+  @spec command(byte(), String.t(), (() -> {:ok, term()} | {:error, CommandError.t()})) :: result()
   def command(vehicle, action, send) do
     before = Vehicles.status_texts(vehicle)
 

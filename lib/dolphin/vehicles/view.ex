@@ -58,7 +58,7 @@ defmodule Dolphin.Vehicles.View do
             status_texts: []
 
   @type class :: :uav | :ugv | :usv | :uuv | :other
-  @type airframe :: :copter | :plane | :quadplane | :rover | :boat | :sub
+  @type airframe :: Dolphin.Airframe.t()
   @type t :: %__MODULE__{
           id: Dolphin.Vehicles.Id.t(),
           network: String.t() | nil,
@@ -107,11 +107,10 @@ defmodule Dolphin.Vehicles.View do
   # surface boat, submarine.
   @copter [2, 3, 4, 13, 14, 15, 29, 35, 43]
   @quadplane [19, 20, 21, 22, 23, 24, 25]
-  @airframes [:copter, :plane, :quadplane, :rover, :boat, :sub]
 
-  @doc "The airframes, as `pick(airframe: ...)` names them."
+  @doc "The airframes, as `pick(airframe: ...)` names them (`Dolphin.Airframe.all/0`)."
   @spec airframes() :: [airframe()]
-  def airframes, do: @airframes
+  defdelegate airframes, to: Dolphin.Airframe, as: :all
 
   @doc """
   The airframe of a vehicle whose HEARTBEAT says MAV_TYPE `mav_type` and

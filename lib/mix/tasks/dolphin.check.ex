@@ -47,6 +47,8 @@ defmodule Mix.Tasks.Dolphin.Check do
       (default 12000; more than 0)
     * `--max-height M` — no mission item higher than M metres above home
       (default 500; more than 0)
+    * `--max-depth M` — no submarine's item deeper than M metres below the
+      surface (default 100; more than 0)
     * `--json` — the report as one JSON object (`file`, `ok`, `findings`:
       `severity`, `kind`, `file`, `line`, `message`; `missions`: `mission`,
       `vehicle`, `line`, `length_m`, `time_s`, `battery_used`,
@@ -68,8 +70,8 @@ defmodule Mix.Tasks.Dolphin.Check do
 
   alias Dolphin.CLI.Values
 
-  @options [sim: :vehicles, fleet: :string, connect: {:keep, :endpoint}, wait: :wait, max_distance: :metres, max_height: :metres, json: :boolean]
-  @usage "usage: mix dolphin.check SCRIPT [--sim N | --fleet FILE | --connect ENDPOINT... [--wait SECONDS]] [--max-distance M] [--max-height M] [--json]"
+  @options [sim: :vehicles, fleet: :string, connect: {:keep, :endpoint}, wait: :wait, max_distance: :metres, max_height: :metres, max_depth: :metres, json: :boolean]
+  @usage "usage: mix dolphin.check SCRIPT [--sim N | --fleet FILE | --connect ENDPOINT... [--wait SECONDS]] [--max-distance M] [--max-height M] [--max-depth M] [--json]"
 
   @impl Mix.Task
   def run(argv) do
@@ -150,7 +152,7 @@ defmodule Mix.Tasks.Dolphin.Check do
   end
 
   defp fleet(opts) do
-    limits = Keyword.take(opts, [:max_distance, :max_height])
+    limits = Keyword.take(opts, [:max_distance, :max_height, :max_depth])
 
     case opts[:fleet] do
       nil ->

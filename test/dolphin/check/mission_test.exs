@@ -64,7 +64,9 @@ defmodule Dolphin.Check.MissionTest do
   end
 
   test "a position off the Earth is an error" do
-    m = Mission.new("Off", [C.home(@home), C.take_off(@up), C.item(:mav_cmd_nav_waypoint, frame: 5, x: 950_000_000, y: -70_000_000, z: 130), C.item(:mav_cmd_nav_waypoint, frame: 6, x: 0, y: 0, z: 30)])
+    m =
+      Mission.new("Off", [C.home(@home), C.take_off(@up), C.item(:mav_cmd_nav_waypoint, frame: 5, x: 950_000_000, y: -70_000_000, z: 130), C.item(:mav_cmd_nav_waypoint, frame: 6, x: 0, y: 0, z: 30)])
+
     assert {problems, _, _} = Check.check(m, vehicle(1.0), %{max_distance: 1.0e9, max_height: 1.0e9})
     assert Enum.any?(problems, &match?({:error, :position, "mission \"Off\" on vehicle 7: item 2 (NAV_WAYPOINT) is not on Earth" <> _}, &1))
     assert Enum.any?(problems, &match?({:warning, :position, "mission \"Off\" on vehicle 7: item 3 (NAV_WAYPOINT) is at latitude 0, longitude 0" <> _}, &1))
@@ -116,6 +118,74 @@ defmodule Dolphin.Check.MissionTest do
       for pitch <- [0, 15, 90] do
         assert {[], [], _} = Check.check(Mission.new("Pitch", [C.home(@home), C.take_off_with_yaw(@up, pitch, 90)]), vehicle(1.0), @limits)
       end
+    end
+  end
+
+  describe "each airframe" do
+    defp on(airframe, battery \\ 1.0), do: vehicle(battery, airframe: airframe)
+
+    defp plane_survey(commands), do: Mission.new("Strip", [C.home(@home), C.take_off(%{@home | h: @home.h + 80}, 12)] ++ commands ++ [C.landing_point(@home)])
+
+    test "a plane's survey whose passes are closer than it can turn is an error; slower, it turns tighter" do
+      # At 22 m/s and 45° of bank a plane turns on a 49 m radius: passes 50 m apart are too close.
+      assert {problems, _, _} = Check.check(plane_survey([C.survey_area(1000, 400, 50)]), on(:plane), @limits)
+      assert [{:error, :turn_radius, message}] = for(p <- problems, elem(p, 0) == :error, do: p)
+      assert message =~ ~s|mission "Strip" on vehicle 7: survey_area(1000, 400, 50, :north_west) puts its passes 50 m apart, and a plane at 22.0 m/s turns no tighter than a 49 m radius|
+      assert message =~ "they must be at least 99 m apart"
+
+      assert {problems, _, _} = Check.check(plane_survey([C.survey_area(1000, 400, 100)]), on(:plane), @limits)
+      refute Enum.any?(problems, &match?({_, :turn_radius, _}, &1))
+      # At 15 m/s the radius is 23 m.
+      assert {problems, _, _} = Check.check(plane_survey([C.speed(15), C.survey_area(1000, 400, 50)]), on(:plane), @limits)
+      refute Enum.any?(problems, &match?({_, :turn_radius, _}, &1))
+      # A copter turns on the spot.
+      copter = Mission.new("Strip", [C.home(@home), C.take_off(@up), C.survey_area(1000, 400, 20), C.return_home_and_land()])
+      assert {[], _, _} = Check.check(copter, on(:copter), @limits)
+    end
+
+    test "a plane's speed below its stall speed or above its most is an error; a loiter tighter than it turns is flown wider, said as a warning" do
+      assert {[{:error, :speed, slow}], _, _} = Check.check(plane_survey([C.speed(8), C.move(1000, 0, 0)]), on(:plane), @limits)
+      assert slow =~ "sets 8.0 m/s, below ArduPlane's least airspeed of 10.0 m/s: it would stall"
+      assert {[{:error, :speed, fast}], _, _} = Check.check(plane_survey([C.speed(35), C.move(1000, 0, 0)]), on(:plane), @limits)
+      assert fast =~ "above ArduPlane's 30.0 m/s"
+      # 8 m/s is a copter's business.
+      assert {[], _, _} = Check.check(Mission.new("Slow", [C.home(@home), C.take_off(@up), C.speed(8), C.move(100, 0, 0)]), on(:copter), @limits)
+
+      assert {[{:warning, :loiter_radius, wide}], _, _} = Check.check(plane_survey([C.move_and_loiter_turns(500, 0, 0, 2, 20)]), on(:plane), @limits)
+      assert wide =~ "circles at a radius of 20 m: a plane flies it at about 60 m"
+    end
+
+    test "a submarine deeper than the limit is an error; the limit is the check's option" do
+      dive = Mission.new("Dive", [C.home(%{@home | h: 0.0}), C.move(0, 0, -120), C.move(50, 0, 0), C.landing_point(Dolphin.Geo.location(40.0005, -7.0, 0))])
+      assert {problems, _, _} = Check.check(dive, on(:sub), @limits)
+      assert [{:error, :too_deep, message}, {:error, :too_deep, _}] = problems
+      assert message =~ "item 1 (NAV_WAYPOINT) is 120 m deep (limit 100 m)"
+      assert {[], _, _} = Check.check(dive, on(:sub), Map.put(@limits, :max_depth, 150))
+    end
+
+    test "energy and time are each airframe's: a rover draws nothing standing, a submarine the same all along, a plane circles while it holds" do
+      drive = Mission.new("Drive", [C.home(@home), C.move(1000, 0, 0), C.move_and_loiter_time(0, 0, 0, 60, 0)])
+      assert {[], [], rover} = Check.check(drive, on(:rover), @limits)
+      # 200 s at 5 m/s and 12.4 A, then 60 s standing.
+      assert_in_delta rover.time_s, 260, 0.5
+      assert_in_delta rover.battery_used, 12.4 * 200 / 3.6 / 3300, 0.0005
+      assert rover.hold_per_s == 0.0
+
+      # At 1 m/s and 8 A all along a submarine goes not half as far: 1 km out is too far to come back.
+      assert {[], [{:error, :energy, far}], _} = Check.check(drive, on(:sub), @limits)
+      assert far =~ "it cannot come home"
+      swim = Mission.new("Swim", [C.home(@home), C.move(300, 0, 0), C.move_and_loiter_time(0, 0, 0, 60, 0)])
+      assert {[], [], sub} = Check.check(swim, on(:sub), @limits)
+      assert_in_delta sub.time_s, 360, 0.5
+      assert_in_delta sub.battery_used, 8.0 * 360 / 3.6 / 3300, 0.0005
+
+      endless = Mission.new("Circle", [C.home(@home), C.take_off(%{@home | h: @home.h + 80}, 12), C.move_and_loiter_pos(1000, 0, 0)])
+      assert {[{:note, :endless, _}], [], plane} = Check.check(endless, on(:plane), @limits)
+      assert_in_delta plane.hold_per_s, 11.5 / 3.6 / 3300, 1.0e-9
+      assert {[{:note, :endless, _}], [], copter} = Check.check(endless, on(:copter), @limits)
+      assert_in_delta copter.hold_per_s, 30 / 3.6 / 3300, 1.0e-9
+      # No note that the model is not the airframe's: every airframe has its own.
+      refute Enum.any?(elem(Check.check(drive, on(:boat), @limits), 1), &match?({:note, :energy_model, _}, &1))
     end
   end
 end

@@ -6,8 +6,9 @@ defmodule Dolphin.Sim.CopterTest do
   alias Dolphin.MAVLink.Ardupilotmega, as: M
   alias Dolphin.Sim.Copter
 
+  import Dolphin.Test.SimModel
+
   @home %{lat: 40.444233, lon: -7.375234, alt: 820.0}
-  @gcs {255, 190}
   @step 50
 
   # --- driving the model -------------------------------------------------------
@@ -25,43 +26,23 @@ defmodule Dolphin.Sim.CopterTest do
   # Steps until `fun.(c)` holds (at most `max_ms`).
   defp run_until(c, fun, max_ms, said \\ []) do
     cond do
-      fun.(c) -> {c, said}
-      max_ms <= 0 -> flunk("not reached in time: mode #{c.mode}, armed #{c.armed}, landed #{c.landed}, alt #{c.alt}, nav #{inspect(c.nav)}")
-      true -> {c, said} = run(c, @step, said); run_until(c, fun, max_ms - @step, said)
+      fun.(c) ->
+        {c, said}
+
+      max_ms <= 0 ->
+        flunk("not reached in time: mode #{c.mode}, armed #{c.armed}, landed #{c.landed}, alt #{c.alt}, nav #{inspect(c.nav)}")
+
+      true ->
+        {c, said} = run(c, @step, said)
+        run_until(c, fun, max_ms - @step, said)
     end
   end
 
-  defp tell(c, message) do
-    {out, c} = c |> Copter.handle(message, @gcs) |> Copter.flush()
-    {c, Enum.map(out, fn {_compid, m} -> m end)}
-  end
-
-  defp command(c, command, params) do
-    [p1, p2, p3, p4, p5, p6, p7] = params ++ List.duplicate(0.0, 7 - length(params))
-    cmd = %M.CommandLong{target_system: 1, target_component: 1, command: command, param1: p1 * 1.0, param2: p2 * 1.0, param3: p3 * 1.0, param4: p4 * 1.0, param5: p5 * 1.0, param6: p6 * 1.0, param7: p7 * 1.0}
-    {c, out} = tell(c, cmd)
-    [ack] = for %M.CommandAck{command: ^command} = a <- out, do: a
-    {c, ack.result, texts(out)}
-  end
-
-  defp texts(messages), do: for(%M.Statustext{text: t} <- messages, do: t) ++ for({_, _, %M.Statustext{text: t}} <- messages, do: t)
   defp messages(said, module), do: for({t, _, %^module{} = m} <- said, do: {t, m})
 
   defp item(seq, command, {lat, lon, alt}, params \\ %{}) do
     fields = Map.merge(%{seq: seq, command: command, frame: 6, x: round(lat * 1.0e7), y: round(lon * 1.0e7), z: alt * 1.0, autocontinue: 1, target_system: 1, target_component: 1}, params)
     struct(M.MissionItemInt, fields)
-  end
-
-  # Uploads `items` (item 0 included) the way a ground station does.
-  defp upload(c, items) do
-    {c, out} = tell(c, %M.MissionCount{target_system: 1, target_component: 1, count: length(items), mission_type: 0})
-    assert [%M.MissionRequest{seq: 0}] = out
-
-    Enum.reduce(items, c, fn item, c ->
-      {c, out} = tell(c, item)
-      if item.seq == length(items) - 1, do: assert(Enum.any?(out, &match?(%M.MissionAck{type: 0}, &1))), else: assert([%M.MissionRequest{}] = out)
-      c
-    end)
   end
 
   defp ready(config \\ %{}) do

@@ -29,16 +29,8 @@ defmodule Dolphin.SITL.AirframesTest do
     :ok
   end
 
-  # Starts one vehicle of `airframe`, picked by this test, and checks that
-  # its heartbeat says {type, airframe, MAV_TYPE} `kind`; its id, its home,
-  # and a function giving the items it reported reached so far.
-  defp start(airframe, kind) do
-    {:ok, fleet} = SITL.start([{airframe, 1}])
-    on_exit(fn -> SITL.stop(fleet) end)
-    vehicle(fleet, kind)
-  end
-
-  # `fun` given the vehicle (as start/2 gives it, and a recorder of its
+  # `fun` given the vehicle (its id, its home, a function giving the items
+  # it reported reached so far, and a recorder of its
   # frames stamped with its own clock) on `backend`, the built-in simulator or
   # SITL, which is stopped after.
   defp on_backend(backend, airframe, kind, fun) do
@@ -227,6 +219,68 @@ defmodule Dolphin.SITL.AirframesTest do
         end
 
       alike(sim, sitl, "the sub's dive")
+    end
+  end
+
+  if Enum.all?([:plane, :rover, :sub], &SITL.available?/1) do
+    # The killed instances' exits are logged: expected here.
+    @tag :capture_log
+    test "a plane, a rover and a submarine killed mid-mission: each is lost within its connection timeout, its task fails with the loss, the others fly on" do
+      {:ok, fleet} = SITL.start(plane: 1, rover: 1, sub: 1)
+      on_exit(fn -> SITL.stop(fleet) end)
+      test = self()
+
+      for id <- fleet.sysids, do: Wait.until(fn -> match?({:ok, %{home: %Location{}, position: %Location{}}}, Vehicles.view(id)) end, 3_000)
+
+      by_airframe =
+        Map.new(fleet.sysids, fn id ->
+          {:ok, view} = Vehicles.view(id)
+          {view.airframe, {id, view.home}}
+        end)
+
+      long = %{
+        plane: fn home -> [C.take_off(Location.at_height(home, home.h + 60), 15), C.move_and_loiter_time(800, 0, 0, 600, 0)] end,
+        rover: fn _home -> [C.move(3000, 0, 0)] end,
+        sub: fn _home -> [C.move(600, 0, -5)] end
+      }
+
+      runs =
+        for {airframe, {id, home}} <- by_airframe do
+          {:ok, _} = Dolphin.Fleet.pick(Dolphin.Fleet, self(), id: id)
+          Vehicles.set_timeout(id, 5_000)
+          mission = Mission.new("Long #{airframe}", [C.home(home) | long[airframe].(home)])
+          {:ok, run} = Engine.start(Engine.watch(Engine.on(mission, [id]), on_error: fn failure -> send(test, {:handled, failure}) end))
+          {airframe, id, home, run}
+        end
+
+      # Each under way: the plane climbing out, the rover and the sub 10 m from home.
+      for {airframe, id, home, _run} <- runs do
+        under_way? = fn
+          {:ok, %{armed?: true, relative_altitude: alt}} when airframe == :plane and alt > 15 -> true
+          {:ok, %{armed?: true, position: %Location{} = at}} when airframe != :plane -> distance(at, home) > 10
+          _ -> false
+        end
+
+        Wait.until(fn -> under_way?.(Vehicles.view(id)) end, 6_000, fn -> "#{airframe}: #{inspect(Vehicles.view(id))}" end)
+      end
+
+      Vehicles.subscribe(:all)
+
+      for {{airframe, id, _home, run}, n} <- Enum.with_index(runs) do
+        lost_from = Dolphin.Clock.now_ms()
+        :ok = SITL.crash(fleet, id)
+        assert_receive {:dolphin, :vehicles, {:vehicle_lost, ^id}}, Dolphin.Clock.to_real_ms(30_000) + 2_000
+        assert Dolphin.Clock.now_ms() - lost_from < 25_000, "#{airframe}"
+        assert_receive {:handled, %Dolphin.Engine.Failure{vehicle: ^id, reason: {:vehicle_lost, ^id}}}, 10_000
+        assert {:ok, :done} = Engine.await(run, 30_000)
+
+        # The ones not killed yet are still heard, their missions on.
+        for {other, other_id, _, other_run} <- Enum.drop(runs, n + 1) do
+          refute_received {:dolphin, :vehicles, {:vehicle_lost, ^other_id}}, "#{other} lost with the #{airframe}"
+          refute_received {Dolphin.Engine, ^other_run, _}, "#{other}'s task ended with the #{airframe}"
+          assert {:ok, %{armed?: true}} = Vehicles.view(other_id)
+        end
+      end
     end
   end
 

@@ -100,6 +100,23 @@ defmodule Mix.Tasks.Dolphin.CheckTest do
       assert out =~ "5 error(s)"
     end
 
+    test "each airframe's limits: a plane's survey it cannot turn into, a submarine deeper than --max-depth" do
+      args = ["dolphin.check", Path.join(@dir, "airframe_limits.exs"), "--fleet", Path.join(@dir, "airframe_limits.json")]
+      {status, out} = run_mix(args)
+      assert status == 1, out
+
+      assert out =~
+               ~s<airframe_limits.exs:23: error: mission "Strip" on vehicle 41: survey_area(1500, 600, 60, :north_east) puts its passes 60 m apart, and a plane at 22.0 m/s turns no tighter than a 49 m radius>
+
+      assert out =~ ~s<airframe_limits.exs:23: error: mission "Trench" on vehicle 42: item 1 (NAV_WAYPOINT) is 150 m deep (limit 100 m)>
+      assert out =~ "2 error(s)"
+
+      {status, out} = run_mix(args ++ ["--max-depth", "200"])
+      assert status == 1, out
+      refute out =~ "deep"
+      assert out =~ "1 error(s)"
+    end
+
     test "a loop in which nothing waits is an error with the loop's line" do
       {status, out} = run_mix(["dolphin.check", Path.join(@dir, "busy_loop.exs"), "--sim", "1"])
       assert status == 1, out

@@ -16,19 +16,9 @@ defmodule Dolphin.Sim.Copter.Battery do
   def step(c, dt) do
     if c.armed do
       speed = :math.sqrt(c.vn * c.vn + c.ve * c.ve)
-
-      effort =
-        case c.config.airframe do
-          # ArduRover draws in proportion to its speed, nothing standing.
-          ground when ground in [:rover, :boat] -> speed / c.config.cruise_speed
-          # ArduSub's thrusters hold it whatever it does.
-          :sub -> 1.0
-          # ArduPlane: ~11.5 A in cruise, ~41 A climbing out, nothing on the ground.
-          :plane -> if in_air?(c), do: (speed / c.config.cruise_speed) ** 2 + 2.5 * max(c.vz, 0) / c.config.climb_speed, else: 0.0
-          :copter -> if in_air?(c), do: 1.0 + 0.1 * speed / 10 + 0.2 * max(c.vz, 0) / 2.5, else: 0.15
-        end
-
-      amps = c.config.hover_current * effort
+      # Its airframe's energy model (the pre-flight check's), at this vehicle's settings.
+      airframe = Dolphin.Airframe.of(c.config.airframe)
+      amps = airframe.current(c.config, speed, c.vz, in_air?(c))
       used = amps * dt / 3.6
       remaining = max(c.battery - used / c.config.capacity_mah, 0.0)
       levels(%{c | battery: remaining, consumed_mah: c.consumed_mah + used, current_a: amps})
@@ -38,7 +28,14 @@ defmodule Dolphin.Sim.Copter.Battery do
       if at_home?(c) and c.config.charge_rate > 0 and c.battery < 1.0 do
         battery = min(c.battery + c.config.charge_rate * dt, 1.0)
         blocked = c.arm_blocked and battery < c.config.battery_low
-        %{c | battery: battery, consumed_mah: max(c.consumed_mah - c.config.charge_rate * dt * c.config.capacity_mah, 0.0), arm_blocked: blocked, battery_warned: if(battery >= c.config.battery_low, do: nil, else: c.battery_warned)}
+
+        %{
+          c
+          | battery: battery,
+            consumed_mah: max(c.consumed_mah - c.config.charge_rate * dt * c.config.capacity_mah, 0.0),
+            arm_blocked: blocked,
+            battery_warned: if(battery >= c.config.battery_low, do: nil, else: c.battery_warned)
+        }
       else
         c
       end

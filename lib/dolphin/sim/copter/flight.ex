@@ -51,9 +51,7 @@ defmodule Dolphin.Sim.Copter.Flight do
   # A plane flies as a plane (Dolphin.Sim.Copter.Plane).
   def fly(%{config: %{airframe: :plane}} = c, dt), do: Dolphin.Sim.Copter.Plane.fly(c, dt)
 
-  # Disarmed, a rover, boat or submarine stops where it is.
-  def fly(%{armed: false, config: %{airframe: airframe}} = c, _dt) when airframe in [:rover, :boat, :sub], do: %{c | vn: 0.0, ve: 0.0, vz: 0.0}
-
+  # Disarmed, a copter in the air falls; a rover, boat or submarine (never "in the air" disarmed) stops where it is.
   def fly(%{armed: false} = c, dt) do
     if in_air?(c), do: %{c | vn: 0.0, ve: 0.0, vz: -8.0, alt: max(c.alt - 8.0 * dt, ground(c))}, else: %{c | vn: 0.0, ve: 0.0, vz: 0.0}
   end

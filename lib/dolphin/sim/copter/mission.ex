@@ -13,10 +13,27 @@ defmodule Dolphin.Sim.Copter.Mission do
 
   # Mission item names as ArduPilot announces them ("Mission: 2 WP").
   @item_names %{
-    16 => "WP", 17 => "LoitUnlim", 18 => "LoitTurns", 19 => "LoitTime", 20 => "RTL", 21 => "Land",
-    22 => "Takeoff", 93 => "Delay", 112 => "CondDelay", 113 => "CondChangeAlt", 114 => "CondDist",
-    115 => "CondYaw", 177 => "Jump", 178 => "ChangeSpeed", 179 => "SetHome", 186 => "ChangeAlt",
-    189 => "LandStart", 203 => "DigiCamCtrl", 206 => "SetCamTrigDst", 2000 => "ImageStartCapture", 2001 => "ImageStopCapture"
+    16 => "WP",
+    17 => "LoitUnlim",
+    18 => "LoitTurns",
+    19 => "LoitTime",
+    20 => "RTL",
+    21 => "Land",
+    22 => "Takeoff",
+    93 => "Delay",
+    112 => "CondDelay",
+    113 => "CondChangeAlt",
+    114 => "CondDist",
+    115 => "CondYaw",
+    177 => "Jump",
+    178 => "ChangeSpeed",
+    179 => "SetHome",
+    186 => "ChangeAlt",
+    189 => "LandStart",
+    203 => "DigiCamCtrl",
+    206 => "SetCamTrigDst",
+    2000 => "ImageStartCapture",
+    2001 => "ImageStopCapture"
   }
 
   # Items that complete at once (DO commands, jumps) are run in a row; a loop
@@ -34,7 +51,7 @@ defmodule Dolphin.Sim.Copter.Mission do
     {new, old} = Enum.split(out, length(out) - before)
     last = fn module -> Enum.find(new, &match?({_, %^module{}}, &1)) end
     keep = [last.(M.MissionItemReached), last.(M.MissionCurrent)]
-    new = Enum.filter(new, fn {_, m} = msg -> not is_struct(m, M.MissionItemReached) and not is_struct(m, M.MissionCurrent) or msg in keep end)
+    new = Enum.filter(new, fn {_, m} = msg -> (not is_struct(m, M.MissionItemReached) and not is_struct(m, M.MissionCurrent)) or msg in keep end)
     %{c | out: new ++ old}
   end
 
@@ -141,7 +158,7 @@ defmodule Dolphin.Sim.Copter.Mission do
     alt =
       cond do
         # A rover or boat drives at its own height, whatever the item says.
-        c.config.airframe in [:rover, :boat] -> c.alt
+        Dolphin.Airframe.heights(c.config.airframe) == :own -> c.alt
         item.z == 0 and item.frame in [3, 6, 10, 11] -> c.alt
         true -> target_alt(c, item.frame, item.z)
       end

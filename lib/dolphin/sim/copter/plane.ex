@@ -21,13 +21,11 @@ defmodule Dolphin.Sim.Copter.Plane do
   alias Dolphin.Sim.Copter
   alias Dolphin.Sim.Copter.Flight
 
+  alias Dolphin.Airframe.Plane, as: Airframe
+
   @g 9.81
-  @bank_deg 45.0
-  # WP_LOITER_RAD 80, flown at about 1.2 times its radius (97–98 m).
-  @loiter_radius 80.0
-  @flown_radius_factor 1.2
-  # Not tighter than this at cruise speed (LOITER_TURNS of 40 m flew 62–74 m).
-  @least_radius 60.0
+  # LOITER, GUIDED and RTL circle at WP_LOITER_RAD (80 m), pulled out a little wider.
+  @hold_radius 80.0
   # RTL_ALTITUDE (m above home).
   @rtl_alt 100.0
   # From touchdown to ArduPlane's auto-disarm: the land detector's ~9 s, then LAND_DISARMDELAY 20 s.
@@ -36,11 +34,7 @@ defmodule Dolphin.Sim.Copter.Plane do
 
   @doc false
   # The radius a loiter of `radius` (0: WP_LOITER_RAD) is flown at, its sign the direction.
-  def flown_radius(radius) do
-    r = if abs(radius) < 1, do: @loiter_radius, else: abs(radius)
-    sign = if radius < 0, do: -1, else: 1
-    sign * max(r * @flown_radius_factor, @least_radius)
-  end
+  def flown_radius(radius), do: Airframe.flown_radius(Airframe.performance(), radius)
 
   @doc false
   # The take-off: along its heading, climbing to `alt`.
@@ -88,7 +82,7 @@ defmodule Dolphin.Sim.Copter.Plane do
     case c.nav do
       {:climb, n, e, alt} -> {c, {bearing(c, n, e), alt}}
       {:goto, n, e, alt} -> {c, {bearing(c, n, e), alt}}
-      {:hold, n, e, alt} -> {c, {circle_bearing(c, n, e, flown_radius(@loiter_radius / @flown_radius_factor)), alt}}
+      {:hold, n, e, alt} -> {c, {circle_bearing(c, n, e, @hold_radius), alt}}
       {:brake} -> {%{c | nav: {:hold, c.n, c.e, c.alt}}, {c.heading, c.alt}}
       {:descend} -> {%{c | nav: {:hold, c.n, c.e, c.alt}}, {c.heading, c.alt}}
       {:circle, n, e, alt, radius, turned, last} -> circle(c, n, e, alt, radius, turned, last)
@@ -102,7 +96,7 @@ defmodule Dolphin.Sim.Copter.Plane do
   defp rtl(c) do
     {hn, he} = home_ne(c)
     alt = home_alt(c) + @rtl_alt
-    {%{c | nav: {:circle, hn, he, alt, flown_radius(@loiter_radius / @flown_radius_factor), 0.0, nil}}, {bearing(c, hn, he), alt}}
+    {%{c | nav: {:circle, hn, he, alt, @hold_radius, 0.0, nil}}, {bearing(c, hn, he), alt}}
   end
 
   # Down the slope from where it is to the point, at the ground there.
@@ -147,7 +141,7 @@ defmodule Dolphin.Sim.Copter.Plane do
 
   # No faster than the bank limit: ω = g tan(bank) / v.
   defp turn(heading, bearing, speed, dt) do
-    max_deg = @g * :math.tan(@bank_deg * @pi / 180) / max(speed, 5.0) * 180 / @pi * dt
+    max_deg = @g * :math.tan(Airframe.bank_deg() * @pi / 180) / max(speed, 5.0) * 180 / @pi * dt
     diff = norm(bearing - heading + 180.0) - 180.0
     norm(heading + max(-max_deg, min(max_deg, diff)))
   end
@@ -156,8 +150,7 @@ defmodule Dolphin.Sim.Copter.Plane do
   defp climb_rate(c, alt, speed) do
     dz = alt - c.alt
     pitch = if c.item && c.item[:item], do: c.item.item.param1, else: 15.0
-    pitch = if c.landed == :takeoff and is_number(pitch) and pitch > 0, do: pitch, else: 15.0
-    up = speed * :math.sin(pitch * @pi / 180)
+    up = Airframe.climb_rate(if(c.landed == :takeoff, do: pitch), speed)
     if dz > 0, do: min(dz, up), else: max(dz, -4.0)
   end
 
@@ -181,5 +174,4 @@ defmodule Dolphin.Sim.Copter.Plane do
         c
     end
   end
-
 end
