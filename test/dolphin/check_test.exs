@@ -156,7 +156,7 @@ defmodule Dolphin.CheckTest do
     assert message =~ "after an `ask` the dry run could not answer"
   end
 
-  test "the JSON form names each finding" , %{fleet: fleet} do
+  test "the JSON form names each finding", %{fleet: fleet} do
     map = "bad_mission.exs" |> check(fleet) |> Check.to_map()
     json = :jiffy.decode(:jiffy.encode(map), [:return_maps])
     assert json["ok"] == false
@@ -166,9 +166,15 @@ defmodule Dolphin.CheckTest do
   describe "fleet files" do
     test "bad ones say what is wrong and where" do
       assert {:error, %FleetFileError{message: "vehicle #1: \"position\" is missing" <> _}} = FleetFile.parse(~s({"vehicles":[{"id":1}]}))
+      # A run takes only payloads from the file: a vehicle needs no position there (null is none), but one given must be a position.
+      assert {:ok, [%{id: 1, payloads: [:sonar], position: nil}]} = FleetFile.parse(~s({"vehicles":[{"id":1,"payloads":["sonar"]}]}), position: :optional)
+      assert {:ok, [%{id: 1, position: nil}]} = FleetFile.parse(~s({"vehicles":[{"id":1,"position":null}]}), position: :optional)
+      assert {:error, %FleetFileError{message: "vehicle #1: \"position\" must be" <> _}} = FleetFile.parse(~s({"vehicles":[{"id":1,"position":[1,2]}]}), position: :optional)
+      assert {:error, %FleetFileError{message: "vehicle #1: \"position\" must be" <> _}} = FleetFile.parse(~s({"vehicles":[{"id":1,"position":null}]}))
       assert {:error, %FleetFileError{message: "vehicle #2: id 1 is given twice"}} = FleetFile.parse(~s({"vehicles":[{"id":1,"position":[1,2,3]},{"id":1,"position":[1,2,3]}]}))
       assert {:error, %FleetFileError{message: "not valid JSON" <> _}} = FleetFile.parse("{")
       assert {:error, %FleetFileError{message: "vehicle #1: \"battery\" must be" <> _}} = FleetFile.parse(~s({"vehicles":[{"id":1,"battery":2,"position":[1,2,3]}]}))
+
       assert {:error, %FleetFileError{message: "vehicle #1: unknown type \"submarine_zz\" (one of uav, ugv, usv, uuv, other)"}} =
                FleetFile.parse(~s({"vehicles":[{"id":1,"type":"submarine_zz","position":[1,2,3]}]}))
     end

@@ -22,11 +22,12 @@ defmodule Dolphin.Check.FleetFile do
   `"thermal_camera"` or `"sidescan"`, as `pick(payload: ...)` writes them;
   default none), `battery` (the charge it starts with, 0.0..1.0; default
   1.0), `position` (`[lat, lon, height above sea level]`, where it stands —
-  its home; required), `airborne` (default false: on the ground).
+  its home; required by a check), `airborne` (default false: on the ground).
 
-  In a run, a vehicle's type and airframe are what its heartbeat says: the
+  In a run, a vehicle's type, airframe and position are what it reports: the
   file gives it only its payloads — those it cannot announce over MAVLink
-  (a side-scan sonar, a smoke sensor) — by system id.
+  (a side-scan sonar, a smoke sensor) — by system id, and a vehicle needs
+  no position there (`read(path, position: :optional)`: `nil` when none).
 
   A file that cannot be used is an error naming every problem in it: each
   field of each vehicle that is wrong, or where the JSON text breaks (byte
@@ -54,25 +55,31 @@ defmodule Dolphin.Check.FleetFile do
   @airframes for a <- View.airframes(), do: {Atom.to_string(a), a}
   @payload_name ~r/^[a-z][a-z0-9_]{0,63}$/
 
-  @type vehicle :: %{id: 0..255, type: atom(), airframe: View.airframe() | nil, payloads: [atom()], battery: float(), position: Location.t(), airborne?: boolean()}
+  @type vehicle :: %{id: 0..255, type: atom(), airframe: View.airframe() | nil, payloads: [atom()], battery: float(), position: Location.t() | nil, airborne?: boolean()}
 
-  @doc "Reads and parses a fleet file."
-  @spec read(Path.t()) :: {:ok, [vehicle()]} | {:error, FleetFileError.t()}
-  def read(path) do
+  @doc """
+  Reads and parses a fleet file. Option `position: :optional` (a run's
+  reading) lets a vehicle have no position; by default (a check's) each
+  must have one.
+  """
+  @spec read(Path.t(), keyword()) :: {:ok, [vehicle()]} | {:error, FleetFileError.t()}
+  def read(path, opts \\ []) do
     result =
       case File.read(path) do
-        {:ok, text} -> parse(text)
+        {:ok, text} -> parse(text, opts)
         {:error, why} -> error(["cannot read it: #{:file.format_error(why)}"])
       end
 
     with {:error, e} <- result, do: {:error, %{e | file: path}}
   end
 
-  @doc "Parses a fleet file's text; an error lists every problem found."
-  @spec parse(String.t()) :: {:ok, [vehicle()]} | {:error, FleetFileError.t()}
-  def parse(text) do
+  @doc "Parses a fleet file's text (options as `read/2`'s); an error lists every problem found."
+  @spec parse(String.t(), keyword()) :: {:ok, [vehicle()]} | {:error, FleetFileError.t()}
+  def parse(text, opts \\ []) do
+    position = if Keyword.get(opts, :position, :required) == :optional, do: nil, else: :required
+
     case JSON.decode(text) do
-      {:ok, %{"vehicles" => list}} when is_list(list) and list != [] -> vehicles(list)
+      {:ok, %{"vehicles" => list}} when is_list(list) and list != [] -> vehicles(list, position)
       {:ok, _} -> error(["expected an object with a non-empty \"vehicles\" list, such as {\"vehicles\": [{\"id\": 1, \"position\": [40.44, -7.37, 820]}]}"])
       {:error, e} -> error(["not valid JSON: " <> json_problem(e, text)])
     end
@@ -91,8 +98,8 @@ defmodule Dolphin.Check.FleetFile do
     end
   end
 
-  defp vehicles(list) do
-    parsed = list |> Enum.with_index(1) |> Enum.map(fn {v, n} -> {n, v, vehicle(v)} end)
+  defp vehicles(list, position) do
+    parsed = list |> Enum.with_index(1) |> Enum.map(fn {v, n} -> {n, v, vehicle(v, position)} end)
     problems = for {n, _v, {:error, whys}} <- parsed, why <- whys, do: {n, "vehicle ##{n}: #{why}"}
 
     # An id given twice is a problem of the later vehicle, whatever else is wrong with either.
@@ -109,14 +116,14 @@ defmodule Dolphin.Check.FleetFile do
     end
   end
 
-  defp vehicle(%{} = v) do
+  defp vehicle(%{} = v, position) do
     fields = [
       id: field(v, "id", :required, &(is_integer(&1) and &1 in 0..255), "an integer system id 0..255"),
       type: v |> field("type", nil, &is_binary/1, "a string") |> and_then(&type/1),
       airframe: v |> field("airframe", nil, &is_binary/1, "a string") |> and_then(&airframe/1),
       payloads: v |> field("payloads", [], &(is_list(&1) and Enum.all?(&1, fn p -> is_binary(p) end)), "a list of strings") |> and_then(&payloads/1),
       battery: field(v, "battery", 1.0, &(is_number(&1) and &1 >= 0 and &1 <= 1), "a number from 0.0 to 1.0"),
-      position: field(v, "position", :required, &position?/1, "[latitude, longitude, height above sea level], latitude -90..90, longitude -180..180"),
+      position: field(v, "position", position, &(position?(&1) or (&1 == nil and position == nil)), "[latitude, longitude, height above sea level], latitude -90..90, longitude -180..180"),
       airborne: field(v, "airborne", false, &is_boolean/1, "true or false")
     ]
 
@@ -125,16 +132,18 @@ defmodule Dolphin.Check.FleetFile do
     case for({_k, {:error, why}} <- fields, do: why) do
       [] ->
         f = Map.new(fields, fn {k, {:ok, value}} -> {k, value} end)
-        [lat, lon, h] = f.position
         {type, airframe} = f.kind
-        {:ok, %{id: f.id, type: type, airframe: airframe, payloads: Enum.sort(f.payloads), battery: f.battery * 1.0, position: %Location{lat: lat * 1.0, lon: lon * 1.0, h: h * 1.0}, airborne?: f.airborne}}
+        {:ok, %{id: f.id, type: type, airframe: airframe, payloads: Enum.sort(f.payloads), battery: f.battery * 1.0, position: location(f.position), airborne?: f.airborne}}
 
       whys ->
         {:error, whys}
     end
   end
 
-  defp vehicle(other), do: {:error, ["expected an object, got #{shown(other)}"]}
+  defp vehicle(other, _position), do: {:error, ["expected an object, got #{shown(other)}"]}
+
+  defp location(nil), do: nil
+  defp location([lat, lon, h]), do: %Location{lat: lat * 1.0, lon: lon * 1.0, h: h * 1.0}
 
   defp position?([lat, lon, h]) when is_number(lat) and is_number(lon) and is_number(h), do: lat >= -90 and lat <= 90 and lon >= -180 and lon <= 180
   defp position?(_), do: false

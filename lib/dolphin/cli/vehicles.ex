@@ -6,7 +6,7 @@ defmodule Dolphin.CLI.Vehicles do
   # hands its undoing to `defer` at once, so that a run that fails half way
   # still stops what it started.
 
-    alias Dolphin.Fleet.FakeSource
+  alias Dolphin.Fleet.FakeSource
 
   @doc false
   # `opts`: the run's options (those of Mix.Tasks.Dolphin.Run, :tlog resolved,
@@ -32,7 +32,7 @@ defmodule Dolphin.CLI.Vehicles do
   # The fleet file's vehicles (--fleet FILE), or an error naming its problems.
   @spec fleet_file(Path.t()) :: {:ok, [Dolphin.Check.FleetFile.vehicle()]} | {:error, Dolphin.CommandLineError.t()}
   def fleet_file(path) do
-    with {:error, e} <- Dolphin.Check.FleetFile.read(path), do: {:error, Dolphin.CommandLineError.failed("--fleet #{path}", e)}
+    with {:error, e} <- Dolphin.Check.FleetFile.read(path, position: :optional), do: {:error, Dolphin.CommandLineError.failed("--fleet #{path}", e)}
   end
 
   # What the fleet file says each vehicle carries, given to it (by system id)

@@ -37,7 +37,8 @@ defmodule Mix.Tasks.Dolphin.Console do
     * `--fleet FILE` — a fleet file (`Dolphin.Check.FleetFile`, the JSON file
       `mix dolphin.check --fleet` reads): each vehicle it lists carries its
       `payloads` (those MAVLink cannot announce: `"sidescan"`, `"smoke"`), by
-      system id, for `pick(payload: ...)`
+      system id, for `pick(payload: ...)` (a vehicle needs no `position`
+      there: it reports its own)
     * `--home LAT,LON[,ALT]` — where `--sim` and `--sitl` vehicles start
       (around that point, 30 m apart; default the report's, in Serra da
       Estrela; a submarine starts at the surface)
@@ -132,7 +133,6 @@ defmodule Mix.Tasks.Dolphin.Console do
         {:error, "bad option #{switch}#{if value, do: " " <> value, else: ""}"}
     end
   end
-
 
   @doc """
   Opens the links and starts the simulated vehicles of `opts` (parsed

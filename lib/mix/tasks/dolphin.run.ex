@@ -43,8 +43,9 @@ defmodule Mix.Tasks.Dolphin.Run do
     * `--fleet FILE` — a fleet file (`Dolphin.Check.FleetFile`, the JSON file
       `mix dolphin.check --fleet` reads): each vehicle it lists carries its
       `payloads` (those MAVLink cannot announce: `"sidescan"`, `"smoke"`), by
-      system id, for `pick(payload: ...)`; the pre-flight check of `--sim`
-      and `--sitl` counts them too
+      system id, for `pick(payload: ...)` (a vehicle needs no `position`
+      there: it reports its own); the pre-flight check of `--sim` and
+      `--sitl` counts them too
     * `--home LAT,LON[,ALT]` — where `--sim` and `--sitl` vehicles start
       (around that point, 30 m apart; default the report's, in Serra da
       Estrela; a submarine starts at the surface)
@@ -244,11 +245,21 @@ defmodule Mix.Tasks.Dolphin.Run do
 
           # Nothing is started when the pre-flight check refuses.
           case Run.check(script, opts, Keyword.get(io, :out, :stdio)) == :ok and Run.run(script, run_opts) do
-            false -> 1
-            :completed -> 0
-            :stopped -> 0
-            {:stopped, signal} -> Signals.status(signal)
-            :failed -> 1
+            false ->
+              1
+
+            :completed ->
+              0
+
+            :stopped ->
+              0
+
+            {:stopped, signal} ->
+              Signals.status(signal)
+
+            :failed ->
+              1
+
             # The usage was right (endpoints are checked when parsed): a port in
             # use, a SITL binary that would not start... the run failed.
             {:error, e} ->

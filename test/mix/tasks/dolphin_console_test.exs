@@ -71,11 +71,15 @@ defmodule Mix.Tasks.Dolphin.ConsoleTest do
   @tag :iex_session
   @tag timeout: 300_000
   test "an IEx session: list vehicles, take off and land one, run and stop a script", %{tmp_dir: dir} do
-    port = open_session()
+    # Two copters and a boat, which carries a sonar by the fleet file.
+    fleet = Path.join(dir, "fleet.json")
+    File.write!(fleet, ~s({"vehicles": [{"id": 3, "airframe": "boat", "payloads": ["sonar"]}]}))
+    port = open_session("iex -S mix dolphin.console --sim copter:2,boat:1 --speedup 20 --fleet #{fleet}")
 
     banner = wait_for(port, ~r/iex\(1\)> /, 120_000)
     assert banner =~ "Dolphin console (speed-up 20x)"
-    assert banner =~ ~r/2 simulated vehicle\(s\) \[1, 2\] on 127\.0\.0\.1:\d+/
+    assert banner =~ "payloads of 1 vehicle(s) from #{fleet}"
+    assert banner =~ ~r/3 simulated vehicle\(s\) \(2 copter, 1 boat\) \[1, 2, 3\] on 127\.0\.0\.1:\d+/
 
     # The helpers are imported (by .iex.exs), with their docs.
     assert ieval(port, "h vehicles") =~ "The fleet at a glance"
@@ -87,6 +91,9 @@ defmodule Mix.Tasks.Dolphin.ConsoleTest do
     assert table =~ ~r/^ID\s+TYPE\s+AIRFRAME\s+MODE\s+ARMED/m
     assert table =~ ~r/^ 1  uav\s+copter\s+STABILIZE\s+no /m
     assert table =~ ~r/^ 2  uav\s+copter\s+STABILIZE\s+no /m
+    assert table =~ ~r/^ 3  usv\s+boat\s+MANUAL\s+no /m
+    # The boat is picked by its airframe and the payload the fleet file gave it.
+    poll(port, ~s|IO.inspect(Dolphin.Fleet.vehicles() \|> Enum.filter(&(:sonar in &1.vehicle.payloads)) \|> Enum.map(&{&1.vehicle.id, &1.vehicle.airframe}))|, &(&1 =~ "[{3, :boat}]"))
 
     assert ieval(port, "takeoff(1, 10)") =~ "vehicle 1: take-off to 10.0 m above home accepted"
     poll(port, "vehicles()", fn t -> altitude(t, 1) >= 9.0 end)
@@ -169,7 +176,7 @@ defmodule Mix.Tasks.Dolphin.ConsoleTest do
     assert_receive {^port, {:exit_status, 0}}, 30_000
   end
 
-  defp open_session(command \\ "iex -S mix dolphin.console --sim 2 --speedup 20") do
+  defp open_session(command) do
     root = File.cwd!()
     env = [{~c"MIX_ENV", ~c"test"}, {~c"LANG", ~c"C.UTF-8"}]
 
