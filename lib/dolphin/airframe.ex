@@ -89,8 +89,13 @@ defmodule Dolphin.Airframe do
   @doc "When a mission ending in a landing is done: once landed and disarmed, or once its landing item is reported reached."
   @callback landing_done() :: :disarmed | :reached
 
-  @doc "The commands (MAV_CMD names) a landing at a point is made of, in order."
-  @callback landing_commands() :: [atom()]
+  @doc """
+  What a landing at a point is made of, in order: MAV_CMD names at the
+  point; `{:approach, metres, slope_deg}`, a waypoint that far before it on
+  the way in, high enough to glide down at that slope; `{name, {:approach,
+  ...}}`, a command at that waypoint.
+  """
+  @callback landing_commands() :: [atom() | {:approach, float(), float()} | {atom(), {:approach, float(), float()}}]
 
   @callback heights() :: heights()
 

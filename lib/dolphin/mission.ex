@@ -165,18 +165,24 @@ defmodule Dolphin.Mission do
   becomes. Option `home:` supplies (or overrides) the home position;
   `airframe:` (`Dolphin.Vehicles.View.airframes/0`; default a copter's items)
   the vehicle's, for what differs: a plane's landing (`landing_point`,
-  `return_home_and_land`) is two items, DO_LAND_START then NAV_LAND, its
-  landing sequence; a submarine's heights are depths below its home at the
-  surface, in frame GLOBAL_RELATIVE_ALT_INT (6).
+  `return_home_and_land`) is its landing sequence, three items —
+  DO_LAND_START and a waypoint on the approach, 400 m out in line with the
+  way it comes from the point before and 28 m above the landing (a 4°
+  glide), then NAV_LAND; a submarine's heights are depths below its home at
+  the surface, in frame GLOBAL_RELATIVE_ALT_INT (6).
 
       iex> alias Dolphin.Mission.Command, as: C
       iex> home = Dolphin.Geo.location(40.444233, -7.375234, 0)
       iex> dive = Dolphin.Mission.new("dive", [C.home(home), C.move(50, 0, -5), C.return_home_and_land()])
       iex> for i <- Dolphin.Mission.to_items(dive, airframe: :sub), do: {i.command, i.frame, i.z}
       [{16, 5, 0.0}, {16, 6, -5.0}, {21, 6, 0.0}]
-      iex> glide = Dolphin.Mission.new("glide", [C.home(home), C.take_off(Dolphin.Geo.location(40.444233, -7.375234, 60)), C.return_home_and_land()])
-      iex> for i <- Dolphin.Mission.to_items(glide, airframe: :plane), do: i.command
-      [16, 22, 189, 21]
+      iex> glide = Dolphin.Mission.new("glide", [C.home(home), C.take_off(Dolphin.Geo.location(40.444233, -7.375234, 60)), C.move(0, 1000, 0), C.return_home_and_land()])
+      iex> [_, _, _, start, approach, land] = Dolphin.Mission.to_items(glide, airframe: :plane)
+      iex> {start.command, approach.command, land.command}
+      {189, 16, 21}
+      iex> {n, e} = Dolphin.Geo.ne_offset(home, Dolphin.Geo.location(approach.x / 1.0e7, approach.y / 1.0e7))
+      iex> {round(n), round(e), round(approach.z)}
+      {0, 400, 28}
 
   Raises `ArgumentError` when the mission has no home and no absolute position
   to take it from, when a jump targets an item that does not exist, or when a

@@ -4,9 +4,11 @@ defmodule Dolphin.Airframe.Plane do
   is flown as a plane): it takes off climbing at the take-off's pitch, cannot
   stand still — a loiter circles at the given radius (flown about 1.2 times
   wider, never tighter than about 60 m at cruise) and a stop circles in
-  LOITER — and lands through its landing sequence (DO_LAND_START then
-  NAV_LAND, which RTL and a stopped mission jump to), done once landed and
-  disarmed (ArduPlane disarms by itself about 29 s after touchdown).
+  LOITER — and lands through its landing sequence (DO_LAND_START, a
+  waypoint 400 m out on the approach, in line with the way it comes, 28 m
+  up — a 4° glide —, then NAV_LAND; RTL and a stopped mission jump to it),
+  done once landed and disarmed (ArduPlane disarms by itself about 29 s
+  after touchdown).
 
   Its figures are ArduPlane SITL's with default parameters: AIRSPEED_CRUISE
   22 m/s, AIRSPEED_MIN 10 and AIRSPEED_MAX 30 m/s, WP_RADIUS 50 m,
@@ -24,6 +26,8 @@ defmodule Dolphin.Airframe.Plane do
   @flown_radius_factor 1.2
   # Not tighter than this at cruise speed (LOITER_TURNS of 40 m flew 62–74 m).
   @least_radius 60.0
+  # Its landing's approach: in line 400 m out, on a 4° slope (28 m up).
+  @approach {:approach, 400.0, 4.0}
 
   @impl true
   def takes_off?, do: true
@@ -32,7 +36,7 @@ defmodule Dolphin.Airframe.Plane do
   @impl true
   def landing_done, do: :disarmed
   @impl true
-  def landing_commands, do: [:mav_cmd_do_land_start, :mav_cmd_nav_land]
+  def landing_commands, do: [{:mav_cmd_do_land_start, @approach}, @approach, :mav_cmd_nav_land]
   @impl true
   def hold_modes, do: [:loiter, :guided]
   @impl true

@@ -248,12 +248,26 @@ defmodule Dolphin.Mission.Items do
   defp time(p, seconds, radius), do: nav(:mav_cmd_nav_loiter_time, p, {seconds, 0, radius, 0})
   defp land(p, yaw, mode), do: nav(:mav_cmd_nav_land, p, {0, mode, 0, yaw})
 
-  # A landing as the airframe makes one: a plane's starts its landing
-  # sequence where it is marked (DO_LAND_START, then NAV_LAND).
-  defp landing(%{airframe: airframe}, p, yaw, mode) do
+  # A landing as the airframe makes one: a plane's is a landing sequence —
+  # DO_LAND_START where it starts, a waypoint on the approach in line with
+  # the way it comes (from the previous point), then NAV_LAND.
+  defp landing(%{airframe: airframe, prev: prev}, p, yaw, mode) do
     for command <- Dolphin.Airframe.of(airframe).landing_commands() do
-      if command == :mav_cmd_nav_land, do: land(p, yaw, mode), else: nav(command, p, {0, 0, 0, 0})
+      case command do
+        :mav_cmd_nav_land -> land(p, yaw, mode)
+        {:approach, metres, slope_deg} -> waypoint(approach(prev, p, metres, slope_deg), 0)
+        {start, {:approach, metres, slope_deg}} -> nav(start, approach(prev, p, metres, slope_deg), {0, 0, 0, 0})
+      end
     end
+  end
+
+  # `metres` before `p` on the line from `from` (from the south when `from`
+  # is `p`), high enough to glide down to it at `slope_deg`.
+  defp approach(from, p, metres, slope_deg) do
+    {n, e} = Geo.ne_offset(p, from)
+    d = :math.sqrt(n * n + e * e)
+    {un, ue} = if d < 1.0, do: {-1.0, 0.0}, else: {n / d, e / d}
+    Geo.offset(p, un * metres, ue * metres, metres * :math.tan(slope_deg * :math.pi() / 180))
   end
 
   defp nav(name, %Location{} = p, params) do

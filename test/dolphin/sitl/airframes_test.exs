@@ -131,15 +131,18 @@ defmodule Dolphin.SITL.AirframesTest do
       [sim, sitl] =
         for backend <- [:sim, :sitl] do
           on_backend(backend, :plane, {:uav, :plane, 1}, fn {id, home, seen} ->
-            # Items: 1 take-off, 2 waypoint, 3 loiter, 4 approach, 5 DO_LAND_START, 6 NAV_LAND.
-            assert [_, %{command: 22, param1: 15.0}, _, _, _, %{command: 189}, %{command: 21}] = Mission.to_items(circuit.(home), airframe: :plane)
+            # Items: 1 take-off, 2 waypoint, 3 loiter, 4 a waypoint back, 5 DO_LAND_START, 6 the approach (400 m out, 28 m up), 7 NAV_LAND.
+            assert [_, %{command: 22, param1: 15.0}, _, _, _, %{command: 189}, %{command: 16} = approach, %{command: 21}] = Mission.to_items(circuit.(home), airframe: :plane)
+            assert_in_delta distance(Geo.location(approach.x / 1.0e7, approach.y / 1.0e7), home), 400, 1
             run = flown(circuit.(home), id, seen)
             assert {:ok, :done} = run.result
-            # The take-off, the waypoint and the loiter are reported reached; the land item never is (as ArduCopter's).
-            assert [1, 2, 3] -- run.reached == [] and 6 not in run.reached, "#{backend}: #{inspect(run.reached)}"
+            # The take-off, the waypoint, the loiter and the approach are reported reached (the waypoint back by its DO item's seq, as ArduCopter does); the land item never is.
+            assert [1, 2, 3, 6] -- run.reached == [] and 7 not in run.reached, "#{backend}: #{inspect(run.reached)}"
             assert run.view.armed? == false, "#{backend}"
             assert Enum.any?(Vehicles.status_texts(id), fn {_, text} -> text =~ "Auto disarmed" end), "#{backend}"
-            assert distance(run.view.position, home) < 150, "#{backend}"
+            # Down where it was sent: in line from its approach, ArduPlane stops within a few metres of the
+            # point (5 m; 64 m long without the approach waypoint); the simulator's plane, with no flare, rolls further.
+            assert distance(run.view.position, home) < if(backend == :sitl, do: 40, else: 150), "#{backend}"
 
             # It cannot stand still: a stop leaves it circling where it was, in LOITER.
             loiter = Mission.new("Orbit", [C.home(home), C.take_off(Location.at_height(home, home.h + 60)), C.move_and_loiter_pos(300, 0, 0, 80)])
