@@ -109,9 +109,10 @@ defmodule Dolphin.Mission do
   alias Dolphin.Geo.Location
   alias Dolphin.Mission.{Command, Items, Plan}
 
-  defstruct name: "mission", home: nil, commands: []
+  defstruct name: "mission", home: nil, commands: [], fence: nil
 
-  @type t :: %__MODULE__{name: String.t(), home: Location.t() | nil, commands: [Command.t()]}
+  @typedoc "A mission: its name, home, commands, and its own fence (`Dolphin.Fence`; nil: the script's)."
+  @type t :: %__MODULE__{name: String.t(), home: Location.t() | nil, commands: [Command.t()], fence: Dolphin.Fence.t() | nil}
 
   @typedoc "What `new/2` and `add/2` take: commands, lists of them (nested), `nil`s (skipped), or missions (their commands)."
   @type commands :: Command.t() | t() | nil | [commands()]
@@ -136,8 +137,10 @@ defmodule Dolphin.Mission do
 
   defp do_add(mission, nil), do: mission
   defp do_add(mission, list) when is_list(list), do: Enum.reduce(list, mission, &do_add(&2, &1))
-  defp do_add(mission, %__MODULE__{commands: commands}), do: %{mission | commands: mission.commands ++ commands}
+  defp do_add(mission, %__MODULE__{commands: commands, fence: fence}), do: %{mission | commands: mission.commands ++ commands, fence: mission.fence || fence}
   defp do_add(mission, %Command{kind: :name, args: [name: name]}), do: %{mission | name: name}
+  defp do_add(%__MODULE__{fence: nil} = mission, %Dolphin.Fence{} = fence), do: %{mission | fence: fence}
+  defp do_add(mission, %Dolphin.Fence{}), do: raise(ArgumentError, "mission #{inspect(mission.name)} already has a fence; a mission has one (its zones are all in it)")
 
   defp do_add(%__MODULE__{home: nil} = mission, %Command{kind: :home, args: [position: p]}), do: %{mission | home: p}
 

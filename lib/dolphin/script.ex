@@ -92,6 +92,7 @@ defmodule Dolphin.Script do
     quote do
       import Dolphin.DSL
       import Dolphin.DSL.Values
+      import Dolphin.DSL.Fence, only: [fence: 1, rally: 1]
       unquote(mission)
     end
   end

@@ -42,6 +42,20 @@ defmodule Dolphin.CheckTest do
     assert length < 205
   end
 
+  test "the fence: a leg into a no-fly zone, out of the fence or over its ceiling is an error with the line; a mission's own fence that home is outside of too", %{fleet: fleet} do
+    report = check("fenced.exs", fleet)
+    errors = for f <- report.findings, f.kind == :fence, do: {f.line, f.message}
+
+    assert [{41, through}, {41, out}, {42, high}, {56, elsewhere}] = errors
+    assert through =~ ~r/^mission "Through the zone" on vehicle 211: the way to item 2 \(NAV_WAYPOINT\) enters exclusion zone 1 at 40\.44\d+, -7\.375234$/
+    assert out =~ "the way to item 3 (NAV_LAND) leaves inclusion zone 1 at"
+    assert high =~ ~s|mission "Too high" on vehicle 211: item 2 (NAV_WAYPOINT) is 140 m above home, over the fence's max_altitude of 120 m|
+    assert elsewhere =~ ~s|mission "Elsewhere" on vehicle 211: the fence's inclusion zone 1 (#Circle<|
+    assert elsewhere =~ "does not contain home"
+    # Round the zone, inside the square, under the ceiling: nothing to say.
+    refute Enum.any?(report.findings, &(&1.line == 43 and &1.kind == :fence))
+  end
+
   test "a script that does not compile is an error with its line", %{fleet: fleet} do
     report = check("unknown_word.exs", fleet)
     assert %{severity: :error, line: 3, message: message} = finding(report, :compile)

@@ -8,7 +8,8 @@ defmodule Dolphin.Check.Mission do
   # airframe's model (Dolphin.Airframe: speeds, climb and descent, current
   # drawn, pack capacity — the simulator's figures, held to each SITL).
 
-  alias Dolphin.{Airframe, Geo}
+  alias Dolphin.{Airframe, Fence, Geo}
+  alias Dolphin.Geo.Shapes
   alias Dolphin.Geo.Location
   alias Dolphin.Mission, as: M
   alias Dolphin.Mission.Survey
@@ -73,8 +74,12 @@ defmodule Dolphin.Check.Mission do
 
         problems =
           case items do
-            [_home] -> [nothing_to_fly(name, vehicle)]
-            _ -> validity(name, items, vehicle, limits) ++ turns(name, mission, vehicle) ++ take_off_heights(name, estimate, vehicle) ++ endless(name, estimate)
+            [_home] ->
+              [nothing_to_fly(name, vehicle)]
+
+            _ ->
+              validity(name, items, vehicle, limits) ++
+                turns(name, mission, vehicle) ++ fence(name, mission.fence, estimate, items, vehicle) ++ take_off_heights(name, estimate, vehicle) ++ endless(name, estimate)
           end
 
         {problems, energy(name, estimate, items, vehicle), Map.drop(estimate, [:empty_at, :empty_home, :low_take_offs])}
@@ -308,6 +313,84 @@ defmodule Dolphin.Check.Mission do
      "#{name}: #{inspect(command)} puts its passes #{metres(apart)} apart, and a #{airframe} at #{Float.round(speed, 1)} m/s turns no tighter than a #{metres(radius)} radius: " <>
        "it cannot turn from one pass into the next (they must be at least #{metres(2 * radius)} apart: a wider spacing, or a lower speed)"}
   end
+
+  # --- the fence ---
+
+  # The mission as it would fly (the estimate's path: each item's point in
+  # flight order, its loiter circles, the way home when it does not land)
+  # against the fence: a leg that leaves an inclusion zone or enters an
+  # exclusion zone, a point above the ceiling or, in flight, below the
+  # floor — each with where; a fence that home itself breaches.
+  defp fence(_name, nil, _estimate, _items, _vehicle), do: []
+
+  defp fence(name, %Fence{} = fence, estimate, [home_item | _] = items, vehicle) do
+    home = location(home_item, nil)
+    by_seq = Map.new(items, &{&1.seq, &1})
+    airframe = Map.get(vehicle, :airframe)
+
+    setup = for why <- Fence.problems(fence, home), do: {:error, :fence, "#{name}: the fence's #{why}"}
+
+    legs =
+      estimate.path
+      |> Enum.map(fn {_t, at, airborne?, seq} -> {at, airborne?, Map.get(by_seq, seq)} end)
+      |> then(&[{estimate.start_at, false, nil} | &1])
+      |> Enum.chunk_every(2, 1, :discard)
+      |> Enum.flat_map(fn [{from, _, _}, {to, airborne?, item}] -> [{from, to, item, airborne?} | circle_legs(to, item, airborne?, airframe)] end)
+
+    back = if estimate.lands?, do: [], else: [{List.last(Enum.map(legs, &elem(&1, 1))) || estimate.start_at, home, :home, true}]
+
+    crossings = Enum.flat_map(legs ++ back, &leg_breach(fence, &1))
+    heights = Enum.flat_map(estimate.path, &height_breach(fence, &1, by_seq, home))
+
+    # A fence home itself breaches says it all: every leg would.
+    if setup != [], do: setup, else: Enum.map(Enum.uniq(crossings ++ heights), fn why -> {:error, :fence, "#{name}: #{why}"} end)
+  end
+
+  # A loiter's circle, as legs round it (16 of them), where the airframe circles.
+  defp circle_legs(centre, %{command: c} = item, true, airframe) when c in [@loiter_unlim, @loiter_turns, @loiter_time] do
+    radius = abs(Airframe.flown_radius(airframe, item.param3))
+
+    if c == @loiter_turns or Airframe.performance(airframe).hold_speed > 0 do
+      points = for k <- 0..16, do: Geo.offset(centre, radius * :math.cos(k * :math.pi() / 8), radius * :math.sin(k * :math.pi() / 8))
+      for [a, b] <- Enum.chunk_every(points, 2, 1, :discard), do: {a, b, item, true}
+    else
+      []
+    end
+  end
+
+  defp circle_legs(_centre, _item, _airborne?, _airframe), do: []
+
+  defp leg_breach(fence, {from, to, item, _airborne?}) do
+    exits = for {zone, i} <- Enum.with_index(fence.include, 1), {t, at} <- [Shapes.exit(zone, from, to)], do: {t, at, "leaves inclusion zone #{i}"}
+    entries = for {zone, i} <- Enum.with_index(fence.exclude, 1), {t, at} <- [Shapes.entry(zone, from, to)], do: {t, at, "enters exclusion zone #{i}"}
+
+    for {_t, at, what} <- Enum.sort_by(exits ++ entries, &elem(&1, 0)) |> Enum.take(1) do
+      "the way #{leg_name(item)} #{what} at #{point(at)}"
+    end
+  end
+
+  defp height_breach(fence, {_t, at, airborne?, seq}, by_seq, home) do
+    item = Map.get(by_seq, seq)
+    height = at.h - home.h
+    cruising? = airborne? and item != nil and item.command not in [@take_off, @land, @rtl]
+
+    cond do
+      fence.max_altitude != nil and height > fence.max_altitude + 0.5 ->
+        ["#{describe(item)} is #{metres(height)} above home, over the fence's max_altitude of #{metres(fence.max_altitude)}"]
+
+      fence.min_altitude != nil and cruising? and height < fence.min_altitude - 0.5 ->
+        ["#{describe(item)} is #{metres(height)} above home, under the fence's min_altitude of #{metres(fence.min_altitude)}"]
+
+      true ->
+        []
+    end
+  end
+
+  defp leg_name(nil), do: "from where it starts"
+  defp leg_name(:home), do: "home from the mission's end"
+  defp leg_name(item), do: "to #{describe(item)}"
+
+  defp point(at), do: "#{Float.round(at.lat, 6)}, #{Float.round(at.lon, 6)}"
 
   # --- energy and time ---
 

@@ -35,7 +35,8 @@ defmodule Dolphin.Check.Source do
   @spec fly(arg(), Dolphin.Mission.t(), non_neg_integer(), keyword()) :: {:ok, pid()}
   def fly(%{test: t, recorder: recorder}, mission, vehicle, opts) do
     line = script_line(Dolphin.Engine.Context.current().owner)
-    estimate = Dolphin.Check.Recorder.mission(recorder, mission, vehicle, line)
+    # Checked with the fence it would fly with: its own, else the script's.
+    estimate = Dolphin.Check.Recorder.mission(recorder, %{mission | fence: mission.fence || opts[:fence]}, vehicle, line)
     Dolphin.Check.Flight.start_link(%{test: t, recorder: recorder, vehicle: vehicle, estimate: estimate, owner: opts[:owner], clock: opts[:clock]})
   end
 

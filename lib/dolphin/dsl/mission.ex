@@ -219,6 +219,9 @@ defmodule Dolphin.DSL.Mission do
     end
   end
 
+  # A mission's own fence (Dolphin.DSL.Fence): its block is the fence's words.
+  defp rewrite({:fence, _meta, [[do: block]]}, _words, caller), do: Dolphin.DSL.Fence.build(block, caller)
+
   defp rewrite({name, meta, args}, words, caller) when is_atom(name) and is_list(args) do
     args = Enum.map(args, &rewrite(&1, words, caller))
 
@@ -293,6 +296,7 @@ defmodule Dolphin.DSL.Mission do
   # Adds the value of one expression of a mission block to the accumulated
   # commands (in reverse order).
   def __collect__(acc, %Command{} = command, _source), do: [command | acc]
+  def __collect__(acc, %Dolphin.Fence{} = fence, _source), do: [fence | acc]
   def __collect__(acc, %Dolphin.Mission{commands: commands}, _source), do: Enum.reverse(commands, acc)
   def __collect__(acc, nil, _source), do: acc
   def __collect__(acc, list, source) when is_list(list), do: Enum.reduce(list, acc, &__collect__(&2, &1, source))

@@ -56,6 +56,26 @@ defmodule Dolphin.DSL.Values do
   def area(center, radius), do: Geo.area(center, radius)
 
   @doc """
+  A polygon zone of a fence (`Dolphin.DSL.Fence`): its corners, in order
+  (at least three; its edges must not cross).
+
+      exclude polygon([location(38.4380, -8.8620, 0), location(38.4380, -8.8590, 0), location(38.4395, -8.8600, 0)])
+  """
+  @spec polygon([Dolphin.Geo.Location.t()]) :: Dolphin.Geo.Polygon.t()
+  def polygon(corners), do: ok!(Dolphin.Geo.Shapes.polygon(corners))
+
+  @doc """
+  A circular zone of a fence (`Dolphin.DSL.Fence`): its centre and radius in metres.
+
+      include circle(location(38.43462, -8.86118, 0), 800)
+  """
+  @spec circle(Dolphin.Geo.Location.t(), number()) :: Dolphin.Geo.Circle.t()
+  def circle(centre, radius), do: ok!(Dolphin.Geo.Shapes.circle(centre, radius))
+
+  defp ok!({:ok, value}), do: value
+  defp ok!({:error, why}), do: raise(ArgumentError, why)
+
+  @doc """
   `n` days, in milliseconds.
 
       iex> days(1)

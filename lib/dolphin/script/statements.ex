@@ -50,6 +50,34 @@ defmodule Dolphin.Script.Statements do
     Fleet.release(ctx.fleet, ctx.owner, sets)
   end
 
+  @doc """
+  Makes `fence` (a `Dolphin.Fence`) the fence of the missions the script
+  flies from its next `execute` on, keeping the rally points already set
+  when it has none; returns it.
+  """
+  @spec fence(Dolphin.Fence.t()) :: Dolphin.Fence.t()
+  def fence(%Dolphin.Fence{} = fence) do
+    ctx = Context.current()
+    fence = if fence.rally == [], do: %{fence | rally: script_fence(ctx).rally}, else: fence
+    Context.put(%{ctx | platform_opts: Keyword.put(ctx.platform_opts, :fence, fence)})
+    fence
+  end
+
+  @doc "Sets the rally points of the script's fence (`Dolphin.Fence`'s `rally`)."
+  @spec rally([Dolphin.Geo.Location.t()]) :: :ok
+  def rally(points) do
+    ctx = Context.current()
+
+    case Dolphin.Fence.put_rally(script_fence(ctx), points) do
+      {:ok, fence} -> Context.put(%{ctx | platform_opts: Keyword.put(ctx.platform_opts, :fence, fence)})
+      {:error, why} -> raise ArgumentError, why
+    end
+
+    :ok
+  end
+
+  defp script_fence(ctx), do: Keyword.get(ctx.platform_opts, :fence) || %Dolphin.Fence{}
+
   @doc "Sets the connection timeout (ms) of the vehicles the script picked and will pick."
   @spec set_connection_timeout(pos_integer()) :: :ok
   def set_connection_timeout(ms) do
