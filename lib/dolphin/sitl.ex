@@ -137,7 +137,11 @@ defmodule Dolphin.SITL do
                 firmware: kind.firmware,
                 model: kind.model,
                 defaults: kind.defaults,
-                params: Enum.reduce([camera_params(Keyword.get(opts, :camera, true)), kind.params, Map.new(Keyword.get(opts, :params, %{}))], &Map.merge(&2, &1)),
+                params:
+                  Enum.reduce(
+                    [camera_params(Keyword.get(opts, :camera, true)), failsafe_params(airframe, Dolphin.Clock.speedup()), kind.params, Map.new(Keyword.get(opts, :params, %{}))],
+                    &Map.merge(&2, &1)
+                  ),
                 sysid: sysid,
                 instance: instance,
                 # A submarine's home is at the surface: ArduSub's depth is its
@@ -366,6 +370,14 @@ defmodule Dolphin.SITL do
         await_fleet(fleet, deadline)
     end
   end
+
+  # ArduSub disarms when it has not heard the ground station for
+  # FS_GCS_TIMEOUT (5 s of its own time, FS_GCS_ENABLE 2): sped up K times
+  # that is 5/K s of real time, which a busy machine's scheduler can take
+  # from the ground station's heartbeat. The timeout is kept at 5 s of real
+  # time (at most the 120 s the parameter allows).
+  defp failsafe_params(:sub, speedup), do: %{"FS_GCS_TIMEOUT" => min(round(5 * speedup), 120)}
+  defp failsafe_params(_airframe, _speedup), do: %{}
 
   defp camera_params(true), do: %{"CAM1_TYPE" => 1}
   defp camera_params(_), do: %{}

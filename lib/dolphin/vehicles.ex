@@ -370,6 +370,29 @@ defmodule Dolphin.Vehicles do
     run(id, command, %{params: params ++ position, int: true, frame: Keyword.get(opts, :frame, 6)}, opts)
   end
 
+  @doc """
+  Sets parameter `name` (a string, as the autopilot names it: `"FENCE_ACTION"`)
+  of vehicle `id` to `value`: `{:ok, value}` once the vehicle answers with
+  it (PARAM_SET, PARAM_VALUE; sent again on silence as a command is), or
+  `{:error, %Dolphin.ParamError{}}` — `:refused` when it keeps another value.
+  """
+  @spec set_param(Id.t(), String.t(), number(), keyword()) :: {:ok, float()} | {:error, Dolphin.ParamError.t()}
+  def set_param(id, name, value, opts \\ []) when is_binary(name) and is_number(value), do: param(id, name, value * 1.0, opts)
+
+  @doc "Reads parameter `name` of vehicle `id`: `{:ok, value}` or `{:error, %Dolphin.ParamError{}}`."
+  @spec read_param(Id.t(), String.t(), keyword()) :: {:ok, float()} | {:error, Dolphin.ParamError.t()}
+  def read_param(id, name, opts \\ []) when is_binary(name), do: param(id, name, nil, opts)
+
+  defp param(id, name, value, opts) do
+    gone = %Dolphin.ParamError{param: name, vehicle: id, result: :vehicle_gone, asked: value, attempts: 0}
+
+    case call_vehicle(id, {:param, %{name: name, value: value}, opts}, :infinity) do
+      {:ok, reply} -> reply
+      :no_vehicle -> {:error, %{gone | detail: "no such vehicle"}}
+      :gone -> {:error, gone}
+    end
+  end
+
   defp run(id, command, request, opts) do
     {:ok, number} = command_id(command)
     name = if is_atom(command), do: command, else: number

@@ -13,7 +13,7 @@ defmodule Dolphin.Vehicles.Vehicle do
   alias Dolphin.Link.Connection
   alias Dolphin.MAVLink.Frame
   alias Dolphin.MAVLink.Ardupilotmega, as: M
-  alias Dolphin.Vehicles.{CommandProtocol, MissionProtocol, Paths, Settings, State, View, Views}
+  alias Dolphin.Vehicles.{CommandProtocol, MissionProtocol, ParamProtocol, Paths, Settings, State, View, Views}
 
   @lost_floor_real_ms 3_000
   @late_real_ms 100
@@ -138,6 +138,8 @@ defmodule Dolphin.Vehicles.Vehicle do
     now = Clock.now_ms()
     {verdict, paths} = Paths.heard(s.paths, link, frame, now, real_ms())
     s = %{s | paths: identify(paths, link, frame)}
+    # Heard again: the view that says so is the one with this frame in it
+    # (published below), so that whoever is told reads what was heard.
     s = if s.lost and verdict != :unidentified, do: reconnected(s), else: s
 
     case verdict do
@@ -174,6 +176,7 @@ defmodule Dolphin.Vehicles.Vehicle do
   def handle_call(:view, _from, s), do: {:reply, s.view || view(s), s}
 
   def handle_call(:paths, _from, s), do: {:reply, Paths.list(s.paths), s}
+
   def handle_call({:set_timeout, ms}, _from, s) do
     Process.cancel_timer(s.check_timer)
     period = check_period(ms)
@@ -186,6 +189,7 @@ defmodule Dolphin.Vehicles.Vehicle do
   # replies to the caller.
   def handle_call({:command, request, opts}, from, s), do: {:noreply, run_op(s, request.command, CommandProtocol, request, opts, from)}
   def handle_call({:mission, request, opts}, from, s), do: {:noreply, run_op(s, :mission, MissionProtocol, request, opts, from)}
+  def handle_call({:param, request, opts}, from, s), do: {:noreply, run_op(s, {:param, request.name}, ParamProtocol, request, opts, from)}
 
   # The name goes with the process, not a moment later when the registry
   # hears of the exit: once Dolphin.Vehicles.forget/1 has stopped a vehicle,
@@ -357,8 +361,11 @@ defmodule Dolphin.Vehicles.Vehicle do
   # The new state, and its view when it changed: only a change of a public
   # field can change the view (link counters change with every frame).
   defp publish(s, new) do
+    # A vehicle heard again is published even when what it said is unchanged.
+    told_lost? = s.view != nil and s.view.connected? == s.lost
+
     case State.changes(s.state, new) do
-      [] -> %{s | state: new}
+      [] when not told_lost? -> %{s | state: new}
       _changes -> publish_view(%{s | state: new})
     end
   end
@@ -400,10 +407,10 @@ defmodule Dolphin.Vehicles.Vehicle do
     %{View.of(s.state, s.lost, Settings.payloads(s.id) ++ configured) | network: s.network}
   end
 
-  # Heard again after a silence: say so, and ask for telemetry again (the
-  # vehicle may have rebooted and forgotten the rates).
+  # Heard again after a silence: no longer lost (the next view published
+  # says so), and telemetry asked for again (the vehicle may have rebooted
+  # and forgotten the rates).
   defp reconnected(s) do
-    s = publish_view(%{s | lost: false})
     if s.requests_left == 0, do: send(self(), :request_telemetry)
     %{s | lost: false, requests_left: @request_tries}
   end
@@ -416,6 +423,7 @@ defmodule Dolphin.Vehicles.Vehicle do
     do: notify_op(s, command, {:ack, ack, compid})
 
   defp route_to_op(s, %{message: %m{} = message}) when m in @mission_messages, do: notify_op(s, :mission, {:mission, message})
+  defp route_to_op(s, %{message: %M.ParamValue{param_id: name} = value}), do: notify_op(s, {:param, name}, {:param, value})
   defp route_to_op(_s, _frame), do: :ok
 
   defp notify_op(s, key, event) do
@@ -441,7 +449,13 @@ defmodule Dolphin.Vehicles.Vehicle do
     # command's retries is followed, and the exchange never knows.
     vehicle = self()
     request = Map.put(request, :send, fn message -> GenServer.cast(vehicle, {:send, message}) end)
-    what = if module == MissionProtocol, do: {:mission, request.operation, request.mission_type}, else: {:command, key}
+
+    what =
+      case module do
+        MissionProtocol -> {:mission, request.operation, request.mission_type}
+        ParamProtocol -> {:param, request.name, request.value}
+        CommandProtocol -> {:command, key}
+      end
 
     opts = Keyword.merge(link_opts(s.state), opts)
 
@@ -481,6 +495,9 @@ defmodule Dolphin.Vehicles.Vehicle do
 
   defp crashed(s, {:mission, operation, type}, reason),
     do: %Dolphin.MissionError{operation: operation, vehicle: s.id, mission_type: type, result: :error, detail: "stopped: #{op_words(reason)}"}
+
+  defp crashed(s, {:param, name, value}, reason),
+    do: %Dolphin.ParamError{param: name, vehicle: s.id, result: :failed, asked: value, attempts: 0, detail: "stopped: #{op_words(reason)}"}
 
   defp crashed(s, {:command, command}, reason),
     do: %Dolphin.CommandError{command: command, vehicle: s.id, result: :failed, attempts: 0, detail: "stopped: #{op_words(reason)}"}

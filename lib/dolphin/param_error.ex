@@ -1,0 +1,34 @@
+defmodule Dolphin.ParamError do
+  @moduledoc """
+  A parameter that could not be set or read on a vehicle: which, on which
+  vehicle, and why (`result`: `:timeout` when no PARAM_VALUE came within
+  the retries, `:refused` when the vehicle answered with another value than
+  the one asked — it has no such parameter, or keeps it within its range —,
+  `:vehicle_gone` when the vehicle's process went away).
+
+      iex> e = %Dolphin.ParamError{param: "FENCE_ACTION", vehicle: 3, result: :refused, asked: 9.0, kept: 1.0, attempts: 1}
+      iex> Exception.message(e)
+      "vehicle 3 kept FENCE_ACTION at 1 when asked for 9"
+  """
+
+  defexception [:param, :vehicle, :result, :asked, :kept, :attempts, :detail]
+
+  @type t :: %__MODULE__{param: String.t(), vehicle: term(), result: atom(), asked: float() | nil, kept: float() | nil, attempts: non_neg_integer(), detail: String.t() | nil}
+
+  @impl true
+  def message(%__MODULE__{param: param, vehicle: vehicle} = e) do
+    base =
+      case e.result do
+        :timeout -> "vehicle #{vehicle} did not answer for parameter #{param} (#{e.attempts} attempts)"
+        :refused -> "vehicle #{vehicle} kept #{param} at #{number(e.kept)} when asked for #{number(e.asked)}"
+        :vehicle_gone -> "vehicle #{vehicle} went away while setting #{param}"
+        other -> "parameter #{param} on vehicle #{vehicle}: #{other}"
+      end
+
+    if e.detail, do: base <> " (" <> e.detail <> ")", else: base
+  end
+
+  defp number(v) when is_float(v) and v == trunc(v) and abs(v) < 1.0e15, do: Integer.to_string(trunc(v))
+  defp number(v) when is_float(v), do: :erlang.float_to_binary(v, [:short])
+  defp number(v), do: inspect(v)
+end

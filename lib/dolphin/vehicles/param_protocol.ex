@@ -1,0 +1,74 @@
+defmodule Dolphin.Vehicles.ParamProtocol do
+  @moduledoc """
+  The MAVLink parameter protocol for one parameter of one vehicle, as a
+  `:gen_statem` started by the vehicle's process (which routes the vehicle's
+  PARAM_VALUEs for that name to it): a set (PARAM_SET, answered by the
+  PARAM_VALUE the vehicle keeps) or a read (PARAM_REQUEST_READ). Sent again
+  when no answer comes within the wait, as the command protocol does
+  (`Dolphin.Vehicles.Retry`); a set answered with another value than asked
+  (the vehicle has no such parameter, or keeps it within its range) is
+  `{:error, %Dolphin.ParamError{result: :refused}}`; otherwise the reply is
+  `{:ok, value}` to the caller given at start.
+  """
+
+  @behaviour :gen_statem
+
+  alias Dolphin.{Clock, ParamError}
+  alias Dolphin.MAVLink.Ardupilotmega, as: M
+  alias Dolphin.Vehicles.Retry
+
+  # MAV_PARAM_TYPE_REAL32: ArduPilot keeps every parameter as a float on the wire.
+  @real32 9
+
+  @doc """
+  Starts the protocol, linked to the caller (the vehicle process).
+  `request`: `%{sysid, vehicle, name, value (nil: a read), send, reply_to}`.
+  Options as `Dolphin.Vehicles.CommandProtocol.start_link/2`'s: `:attempts`,
+  `:loss`, `:rtt_ms`, `:ack_timeout_ms`.
+  """
+  @spec start_link(map(), keyword()) :: :gen_statem.start_ret()
+  def start_link(request, opts \\ []), do: :gen_statem.start_link(__MODULE__, {request, opts}, [])
+
+  @impl true
+  def callback_mode, do: [:handle_event_function, :state_enter]
+
+  @impl true
+  def init({request, opts}) do
+    longest = Keyword.get(opts, :ack_timeout_ms, 1_500)
+    rtt = Keyword.get(opts, :rtt_ms)
+    wait = if is_number(rtt), do: min(Clock.retry_real_ms(longest), max(2 * Retry.timeout([rtt], longest), Clock.retry_real_ms(250))), else: Clock.retry_real_ms(longest)
+    data = Map.merge(request, %{attempts: Keyword.get_lazy(opts, :attempts, fn -> Retry.attempts(Keyword.get(opts, :loss)) end), wait_ms: wait, sent: 0})
+    {:ok, {:waiting, 1}, data}
+  end
+
+  @impl true
+  def handle_event(:enter, _old, {:waiting, n}, data) do
+    data.send.(message(data))
+    {:keep_state, %{data | sent: n}, [{:state_timeout, data.wait_ms, :resend}]}
+  end
+
+  def handle_event(:state_timeout, :resend, {:waiting, n}, data) do
+    if n < data.attempts,
+      do: {:next_state, {:waiting, n + 1}, data},
+      else: finish(data, {:error, %ParamError{param: data.name, vehicle: data.vehicle, result: :timeout, asked: data.value, attempts: n}})
+  end
+
+  def handle_event(:info, {:param, %M.ParamValue{param_value: kept}}, _state, %{value: nil} = data), do: finish(data, {:ok, kept})
+
+  def handle_event(:info, {:param, %M.ParamValue{param_value: kept}}, _state, data) do
+    # Compared as the float32 the vehicle keeps.
+    if same?(kept, data.value),
+      do: finish(data, {:ok, kept}),
+      else: finish(data, {:error, %ParamError{param: data.name, vehicle: data.vehicle, result: :refused, asked: data.value, kept: kept, attempts: data.sent}})
+  end
+
+  defp same?(a, b), do: <<a::float-32>> == <<b::float-32>>
+
+  defp finish(data, reply) do
+    if data.reply_to, do: :gen_statem.reply(data.reply_to, reply)
+    {:stop, :normal, data}
+  end
+
+  defp message(%{value: nil} = data), do: %M.ParamRequestRead{target_system: data.sysid, target_component: 1, param_id: data.name, param_index: -1}
+  defp message(data), do: %M.ParamSet{target_system: data.sysid, target_component: 1, param_id: data.name, param_value: data.value * 1.0, param_type: @real32}
+end
