@@ -102,6 +102,12 @@ defmodule Dolphin.Airframe do
   @doc "The firmware that flies it, as its messages are named."
   @callback firmware() :: String.t()
 
+  @doc """
+  Its firmware's FENCE_ACTION for a fence's `on_breach` (`Dolphin.Fence`),
+  or nil when it has none such.
+  """
+  @callback fence_action(:rtl | :land | :hold | :report) :: non_neg_integer() | nil
+
   @doc "The modes that hold it where it is, the first the one a stop asks for."
   @callback hold_modes() :: [atom()]
 
@@ -224,7 +230,7 @@ defmodule Dolphin.Airframe do
   Makes the module an airframe, with what most airframes do unless it says
   otherwise: a landing is one NAV_LAND, heights are above sea level, a
   loiter is flown at its radius as given, it turns on the spot, and climbs
-  out straight up at its climb speed.
+  out straight up at its climb speed; its fence reports or returns home.
   """
   defmacro __using__(_opts) do
     quote do
@@ -240,8 +246,13 @@ defmodule Dolphin.Airframe do
       def turn_radius(_p, _speed), do: 0.0
       @impl true
       def climb_out(p, _pitch), do: {p.climb_speed, 0.0, 0.0}
+      # Every firmware's fence reports (0) and returns home (1).
+      @impl true
+      def fence_action(:report), do: 0
+      def fence_action(:rtl), do: 1
+      def fence_action(_other), do: nil
 
-      defoverridable landing_commands: 0, heights: 0, flown_radius: 2, turn_radius: 2, climb_out: 2
+      defoverridable landing_commands: 0, heights: 0, flown_radius: 2, turn_radius: 2, climb_out: 2, fence_action: 1
     end
   end
 end

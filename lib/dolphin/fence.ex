@@ -112,6 +112,66 @@ defmodule Dolphin.Fence do
   def empty?(%__MODULE__{include: [], exclude: [], max_altitude: nil, min_altitude: nil, rally: []}), do: true
   def empty?(%__MODULE__{}), do: false
 
+  @doc """
+  The fence as the items of the mission protocol's fence and rally lists
+  (MISSION_ITEM_INT, `mission_type` 1 and 2, seq from 0): a polygon is one
+  item per corner (MAV_CMD_NAV_FENCE_POLYGON_VERTEX_INCLUSION or _EXCLUSION,
+  param1 its corner count), a circle one item (..._CIRCLE_INCLUSION or
+  _EXCLUSION, param1 its radius), in frame GLOBAL_INT; a rally point is
+  MAV_CMD_NAV_RALLY_POINT at its height above `home`, in frame
+  GLOBAL_RELATIVE_ALT_INT.
+
+      iex> home = Dolphin.Geo.location(38.43462, -8.86118, 0)
+      iex> {:ok, zone} = Dolphin.Geo.Shapes.circle(home, 500)
+      iex> %{fence: [circle], rally: [point]} = Dolphin.Fence.to_items(%Dolphin.Fence{include: [zone], rally: [Dolphin.Geo.offset(home, 100, 0, 30)]}, home)
+      iex> {circle.command, circle.param1, circle.mission_type, point.command, point.z, point.mission_type}
+      {5003, 500.0, 1, 5100, 30.0, 2}
+  """
+  @spec to_items(t(), Location.t()) :: %{fence: [struct()], rally: [struct()]}
+  def to_items(%__MODULE__{} = fence, %Location{} = home) do
+    zones = Enum.flat_map(fence.include, &zone_items(&1, :inclusion)) ++ Enum.flat_map(fence.exclude, &zone_items(&1, :exclusion))
+    rally = for p <- fence.rally, do: item(5100, 6, p, p.h - home.h, 0.0, 2)
+    %{fence: numbered(zones), rally: numbered(rally)}
+  end
+
+  @vertex %{inclusion: 5001, exclusion: 5002}
+  @circle %{inclusion: 5003, exclusion: 5004}
+
+  defp zone_items(%Polygon{points: points}, side), do: for(p <- points, do: item(@vertex[side], 5, p, 0.0, length(points) * 1.0, 1))
+  defp zone_items(%Circle{centre: c, radius: r}, side), do: [item(@circle[side], 5, c, 0.0, r, 1)]
+
+  defp item(command, frame, %Location{lat: lat, lon: lon}, z, param1, type) do
+    %Dolphin.MAVLink.Ardupilotmega.MissionItemInt{
+      command: command,
+      frame: frame,
+      x: round(lat * 1.0e7),
+      y: round(lon * 1.0e7),
+      z: z * 1.0,
+      param1: param1,
+      param2: 0.0,
+      param3: 0.0,
+      param4: 0.0,
+      autocontinue: 1,
+      current: 0,
+      mission_type: type
+    }
+  end
+
+  defp numbered(items), do: items |> Enum.with_index() |> Enum.map(fn {item, seq} -> %{item | seq: seq} end)
+
+  @doc """
+  The FENCE_TYPE bits that enable what the fence has: 1 its ceiling, 4 its
+  zones (polygons and circles alike), 8 its floor.
+  """
+  @spec type_bits(t()) :: non_neg_integer()
+  def type_bits(%__MODULE__{} = fence) do
+    Enum.sum([
+      if(fence.max_altitude, do: 1, else: 0),
+      if(fence.include != [] or fence.exclude != [], do: 4, else: 0),
+      if(fence.min_altitude, do: 8, else: 0)
+    ])
+  end
+
   @keys [:include, :exclude, :max_altitude, :min_altitude, :on_breach, :rally]
 
   defp known_keys(opts) do

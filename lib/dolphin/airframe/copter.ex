@@ -32,6 +32,13 @@ defmodule Dolphin.Airframe.Copter do
   def current(p, speed, climb, true), do: p.hover_current * (1.0 + 0.1 * speed / 10 + 0.2 * max(climb, 0) / 2.5)
   def current(p, _speed, _climb, false), do: p.hover_current * 0.15
 
+  # ArduCopter's FENCE_ACTION: 1 RTL (else LAND), 2 LAND, 4 BRAKE (else LAND), 0 report only.
+  @impl true
+  def fence_action(:rtl), do: 1
+  def fence_action(:land), do: 2
+  def fence_action(:hold), do: 4
+  def fence_action(:report), do: 0
+
   # Spooling up, then straight up.
   @impl true
   def climb_out(p, _pitch), do: {p.climb_speed, 0.0, 3.0}

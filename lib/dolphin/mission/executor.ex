@@ -4,11 +4,12 @@ defmodule Dolphin.Mission.Executor do
   # Dolphin.Mission.Platform for its contract with the engine), a :gen_statem
   # over the steps ArduCopter needs (docs/ardupilot.md):
   #
-  #   :hold -> :clear -> :upload -> :verify -> :guided -> :arm -> :start -> :flying -> done | failed
+  #   :hold -> :clear -> :upload -> :verify -> [:fence] -> :guided -> :arm -> :start -> :flying -> done | failed
   #
   # :hold waits for the end of the vehicle's boot and holds it if it is flying
   # another mission; then clear; upload; download it back and compare by
-  # meaning (never start an unverified mission); GUIDED; arm, retried while the
+  # meaning (never start an unverified mission); the mission's fence, or the
+  # script's, put on the vehicle (Dolphin.Vehicles.Fences); GUIDED; arm, retried while the
   # autopilot is not ready, for at most `:arm_timeout_ms`; MISSION_START at once
   # (a copter armed on the ground disarms itself after ~10 s). In :flying it
   # follows the vehicle's state (Dolphin.Mission.Executor.Flight judges it);
@@ -34,6 +35,8 @@ defmodule Dolphin.Mission.Executor do
 
   @arm_timeout_ms 120_000
   @landing_reports_ms 5_000
+  # How long (clock ms) a vehicle that left its mission is given to say why.
+  @reason_ms 1_000
   @takeoff 22
   @land 21
   # A landed vehicle this close to a mission's landing point is there.
@@ -71,6 +74,8 @@ defmodule Dolphin.Mission.Executor do
     data = %{
       mission: mission,
       name: mission.name,
+      # Its own fence, else the script's (the run's platform options).
+      fence: mission.fence || Map.get(opts, :fence),
       vehicle: vehicle,
       owner: opts.owner,
       arm_timeout_ms: Map.get(opts, :arm_timeout_ms, @arm_timeout_ms),
@@ -116,6 +121,14 @@ defmodule Dolphin.Mission.Executor do
   end
 
   def handle_event(:enter, _old, :verify, data), do: exchange(data, fn -> Vehicles.download_mission(data.vehicle) end)
+
+  def handle_event(:enter, _old, :fence, data) do
+    [home | _] = data.items
+    at = Dolphin.Geo.location(home.x / 1.0e7, home.y / 1.0e7, home.z)
+    exchange(data, fn -> Dolphin.Vehicles.Fences.apply(data.vehicle, data.fence, at, data.airframe) end)
+  end
+
+  def handle_event(:enter, _old, {:leaving, _cause}, _data), do: :keep_state_and_data
   def handle_event(:enter, _old, :guided, data), do: exchange(data, fn -> Manoeuvres.guided(data.vehicle, within: data.arm_timeout_ms) end)
   def handle_event(:enter, _old, :arm, data), do: exchange(data, fn -> Manoeuvres.arm_when_ready(data.vehicle, within: data.arm_timeout_ms) end)
 
@@ -190,6 +203,9 @@ defmodule Dolphin.Mission.Executor do
       do: fail(:flying, data, grounded(data, st), vehicle_fault?: true, texts: texts(data)),
       else: judge(%{data | grounded: nil}, st)
   end
+
+  def handle_event(:state_timeout, :said, {:leaving, cause}, data),
+    do: fail(:flying, data, cause, vehicle_fault?: true, texts: texts(data), hold: false)
 
   def handle_event(:state_timeout, :check_landed, :flying, data) do
     case Vehicles.view(data.vehicle) do
@@ -283,7 +299,7 @@ defmodule Dolphin.Mission.Executor do
 
   defp answered(:verify, {:ok, back}, data) do
     case Mission.compare_download(data.items, back) do
-      :ok -> next(:guided, data)
+      :ok -> next(if(data.fence, do: :fence, else: :guided), data)
       {:error, e} -> fail(:verify, data, {:read_back_differs, e})
     end
   end
@@ -294,6 +310,8 @@ defmodule Dolphin.Mission.Executor do
   defp answered(:verify, {:error, e}, data),
     do: fail(:verify, data, {:read_back_failed, e, data.attempt})
 
+  defp answered(:fence, :ok, data), do: next(:guided, data)
+  defp answered(:fence, {:error, e}, data), do: fail(:fence, data, {:refused, e})
   defp answered(:guided, :ok, data), do: next(:arm, data)
   defp answered(:arm, :ok, data), do: next(:start, data)
   # The autopilot would not arm (not ready, a failed check): the vehicle's own fault.
@@ -381,9 +399,11 @@ defmodule Dolphin.Mission.Executor do
       :done ->
         done(data)
 
-      # Left to what took it (a failsafe's RTL or LAND, the pilot): never overridden.
+      # Left to what took it (a failsafe's RTL or LAND, the pilot): never
+      # overridden; failed once the vehicle has had the time to say why (its
+      # STATUSTEXT may come just after the HEARTBEAT with the new mode).
       {:left, cause} ->
-        fail(:flying, data, cause, vehicle_fault?: true, texts: texts(data), hold: false)
+        {:next_state, {:leaving, cause}, data, [{:state_timeout, Clock.to_real_ms(@reason_ms), :said}]}
 
       # A landing mission's disarm comes before its last report (ArduPilot
       # reports the final item after "Disarming motors"): the reports are

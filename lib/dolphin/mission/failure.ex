@@ -45,7 +45,7 @@ defmodule Dolphin.Mission.Failure do
 
   defexception mission: nil, vehicle: nil, step: nil, cause: nil, status_texts: [], vehicle_fault?: false
 
-  @type step :: :hold | :clear | :upload | :verify | :guided | :arm | :start | :flying | :resume
+  @type step :: :hold | :clear | :upload | :verify | :fence | :guided | :arm | :start | :flying | :resume
   @type cause ::
           {:cannot_make_items, String.t()}
           | {:booting, :uninit | :boot, non_neg_integer()}
@@ -77,6 +77,15 @@ defmodule Dolphin.Mission.Failure do
         }
 
   @impl true
+  # What made a vehicle leave AUTO is often only a notice ("Polygon fence
+  # breached", severity 5): said too; otherwise the first warning or worse.
+  def message(%__MODULE__{cause: {:left_auto, _}} = f) do
+    case Enum.find(f.status_texts, fn {severity, _} -> severity <= 5 end) do
+      {_, text} -> words(f) <> ": the autopilot says \"#{text}\""
+      nil -> words(f)
+    end
+  end
+
   def message(%__MODULE__{} = f), do: words(f) <> Dolphin.ManoeuvreError.says(f.status_texts, [])
 
   defp words(%{cause: {:cannot_make_items, text}} = f), do: "mission #{inspect(f.mission)} cannot be turned into items: #{text}"

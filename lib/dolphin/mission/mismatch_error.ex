@@ -2,7 +2,8 @@ defmodule Dolphin.Mission.MismatchError do
   @moduledoc """
   A mission read back from a vehicle that differs in meaning from the one
   uploaded (`Dolphin.Mission.compare_download/2`): the first difference,
-  `what` differs (`:count`, `:command`, `:frame`, `:position`, `:height`),
+  `what` differs (`:count`, `:command`, `:frame`, `:position`, `:height`;
+  for a fence item `:param1`, its corner count or radius),
   in which `item` (its seq; nil for `:count`), as it is `on_vehicle` and as it
   was `uploaded`.
 
@@ -13,7 +14,7 @@ defmodule Dolphin.Mission.MismatchError do
   defexception [:what, :item, :on_vehicle, :uploaded]
 
   @type t :: %__MODULE__{
-          what: :count | :command | :frame | :position | :height,
+          what: :count | :command | :frame | :position | :height | :param1,
           item: non_neg_integer() | nil,
           on_vehicle: term(),
           uploaded: term()
@@ -27,6 +28,7 @@ defmodule Dolphin.Mission.MismatchError do
       :frame -> "item #{item} has frame #{down} on the vehicle, #{up} was uploaded"
       :position -> "item #{item} is at #{inspect(down)} on the vehicle, #{inspect(up)} was uploaded"
       :height -> "item #{item} is at height #{inspect(down)} on the vehicle, #{up} was uploaded"
+      :param1 -> "item #{item} has param1 #{inspect(down)} on the vehicle, #{up} was uploaded"
     end
   end
 end

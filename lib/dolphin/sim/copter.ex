@@ -27,7 +27,7 @@ defmodule Dolphin.Sim.Copter do
   alias Dolphin.Geo
   alias Dolphin.MAVLink.Ardupilotmega, as: M
   alias Dolphin.Sim.{MissionServer, Streams}
-  alias Dolphin.Sim.Copter.{Battery, Camera, Commands, Flight, Mission, Modes}
+  alias Dolphin.Sim.Copter.{Battery, Camera, Commands, Fence, Flight, Mission, Modes}
 
   @autopilot 1
 
@@ -94,6 +94,8 @@ defmodule Dolphin.Sim.Copter do
             arm_blocked: false,
             ground_since: nil,
             photos: 0,
+            # The geofence's breaches (Copter.Fence).
+            fence: %{bits: 0, count: 0, time_ms: 0, recovery_until: 0, zones: nil},
             capture: nil,
             # Sent unasked: the heartbeat at 1 Hz, TIMESYNC every 10 s.
             streams: %{0 => 1000, 111 => 10_000},
@@ -342,6 +344,7 @@ defmodule Dolphin.Sim.Copter do
     |> Modes.auto_disarm()
     |> Camera.capture()
     |> Battery.step(dt_ms / 1000)
+    |> Fence.step()
     |> Modes.gcs_failsafe()
     |> mission_timeout()
     |> Mission.latest_reports(before)
@@ -366,6 +369,13 @@ defmodule Dolphin.Sim.Copter do
 
   @doc false
   def say(c, message, compid \\ @autopilot), do: %{c | out: [{compid, message} | c.out]}
+
+  @doc false
+  # Where the vehicle is, as a location (its height above mean sea level).
+  def location(c) do
+    {lat, lon} = Geo.from_tangent(c.plane, c.n, c.e)
+    Geo.location(lat, lon, c.alt)
+  end
 
   @doc false
   def text(c, severity, text), do: say(c, %M.Statustext{severity: severity, text: binary_part(text, 0, min(byte_size(text), 50))})

@@ -16,7 +16,7 @@ defmodule Dolphin.Sim.Streams do
   # include EXTENDED_SYS_STATE: ArduPilot sends it only when asked by interval.
   @data_streams %{
     1 => [24],
-    2 => [1, 24, 42],
+    2 => [1, 24, 42, 162],
     6 => [33],
     10 => [30],
     11 => [74],
@@ -25,7 +25,7 @@ defmodule Dolphin.Sim.Streams do
   @all_streams [1, 24, 42, 33, 30, 74, 147]
 
   # Messages that can be streamed or requested once.
-  @known [1, 24, 30, 33, 42, 74, 111, 147, 148, 242, 245]
+  @known [1, 24, 30, 33, 42, 74, 111, 147, 148, 162, 242, 245]
 
   # Parameters a ground station may read (names as ArduPilot 4.5/4.6 and 4.7).
   @doc false
@@ -42,7 +42,15 @@ defmodule Dolphin.Sim.Streams do
       "RTL_ALT" => config.rtl_alt * 100,
       "BATT_CAPACITY" => config.capacity_mah,
       "DISARM_DELAY" => config.disarm_delay_ms / 1000,
-      "FS_GCS_ENABLE" => if(config.gcs_failsafe, do: 1, else: 0)
+      "FS_GCS_ENABLE" => if(config.gcs_failsafe, do: 1, else: 0),
+      # The geofence (Copter.Fence), as ArduCopter's defaults are with copter.parm.
+      "FENCE_ENABLE" => 0,
+      "FENCE_TYPE" => 7,
+      "FENCE_ACTION" => 1,
+      "FENCE_ALT_MAX" => 100,
+      "FENCE_ALT_MIN" => -10,
+      "FENCE_MARGIN" => 2,
+      "FENCE_RADIUS" => 150
     }
   end
 
@@ -199,6 +207,9 @@ defmodule Dolphin.Sim.Streams do
 
     %M.AutopilotVersion{capabilities: capabilities, flight_sw_version: 0x04060000, uid: c.uid, vendor_id: 0x1209, product_id: 0x5740}
   end
+
+  # FENCE_STATUS only while a fence is enabled.
+  def message(c, 162), do: if(Dolphin.Sim.Copter.Fence.enabled?(c), do: Dolphin.Sim.Copter.Fence.status(c))
 
   def message(%{home: nil}, 242), do: nil
 

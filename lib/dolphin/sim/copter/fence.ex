@@ -1,0 +1,148 @@
+defmodule Dolphin.Sim.Copter.Fence do
+  @moduledoc false
+  # The simulated vehicle's geofence, as ArduCopter keeps one
+  # (docs/ardupilot.md, "Fences"): with FENCE_ENABLE 1 it is checked every
+  # step against the fence list of the mission protocol (its zones, judged
+  # by Dolphin.Geo.Shapes as the pre-flight check judges them: inside every
+  # inclusion zone, outside every exclusion zone) and the altitude band
+  # FENCE_ALT_MAX / FENCE_ALT_MIN (above home), by the FENCE_TYPE bits. A new
+  # breach, armed and in the air: "Polygon fence breached" (or "Max Alt",
+  # "Min Alt"; several joined by "and"), FENCE_ACTION taken (0 report, 1 RTL,
+  # 2 LAND, 4 BRAKE), "Manual recovery started", a FENCE_STATUS at once; for
+  # 10 s after, new breaches are counted and not acted on. Back inside:
+  # "Fence breach cleared". FENCE_STATUS (162) reports it while the fence is
+  # enabled.
+
+  import Dolphin.Sim.Copter, only: [text: 3, in_air?: 1, home_alt: 1, say: 2]
+
+  alias Dolphin.Geo.Shapes
+  alias Dolphin.MAVLink.Ardupilotmega, as: M
+  alias Dolphin.Sim.{Copter, MissionServer}
+  alias Dolphin.Sim.Copter.Modes
+
+  @boundary 4
+  @max_alt 1
+  @min_alt 8
+  @recovery_ms 10_000
+  @actions %{1 => :rtl, 2 => :land, 4 => :brake}
+
+  @doc false
+  @spec step(Copter.t()) :: Copter.t()
+  def step(c) do
+    if enabled?(c), do: check(c), else: c
+  end
+
+  @doc false
+  def enabled?(c), do: Map.get(c.params, "FENCE_ENABLE", 0) == 1
+
+  @doc false
+  # FENCE_STATUS: breach_type 3 the boundary, 2 the ceiling, 1 the floor.
+  def status(c) do
+    f = c.fence
+
+    type =
+      cond do
+        Bitwise.band(f.bits, @boundary) != 0 -> 3
+        Bitwise.band(f.bits, @max_alt) != 0 -> 2
+        Bitwise.band(f.bits, @min_alt) != 0 -> 1
+        true -> 0
+      end
+
+    %M.FenceStatus{breach_status: if(f.bits != 0, do: 1, else: 0), breach_count: f.count, breach_type: type, breach_time: f.time_ms, breach_mitigation: 1}
+  end
+
+  defp check(c) do
+    {zones, c} = zones(c)
+    types = round(Map.get(c.params, "FENCE_TYPE", 7))
+    height = c.alt - home_alt(c)
+    here = Copter.location(c)
+
+    bits =
+      Enum.sum([
+        if(Bitwise.band(types, @boundary) != 0 and Dolphin.Fence.breach(zones, here) != nil, do: @boundary, else: 0),
+        if(Bitwise.band(types, @max_alt) != 0 and height >= Map.get(c.params, "FENCE_ALT_MAX", 100), do: @max_alt, else: 0),
+        if(Bitwise.band(types, @min_alt) != 0 and in_air?(c) and height <= Map.get(c.params, "FENCE_ALT_MIN", -10), do: @min_alt, else: 0)
+      ])
+
+    new = Bitwise.band(bits, Bitwise.bnot(c.fence.bits))
+
+    cond do
+      new != 0 -> breached(c, bits, new)
+      bits == 0 and c.fence.bits != 0 -> cleared(c)
+      true -> %{c | fence: %{c.fence | bits: bits}}
+    end
+  end
+
+  defp breached(c, bits, new) do
+    episode? = c.fence.bits == 0
+    fence = %{c.fence | bits: bits, count: c.fence.count + 1, time_ms: if(episode?, do: c.time_ms, else: c.fence.time_ms)}
+    c = %{c | fence: fence}
+
+    if c.armed and in_air?(c) and c.time_ms >= fence.recovery_until do
+      c = text(c, 5, "#{names(new)} breached")
+      c = act(c, @actions[round(Map.get(c.params, "FENCE_ACTION", 1))])
+      c = %{c | fence: %{c.fence | recovery_until: c.time_ms + @recovery_ms}}
+      c |> text(6, "Manual recovery started") |> say(status(c))
+    else
+      c
+    end
+  end
+
+  defp cleared(c) do
+    c = %{c | fence: %{c.fence | bits: 0}}
+    if in_air?(c), do: text(c, 5, "Fence breach cleared"), else: c
+  end
+
+  defp act(c, nil), do: c
+
+  defp act(c, mode) do
+    {_, c} = Modes.set_mode_named(c, mode)
+    c
+  end
+
+  defp names(bits) do
+    [{@boundary, "Polygon"}, {@max_alt, "Max Alt"}, {@min_alt, "Min Alt"}]
+    |> Enum.filter(fn {bit, _} -> Bitwise.band(bits, bit) != 0 end)
+    |> Enum.map_join(" and ", &elem(&1, 1))
+    |> Kernel.<>(if(Bitwise.band(bits, bits - 1) != 0, do: " fences", else: " fence"))
+  end
+
+  # The zones of the fence list, parsed once per list.
+  defp zones(c) do
+    items = MissionServer.items(c.missions, 1)
+
+    case c.fence.zones do
+      {^items, zones} -> {zones, c}
+      _ -> with zones = parse(items), do: {zones, %{c | fence: %{c.fence | zones: {items, zones}}}}
+    end
+  end
+
+  @doc false
+  # A fence from its items: a polygon is its run of vertices (param1 of them), a circle one item.
+  def parse(items), do: parse(items, %Dolphin.Fence{})
+
+  defp parse([], fence), do: fence
+
+  defp parse([%{command: c, param1: n} | _] = items, fence) when c in [5001, 5002] do
+    {vertices, rest} = Enum.split(items, max(trunc(n), 1))
+    side = if c == 5001, do: :include, else: :exclude
+
+    case Shapes.polygon(Enum.map(vertices, &point/1)) do
+      {:ok, polygon} -> parse(rest, Map.update!(fence, side, &(&1 ++ [polygon])))
+      {:error, _} -> parse(rest, fence)
+    end
+  end
+
+  defp parse([%{command: c, param1: r} = item | rest], fence) when c in [5003, 5004] do
+    side = if c == 5003, do: :include, else: :exclude
+
+    case Shapes.circle(point(item), r) do
+      {:ok, circle} -> parse(rest, Map.update!(fence, side, &(&1 ++ [circle])))
+      {:error, _} -> parse(rest, fence)
+    end
+  end
+
+  defp parse([_other | rest], fence), do: parse(rest, fence)
+
+  defp point(item), do: Dolphin.Geo.location(item.x / 1.0e7, item.y / 1.0e7, 0)
+end
