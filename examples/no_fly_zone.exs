@@ -16,38 +16,35 @@ use Dolphin.Script
 base = location(40.444233, -7.375234, 820)
 
 fence do
-  include(circle(base, 600))
+  include circle(base, 600)
   # 80 to 120 m north of the base, 100 m wide.
-  exclude(
-    polygon([
-      Dolphin.Geo.offset(base, 80, -50),
-      Dolphin.Geo.offset(base, 80, 50),
-      Dolphin.Geo.offset(base, 120, 50),
-      Dolphin.Geo.offset(base, 120, -50)
-    ])
-  )
-
-  max_altitude(60)
-  on_breach(:rtl)
+  exclude polygon([
+            Dolphin.Geo.offset(base, 80, -50),
+            Dolphin.Geo.offset(base, 80, 50),
+            Dolphin.Geo.offset(base, 120, 50),
+            Dolphin.Geo.offset(base, 120, -50)
+          ])
+  max_altitude 60
+  on_breach :rtl
 end
 
-rally([Dolphin.Geo.offset(base, 0, 60, 30)])
+rally [Dolphin.Geo.offset(base, 0, 60, 30)]
 
 north =
   mission "North" do
-    home(base)
-    take_off(location(40.444233, -7.375234, 840))
-    move(200, 0, 0)
+    home base
+    take_off location(40.444233, -7.375234, 840)
+    move 200, 0, 0
     return_home_and_land()
   end
 
 v = pick(type: :uav, region: area(base, meters(200)), timeout: minutes(1))
 
-execute(%{
+execute %{
   v =>
     watch(north,
       on_error: fn failure ->
         message("stopped at the fence: " <> Dolphin.Engine.Failure.message(failure))
       end
     )
-})
+}
