@@ -46,7 +46,7 @@ defmodule Dolphin.CheckTest do
     report = check("fenced.exs", fleet)
     errors = for f <- report.findings, f.kind == :fence, do: {f.line, f.message}
 
-    assert [{41, through}, {41, out}, {42, high}, {56, elsewhere}] = errors
+    assert [{41, through}, {41, out}, {42, high}, {58, elsewhere}] = errors
     assert through =~ ~r/^mission "Through the zone" on vehicle 211: the way to item 2 \(NAV_WAYPOINT\) enters exclusion zone 1 at 40\.44\d+, -7\.375234$/
     assert out =~ "the way to item 3 (NAV_LAND) leaves inclusion zone 1 at"
     assert high =~ ~s|mission "Too high" on vehicle 211: item 2 (NAV_WAYPOINT) is 140 m above home, over the fence's max_altitude of 120 m|

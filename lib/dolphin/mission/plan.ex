@@ -82,10 +82,28 @@ defmodule Dolphin.Mission.Plan do
         "plannedHomePosition" => [home.x / 1.0e7, home.y / 1.0e7, home.z],
         "items" => plan_items
       },
-      "geoFence" => %{"circles" => [], "polygons" => [], "version" => 2},
-      "rallyPoints" => %{"points" => [], "version" => 2}
+      "geoFence" => geo_fence(mission.fence),
+      "rallyPoints" => %{"points" => rally_points(mission.fence, home.z), "version" => 2}
     }
   end
+
+  # The mission's fence as QGroundControl keeps one: its zones (the
+  # altitude band and the breach action are the vehicle's parameters, not
+  # the plan's), its rally points at their height above the planned home.
+  defp geo_fence(nil), do: %{"circles" => [], "polygons" => [], "version" => 2}
+
+  defp geo_fence(%Dolphin.Fence{} = fence) do
+    zones = Enum.map(fence.include, &{&1, true}) ++ Enum.map(fence.exclude, &{&1, false})
+
+    %{
+      "circles" => for({%Dolphin.Geo.Circle{centre: c, radius: r}, inclusion} <- zones, do: %{"circle" => %{"center" => [c.lat, c.lon], "radius" => r}, "inclusion" => inclusion, "version" => 1}),
+      "polygons" => for({%Dolphin.Geo.Polygon{points: points}, inclusion} <- zones, do: %{"inclusion" => inclusion, "polygon" => Enum.map(points, &[&1.lat, &1.lon]), "version" => 1}),
+      "version" => 2
+    }
+  end
+
+  defp rally_points(nil, _home_h), do: []
+  defp rally_points(%Dolphin.Fence{rally: points}, home_h), do: for(p <- points, do: [p.lat, p.lon, p.h - home_h])
 
   defp plan_item(item) do
     frame = Map.get(@to_plan_frame, item.frame, item.frame)
@@ -128,9 +146,10 @@ defmodule Dolphin.Mission.Plan do
          {:ok, mission} <- object(plan, "mission"),
          :ok <- check(mission["version"] == 2, :unsupported_version, field("mission.version", mission, "version", "2")),
          {:ok, home} <- home(mission),
-         {:ok, items} <- items(mission) do
+         {:ok, items} <- items(mission),
+         {:ok, fence} <- fence(plan, home) do
       name = Keyword.get(opts, :name, "plan")
-      {:ok, mission_from_items(name, home, items)}
+      {:ok, %{mission_from_items(name, home, items) | fence: fence}}
     end
   end
 
@@ -155,6 +174,70 @@ defmodule Dolphin.Mission.Plan do
       :error -> {:error, %PlanError{reason: :not_a_plan, detail: ~s|no "#{key}"|}}
     end
   end
+
+  # The plan's geoFence and rallyPoints as the mission's fence (nil when it has none).
+  defp fence(plan, home) do
+    geo = Map.get(plan, "geoFence", %{})
+    rally = Map.get(plan, "rallyPoints", %{})
+
+    with {:ok, zones} <- zones(geo),
+         {:ok, points} <- rally(rally, home) do
+      {include, exclude} = Enum.split_with(zones, &elem(&1, 1))
+      opts = Enum.map(include, &{:include, elem(&1, 0)}) ++ Enum.map(exclude, &{:exclude, elem(&1, 0)}) ++ [rally: points]
+
+      case Dolphin.Fence.new(opts) do
+        {:ok, %{include: [], exclude: [], rally: []}} -> {:ok, nil}
+        {:ok, fence} -> {:ok, fence}
+        {:error, why} -> {:error, %PlanError{reason: :invalid_fence, detail: why}}
+      end
+    end
+  end
+
+  defp zones(%{} = geo) do
+    polygons = for {json, i} <- Enum.with_index(List.wrap(Map.get(geo, "polygons", [])), 1), do: zone(:polygon, json, i)
+    circles = for {json, i} <- Enum.with_index(List.wrap(Map.get(geo, "circles", [])), 1), do: zone(:circle, json, i)
+
+    case Enum.find(polygons ++ circles, &match?({:error, _}, &1)) do
+      nil -> {:ok, polygons ++ circles}
+      error -> error
+    end
+  end
+
+  defp zones(other), do: {:error, %PlanError{reason: :invalid_fence, detail: ~s|"geoFence" is #{JSONText.show(other)}, not an object|}}
+
+  defp zone(:polygon, %{"polygon" => corners} = json, i) when is_list(corners) do
+    with {:ok, points} <- corners(corners, "geoFence polygon #{i}"),
+         {:ok, polygon} <- wrap(Dolphin.Geo.Shapes.polygon(points), "geoFence polygon #{i}") do
+      {polygon, Map.get(json, "inclusion", true) != false}
+    end
+  end
+
+  defp zone(:circle, %{"circle" => %{"center" => [lat, lon], "radius" => r}} = json, i) when is_number(lat) and is_number(lon) do
+    with {:ok, circle} <- wrap(Dolphin.Geo.Shapes.circle(Location.new(lat, lon, 0), r), "geoFence circle #{i}"),
+         do: {circle, Map.get(json, "inclusion", true) != false}
+  end
+
+  defp zone(kind, json, i), do: {:error, %PlanError{reason: :invalid_fence, detail: "geoFence #{kind} #{i} is #{JSONText.show(json)}"}}
+
+  defp corners(corners, what) do
+    if Enum.all?(corners, &match?([lat, lon | _] when is_number(lat) and is_number(lon) and abs(lat) <= 90 and abs(lon) <= 180, &1)),
+      do: {:ok, Enum.map(corners, fn [lat, lon | _] -> Location.new(lat, lon, 0) end)},
+      else: {:error, %PlanError{reason: :invalid_fence, detail: "#{what}: its corners are [latitude, longitude] pairs, got #{JSONText.show(corners)}"}}
+  end
+
+  defp wrap({:ok, value}, _what), do: {:ok, value}
+  defp wrap({:error, why}, what), do: {:error, %PlanError{reason: :invalid_fence, detail: "#{what}: #{why}"}}
+
+  # Rally points are written at their height above the planned home.
+  defp rally(%{} = rally, home) do
+    points = List.wrap(Map.get(rally, "points", []))
+
+    if Enum.all?(points, &match?([lat, lon, h] when is_number(lat) and is_number(lon) and is_number(h), &1)),
+      do: {:ok, for([lat, lon, h] <- points, do: Location.new(lat, lon, home.h + h))},
+      else: {:error, %PlanError{reason: :invalid_fence, detail: "rallyPoints: each point is [latitude, longitude, height above home], got #{JSONText.show(points)}"}}
+  end
+
+  defp rally(other, _home), do: {:error, %PlanError{reason: :invalid_fence, detail: ~s|"rallyPoints" is #{JSONText.show(other)}, not an object|}}
 
   defp check(true, _reason, _detail), do: :ok
   defp check(false, reason, detail), do: {:error, %PlanError{reason: reason, detail: detail}}

@@ -2,7 +2,8 @@ defmodule Dolphin.Mission.PlanError do
   @moduledoc """
   A QGroundControl plan that could not be read: `reason` names what is
   wrong (`:invalid_json`, `:not_a_plan`, `:unsupported_version`,
-  `:unsupported_item`, `:invalid_item`, `:invalid_home`), `detail` says where.
+  `:unsupported_item`, `:invalid_item`, `:invalid_home`, `:invalid_fence`),
+  `detail` says where.
 
       iex> Exception.message(%Dolphin.Mission.PlanError{reason: :not_a_plan, detail: ~s(fileType is "Mission")})
       ~s(not a QGroundControl plan: fileType is "Mission")
@@ -22,6 +23,7 @@ defmodule Dolphin.Mission.PlanError do
         :unsupported_item -> "unsupported plan item"
         :invalid_item -> "invalid plan item"
         :invalid_home -> "invalid planned home position"
+        :invalid_fence -> "invalid geofence or rally points"
         other -> "invalid plan (#{other})"
       end
 

@@ -164,6 +164,33 @@ defmodule Dolphin.Mission.PlanTest do
     )
   end
 
+  test "a mission's fence goes out as the plan's geoFence and rallyPoints, in QGroundControl's shapes, and comes back" do
+    {:ok, square} = Geo.Shapes.polygon(for {n, e} <- [{-300, -300}, {-300, 300}, {300, 300}, {300, -300}], do: Geo.offset(@home, n, e))
+    {:ok, zone} = Geo.Shapes.circle(Geo.offset(@home, 100, 0), 40)
+    fence = Dolphin.Fence.new!(include: [square], exclude: [zone], rally: [Geo.offset(@home, 0, 50, 30)])
+    m = %{Mission.new("Fenced", [C.home(@home), C.take_off(Geo.offset(@home, 0, 0, 20)), C.return_home_and_land()]) | fence: fence}
+
+    plan = Mission.to_plan(m) |> :jiffy.decode([:return_maps])
+    assert %{"geoFence" => %{"polygons" => [%{"inclusion" => true, "polygon" => corners, "version" => 1}], "circles" => [%{"inclusion" => false, "circle" => %{"radius" => 40.0}}], "version" => 2}} = plan
+    assert length(corners) == 4
+    assert %{"rallyPoints" => %{"points" => [[_, _, height]], "version" => 2}} = plan
+    assert_in_delta height, 30, 1.0e-9
+
+    assert {:ok, back} = Mission.from_plan(Mission.to_plan(m))
+    assert [%Geo.Polygon{points: points}] = back.fence.include
+    assert Enum.map(points, &{&1.lat, &1.lon}) == Enum.map(square.points, &{&1.lat, &1.lon})
+    assert [%Geo.Circle{radius: 40.0}] = back.fence.exclude
+    assert [rally] = back.fence.rally
+    assert_in_delta rally.h, @home.h + 30, 1.0e-6
+    # A plan without a fence gives a mission without one.
+    assert {:ok, %{fence: nil}} = Mission.from_plan(Mission.to_plan(%{m | fence: nil}))
+
+    # A zone the vehicle could not keep is an error naming it.
+    bad = put_in(plan, ["geoFence", "polygons"], [%{"inclusion" => true, "polygon" => [[40.0, -7.0], [40.001, -7.0]], "version" => 1}])
+    assert {:error, %PlanError{reason: :invalid_fence} = e} = Mission.from_plan(bad)
+    assert Exception.message(e) == "invalid geofence or rally points: geoFence polygon 1: a polygon needs at least 3 corners, got 2"
+  end
+
   test "plans that cannot be read are errors naming what is wrong" do
     plan = json(File.read!(@fixture))
 

@@ -100,7 +100,13 @@ defmodule Dolphin.Web.RunTest do
     argv = [flight, "--sim", "1", "--speedup", "10", "--tlog", Path.join(dir, "flight.tlog"), "--events", Path.join(dir, "flight.jsonl"), "--web", "0", "--report", report]
     run = Task.async(fn -> Run.main(argv, out: out, err: err) end)
 
-    url = Wait.until(fn -> with [_, url] <- Regex.run(~r{live view: (http://127\.0\.0\.1:\d+/)}, elem(StringIO.contents(out), 1)), do: url end)
+    # (The run checks the script first, in a dry run other tests may hold a while on a busy machine.)
+    url =
+      Wait.until(
+        fn -> with [_, url] <- Regex.run(~r{live view: (http://127\.0\.0\.1:\d+/)}, elem(StringIO.contents(out), 1)), do: url end,
+        6_000,
+        fn -> inspect({StringIO.contents(out), StringIO.contents(err)}) end
+      )
 
     # Once the vehicle flies its mission: where it is, and its task on the time line.
     first =

@@ -105,13 +105,13 @@ defmodule Mix.Tasks.FlagValuesTest do
     types = Path.join(dir, "types.exs")
     File.write!(types, "use Dolphin.Script\nx = 1\nmessage \"\#{x.speed}\"\n")
     block = Path.join(dir, "block.exs")
-    File.write!(block, "use Dolphin.Script\nv = pick()\nm = mission \"m\" do\n  takeoff 10\n  circle(1, 2)\nend\nexecute %{v => m}\n")
+    File.write!(block, "use Dolphin.Script\nv = pick()\nm = mission \"m\" do\n  takeoff 10\n  spiral(1, 2)\nend\nexecute %{v => m}\n")
 
     assert [{1, types_out}, {1, block_out}] = run_all([["dolphin.check", types, "--sim", "1"], ["dolphin.check", block, "--sim", "1"]])
 
     # The compiler names the file relative to the working directory, as the check's lines do.
     assert types_out =~ "#{Path.relative_to_cwd(types)}:3: warning: incompatible types:\n"
-    assert block_out =~ "#{Path.relative_to_cwd(block)}:5: warning: undefined function circle/2: no word of the language or of Elixir has that name"
+    assert block_out =~ "#{Path.relative_to_cwd(block)}:5: warning: undefined function spiral/2: no word of the language or of Elixir has that name"
 
     for output <- [types_out, block_out] do
       refute output =~ "Conflict found at"
