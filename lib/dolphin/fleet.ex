@@ -373,6 +373,7 @@ defmodule Dolphin.Fleet do
     mine = Enum.filter(ids, &(s.picked[&1] == owner))
     if mine != [] and s.claims?, do: Claims.release(mine)
     if s.events and mine != [], do: Events.emit(:released, %{vehicles: Enum.sort(mine)})
+    if mine != [], do: Source.released(s.source, mine)
     %{s | picked: Map.drop(s.picked, mine)}
   end
 

@@ -61,13 +61,28 @@ defmodule Dolphin.FenceTest do
     {:ok, view} = Vehicles.view(id)
     {:ok, zone} = Shapes.polygon(for {n, e} <- [{80, -50}, {80, 50}, {120, 50}, {120, -50}], do: Geo.offset(home, n, e))
     refute Shapes.contains?(zone, view.position)
+
+    # Released, it is given back as it was found: no fence, no rally point, its parameters as they were.
+    :ok = Dolphin.Fleet.release(Dolphin.Fleet, self(), [id])
+
+    Wait.until(
+      fn ->
+        match?({:ok, 7.0}, Vehicles.read_param(id, "FENCE_TYPE")) and match?({:ok, 100.0}, Vehicles.read_param(id, "FENCE_ALT_MAX")) and
+          match?({:ok, []}, Vehicles.download_mission(id, mission_type: :rally))
+      end,
+      3_000
+    )
+
+    assert {:ok, []} = Vehicles.download_mission(id, mission_type: :fence)
+    assert {:ok, 0.0} = Vehicles.read_param(id, "FENCE_ENABLE")
+    assert {:ok, 1.0} = Vehicles.read_param(id, "FENCE_ACTION")
     for text <- said, text =~ ~r/fence|recovery/i, into: MapSet.new(), do: text
   end
 
   # What ArduCopter SITL said at the breach (docs/ardupilot.md), which the simulator must say too.
   @breach_texts MapSet.new(["Polygon fence breached", "Manual recovery started"])
 
-  test "the simulator: a fence put on a copter is read back as sent; flown into its no-fly zone, it breaches it and returns, and the mission fails saying so" do
+  test "the simulator: a fence put on a copter is read back as sent; flown into its no-fly zone, it breaches it and returns, the mission fails saying so; released, the copter is given back as it was found" do
     assert flies_into_the_zone(:sim) == @breach_texts
   end
 

@@ -17,6 +17,8 @@ defmodule Dolphin.Fleet.MAVLinkSource do
 
   @behaviour Dolphin.Fleet.Source
 
+  require Logger
+
   @impl true
   def list(_arg), do: Dolphin.Vehicles.list()
 
@@ -25,6 +27,26 @@ defmodule Dolphin.Fleet.MAVLinkSource do
 
   @impl true
   def views(_arg), do: Dolphin.Vehicles.Views.all()
+
+  @impl true
+  # Each released vehicle whose fence was changed gets it back, in a task
+  # of its own (a transfer takes seconds; the fleet does not wait).
+  def released(_arg, ids) do
+    instance = Dolphin.Instance.current()
+
+    for id <- ids, Dolphin.Vehicles.Settings.found_fence?(id) do
+      Task.Supervisor.start_child(Dolphin.Mission.Guards, fn ->
+        Dolphin.Instance.put(instance)
+
+        case Dolphin.Vehicles.Fences.give_back(id) do
+          :ok -> :ok
+          {:error, e} -> Logger.warning("vehicle #{id}: its fence could not be given back as it was found: #{Exception.message(e)}")
+        end
+      end)
+    end
+
+    :ok
+  end
 
   @impl true
   def set_timeout(_arg, id, ms), do: Dolphin.Vehicles.set_timeout(id, ms)

@@ -32,6 +32,14 @@ defmodule Dolphin.Fleet.Source do
   @type t :: {module(), term()}
   @type id :: non_neg_integer()
 
+  @doc """
+  Told when the fleet releases vehicles (a script's `release`, or its end):
+  the source gives them back as it found them (a MAVLink vehicle its fence,
+  `Dolphin.Vehicles.Fences.give_back/2`). Optional; must not block.
+  """
+  @callback released(arg :: term(), [id()]) :: :ok
+  @optional_callbacks released: 2
+
   @doc "The ids of the vehicles known now."
   @callback list(arg :: term()) :: [id()]
 
@@ -55,6 +63,9 @@ defmodule Dolphin.Fleet.Source do
   def views({m, a}), do: m.views(a)
   @doc false
   def set_timeout({m, a}, id, ms), do: m.set_timeout(a, id, ms)
+
+  @doc false
+  def released({m, a}, ids), do: if(function_exported?(m, :released, 2), do: m.released(a, ids), else: :ok)
   @doc false
   def send_message({m, a}, id, msg), do: m.send_message(a, id, msg)
 

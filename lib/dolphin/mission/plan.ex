@@ -316,8 +316,15 @@ defmodule Dolphin.Mission.Plan do
 
   defp params(%{"params" => params}) when is_list(params) and length(params) == 7 do
     case Enum.find_index(params, &(not (is_number(&1) or &1 == :null))) do
-      nil -> {:ok, Enum.map(params, fn :null -> :nan; n -> n / 1 end)}
-      i -> {:error, ~s|"params" #{i + 1} is #{JSONText.show(Enum.at(params, i))}, not a number or null|}
+      nil ->
+        {:ok,
+         Enum.map(params, fn
+           :null -> :nan
+           n -> n / 1
+         end)}
+
+      i ->
+        {:error, ~s|"params" #{i + 1} is #{JSONText.show(Enum.at(params, i))}, not a number or null|}
     end
   end
 
@@ -358,8 +365,7 @@ defmodule Dolphin.Mission.Plan do
   defp settle(base, commands, items) do
     generated = base |> Mission.add(commands) |> Mission.to_items() |> tl()
 
-    wrong =
-      for {{made, wanted}, i} <- Enum.with_index(Enum.zip(generated, items)), not same?(made, wanted), into: MapSet.new(), do: i
+    wrong = for {{made, wanted}, i} <- Enum.with_index(Enum.zip(generated, items)), not same?(made, wanted), into: MapSet.new(), do: i
 
     if MapSet.size(wrong) == 0 and length(generated) == length(items) do
       Mission.add(base, commands)
@@ -413,14 +419,29 @@ defmodule Dolphin.Mission.Plan do
 
   defp guess(%{frame: 2} = i) do
     case {i.command, i.param1, i.param2, i.param3} do
-      {@speed, type, speed, _} when type in [0.0, 1.0, 2.0, 3.0] and is_float(speed) -> Command.speed(speed, trunc(type))
-      {@delay, seconds, _, _} when is_float(seconds) and seconds >= 0 -> Command.delay(seconds)
-      {@start_capture, _, _, 1.0} -> Command.capture_photo()
-      {@start_capture, _, interval, 0.0} when is_float(interval) and interval > 0 -> Command.capture_until_stop(interval)
-      {@start_capture, _, interval, n} when is_float(interval) and interval > 0 and is_float(n) and n > 1 and n == trunc(n) -> Command.capture_several_photos(trunc(n), interval)
-      {@stop_capture, _, _, _} -> Command.stop_capturing()
-      {@jump, item, repeat, _} when is_float(item) and item >= 1 and item == trunc(item) and is_float(repeat) and repeat >= -1 and repeat == trunc(repeat) -> Command.jump_to_item(trunc(item), trunc(repeat))
-      _ -> raw(i)
+      {@speed, type, speed, _} when type in [0.0, 1.0, 2.0, 3.0] and is_float(speed) ->
+        Command.speed(speed, trunc(type))
+
+      {@delay, seconds, _, _} when is_float(seconds) and seconds >= 0 ->
+        Command.delay(seconds)
+
+      {@start_capture, _, _, 1.0} ->
+        Command.capture_photo()
+
+      {@start_capture, _, interval, 0.0} when is_float(interval) and interval > 0 ->
+        Command.capture_until_stop(interval)
+
+      {@start_capture, _, interval, n} when is_float(interval) and interval > 0 and is_float(n) and n > 1 and n == trunc(n) ->
+        Command.capture_several_photos(trunc(n), interval)
+
+      {@stop_capture, _, _, _} ->
+        Command.stop_capturing()
+
+      {@jump, item, repeat, _} when is_float(item) and item >= 1 and item == trunc(item) and is_float(repeat) and repeat >= -1 and repeat == trunc(repeat) ->
+        Command.jump_to_item(trunc(item), trunc(repeat))
+
+      _ ->
+        raw(i)
     end
   end
 

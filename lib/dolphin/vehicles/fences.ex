@@ -13,6 +13,12 @@ defmodule Dolphin.Vehicles.Fences do
   parameter's (`Dolphin.ParamError`), or `Dolphin.Mission.MismatchError`
   for a list read back otherwise than it was sent — and the fence is left
   disabled.
+
+  A vehicle is given back as it was found: before its fence is first
+  changed, its fence and rally lists and FENCE_* parameters are read and
+  kept (`Dolphin.Vehicles.Settings`), and `give_back/2` (which the fleet
+  calls when the vehicle is released, `Dolphin.Fleet.MAVLinkSource`) puts
+  them back.
   """
 
   alias Dolphin.{Airframe, Fence, Vehicles}
@@ -27,6 +33,7 @@ defmodule Dolphin.Vehicles.Fences do
     items = Fence.to_items(fence, home)
 
     with {:ok, action} <- action(id, fence, airframe),
+         :ok <- keep_found(id, opts),
          {:ok, _} <- Vehicles.set_param(id, "FENCE_ENABLE", 0, opts),
          :ok <- put_list(id, :fence, items.fence, opts),
          :ok <- put_list(id, :rally, items.rally, opts),
@@ -38,6 +45,63 @@ defmodule Dolphin.Vehicles.Fences do
       :ok
     end
   end
+
+  @params ["FENCE_ENABLE", "FENCE_TYPE", "FENCE_ACTION", "FENCE_ALT_MAX", "FENCE_ALT_MIN"]
+
+  @doc """
+  Gives vehicle `id` its fence back as it was before this ground station
+  first changed it: `:ok` (also when nothing was changed), or the
+  refusal that stopped it.
+  """
+  @spec give_back(Vehicles.Id.t(), keyword()) :: :ok | {:error, Exception.t()}
+  def give_back(id, opts \\ []) do
+    case Vehicles.Settings.take_found_fence(id) do
+      :none ->
+        :ok
+
+      {:ok, found} ->
+        with {:ok, _} <- Vehicles.set_param(id, "FENCE_ENABLE", 0, opts),
+             :ok <- put_list(id, :fence, found.fence, opts),
+             :ok <- put_list(id, :rally, found.rally, opts),
+             :ok <- Enum.reduce_while(@params -- ["FENCE_ENABLE"], :ok, fn name, :ok -> param_back(id, name, found.params, opts) end),
+             {:ok, _} <- Vehicles.set_param(id, "FENCE_ENABLE", Map.fetch!(found.params, "FENCE_ENABLE"), opts) do
+          :ok
+        end
+    end
+  end
+
+  defp param_back(id, name, params, opts) do
+    case Vehicles.set_param(id, name, Map.fetch!(params, name), opts) do
+      {:ok, _} -> {:cont, :ok}
+      error -> {:halt, error}
+    end
+  end
+
+  # What the vehicle had before its first fence from here.
+  defp keep_found(id, opts) do
+    if Vehicles.Settings.found_fence?(id) do
+      :ok
+    else
+      with {:ok, fence} <- Vehicles.download_mission(id, Keyword.put(opts, :mission_type, :fence)),
+           {:ok, rally} <- Vehicles.download_mission(id, Keyword.put(opts, :mission_type, :rally)),
+           {:ok, params} <- read_params(id, opts) do
+        Vehicles.Settings.put_found_fence(id, %{fence: renumbered(fence), rally: renumbered(rally), params: params})
+        :ok
+      end
+    end
+  end
+
+  defp read_params(id, opts) do
+    Enum.reduce_while(@params, {:ok, %{}}, fn name, {:ok, acc} ->
+      case Vehicles.read_param(id, name, opts) do
+        {:ok, value} -> {:cont, {:ok, Map.put(acc, name, value)}}
+        error -> {:halt, error}
+      end
+    end)
+  end
+
+  # Read back in the frames ArduPilot keeps (0, 3): sent again as they came.
+  defp renumbered(items), do: items |> Enum.with_index() |> Enum.map(fn {item, seq} -> %{item | seq: seq} end)
 
   defp action(id, fence, airframe) do
     module = Airframe.of(airframe)

@@ -51,6 +51,27 @@ defmodule Dolphin.Vehicles.Settings do
     end
   end
 
+  @doc """
+  Keeps `found`, what vehicle `id`'s fence was before this ground station
+  changed it (`Dolphin.Vehicles.Fences`), unless something is kept already:
+  the first is what it is given back. `true` when kept now.
+  """
+  @spec put_found_fence(Dolphin.Vehicles.Id.t(), map()) :: boolean()
+  def put_found_fence(id, found), do: :ets.insert_new(table(), {{:found_fence, id}, found})
+
+  @doc "Whether a found fence is kept for vehicle `id`."
+  @spec found_fence?(Dolphin.Vehicles.Id.t()) :: boolean()
+  def found_fence?(id), do: :ets.member(table(), {:found_fence, id})
+
+  @doc "Takes (and forgets) what `put_found_fence/2` kept for vehicle `id`."
+  @spec take_found_fence(Dolphin.Vehicles.Id.t()) :: {:ok, map()} | :none
+  def take_found_fence(id) do
+    case :ets.take(table(), {:found_fence, id}) do
+      [{_, found}] -> {:ok, found}
+      [] -> :none
+    end
+  end
+
   @doc "The connection timeout set for vehicle `sysid`, or `default`."
   @spec timeout(Dolphin.Vehicles.Id.t(), pos_integer() | nil) :: pos_integer() | nil
   def timeout(sysid, default) do

@@ -171,7 +171,10 @@ defmodule Dolphin.Mission.PlanTest do
     m = %{Mission.new("Fenced", [C.home(@home), C.take_off(Geo.offset(@home, 0, 0, 20)), C.return_home_and_land()]) | fence: fence}
 
     plan = Mission.to_plan(m) |> :jiffy.decode([:return_maps])
-    assert %{"geoFence" => %{"polygons" => [%{"inclusion" => true, "polygon" => corners, "version" => 1}], "circles" => [%{"inclusion" => false, "circle" => %{"radius" => 40.0}}], "version" => 2}} = plan
+
+    assert %{"geoFence" => %{"polygons" => [%{"inclusion" => true, "polygon" => corners, "version" => 1}], "circles" => [%{"inclusion" => false, "circle" => %{"radius" => 40.0}}], "version" => 2}} =
+             plan
+
     assert length(corners) == 4
     assert %{"rallyPoints" => %{"points" => [[_, _, height]], "version" => 2}} = plan
     assert_in_delta height, 30, 1.0e-9
@@ -239,6 +242,7 @@ defmodule Dolphin.Mission.PlanTest do
     assert message(with_item.(%{"autoContinue" => "yes"})) == ~s|invalid plan item: item 1: "autoContinue" is "yes", not true or false|
     assert message(put_in(plan, ["mission", "items"], [5])) == ~s|invalid plan item: item 1: it is a number (5), not an object|
     assert message(put_in(plan, ["mission", "items"], %{})) == ~s|not a QGroundControl plan: "mission.items" is {}, not an array of items|
+
     assert message(put_in(plan, ["mission", "plannedHomePosition"], [91, 0, 0])) ==
              ~s|invalid planned home position: "plannedHomePosition" is [91,0,0], not [latitude, longitude, altitude] with latitude -90..90 and longitude -180..180|
 

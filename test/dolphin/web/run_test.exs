@@ -119,7 +119,13 @@ defmodule Dolphin.Web.RunTest do
     {lat0, lon0} = positions(first)[1]
 
     # Later, the same page shows it elsewhere, its track longer.
-    later = Wait.until(fn -> page = get(url); {lat, _} = positions(page)[1]; abs(lat - lat0) > 0.0002 and page end)
+    later =
+      Wait.until(fn ->
+        page = get(url)
+        {lat, _} = positions(page)[1]
+        abs(lat - lat0) > 0.0002 and page
+      end)
+
     assert {_lat, lon} = positions(later)[1]
     assert_in_delta lon, lon0, 0.0002, "it flies north"
     [points0] = Regex.run(~r/class="flown" data-vehicle="1" data-points="(\d+)"/, first, capture: :all_but_first)
