@@ -135,7 +135,9 @@ while time.time() < deadline and not disarmed:
         if not modes or modes[-1] != mode:
             modes.append(mode)
         armed = msg.base_mode & m.MAV_MODE_FLAG_SAFETY_ARMED
-        if not armed and len(reached) == len(items) - 1:
+        # Done once disarmed after the last item (a datagram of an earlier
+        # one may be lost on a busy machine: UDP, and this reader is slow).
+        if not armed and reached and reached[-1] == len(items) - 1:
             disarmed = True
 
 last = mav.recv_match(type="GLOBAL_POSITION_INT", blocking=True, timeout=answer(5))

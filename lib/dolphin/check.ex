@@ -86,6 +86,8 @@ defmodule Dolphin.Check do
   @max_distance 12_000
   @max_height 500
   @max_depth 100
+  # Metres across and in height two of our vehicles keep apart unless the script says otherwise (`min_separation`).
+  @min_separation %{horizontal: 20.0, vertical: 10.0}
 
   @doc "Checks the script at `path` (see the module doc for options); the findings, errors first."
   @spec run(Path.t(), keyword()) :: t()
@@ -124,9 +126,12 @@ defmodule Dolphin.Check do
   def sim_fleet(fleet, home) when is_list(fleet) do
     airframes = Enum.flat_map(fleet, fn {airframe, n} -> List.duplicate(airframe, n) end)
     base = with {lat, lon, alt} <- home, do: %Dolphin.Geo.Location{lat: lat * 1.0, lon: lon * 1.0, h: alt * 1.0}, else: (nil -> @sim_home)
+    # Where the simulator puts them (Dolphin.Sim.homes/2: a few tens of metres apart).
+    spread = Dolphin.Sim.homes(length(airframes), home: %{lat: base.lat, lon: base.lon, alt: base.h})
 
-    for {airframe, id} <- Enum.with_index(airframes, 1) do
-      position = if Dolphin.Airframe.heights(airframe) == :depth, do: %{base | h: 0.0}, else: base
+    for {{airframe, id}, at} <- Enum.zip(Enum.with_index(airframes, 1), spread) do
+      at = Dolphin.Geo.location(at.lat, at.lon, at.alt)
+      position = if Dolphin.Airframe.heights(airframe) == :depth, do: %{at | h: 0.0}, else: at
       %{id: id, type: View.airframe_class(airframe), airframe: airframe, payloads: [:camera], battery: 1.0, position: position, airborne?: false}
     end
   end
@@ -216,6 +221,13 @@ defmodule Dolphin.Check do
     end
   end
 
+  # Our vehicles too close to each other, anywhere in the dry run.
+  defp separation(recorder, file, severity) do
+    {timelines, asked} = Recorder.timelines(recorder)
+    limits = asked || @min_separation
+    for conflict <- Dolphin.Check.Separation.conflicts(timelines, limits), do: Dolphin.Check.Separation.finding(conflict, file, limits, severity)
+  end
+
   defp dry_run(script, opts) do
     vehicles = Keyword.get_lazy(opts, :fleet, fn -> sim_fleet(Keyword.get(opts, :sim, 1)) end)
     limits = %{max_distance: Keyword.get(opts, :max_distance, @max_distance), max_height: Keyword.get(opts, :max_height, @max_height), max_depth: Keyword.get(opts, :max_depth, @max_depth)}
@@ -246,11 +258,12 @@ defmodule Dolphin.Check do
       busy = busy_loops(script)
       outcome = script_outcome(script, fleet_name, horizon, recorder)
       {findings, missions} = Recorder.results(recorder)
+      separation = separation(recorder, script.file, Keyword.get(opts, :separation, :error))
       # After an `ask` (answered nil here) what the script does is not the dry run's to judge.
       asked? = Enum.any?(findings, &(&1.kind == :ask))
       # A busy loop is why a script is still running at the horizon: no note besides.
       outcome = if busy != [] and match?({:running, _}, outcome), do: {:ok, :busy}, else: outcome
-      all = busy ++ energy_severity(findings, Keyword.get(opts, :energy, :error)) ++ outcome_findings(outcome, script.file, horizon, asked?)
+      all = busy ++ energy_severity(findings, Keyword.get(opts, :energy, :error)) ++ separation ++ outcome_findings(outcome, script.file, horizon, asked?)
       %__MODULE__{file: script.file, findings: Enum.sort_by(all, &severity_rank(&1.severity)), missions: missions}
     after
       for pid <- [fleet, recorder, ts] do

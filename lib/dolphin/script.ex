@@ -92,7 +92,7 @@ defmodule Dolphin.Script do
     quote do
       import Dolphin.DSL
       import Dolphin.DSL.Values
-      import Dolphin.DSL.Fence, only: [fence: 1, rally: 1]
+      import Dolphin.DSL.Fence, only: [fence: 1, rally: 1, min_separation: 2]
       unquote(mission)
     end
   end

@@ -56,6 +56,29 @@ defmodule Dolphin.CheckTest do
     refute Enum.any?(report.findings, &(&1.line == 43 and &1.kind == :fence))
   end
 
+  test "two of our vehicles on crossing ways at once: an error with when and where, at the line that flies them; a script's own least separation", _ do
+    {:ok, fleet} = FleetFile.read(Path.join(@dir, "crossing_fleet.json"))
+    report = check("crossing.exs", fleet)
+    assert [%{severity: :error, line: 23, message: message}] = Enum.filter(report.findings, &(&1.kind == :separation))
+    assert message =~ ~r/^vehicles 211 and 212 come within \d m of each other across and 0 m in height 4\d s into the run, at 40\.4442\d+, -7\.3752\d+ /
+    assert message =~ ~s|(mission "East" on vehicle 211 and mission "North" on vehicle 212); the least separation is 20 m across or 10 m in height|
+
+    # In a run on simulated vehicles, which pass through each other, a warning.
+    report = check("crossing.exs", fleet, separation: :warning)
+    assert [%{severity: :warning}] = Enum.filter(report.findings, &(&1.kind == :separation))
+
+    # Ten metres higher, one passes over the other: apart.
+    source = File.read!(Path.join(@dir, "crossing.exs")) |> String.replace("Dolphin.Geo.offset(base, -300, 0, 30)", "Dolphin.Geo.offset(base, -300, 0, 42)")
+    over = Path.join(System.tmp_dir!(), "crossing_over_#{System.unique_integer([:positive])}.exs")
+    File.write!(over, source)
+    on_exit(fn -> File.rm(over) end)
+    assert [] = Enum.filter(Check.run(over, fleet: fleet).findings, &(&1.kind == :separation))
+    # 34 m apart at their closest: too close for a script that keeps 40 m.
+    File.write!(over, String.replace(source, "base = location", "min_separation 40, 15\nbase = location"))
+    assert [%{message: wider}] = Enum.filter(Check.run(over, fleet: fleet).findings, &(&1.kind == :separation))
+    assert wider =~ "the least separation is 40 m across or 15 m in height"
+  end
+
   test "a script that does not compile is an error with its line", %{fleet: fleet} do
     report = check("unknown_word.exs", fleet)
     assert %{severity: :error, line: 3, message: message} = finding(report, :compile)

@@ -79,13 +79,13 @@ defmodule Dolphin.Check.Flight do
 
   # Where the flight is after `elapsed_s`: the last point of the estimate's
   # path reached by then (the vehicle holds there when stopped).
-  defp left_at(%{estimate: nil} = s, _elapsed_s), do: Dolphin.Check.Recorder.ended(s.recorder, s.vehicle, nil, false)
+  defp left_at(%{estimate: nil} = s, elapsed_s), do: Dolphin.Check.Recorder.ended(s.recorder, s.vehicle, nil, false, elapsed_s)
 
   defp left_at(s, elapsed_s) do
     e = s.estimate
     {_, at, airborne?, _} = e.path |> Enum.take_while(fn {t, _, _, _} -> t <= elapsed_s end) |> List.last() || {0.0, e.start_at, s.airborne?, 0}
     if at, do: FakeSource.set(s.test, s.vehicle, position: at, relative_altitude: if(airborne?, do: 20.0, else: 0.0))
-    Dolphin.Check.Recorder.ended(s.recorder, s.vehicle, at, airborne?)
+    Dolphin.Check.Recorder.ended(s.recorder, s.vehicle, at, airborne?, elapsed_s)
   end
 
   defp empty_before_stop(%{estimate: e} = s) do

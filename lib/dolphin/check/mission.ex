@@ -441,12 +441,13 @@ defmodule Dolphin.Check.Mission do
     module = Airframe.of(airframe)
     model = %{module: module, p: module.performance(), heights: module.heights()}
     home_loc = location(home, nil)
-    # Where the vehicle is when the mission starts: where the last one left it, else at home.
-    # (A vehicle that does not take off is under way from the start.)
+    # Where the vehicle is when the mission starts: where the last one left
+    # it, else where it stands. (A vehicle that does not take off is under
+    # way from the start.)
     under_way? = vehicle.airborne? or not module.takes_off?()
 
     start = %{
-      at: Map.get(vehicle, :at) || home_loc,
+      at: Map.get(vehicle, :at) || stands(vehicle, home_loc),
       airborne?: under_way?,
       speed: model.p.cruise_speed,
       capacity: model.p.capacity_mah,
@@ -485,6 +486,13 @@ defmodule Dolphin.Check.Mission do
       empty_home: vehicle.battery != nil and flown.empty_at == nil and flown.used + back_used > vehicle.battery
     }
   end
+
+  # Where a vehicle on the ground stands: its own position (a copter climbs
+  # from where it is), at the height of the mission's home when it is
+  # within a few metres of it (where the mission's heights are measured
+  # from); none known, at the home.
+  defp stands(%{position: %Location{} = p}, home), do: if(abs(p.h - home.h) < 5.0, do: %{p | h: home.h}, else: p)
+  defp stands(_vehicle, home), do: home
 
   # The items in the order they are flown: jumps repeated as often as they
   # say (a jump for ever: once round the loop), skipping home.

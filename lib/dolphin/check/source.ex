@@ -36,7 +36,8 @@ defmodule Dolphin.Check.Source do
   def fly(%{test: t, recorder: recorder}, mission, vehicle, opts) do
     line = script_line(Dolphin.Engine.Context.current().owner)
     # Checked with the fence it would fly with: its own, else the script's.
-    estimate = Dolphin.Check.Recorder.mission(recorder, %{mission | fence: mission.fence || opts[:fence]}, vehicle, line)
+    now_ms = (opts[:clock] || Dolphin.Check.Clock).now_ms()
+    estimate = Dolphin.Check.Recorder.mission(recorder, %{mission | fence: mission.fence || opts[:fence]}, vehicle, line, now_ms, opts[:min_separation])
     Dolphin.Check.Flight.start_link(%{test: t, recorder: recorder, vehicle: vehicle, estimate: estimate, owner: opts[:owner], clock: opts[:clock]})
   end
 

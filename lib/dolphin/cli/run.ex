@@ -68,7 +68,9 @@ defmodule Dolphin.CLI.Run do
         :ok
 
       true ->
-        report = Dolphin.Check.check_script(script, fleet: stand_ins(n, opts[:home], opts[:fleet]), energy: :warning)
+        # Simulated vehicles (and SITL's) fly on at 0 % and pass through
+        # each other: what would be an error for real ones is said, as a warning.
+        report = Dolphin.Check.check_script(script, fleet: stand_ins(n, opts[:home], opts[:fleet]), energy: :warning, separation: :warning)
         errors? = Dolphin.Check.errors?(report)
 
         if report.findings != [] and (errors? or !opts[:quiet]) do

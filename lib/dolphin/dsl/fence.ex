@@ -46,6 +46,16 @@ defmodule Dolphin.DSL.Fence do
     Dolphin.DSL.Expand.at_line(quote(do: Dolphin.Script.Statements.fence(unquote(build(block, __CALLER__)))), __CALLER__)
   end
 
+  @doc """
+  The least separation the pre-flight check holds the script's vehicles
+  to: `horizontal` metres across or `vertical` metres in height (default
+  20 and 10): two of them closer than both at once, while one flies, is an
+  error at the line of the later task, with when and where.
+  """
+  defmacro min_separation(horizontal, vertical) do
+    Dolphin.DSL.Expand.at_line(quote(do: Dolphin.Script.Statements.min_separation(unquote(horizontal), unquote(vertical))), __CALLER__)
+  end
+
   @doc "Sets the rally points of the script's fence: locations a vehicle sent home may return to instead."
   defmacro rally(points) do
     Dolphin.DSL.Expand.at_line(quote(do: Dolphin.Script.Statements.rally(unquote(points))), __CALLER__)

@@ -63,6 +63,21 @@ defmodule Dolphin.Script.Statements do
     fence
   end
 
+  @doc """
+  The least separation between two of the script's vehicles the pre-flight
+  check holds them to: `horizontal` metres across or `vertical` metres in
+  height (default 20 and 10).
+  """
+  @spec min_separation(number(), number()) :: :ok
+  def min_separation(horizontal, vertical) when is_number(horizontal) and horizontal > 0 and is_number(vertical) and vertical > 0 do
+    ctx = Context.current()
+    Context.put(%{ctx | platform_opts: Keyword.put(ctx.platform_opts, :min_separation, %{horizontal: horizontal * 1.0, vertical: vertical * 1.0})})
+    :ok
+  end
+
+  def min_separation(horizontal, vertical),
+    do: raise(ArgumentError, "min_separation takes metres across and in height, each more than 0, got: #{inspect(horizontal)}, #{inspect(vertical)}")
+
   @doc "Sets the rally points of the script's fence (`Dolphin.Fence`'s `rally`)."
   @spec rally([Dolphin.Geo.Location.t()]) :: :ok
   def rally(points) do

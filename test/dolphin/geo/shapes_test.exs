@@ -10,8 +10,12 @@ defmodule Dolphin.Geo.ShapesTest do
 
   doctest Dolphin.Geo.Shapes
 
+  # Hundreds of cases each, thousands of samples: longer than the default on a loaded machine.
+  @moduletag timeout: 300_000
+
   @home Geo.location(38.43462, -8.86118, 0)
-  @samples 2_000
+  # Points sampled along each leg.
+  @samples 1_000
 
   # A star-shaped polygon round a centre 0–300 m from home: corners at sorted
   # angles, each at its own distance (always simple, never crossing itself).
@@ -83,7 +87,7 @@ defmodule Dolphin.Geo.ShapesTest do
 
         true
       end),
-      numtests: 300
+      numtests: 200
     )
   end
 
@@ -113,7 +117,7 @@ defmodule Dolphin.Geo.ShapesTest do
 
         true
       end),
-      numtests: 300
+      numtests: 200
     )
   end
 
@@ -147,7 +151,7 @@ defmodule Dolphin.Geo.ShapesTest do
 
         true
       end),
-      numtests: 300
+      numtests: 200
     )
   end
 
@@ -165,7 +169,7 @@ defmodule Dolphin.Geo.ShapesTest do
         assert_in_delta dist.(t), d, 1.0e-6
         assert d <= Enum.min(sampled) + 1.0e-6
       end),
-      numtests: 300
+      numtests: 200
     )
   end
 
