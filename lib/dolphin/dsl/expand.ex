@@ -16,6 +16,13 @@ defmodule Dolphin.DSL.Expand do
     end
   end
 
+  @doc false
+  # The expressions of a `do` block, in order.
+  @spec exprs(Macro.t()) :: [Macro.t()]
+  def exprs({:__block__, _, exprs}), do: exprs
+  def exprs(nil), do: []
+  def exprs(expr), do: [expr]
+
   @spec action_ast(Macro.t(), Macro.t(), Macro.Env.t()) :: Macro.t()
   def action_ast(name, block, caller) do
     quote do

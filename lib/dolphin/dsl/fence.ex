@@ -66,14 +66,7 @@ defmodule Dolphin.DSL.Fence do
   # block uses it for a mission's own fence).
   @spec build(Macro.t(), Macro.Env.t()) :: Macro.t()
   def build(block, caller) do
-    exprs =
-      case block do
-        {:__block__, _, exprs} -> exprs
-        nil -> []
-        expr -> [expr]
-      end
-
-    clauses = Enum.map(exprs, &clause(&1, caller))
+    clauses = Enum.map(Dolphin.DSL.Expand.exprs(block), &clause(&1, caller))
 
     quote do
       Dolphin.DSL.Fence.__build__(unquote(clauses))

@@ -113,13 +113,7 @@ defmodule Dolphin.DSL.Mission do
   # the non-match ones gathered into a list.
   defp collect(block, depth, words, caller) do
     acc = Macro.var(:"dolphin_mission_acc_#{depth}", __MODULE__)
-
-    exprs =
-      case block do
-        {:__block__, _, exprs} -> exprs
-        nil -> []
-        expr -> [expr]
-      end
+    exprs = Dolphin.DSL.Expand.exprs(block)
 
     steps =
       Enum.map(exprs, fn

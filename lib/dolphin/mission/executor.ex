@@ -74,6 +74,9 @@ defmodule Dolphin.Mission.Executor do
     data = %{
       mission: mission,
       name: mission.name,
+      # Why the vehicle left its mission (a failsafe, the pilot), while it is
+      # given the time to say so.
+      leaving: nil,
       # Its own fence, else the script's (the run's platform options).
       fence: mission.fence || Map.get(opts, :fence),
       vehicle: vehicle,
@@ -128,7 +131,6 @@ defmodule Dolphin.Mission.Executor do
     exchange(data, fn -> Dolphin.Vehicles.Fences.apply(data.vehicle, data.fence, at, data.airframe) end)
   end
 
-  def handle_event(:enter, _old, {:leaving, _cause}, _data), do: :keep_state_and_data
   def handle_event(:enter, _old, :guided, data), do: exchange(data, fn -> Manoeuvres.guided(data.vehicle, within: data.arm_timeout_ms) end)
   def handle_event(:enter, _old, :arm, data), do: exchange(data, fn -> Manoeuvres.arm_when_ready(data.vehicle, within: data.arm_timeout_ms) end)
 
@@ -190,6 +192,10 @@ defmodule Dolphin.Mission.Executor do
 
   # --- :start and :flying: the vehicle's state ----------------------------------
 
+  # Left to what took it, and saying why: nothing more to judge.
+  def handle_event(:info, {:dolphin, {:vehicle, id}, {:view, st}}, :flying, %{vehicle: id, leaving: cause} = data) when cause != nil,
+    do: {:keep_state, %{data | view: st}}
+
   def handle_event(:info, {:dolphin, {:vehicle, id}, {:view, st}}, state, %{vehicle: id} = data) when state in [:start, :flying] do
     data = %{data | view: st, flight: Flight.reported(data.flight, st)}
     # While MISSION_START's answer is awaited, what the vehicle shows is kept for the judging.
@@ -204,7 +210,7 @@ defmodule Dolphin.Mission.Executor do
       else: judge(%{data | grounded: nil}, st)
   end
 
-  def handle_event(:state_timeout, :said, {:leaving, cause}, data),
+  def handle_event(:state_timeout, :said, :flying, %{leaving: cause} = data),
     do: fail(:flying, data, cause, vehicle_fault?: true, texts: texts(data), hold: false)
 
   def handle_event(:state_timeout, :check_landed, :flying, data) do
@@ -230,7 +236,9 @@ defmodule Dolphin.Mission.Executor do
 
   def handle_event({:call, from}, {:stop, _reason}, state, data) do
     cancel_task(data)
-    {:stop_and_reply, :normal, [{:reply, from, hold(data.vehicle, commanded?(state))}]}
+    # (A vehicle that left its mission to a failsafe is not held: never overridden.)
+    reply = if data.leaving, do: :ok, else: hold(data.vehicle, commanded?(state))
+    {:stop_and_reply, :normal, [{:reply, from, reply}]}
   end
 
   # A task's exit comes with its :DOWN; the engine's leaf (our parent) exiting
@@ -403,7 +411,7 @@ defmodule Dolphin.Mission.Executor do
       # overridden; failed once the vehicle has had the time to say why (its
       # STATUSTEXT may come just after the HEARTBEAT with the new mode).
       {:left, cause} ->
-        {:next_state, {:leaving, cause}, data, [{:state_timeout, Clock.to_real_ms(@reason_ms), :said}]}
+        {:keep_state, %{data | leaving: cause}, [{:state_timeout, Clock.to_real_ms(@reason_ms), :said} | watch]}
 
       # A landing mission's disarm comes before its last report (ArduPilot
       # reports the final item after "Disarming motors"): the reports are
