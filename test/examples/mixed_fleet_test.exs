@@ -12,10 +12,7 @@ defmodule Dolphin.Examples.MixedFleetTest do
   @moduletag timeout: 600_000
 
   setup do
-    on_exit(fn ->
-      Dolphin.Test.GroundStation.forget_vehicles()
-      Dolphin.Clock.set_speedup(1)
-    end)
+    ExampleRun.clean_up_after_test()
   end
 
   # Runs the example on `vehicles`; each mission's vehicle and result, in the

@@ -11,10 +11,7 @@ defmodule Dolphin.Examples.NoFlyZoneTest do
   @moduletag timeout: 600_000
 
   setup do
-    on_exit(fn ->
-      Dolphin.Test.GroundStation.forget_vehicles()
-      Dolphin.Clock.set_speedup(1)
-    end)
+    ExampleRun.clean_up_after_test()
   end
 
   # As a user runs it, checked first: the check's findings, and nothing flown.

@@ -15,10 +15,7 @@ defmodule Dolphin.Examples.SidescanSurveyTest do
   @root Path.expand("../..", __DIR__)
 
   setup do
-    on_exit(fn ->
-      Dolphin.Test.GroundStation.forget_vehicles()
-      Dolphin.Clock.set_speedup(1)
-    end)
+    ExampleRun.clean_up_after_test()
   end
 
   # Runs the example with `vehicles` (`--sim sub:3` or `--sitl sub:3`); its

@@ -15,6 +15,16 @@ defmodule Dolphin.Test.ExampleRun do
 
   @examples Path.expand("../../examples", __DIR__)
 
+  @doc "In a test's setup: once it ends, its vehicles forgotten and the clock back at 1× (runs leave both)."
+  def clean_up_after_test do
+    ExUnit.Callbacks.on_exit(fn ->
+      GroundStation.forget_vehicles()
+      Dolphin.Clock.set_speedup(1)
+    end)
+
+    :ok
+  end
+
   @doc """
   Runs `examples/NAME.exs` as `mix dolphin.run` would, with `args` (the
   vehicles: `--sim N`, `--sitl N`, `--connect ENDPOINT`, and `--speedup`),
