@@ -39,7 +39,16 @@ defmodule Dolphin.Examples.NoFlyZoneTest do
     assert code == 1, output
     assert output =~ ~r/no_fly_zone\.exs:43: error: mission "North" on vehicle 1: the way to item 2 \(NAV_WAYPOINT\) enters exclusion zone 1 at 40\.44\d+, -7\.375234/
 
-    breached!(ExampleRun.run(dir, "no_fly_zone", "-sim", ["--sim", "1", "--speedup", "25", "--no-check"], nil))
+    run = ExampleRun.run(dir, "no_fly_zone", "-sim", ["--sim", "1", "--speedup", "25", "--no-check"], nil)
+    breached!(run)
+
+    # Its flight report draws the fence the vehicle was given: the circle it stays in, the no-fly zone, the rally point.
+    html = Path.join(dir, "report.html")
+    assert {:ok, _} = Dolphin.Report.write(run.tlog, Path.join(dir, "no_fly_zone-sim.jsonl"), html)
+    page = File.read!(html)
+    assert page =~ ~r/<circle class="zone inclusion" cx="[-\d.]+" cy="[-\d.]+" r="600\.0"/
+    assert [_] = Regex.scan(~r/<polygon class="zone exclusion" points="[^"]+"/, page)
+    assert page =~ ~s(<text class="rally")
   end
 
   if Dolphin.SITL.available?(:copter) do

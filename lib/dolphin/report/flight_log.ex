@@ -48,6 +48,9 @@ defmodule Dolphin.Report.FlightLog do
               battery: [],
               link: [],
               uploads: [],
+              # The latest fence and rally lists uploaded to it: seq => {command, x, y, z, param1}.
+              fence: %{},
+              rally: %{},
               reached: [],
               photos: [],
               texts: []
@@ -155,7 +158,17 @@ defmodule Dolphin.Report.FlightLog do
     end)
   end
 
+  # A fence or rally list uploaded: the latest one replaces the one before.
+  defp message(%M.MissionCount{mission_type: type, target_system: target}, _ts, %Frame{sysid: from}, log) when type in [1, 2] and target != from,
+    do: update_id(log, target, &Map.put(&1, list_key(type), %{}))
+
+  defp message(%M.MissionItemInt{mission_type: type, target_system: target} = item, _ts, %Frame{sysid: from}, log) when type in [1, 2] and target != from,
+    do: update_id(log, target, &Map.update!(&1, list_key(type), fn items -> Map.put(items, item.seq, {item.command, item.x, item.y, item.z, item.param1}) end))
+
   defp message(_other, _ts, _frame, log), do: log
+
+  defp list_key(1), do: :fence
+  defp list_key(2), do: :rally
 
   defp update(log, %Frame{sysid: id}, fun), do: update_id(log, id, fun)
 
@@ -271,8 +284,7 @@ defmodule Dolphin.Report.FlightLog do
         within = fn ts -> ts >= first and ts <= last end
         keep = fn list -> Enum.filter(list, &within.(elem(&1, 0))) end
 
-        vehicles =
-          for {id, v} <- log.vehicles, v = select_vehicle(v, first, within, keep), v.positions != [] or v.modes != [], into: %{}, do: {id, v}
+        vehicles = for {id, v} <- log.vehicles, v = select_vehicle(v, first, within, keep), v.positions != [] or v.modes != [], into: %{}, do: {id, v}
 
         %{log | vehicles: vehicles, first_us: first, last_us: last, starts: []}
     end

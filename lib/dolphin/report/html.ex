@@ -14,28 +14,46 @@ defmodule Dolphin.Report.HTML do
     [
       "<!DOCTYPE html>\n<html lang=\"en\"><head><meta charset=\"utf-8\">",
       "<meta name=\"viewport\" content=\"width=device-width, initial-scale=1\">",
-      "<title>", esc(info.title), " — ", esc(Path.basename(info.tlog)), "</title>",
-      "<style>", css(), "</style></head>\n<body data-vehicles=\"#{length(model.vehicles)}\">",
-      "<header><h1>", esc(info.title), "</h1>",
-      "<p class=\"files\">telemetry log ", file(info.tlog),
+      "<title>",
+      esc(info.title),
+      " — ",
+      esc(Path.basename(info.tlog)),
+      "</title>",
+      "<style>",
+      css(),
+      "</style></head>\n<body data-vehicles=\"#{length(model.vehicles)}\">",
+      "<header><h1>",
+      esc(info.title),
+      "</h1>",
+      "<p class=\"files\">telemetry log ",
+      file(info.tlog),
       if(info.events, do: ["; events ", file(info.events)], else: "; no events file: the time line shows no tasks"),
       "</p><p class=\"when\">",
       if(model.started_at, do: ["started ", model.started_at |> DateTime.truncate(:second) |> DateTime.to_string(), " · "], else: []),
       "#{clock(model.span_s)} of clock time",
       if(abs(model.speedup - 1) > 0.05, do: " (flown #{num(model.speedup, 1)}× faster than real time)", else: ""),
-      "</p>", notes(model, info), "</header>\n",
+      "</p>",
+      notes(model, info),
+      "</header>\n",
       legend(model),
-      "<section id=\"summary\"><h2>Summary</h2>", script_result(model.script), summary(model), "</section>\n",
-      "<section id=\"map-section\"><h2>Map</h2><p class=\"hint\">Solid: flown; dashed: planned (each mission uploaded); ▲ take-off, ▼ landing, ■ home, small squares: photos, circles: where each task started (hollow) and ended (filled, coloured by result). Grid in metres, north up. Hover for details.</p>",
-      SVG.map(model), "</section>\n",
+      "<section id=\"summary\"><h2>Summary</h2>",
+      script_result(model.script),
+      summary(model),
+      "</section>\n",
+      "<section id=\"map-section\"><h2>Map</h2><p class=\"hint\">Solid: flown; dashed: planned (each mission uploaded); ▲ take-off, ▼ landing, ■ home, small squares: photos, circles: where each task started (hollow) and ended (filled, coloured by result); the fence uploaded: green dashes its inclusion zones, red shading its no-fly zones, R its rally points. Grid in metres, north up. Hover for details.</p>",
+      SVG.map(model),
+      "</section>\n",
       "<section id=\"timeline-section\"><h2>Time line</h2><p class=\"hint\">A bar per task, coloured by how it ended: <span class=\"key result-done\">done</span> <span class=\"key result-stopped\">stopped</span> <span class=\"key result-failed\">failed</span> <span class=\"key result-unfinished\">unfinished</span>. Marks: ▲ condition met, ◆ mode change, ✕ lost, ○ reconnected, • message. Hover for the reason.</p>",
-      SVG.timeline(model), "</section>\n",
+      SVG.timeline(model),
+      "</section>\n",
       "<section id=\"plots\"><h2>Over time</h2>",
       SVG.plot(model, :battery, "battery", "%", 100),
       SVG.plot(model, :height, "height above home", "m", nil),
       SVG.plot(model, :speed, "ground speed", "m/s", nil),
       SVG.plot(model, :link, "link quality (frames received)", "%", 100),
-      "</section>\n<script>", js(), "</script></body></html>\n"
+      "</section>\n<script>",
+      js(),
+      "</script></body></html>\n"
     ]
   end
 
@@ -65,8 +83,11 @@ defmodule Dolphin.Report.HTML do
     runs =
       case Map.get(info, :runs) do
         {n, run} when n > 1 ->
-          ["<li id=\"runs\">The telemetry log holds #{n} runs (the vehicles' clocks started again after the ground station had stopped recording): this report shows run #{run} of #{n} alone",
-           if(run == n, do: ", the last", else: ""), " (<code>mix dolphin.report --run N</code> shows another).</li>"]
+          [
+            "<li id=\"runs\">The telemetry log holds #{n} runs (the vehicles' clocks started again after the ground station had stopped recording): this report shows run #{run} of #{n} alone",
+            if(run == n, do: ", the last", else: ""),
+            " (<code>mix dolphin.report --run N</code> shows another).</li>"
+          ]
 
         _ ->
           []
@@ -180,6 +201,9 @@ defmodule Dolphin.Report.HTML do
     .scale-bar rect,.north-arrow path{fill:#333}.scale-bar text,.north-arrow text{fill:#333}
     .vehicle .flown{fill:none;stroke:var(--c);stroke-width:2.2;stroke-linejoin:round;vector-effect:non-scaling-stroke}
     .vehicle .planned{fill:none;stroke:var(--c);stroke-width:1.3;stroke-dasharray:6 4;opacity:.7;vector-effect:non-scaling-stroke}
+    .zone.inclusion{fill:none;stroke:#2a8a3a;stroke-width:1.5;stroke-dasharray:10 5;vector-effect:non-scaling-stroke}
+    .zone.exclusion{fill:#c0392b;fill-opacity:.15;stroke:#c0392b;stroke-width:1.2;vector-effect:non-scaling-stroke}
+    .rally{fill:#2a8a3a;font-weight:bold}
     .vehicle .item{fill:#fff;stroke:var(--c);stroke-width:1;vector-effect:non-scaling-stroke}
     .vehicle .photo{fill:#fff;stroke:#333;stroke-width:1;vector-effect:non-scaling-stroke}
     .vehicle .takeoff,.vehicle .landing{fill:var(--c);stroke:#000;stroke-width:1;vector-effect:non-scaling-stroke}

@@ -118,6 +118,8 @@ defmodule Dolphin.Report.Model do
       landings: landings,
       photos: for({ts, lat, lon} <- v.photos, {x, y} = project.(lat, lon), do: {clock.(ts), x, y}),
       plans: v.uploads |> Enum.map(&plan(&1, v.home, project, clock)) |> same_plans(),
+      zones: zones(v.fence, project),
+      rally: for({_seq, {5100, lat, lon, _z, _}} <- Enum.sort(v.rally), do: project.(lat, lon)),
       tasks: Enum.map(my_tasks, &Map.merge(&1, %{from: at.(&1.start), to: at.(&1.stop)})),
       marks: marks(v, mine, clock),
       series: %{
@@ -215,6 +217,22 @@ defmodule Dolphin.Report.Model do
 
     %{at: clock.(upload.at), count: upload.count, points: points}
   end
+
+  # The zones of the latest fence uploaded: a polygon is its run of corners
+  # (param1 of them), a circle its centre and radius, in map metres.
+  defp zones(items, project), do: items |> Enum.sort() |> Enum.map(&elem(&1, 1)) |> zone_list(project)
+
+  defp zone_list([], _project), do: []
+
+  defp zone_list([{c, _, _, _, n} | _] = items, project) when c in [5001, 5002] do
+    {corners, rest} = Enum.split(items, max(trunc(n), 1))
+    [%{shape: :polygon, inclusion?: c == 5001, points: for({_, lat, lon, _, _} <- corners, do: project.(lat, lon))} | zone_list(rest, project)]
+  end
+
+  defp zone_list([{c, lat, lon, _, r} | rest], project) when c in [5003, 5004],
+    do: [%{shape: :circle, inclusion?: c == 5003, centre: project.(lat, lon), radius: r} | zone_list(rest, project)]
+
+  defp zone_list([_other | rest], project), do: zone_list(rest, project)
 
   # A mission uploaded again (each `forever` round of a script) is drawn once,
   # with the times it was uploaded.

@@ -30,7 +30,9 @@ defmodule Dolphin.Report.SVG do
     [
       ~s(<svg id="map" class="map" xmlns="http://www.w3.org/2000/svg" viewBox="#{num(minx)} #{num(-maxy)} #{num(w)} #{num(h)}" preserveAspectRatio="xMidYMid meet" data-span-m="#{num(span, 0)}">),
       grid(minx, miny, maxx, maxy, span),
+      model.vehicles |> Enum.flat_map(& &1.zones) |> Enum.uniq() |> Enum.map(&zone/1),
       Enum.map(model.vehicles, &vehicle_map(&1, ctx)),
+      model.vehicles |> Enum.flat_map(& &1.rally) |> Enum.uniq() |> Enum.map(&rally_point(&1, font)),
       scale_bar(minx, miny, span, font, nice(span / 8)),
       north_arrow(maxx, maxy, span, font),
       "</svg>"
@@ -40,7 +42,7 @@ defmodule Dolphin.Report.SVG do
   defp bounds(vehicles) do
     xs_ys =
       Enum.flat_map(vehicles, fn v ->
-        v.track ++ Enum.flat_map(v.plans, fn p -> Enum.map(p.points, fn {_, _, x, y} -> {x, y} end) end) ++ List.wrap(v.home)
+        v.track ++ Enum.flat_map(v.plans, fn p -> Enum.map(p.points, fn {_, _, x, y} -> {x, y} end) end) ++ List.wrap(v.home) ++ zone_points(Map.get(v, :zones, []))
       end)
 
     case xs_ys do
@@ -107,6 +109,26 @@ defmodule Dolphin.Report.SVG do
 
   defp metres(m) when m >= 1000, do: "#{num(m / 1000, 1)} km"
   defp metres(m), do: "#{num(m, 0)} m"
+
+  # A fence's zone: an inclusion zone outlined, an exclusion (no-fly) zone shaded.
+  defp zone(%{shape: :polygon, inclusion?: inclusion?, points: points}),
+    do: [~s(<polygon class="zone #{side(inclusion?)}" points="), points(points), ~s("><title>fence: #{side(inclusion?)} zone</title></polygon>)]
+
+  defp zone(%{shape: :circle, inclusion?: inclusion?, centre: {x, y}, radius: r}),
+    do: ~s(<circle class="zone #{side(inclusion?)}" cx="#{num(x)}" cy="#{num(-y)}" r="#{num(r)}"><title>fence: #{side(inclusion?)} zone, #{metres(r)} radius</title></circle>)
+
+  defp side(true), do: "inclusion"
+  defp side(false), do: "exclusion"
+
+  defp rally_point({x, y}, font),
+    do: ~s(<text class="rally" x="#{num(x)}" y="#{num(-y)}" font-size="#{num(font * 1.2)}" text-anchor="middle"><title>rally point</title>R</text>)
+
+  defp zone_points(zones) do
+    Enum.flat_map(zones, fn
+      %{shape: :polygon, points: points} -> points
+      %{shape: :circle, centre: {x, y}, radius: r} -> [{x - r, y - r}, {x + r, y + r}]
+    end)
+  end
 
   defp vehicle_map(v, ctx) do
     c = color(v.index)
