@@ -23,6 +23,8 @@ defmodule Dolphin.Application do
       Dolphin.Engine.Supervisor,
       # Vehicles whose mission went to another (reassign), held when heard again.
       {Task.Supervisor, name: Dolphin.Mission.Guards},
+      # Released vehicles being given their fence back (Dolphin.Vehicles.Fences).
+      {Task.Supervisor, name: Dolphin.Vehicles.FenceReturns},
       # Scripts (Dolphin.Script.Runner), which start runs: after the engine,
       # so that they stop before it, each stopping its runs in order.
       {DynamicSupervisor, name: Dolphin.Script.Supervisor, strategy: :one_for_one},

@@ -26,16 +26,16 @@ defmodule Dolphin.ScriptErrorsTest do
   end
 
   test "a fence that cannot be one is an error at its line, saying why" do
-    home = "home = location(38.43462, -8.86118, 0)\n"
+    home = "home = location(38.43462, -8.86118, 0)\n_ = home\n"
 
     # A zone's mistake at the zone's line, the block's at the block's.
     for {body, at, why} <- [
-          {"include polygon([home, Dolphin.Geo.offset(home, 10, 0)])", 4, "a polygon needs at least 3 corners, got 2"},
-          {"exclude polygon([home, Dolphin.Geo.offset(home, 100, 100), Dolphin.Geo.offset(home, 100, 0), Dolphin.Geo.offset(home, 0, 100)])", 4,
+          {"include polygon([home, Dolphin.Geo.offset(home, 10, 0)])", 5, "a polygon needs at least 3 corners, got 2"},
+          {"exclude polygon([home, Dolphin.Geo.offset(home, 100, 100), Dolphin.Geo.offset(home, 100, 0), Dolphin.Geo.offset(home, 0, 100)])", 5,
            "the polygon crosses itself: its edge 1 (corner 1 to 2) crosses its edge 3"},
-          {"max_altitude 10\n  min_altitude 30", 3, "the fence's altitude band is upside down: min_altitude 30 m is above max_altitude 10 m"},
-          {"on_breach :explode", 3, "on_breach is one of :rtl, :land, :hold, :report, got: :explode"},
-          {"include circle(home, 0)", 4, "a circle's radius is a number of metres, more than 0, got: 0"}
+          {"max_altitude 10\n  min_altitude 30", 4, "the fence's altitude band is upside down: min_altitude 30 m is above max_altitude 10 m"},
+          {"on_breach :explode", 4, "on_breach is one of :rtl, :land, :hold, :report, got: :explode"},
+          {"include circle(home, 0)", 5, "a circle's radius is a number of metres, more than 0, got: 0"}
         ] do
       source = "use Dolphin.Script\n" <> home <> "fence do\n  " <> body <> "\nend\n"
       {:ok, script} = Script.compile_string(source, "fence.exs")

@@ -42,6 +42,12 @@ defmodule Dolphin.Examples.NoFlyZoneTest do
     run = ExampleRun.run(dir, "no_fly_zone", "-sim", ["--sim", "1", "--speedup", "25", "--no-check"], nil)
     breached!(run)
 
+    # Released at the script's end, the vehicle was given back as it was found before the run closed its link:
+    # the last FENCE_ENABLE it was sent is the 0 it had.
+    {frames, _} = Dolphin.MAVLink.Tlog.read(Dolphin.MAVLink.Tlog.reader(), File.read!(run.tlog))
+    enables = for {_, %{message: %Dolphin.MAVLink.Ardupilotmega.ParamSet{param_id: "FENCE_ENABLE", param_value: v}}} <- frames, do: v
+    assert [0.0, 1.0 | _] = Enum.reverse(Enum.dedup(enables))
+
     # Its flight report draws the fence the vehicle was given: the circle it stays in, the no-fly zone, the rally point.
     html = Path.join(dir, "report.html")
     assert {:ok, _} = Dolphin.Report.write(run.tlog, Path.join(dir, "no_fly_zone-sim.jsonl"), html)

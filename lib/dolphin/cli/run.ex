@@ -128,6 +128,8 @@ defmodule Dolphin.CLI.Run do
         # The outputs stop first (they show the run, not its teardown); then
         # the last started is the first stopped: the simulator before its link.
         Teardown.run(:output)
+        # Released vehicles get their fence back before the links close.
+        Dolphin.Vehicles.Fences.await_returns(30_000)
         Teardown.run_all()
         Dolphin.Clock.set_speedup(previous_speedup)
       end

@@ -35,7 +35,7 @@ defmodule Dolphin.Fleet.MAVLinkSource do
     instance = Dolphin.Instance.current()
 
     for id <- ids, Dolphin.Vehicles.Settings.found_fence?(id) do
-      Task.Supervisor.start_child(Dolphin.Mission.Guards, fn ->
+      Task.Supervisor.start_child(Dolphin.Vehicles.FenceReturns, fn ->
         Dolphin.Instance.put(instance)
 
         case Dolphin.Vehicles.Fences.give_back(id) do

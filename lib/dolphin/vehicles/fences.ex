@@ -70,6 +70,22 @@ defmodule Dolphin.Vehicles.Fences do
     end
   end
 
+  @doc """
+  Waits (at most `real_ms` of real time) until every released vehicle has
+  been given its fence back: what a run does before it closes its links.
+  `:ok`, or `:timeout` with some still under way.
+  """
+  @spec await_returns(non_neg_integer()) :: :ok | :timeout
+  def await_returns(real_ms) do
+    deadline = System.monotonic_time(:millisecond) + real_ms
+
+    Stream.repeatedly(fn -> Task.Supervisor.children(Dolphin.Vehicles.FenceReturns) end)
+    |> Enum.find_value(fn
+      [] -> :ok
+      _ -> if System.monotonic_time(:millisecond) > deadline, do: :timeout, else: Process.sleep(20) && nil
+    end)
+  end
+
   defp param_back(id, name, params, opts) do
     case Vehicles.set_param(id, name, Map.fetch!(params, name), opts) do
       {:ok, _} -> {:cont, :ok}
