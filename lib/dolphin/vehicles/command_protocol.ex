@@ -62,10 +62,6 @@ defmodule Dolphin.Vehicles.CommandProtocol do
   @spec result(non_neg_integer()) :: atom()
   def result(n), do: Map.get(@results, n, :"unknown_#{n}")
 
-  # How long to wait for a COMMAND_ACK (real ms).
-  defp ack_wait(longest, rtt) when is_number(rtt), do: min(Clock.retry_real_ms(longest), max(2 * Retry.timeout([rtt], longest), Clock.retry_real_ms(250)))
-  defp ack_wait(longest, _unknown), do: Clock.retry_real_ms(longest)
-
   @impl true
   def callback_mode, do: [:handle_event_function, :state_enter]
 
@@ -77,7 +73,7 @@ defmodule Dolphin.Vehicles.CommandProtocol do
         # Given attempts are exact; the link's are tried for at least the least patience too.
         fixed_attempts?: Keyword.has_key?(opts, :attempts),
         first_sent_at: System.monotonic_time(:millisecond),
-        wait_ms: ack_wait(Keyword.get(opts, :ack_timeout_ms, 1_500), Keyword.get(opts, :rtt_ms)),
+        wait_ms: Retry.answer_wait(Keyword.get(opts, :ack_timeout_ms, 1_500), Keyword.get(opts, :rtt_ms)),
         progress_timeout_ms: Keyword.get(opts, :progress_timeout_ms, 30_000),
         sent: 0
       })

@@ -13,7 +13,7 @@ defmodule Dolphin.Vehicles.ParamProtocol do
 
   @behaviour :gen_statem
 
-  alias Dolphin.{Clock, ParamError}
+  alias Dolphin.ParamError
   alias Dolphin.MAVLink.Ardupilotmega, as: M
   alias Dolphin.Vehicles.Retry
 
@@ -34,9 +34,7 @@ defmodule Dolphin.Vehicles.ParamProtocol do
 
   @impl true
   def init({request, opts}) do
-    longest = Keyword.get(opts, :ack_timeout_ms, 1_500)
-    rtt = Keyword.get(opts, :rtt_ms)
-    wait = if is_number(rtt), do: min(Clock.retry_real_ms(longest), max(2 * Retry.timeout([rtt], longest), Clock.retry_real_ms(250))), else: Clock.retry_real_ms(longest)
+    wait = Retry.answer_wait(Keyword.get(opts, :ack_timeout_ms, 1_500), Keyword.get(opts, :rtt_ms))
     data = Map.merge(request, %{attempts: Keyword.get_lazy(opts, :attempts, fn -> Retry.attempts(Keyword.get(opts, :loss)) end), wait_ms: wait, sent: 0})
     {:ok, {:waiting, 1}, data}
   end

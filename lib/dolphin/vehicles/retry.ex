@@ -87,4 +87,14 @@ defmodule Dolphin.Vehicles.Retry do
     p80 = Enum.at(sorted, trunc(0.8 * (length(sorted) - 1)))
     (2 * p80 + 2) |> round() |> max(Clock.retry_real_ms(0, speedup)) |> min(Clock.retry_real_ms(ceiling_ms, speedup))
   end
+
+  @doc """
+  How long (real ms) to wait for one answer to a request sent once (a
+  COMMAND_ACK, a PARAM_VALUE): `longest` ms of clock time when the link's
+  round trip `rtt_ms` is not known; else twice `timeout/2` of it, never
+  under 250 ms of clock time (for the vehicle's own work) nor over `longest`.
+  """
+  @spec answer_wait(number(), number() | nil) :: pos_integer()
+  def answer_wait(longest, rtt_ms) when is_number(rtt_ms), do: min(Clock.retry_real_ms(longest), max(2 * timeout([rtt_ms], longest), Clock.retry_real_ms(250)))
+  def answer_wait(longest, _unknown), do: Clock.retry_real_ms(longest)
 end
