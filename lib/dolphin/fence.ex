@@ -134,6 +134,39 @@ defmodule Dolphin.Fence do
     %{fence: numbered(zones), rally: numbered(rally)}
   end
 
+  @doc """
+  The zones of a fence list as the vehicle keeps it (`to_items/2`'s fence
+  items, or any maps with `command`, `x`, `y` in degE7 and `param1`): a
+  polygon is its run of corners (param1 of them), a circle one item. What
+  is not a zone (a return point), or a zone that cannot be one, is left out.
+
+      iex> home = Dolphin.Geo.location(38.43462, -8.86118, 0)
+      iex> {:ok, zone} = Dolphin.Geo.Shapes.polygon(for {n, e} <- [{0, 0}, {0, 100}, {100, 0}], do: Dolphin.Geo.offset(home, n, e))
+      iex> %{fence: items} = Dolphin.Fence.to_items(%Dolphin.Fence{exclude: [zone]}, home)
+      iex> [%Dolphin.Geo.Polygon{points: corners}] = Dolphin.Fence.from_items(items).exclude
+      iex> length(corners)
+      3
+  """
+  @spec from_items([map()]) :: t()
+  def from_items(items), do: zones(items, %__MODULE__{})
+
+  defp zones([], fence), do: fence
+
+  defp zones([%{command: c, param1: n} | _] = items, fence) when c in [5001, 5002] do
+    {corners, rest} = Enum.split(items, max(trunc(n), 1))
+    zones(rest, add_zone(fence, if(c == 5001, do: :include, else: :exclude), Shapes.polygon(Enum.map(corners, &item_point/1))))
+  end
+
+  defp zones([%{command: c, param1: r} = item | rest], fence) when c in [5003, 5004],
+    do: zones(rest, add_zone(fence, if(c == 5003, do: :include, else: :exclude), Shapes.circle(item_point(item), r)))
+
+  defp zones([_other | rest], fence), do: zones(rest, fence)
+
+  defp add_zone(fence, side, {:ok, zone}), do: Map.update!(fence, side, &(&1 ++ [zone]))
+  defp add_zone(fence, _side, {:error, _}), do: fence
+
+  defp item_point(item), do: Dolphin.Geo.location(item.x / 1.0e7, item.y / 1.0e7, 0)
+
   @vertex %{inclusion: 5001, exclusion: 5002}
   @circle %{inclusion: 5003, exclusion: 5004}
 

@@ -218,21 +218,16 @@ defmodule Dolphin.Report.Model do
     %{at: clock.(upload.at), count: upload.count, points: points}
   end
 
-  # The zones of the latest fence uploaded: a polygon is its run of corners
-  # (param1 of them), a circle its centre and radius, in map metres.
-  defp zones(items, project), do: items |> Enum.sort() |> Enum.map(&elem(&1, 1)) |> zone_list(project)
-
-  defp zone_list([], _project), do: []
-
-  defp zone_list([{c, _, _, _, n} | _] = items, project) when c in [5001, 5002] do
-    {corners, rest} = Enum.split(items, max(trunc(n), 1))
-    [%{shape: :polygon, inclusion?: c == 5001, points: for({_, lat, lon, _, _} <- corners, do: project.(lat, lon))} | zone_list(rest, project)]
+  # The zones of the latest fence uploaded (read as the vehicle keeps them,
+  # Dolphin.Fence.from_items/1), in map metres.
+  defp zones(items, project) do
+    fence = items |> Enum.sort() |> Enum.map(fn {_seq, {command, x, y, _z, param1}} -> %{command: command, x: x, y: y, param1: param1} end) |> Dolphin.Fence.from_items()
+    at = fn %{lat: lat, lon: lon} -> project.(round(lat * 1.0e7), round(lon * 1.0e7)) end
+    Enum.map(fence.include, &zone(&1, true, at)) ++ Enum.map(fence.exclude, &zone(&1, false, at))
   end
 
-  defp zone_list([{c, lat, lon, _, r} | rest], project) when c in [5003, 5004],
-    do: [%{shape: :circle, inclusion?: c == 5003, centre: project.(lat, lon), radius: r} | zone_list(rest, project)]
-
-  defp zone_list([_other | rest], project), do: zone_list(rest, project)
+  defp zone(%Dolphin.Geo.Polygon{points: points}, inclusion?, at), do: %{shape: :polygon, inclusion?: inclusion?, points: Enum.map(points, at)}
+  defp zone(%Dolphin.Geo.Circle{centre: c, radius: r}, inclusion?, at), do: %{shape: :circle, inclusion?: inclusion?, centre: at.(c), radius: r}
 
   # A mission uploaded again (each `forever` round of a script) is drawn once,
   # with the times it was uploaded.

@@ -15,7 +15,6 @@ defmodule Dolphin.Sim.Copter.Fence do
 
   import Dolphin.Sim.Copter, only: [text: 3, in_air?: 1, home_alt: 1, say: 2]
 
-  alias Dolphin.Geo.Shapes
   alias Dolphin.MAVLink.Ardupilotmega, as: M
   alias Dolphin.Sim.{Copter, MissionServer}
   alias Dolphin.Sim.Copter.Modes
@@ -113,36 +112,7 @@ defmodule Dolphin.Sim.Copter.Fence do
 
     case c.fence.zones do
       {^items, zones} -> {zones, c}
-      _ -> with zones = parse(items), do: {zones, %{c | fence: %{c.fence | zones: {items, zones}}}}
+      _ -> with zones = Dolphin.Fence.from_items(items), do: {zones, %{c | fence: %{c.fence | zones: {items, zones}}}}
     end
   end
-
-  @doc false
-  # A fence from its items: a polygon is its run of vertices (param1 of them), a circle one item.
-  def parse(items), do: parse(items, %Dolphin.Fence{})
-
-  defp parse([], fence), do: fence
-
-  defp parse([%{command: c, param1: n} | _] = items, fence) when c in [5001, 5002] do
-    {vertices, rest} = Enum.split(items, max(trunc(n), 1))
-    side = if c == 5001, do: :include, else: :exclude
-
-    case Shapes.polygon(Enum.map(vertices, &point/1)) do
-      {:ok, polygon} -> parse(rest, Map.update!(fence, side, &(&1 ++ [polygon])))
-      {:error, _} -> parse(rest, fence)
-    end
-  end
-
-  defp parse([%{command: c, param1: r} = item | rest], fence) when c in [5003, 5004] do
-    side = if c == 5003, do: :include, else: :exclude
-
-    case Shapes.circle(point(item), r) do
-      {:ok, circle} -> parse(rest, Map.update!(fence, side, &(&1 ++ [circle])))
-      {:error, _} -> parse(rest, fence)
-    end
-  end
-
-  defp parse([_other | rest], fence), do: parse(rest, fence)
-
-  defp point(item), do: Dolphin.Geo.location(item.x / 1.0e7, item.y / 1.0e7, 0)
 end
