@@ -59,7 +59,7 @@ defmodule Dolphin.Script.Statements do
   def fence(%Dolphin.Fence{} = fence) do
     ctx = Context.current()
     fence = if fence.rally == [], do: %{fence | rally: script_fence(ctx).rally}, else: fence
-    Context.put(%{ctx | platform_opts: Keyword.put(ctx.platform_opts, :fence, fence)})
+    put_platform_opt(ctx, :fence, fence)
     fence
   end
 
@@ -71,7 +71,7 @@ defmodule Dolphin.Script.Statements do
   @spec min_separation(number(), number()) :: :ok
   def min_separation(horizontal, vertical) when is_number(horizontal) and horizontal > 0 and is_number(vertical) and vertical > 0 do
     ctx = Context.current()
-    Context.put(%{ctx | platform_opts: Keyword.put(ctx.platform_opts, :min_separation, %{horizontal: horizontal * 1.0, vertical: vertical * 1.0})})
+    put_platform_opt(ctx, :min_separation, %{horizontal: horizontal * 1.0, vertical: vertical * 1.0})
     :ok
   end
 
@@ -84,7 +84,7 @@ defmodule Dolphin.Script.Statements do
     ctx = Context.current()
 
     case Dolphin.Fence.put_rally(script_fence(ctx), points) do
-      {:ok, fence} -> Context.put(%{ctx | platform_opts: Keyword.put(ctx.platform_opts, :fence, fence)})
+      {:ok, fence} -> put_platform_opt(ctx, :fence, fence)
       {:error, why} -> raise ArgumentError, why
     end
 
@@ -92,6 +92,9 @@ defmodule Dolphin.Script.Statements do
   end
 
   defp script_fence(ctx), do: Keyword.get(ctx.platform_opts, :fence) || %Dolphin.Fence{}
+
+  # What every mission the script flies from now on is given (Dolphin.Mission.Platform's options).
+  defp put_platform_opt(ctx, key, value), do: Context.put(%{ctx | platform_opts: Keyword.put(ctx.platform_opts, key, value)})
 
   @doc "Sets the connection timeout (ms) of the vehicles the script picked and will pick."
   @spec set_connection_timeout(pos_integer()) :: :ok
