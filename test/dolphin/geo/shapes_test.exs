@@ -105,8 +105,16 @@ defmodule Dolphin.Geo.ShapesTest do
           first_out = Enum.find_value(samples, fn {t, p} -> if not star_inside?(s, p), do: t end)
 
           case Shapes.entry(polygon, a, b) do
-            nil -> assert first_in == nil
-            {t, at} -> assert first_in != nil and abs(first_in - t) <= 2 * step and and_height(at, a, b, t)
+            nil ->
+              assert first_in == nil
+
+            # A leg that clips a corner for less than a sample step has no sample in: the oracle
+            # sees it out again one step on.
+            {t, at} when first_in == nil ->
+              assert and_height(at, a, b, t) and not star_inside?(s, Shapes.along(a, b, min(t + step, 1.0)))
+
+            {t, at} ->
+              assert abs(first_in - t) <= 2 * step and and_height(at, a, b, t)
           end
 
           case Shapes.exit(polygon, a, b) do
