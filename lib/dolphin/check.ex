@@ -86,8 +86,6 @@ defmodule Dolphin.Check do
   @max_distance 12_000
   @max_height 500
   @max_depth 100
-  # Metres across and in height two of our vehicles keep apart unless the script says otherwise (`min_separation`).
-  @min_separation %{horizontal: 20.0, vertical: 10.0}
 
   @doc "Checks the script at `path` (see the module doc for options); the findings, errors first."
   @spec run(Path.t(), keyword()) :: t()
@@ -224,7 +222,7 @@ defmodule Dolphin.Check do
   # Our vehicles too close to each other, anywhere in the dry run.
   defp separation(recorder, file, severity) do
     {timelines, asked} = Recorder.timelines(recorder)
-    limits = asked || @min_separation
+    limits = asked || Dolphin.Separation.default_limits()
     for conflict <- Dolphin.Check.Separation.conflicts(timelines, limits), do: Dolphin.Check.Separation.finding(conflict, file, limits, severity)
   end
 

@@ -46,10 +46,13 @@ defmodule Dolphin.EventText do
     :armed,
     :disarmed,
     :mission_uploaded,
+    :fence_applied,
     :mission_item_reached,
     :condition_met,
     :task_reassigned,
-    :vehicle_returned
+    :vehicle_returned,
+    :separation_hold,
+    :separation_clear
   ]
 
   @doc """
@@ -136,6 +139,18 @@ defmodule Dolphin.EventText do
   def event_text(%{event: :task_finished} = e),
     do: "task #{e.task_id} #{e.kind} #{inspect(cut(e.name, 60))}#{on_vehicle(e)}: #{e.result}" <> because(e.reason)
 
+  def event_text(%{event: :fence_applied} = e),
+    do: "vehicle #{e.vehicle}: fence of #{inspect(e.name)} on (#{zones(e.fence)}, #{length(e.rally)} rally point(s))"
+
+  def event_text(%{event: :separation_hold, action: action} = e) when action in [:aside, "aside"],
+    do: "vehicle #{e.vehicle} moves out of vehicle #{e.other}'s way: #{e.distance} m away (#{e.height} m in height), coming within the least separation in #{e.in_s} s"
+
+  def event_text(%{event: :separation_hold} = e),
+    do: "vehicle #{e.vehicle} holds: vehicle #{e.other} is #{e.distance} m away (#{e.height} m in height) and would come within the least separation in #{e.in_s} s"
+
+  def event_text(%{event: :separation_clear} = e),
+    do: "vehicle #{e.vehicle} goes on after #{Format.seconds(e.held_ms)} held" <> if(e.distance, do: " (vehicle #{e.other} #{e.distance} m away)", else: "")
+
   def event_text(%{event: :task_reassigned} = e), do: "task #{e.task_id}: vehicle #{e.from} failed it; vehicle #{e.to} takes it over from item #{e.resume_seq}"
 
   def event_text(%{event: :vehicle_returned} = e),
@@ -154,6 +169,12 @@ defmodule Dolphin.EventText do
 
   defp because(nil), do: ""
   defp because(reason), do: " (#{String.replace_prefix(reason, "stopped: ", "")})"
+
+  # A fence list's zones: a polygon is a run of corner items (each says how many), a circle one item.
+  defp zones(items) do
+    n = items |> Enum.map(fn [command, _, _, param1] -> if command in [5001, 5002], do: 1 / max(param1, 1), else: 1 end) |> Enum.sum() |> round()
+    "#{n} zone(s)"
+  end
 
   defp cut(nil, _n), do: ""
   defp cut(text, n), do: if(String.length(text) > n, do: String.slice(text, 0, n - 1) <> "…", else: text)

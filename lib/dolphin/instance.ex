@@ -33,7 +33,7 @@ defmodule Dolphin.Instance do
     @moduledoc """
     The registered names of an instance's parts (see `Dolphin.Instance.names/1`).
     """
-    @enforce_keys [:instance, :registry, :pubsub, :views, :heard, :paths, :routes, :settings, :vehicles, :links, :fleet, :sims, :sitls, :cluster?]
+    @enforce_keys [:instance, :registry, :pubsub, :views, :heard, :paths, :routes, :settings, :vehicles, :links, :fleet, :separation, :sims, :sitls, :cluster?]
     defstruct @enforce_keys
 
     @type t :: %__MODULE__{}
@@ -50,6 +50,7 @@ defmodule Dolphin.Instance do
     vehicles: Dolphin.Vehicles.Supervisor,
     links: Dolphin.Link.Supervisor,
     fleet: Dolphin.Fleet,
+    separation: Dolphin.Separation,
     sims: Dolphin.Sim.Supervisor,
     sitls: Dolphin.SITL.Supervisor
   ]
@@ -162,6 +163,8 @@ defmodule Dolphin.Instance do
         [
           # Who is available, picked, busy.
           {Dolphin.Fleet, name: names.fleet, claims: cluster?},
+          # The live separation monitor of the missions flown here (Dolphin.Separation).
+          {Dolphin.Separation, name: names.separation},
           # Simulated vehicles (Dolphin.Sim) and ArduPilot SITL instances
           # (Dolphin.SITL): empty until asked for; they speak to links over UDP.
           {Dolphin.Sim.Supervisor, name: names.sims},

@@ -14,7 +14,9 @@ defmodule Dolphin.EventTextTest do
         parent_id: nil, kind: :mission, progress: %{current: 1, total: 3}, result: :done, condition: "battery(v) < 0.3",
         branch: nil, text: "hello", key: :k, value: 1, script: "x.exs", from: 1, to: 3, resume_seq: 6, held: true,
         station: :"gs1@host", heard: 2, stations: [:"gs1@host", :"gs2@host"], kept: :"gs1@host", dropped: :"gs2@host",
-        path: "udpin:0.0.0.0:14550 from 10.0.0.7:14555", uid: 9, vehicle_uid: 7, other: "1@10.0.0.7:14555"
+        path: "udpin:0.0.0.0:14550 from 10.0.0.7:14555", uid: 9, vehicle_uid: 7, other: "1@10.0.0.7:14555",
+        distance: 84.9, height: 0.0, closest: 3.2, in_s: 5.1, held_ms: 4_600, action: :hold, limit_m: 20.0, limit_height_m: 10.0,
+        fence: [[5003, 404_442_330, -73_752_340, 600.0]], rally: [[404_442_330, -73_745_000, 30.0]]
       }
 
       for {name, fields} <- Dolphin.Events.catalogue() do
@@ -42,6 +44,20 @@ defmodule Dolphin.EventTextTest do
 
       assert EventText.event_text(%{event: :task_reassigned, run: 7, task_id: 5, from: 1, to: 3, resume_seq: 6}) ==
                "task 5: vehicle 1 failed it; vehicle 3 takes it over from item 6"
+      assert EventText.event_text(%{event: :separation_hold, vehicle: 2, other: 1, action: "aside", distance: 25.0, height: 0.0, closest: 3.2, in_s: 2.0, limit_m: 20.0, limit_height_m: 10.0}) ==
+               "vehicle 2 moves out of vehicle 1's way: 25.0 m away (0.0 m in height), coming within the least separation in 2.0 s"
+
+      assert EventText.event_text(%{event: :separation_hold, vehicle: 2, other: 1, action: :hold, distance: 84.9, height: 0.0, closest: 3.2, in_s: 5.1, limit_m: 20.0, limit_height_m: 10.0}) ==
+               "vehicle 2 holds: vehicle 1 is 84.9 m away (0.0 m in height) and would come within the least separation in 5.1 s"
+
+      assert EventText.event_text(%{event: :separation_clear, vehicle: 2, other: 1, distance: 99.9, held_ms: 4_600}) == "vehicle 2 goes on after 4.6 s held (vehicle 1 99.9 m away)"
+
+      # A polygon of four corners (four items) and a circle: two zones.
+      square = for _ <- 1..4, do: [5002, 404_442_330, -73_752_340, 4]
+
+      assert EventText.event_text(%{event: :fence_applied, vehicle: 1, name: "North", fence: square ++ [[5003, 404_442_330, -73_752_340, 600.0]], rally: []}) ==
+               ~s[vehicle 1: fence of "North" on (2 zone(s), 0 rally point(s))]
+
       assert EventText.event_text(%{event: :allocated, run: 7, allocation: %{"8" => 1, "9" => 2}}) == "run 7: task 8 on vehicle 1, task 9 on vehicle 2"
     end
 

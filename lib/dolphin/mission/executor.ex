@@ -81,6 +81,16 @@ defmodule Dolphin.Mission.Executor do
       fence: mission.fence || Map.get(opts, :fence),
       vehicle: vehicle,
       owner: opts.owner,
+      # When the task started (clock ms; of two vehicles about to come too
+      # close, the later one's holds) and the run's least separation (nil:
+      # the default), for Dolphin.Separation.
+      started_at: Clock.now_ms(),
+      rank: {Map.get(opts, :run), Map.get(opts, :task_id)},
+      min_separation: Map.get(opts, :min_separation),
+      # Held by the separation monitor: nil, or what it wants (:hold, :go)
+      # and how far the vehicle is (:holding, :held, :resuming, :resumed
+      # until a view shows AUTO again).
+      separation: nil,
       arm_timeout_ms: Map.get(opts, :arm_timeout_ms, @arm_timeout_ms),
       # How its missions fly (Dolphin.Vehicles.View.airframe/2), from its view once known.
       airframe: nil,
@@ -126,9 +136,8 @@ defmodule Dolphin.Mission.Executor do
   def handle_event(:enter, _old, :verify, data), do: exchange(data, fn -> Vehicles.download_mission(data.vehicle) end)
 
   def handle_event(:enter, _old, :fence, data) do
-    [home | _] = data.items
-    at = Dolphin.Geo.location(home.x / 1.0e7, home.y / 1.0e7, home.z)
-    exchange(data, fn -> Dolphin.Vehicles.Fences.apply(data.vehicle, data.fence, at, data.airframe) end)
+    home = fence_home(data)
+    exchange(data, fn -> Dolphin.Vehicles.Fences.apply(data.vehicle, data.fence, home, data.airframe) end)
   end
 
   def handle_event(:enter, _old, :guided, data), do: exchange(data, fn -> Manoeuvres.guided(data.vehicle, within: data.arm_timeout_ms) end)
@@ -139,6 +148,7 @@ defmodule Dolphin.Mission.Executor do
 
   def handle_event(:enter, _old, :flying, data) do
     data = %{data | flight_texts: Vehicles.status_texts(data.vehicle)}
+    :ok = Dolphin.Separation.flying(data.vehicle, started_at: data.started_at, rank: data.rank, limits: data.min_separation)
     # Judged at once on what it was last sent; else on the next view.
     if data.view, do: judge(data, data.view), else: {:keep_state, data}
   end
@@ -203,6 +213,22 @@ defmodule Dolphin.Mission.Executor do
   end
 
   def handle_event(:info, {:dolphin, _topic, _event}, _state, _data), do: :keep_state_and_data
+
+  # --- :flying: held apart from another vehicle (Dolphin.Separation) ---------------
+
+  # (A vehicle leaving its mission to a failsafe is left to it.)
+  def handle_event(:info, {:separation, :hold, _seen}, :flying, %{leaving: nil} = data), do: separation(data, :hold)
+  def handle_event(:info, {:separation, :clear, _}, :flying, %{leaving: nil} = data), do: separation(data, :go)
+
+  # Held and still in the other's way: a copter moves up (or down) out of it.
+  def handle_event(:info, {:separation, :aside, %{metres: m}}, :flying, %{leaving: nil, separation: %{phase: :held, want: :hold}, task: nil} = data) do
+    case aside_point(data, m) do
+      nil -> :keep_state_and_data
+      point -> exchange(put_in(data.separation.phase, :aside), fn -> Manoeuvres.go_to(data.vehicle, point) end)
+    end
+  end
+
+  def handle_event(:info, {:separation, _, _}, _state, _data), do: :keep_state_and_data
 
   def handle_event({:timeout, :grounded}, :grounded, :flying, %{view: st} = data) do
     if still_grounded?(data, st),
@@ -287,7 +313,11 @@ defmodule Dolphin.Mission.Executor do
     end
   end
 
+  # The mission's home: rally heights are above it.
+  defp fence_home(%{items: [home | _]}), do: Dolphin.Geo.location(home.x / 1.0e7, home.y / 1.0e7, home.z)
+
   # What the exchange of `state` answered; the next step, or the end.
+  defp answered(:flying, result, %{separation: %{phase: phase}} = data) when phase in [:holding, :aside, :resuming], do: separated(result, data)
   defp answered(:hold, :ok, data), do: next(:clear, data)
   defp answered(:clear, :ok, data), do: next(:upload, data)
 
@@ -318,7 +348,19 @@ defmodule Dolphin.Mission.Executor do
   defp answered(:verify, {:error, e}, data),
     do: fail(:verify, data, {:read_back_failed, e, data.attempt})
 
-  defp answered(:fence, :ok, data), do: next(:guided, data)
+  defp answered(:fence, :ok, data) do
+    items = Dolphin.Fence.to_items(data.fence, fence_home(data))
+
+    Events.emit(:fence_applied, %{
+      vehicle: data.vehicle,
+      name: data.name,
+      fence: for(i <- items.fence, do: [i.command, i.x, i.y, i.param1]),
+      rally: for(i <- items.rally, do: [i.x, i.y, i.z])
+    })
+
+    next(:guided, data)
+  end
+
   defp answered(:fence, {:error, e}, data), do: fail(:fence, data, {:refused, e})
   defp answered(:guided, :ok, data), do: next(:arm, data)
   defp answered(:arm, :ok, data), do: next(:start, data)
@@ -393,10 +435,64 @@ defmodule Dolphin.Mission.Executor do
     e in ArgumentError -> {:error, {:cannot_make_items, Exception.message(e)}}
   end
 
+  # --- :flying: separation holds ---------------------------------------------------
+
+  # What the monitor wants now; one exchange with the vehicle at a time,
+  # the next one once it ends.
+  defp separation(%{separation: nil} = data, :hold), do: separation_step(%{data | separation: %{want: :hold, phase: :resumed}})
+  defp separation(%{separation: nil} = data, :go), do: {:keep_state, data}
+  defp separation(data, want), do: separation_step(put_in(data.separation.want, want))
+
+  defp separation_step(%{separation: %{want: :hold, phase: :resumed}} = data),
+    do: exchange(put_in(data.separation.phase, :holding), fn -> Manoeuvres.hold(data.vehicle, fresh: true) end)
+
+  defp separation_step(%{separation: %{want: :go, phase: :held}} = data),
+    do: exchange(put_in(data.separation.phase, :resuming), fn -> Manoeuvres.command(data.vehicle, "AUTO", fn -> Vehicles.set_mode(data.vehicle, :auto) end) end)
+
+  defp separation_step(data), do: {:keep_state, data}
+
+  defp separated(:ok, %{separation: %{phase: phase}} = data) when phase in [:holding, :aside], do: separation_step(put_in(data.separation.phase, :held))
+  # Moving aside is for good measure: refused (the vehicle touched down meanwhile), it holds where it is.
+  defp separated({:error, _}, %{separation: %{phase: :aside}} = data), do: separation_step(put_in(data.separation.phase, :held))
+
+  defp separated(:ok, %{separation: %{phase: :resuming}} = data), do: separation_step(put_in(data.separation.phase, :resumed))
+  defp separated({:error, e}, data), do: fail(:flying, data, {:refused, e})
+
+  # Where a held copter goes out of the other's way: `m` metres up, or down
+  # when its fence's ceiling is nearer; nil when neither keeps 5 m clear of
+  # the ceiling, the floor and the ground (or it is not a copter).
+  defp aside_point(%{airframe: airframe, view: %{position: %{lat: lat, lon: lon}, relative_altitude: h}} = data, m) when is_number(h) do
+    ceiling = if data.fence && data.fence.max_altitude, do: data.fence.max_altitude - 5, else: nil
+    floor = max(5, if(data.fence && data.fence.min_altitude, do: data.fence.min_altitude + 5, else: 5))
+
+    cond do
+      airframe != :copter -> nil
+      ceiling == nil or h + m <= ceiling -> {lat, lon, h + m}
+      h - m >= floor -> {lat, lon, h - m}
+      true -> nil
+    end
+  end
+
+  defp aside_point(_data, _m), do: nil
+
+  # Held by the monitor, the vehicle is in a mode that holds it: no leaving
+  # of its mission. It is back in it once a view shows AUTO after the resume.
+  defp separated_verdict(%{separation: nil}, _st, verdict), do: verdict
+
+  defp separated_verdict(data, st, {:left, {:left_auto, _}} = verdict),
+    do: if(st.mode in Manoeuvres.hold_modes(data.airframe), do: :flying, else: verdict)
+
+  defp separated_verdict(_data, _st, verdict), do: verdict
+
+  defp back_in_mission(%{separation: %{phase: :resumed, want: :go}} = data, %{mode: :auto}), do: %{data | separation: nil}
+  defp back_in_mission(data, _st), do: data
+
   # --- :flying ----------------------------------------------------------------
 
   defp judge(data, st) do
     {verdict, progress, flight} = Flight.judge(data.flight, st)
+    verdict = separated_verdict(data, st, verdict)
+    data = back_in_mission(data, st)
     {data, watch} = watch_grounded(%{data | flight: flight}, st)
     if progress, do: Platform.progress(data.owner, progress)
 

@@ -47,8 +47,22 @@ defmodule Dolphin.Report.Model do
       stats: log.stats,
       vehicles: vehicles,
       script: script(events, span),
-      script_marks: script_marks(events, tasks)
+      script_marks: script_marks(events, tasks),
+      separation: separation(log, events)
     }
+  end
+
+  # The nearest-vehicle distance over time (Report.Separation) against the
+  # least separation the monitor kept, as its events give it (else the default).
+  defp separation(log, events) do
+    limits =
+      case Enum.find(events, &(&1["event"] == "separation_hold")) do
+        %{"limit_m" => h, "limit_height_m" => v} -> %{horizontal: h, vertical: v}
+        nil -> Dolphin.Separation.default_limits()
+      end
+
+    closest = Dolphin.Report.Separation.closest(log, vertical: limits.vertical)
+    %{series: Simplify.series(closest.series, @plot_buckets), least: closest.least, limits: limits}
   end
 
   @doc false
@@ -262,6 +276,8 @@ defmodule Dolphin.Report.Model do
         %{"event" => "mode_changed", "mode" => m, "t" => t} -> [{t, :mode, "mode #{m}"}]
         %{"event" => "vehicle_lost", "t" => t} -> [{t, :lost, "lost"}]
         %{"event" => "vehicle_reconnected", "t" => t} -> [{t, :reconnected, "reconnected"}]
+        %{"event" => "separation_hold", "t" => t} = e -> [{t, :separation_hold, "held apart from vehicle #{e["other"]} (#{e["distance"]} m away)"}]
+        %{"event" => "separation_clear", "t" => t} = e -> [{t, :separation_clear, "goes on after #{e["held_ms"] / 1000} s held"}]
         _ -> []
       end)
 

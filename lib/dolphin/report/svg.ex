@@ -310,6 +310,9 @@ defmodule Dolphin.Report.SVG do
         :lost -> ~s(<path d="M#{num(x - 4)} #{y - 4} L#{num(x + 4)} #{y + 4} M#{num(x + 4)} #{y - 4} L#{num(x - 4)} #{y + 4}"/>)
         :reconnected -> ~s(<circle cx="#{num(x)}" cy="#{y}" r="4"/>)
         :mode -> ~s(<path d="M#{num(x)} #{y - 5} L#{num(x + 4)} #{y} L#{num(x)} #{y + 5} L#{num(x - 4)} #{y} Z"/>)
+        # A pause sign, and a play sign.
+        :separation_hold -> ~s(<path d="M#{num(x - 3)} #{y - 5} V#{y + 5} M#{num(x + 3)} #{y - 5} V#{y + 5}"/>)
+        :separation_clear -> ~s(<path d="M#{num(x - 3)} #{y - 5} L#{num(x + 5)} #{y} L#{num(x - 3)} #{y + 5} Z"/>)
         _ -> ~s(<circle cx="#{num(x)}" cy="#{y}" r="3"/>)
       end
 
@@ -355,6 +358,38 @@ defmodule Dolphin.Report.SVG do
         end
       end),
       if(values == [], do: ~s(<text class="no-data" x="#{div(@width, 2)}" y="#{div(@plot_h, 2)}" text-anchor="middle">no data in the log</text>), else: []),
+      "</svg>"
+    ]
+  end
+
+  @doc false
+  # The distance from each moment's closest pair, with the least separation's
+  # line; the scale stops at ten times it (farther is apart, however far).
+  @spec separation_plot(map()) :: iodata()
+  def separation_plot(%{separation: %{series: series, least: least, limits: limits}} = model) do
+    span = max(model.span_s, 1.0)
+    x = fn t -> @label_w + max(0.0, min(t, span)) / span * (@width - @label_w - @right_pad) end
+    top = nice(min(Enum.max(Enum.map(series, &elem(&1, 1)), fn -> limits.horizontal * 2 end), limits.horizontal * 10))
+    inner = @plot_h - @plot_top - @plot_bottom
+    y = fn val -> @plot_top + inner - min(val, top) / top * inner end
+    ticks = Stream.iterate(0.0, &(&1 + nice(top / 4))) |> Enum.take_while(&(&1 <= top + 1.0e-9))
+    title = "closest other vehicle across (of those within #{num(limits.vertical, 0)} m in height)"
+
+    [
+      ~s(<svg class="plot separation" xmlns="http://www.w3.org/2000/svg" viewBox="0 0 #{@width} #{@plot_h}">),
+      ~s(<text class="plot-title" x="#{@label_w}" y="14">#{title}),
+      if(least, do: " — least #{num(least.across, 1)} m at #{clock(least.at_s)}, vehicles #{elem(least.pair, 0)} and #{elem(least.pair, 1)}", else: ""),
+      "</text>",
+      ~s(<g class="axis">),
+      Enum.map(ticks, fn v ->
+        ~s(<line x1="#{@label_w}" y1="#{num(y.(v))}" x2="#{@width - @right_pad}" y2="#{num(y.(v))}"/><text x="#{@label_w - 4}" y="#{num(y.(v) + 4)}" text-anchor="end">#{num(v, 0)} m</text>)
+      end),
+      "</g>",
+      ~s(<line class="limit" x1="#{@label_w}" y1="#{num(y.(limits.horizontal))}" x2="#{@width - @right_pad}" y2="#{num(y.(limits.horizontal))}"><title>least separation: #{num(limits.horizontal, 0)} m across</title></line>),
+      case series do
+        [] -> ~s(<text class="no-data" x="#{div(@width, 2)}" y="#{div(@plot_h, 2)}" text-anchor="middle">never two vehicles in the air within #{num(limits.vertical, 0)} m in height</text>)
+        _ -> [~s(<polyline class="series separation" points="), Enum.map_intersperse(series, " ", fn {t, val} -> [num(x.(t)), ",", num(y.(val))] end), ~s("/>)]
+      end,
       "</svg>"
     ]
   end

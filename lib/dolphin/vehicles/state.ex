@@ -8,7 +8,7 @@ defmodule Dolphin.Vehicles.State do
   | `type`, `autopilot` | HEARTBEAT (autopilot component) | `MAV_TYPE` number; `:ardupilot`, `:px4` or `:other` |
   | `mode` | HEARTBEAT | mode name (`:guided`, `:auto`, ... see `Dolphin.Vehicles.Modes`) or `{:custom, n}` |
   | `armed`, `system_status` | HEARTBEAT | `base_mode` bit 128; `MAV_STATE` number |
-  | `position` | GLOBAL_POSITION_INT | `%{lat, lon, alt, relative_alt, heading}`: degrees, metres, degrees (nil when unknown) |
+  | `position` | GLOBAL_POSITION_INT | `%{lat, lon, alt, relative_alt, heading, velocity}`: degrees, metres, degrees (nil when unknown), `{north, east, up}` m/s |
   | `home` | HOME_POSITION | `%{lat, lon, alt}` |
   | `battery` | SYS_STATUS, BATTERY_STATUS (id 0) | remaining fraction 0.0..1.0, `nil` until reported |
   | `mission` | MISSION_CURRENT, MISSION_ITEM_REACHED | `%{current, total, state, reached}` of the mission on the vehicle: all `nil` again when a new one is uploaded or it is cleared (`mission_replaced/1`) |
@@ -130,7 +130,8 @@ defmodule Dolphin.Vehicles.State do
       lon: p.lon / 1.0e7,
       alt: p.alt / 1000,
       relative_alt: p.relative_alt / 1000,
-      heading: if(p.hdg == 65_535, do: nil, else: p.hdg / 100)
+      heading: if(p.hdg == 65_535, do: nil, else: p.hdg / 100),
+      velocity: {p.vx / 100, p.vy / 100, -p.vz / 100}
     }
 
     %{state | position: position}

@@ -24,6 +24,7 @@ defmodule Dolphin.Vehicles.View do
   | `battery` | remaining fraction 0.0..1.0, `nil` until reported |
   | `position` | `Dolphin.Geo.Location` (height above mean sea level) or `nil` |
   | `relative_altitude` | metres above home, or `nil` |
+  | `velocity` | `{north, east, up}` in metres per second, or `nil` |
   | `mode` | flight mode name (`:guided`, `:auto`, ...) or `nil` |
   | `armed?`, `connected?` | booleans |
   | `mission_progress` | `{reached, total}`: last mission item reached (0 before the first) and items in the mission, since the mission was last uploaded; `nil` until the vehicle reports its mission |
@@ -46,6 +47,7 @@ defmodule Dolphin.Vehicles.View do
             battery: nil,
             position: nil,
             relative_altitude: nil,
+            velocity: nil,
             mode: nil,
             armed?: false,
             connected?: true,
@@ -71,6 +73,7 @@ defmodule Dolphin.Vehicles.View do
           battery: float() | nil,
           position: Dolphin.Geo.Location.t() | nil,
           relative_altitude: float() | nil,
+          velocity: {float(), float(), float()} | nil,
           mode: atom() | nil,
           armed?: boolean(),
           connected?: boolean(),
@@ -248,6 +251,7 @@ defmodule Dolphin.Vehicles.View do
       battery: state.battery,
       position: position,
       relative_altitude: relative,
+      velocity: state.position && Map.get(state.position, :velocity),
       mode: state.mode,
       armed?: state.armed,
       connected?: not lost,

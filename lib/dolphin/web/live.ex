@@ -60,7 +60,8 @@ defmodule Dolphin.Web.Live do
   end
 
   # A position as the log has it ({ts, lat e7, lon e7, height above home mm,
-  # vx, vy cm/s}), when it moved; the speed is the one since the last one.
+  # vx, vy cm/s}), when it moved: its velocity as reported, else the speed
+  # since the last one (north).
   defp position(v, %View{position: nil}, _ts), do: {v, 0}
 
   defp position(v, %View{position: p} = view, ts) do
@@ -71,6 +72,10 @@ defmodule Dolphin.Web.Live do
     case v.positions do
       [{_, ^lat, ^lon, ^rel, _, _} | _] ->
         {v, 0}
+
+      _ when is_tuple(view.velocity) ->
+        {vn, ve, _} = view.velocity
+        {%{v | positions: [{ts, lat, lon, rel, round(vn * 100), round(ve * 100)} | v.positions]}, 1}
 
       [{ts0, lat0, lon0, _, _, _} | _] when ts > ts0 ->
         speed = Dolphin.Geo.distance(Dolphin.Geo.location(lat0 / 1.0e7, lon0 / 1.0e7, 0), Dolphin.Geo.location(p.lat, p.lon, 0)) / ((ts - ts0) / 1.0e6)
@@ -87,8 +92,18 @@ defmodule Dolphin.Web.Live do
   def event(live, %{event: _, at_ms: _} = event) do
     e = event |> Dolphin.Events.to_json(live.origin_ms) |> :jiffy.decode([:return_maps, null_term: nil])
     {events, n} = if live.n_events >= @max_events, do: {:queue.drop(live.events), live.n_events}, else: {live.events, live.n_events + 1}
-    %{live | events: :queue.in(e, events), n_events: n, running: running(live.running, e)}
+    %{live | events: :queue.in(e, events), n_events: n, running: running(live.running, e), vehicles: fenced(live.vehicles, e)}
   end
+
+  # The fence a vehicle was given, as the log's fence and rally lists keep it (the map draws them).
+  defp fenced(vehicles, %{"event" => "fence_applied", "vehicle" => id, "fence" => fence, "rally" => rally}) do
+    v = Map.get(vehicles, id) || %FlightLog.Vehicle{id: id}
+    zones = for {[command, x, y, param1], seq} <- Enum.with_index(fence), into: %{}, do: {seq, {command, x, y, 0.0, param1}}
+    points = for {[x, y, z], seq} <- Enum.with_index(rally), into: %{}, do: {seq, {5100, x, y, z, 0.0}}
+    Map.put(vehicles, id, %{v | fence: zones, rally: points})
+  end
+
+  defp fenced(vehicles, _e), do: vehicles
 
   # The platform task each vehicle flies now: vehicle => {task id, kind, name}.
   defp running(running, %{"event" => "task_started", "vehicle" => v} = e) when is_integer(v) or is_binary(v), do: Map.put(running, v, {e["task_id"], e["kind"], e["name"]})

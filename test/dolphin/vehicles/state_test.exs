@@ -52,7 +52,7 @@ defmodule Dolphin.Vehicles.StateTest do
   test "position, home, mission progress, landed state, status texts" do
     s =
       fold([
-        {%M.GlobalPositionInt{lat: 411_780_000, lon: -85_960_000, alt: 132_000, relative_alt: 20_500, hdg: 65_535}, []},
+        {%M.GlobalPositionInt{lat: 411_780_000, lon: -85_960_000, alt: 132_000, relative_alt: 20_500, hdg: 65_535, vx: 250, vy: -120, vz: -50}, []},
         {%M.HomePosition{latitude: 411_770_000, longitude: -85_950_000, altitude: 111_500}, []},
         {%M.MissionCurrent{seq: 3, total: 6, mission_state: 3}, []},
         {%M.MissionItemReached{seq: 2}, []},
@@ -60,7 +60,8 @@ defmodule Dolphin.Vehicles.StateTest do
         {%M.Statustext{severity: 6, text: "Reached command #2"}, []}
       ])
 
-    assert s.position == %{lat: 41.178, lon: -8.596, alt: 132.0, relative_alt: 20.5, heading: nil}
+    # Velocity north, east and up (GLOBAL_POSITION_INT's vz is down).
+    assert s.position == %{lat: 41.178, lon: -8.596, alt: 132.0, relative_alt: 20.5, heading: nil, velocity: {2.5, -1.2, 0.5}}
     assert s.home == %{lat: 41.177, lon: -8.595, alt: 111.5}
     assert s.mission == %{current: 3, total: 6, state: :active, reached: 2}
     assert s.landed == :in_air

@@ -67,6 +67,40 @@ defmodule Dolphin.Web.LiveTest do
     for {id, html} <- pieces, id not in ["when", "legend"], do: assert(page =~ ~s(<section id="#{id}">) <> html <> "</section>")
   end
 
+  test "the fence a vehicle was given is drawn on the map; two vehicles too close, and the hold, on the plot and the time line" do
+    base = Dolphin.Geo.location(40.44, -7.375, 820)
+    {:ok, zone} = Dolphin.Geo.Shapes.polygon(for {n, e} <- [{50, -30}, {50, 30}, {80, 30}, {80, -30}], do: Dolphin.Geo.offset(base, n, e))
+    items = Dolphin.Fence.to_items(%Dolphin.Fence{exclude: [zone], rally: [Dolphin.Geo.offset(base, 0, 60, 30)]}, base)
+
+    fence = %{
+      event: :fence_applied,
+      at_ms: 1000,
+      vehicle: 1,
+      name: "North",
+      fence: for(i <- items.fence, do: [i.command, i.x, i.y, i.param1]),
+      rally: for(i <- items.rally, do: [i.x, i.y, i.z])
+    }
+
+    hold = %{event: :separation_hold, at_ms: 4000, vehicle: 2, other: 1, action: :hold, distance: 12.0, height: 0.0, closest: 2.0, in_s: 3.0, limit_m: 20.0, limit_height_m: 10.0}
+
+    # Vehicle 2 flies beside vehicle 1, 11 m east of it.
+    live =
+      Live.new(0)
+      |> Live.event(fence)
+      |> fly(1, 10)
+      |> then(fn live ->
+        Enum.reduce(0..9, live, fn i, live -> Live.view(live, view(2, 40.44 + i / 100_000, position: Dolphin.Geo.offset(Dolphin.Geo.location(40.44 + i / 100_000, -7.375, 820), 0, 11)), i * 1000) end)
+      end)
+      |> Live.event(hold)
+
+    page = Live.page(live, 10_000)
+    assert [_] = Regex.scan(~r/<polygon class="zone exclusion" points="[^"]+"/, page)
+    assert page =~ ~s(<text class="rally")
+    assert page =~ ~s(<svg class="plot separation")
+    assert page =~ ~r/least 11\.0 m at [^,]+, vehicles [12] and [12]/
+    assert page =~ ~s(<g class="mark mark-separation_hold">)
+  end
+
   test "a page with no vehicle yet" do
     page = Live.page(Live.new(0), 0)
     assert page =~ ~s(<section id="live-status">)

@@ -1,0 +1,337 @@
+defmodule Dolphin.Separation do
+  @moduledoc """
+  The live separation monitor: while missions fly, it keeps our vehicles
+  apart by holding one of two that are about to come too close, and lets it
+  go on once the way is clear.
+
+  Every mission the MAVLink platform flies (`Dolphin.Mission.Platform`)
+  registers its vehicle here once MISSION_START is accepted (`flying/2`),
+  with the least separation of its run (`min_separation` in the script,
+  else 20 m across and 10 m in height). On each view of a registered
+  vehicle the monitor predicts, from its position and velocity and those of
+  every other vehicle of the ground station in the air (registered or not),
+  whether the two will come within the separation in the next
+  8 seconds of clock time (`Dolphin.Separation.Prediction`). When they
+  will:
+
+    * the vehicle whose mission started later holds (its mission's process
+      is sent `{:separation, :hold, info}`: it holds as its airframe holds,
+      `Dolphin.Vehicles.Manoeuvres.hold_modes/1`, without failing its
+      mission); a vehicle not flying one of our missions is never held, so
+      the one that is holds;
+    * a held copter that the other still comes at once it has stopped (two
+      vehicles on one line, or bound for one point) moves out of its way:
+      twice the vertical separation up, or down when its fence's ceiling is
+      too near (`{:separation, :aside, %{metres: m, ...}}`); the vehicle
+      with the right of way is never held, so two never wait for each other;
+    * `separation_hold` is emitted (`action` `hold`, then `aside`), with the
+      pair, how far apart they are, the closest they would have come and in
+      how many seconds.
+
+  Two vehicles already closer than the separation but moving apart are
+  left to go on: holding either would only keep them close.
+
+  A held vehicle goes on (`{:separation, :clear, ...}`: its mission resumes
+  where it was) once, for a second of clock time, no vehicle in the air is
+  closer than one and a half times the separation and none would come
+  closer than that within the horizon were it to fly on as it was flying
+  when held; `separation_clear` says so,
+  with how long it was held. The hold counts in its task's time.
+
+  Vehicles on the ground are not kept apart (a landing beside a parked
+  vehicle is the pre-flight check's to judge); a submarine is kept apart
+  only from submarines; vehicles the ground station does not hear are not
+  seen at all.
+
+  The monitor is a part of an instance (`Dolphin.Instance`), so runs of one
+  ground station are kept apart from each other's vehicles too.
+  """
+
+  use GenServer
+
+  alias Dolphin.{Clock, Events, Geo}
+  alias Dolphin.Separation.Prediction
+  alias Dolphin.Vehicles.{Manoeuvres, Views}
+
+  @default_limits %{horizontal: 20.0, vertical: 10.0}
+  # Seconds of clock time ahead the monitor looks.
+  @horizon_s 8
+  # A held vehicle goes on after this long (clock ms) with the way clear.
+  @settle_ms 1_000
+  # How often (clock ms) held vehicles are looked at when no view comes (a
+  # braked vehicle's position may not change at all).
+  @tick_ms 250
+  # A held vehicle goes on only with this much more room than the least
+  # separation: it starts from a stop, and the prediction is a straight line.
+  @clear_margin 1.5
+  # Tasks started within this long (clock ms) of each other started together.
+  @together_ms 1_000
+  # A held copter the other still comes at moves this many times the
+  # vertical separation up (or down) out of its way.
+  @aside_factor 2
+  # Below this speed (m/s) a held vehicle has stopped.
+  @stopped_ms 1.0
+
+  @doc "The separation kept when a script sets none: metres across and in height."
+  @spec default_limits() :: %{horizontal: float(), vertical: float()}
+  def default_limits, do: @default_limits
+
+  @doc """
+  Registers the calling process as the one flying a mission on vehicle `id`:
+  it is sent `{:separation, :hold, %{vehicle: id, other: ..., ...}}`,
+  `{:separation, :aside, %{metres: m, ...}}` and `{:separation, :clear,
+  %{vehicle: id}}` until it exits. Options: `:started_at` (clock ms the mission's task started:
+  the later of two holds), `:limits` (`%{horizontal: m, vertical: m}`).
+  """
+  @spec flying(Dolphin.Vehicles.Id.t(), keyword()) :: :ok
+  def flying(id, opts \\ []) do
+    started = {Keyword.get(opts, :started_at, Clock.now_ms()), Keyword.get(opts, :rank)}
+    GenServer.call(server(), {:flying, id, self(), started, Keyword.get(opts, :limits) || @default_limits})
+  end
+
+  @doc "The vehicles held now: id => the vehicle it was first held for."
+  @spec held() :: %{Dolphin.Vehicles.Id.t() => Dolphin.Vehicles.Id.t()}
+  def held, do: GenServer.call(server(), :held)
+
+  @doc false
+  def start_link(opts), do: GenServer.start_link(__MODULE__, :ok, name: Keyword.fetch!(opts, :name))
+
+  defp server, do: Dolphin.Instance.names().separation
+
+  # --- the monitor ---------------------------------------------------------------
+
+  defmodule Flying do
+    @moduledoc false
+    # One registered vehicle: who flies its mission, since when, its limits,
+    # its latest view (and the clock time it came), and its hold, if held.
+    defstruct [:id, :pid, :ref, :started_at, :rank, :limits, :view, :seen_at, held: nil]
+  end
+
+  @impl true
+  def init(:ok), do: {:ok, %{flying: %{}, ticking: false}}
+
+  @impl true
+  def handle_call({:flying, id, pid, {started_at, rank}, limits}, _from, s) do
+    s = forget(s, id)
+    Dolphin.Vehicles.subscribe(id)
+    view = with {:ok, v} <- Views.get(id), do: v, else: (_ -> nil)
+    flying = %Flying{id: id, pid: pid, ref: Process.monitor(pid), started_at: started_at, rank: rank, limits: limits, view: view, seen_at: Clock.now_ms()}
+    {:reply, :ok, put_in(s.flying[id], flying)}
+  end
+
+  def handle_call(:held, _from, s), do: {:reply, for({id, %{held: %{other: other}}} <- s.flying, into: %{}, do: {id, other}), s}
+
+  @impl true
+  def handle_info({:dolphin, {:vehicle, id}, {:view, view}}, s) do
+    case s.flying do
+      %{^id => f} ->
+        s = put_in(s.flying[id], %{f | view: view, seen_at: Clock.now_ms()})
+        {:noreply, s |> judge(id) |> look_at_held()}
+
+      _ ->
+        {:noreply, s}
+    end
+  end
+
+  def handle_info(:tick, s), do: {:noreply, look_at_held(%{s | ticking: false})}
+
+  def handle_info({:DOWN, ref, :process, _, _}, s) do
+    case Enum.find(s.flying, fn {_, f} -> f.ref == ref end) do
+      {id, _} -> {:noreply, s |> forget(id) |> look_at_held()}
+      nil -> {:noreply, s}
+    end
+  end
+
+  def handle_info(_other, s), do: {:noreply, s}
+
+  defp forget(s, id) do
+    case Map.pop(s.flying, id) do
+      {nil, _} ->
+        s
+
+      {f, flying} ->
+        Process.demonitor(f.ref, [:flush])
+        Dolphin.PubSub.unsubscribe({:vehicle, id})
+        %{s | flying: flying}
+    end
+  end
+
+  # --- judging a vehicle against the others ------------------------------------------
+
+  defp judge(s, id) do
+    now = Clock.now_ms()
+    f = s.flying[id]
+
+    if airborne?(f.view) do
+      Enum.reduce(others(s, f), s, fn other, s -> judge_pair(s, id, other, now) end)
+    else
+      s
+    end
+  end
+
+  defp judge_pair(s, id, other, now) do
+    f = s.flying[id]
+    plane = Geo.tangent_plane(f.view.position)
+    limits = limits(f, other)
+    mine = motion(plane, f.view, now - f.seen_at)
+    theirs = motion(plane, other.view, now - other.seen_at)
+
+    case Prediction.conflict(mine, theirs, limits, @horizon_s) do
+      :clear ->
+        s
+
+      {:conflict, in_s, closest} ->
+        {across, height} = Prediction.apart(mine, theirs)
+        seen = %{distance: across, height: height, closest: closest, in_s: in_s, limits: limits}
+        {holder, ahead} = holder(f, other)
+
+        cond do
+          holder.held == nil -> hold(s, holder, ahead, seen, now)
+          # Held, stopped, and the other still coming at it: a copter climbs (or
+          # descends) out of its way, once a hold.
+          not holder.held.aside and stopped?(holder.view) -> aside(s, holder, ahead, seen)
+          true -> s
+        end
+    end
+  end
+
+  # Which of the two holds, and for which: the one whose task started later
+  # (tasks started within a second of each other, by `execute` or `|||`:
+  # the one written later), a vehicle flying none of ours never.
+  defp holder(%Flying{} = f, %Flying{} = o), do: if(later?(o, f), do: {o, f.id}, else: {f, o.id})
+  defp holder(%Flying{} = f, other), do: {f, other.id}
+
+  defp later?(a, b) do
+    if abs(a.started_at - b.started_at) >= @together_ms, do: a.started_at > b.started_at, else: {a.rank, a.id} > {b.rank, b.id}
+  end
+
+  defp hold(s, holder, other, seen, now) do
+    send(holder.pid, {:separation, :hold, Map.merge(seen, %{vehicle: holder.id, other: other})})
+    emit_hold(holder.id, other, seen, :hold)
+    held = %{other: other, since: now, velocity: velocity(holder.view), height: holder.view.position.h, aside: false, clear_since: nil}
+    tick(put_in(s.flying[holder.id], %{holder | held: held}))
+  end
+
+  defp aside(s, holder, other, seen) do
+    metres = seen.limits.vertical * @aside_factor
+    send(holder.pid, {:separation, :aside, Map.merge(seen, %{vehicle: holder.id, other: other, metres: metres})})
+    emit_hold(holder.id, other, seen, :aside)
+    put_in(s.flying[holder.id].held.aside, true)
+  end
+
+  defp emit_hold(vehicle, other, seen, action) do
+    Events.emit(:separation_hold, %{
+      vehicle: vehicle,
+      other: other,
+      action: action,
+      distance: Float.round(seen.distance * 1.0, 1),
+      height: Float.round(seen.height * 1.0, 1),
+      closest: Float.round(seen.closest * 1.0, 1),
+      in_s: Float.round(seen.in_s * 1.0, 1),
+      limit_m: seen.limits.horizontal,
+      limit_height_m: seen.limits.vertical
+    })
+  end
+
+  # --- letting held vehicles go ---------------------------------------------------
+
+  defp look_at_held(s) do
+    now = Clock.now_ms()
+    s = Enum.reduce(Map.keys(s.flying), s, fn id, s -> if s.flying[id].held, do: look_at(s, id, now), else: s end)
+    if Enum.any?(s.flying, fn {_, f} -> f.held end), do: tick(s), else: s
+  end
+
+  defp look_at(s, id, now) do
+    f = s.flying[id]
+    held = f.held
+
+    cond do
+      not clear?(s, f, now) -> put_in(s.flying[id].held.clear_since, nil)
+      held.clear_since == nil -> put_in(s.flying[id].held.clear_since, now)
+      now - held.clear_since >= @settle_ms -> let_go(s, f, now)
+      true -> s
+    end
+  end
+
+  # No one closer than the separation, and no one it would come too close
+  # to were it to fly on as it flew when held.
+  defp clear?(_s, %Flying{view: view}, _now) when view == nil or view.position == nil, do: true
+
+  defp clear?(s, f, now) do
+    plane = Geo.tangent_plane(f.view.position)
+    # From where it is across, at the height it was held at (one that moved
+    # aside goes back to it as it goes on).
+    {{n, e, _}, _} = motion(plane, f.view, now - f.seen_at)
+    going_on = {{n, e, f.held.height}, f.held.velocity}
+
+    Enum.all?(others(s, f), fn other ->
+      theirs = motion(plane, other.view, now - other.seen_at)
+      limits = limits(f, other) |> Map.new(fn {k, m} -> {k, m * @clear_margin} end)
+      Prediction.apart?(going_on, theirs, limits) and Prediction.conflict(going_on, theirs, limits, @horizon_s) == :clear
+    end)
+  end
+
+  defp let_go(s, f, now) do
+    send(f.pid, {:separation, :clear, %{vehicle: f.id}})
+    distance = with %{} = other <- Enum.find(others(s, f), &(&1.id == f.held.other)), do: distance(f, other), else: (_ -> nil)
+    Events.emit(:separation_clear, %{vehicle: f.id, other: f.held.other, distance: distance, held_ms: now - f.held.since})
+    put_in(s.flying[f.id].held, nil)
+  end
+
+  defp distance(f, other) do
+    plane = Geo.tangent_plane(f.view.position)
+    {across, _} = Prediction.apart(motion(plane, f.view, 0), motion(plane, other.view, 0))
+    Float.round(across, 1)
+  end
+
+  defp tick(%{ticking: true} = s), do: s
+
+  defp tick(s) do
+    Process.send_after(self(), :tick, max(Clock.to_real_ms(@tick_ms), 1))
+    %{s | ticking: true}
+  end
+
+  # --- what the monitor sees ------------------------------------------------------
+
+  # Every other vehicle in the air that `f` is kept apart from: the
+  # registered ones as their views came, the ground station's others as the
+  # table has them now.
+  defp others(s, f) do
+    registered = for {id, o} <- s.flying, id != f.id, airborne?(o.view), same_medium?(f.view, o.view), do: o
+    now = Clock.now_ms()
+
+    unregistered = for %{id: id} = view <- Views.all(), not Map.has_key?(s.flying, id), airborne?(view), same_medium?(f.view, view), do: %{id: id, view: view, seen_at: now}
+
+    registered ++ unregistered
+  end
+
+  defp limits(%Flying{limits: mine}, %Flying{limits: theirs}), do: %{horizontal: max(mine.horizontal, theirs.horizontal), vertical: max(mine.vertical, theirs.vertical)}
+  defp limits(%Flying{limits: mine}, _other), do: mine
+
+  # In the air (an aircraft), or armed (a rover, boat or submarine: under
+  # way), heard, and placed.
+  defp airborne?(nil), do: false
+  defp airborne?(%{position: nil}), do: false
+  defp airborne?(%{connected?: false}), do: false
+  defp airborne?(%{airframe: airframe} = view) when airframe in [:rover, :boat, :sub], do: view.armed?
+  defp airborne?(view), do: Manoeuvres.in_air?(view)
+
+  defp same_medium?(a, b), do: a.airframe == :sub == (b.airframe == :sub)
+
+  defp stopped?(view) do
+    {vn, ve, vu} = velocity(view)
+    :math.sqrt(vn * vn + ve * ve + vu * vu) < @stopped_ms
+  end
+
+  defp velocity(%{velocity: {_, _, _} = v}), do: v
+  defp velocity(_view), do: {0.0, 0.0, 0.0}
+
+  # Where a vehicle is now, in the plane's frame, moved on by its velocity
+  # for the `age_ms` since its view came, and its velocity.
+  defp motion(plane, view, age_ms) do
+    {vn, ve, vu} = velocity(view)
+    {n, e} = Geo.to_tangent(plane, view.position.lat, view.position.lon)
+    dt = max(age_ms, 0) / 1000
+    {{n + vn * dt, e + ve * dt, view.position.h + vu * dt}, {vn, ve, vu}}
+  end
+end

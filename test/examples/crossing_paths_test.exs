@@ -1,0 +1,68 @@
+defmodule Dolphin.Examples.CrossingPathsTest do
+  # examples/crossing_paths.exs as its header says to run it: the check
+  # finds the two vehicles' conflict, with its line; flown, the live
+  # separation monitor holds one and lets it go on, both missions end done,
+  # and the log shows the two never came within the least separation. On
+  # the built-in simulator, and on ArduCopter SITL.
+  use ExUnit.Case, async: false
+
+  alias Dolphin.Test.ExampleRun
+
+  @moduletag :tmp_dir
+  @moduletag timeout: 600_000
+
+  @example Path.expand("../../examples/crossing_paths.exs", __DIR__)
+
+  setup do
+    ExampleRun.clean_up_after_test()
+  end
+
+  defp kept_apart!(run) do
+    assert run.code == 0, run.output
+    assert run.result == "done"
+
+    # The later one held, once, for the other; then went on.
+    assert [hold] = for(%{"event" => "separation_hold"} = e <- run.events, do: e)
+    assert [clear] = for(%{"event" => "separation_clear"} = e <- run.events, do: e)
+    assert {clear["vehicle"], clear["other"]} == {hold["vehicle"], hold["other"]}
+    assert hold["in_s"] <= 8 and hold["closest"] < 20
+    assert clear["held_ms"] >= 1_000
+
+    # Both missions flown to their end.
+    assert [%{"result" => "done"}, %{"result" => "done"}] = for(%{"event" => "task_finished", "kind" => "mission"} = e <- run.events, do: e)
+    assert run.disarmed_at_end
+
+    # Never within 20 m across while within 10 m in height, measured from the log.
+    {:ok, log} = Dolphin.Report.FlightLog.read_file(run.tlog)
+    %{least: least, series: series} = Dolphin.Report.Separation.closest(log)
+    assert length(series) > 50
+    assert least.across > 20, "the two came #{Float.round(least.across, 1)} m apart at #{Float.round(least.at_s, 1)} s"
+    least
+  end
+
+  test "the check finds the conflict at its line; flown on the simulator, the monitor keeps the two apart", %{tmp_dir: dir} do
+    {:ok, out} = StringIO.open("")
+    {:ok, err} = StringIO.open("")
+    assert Mix.Tasks.Dolphin.Check.main([@example, "--sim", "2"], out: out, err: err) == 1
+    found = elem(StringIO.contents(out), 1) <> elem(StringIO.contents(err), 1)
+    assert found =~ ~r/crossing_paths\.exs:47: error: vehicles 1 and 2 come within \d+ m of each other across and 0 m in height \d+ s into the run/
+
+    run = ExampleRun.run(dir, "crossing_paths", "-sim", ["--sim", "2", "--speedup", "10"], nil)
+    kept_apart!(run)
+
+    # The report draws the smallest distance against the limit, and the hold on the time line.
+    html = Path.join(dir, "report.html")
+    assert {:ok, _} = Dolphin.Report.write(run.tlog, Path.join(dir, "crossing_paths-sim.jsonl"), html)
+    page = File.read!(html)
+    assert page =~ ~s(<svg class="plot separation")
+    assert page =~ ~s(<line class="limit")
+    assert page =~ ~s(<g class="mark mark-separation_hold">)
+  end
+
+  if Dolphin.SITL.available?(:copter) do
+    @tag :sitl
+    test "on ArduCopter SITL: held, let go, and kept apart as on the simulator", %{tmp_dir: dir} do
+      kept_apart!(ExampleRun.run(dir, "crossing_paths", "-sitl", ["--sitl", "2", "--speedup", "5"], nil))
+    end
+  end
+end
