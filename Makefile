@@ -24,6 +24,7 @@ bench: bootstrap
 	MIX_ENV=prod mix run bench/reaction.exs
 	MIX_ENV=prod mix run bench/report.exs
 	MIX_ENV=prod mix run bench/cluster.exs
+	MIX_ENV=prod mix run bench/separation.exs
 
 dialyzer: bootstrap
 	scripts/dialyzer

@@ -23,6 +23,13 @@ defmodule Dolphin.Airframe.Ground do
   @impl true
   def hold_modes, do: [:loiter, :hold]
 
+  # ArduRover's FENCE_ACTION: 1 RTL (or HOLD), 2 HOLD; no landing.
+  @impl true
+  def fence_action(:report), do: 0
+  def fence_action(:rtl), do: 1
+  def fence_action(:hold), do: 2
+  def fence_action(:land), do: nil
+
   # The accelerations stand for how it slows to a waypoint and rounds a
   # corner: chosen so that the differential test's routes take the time
   # ArduRover took (test/dolphin/sitl/airframes_test.exs).

@@ -23,7 +23,9 @@ defmodule Dolphin.Sim.Copter.Fence do
   @max_alt 1
   @min_alt 8
   @recovery_ms 10_000
+  # FENCE_ACTION's numbers, as each firmware reads them.
   @actions %{1 => :rtl, 2 => :land, 4 => :brake}
+  @ground_actions %{1 => :rtl, 2 => :hold}
 
   @doc false
   @spec step(Copter.t()) :: Copter.t()
@@ -79,7 +81,7 @@ defmodule Dolphin.Sim.Copter.Fence do
 
     if c.armed and in_air?(c) and c.time_ms >= fence.recovery_until do
       c = text(c, 5, "#{names(new)} breached")
-      c = act(c, @actions[round(Map.get(c.params, "FENCE_ACTION", 1))])
+      c = act(c, actions(c)[round(Map.get(c.params, "FENCE_ACTION", 1))])
       c = %{c | fence: %{c.fence | recovery_until: c.time_ms + @recovery_ms}}
       c |> text(6, "Manual recovery started") |> say(status(c))
     else
@@ -91,6 +93,9 @@ defmodule Dolphin.Sim.Copter.Fence do
     c = %{c | fence: %{c.fence | bits: 0}}
     if in_air?(c), do: text(c, 5, "Fence breach cleared"), else: c
   end
+
+  defp actions(%{config: %{airframe: airframe}}) when airframe in [:rover, :boat], do: @ground_actions
+  defp actions(_c), do: @actions
 
   defp act(c, nil), do: c
 
