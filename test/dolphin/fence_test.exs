@@ -79,6 +79,39 @@ defmodule Dolphin.FenceTest do
     for text <- said, text =~ ~r/fence|recovery/i, into: MapSet.new(), do: text
   end
 
+  # A rover driven at a no-fly zone: ArduRover stops short of it (FENCE_MARGIN,
+  # 2 m) and stands there in AUTO without a word; the task fails once it has
+  # stood still for a minute, saying where. Returns how far it got.
+  defp drives_at_the_zone(backend) do
+    [id] = Backend.start(backend, [rover: 1], speedup: if(backend == :sim, do: 20, else: 10))
+    home = Backend.home(id)
+    {:ok, _} = Dolphin.Fleet.pick(Dolphin.Fleet, self(), id: id)
+    {:ok, zone} = Shapes.polygon(for {n, e} <- [{80, -50}, {80, 50}, {120, 50}, {120, -50}], do: Geo.offset(home, n, e))
+    fence = Fence.new!(exclude: [zone], on_breach: :hold)
+    drive = Mission.new("Drive", [C.home(home), C.move(200, 0, 0)]) |> Map.put(:fence, fence)
+
+    assert {:error, %Engine.Failure{reason: %Mission.Failure{cause: {:stuck, 60, {1, 1, "NAV_WAYPOINT", short}}} = failure}} = Engine.run(Engine.on(drive, [id]))
+    assert Exception.message(failure) =~ ~r/has stood still for 60 s of the mission, \d+ m short of item 1 of 1 \(NAV_WAYPOINT\), in AUTO/
+    # ArduRover's fence action for :hold is HOLD (FENCE_ACTION 2), and it never breached.
+    assert {:ok, 2.0} = Vehicles.read_param(id, "FENCE_ACTION")
+    {:ok, view} = Vehicles.view(id)
+    refute Shapes.contains?(zone, view.position)
+    {north, _} = Geo.ne_offset(home, view.position)
+    :ok = Dolphin.Fleet.release(Dolphin.Fleet, self(), [id])
+    {round(north), short}
+  end
+
+  test "the simulator: a rover driven at a no-fly zone stops short of it as ArduRover does, and the task fails saying where it stands" do
+    assert {78, 122} = drives_at_the_zone(:sim)
+  end
+
+  if Dolphin.SITL.available?(:rover) do
+    @tag :sitl
+    test "ArduRover SITL: stops short of the no-fly zone, and the task fails as on the simulator" do
+      assert {78, 122} = drives_at_the_zone(:sitl)
+    end
+  end
+
   # What ArduCopter SITL said at the breach (docs/ardupilot.md), which the simulator must say too.
   @breach_texts MapSet.new(["Polygon fence breached", "Manual recovery started"])
 

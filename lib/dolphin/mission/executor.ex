@@ -47,6 +47,14 @@ defmodule Dolphin.Mission.Executor do
   # (docs/ardupilot.md); a copter held armed there by a delay disarms
   # itself after 10 s (DISARM_DELAY).
   @grounded_timeout_ms 60_000
+  # Standing still this long (clock ms) short of a waypoint in AUTO, the
+  # vehicle is stuck: ArduRover stops short of its fence and says nothing.
+  @stuck_timeout_ms 60_000
+  # Still: within this many metres of where it stood; short of its
+  # waypoint: farther than this from it.
+  @still_m 1.0
+  @short_m 10.0
+  @waypoint 16
   # Below this height above home, with no landed state saying otherwise, the vehicle is on the ground.
   @ground_m 1.0
   @boot_poll_ms 200
@@ -96,6 +104,9 @@ defmodule Dolphin.Mission.Executor do
       airframe: nil,
       # Where the vehicle was first seen armed on the ground in :flying, while it stays so.
       grounded: nil,
+      # Where and at which item the vehicle was first seen standing still
+      # short of a waypoint in :flying, while it stays so.
+      still: nil,
       items: nil,
       ending: nil,
       boot_deadline: Clock.now_ms() + @boot_timeout_ms,
@@ -234,6 +245,13 @@ defmodule Dolphin.Mission.Executor do
     if still_grounded?(data, st),
       do: fail(:flying, data, grounded(data, st), vehicle_fault?: true, texts: texts(data)),
       else: judge(%{data | grounded: nil}, st)
+  end
+
+  def handle_event({:timeout, :stuck}, :stuck, :flying, %{view: st} = data) do
+    case stuck(data, st) do
+      {:stuck, cause} -> fail(:flying, data, cause, texts: texts(data))
+      :moving -> judge(%{data | still: nil}, st)
+    end
   end
 
   def handle_event(:state_timeout, :said, :flying, %{leaving: cause} = data),
@@ -493,7 +511,9 @@ defmodule Dolphin.Mission.Executor do
     {verdict, progress, flight} = Flight.judge(data.flight, st)
     verdict = separated_verdict(data, st, verdict)
     data = back_in_mission(data, st)
-    {data, watch} = watch_grounded(%{data | flight: flight}, st)
+    {data, grounded} = watch_grounded(%{data | flight: flight}, st)
+    {data, still} = watch_still(data, st)
+    watch = grounded ++ still
     if progress, do: Platform.progress(data.owner, progress)
 
     case verdict do
@@ -535,6 +555,57 @@ defmodule Dolphin.Mission.Executor do
         {data, []}
     end
   end
+
+  # Standing still in AUTO short of the waypoint it flies to (not at a
+  # loiter or a delay, where standing is the mission, nor held apart from
+  # another vehicle): a timer from the first time it is seen so, where it
+  # stood and at which item, cancelled once it moves or goes on.
+  defp watch_still(data, st) do
+    standing = standing_short(data, st)
+
+    cond do
+      standing == nil and data.still != nil -> {%{data | still: nil}, [{{:timeout, :stuck}, :cancel}]}
+      standing == nil -> {data, []}
+      data.still != nil and data.still.seq == standing.seq and near?(data.still.at, standing.at, @still_m) -> {data, []}
+      true -> {%{data | still: standing}, [{{:timeout, :stuck}, Clock.to_real_ms(@stuck_timeout_ms), :stuck}]}
+    end
+  end
+
+  # %{at, seq, short} when the vehicle stands in AUTO, armed, bound for a waypoint farther than @short_m; else nil.
+  defp standing_short(%{separation: nil, items: items}, %{armed?: true, mode: :auto, position: %{} = p, mission: %{current: seq, state: :active}} = st)
+       when is_integer(seq) do
+    item = Enum.at(items, seq)
+
+    with %{command: @waypoint, x: x, y: y} when x != 0 <- item,
+         true <- speed(st) < 0.2,
+         short when short > @short_m <- Dolphin.Geo.distance(Dolphin.Geo.location(p.lat, p.lon), Dolphin.Geo.location(x / 1.0e7, y / 1.0e7)) do
+      %{at: p, seq: seq, short: short}
+    else
+      _ -> nil
+    end
+  end
+
+  defp standing_short(_data, _st), do: nil
+
+  defp speed(%{velocity: {vn, ve, vu}}), do: :math.sqrt(vn * vn + ve * ve + vu * vu)
+  defp speed(_st), do: 0.0
+
+  defp near?(a, b, metres), do: Dolphin.Geo.distance(Dolphin.Geo.location(a.lat, a.lon), Dolphin.Geo.location(b.lat, b.lon)) <= metres
+
+  # Still where it stood, at the same item: stuck, with where.
+  defp stuck(%{still: %{} = still} = data, st) do
+    case standing_short(data, st) do
+      %{seq: seq, at: at, short: short} when seq == still.seq ->
+        if near?(still.at, at, @still_m),
+          do: {:stuck, {:stuck, div(@stuck_timeout_ms, 1000), {seq, length(data.items) - 1, Mission.item_name(Enum.at(data.items, seq)), round(short)}}},
+          else: :moving
+
+      _ ->
+        :moving
+    end
+  end
+
+  defp stuck(_data, _st), do: :moving
 
   defp on_ground_armed?(%{armed?: true, landed: :on_ground}), do: true
   defp on_ground_armed?(%{armed?: true, landed: landed, relative_altitude: alt}) when landed in [nil, :takeoff] and is_number(alt), do: alt < @ground_m

@@ -31,6 +31,9 @@ defmodule Dolphin.Mission.Failure do
     * `{:read_back_failed, exception, attempts}`;
     * `{:grounded, seconds, item}` — armed on the ground, not climbing
       (`item`: `{seq, total, name, take_off?}` of the current item, or nil);
+    * `{:stuck, seconds, {seq, total, name, metres}}` — it stood still in
+      AUTO, `metres` short of waypoint `seq`, for `seconds` of clock time
+      (ArduRover stops short of its fence and says nothing);
     * `{:left_auto, mode}` — the vehicle left AUTO (a failsafe, the pilot);
     * `:disarmed` — it disarmed before the mission ended;
     * `{:landed_early, current, total}` — it landed and disarmed before the end;
@@ -57,6 +60,7 @@ defmodule Dolphin.Mission.Failure do
           | {:read_back_differs, Exception.t()}
           | {:read_back_failed, Exception.t(), pos_integer()}
           | {:grounded, non_neg_integer(), {non_neg_integer(), non_neg_integer(), String.t(), boolean()} | nil}
+          | {:stuck, non_neg_integer(), {non_neg_integer(), non_neg_integer(), String.t(), non_neg_integer()}}
           | {:left_auto, String.t()}
           | :disarmed
           | {:landed_early, term(), term()}
@@ -105,6 +109,11 @@ defmodule Dolphin.Mission.Failure do
 
   defp words(%{cause: {:read_back_failed, e, attempts}}),
     do: "reading the mission back to verify it failed#{if attempts > 1, do: " (#{attempts} attempts)"}: #{Exception.message(e)}"
+
+  defp words(%{cause: {:stuck, seconds, {seq, last, name, metres}}} = f),
+    do:
+      "vehicle #{f.vehicle} has stood still for #{seconds} s of the mission, #{metres} m short of item #{seq} of #{last} (#{name}), in AUTO: " <>
+        "something stops it there (an obstacle, or its fence: a rover stops short of it)"
 
   defp words(%{cause: {:grounded, seconds, item}} = f) do
     {at, waiting} =

@@ -336,9 +336,11 @@ defmodule Dolphin.Sim.Copter do
     c = %{c | time_ms: c.time_ms + dt_ms, burst: 0}
     before = length(c.out)
 
+    c = boot_events(c, was_ready)
+
     c
-    |> boot_events(was_ready)
     |> Flight.fly(dt_ms / 1000)
+    |> Fence.avoid(c)
     |> Flight.touchdown()
     |> Mission.check_item()
     |> Modes.auto_disarm()
