@@ -42,12 +42,13 @@ defmodule Dolphin.SeparationTest do
 
   # A stand-in for the process flying vehicle `id`'s mission: it registers
   # and passes on what the monitor sends it.
-  defp executor(id, started_at) do
+  # `rank`: the engine's {run, task id}, which orders tasks started together.
+  defp executor(id, started_at, rank \\ nil) do
     test = self()
 
     pid =
       spawn_link(fn ->
-        :ok = Separation.flying(id, started_at: started_at, limits: @limits)
+        :ok = Separation.flying(id, started_at: started_at, rank: rank, limits: @limits)
         send(test, {:registered, id})
         forward(test)
       end)
@@ -143,23 +144,8 @@ defmodule Dolphin.SeparationTest do
   test "two tasks started together: the one the engine made later holds, whichever registered first" do
     flying(201, 0, -60, {0.0, 10.0, 0.0})
     flying(202, -60, 0, {10.0, 0.0, 0.0})
-    test = self()
-
-    spawn_link(fn ->
-      :ok = Separation.flying(202, started_at: 1_000, rank: {1, 3}, limits: @limits)
-      send(test, :registered)
-      forward(test)
-    end)
-
-    assert_receive :registered
-
-    spawn_link(fn ->
-      :ok = Separation.flying(201, started_at: 1_200, rank: {1, 5}, limits: @limits)
-      send(test, :registered)
-      forward(test)
-    end)
-
-    assert_receive :registered
+    executor(202, 1_000, {1, 3})
+    executor(201, 1_200, {1, 5})
     flying(201, 0, -60, {0.0, 10.0, 0.0})
     assert_receive {:separation, :hold, %{vehicle: 201, other: 202}}
   end
