@@ -108,7 +108,7 @@ defmodule Dolphin.Separation do
   end
 
   @impl true
-  def init(:ok), do: {:ok, %{flying: %{}, ticking: false}}
+  def init(:ok), do: {:ok, %{flying: %{}, ticking: false, heard: nil}}
 
   @impl true
   def handle_call({:flying, id, pid, {started_at, rank}, limits}, _from, s) do
@@ -163,18 +163,18 @@ defmodule Dolphin.Separation do
     f = s.flying[id]
 
     if airborne?(f.view) do
-      Enum.reduce(others(s, f), s, fn other, s -> judge_pair(s, id, other, now) end)
+      {others, s} = others(s, f)
+      plane = Geo.tangent_plane(f.view.position)
+      mine = motion(plane, f.view, now - f.seen_at)
+      Enum.reduce(others, s, fn other, s -> judge_pair(s, id, mine, motion(plane, other.view, now - other.seen_at), other, now) end)
     else
       s
     end
   end
 
-  defp judge_pair(s, id, other, now) do
+  defp judge_pair(s, id, mine, theirs, other, now) do
     f = s.flying[id]
-    plane = Geo.tangent_plane(f.view.position)
     limits = limits(f, other)
-    mine = motion(plane, f.view, now - f.seen_at)
-    theirs = motion(plane, other.view, now - other.seen_at)
 
     case Prediction.conflict(mine, theirs, limits, @horizon_s) do
       :clear ->
@@ -258,13 +258,14 @@ defmodule Dolphin.Separation do
   defp clear?(_s, %Flying{view: view}, _now) when view == nil or view.position == nil, do: true
 
   defp clear?(s, f, now) do
+    {others, _} = others(s, f)
     plane = Geo.tangent_plane(f.view.position)
     # From where it is across, at the height it was held at (one that moved
     # aside goes back to it as it goes on).
     {{n, e, _}, _} = motion(plane, f.view, now - f.seen_at)
     going_on = {{n, e, f.held.height}, f.held.velocity}
 
-    Enum.all?(others(s, f), fn other ->
+    Enum.all?(others, fn other ->
       theirs = motion(plane, other.view, now - other.seen_at)
       limits = limits(f, other) |> Map.new(fn {k, m} -> {k, m * @clear_margin} end)
       Prediction.apart?(going_on, theirs, limits) and Prediction.conflict(going_on, theirs, limits, @horizon_s) == :clear
@@ -273,7 +274,8 @@ defmodule Dolphin.Separation do
 
   defp let_go(s, f, now) do
     send(f.pid, {:separation, :clear, %{vehicle: f.id}})
-    distance = with %{} = other <- Enum.find(others(s, f), &(&1.id == f.held.other)), do: distance(f, other), else: (_ -> nil)
+    {others, _} = others(s, f)
+    distance = with %{} = other <- Enum.find(others, &(&1.id == f.held.other)), do: distance(f, other), else: (_ -> nil)
     Events.emit(:separation_clear, %{vehicle: f.id, other: f.held.other, distance: distance, held_ms: now - f.held.since})
     put_in(s.flying[f.id].held, nil)
   end
@@ -298,11 +300,21 @@ defmodule Dolphin.Separation do
   # table has them now.
   defp others(s, f) do
     registered = for {id, o} <- s.flying, id != f.id, airborne?(o.view), same_medium?(f.view, o.view), do: o
+    {heard, s} = heard(s)
+    unregistered = for %{id: id} = o <- heard, not Map.has_key?(s.flying, id), same_medium?(f.view, o.view), do: o
+    {registered ++ unregistered, s}
+  end
+
+  # The station's vehicles in the air, read from the views' table at most
+  # once a tick (the registered ones' views come to the monitor itself).
+  defp heard(%{heard: {at, heard}} = s) do
+    if Clock.now_ms() - at < @tick_ms, do: {heard, s}, else: heard(%{s | heard: nil})
+  end
+
+  defp heard(s) do
     now = Clock.now_ms()
-
-    unregistered = for %{id: id} = view <- Views.all(), not Map.has_key?(s.flying, id), airborne?(view), same_medium?(f.view, view), do: %{id: id, view: view, seen_at: now}
-
-    registered ++ unregistered
+    heard = for view <- Views.all(), airborne?(view), do: %{id: view.id, view: view, seen_at: now}
+    {heard, %{s | heard: {now, heard}}}
   end
 
   defp limits(%Flying{limits: mine}, %Flying{limits: theirs}), do: %{horizontal: max(mine.horizontal, theirs.horizontal), vertical: max(mine.vertical, theirs.vertical)}
