@@ -47,10 +47,12 @@ defmodule Dolphin.DSL.Fence do
   end
 
   @doc """
-  The least separation the pre-flight check holds the script's vehicles
-  to: `horizontal` metres across or `vertical` metres in height (default
-  20 and 10): two of them closer than both at once, while one flies, is an
-  error at the line of the later task, with when and where.
+  The least separation the script's vehicles are held to: `horizontal`
+  metres across or `vertical` metres in height (default 20 and 10). Before
+  anything flies, two of them closer than both at once in the dry run,
+  while one flies, is an error at the line of the later task, with when and
+  where; in flight the separation monitor (`Dolphin.Separation`) holds the
+  later task's vehicle before it would come that close.
   """
   defmacro min_separation(horizontal, vertical) do
     Dolphin.DSL.Expand.at_line(quote(do: Dolphin.Script.Statements.min_separation(unquote(horizontal), unquote(vertical))), __CALLER__)

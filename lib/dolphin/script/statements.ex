@@ -64,9 +64,10 @@ defmodule Dolphin.Script.Statements do
   end
 
   @doc """
-  The least separation between two of the script's vehicles the pre-flight
-  check holds them to: `horizontal` metres across or `vertical` metres in
-  height (default 20 and 10).
+  The least separation between two of the script's vehicles, which the
+  pre-flight check and, in flight, the separation monitor hold them to:
+  `horizontal` metres across or `vertical` metres in height (default 20
+  and 10).
   """
   @spec min_separation(number(), number()) :: :ok
   def min_separation(horizontal, vertical) when is_number(horizontal) and horizontal > 0 and is_number(vertical) and vertical > 0 do
