@@ -245,8 +245,14 @@ defmodule Dolphin.ConsoleTest do
     await_all(io, [~s{answered run #{id}'s "Which area?": "north"}, "[run #{id}] patrolling north"])
 
     Wait.until(fn -> match?({:ok, %{mode: :auto, mission: %{current: 2}}}, Vehicles.state(2)) end, 1_000)
-    tasks()
-    text = out(io)
+    # The task's progress comes from its executor, after the vehicle's state shows it: listed until it does.
+    text =
+      Wait.until(fn ->
+        tasks()
+        text = out(io)
+        if text =~ "item 2/2", do: text
+      end)
+
     assert text =~ ~r/^run #{id} script .*patrol.exs\s+running for .+\n└─ run \d+\n   └─ \d+ mission "Patrol"  vehicle 2\s+item 2\/2/
 
     stop(String.to_integer(id))

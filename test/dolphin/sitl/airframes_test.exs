@@ -7,14 +7,17 @@ defmodule Dolphin.SITL.AirframesTest do
   # the clock's speed-up: not async.
   use ExUnit.Case, async: false
 
-  alias Dolphin.{Engine, Geo, Mission, SITL, Vehicles}
+  alias Dolphin.{Engine, Geo, SITL, Vehicles}
   alias Dolphin.Geo.Location
-  alias Dolphin.Mission.Command, as: C
+  # Used only by the tests of the firmwares found: no warning when none is.
+  alias Dolphin.Mission, warn: false
+  alias Dolphin.Mission.Command, as: C, warn: false
   alias Dolphin.MAVLink.Ardupilotmega, as: M
   alias Dolphin.Test.{FrameRecorder, Wait}
 
   @moduletag :sitl
   @moduletag timeout: 600_000
+  @compile {:nowarn_unused_function, alike: 3, distance: 2, drain: 0, flown: 3, fly: 2, on_backend: 4, reached: 1, stopped: 4, vehicle: 2}
   @speedup 10
 
   setup do
