@@ -51,6 +51,8 @@ defmodule Dolphin.ReportTest do
         up = round(min(max(t - 5, 0) * 4, 50))
         along = round(min(max(t - 10, 0) * 5, 100) * @m)
         {lat, lon} = if v == 1, do: {@lat0 + along, @lon0}, else: {@lat0, @lon0 + along}
+        # Before its position estimate has an origin ArduPilot reports 0, 0 (SITL's first seconds): no place.
+        {lat, lon} = if t < 2, do: {0, 0}, else: {lat, lon}
         ts = round(t * 1_000_000) + v * 1_000
 
         boot_s = if reboot_at_s && v == 2 && t >= reboot_at_s, do: t - reboot_at_s, else: t
@@ -143,6 +145,11 @@ defmodule Dolphin.ReportTest do
     # Plots and summary, which says what each vehicle is (its heartbeat's type and airframe).
     for plot <- ~w(battery height speed link), do: assert(html =~ ~s(class="plot plot-#{plot}"))
     assert html =~ ~r{<td><span class="swatch"></span>1</td><td>uav copter</td>}
+    # Each flew 100 m: the 0, 0 reported before a position fix is no place it went to.
+    assert html =~ ~r{<td><span class="swatch"></span>1</td><td>uav copter</td><td>[^<]+</td><td>100 m</td>}
+    # The distance between the two over time, against the least separation.
+    assert [_] = Regex.scan(~r/<svg class="plot separation"/, html)
+    assert html =~ ~r/least [\d.]+ m at [^,]+, vehicles [12] and [12]/
     assert html =~ ~s(id="script-result">failed)
     assert html =~ "<b>East</b>: the vehicle left its mission"
 

@@ -121,6 +121,10 @@ defmodule Dolphin.Report.FlightLog do
     end)
   end
 
+  # ArduPilot reports 0, 0 until its position estimate has an origin (SITL
+  # for its first seconds): no place, but its boot clock counts.
+  defp message(%M.GlobalPositionInt{lat: 0, lon: 0} = p, ts, frame, log), do: boot_clock(log, frame.sysid, ts, p.time_boot_ms)
+
   defp message(%M.GlobalPositionInt{} = p, ts, frame, log) do
     log = boot_clock(log, frame.sysid, ts, p.time_boot_ms)
     update(log, frame, &%{&1 | positions: [{ts, p.lat, p.lon, p.relative_alt, p.vx, p.vy} | &1.positions]})

@@ -57,8 +57,9 @@ defmodule Dolphin.Report.Model do
   defp separation(log, events) do
     limits =
       case Enum.find(events, &(&1["event"] == "separation_hold")) do
-        %{"limit_m" => h, "limit_height_m" => v} -> %{horizontal: h, vertical: v}
-        nil -> Dolphin.Separation.default_limits()
+        %{"limit_m" => h, "limit_height_m" => v} when is_number(h) and h > 0 and is_number(v) and v > 0 -> %{horizontal: h, vertical: v}
+        # None, or from an events file that does not say (an older one, one edited by hand).
+        _ -> Dolphin.Separation.default_limits()
       end
 
     closest = Dolphin.Report.Separation.closest(log, vertical: limits.vertical)
