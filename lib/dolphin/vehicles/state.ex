@@ -124,6 +124,10 @@ defmodule Dolphin.Vehicles.State do
   defp message(state, _compid, %M.BatteryStatus{id: 0, battery_remaining: remaining}) when remaining >= 0 and remaining <= 100,
     do: %{state | battery: remaining / 100}
 
+  # ArduPilot reports 0, 0 until its position estimate has an origin (SITL
+  # for its first seconds): no position yet.
+  defp message(state, _compid, %M.GlobalPositionInt{lat: 0, lon: 0}), do: state
+
   defp message(state, _compid, %M.GlobalPositionInt{} = p) do
     position = %{
       lat: p.lat / 1.0e7,

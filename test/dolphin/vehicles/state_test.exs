@@ -50,6 +50,9 @@ defmodule Dolphin.Vehicles.StateTest do
   end
 
   test "position, home, mission progress, landed state, status texts" do
+    # Before a position fix ArduPilot says 0, 0: no position.
+    assert fold([{%M.GlobalPositionInt{lat: 0, lon: 0, relative_alt: -20}, []}]).position == nil
+
     s =
       fold([
         {%M.GlobalPositionInt{lat: 411_780_000, lon: -85_960_000, alt: 132_000, relative_alt: 20_500, hdg: 65_535, vx: 250, vy: -120, vz: -50}, []},
