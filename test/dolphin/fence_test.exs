@@ -97,7 +97,10 @@ defmodule Dolphin.FenceTest do
     {:ok, view} = Vehicles.view(id)
     refute Shapes.contains?(zone, view.position)
     {north, _} = Geo.ne_offset(home, view.position)
+    # Released, given back as it was found (before the vehicle is stopped).
     :ok = Dolphin.Fleet.release(Dolphin.Fleet, self(), [id])
+    assert :ok = Vehicles.Fences.await_returns(30_000)
+    assert {:ok, 1.0} = Vehicles.read_param(id, "FENCE_ACTION")
     {round(north), short}
   end
 
