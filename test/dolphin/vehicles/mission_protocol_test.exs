@@ -59,6 +59,12 @@ defmodule Dolphin.Vehicles.MissionProtocolTest do
     end
   end
 
+  # `n` items of a list of `type`: a mission's waypoints, a fence's polygon
+  # corners (each saying how many), rally points.
+  defp items(n, :mission), do: items(n)
+  defp items(n, :fence), do: for(i <- 0..(n - 1)//1, do: %M.MissionItemInt{frame: 5, command: 5001, param1: n * 1.0, x: 411_780_000 + i * 100, y: -85_960_000 - i * 37})
+  defp items(n, :rally), do: for(i <- 0..(n - 1)//1, do: %M.MissionItemInt{frame: 6, command: 5100, x: 411_790_000 + i * 100, y: -85_950_000, z: 15.0 + i})
+
   # What the vehicle holds, compared with what was uploaded.
   defp same_mission?(held, uploaded) do
     length(held) == length(uploaded) and
@@ -67,7 +73,6 @@ defmodule Dolphin.Vehicles.MissionProtocolTest do
 
   # An item without what only addresses it (targets, position in the list).
   defp meaning(item), do: %{item | seq: 0, mission_type: 0, target_system: 0, target_component: 0}
-
 
   # The vehicle's mission as its views say, once it satisfies `fun`.
   defp await_mission(sysid, fun) do
@@ -174,18 +179,20 @@ defmodule Dolphin.Vehicles.MissionProtocolTest do
   defp upload_and_verify(sysid, vehicle, mission, opts \\ []) do
     upload = Vehicles.upload_mission(sysid, mission, opts)
     download = Vehicles.download_mission(sysid, opts)
+    type = Map.fetch!(%{mission: 0, fence: 1, rally: 2}, Keyword.get(opts, :mission_type, :mission))
 
     cond do
       upload != :ok and not match?({:error, %MissionError{result: :unconfirmed}}, upload) -> "upload: #{inspect(upload)}"
       not match?({:ok, _}, download) -> "upload #{inspect(upload)}, then the download: #{inspect(download)}"
       not same_mission?(elem(download, 1), mission) -> "the mission read back differs from the one uploaded"
-      not same_mission?(ScriptedVehicle.mission(vehicle), mission) -> "the vehicle holds another mission"
+      not same_mission?(ScriptedVehicle.mission(vehicle, type), mission) -> "the vehicle holds another mission"
       true -> nil
     end
   end
 
   # The issue's promise: up to 30 % loss each way, 10 % duplicates and 10 %
-  # reordering, random missions go up and come back exactly, every time. At a
+  # reordering, random missions, fences and rally lists go up and come back
+  # exactly, every time. At a
   # speed-up of 10 the vehicle's patience (8 s of its time) is 800 ms of real
   # time: more than a loaded machine's pauses.
   @tag timeout: 600_000
@@ -194,11 +201,11 @@ defmodule Dolphin.Vehicles.MissionProtocolTest do
     {sysid, vehicle} = vehicle(port, [])
 
     check(
-      forall({T.integer(1, 150), T.integer(0, 30), T.integer(0, 10), T.integer(0, 10)}, fn {n, loss, dup, reorder} ->
+      forall({T.elements([:mission, :fence, :rally]), T.integer(1, 150), T.integer(0, 30), T.integer(0, 10), T.integer(0, 10)}, fn {type, n, loss, dup, reorder} ->
         ScriptedVehicle.set_faults(vehicle, loss: loss / 100, duplicate: dup / 100, reorder: reorder / 100)
-        failure = upload_and_verify(sysid, vehicle, items(n))
+        failure = upload_and_verify(sysid, vehicle, items(n, type), mission_type: type)
         ScriptedVehicle.set_faults(vehicle, [])
-        assert failure == nil, "#{n} items, #{loss} % loss, #{dup} % duplicates, #{reorder} % reordering: #{failure}"
+        assert failure == nil, "#{type}: #{n} items, #{loss} % loss, #{dup} % duplicates, #{reorder} % reordering: #{failure}"
         true
       end),
       numtests: 15
