@@ -14,7 +14,9 @@ defmodule Dolphin.Separation do
   8 seconds of clock time (`Dolphin.Separation.Prediction`). When they
   will:
 
-    * the vehicle whose mission started later holds (its mission's process
+    * the vehicle whose task started later holds (of two started within a
+      second of each other, by `execute` or `|||`, the one the engine made
+      later, so the choice does not depend on timing; its mission's process
       is sent `{:separation, :hold, info}`: it holds as its airframe holds,
       `Dolphin.Vehicles.Manoeuvres.hold_modes/1`, without failing its
       mission); a vehicle not flying one of our missions is never held, so
@@ -35,8 +37,8 @@ defmodule Dolphin.Separation do
   where it was) once, for a second of clock time, no vehicle in the air is
   closer than one and a half times the separation and none would come
   closer than that within the horizon were it to fly on as it was flying
-  when held; `separation_clear` says so,
-  with how long it was held. The hold counts in its task's time.
+  when held; `separation_clear` says so, with how long it was held. The
+  hold counts in its task's time.
 
   Vehicles on the ground are not kept apart (a landing beside a parked
   vehicle is the pre-flight check's to judge); a submarine is kept apart
