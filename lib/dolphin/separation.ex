@@ -110,7 +110,11 @@ defmodule Dolphin.Separation do
   end
 
   @impl true
-  def init(:ok), do: {:ok, %{flying: %{}, ticking: false, heard: nil}}
+  def init(:ok) do
+    # A vehicle forgotten or lost leaves the station's vehicles read last (heard/1) at once.
+    Dolphin.Vehicles.subscribe(:all)
+    {:ok, %{flying: %{}, ticking: false, heard: nil}}
+  end
 
   @impl true
   def handle_call({:flying, id, pid, {started_at, rank}, limits}, _from, s) do
@@ -136,6 +140,8 @@ defmodule Dolphin.Separation do
   end
 
   def handle_info(:tick, s), do: {:noreply, look_at_held(%{s | ticking: false})}
+
+  def handle_info({:dolphin, :vehicles, {notice, _id}}, s) when notice in [:vehicle_forgotten, :vehicle_lost], do: {:noreply, %{s | heard: nil}}
 
   def handle_info({:DOWN, ref, :process, _, _}, s) do
     case Enum.find(s.flying, fn {_, f} -> f.ref == ref end) do

@@ -15,11 +15,14 @@ defmodule Dolphin.SeparationTest do
 
   @base Geo.location(40.444233, -7.375234, 820)
   @limits %{horizontal: 20.0, vertical: 10.0}
-  @ids [201, 202, 203]
-
+  # Each test's three vehicles have ids of their own: what the monitor still
+  # does about another test's vehicles is no concern of this one's.
   setup do
+    base = 10_000 + 10 * System.unique_integer([:positive, :monotonic])
+    ids = {base + 1, base + 2, base + 3}
     Dolphin.Events.subscribe()
-    on_exit(fn -> Enum.each(@ids, &Views.delete/1) end)
+    on_exit(fn -> ids |> Tuple.to_list() |> Enum.each(&Views.delete/1) end)
+    %{ids: ids}
   end
 
   # A copter `north`, `east` metres from the base, 30 m up, flying at `velocity` {n, e, up} m/s.
@@ -65,113 +68,117 @@ defmodule Dolphin.SeparationTest do
     forward(test)
   end
 
-  defp no_event(name) do
-    refute_receive {:dolphin, :events, %{event: ^name}}, 300
+  defp no_event(name, ids) do
+    receive do
+      {:dolphin, :events, %{event: ^name, vehicle: v} = e} -> if v in Tuple.to_list(ids), do: flunk("unexpected #{inspect(e)}"), else: no_event(name, ids)
+    after
+      300 -> :ok
+    end
   end
 
-  test "of two vehicles about to cross, the one whose task started later holds, and goes on once the other has passed" do
-    # 201 flies east along the base's parallel, 202 north along its meridian: they meet over the base.
-    flying(201, 0, -150, {0.0, 10.0, 0.0})
-    flying(202, -150, 0, {10.0, 0.0, 0.0})
-    executor(201, 1_000)
-    executor(202, 2_000)
+  test "of two vehicles about to cross, the one whose task started later holds, and goes on once the other has passed", %{ids: {a, b, c} = ids} do
+    # a flies east along the base's parallel, b north along its meridian: they meet over the base.
+    flying(a, 0, -150, {0.0, 10.0, 0.0})
+    flying(b, -150, 0, {10.0, 0.0, 0.0})
+    executor(a, 1_000)
+    executor(b, 2_000)
 
     # 15 s from the crossing: beyond the horizon, nothing.
-    flying(201, 0, -150, {0.0, 10.0, 0.0})
-    flying(202, -150, 0, {10.0, 0.0, 0.0})
-    no_event(:separation_hold)
+    flying(a, 0, -150, {0.0, 10.0, 0.0})
+    flying(b, -150, 0, {10.0, 0.0, 0.0})
+    no_event(:separation_hold, ids)
 
     # 6 s from it: the later one holds.
-    flying(201, 0, -60, {0.0, 10.0, 0.0})
-    flying(202, -60, 0, {10.0, 0.0, 0.0})
-    assert_receive {:separation, :hold, %{vehicle: 202, other: 201, in_s: in_s, closest: closest}}
+    flying(a, 0, -60, {0.0, 10.0, 0.0})
+    flying(b, -60, 0, {10.0, 0.0, 0.0})
+    assert_receive {:separation, :hold, %{vehicle: ^b, other: ^a, in_s: in_s, closest: closest}}
     assert in_s > 3 and in_s < 6 and closest < 20
-    assert_receive {:dolphin, :events, %{event: :separation_hold, vehicle: 202, other: 201, distance: distance}}
+    assert_receive {:dolphin, :events, %{event: :separation_hold, vehicle: ^b, other: ^a, distance: distance}}
     assert_in_delta distance, 84.9, 0.5
-    refute_receive {:separation, :hold, %{vehicle: 201}}, 200
-    assert Separation.held() == %{202 => 201}
+    refute_receive {:separation, :hold, %{vehicle: ^a}}, 200
+    assert Map.take(Separation.held(), [a, b, c]) == %{b => a}
 
     # Stopped 55 m short of the crossing while the other crosses: held still, then clear once it is past.
-    flying(202, -55, 0, {0.0, 0.0, 0.0})
-    flying(201, 0, -30, {0.0, 10.0, 0.0})
+    flying(b, -55, 0, {0.0, 0.0, 0.0})
+    flying(a, 0, -30, {0.0, 10.0, 0.0})
     refute_receive {:separation, :clear, _}, 300
-    flying(201, 0, 50, {0.0, 10.0, 0.0})
-    assert_receive {:separation, :clear, %{vehicle: 202}}, 5_000
-    assert_receive {:dolphin, :events, %{event: :separation_clear, vehicle: 202, other: 201, held_ms: held_ms}}
+    flying(a, 0, 50, {0.0, 10.0, 0.0})
+    assert_receive {:separation, :clear, %{vehicle: ^b}}, 5_000
+    assert_receive {:dolphin, :events, %{event: :separation_clear, vehicle: ^b, other: ^a, held_ms: held_ms}}
     assert held_ms >= 1_000
-    assert Separation.held() == %{}
+    refute Map.has_key?(Separation.held(), b)
   end
 
-  test "a vehicle the ground station hears but flies no mission of ours is kept clear of: the one flying ours holds" do
-    flying(203, 0, 0, {0.0, 0.0, 0.0})
-    executor(201, 1_000)
-    flying(201, 0, -50, {0.0, 10.0, 0.0})
-    assert_receive {:separation, :hold, %{vehicle: 201, other: 203}}
+  test "a vehicle the ground station hears but flies no mission of ours is kept clear of: the one flying ours holds", %{ids: {a, _b, c}} do
+    flying(c, 0, 0, {0.0, 0.0, 0.0})
+    executor(a, 1_000)
+    flying(a, 0, -50, {0.0, 10.0, 0.0})
+    assert_receive {:separation, :hold, %{vehicle: ^a, other: ^c}}
   end
 
-  test "vehicles on the ground, and a submarine beside a copter, are not kept apart" do
-    executor(201, 1_000)
-    executor(202, 2_000)
-    flying(201, 0, 0, {0.0, 0.0, 0.0}, landed: :on_ground, up: 0)
-    flying(202, 0, 5, {0.0, 0.0, 0.0}, landed: :on_ground, up: 0)
-    flying(202, 0, 5, {0.0, 0.0, 1.0}, landed: :on_ground, armed?: false, up: 0)
-    no_event(:separation_hold)
+  test "vehicles on the ground, and a submarine beside a copter, are not kept apart", %{ids: {a, b, _c} = ids} do
+    executor(a, 1_000)
+    executor(b, 2_000)
+    flying(a, 0, 0, {0.0, 0.0, 0.0}, landed: :on_ground, up: 0)
+    flying(b, 0, 5, {0.0, 0.0, 0.0}, landed: :on_ground, up: 0)
+    flying(b, 0, 5, {0.0, 0.0, 1.0}, landed: :on_ground, armed?: false, up: 0)
+    no_event(:separation_hold, ids)
 
-    flying(201, 0, 0, {0.0, 0.0, 0.0}, up: -5, airframe: :sub, landed: nil)
-    flying(202, 0, 5, {0.0, 0.0, 0.0}, up: -5)
-    no_event(:separation_hold)
+    flying(a, 0, 0, {0.0, 0.0, 0.0}, up: -5, airframe: :sub, landed: nil)
+    flying(b, 0, 5, {0.0, 0.0, 0.0}, up: -5)
+    no_event(:separation_hold, ids)
   end
 
-  test "head-on on one line: the later one holds and, the other still coming at it once it has stopped, moves out of its way; the other never holds" do
-    executor(201, 1_000)
-    executor(202, 2_000)
-    flying(201, 0, -60, {0.0, 10.0, 0.0})
-    flying(202, 0, 60, {0.0, -10.0, 0.0})
-    assert_receive {:separation, :hold, %{vehicle: 202, other: 201}}
-    assert_receive {:dolphin, :events, %{event: :separation_hold, vehicle: 202, action: :hold}}
-    flying(202, 0, 55, {0.0, 0.0, 0.0})
-    flying(201, 0, -20, {0.0, 10.0, 0.0})
-    assert_receive {:separation, :aside, %{vehicle: 202, other: 201, metres: 20.0}}
-    assert_receive {:dolphin, :events, %{event: :separation_hold, vehicle: 202, action: :aside}}
-    refute_receive {:separation, _, %{vehicle: 201}}, 300
-    assert Separation.held() == %{202 => 201}
+  test "head-on on one line: the later one holds and, the other still coming at it once it has stopped, moves out of its way; the other never holds", %{ids: {a, b, c}} do
+    executor(a, 1_000)
+    executor(b, 2_000)
+    flying(a, 0, -60, {0.0, 10.0, 0.0})
+    flying(b, 0, 60, {0.0, -10.0, 0.0})
+    assert_receive {:separation, :hold, %{vehicle: ^b, other: ^a}}
+    assert_receive {:dolphin, :events, %{event: :separation_hold, vehicle: ^b, action: :hold}}
+    flying(b, 0, 55, {0.0, 0.0, 0.0})
+    flying(a, 0, -20, {0.0, 10.0, 0.0})
+    assert_receive {:separation, :aside, %{vehicle: ^b, other: ^a, metres: 20.0}}
+    assert_receive {:dolphin, :events, %{event: :separation_hold, vehicle: ^b, action: :aside}}
+    refute_receive {:separation, _, %{vehicle: ^a}}, 300
+    assert Map.take(Separation.held(), [a, b, c]) == %{b => a}
 
     # Only once a hold.
-    flying(201, 0, -10, {0.0, 10.0, 0.0})
+    flying(a, 0, -10, {0.0, 10.0, 0.0})
     refute_receive {:separation, :aside, _}, 300
   end
 
-  test "two tasks started together: the one the engine made later holds, whichever registered first" do
-    flying(201, 0, -60, {0.0, 10.0, 0.0})
-    flying(202, -60, 0, {10.0, 0.0, 0.0})
-    executor(202, 1_000, {1, 3})
-    executor(201, 1_200, {1, 5})
-    flying(201, 0, -60, {0.0, 10.0, 0.0})
-    assert_receive {:separation, :hold, %{vehicle: 201, other: 202}}
+  test "two tasks started together: the one the engine made later holds, whichever registered first", %{ids: {a, b, _c}} do
+    flying(a, 0, -60, {0.0, 10.0, 0.0})
+    flying(b, -60, 0, {10.0, 0.0, 0.0})
+    executor(b, 1_000, {1, 3})
+    executor(a, 1_200, {1, 5})
+    flying(a, 0, -60, {0.0, 10.0, 0.0})
+    assert_receive {:separation, :hold, %{vehicle: ^a, other: ^b}}
   end
 
-  test "two already too close but moving apart are left to part" do
-    executor(201, 1_000)
-    executor(202, 2_000)
-    flying(201, 0, 0, {0.0, -5.0, 0.0})
-    flying(202, 0, 12, {0.0, 5.0, 0.0})
-    no_event(:separation_hold)
+  test "two already too close but moving apart are left to part", %{ids: {a, b, _c} = ids} do
+    executor(a, 1_000)
+    executor(b, 2_000)
+    flying(a, 0, 0, {0.0, -5.0, 0.0})
+    flying(b, 0, 12, {0.0, 5.0, 0.0})
+    no_event(:separation_hold, ids)
   end
 
-  test "a mission that ends is forgotten: what it held for no longer holds the other" do
-    flying(201, 0, -60, {0.0, 10.0, 0.0})
-    flying(202, -60, 0, {10.0, 0.0, 0.0})
-    first = executor(201, 1_000)
-    executor(202, 2_000)
-    flying(202, -60, 0, {10.0, 0.0, 0.0})
-    assert_receive {:separation, :hold, %{vehicle: 202}}
+  test "a mission that ends is forgotten: what it held for no longer holds the other", %{ids: {a, b, _c}} do
+    flying(a, 0, -60, {0.0, 10.0, 0.0})
+    flying(b, -60, 0, {10.0, 0.0, 0.0})
+    first = executor(a, 1_000)
+    executor(b, 2_000)
+    flying(b, -60, 0, {10.0, 0.0, 0.0})
+    assert_receive {:separation, :hold, %{vehicle: ^b}}
 
     # The first lands where it is and its mission ends.
-    flying(202, -55, 0, {0.0, 0.0, 0.0})
-    flying(201, 0, -30, {0.0, 0.0, 0.0}, landed: :on_ground, armed?: false, up: 0)
+    flying(b, -55, 0, {0.0, 0.0, 0.0})
+    flying(a, 0, -30, {0.0, 0.0, 0.0}, landed: :on_ground, armed?: false, up: 0)
     Process.unlink(first)
     Process.exit(first, :kill)
-    assert_receive {:separation, :clear, %{vehicle: 202}}, 5_000
+    assert_receive {:separation, :clear, %{vehicle: ^b}}, 5_000
   end
 
   test "the prediction finds a loss of separation exactly when sampling the two straight paths finds one" do

@@ -51,7 +51,9 @@ defmodule Dolphin.Separation.Prediction do
       # Too close already, but parting (scaled by the limits, so that a metre
       # in height counts as much as its share of the separation): going on apart.
       {from, to} when from == 0 ->
-        if parting?(a, b, limits), do: :clear, else: closest(dn, de, rn, re, from, to)
+        # (Within already, not merely from the limit's edge on.)
+        within? = dn * dn + de * de < h * h and abs(du) < v
+        if within? and parting?(a, b, limits), do: :clear, else: closest(dn, de, rn, re, from, to)
 
       {from, to} ->
         closest(dn, de, rn, re, from, to)
