@@ -37,11 +37,11 @@ defmodule SeparationBench do
 
   # {reaction µs, the held vehicle} of one run's log: the hold's DO_SET_MODE
   # against the first frame that showed the loss of separation coming.
-  def reaction(path) do
+  # `k`: the log's vehicle seconds per wall second (Dolphin.Report.FlightLog.speedup/1).
+  def reaction(path, k) do
     {records, reader} = Tlog.read(Tlog.reader(), File.read!(path))
     {rest, _} = Tlog.finish(reader)
     records = records ++ rest
-    k = speedup(records)
 
     # GUIDED (4) and AUTO (3) start and resume missions; the other is the hold (BRAKE).
     [{sent_us, held} | _] = for {ts, %{message: %M.CommandLong{command: @mode_command, target_system: v, param2: mode}}} <- records, mode not in [3.0, 4.0], do: {ts, v}
@@ -80,13 +80,6 @@ defmodule SeparationBench do
     {n, e} = Dolphin.Geo.to_tangent(plane, p.lat / 1.0e7, p.lon / 1.0e7)
     {{n + vn * age_s, e + ve * age_s, p.alt / 1000 + vu * age_s}, {vn, ve, vu}}
   end
-
-  # Vehicle seconds per wall second, from one vehicle's boot clock.
-  defp speedup(records) do
-    stamps = for {ts, %{sysid: 1, message: %M.GlobalPositionInt{time_boot_ms: b}}} <- records, do: {ts, b}
-    {{t0, b0}, {t1, b1}} = {List.first(stamps), List.last(stamps)}
-    (b1 - b0) * 1000 / max(t1 - t0, 1)
-  end
 end
 
 IO.puts("separation monitor: #{runs} run(s) of examples/crossing_paths.exs on #{backend} 2 at #{speedup}x")
@@ -100,7 +93,7 @@ results =
     if code != 0, do: raise("run #{i} exited #{code}: #{elem(StringIO.contents(out), 1)}")
     {:ok, log} = Dolphin.Report.FlightLog.read_file(tlog)
     least = Dolphin.Report.Separation.closest(log).least
-    {reaction_us, held} = SeparationBench.reaction(tlog)
+    {reaction_us, held} = SeparationBench.reaction(tlog, Dolphin.Report.FlightLog.speedup(log))
     IO.puts("  run #{i}: vehicle #{held} held, reaction #{if reaction_us, do: "#{Float.round(reaction_us / 1000, 2)} ms", else: "?"}, least #{Float.round(least.across, 1)} m across")
     {reaction_us, least.across}
   end

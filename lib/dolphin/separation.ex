@@ -252,21 +252,21 @@ defmodule Dolphin.Separation do
   defp look_at(s, id, now) do
     f = s.flying[id]
     held = f.held
+    {others, s} = others(s, f)
 
     cond do
-      not clear?(s, f, now) -> put_in(s.flying[id].held.clear_since, nil)
+      not clear?(f, others, now) -> put_in(s.flying[id].held.clear_since, nil)
       held.clear_since == nil -> put_in(s.flying[id].held.clear_since, now)
-      now - held.clear_since >= @settle_ms -> let_go(s, f, now)
+      now - held.clear_since >= @settle_ms -> let_go(s, f, others, now)
       true -> s
     end
   end
 
   # No one closer than the separation, and no one it would come too close
   # to were it to fly on as it flew when held.
-  defp clear?(_s, %Flying{view: view}, _now) when view == nil or view.position == nil, do: true
+  defp clear?(%Flying{view: view}, _others, _now) when view == nil or view.position == nil, do: true
 
-  defp clear?(s, f, now) do
-    {others, _} = others(s, f)
+  defp clear?(f, others, now) do
     plane = Geo.tangent_plane(f.view.position)
     # From where it is across, at the height it was held at (one that moved
     # aside goes back to it as it goes on).
@@ -280,9 +280,8 @@ defmodule Dolphin.Separation do
     end)
   end
 
-  defp let_go(s, f, now) do
+  defp let_go(s, f, others, now) do
     send(f.pid, {:separation, :clear, %{vehicle: f.id}})
-    {others, _} = others(s, f)
     distance = with %{} = other <- Enum.find(others, &(&1.id == f.held.other)), do: distance(f, other), else: (_ -> nil)
     Events.emit(:separation_clear, %{vehicle: f.id, other: f.held.other, distance: distance, held_ms: now - f.held.since})
     put_in(s.flying[f.id].held, nil)
@@ -338,10 +337,7 @@ defmodule Dolphin.Separation do
 
   defp same_medium?(a, b), do: a.airframe == :sub == (b.airframe == :sub)
 
-  defp stopped?(view) do
-    {vn, ve, vu} = velocity(view)
-    :math.sqrt(vn * vn + ve * ve + vu * vu) < @stopped_ms
-  end
+  defp stopped?(view), do: Dolphin.Vehicles.View.speed(view) < @stopped_ms
 
   defp velocity(%{velocity: {_, _, _} = v}), do: v
   defp velocity(_view), do: {0.0, 0.0, 0.0}

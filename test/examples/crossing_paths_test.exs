@@ -60,21 +60,16 @@ defmodule Dolphin.Examples.CrossingPathsTest do
   end
 
   test "head-on on one line: the later one holds, then climbs out of the other's way, and goes on once it has passed", %{tmp_dir: dir} do
-    {:ok, out} = StringIO.open("")
-    tlog = Path.join(dir, "head_on.tlog")
-    events = Path.join(dir, "head_on.jsonl")
-    script = Path.expand("../fixtures/separation/head_on.exs", __DIR__)
-    code = Mix.Tasks.Dolphin.Run.main([script, "--sim", "2", "--speedup", "10", "--tlog", tlog, "--events", events, "--quiet"], out: out, err: out)
-    Dolphin.Test.GroundStation.forget_vehicles()
-    assert code == 0, elem(StringIO.contents(out), 1)
-    all = events |> File.read!() |> String.split("\n", trim: true) |> Enum.map(&elem(Dolphin.MAVLink.JSON.decode(&1), 1))
+    run = ExampleRun.run(dir, Path.expand("../fixtures/separation/head_on.exs", __DIR__), "", ["--sim", "2", "--speedup", "10"], nil)
+    assert run.code == 0, run.output
+    all = run.events
 
     assert [%{"vehicle" => held, "action" => "hold"}, %{"vehicle" => held, "action" => "aside", "other" => other}] = for(%{"event" => "separation_hold"} = e <- all, do: e)
     assert [%{"vehicle" => ^held, "other" => ^other}] = for(%{"event" => "separation_clear"} = e <- all, do: e)
     assert [%{"result" => "done"}, %{"result" => "done"}] = for(%{"event" => "task_finished", "kind" => "mission"} = e <- all, do: e)
 
     # Out of the way, in height: never within 20 m across while within 10 m in height.
-    {:ok, log} = Dolphin.Report.FlightLog.read_file(tlog)
+    {:ok, log} = Dolphin.Report.FlightLog.read_file(run.tlog)
     assert Dolphin.Report.Separation.closest(log).least.across > 20
     # It went up: twice the vertical separation above the line's 30 m, as its log shows.
     assert Enum.any?(log.vehicles[held].positions, fn {_, _, _, rel_mm, _, _} -> rel_mm > 45_000 end)

@@ -26,7 +26,8 @@ defmodule Dolphin.Test.ExampleRun do
   end
 
   @doc """
-  Runs `examples/NAME.exs` as `mix dolphin.run` would, with `args` (the
+  Runs `examples/NAME.exs` (or the script at NAME when it is a path ending
+  in `.exs`) as `mix dolphin.run` would, with `args` (the
   vehicles: `--sim N`, `--sitl N`, `--connect ENDPOINT`, and `--speedup`),
   `--for FOR_TIME` if given, events and a .tlog written under `dir` (named
   by `label`), `io` given to `Run.main/2` (such as `sitl: [send_to: ...]`). Returns the exit code, the output, how the script ended, the
@@ -34,15 +35,24 @@ defmodule Dolphin.Test.ExampleRun do
   every event (`events`, as the events file has them).
   """
   def run(dir, name, label, args, for_time, io \\ []) do
+    {script, name} = if String.ends_with?(name, ".exs"), do: {name, Path.basename(name, ".exs")}, else: {Path.join(@examples, "#{name}.exs"), name}
     events = Path.join(dir, "#{name}#{label}.jsonl")
     tlog = Path.join(dir, "#{name}#{label}.tlog")
     {:ok, out} = StringIO.open("")
     {:ok, err} = StringIO.open("")
     bound = if for_time, do: ["--for", for_time], else: []
-    argv = [Path.join(@examples, "#{name}.exs") | args] ++ ["--events", events, "--tlog", tlog, "--quiet"] ++ bound
+    argv = [script | args] ++ ["--events", events, "--tlog", tlog, "--quiet"] ++ bound
     code = Run.main(argv, [out: out, err: err] ++ io)
     GroundStation.forget_vehicles()
-    all = events |> File.read!() |> String.split("\n", trim: true) |> Enum.map(fn line -> {:ok, e} = JSON.decode(line); e end)
+
+    all =
+      events
+      |> File.read!()
+      |> String.split("\n", trim: true)
+      |> Enum.map(fn line ->
+        {:ok, e} = JSON.decode(line)
+        e
+      end)
 
     %{
       code: code,
@@ -127,11 +137,13 @@ defmodule Dolphin.Test.ExampleRun do
   # Which vehicles were disarmed when the script ended, by the order they were picked.
   defp disarmed_at_end(all) do
     picked = for %{"event" => "picked", "vehicles" => vs} <- all, v <- vs, uniq: true, do: v
-    armed = Enum.reduce(all, %{}, fn
-      %{"event" => "armed", "vehicle" => v}, acc -> Map.put(acc, v, true)
-      %{"event" => "disarmed", "vehicle" => v}, acc -> Map.put(acc, v, false)
-      _, acc -> acc
-    end)
+
+    armed =
+      Enum.reduce(all, %{}, fn
+        %{"event" => "armed", "vehicle" => v}, acc -> Map.put(acc, v, true)
+        %{"event" => "disarmed", "vehicle" => v}, acc -> Map.put(acc, v, false)
+        _, acc -> acc
+      end)
 
     Enum.map(picked, &(not Map.get(armed, &1, false)))
   end

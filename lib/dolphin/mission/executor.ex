@@ -577,7 +577,7 @@ defmodule Dolphin.Mission.Executor do
     item = Enum.at(items, seq)
 
     with %{command: @waypoint, x: x, y: y} when x != 0 <- item,
-         true <- speed(st) < 0.2,
+         true <- Dolphin.Vehicles.View.speed(st) < 0.2,
          short when short > @short_m <- Dolphin.Geo.distance(Dolphin.Geo.location(p.lat, p.lon), Dolphin.Geo.location(x / 1.0e7, y / 1.0e7)) do
       %{at: p, seq: seq, short: short}
     else
@@ -586,9 +586,6 @@ defmodule Dolphin.Mission.Executor do
   end
 
   defp standing_short(_data, _st), do: nil
-
-  defp speed(%{velocity: {vn, ve, vu}}), do: :math.sqrt(vn * vn + ve * ve + vu * vu)
-  defp speed(_st), do: 0.0
 
   defp near?(a, b, metres), do: Dolphin.Geo.distance(Dolphin.Geo.location(a.lat, a.lon), Dolphin.Geo.location(b.lat, b.lon)) <= metres
 
@@ -614,9 +611,7 @@ defmodule Dolphin.Mission.Executor do
   # Still armed on the ground, and where it was then (one moving, low over
   # ground lower than home, is flying).
   defp still_grounded?(%{grounded: %{at: at}}, st) do
-    on_ground_armed?(st) and
-      (at == nil or st.position == nil or
-         Dolphin.Geo.distance(Dolphin.Geo.location(at.lat, at.lon), Dolphin.Geo.location(st.position.lat, st.position.lon)) <= @here_m)
+    on_ground_armed?(st) and (at == nil or st.position == nil or near?(at, st.position, @here_m))
   end
 
   defp still_grounded?(_data, _st), do: false

@@ -86,6 +86,17 @@ defmodule Dolphin.Vehicles.View do
           status_texts: [{non_neg_integer(), String.t()}]
         }
 
+  @doc """
+  How fast the vehicle moves, metres per second over ground and in height
+  together (0.0 while its velocity is not reported).
+
+      iex> Dolphin.Vehicles.View.speed(%Dolphin.Vehicles.View{velocity: {3.0, 4.0, 0.0}})
+      5.0
+  """
+  @spec speed(t()) :: float()
+  def speed(%__MODULE__{velocity: {vn, ve, vu}}), do: :math.sqrt(vn * vn + ve * ve + vu * vu)
+  def speed(%__MODULE__{}), do: 0.0
+
   @uav [1, 2, 3, 4, 7, 8, 13, 14, 15, 16, 17, 19, 20, 21, 22, 23, 24, 25, 28, 29, 35, 43, 47]
 
   @doc """

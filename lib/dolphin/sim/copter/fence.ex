@@ -47,7 +47,7 @@ defmodule Dolphin.Sim.Copter.Fence do
   def avoid(%{config: %{airframe: airframe}} = c, before) when airframe in [:rover, :boat] do
     speed = :math.sqrt(c.vn * c.vn + c.ve * c.ve)
 
-    if enabled?(c) and c.armed and speed > 0.01 and round(Map.get(c.params, "FENCE_TYPE", 6)) |> Bitwise.band(@boundary) != 0 do
+    if enabled?(c) and c.armed and speed > 0.01 and Bitwise.band(types(c), @boundary) != 0 do
       margin = Map.get(c.params, "FENCE_MARGIN", 2)
       {zones, c} = zones(c)
       ahead = Geo.offset(Copter.location(c), c.vn / speed * margin, c.ve / speed * margin)
@@ -77,7 +77,7 @@ defmodule Dolphin.Sim.Copter.Fence do
 
   defp check(c) do
     {zones, c} = zones(c)
-    types = round(Map.get(c.params, "FENCE_TYPE", 7))
+    types = types(c)
     height = c.alt - home_alt(c)
     here = Copter.location(c)
 
@@ -116,6 +116,8 @@ defmodule Dolphin.Sim.Copter.Fence do
     c = %{c | fence: %{c.fence | bits: 0}}
     if in_air?(c), do: text(c, 5, "Fence breach cleared"), else: c
   end
+
+  defp types(c), do: round(Map.get(c.params, "FENCE_TYPE", 7))
 
   defp actions(%{config: %{airframe: airframe}}) when airframe in [:rover, :boat], do: @ground_actions
   defp actions(_c), do: @actions
