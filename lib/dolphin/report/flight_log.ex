@@ -318,6 +318,15 @@ defmodule Dolphin.Report.FlightLog do
   defp home({_ts, home}), do: home
 
   @doc false
+  # A record's stamp (µs since the epoch) as the log's clock seconds: from
+  # its first record, at the vehicles' rate (speedup/1).
+  @spec clock(t()) :: (integer() -> float())
+  def clock(%__MODULE__{first_us: first} = log) do
+    k = speedup(log)
+    fn ts -> (ts - first) * k / 1_000_000 end
+  end
+
+  @doc false
   # The vehicles' clock rate over the log's (1.0 when the log does not tell).
   @spec speedup(t()) :: float()
   def speedup(%__MODULE__{boot_ms: b, boot_real_us: r}) when b > 0 and r > 0, do: b * 1000 / r

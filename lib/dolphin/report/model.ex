@@ -27,7 +27,7 @@ defmodule Dolphin.Report.Model do
   @spec build(FlightLog.t(), [map()], float()) :: map()
   def build(%FlightLog{} = log, events, offset_s) do
     k = FlightLog.speedup(log)
-    clock = fn ts -> (ts - log.first_us) * k / 1_000_000 end
+    clock = FlightLog.clock(log)
     span = clock.(log.last_us)
     ids = log.vehicles |> Map.keys() |> Enum.sort()
     ref = reference(log, ids)
@@ -71,7 +71,7 @@ defmodule Dolphin.Report.Model do
   @spec anchors(FlightLog.t()) :: map()
   def anchors(%FlightLog{} = log) do
     k = FlightLog.speedup(log)
-    clock = fn ts -> (ts - log.first_us) * k / 1_000_000 end
+    clock = FlightLog.clock(log)
     vs = Map.values(log.vehicles)
 
     %{

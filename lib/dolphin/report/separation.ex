@@ -38,7 +38,7 @@ defmodule Dolphin.Report.Separation do
       %{series: [], least: nil}
     else
       k = FlightLog.speedup(log)
-      clock = fn ts -> (ts - log.first_us) * k / 1_000_000 end
+      clock = FlightLog.clock(log)
       {lat0, lon0} = origin(vehicles)
       plane = Dolphin.Geo.tangent_plane(%{lat: lat0, lon: lon0})
 
