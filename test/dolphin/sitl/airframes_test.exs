@@ -9,7 +9,8 @@ defmodule Dolphin.SITL.AirframesTest do
 
   alias Dolphin.{Engine, Geo, SITL, Vehicles}
   alias Dolphin.Geo.Location
-  # Used only by the tests of the firmwares found: no warning when none is.
+  # Used only by the tests of the firmwares found: no warning when none is
+  # (and the helpers below are public for the same reason).
   alias Dolphin.Mission, warn: false
   alias Dolphin.Mission.Command, as: C, warn: false
   alias Dolphin.MAVLink.Ardupilotmega, as: M
@@ -17,7 +18,6 @@ defmodule Dolphin.SITL.AirframesTest do
 
   @moduletag :sitl
   @moduletag timeout: 600_000
-  @compile {:nowarn_unused_function, alike: 3, distance: 2, drain: 0, flown: 3, fly: 2, on_backend: 4, reached: 1, stopped: 4, vehicle: 2}
   @speedup 10
 
   setup do
@@ -36,7 +36,7 @@ defmodule Dolphin.SITL.AirframesTest do
   # it reported reached so far, and a recorder of its
   # frames stamped with its own clock) on `backend`, the built-in simulator or
   # SITL, which is stopped after.
-  defp on_backend(backend, airframe, kind, fun) do
+  def on_backend(backend, airframe, kind, fun) do
     {start, stop} = if backend == :sitl, do: {&SITL.start/2, &SITL.stop/1}, else: {&Dolphin.Sim.Local.start/2, &Dolphin.Sim.Local.stop/1}
     {:ok, recorder} = FrameRecorder.start_link()
     {:ok, fleet} = start.([{airframe, 1}], forward: [FrameRecorder.endpoint(recorder)])
@@ -50,7 +50,7 @@ defmodule Dolphin.SITL.AirframesTest do
     end
   end
 
-  defp vehicle(fleet, kind) do
+  def vehicle(fleet, kind) do
     [id] = fleet.sysids
     Wait.until(fn -> match?({:ok, %{home: %Location{}, position: %Location{}}}, Vehicles.view(id)) end, 3_000)
     {:ok, view} = Vehicles.view(id)
@@ -59,13 +59,13 @@ defmodule Dolphin.SITL.AirframesTest do
     {id, view.home, reached(id)}
   end
 
-  defp fly(mission, id), do: Engine.run(Engine.on(mission, [id]))
+  def fly(mission, id), do: Engine.run(Engine.on(mission, [id]))
 
   # Flies `mission` and says how it went: the result, the items reported
   # reached, the time from arming to the end in the vehicle's own clock (a
   # loaded machine slows SITL's down, not the mission's), and the vehicle's
   # view then.
-  defp flown(mission, id, {seen, recorder}) do
+  def flown(mission, id, {seen, recorder}) do
     Dolphin.Events.subscribe()
     result = fly(mission, id)
     events = drain()
@@ -81,7 +81,7 @@ defmodule Dolphin.SITL.AirframesTest do
   # The built-in simulator and ArduPilot flew it alike: the same items
   # reported, the same end, in about the same time (within 35 %: the
   # simulator does not model the corners, the currents, the drift).
-  defp alike(sim, sitl, what) do
+  def alike(sim, sitl, what) do
     table = "#{what}: simulator #{inspect(Map.drop(sim, [:view, :texts]))}, ArduPilot #{inspect(Map.drop(sitl, [:view, :texts]))}"
     assert sim.result == sitl.result, table
     assert sim.reached == sitl.reached, table
@@ -90,21 +90,21 @@ defmodule Dolphin.SITL.AirframesTest do
   end
 
   # Stopped after `ms` of clock time; the mode it holds in, once the heartbeat says so.
-  defp stopped(mission, id, ms, mode) do
+  def stopped(mission, id, ms, mode) do
     assert {:ok, :done} = Engine.run(Engine.during(ms, Engine.on(mission, [id])))
     Wait.until(fn -> match?({:ok, %{mode: ^mode}}, Vehicles.view(id)) end, 500)
     {:ok, view} = Vehicles.view(id)
     view
   end
 
-  defp distance(%Location{} = a, %Location{} = b), do: Geo.distance(Geo.location(a.lat, a.lon), Geo.location(b.lat, b.lon))
+  def distance(%Location{} = a, %Location{} = b), do: Geo.distance(Geo.location(a.lat, a.lon), Geo.location(b.lat, b.lon))
 
-  defp reached(id) do
+  def reached(id) do
     Dolphin.Events.subscribe()
     fn -> for({:dolphin, :events, %{event: :mission_item_reached, vehicle: ^id, seq: seq}} <- drain(), do: seq) end
   end
 
-  defp drain do
+  def drain do
     receive do
       m -> [m | drain()]
     after
