@@ -21,9 +21,9 @@ defmodule Dolphin.CLI.Signals do
 
   While caught, the first signal is sent; a repeat within `repeat_ms/0` of
   it is taken as the same request (a key pressed twice, `timeout` signalling
-  the VM and its process group, `kill` given twice) and ignored; one that
-  comes later ends the VM at once, after the catcher's last words
-  (`:again`).
+  the VM and its process group, `kill` given twice) and ignored, even when
+  it comes after the catcher has released them; one that comes later ends
+  the VM at once, after the catcher's last words (`:again`).
 
   All signals go to one relay process. SIGTERM reaches it through the VM's
   signal server (`:os.set_signal/2` and a handler in `:erl_signal_server`
@@ -157,7 +157,7 @@ defmodule Dolphin.CLI.Signals do
     # Its lines go to the standard error of now: a script being compiled has
     # :standard_error registered to a capture of its warnings for a while.
     err = Process.whereis(:standard_error) || :standard_error
-    relay = spawn(fn -> receive(do: ({:installed, caught} -> relay(%{stack: [], caught: caught, err: err}))) end)
+    relay = spawn(fn -> receive(do: ({:installed, caught} -> relay(%{stack: [], caught: caught, err: err, forwarded: nil}))) end)
 
     try do
       Process.register(relay, @relay)
@@ -195,7 +195,7 @@ defmodule Dolphin.CLI.Signals do
 
   defp on_signal(%{stack: [{:forward, pid, opts, mref, nil} | rest]} = state, sig, now) do
     send(pid, {:dolphin_signal, sig})
-    %{state | stack: [{:forward, pid, opts, mref, now} | rest]}
+    %{state | stack: [{:forward, pid, opts, mref, now} | rest], forwarded: now}
   end
 
   defp on_signal(%{stack: [{:forward, _, _, _, first} | _]} = state, _sig, now) when now - first < @repeat_ms, do: state
@@ -208,6 +208,11 @@ defmodule Dolphin.CLI.Signals do
 
     System.halt(status(sig))
   end
+
+  # The repeat of a request a catcher took and has already finished with
+  # (the script stopped before `timeout`'s second signal came) is still that
+  # request: the task ends as the first signal said, not with the second.
+  defp on_signal(%{stack: [{:exit, _, _} | _], forwarded: at} = state, _sig, now) when is_integer(at) and now - at < @repeat_ms, do: state
 
   defp on_signal(%{stack: [{:exit, prefix, what} | _]} = state, sig, _now) do
     IO.puts(state.err, "#{prefix}: #{name(sig)}: #{what}")
