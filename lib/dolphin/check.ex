@@ -117,12 +117,12 @@ defmodule Dolphin.Check do
   the ground (or the surface) at the simulator's home, or at `home`
   (`{lat, lon, alt}`, as `--home` gives it).
   """
-  @spec sim_fleet(pos_integer() | [{atom(), pos_integer()}], {number(), number(), number()} | nil) :: [Dolphin.Check.FleetFile.vehicle()]
+  @spec sim_fleet(pos_integer() | [{atom(), pos_integer()} | {atom(), pos_integer(), [atom()]}], {number(), number(), number()} | nil) :: [Dolphin.Check.FleetFile.vehicle()]
   def sim_fleet(fleet, home \\ nil)
   def sim_fleet(n, home) when is_integer(n), do: sim_fleet([copter: n], home)
 
   def sim_fleet(fleet, home) when is_list(fleet) do
-    airframes = Enum.flat_map(fleet, fn {airframe, n} -> List.duplicate(airframe, n) end)
+    airframes = Enum.flat_map(fleet, fn {airframe, n} -> List.duplicate(airframe, n); {airframe, n, _sensors} -> List.duplicate(airframe, n) end)
     base = with {lat, lon, alt} <- home, do: %Dolphin.Geo.Location{lat: lat * 1.0, lon: lon * 1.0, h: alt * 1.0}, else: (nil -> @sim_home)
     # Where the simulator puts them (Dolphin.Sim.homes/2: a few tens of metres apart).
     spread = Dolphin.Sim.homes(length(airframes), home: %{lat: base.lat, lon: base.lon, alt: base.h})
@@ -250,7 +250,7 @@ defmodule Dolphin.Check do
             relative_altitude: if(v.airborne?, do: 20.0, else: 0.0)
           )
 
-    {:ok, fleet} = Dolphin.Fleet.start_link(name: fleet_name, source: {Source, %{test: test, recorder: recorder}}, claims: false)
+    {:ok, fleet} = Dolphin.Fleet.start_link(name: fleet_name, source: {Source, %{test: test, recorder: recorder}}, claims: false, assume_sensors: true)
 
     try do
       busy = busy_loops(script)

@@ -78,7 +78,8 @@ defmodule Dolphin.DSL do
   match every filter. Options: `count:` (default 1), `type:` (`:uav`,
   `:ugv`, `:usv`, `:uuv`, `:other` or a list), `airframe:` (`:copter`,
   `:plane`, `:quadplane`, `:rover`, `:boat`, `:sub` or a list), `payload:`
-  (an atom or a list, all required), `region:` (an `area/2`), `id:` (a system id or a list),
+  (an atom or a list, all required), `sensors:` (declared sensors, named
+  in place: `[:smoke]`; a vehicle on which each has been heard), `region:` (an `area/2`), `id:` (a system id or a list),
   `timeout:` (clock ms, default `:infinity`).
 
       v = pick(type: :uav, timeout: seconds(30))
@@ -90,7 +91,7 @@ defmodule Dolphin.DSL do
   1 vehicle, type :uav; ...`), reported at the line of the `pick`; a bad
   option raises `ArgumentError`. See docs/language.md, "Vehicles".
   """
-  defmacro pick(opts \\ []), do: at_line(quote(do: Dolphin.Script.Statements.pick(unquote(opts))), __CALLER__)
+  defmacro pick(opts \\ []), do: at_line(quote(do: Dolphin.Script.Statements.pick(unquote(Dolphin.DSL.Sensors.pick_opts(opts, __CALLER__)))), __CALLER__)
 
   @doc """
   Makes vehicles the script picked available again: a set or a list of sets.

@@ -99,7 +99,7 @@ defmodule Dolphin.Engine do
   the task that cannot be served.
   """
 
-  alias Dolphin.Engine.{Action, AllOf, Concurrent, Cond, Condition, Context, During, Idle, On, OneOf, PlatformTask, Run, Sequence, Task, Until, WaitFor, Watch}
+  alias Dolphin.Engine.{Action, AllOf, Concurrent, Cond, Condition, Context, During, Idle, On, OneOf, OnSensor, PlatformTask, Run, Sequence, Task, Until, WaitFor, Watch}
 
   @type task :: Task.t()
   @type result :: {:ok, :done | :stopped} | {:error, Dolphin.Engine.Failure.t() | Dolphin.Fleet.AllocationError.t()}
@@ -189,6 +189,37 @@ defmodule Dolphin.Engine do
       do: raise(ArgumentError, "reassign takes from: (a vehicle set or ids), got: #{inspect(opts)}")
 
     watch(task, [on_error: :reassign] ++ opts)
+  end
+
+  @doc """
+  Missions flown while a sensor is watched: `missions` maps each vehicle
+  (a one-vehicle set or an id) to its `Dolphin.Mission`; a reading of
+  `sensor` (a `Dolphin.Sensors.Sensor`) above `above:` at a new place
+  (farther than `apart:` metres, default 100, from the detections made)
+  sends the nearest vehicle free to fly `then:`'s task for it, its mission
+  resumed afterwards. See `Dolphin.Engine.OnSensor`.
+  """
+  @spec on_sensor(map() | [{term(), term()}], Dolphin.Sensors.Sensor.t(), keyword()) :: OnSensor.t()
+  def on_sensor(missions, %Dolphin.Sensors.Sensor{} = sensor, opts) do
+    {above, opts} = Keyword.pop(opts, :above)
+    {apart, opts} = Keyword.pop(opts, :apart, 100)
+    {then, opts} = Keyword.pop(opts, :then)
+
+    unless is_number(above), do: raise(ArgumentError, "on_sensor takes above: (the threshold, a number), got: #{inspect(above)}")
+    unless is_number(apart) and apart >= 0, do: raise(ArgumentError, "on_sensor takes apart: (metres, 0 or more), got: #{inspect(apart)}")
+    unless is_function(then, 1), do: raise(ArgumentError, "on_sensor takes then: (a function of the detection, giving a task), got: #{inspect(then)}")
+
+    missions =
+      for {v, m} <- Enum.to_list(missions) do
+        case {Dolphin.Fleet.VehicleSet.ids(Dolphin.Fleet.VehicleSet.new(v)), m} do
+          {[id], %Dolphin.Mission{} = mission} -> {id, mission}
+          {[_], other} -> raise ArgumentError, "on_sensor flies a mission on each vehicle (mission \"name\" do ... end), got: #{inspect(other)}"
+          {ids, _} -> raise ArgumentError, "on_sensor gives each mission one vehicle, got: #{inspect(ids)}"
+        end
+      end
+
+    if missions == [], do: raise(ArgumentError, "on_sensor takes at least one vehicle and its mission")
+    build(%OnSensor{missions: missions, sensor: sensor, above: above, apart: apart * 1.0, then: then}, opts)
   end
 
   @doc "A task of a platform (see `Dolphin.Engine.Platform`); `spec` is the platform's description of it."

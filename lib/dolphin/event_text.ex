@@ -52,7 +52,9 @@ defmodule Dolphin.EventText do
     :task_reassigned,
     :vehicle_returned,
     :separation_hold,
-    :separation_clear
+    :separation_clear,
+    :sensor_declared,
+    :sensor_threshold
   ]
 
   @doc """
@@ -150,6 +152,16 @@ defmodule Dolphin.EventText do
 
   def event_text(%{event: :separation_clear} = e),
     do: "vehicle #{e.vehicle} goes on after #{Format.seconds(e.held_ms)} held" <> if(e.distance, do: " (vehicle #{e.other} #{e.distance} m away)", else: "")
+
+  def event_text(%{event: :sensor_declared} = e),
+    do: "sensor #{e.sensor}: #{e.source}" <> if(e.unit, do: " in #{e.unit}", else: "") <> if(e.stale_after, do: ", unknown #{Format.seconds(e.stale_after)} after its last reading", else: "")
+
+  def event_text(%{event: :sensor_threshold} = e) do
+    where = if e.lat, do: " at #{Float.round(e.lat * 1.0, 6)}, #{Float.round(e.lon * 1.0, 6)} (#{round(e.h)} m)", else: " (position unknown)"
+    unit = if e.unit, do: " #{e.unit}", else: ""
+    sent = if Map.get(e, :sent), do: ": vehicle #{e.sent} goes to look", else: ""
+    "vehicle #{e.vehicle} read #{e.sensor} #{e.value}#{unit}#{where} (#{e.condition})#{sent}"
+  end
 
   def event_text(%{event: :task_reassigned} = e), do: "task #{e.task_id}: vehicle #{e.from} failed it; vehicle #{e.to} takes it over from item #{e.resume_seq}"
 

@@ -38,6 +38,10 @@ defmodule Dolphin.Events do
      "the way is clear: held `vehicle` goes on with its mission after `held_ms` clock ms; `other` (the vehicle it was held for) is `distance` m away across (null: no longer in the air)"},
     {:condition_met, [:run, :task_id, :condition, :branch],
      "the condition of an until, wait_for, condition, one_of or all_of held; `condition` is its source text, `branch` the index in one_of/all_of (else null)"},
+    {:sensor_declared, [:sensor, :source, :unit, :scale, :offset, :stale_after],
+     "a script declared a sensor (`sensor :smoke, from: ...`): every vehicle now reports its readings of `source` (`NAMED_VALUE SMOKE`, `SCALED_PRESSURE2.temperature`); its value is raw × `scale` + `offset`, in `unit`; a reading older than `stale_after` ms (null: never) is unknown"},
+    {:sensor_threshold, [:run, :task_id, :vehicle, :sensor, :value, :unit, :lat, :lon, :h, :condition, :sent],
+     "a sensor reading met what a script waited for: a condition that reads it held (`condition` its text), or `on_sensor` detected it; `vehicle` read `value` at `lat`, `lon`, `h` (where it was; null while unknown); `sent` the vehicle `on_sensor` sent to look (else null)"},
     {:message, [:text], "a script's `message`"},
     {:signal_posted, [:key, :value], "a script's `post`"},
     {:signal_consumed, [:key, :value], "a successful `consume`"},
@@ -65,7 +69,8 @@ defmodule Dolphin.Events do
   #{Enum.map_join(@events, "\n  ", fn {name, fields, doc} -> "* `#{name}` (#{Enum.join(fields, ", ")}) — #{doc}" end)}
 
   Kinds of task (`kind`): `idle`, `action`, `condition`, `sequence`,
-  `concurrent`, `until`, `during`, `wait_for`, `one_of`, `all_of`, `watch`, and
+  `concurrent`, `until`, `during`, `wait_for`, `one_of`, `all_of`, `watch`,
+  `on_sensor`, and
   for platform tasks the platform's kind (`mission`, `test`, ...).
   """
 

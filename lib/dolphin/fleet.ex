@@ -67,7 +67,7 @@ defmodule Dolphin.Fleet do
 
   @types [:uav, :ugv, :usv, :uuv, :other]
   @airframes View.airframes()
-  @pick_keys [:count, :type, :airframe, :payload, :region, :id, :timeout]
+  @pick_keys [:count, :type, :airframe, :payload, :sensors, :region, :id, :timeout]
   # How often picks waiting on a region are checked again (clock ms), besides events.
   @region_tick 1_000
 
@@ -182,6 +182,11 @@ defmodule Dolphin.Fleet do
     payload = List.wrap(Keyword.get(opts, :payload))
     unless Enum.all?(payload, &is_atom/1), do: raise(ArgumentError, "pick payload must be an atom or a list of atoms, got: #{inspect(payload)}")
 
+    sensors = List.wrap(Keyword.get(opts, :sensors))
+
+    unless Enum.all?(sensors, &is_struct(&1, Dolphin.Sensors.Sensor)),
+      do: raise(ArgumentError, "pick sensors must be sensors the script declared, named in place (sensors: [:smoke]), got: #{inspect(sensors)}")
+
     region = Keyword.get(opts, :region)
     unless region == nil or is_struct(region, Area), do: raise(ArgumentError, "pick region must be an area (area/2), got: #{inspect(region)}")
 
@@ -195,7 +200,7 @@ defmodule Dolphin.Fleet do
     unless timeout == :infinity or (is_integer(timeout) and timeout >= 0),
       do: raise(ArgumentError, "pick timeout must be milliseconds or :infinity, got: #{inspect(timeout)}")
 
-    %{count: count, type: type, airframe: airframe, payload: payload, region: region, id: id && List.wrap(id), timeout: timeout}
+    %{count: count, type: type, airframe: airframe, payload: payload, sensors: sensors, region: region, id: id && List.wrap(id), timeout: timeout}
   end
 
   def requirement!(other), do: raise(ArgumentError, "pick options must be a keyword list, got: #{inspect(other)}")
@@ -207,6 +212,7 @@ defmodule Dolphin.Fleet do
       req.type && "type #{inspect(req.type)}",
       req[:airframe] && "airframe #{inspect(req.airframe)}",
       req.payload != [] && "payload #{inspect(req.payload)}",
+      req[:sensors] not in [nil, []] && "sensors #{inspect(Enum.map(req.sensors, & &1.name))} heard",
       req.region && "in #{inspect(req.region)}",
       req.id && "id #{VehicleSet.format(req.id)}"
     ]
@@ -247,7 +253,10 @@ defmodule Dolphin.Fleet do
       # vehicles claimed by another node's pick (Dolphin.Fleet.Claims), as
       # learnt when claiming them failed; forgotten when claims are released
       claimed_elsewhere: MapSet.new(),
-      region_tick: false
+      region_tick: false,
+      # A pre-flight check's stand-ins cannot have been heard sensing: it
+      # takes a pick's sensors as heard (Dolphin.Check).
+      assume_sensors?: Keyword.get(opts, :assume_sensors, false)
     }
 
     {:ok, use_source(s, source)}
@@ -412,7 +421,7 @@ defmodule Dolphin.Fleet do
   # ones tried.
   defp serve_waiter(s, w, available, claimed) do
     # (What an earlier waiter of this round got, or learnt taken elsewhere, is no longer available.)
-    matching = Enum.filter(available, &(matches?(w.req, &1) and not MapSet.member?(claimed, &1.id) and available?(s, &1)))
+    matching = Enum.filter(available, &(matches?(requirement(s, w.req), &1) and not MapSet.member?(claimed, &1.id) and available?(s, &1)))
 
     with true <- length(matching) >= w.req.count,
          ids = matching |> Enum.take(w.req.count) |> Enum.map(& &1.id),
@@ -437,9 +446,12 @@ defmodule Dolphin.Fleet do
   defp available?(s, %View{id: id} = v),
     do: v.connected? and s.picked[id] == nil and s.busy[id] == nil and not MapSet.member?(s.claimed_elsewhere, id)
 
+  defp requirement(%{assume_sensors?: true}, req), do: %{req | sensors: []}
+  defp requirement(_s, req), do: req
+
   defp matches?(req, %View{} = v) do
     (req.type == nil or v.type in List.wrap(req.type)) and (req.airframe == nil or v.airframe in List.wrap(req.airframe)) and Enum.all?(req.payload, &(&1 in v.payloads)) and
-      (req.region == nil or (v.position != nil and Geo.contains?(req.region, v.position))) and (req.id == nil or Enum.any?(req.id, &View.named?(v, &1)))
+      Enum.all?(req.sensors, &Map.has_key?(v.sensors, &1.source)) and (req.region == nil or (v.position != nil and Geo.contains?(req.region, v.position))) and (req.id == nil or Enum.any?(req.id, &View.named?(v, &1)))
   end
 
   defp pick_error(s, req) do
@@ -459,7 +471,7 @@ defmodule Dolphin.Fleet do
         "#{id} (#{View.describe_kind(v)}#{if v.payloads != [], do: " " <> inspect(v.payloads), else: ""}, #{status})"
       end)
 
-    n = Enum.count(vehicles, &(available?(s, &1) and matches?(req, &1)))
+    n = Enum.count(vehicles, &(available?(s, &1) and matches?(requirement(s, req), &1)))
 
     %PickError{
       requirement: describe(req),

@@ -76,6 +76,69 @@ defmodule Dolphin.JSONText do
   def kind(:null), do: "null"
   def kind(_value), do: "not JSON"
 
+  @doc """
+  The line (from 1) at which each value of valid JSON `text` begins, by its
+  path from the top (object keys as strings, array indexes from 0; `[]` is
+  the whole text): where to point a user at a value that is wrong.
+
+      iex> Dolphin.JSONText.lines(~s({\\n  "fires": [\\n    {"lat": 40.1,\\n     "radius_m": -3}\\n  ]\\n}))[["fires", 0, "radius_m"]]
+      4
+  """
+  @spec lines(binary()) :: %{[String.t() | non_neg_integer()] => pos_integer()}
+  def lines(text) when is_binary(text) do
+    {_rest, _line, found} = value(skip(text, 1), [], %{})
+    found
+  end
+
+  # A small scanner of valid JSON: it follows lines and paths only (the
+  # text was decoded already), noting where each value starts.
+  defp value({rest, line}, path, found) do
+    found = Map.put(found, Enum.reverse(path), line)
+
+    case rest do
+      "{" <> rest -> members(skip(rest, line), path, found)
+      "[" <> rest -> elements(skip(rest, line), path, 0, found)
+      "\"" <> rest -> {rest |> string() |> elem(1), line, found}
+      _ -> {scalar(rest), line, found}
+    end
+  end
+
+  defp members({"}" <> rest, line}, _path, found), do: {rest, line, found}
+
+  defp members({"\"" <> rest, line}, path, found) do
+    {key, rest} = string(rest)
+    {":" <> rest, line} = skip(rest, line)
+    {rest, line, found} = value(skip(rest, line), [key | path], found)
+
+    case skip(rest, line) do
+      {"," <> rest, line} -> members(skip(rest, line), path, found)
+      {"}" <> rest, line} -> {rest, line, found}
+    end
+  end
+
+  defp elements({"]" <> rest, line}, _path, _i, found), do: {rest, line, found}
+
+  defp elements(at, path, i, found) do
+    {rest, line, found} = value(at, [i | path], found)
+
+    case skip(rest, line) do
+      {"," <> rest, line} -> elements(skip(rest, line), path, i + 1, found)
+      {"]" <> rest, line} -> {rest, line, found}
+    end
+  end
+
+  # A string's text (escapes kept as written: keys are compared as written) and what follows.
+  defp string(text), do: string(text, [])
+  defp string("\\" <> <<c, rest::binary>>, acc), do: string(rest, [c, ?\\ | acc])
+  defp string("\"" <> rest, acc), do: {acc |> Enum.reverse() |> IO.iodata_to_binary(), rest}
+  defp string(<<c, rest::binary>>, acc), do: string(rest, [c | acc])
+
+  defp scalar(text), do: String.replace(text, ~r/^[^,\]\}\s]+/, "", global: false)
+
+  defp skip(<<c, rest::binary>>, line) when c in [?\s, ?\t, ?\r], do: skip(rest, line)
+  defp skip("\n" <> rest, line), do: skip(rest, line + 1)
+  defp skip(rest, line), do: {rest, line}
+
   # "line L, column C (byte B)": C counts characters from the line's start.
   defp where(text, at) do
     before = binary_part(text, 0, min(at - 1, byte_size(text)))

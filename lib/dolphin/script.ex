@@ -93,6 +93,7 @@ defmodule Dolphin.Script do
       import Dolphin.DSL
       import Dolphin.DSL.Values
       import Dolphin.DSL.Fence, only: [fence: 1, rally: 1, min_separation: 2]
+      import Dolphin.DSL.Sensors, only: [sensor: 2, sensor_age: 2, peak: 3, peak_position: 3, on_sensor: 3]
       unquote(mission)
     end
   end

@@ -80,6 +80,12 @@ defmodule Dolphin.Sim do
     * `:speedup` — sets `Dolphin.Clock`'s speed-up factor;
     * `:seed` — seeds the faults' randomness (default 1);
     * `:faults` — faults on every vehicle's link from the start;
+    * `:sensors` — the sensors each vehicle's companion computer carries
+      (`Dolphin.Sim.Companion`: `:smoke`, `:water_temp`, `:range`): a list
+      for every vehicle, or a map of lists by system id; `:world` — what they
+      sense, a `Dolphin.Sim.World` or the path of a world file (default: an
+      empty world); `:sensor_rate_hz` (default 2) and `:sensor_noise` (the
+      noise's standard deviation, default each model's);
     * any vehicle setting: `:airframe` (`:copter`, default, `:plane`, `:rover`,
       `:boat`, `:sub`: whose firmware it behaves as, with that airframe's
       speeds and currents unless given), `:battery` (initial fraction, default 1.0),
@@ -115,6 +121,7 @@ defmodule Dolphin.Sim do
          :ok <- free(Enum.map(sysids, &sim_id(opts[:network], &1))),
          :ok <- faults(opts),
          {:ok, homes, charger} <- places(opts, length(sysids)),
+         {:ok, sensing} <- sensing(opts, sysids),
          :ok <- speedup(opts[:speedup]) do
       cameras = cameras(opts[:camera], sysids)
       config = Map.put(config, :charger, charger)
@@ -133,6 +140,10 @@ defmodule Dolphin.Sim do
            home: home,
            seed: Keyword.get(opts, :seed, 1),
            faults: Keyword.get(opts, :faults, %{}),
+           sensors: Map.get(sensing.sensors, sysid, []),
+           world: sensing.world,
+           sensor_rate_hz: sensing.rate_hz,
+           sensor_noise: sensing.noise,
            config: Map.put(config, :camera, sysid in cameras)}
 
         case DynamicSupervisor.start_child(Dolphin.Instance.names().sims, child) do
@@ -433,6 +444,38 @@ defmodule Dolphin.Sim do
       do: place,
       else: raise(ArgumentError, "bad home: vehicles #{round(@spacing)} m apart around #{center.lat}, #{center.lon} would stand at #{Float.round(lat, 6)}, #{Float.round(lon, 6)}, off the map (too near a pole or the 180th meridian)")
   end
+
+  # The sensors each vehicle's companion computer carries, and what they sense.
+  defp sensing(opts, sysids) do
+    models = Dolphin.Sim.Companion.models()
+
+    sensors =
+      case Keyword.get(opts, :sensors, []) do
+        list when is_list(list) -> {:ok, Map.new(sysids, &{&1, list})}
+        %{} = by_id -> {:ok, by_id}
+        other -> {:error, "bad :sensors #{inspect(other)}: a list of sensor models (#{Enum.join(models, ", ")}), or a map of them by system id"}
+      end
+
+    with {:ok, sensors} <- sensors,
+         nil <- Enum.find_value(sensors, fn {_id, list} -> Enum.find(List.wrap(list), &(&1 not in models)) end) |> unknown_model(models),
+         {:ok, world} <- world(Keyword.get(opts, :world)),
+         rate = Keyword.get(opts, :sensor_rate_hz, 2),
+         true <- (is_number(rate) and rate > 0 and rate <= 50) || {:error, "bad :sensor_rate_hz #{inspect(rate)}: readings a second, more than 0 and at most 50"},
+         noise = Keyword.get(opts, :sensor_noise),
+         true <- noise == nil or (is_number(noise) and noise >= 0) || {:error, "bad :sensor_noise #{inspect(noise)}: the noise's standard deviation, 0 or more"} do
+      {:ok, %{sensors: Map.new(sensors, fn {id, l} -> {id, List.wrap(l)} end), world: world, rate_hz: rate, noise: noise}}
+    else
+      {:error, why} -> Dolphin.Sim.Error.bad_option(why)
+    end
+  end
+
+  defp unknown_model(nil, _models), do: nil
+  defp unknown_model(model, models), do: {:error, "no sensor model #{inspect(model)}; the simulator's sensors are #{Enum.join(models, ", ")}"}
+
+  defp world(nil), do: {:ok, %Dolphin.Sim.World{}}
+  defp world(%Dolphin.Sim.World{} = world), do: {:ok, world}
+  defp world(path) when is_binary(path), do: Dolphin.Sim.World.read(path)
+  defp world(other), do: {:error, "bad :world #{inspect(other)}: a world (Dolphin.Sim.World) or the path of a world file"}
 
   defp cameras(true, sysids), do: sysids
   defp cameras(list, _sysids) when is_list(list), do: list

@@ -253,6 +253,23 @@ defmodule Dolphin.Vehicles do
     :ok
   end
 
+  @doc """
+  From now on every vehicle of the instance, heard or not yet, folds the
+  readings of these sensors' sources into its view (`Dolphin.Vehicles.View`,
+  `sensors`): a script's `sensor` declarations. Sources already watched stay
+  watched; a source declared again keeps the longest `keep` and each
+  `stale_after`.
+  """
+  @spec watch_sensors([Dolphin.Sensors.Sensor.t()]) :: :ok
+  def watch_sensors(sensors) do
+    _ = Dolphin.Vehicles.Settings.declare_sensors(sensors)
+
+    for pid <- Registry.select(Dolphin.Instance.names().registry, [{{{:vehicle, :_}, :"$1", :_}, [], [:"$1"]}]),
+        do: GenServer.cast(pid, :sensors_changed)
+
+    :ok
+  end
+
   @doc "The payloads given to vehicle `id` with `put_payloads/2` (not its components')."
   @spec given_payloads(Id.t()) :: [atom()]
   def given_payloads(id), do: Dolphin.Vehicles.Settings.payloads(id)

@@ -16,7 +16,8 @@ defmodule Dolphin.EventTextTest do
         station: :"gs1@host", heard: 2, stations: [:"gs1@host", :"gs2@host"], kept: :"gs1@host", dropped: :"gs2@host",
         path: "udpin:0.0.0.0:14550 from 10.0.0.7:14555", uid: 9, vehicle_uid: 7, other: "1@10.0.0.7:14555",
         distance: 84.9, height: 0.0, closest: 3.2, in_s: 5.1, held_ms: 4_600, action: :hold, limit_m: 20.0, limit_height_m: 10.0,
-        fence: [[5003, 404_442_330, -73_752_340, 600.0]], rally: [[404_442_330, -73_745_000, 30.0]]
+        fence: [[5003, 404_442_330, -73_752_340, 600.0]], rally: [[404_442_330, -73_745_000, 30.0]],
+        sensor: :smoke, source: "NAMED_VALUE SMOKE", unit: nil, scale: 1.0, offset: 0.0, stale_after: 5_000, lat: 40.4451, lon: -7.376, h: 860.0, sent: 2
       }
 
       for {name, fields} <- Dolphin.Events.catalogue() do

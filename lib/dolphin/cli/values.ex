@@ -219,12 +219,31 @@ defmodule Dolphin.CLI.Values do
       sitl_bin: {:file, "SITL binary"},
       sitl_defaults: {:keep, {:file, "parameter file"}},
       fleet: {:file, "fleet file"},
+      world: {:file, "world file"},
       home: :home,
       seed: :integer,
       speedup: :speedup,
       tlog: :output,
       forward: {:keep, {:endpoint, [:udpout]}}
     ]
+  end
+
+  @doc """
+  `--world FILE` read (`Dolphin.Sim.World`), in place of its path: refused
+  with the file's line and key when it is wrong, and without `--sim`
+  (nothing else senses it).
+  """
+  @spec world(keyword()) :: {:ok, keyword()} | {:error, CommandLineError.t()}
+  def world(opts) do
+    cond do
+      opts[:world] == nil -> {:ok, opts}
+      opts[:sim] == nil -> CommandLineError.usage_error("--world is what simulated sensors sense: it goes with --sim")
+      true -> with {:error, why} <- world_file(opts[:world], opts), do: {:error, CommandLineError.failed("--world", why)}
+    end
+  end
+
+  defp world_file(path, opts) do
+    with {:ok, world} <- Dolphin.Sim.World.read(path), do: {:ok, Keyword.put(opts, :world, world)}
   end
 
   # --- kinds ------------------------------------------------------------------
@@ -253,7 +272,7 @@ defmodule Dolphin.CLI.Values do
   end
 
   # N copters, or airframes and counts: "copter:2,plane:1,boat:1,sub:3".
-  defp value(:sim_fleet, text), do: fleet_spec(text, Dolphin.Sim.airframes())
+  defp value(:sim_fleet, text), do: fleet_spec(text, Dolphin.Sim.airframes(), Dolphin.Sim.Companion.models())
   defp value(:sitl_fleet, text), do: fleet_spec(text, Dolphin.SITL.airframes())
 
   defp value(:vehicles, text), do: integer(text, 1..@max_sysid, "a number of vehicles from 1 to #{@max_sysid} (each needs a system id of its own)")
@@ -384,28 +403,57 @@ defmodule Dolphin.CLI.Values do
     if File.dir?(path), do: {:error, "a directory, not a #{what}"}, else: {:ok, path}
   end
 
-  defp fleet_spec(text, airframes) do
-    if String.contains?(text, ":") do
-      known = Enum.map(airframes, &Atom.to_string/1)
+  # "copter:2,boat:1": airframes and counts; a simulated group may carry
+  # sensors, "copter:2+smoke+range" (and "2+smoke": N copters with them).
+  defp fleet_spec(text, airframes, sensors \\ []) do
+    if String.contains?(text, [":", "+"]), do: groups(text, airframes, sensors), else: value(:vehicles, text)
+  end
 
-      fleet =
-        for part <- String.split(text, ",", trim: true) do
-          with [name, n] <- String.split(part, ":"),
-               true <- name in known,
-               {:ok, count} <- value(:vehicles, n) do
-            {String.to_existing_atom(name), count}
-          else
-            _ -> :error
-          end
+  defp groups(text, airframes, sensors) do
+    known = Enum.map(airframes, &Atom.to_string/1)
+    models = Enum.map(sensors, &Atom.to_string/1)
+
+    fleet =
+      for part <- String.split(text, ",", trim: true) do
+        [group | carried] = String.split(part, "+")
+
+        with {:ok, airframe, n} <- group(group, known),
+             {:ok, carried} <- carried(carried, models) do
+          if carried == [], do: {airframe, n}, else: {airframe, n, carried}
         end
-
-      if :error not in fleet and fleet |> Keyword.values() |> Enum.sum() <= @max_sysid do
-        {:ok, fleet}
-      else
-        {:error, "a number of copters, or airframes and counts such as #{Enum.at(known, -2)}:1,#{List.last(known)}:3 (airframes: #{Enum.join(known, ", ")}; #{@max_sysid} vehicles at most)"}
       end
-    else
-      value(:vehicles, text)
+
+    rule =
+      "a number of copters, or airframes and counts such as #{Enum.at(known, -2)}:1,#{List.last(known)}:3 (airframes: #{Enum.join(known, ", ")}; #{@max_sysid} vehicles at most)" <>
+        if(sensors == [], do: "", else: "; sensors after +, as copter:2+smoke (#{Enum.join(models, ", ")})")
+
+    case Enum.find(fleet, &match?({:error, _}, &1)) do
+      {:error, {:sensor, name}} -> {:error, "no simulated sensor #{inspect(name)}: the simulator's sensors are #{Enum.join(models, ", ")}"}
+      {:error, _} -> {:error, rule}
+      nil -> if Enum.sum(Enum.map(fleet, &elem(&1, 1))) <= @max_sysid, do: {:ok, fleet}, else: {:error, rule}
+    end
+  end
+
+  defp group(text, known) do
+    case String.split(text, ":") do
+      [n] ->
+        with {:ok, n} <- value(:vehicles, n), do: {:ok, :copter, n}, else: (_ -> {:error, :group})
+
+      [name, n] ->
+        with true <- name in known, {:ok, count} <- value(:vehicles, n), do: {:ok, String.to_existing_atom(name), count}, else: (_ -> {:error, :group})
+
+      _ ->
+        {:error, :group}
+    end
+  end
+
+  defp carried([], _models), do: {:ok, []}
+  defp carried(_names, []), do: {:error, :group}
+
+  defp carried(names, models) do
+    case Enum.find(names, &(&1 not in models)) do
+      nil -> {:ok, names |> Enum.uniq() |> Enum.map(&String.to_existing_atom/1)}
+      name -> {:error, {:sensor, name}}
     end
   end
 

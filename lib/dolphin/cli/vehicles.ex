@@ -79,7 +79,7 @@ defmodule Dolphin.CLI.Vehicles do
   end
 
   defp start_sim(n, opts, link_opts, out, defer) do
-    case Dolphin.Sim.Local.start(n, [seed: Keyword.get(opts, :seed, 1), home: opts[:home]] ++ link_opts) do
+    case Dolphin.Sim.Local.start(n, [seed: Keyword.get(opts, :seed, 1), home: opts[:home], world: opts[:world]] ++ link_opts) do
       {:ok, sim} ->
         defer.(fn -> Dolphin.Sim.Local.stop(sim) end)
         IO.puts(out, "#{sim_words(n)} #{Dolphin.Fleet.VehicleSet.format(sim.sysids)} on 127.0.0.1:#{sim.port}")
@@ -106,9 +106,13 @@ defmodule Dolphin.CLI.Vehicles do
 
   @doc false
   # What --sim started, in words: "2 simulated vehicle(s)", "4 simulated vehicle(s) (1 boat, 3 sub)".
-  @spec sim_words(pos_integer() | keyword()) :: String.t()
+  @spec sim_words(pos_integer() | list()) :: String.t()
   def sim_words(n) when is_integer(n), do: "#{n} simulated vehicle(s)"
-  def sim_words(fleet), do: "#{fleet |> Keyword.values() |> Enum.sum()} simulated vehicle(s) (#{Enum.map_join(fleet, ", ", fn {a, n} -> "#{n} #{a}" end)})"
+  def sim_words(fleet) do
+    groups = Dolphin.Sim.Local.groups(fleet)
+    total = groups |> Enum.map(&elem(&1, 1)) |> Enum.sum()
+    "#{total} simulated vehicle(s) (#{Enum.map_join(groups, ", ", fn {a, n, sensors} -> "#{n} #{a}#{Enum.map(sensors, &"+#{&1}")}" end)})"
+  end
 
   @doc false
   # What --sitl started, in words: "2 ArduCopter SITL instance(s)", "3 SITL instance(s): 1 plane, 2 boat".

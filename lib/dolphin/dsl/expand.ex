@@ -36,12 +36,13 @@ defmodule Dolphin.DSL.Expand do
   @spec cond_ast(Macro.t(), Macro.Env.t()) :: Macro.t()
   def cond_ast(c, caller) do
     snapshot = Macro.var(:snapshot, __MODULE__)
-    {body, follow} = reads(c, snapshot, caller)
+    {body, follow, sensors} = reads(c, snapshot, caller)
+    meta = if sensors == [], do: meta(caller), else: quote(do: Map.put(unquote(meta(caller)), :sensor_reads, unquote(sensors)))
 
     quote do
       Dolphin.Engine.Cond.new(fn unquote(snapshot) -> unquote(logic(body, snapshot)) end,
         source: unquote(Macro.to_string(c)),
-        meta: unquote(meta(caller)),
+        meta: unquote(meta),
         follow: unquote(follow)
       )
     end
@@ -62,6 +63,8 @@ defmodule Dolphin.DSL.Expand do
     poll: 2
   ]
 
+  @sensor_readers Dolphin.DSL.Sensors.readers()
+
   # Modules whose functions read nothing a condition follows: calling them
   # hides no read (a reader in a `fn` given to them is rewritten like any).
   @plain [Kernel, Enum, Map, MapSet, List, Keyword, Tuple, String, Integer, Float, Access, Stream, Range]
@@ -72,36 +75,59 @@ defmodule Dolphin.DSL.Expand do
   # module's): such a condition is re-evaluated on the changes of the
   # vehicles its task flies too (Dolphin.Engine.Cond, `follow`).
   defp reads(c, snapshot, caller) do
-    Macro.prewalk(c, false, fn
-      {name, meta, args} = call, follow when is_atom(name) and is_list(args) ->
-        arity = length(args)
+    {body, {follow, sensors}} =
+      Macro.prewalk(c, {false, []}, fn
+        {name, meta, args} = call, {follow, sensors} when is_atom(name) and is_list(args) ->
+          arity = length(args)
 
-        cond do
-          {name, arity} in @readers and imported?(caller, name, arity, Dolphin.DSL) ->
-            {{{:., meta, [Dolphin.Engine.Snapshot, name]}, meta, [snapshot | args]}, follow}
+          cond do
+            {name, arity} in @readers and imported?(caller, name, arity, Dolphin.DSL) ->
+              {{{:., meta, [Dolphin.Engine.Snapshot, name]}, meta, [snapshot | args]}, {follow, sensors}}
 
-          # Operators, special forms and the language's words read nothing hidden.
-          Macro.operator?(name, arity) or Macro.special_form?(name, arity) or name in [:fn, :->, :__block__] ->
-            {call, follow}
+            # A sensor's reader reads the sensor declared (a declaration reads nothing).
+            {name, arity} in @sensor_readers and {:macro, Dolphin.DSL.Sensors} in Macro.Env.lookup_import(caller, {name, arity}) ->
+              case Dolphin.DSL.Sensors.rewrite(name, args, snapshot, caller) do
+                nil -> {call, {follow, sensors}}
+                read -> {read, {follow, sensors ++ sensor_read(args, caller)}}
+              end
 
-          true ->
-            {call, follow or not Enum.any?(Macro.Env.lookup_import(caller, {name, arity}), fn {_, m} -> plain?(m) end)}
-        end
+            # Operators, special forms and the language's words read nothing hidden.
+            Macro.operator?(name, arity) or Macro.special_form?(name, arity) or name in [:fn, :->, :__block__] ->
+              {call, {follow, sensors}}
 
-      {{:., _, [module, _fun]}, meta, _} = call, follow ->
-        case Macro.expand(module, caller) do
-          module when is_atom(module) -> {call, follow or not plain?(module)}
-          # A field of a value (`position(v).h`) reads nothing hidden; a call through a variable may.
-          _value -> {call, follow or not Keyword.get(meta, :no_parens, false)}
-        end
+            true ->
+              {call, {follow or not Enum.any?(Macro.Env.lookup_import(caller, {name, arity}), fn {_, m} -> plain?(m) end), sensors}}
+          end
 
-      {{:., _, [_fun]}, _, _} = call, _follow ->
-        {call, true}
+        {{:., _, [module, _fun]}, meta, _} = call, {follow, sensors} ->
+          case Macro.expand(module, caller) do
+            module when is_atom(module) -> {call, {follow or not plain?(module), sensors}}
+            # A field of a value (`position(v).h`) reads nothing hidden; a call through a variable may.
+            _value -> {call, {follow or not Keyword.get(meta, :no_parens, false), sensors}}
+          end
 
-      other, follow ->
-        {other, follow}
-    end)
+        {{:., _, [_fun]}, _, _} = call, {_follow, sensors} ->
+          {call, {true, sensors}}
+
+        other, acc ->
+          {other, acc}
+      end)
+
+    {body, follow, Enum.uniq(sensors)}
   end
+
+  # A sensor read on a vehicle named by a variable or an id, as `{vehicle,
+  # sensor}` for the condition's `sensor_threshold` event; a vehicle
+  # computed otherwise is not known before the condition runs.
+  defp sensor_read([v, name | _], caller) when is_atom(name) do
+    case v do
+      {var, _, context} when is_atom(var) and is_atom(context) -> [quote(do: {unquote(v), unquote(Macro.escape(Dolphin.DSL.Sensors.declared(caller)[name]))})]
+      id when is_integer(id) -> [quote(do: {unquote(id), unquote(Macro.escape(Dolphin.DSL.Sensors.declared(caller)[name]))})]
+      _ -> []
+    end
+  end
+
+  defp sensor_read(_args, _caller), do: []
 
   defp imported?(caller, name, arity, module), do: {:function, module} in Macro.Env.lookup_import(caller, {name, arity})
 

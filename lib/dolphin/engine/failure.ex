@@ -75,6 +75,8 @@ defmodule Dolphin.Engine.Failure do
   def format_reason({:crashed, :no_report_after_stop}), do: "engine process crashed: it did not report after it was stopped (killed)"
   def format_reason({:crashed, reason}), do: "engine process #{exit_words(reason)}"
   def format_reason({:condition_met, id}), do: "stopped: the condition of task #{id} held"
+  def format_reason({:sent_to_look, id}), do: "stopped: on_sensor (task #{id}) sent its vehicle to look at a detection; the mission goes on afterwards"
+  def format_reason({:on_sensor_failed, reason}), do: "on_sensor's then: failed: #{format_reason(reason)}"
   def format_reason({:time_limit, id}), do: "stopped: time limit of task #{id}"
   def format_reason({:sibling_failed, _}), do: "stopped: a concurrent task failed"
   def format_reason({:parent_exit, reason}), do: "stopped: what started it #{parent_words(reason)}"

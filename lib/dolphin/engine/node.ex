@@ -22,6 +22,8 @@ defmodule Dolphin.Engine.Node do
   #                              {:platform_start_failed, reason}, {:vehicle_lost, id}
   #   {:platform_stop, reason}   (platform tasks) bounded stop callback
   #   {:emit, event, fields}     a Dolphin.Events event (run and task_id added, unless given)
+  #   {:emit, :condition_met, fields, reads}  and a sensor_threshold event for each
+  #                              {vehicle, sensor} the condition read (its reading now)
   #   :continue                  -> :continue at once (to do things one at a time)
   #   {:finish, result}          :done | {:failed, reason}
   #
@@ -46,6 +48,7 @@ defmodule Dolphin.Engine.Node do
           | :platform_start
           | {:platform_stop, term()}
           | {:emit, atom(), map()}
+          | {:emit, :condition_met, map(), [{term(), Dolphin.Sensors.Sensor.t()}]}
           | :continue
           | {:finish, :done | {:failed, term()}}
 
@@ -72,5 +75,11 @@ defmodule Dolphin.Engine.Node do
   def completed(_done_or_stopped), do: :done
 
   @doc false
-  def cond_met(cond, branch \\ nil), do: {:emit, :condition_met, %{condition: cond.source, branch: branch}}
+  # With the sensors it read (Dolphin.DSL.Sensors): the runner says each one's reading too.
+  def cond_met(cond, branch \\ nil) do
+    case Map.get(cond.meta, :sensor_reads, []) do
+      [] -> {:emit, :condition_met, %{condition: cond.source, branch: branch}}
+      reads -> {:emit, :condition_met, %{condition: cond.source, branch: branch}, reads}
+    end
+  end
 end

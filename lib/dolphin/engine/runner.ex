@@ -466,6 +466,16 @@ defmodule Dolphin.Engine.Runner do
     s
   end
 
+  defp effect({:emit, :condition_met, fields, sensor_reads}, s) do
+    emit(s, :condition_met, fields)
+
+    for {v, sensor} <- sensor_reads,
+        detection = Dolphin.Engine.Watcher.detection(v, sensor),
+        do: emit(s, :sensor_threshold, Dolphin.Sensors.Detection.event_fields(detection, fields.condition, nil))
+
+    s
+  end
+
   defp effect(:continue, s), do: feed(s, :continue)
   defp effect({:finish, result}, s), do: finish(s, result)
 

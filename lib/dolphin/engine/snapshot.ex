@@ -10,7 +10,9 @@ defmodule Dolphin.Engine.Snapshot do
   write conditions this way: they rewrite the readers of the language called
   in the condition's expression (`battery/1`, `position/1`, `altitude/1`,
   `relative_altitude/1`, `mode/1`, `armed?/1`, `connected?/1`,
-  `mission_progress/1`, `poll/1,2`) into the readers below.
+  `mission_progress/1`, `poll/1,2`, and the sensors' `sensor/2`,
+  `sensor_age/2`, `peak/3`, `peak_position/3` given the sensor declared)
+  into the readers below.
 
   The node's `Dolphin.Engine.Watcher` builds the snapshot: the latest
   `Dolphin.Vehicles.View` of each vehicle the condition has read, and the
@@ -28,6 +30,7 @@ defmodule Dolphin.Engine.Snapshot do
 
   alias Dolphin.Engine.{Context, Signals, Watcher}
   alias Dolphin.Fleet.VehicleSet
+  alias Dolphin.Sensors.Sensor
   alias Dolphin.Vehicles.View
 
   defstruct vehicles: %{}, reads: MapSet.new(), signals: nil
@@ -105,6 +108,54 @@ defmodule Dolphin.Engine.Snapshot do
   @doc "Mission progress of a vehicle (see `Dolphin.DSL.mission_progress/1`)."
   @spec mission_progress(t() | nil, VehicleSet.t() | non_neg_integer()) :: {non_neg_integer(), non_neg_integer()} | nil
   def mission_progress(snapshot, v), do: vehicle(snapshot, v, :mission_progress).mission_progress
+
+  @doc "A sensor's latest value on a vehicle, `nil` when not heard or stale (see `Dolphin.DSL.Sensors.sensor/2`)."
+  @spec sensor(t() | nil, VehicleSet.t() | non_neg_integer(), Sensor.t()) :: float() | nil
+  def sensor(snapshot, v, %Sensor{source: source, stale_after: stale_after} = sensor) do
+    case vehicle(snapshot, v, :sensor).sensors do
+      %{^source => %{stale: stale} = r} -> if stale_after in stale, do: nil, else: Dolphin.Sensors.value(sensor, r.value)
+      _ -> nil
+    end
+  end
+
+  @doc "Clock ms since a sensor's latest reading on a vehicle, `nil` before the first (see `Dolphin.DSL.Sensors.sensor_age/2`)."
+  @spec sensor_age(t() | nil, VehicleSet.t() | non_neg_integer(), Sensor.t()) :: non_neg_integer() | nil
+  def sensor_age(snapshot, v, %Sensor{source: source}) do
+    case vehicle(snapshot, v, :sensor_age).sensors do
+      %{^source => %{at: at}} -> max(Dolphin.Clock.now_ms() - at, 0)
+      _ -> nil
+    end
+  end
+
+  @doc "A sensor's highest value on a vehicle in the last `within` clock ms, `nil` when none (see `Dolphin.DSL.Sensors.peak/3`)."
+  @spec peak(t() | nil, VehicleSet.t() | non_neg_integer(), Sensor.t(), pos_integer()) :: float() | nil
+  def peak(snapshot, v, sensor, within) do
+    with {value, _position} <- peak_reading(vehicle(snapshot, v, :peak), sensor, within), do: value
+  end
+
+  @doc "Where a vehicle was at `peak/4`'s reading, `nil` when none (see `Dolphin.DSL.Sensors.peak_position/3`)."
+  @spec peak_position(t() | nil, VehicleSet.t() | non_neg_integer(), Sensor.t(), pos_integer()) :: Dolphin.Geo.Location.t() | nil
+  def peak_position(snapshot, v, sensor, within) do
+    with {_value, position} <- peak_reading(vehicle(snapshot, v, :peak_position), sensor, within), do: position
+  end
+
+  defp peak_reading(%View{sensors: sensors}, %Sensor{source: source} = sensor, within) when is_integer(within) and within > 0 do
+    since = Dolphin.Clock.now_ms() - within
+
+    case Map.get(sensors, source) do
+      nil ->
+        nil
+
+      %{history: history} ->
+        history
+        |> Enum.take_while(fn {at, _, _} -> at >= since end)
+        |> Enum.map(fn {_at, raw, position} -> {Dolphin.Sensors.value(sensor, raw), position} end)
+        |> Enum.max_by(&elem(&1, 0), fn -> nil end)
+    end
+  end
+
+  defp peak_reading(_view, %Sensor{name: name}, within),
+    do: raise(ArgumentError, "peak(_, #{inspect(name)}, within: ...) takes a duration in ms (seconds(30)), got: #{inspect(within)}")
 
   @doc "Whether the script's signal `key` has a value (see `Dolphin.DSL.poll/1`)."
   @spec poll(t() | nil, term()) :: boolean()

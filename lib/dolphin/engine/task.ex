@@ -29,7 +29,7 @@ defmodule Dolphin.Engine.Task do
       "#Task<idle(1000) >>> (idle(5) ||| idle(6))>"
   """
 
-  alias Dolphin.Engine.{Action, AllOf, Concurrent, Condition, During, Idle, On, OneOf, PlatformTask, Sequence, Until, WaitFor, Watch}
+  alias Dolphin.Engine.{Action, AllOf, Concurrent, Condition, During, Idle, On, OneOf, OnSensor, PlatformTask, Sequence, Until, WaitFor, Watch}
 
   @type t ::
           Idle.t()
@@ -45,6 +45,7 @@ defmodule Dolphin.Engine.Task do
           | OneOf.t()
           | AllOf.t()
           | Watch.t()
+          | OnSensor.t()
 
   @doc "Converts a value to a task with `Dolphin.Engine.Taskable`; `ArgumentError` if it is not one."
   @spec new!(term()) :: t()
@@ -139,6 +140,9 @@ defmodule Dolphin.Engine.Task do
   defp fmt(%AllOf{branches: bs}, _), do: "all_of(" <> Enum.map_join(bs, "; ", fn {c, t} -> "#{c.source} -> #{fmt(t, 0)}" end) <> ")"
   defp fmt(%Watch{task: t, on_error: :reassign, from: nil}, _), do: "reassign(#{fmt(t, 0)})"
   defp fmt(%Watch{task: t, on_error: :reassign, from: set}, _), do: "reassign(#{fmt(t, 0)}, from: #{Dolphin.Fleet.VehicleSet.format(set)})"
+  defp fmt(%OnSensor{} = t, _),
+    do: "on_sensor(%{" <> Enum.map_join(t.missions, ", ", fn {v, m} -> "#{v} => #{inspect(m.name)}" end) <> "}, #{inspect(t.sensor.name)}, above: #{t.above})"
+
   defp fmt(%Watch{task: t, on_error: e}, _), do: "watch(#{fmt(t, 0)}, on_error: #{if is_function(e), do: "fn", else: inspect(e)})"
 
   defp paren(s, true), do: "(" <> s <> ")"

@@ -180,4 +180,19 @@ defmodule Dolphin.Engine.Watcher do
       {:error, :unknown_vehicle} -> raise ArgumentError, "unknown vehicle #{inspect(id)}"
     end
   end
+
+  @doc """
+  The latest reading of `sensor` on a vehicle (a one-vehicle set or an id),
+  read live as `vehicle/2` does, as a `Dolphin.Sensors.Detection`; nil when
+  the vehicle is unknown or has none.
+  """
+  @spec detection(VehicleSet.t() | Dolphin.Vehicles.Id.t(), Dolphin.Sensors.Sensor.t()) :: Dolphin.Sensors.Detection.t() | nil
+  def detection(ref, sensor) do
+    with [id] <- VehicleSet.ids(VehicleSet.new(ref)),
+         {:ok, view} <- Source.vehicle(Context.source(Context.current()), id) do
+      Dolphin.Sensors.Detection.of(view, sensor)
+    else
+      _ -> nil
+    end
+  end
 end

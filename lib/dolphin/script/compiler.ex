@@ -34,6 +34,8 @@ defmodule Dolphin.Script.Compiler do
         # compiled: the line is the script's frame in the stack.
         e in ArgumentError ->
           {:error, %Error{kind: :compile, file: file, line: script_line(__STACKTRACE__, file), message: Exception.message(e)}}
+      after
+        Dolphin.DSL.Sensors.forget(module)
       end
     end
   end

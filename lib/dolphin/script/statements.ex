@@ -79,6 +79,26 @@ defmodule Dolphin.Script.Statements do
   def min_separation(horizontal, vertical),
     do: raise(ArgumentError, "min_separation takes metres across and in height, each more than 0, got: #{inspect(horizontal)}, #{inspect(vertical)}")
 
+  @doc """
+  A script's sensor declaration, once it runs: every vehicle of the station
+  watches its source from now on (`Dolphin.Vehicles.watch_sensors/1`), and
+  the event `sensor_declared` says what it reads (the flight report plots
+  it). Returns the sensor.
+  """
+  @spec sensor(Dolphin.Sensors.Sensor.t()) :: Dolphin.Sensors.Sensor.t()
+  def sensor(%Dolphin.Sensors.Sensor{} = sensor) do
+    ctx = Context.current()
+    :ok = Dolphin.Vehicles.watch_sensors([sensor])
+
+    Dolphin.Events.emit(
+      :sensor_declared,
+      %{sensor: sensor.name, source: Dolphin.Sensors.describe_source(sensor.source), unit: sensor.unit, scale: sensor.scale, offset: sensor.offset, stale_after: sensor.stale_after},
+      ctx.clock.now_ms()
+    )
+
+    sensor
+  end
+
   @doc "Sets the rally points of the script's fence (`Dolphin.Fence`'s `rally`)."
   @spec rally([Dolphin.Geo.Location.t()]) :: :ok
   def rally(points) do

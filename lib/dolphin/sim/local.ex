@@ -12,8 +12,9 @@ defmodule Dolphin.Sim.Local do
   @type t :: %{link: pid(), port: :inet.port_number(), sysids: [byte()]}
 
   @doc """
-  Starts `count` simulated vehicles on a new local link. Options: `:seed`,
-  `:first_sysid` (default 1), and the link's options (`:tlog`, `:forward`). Returns once the fleet knows every
+  Starts `count` simulated vehicles (or the groups of `groups/1`) on a new
+  local link. Options: `:seed`, `:first_sysid` (default 1), `:world` (what
+  their sensors sense: a `Dolphin.Sim.World` or a world file's path), and the link's options (`:tlog`, `:forward`). Returns once the fleet knows every
   vehicle (or after 10 s of real time), or an error saying what failed.
   """
   @spec start(pos_integer() | [{atom(), pos_integer()}], keyword()) :: {:ok, t()} | {:error, Dolphin.Sim.Error.t()}
@@ -22,17 +23,19 @@ defmodule Dolphin.Sim.Local do
 
   def start(fleet, opts) when is_list(fleet) do
     name = {:dolphin_local_sim, System.unique_integer([:positive])}
-    count = fleet |> Keyword.values() |> Enum.sum()
+    fleet = groups(fleet)
+    count = fleet |> Enum.map(&elem(&1, 1)) |> Enum.sum()
     {seed, opts} = Keyword.pop(opts, :seed, 1)
     {first, opts} = Keyword.pop(opts, :first_sysid, 1)
-    {home, link_opts} = Keyword.pop(opts, :home)
+    {home, opts} = Keyword.pop(opts, :home)
+    {world, link_opts} = Keyword.pop(opts, :world)
 
     case Dolphin.Link.connect("udpin:127.0.0.1:0", [name: name] ++ link_opts) do
       {:ok, link} ->
         port = Dolphin.Link.Connection.port(name)
         # Camera drones: every simulated vehicle carries a camera (component 100).
         # They boot as ArduCopter does: 2 s of MAV_STATE BOOT refusing uploads.
-        sim_opts = [gcs: {{127, 0, 0, 1}, port}, speedup: Dolphin.Clock.speedup(), seed: seed, camera: true, boot_ms: 2_000]
+        sim_opts = [gcs: {{127, 0, 0, 1}, port}, speedup: Dolphin.Clock.speedup(), seed: seed, camera: true, boot_ms: 2_000] ++ if(world, do: [world: world], else: [])
 
         case start_groups(fleet, first, count, home, sim_opts) do
           {:ok, sysids} ->
@@ -59,11 +62,11 @@ defmodule Dolphin.Sim.Local do
     [charger] = Dolphin.Sim.homes(1, around)
 
     fleet
-    |> Enum.reduce_while({:ok, [], first, homes}, fn {airframe, n}, {:ok, started, next, homes} ->
+    |> Enum.reduce_while({:ok, [], first, homes}, fn {airframe, n, sensors}, {:ok, started, next, homes} ->
       {mine, rest} = Enum.split(homes, n)
       mine = if Dolphin.Airframe.heights(airframe) == :depth, do: Enum.map(mine, &%{&1 | alt: 0.0}), else: mine
 
-      case Dolphin.Sim.start(sim_opts ++ [count: n, first_sysid: next, homes: mine, charger: charger, airframe: airframe]) do
+      case Dolphin.Sim.start(sim_opts ++ [count: n, first_sysid: next, homes: mine, charger: charger, airframe: airframe, sensors: sensors]) do
         {:ok, sysids} -> {:cont, {:ok, started ++ sysids, next + n, rest}}
         {:error, e} -> {:halt, {:error, e, started}}
       end
@@ -79,6 +82,20 @@ defmodule Dolphin.Sim.Local do
   rescue
     e in ArgumentError -> {:error, %Dolphin.Sim.Error{reason: :bad_option, message: Exception.message(e)}}
   end
+
+  @doc """
+  A fleet as `--sim` gives it — a number of copters, or `{airframe, count}`
+  and `{airframe, count, sensors}` groups — as `{airframe, count, sensors}`
+  groups.
+
+      iex> Dolphin.Sim.Local.groups([copter: 2, boat: 1])
+      [{:copter, 2, []}, {:boat, 1, []}]
+      iex> Dolphin.Sim.Local.groups(3)
+      [{:copter, 3, []}]
+  """
+  @spec groups(pos_integer() | [{atom(), pos_integer()} | {atom(), pos_integer(), [atom()]}]) :: [{atom(), pos_integer(), [atom()]}]
+  def groups(n) when is_integer(n), do: [{:copter, n, []}]
+  def groups(fleet) when is_list(fleet), do: Enum.map(fleet, fn {a, n} -> {a, n, []}; {_, _, _} = g -> g end)
 
   @doc """
   Stops what `start/2` started; the ground station forgets the vehicles too (a

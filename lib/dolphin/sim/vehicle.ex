@@ -68,7 +68,8 @@ defmodule Dolphin.Sim.Vehicle do
           lag_ms: 0,
           unsendable: MapSet.new(),
           sent: 0,
-          received: 0
+          received: 0,
+          companion: companion(opts, seed)
         }
 
         # The first heartbeat at once: a booting vehicle is heard at once.
@@ -78,6 +79,14 @@ defmodule Dolphin.Sim.Vehicle do
 
       {:error, why} ->
         {:stop, {:cannot_open, "simulated vehicle #{sysid}", :inet.format_error(why)}}
+    end
+  end
+
+  # Its sensors' companion computer (Dolphin.Sim.Companion), when it carries sensors.
+  defp companion(opts, seed) do
+    case Keyword.get(opts, :sensors, []) do
+      [] -> nil
+      sensors -> Dolphin.Sim.Companion.new(sensors, Keyword.get(opts, :world), rate_hz: Keyword.get(opts, :sensor_rate_hz, 2), noise: Keyword.get(opts, :sensor_noise), seed: {seed, key(opts)})
     end
   end
 
@@ -106,6 +115,7 @@ defmodule Dolphin.Sim.Vehicle do
       photos: m.photos,
       speed: m.speed,
       faults: Faults.to_map(s.faults_out),
+      sensors: if(s.companion, do: s.companion.sensors, else: []),
       sent: s.sent,
       received: s.received
     }
@@ -126,7 +136,7 @@ defmodule Dolphin.Sim.Vehicle do
     target = Clock.now_ms() - s.clock_origin
     {model, steps} = catch_up(s.model, target, 0)
     lag = max(target - model.time_ms - @step_ms, 0)
-    s = transmit(%{s | model: model, lag_ms: lag})
+    s = s |> Map.put(:model, model) |> Map.put(:lag_ms, lag) |> transmit() |> sense()
 
     if steps == 0 or lag > 0 do
       # Wait for the clock to move on by the rest of a step.
@@ -188,6 +198,13 @@ defmodule Dolphin.Sim.Vehicle do
   defp transmit(s) do
     {outputs, model} = Copter.flush(s.model)
     Enum.reduce(outputs, %{s | model: model}, &transmit_one/2)
+  end
+
+  defp sense(%{companion: nil} = s), do: s
+
+  defp sense(s) do
+    {outputs, companion} = Dolphin.Sim.Companion.step(s.companion, s.model)
+    Enum.reduce(outputs, %{s | companion: companion}, &transmit_one/2)
   end
 
   defp transmit_one({:reboot, nil}, s), do: %{s | model: Copter.reboot(s.model), clock_origin: Clock.now_ms()}

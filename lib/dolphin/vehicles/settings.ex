@@ -5,7 +5,8 @@ defmodule Dolphin.Vehicles.Settings do
   and the payloads it carries that it cannot announce over MAVLink
   (`Dolphin.Vehicles.put_payloads/2`: a fleet file's, a SITL camera), which
   a restarted process (a crash, a vehicle forgotten and heard again) keeps,
-  and which are set before the vehicle is first heard. One public ETS table, read by the vehicle's process as it starts,
+  and which are set before the vehicle is first heard; and the sensor sources
+  scripts declared, which every vehicle watches. One public ETS table, read by the vehicle's process as it starts,
   owned by this small process, started before the vehicles' supervisor.
   """
 
@@ -72,6 +73,19 @@ defmodule Dolphin.Vehicles.Settings do
     end
   end
 
+  @doc """
+  Adds the declarations of `sensors` (`Dolphin.Sensors.Sensor`s) to the
+  sources every vehicle of the instance watches, and returns what they are
+  now (`Dolphin.Sensors.Readings.declare/2`). Serialised by this process:
+  two runs declaring at once both count.
+  """
+  @spec declare_sensors([Dolphin.Sensors.Sensor.t()]) :: %{Dolphin.Sensors.Sensor.source() => Dolphin.Sensors.Readings.config()}
+  def declare_sensors(sensors), do: GenServer.call(Dolphin.Instance.names().settings, {:declare_sensors, sensors})
+
+  @doc "The sensor sources watched (`declare_sensors/1`), `%{}` when none."
+  @spec sensors() :: %{Dolphin.Sensors.Sensor.source() => Dolphin.Sensors.Readings.config()}
+  def sensors, do: sensors(table())
+
   @doc "The connection timeout set for vehicle `sysid`, or `default`."
   @spec timeout(Dolphin.Vehicles.Id.t(), pos_integer() | nil) :: pos_integer() | nil
   def timeout(sysid, default) do
@@ -84,7 +98,21 @@ defmodule Dolphin.Vehicles.Settings do
   @impl true
   def init(table) do
     :ets.new(table, [:named_table, :public, :set, read_concurrency: true])
-    {:ok, nil}
+    {:ok, table}
+  end
+
+  @impl true
+  def handle_call({:declare_sensors, sensors}, _from, table) do
+    config = Dolphin.Sensors.Readings.declare(sensors(table), sensors)
+    :ets.insert(table, {:sensors, config})
+    {:reply, config, table}
+  end
+
+  defp sensors(table) do
+    case :ets.lookup(table, :sensors) do
+      [{_, config}] -> config
+      [] -> %{}
+    end
   end
 
   defp table, do: Dolphin.Instance.names().settings

@@ -14,6 +14,7 @@ defmodule Dolphin.Vehicles.State do
   | `mission` | MISSION_CURRENT, MISSION_ITEM_REACHED | `%{current, total, state, reached}` of the mission on the vehicle: all `nil` again when a new one is uploaded or it is cleared (`mission_replaced/1`) |
   | `landed` | EXTENDED_SYS_STATE | `:on_ground`, `:in_air`, `:takeoff`, `:landing` or nil |
   | `status_texts` | STATUSTEXT | the last 20 `{severity, text}`, newest first |
+  | `sensors` | NAMED_VALUE_FLOAT/INT, any message field watched (any component) | the readings of the sources in `watch` (`Dolphin.Sensors.Readings`), by source |
   | `uid` | AUTOPILOT_VERSION (autopilot component) | the autopilot's unique id (`unique_id/1`; 0: it has none), `nil` until reported |
   | `components` | HEARTBEAT of other components | e.g. `:camera`, `:gimbal` |
   | `link` | every frame | `%{received, lost, last_seen_ms}`: `lost` counts sequence gaps |
@@ -24,6 +25,7 @@ defmodule Dolphin.Vehicles.State do
 
   alias Dolphin.MAVLink.Ardupilotmega, as: M
   alias Dolphin.MAVLink.Frame
+  alias Dolphin.Sensors.Readings
   alias Dolphin.Vehicles.{LinkQuality, Modes}
 
   @max_texts 20
@@ -44,6 +46,8 @@ defmodule Dolphin.Vehicles.State do
             landed: nil,
             status_texts: [],
             uid: nil,
+            sensors: %{},
+            watch: %{named: %{}, messages: %{}, keep: %{}},
             components: MapSet.new(),
             link: %{received: 0, lost: 0, last_seen_ms: nil},
             link_quality: LinkQuality.new(),
@@ -62,7 +66,25 @@ defmodule Dolphin.Vehicles.State do
     state
     |> count(frame, now_ms)
     |> message(frame.compid, frame.message)
+    |> sense(frame, now_ms)
   end
+
+  @doc "The state watching the sensor sources of `watch` (`Dolphin.Sensors.Readings.watch/1`); readings of sources no longer watched are dropped."
+  @spec watch_sensors(t(), Readings.watch()) :: t()
+  def watch_sensors(%__MODULE__{} = state, watch), do: %{state | watch: watch, sensors: Map.take(state.sensors, Map.keys(watch.keep))}
+
+  # Nothing watched (no script declared a sensor): nothing to look at.
+  defp sense(%{watch: %{named: named, messages: messages}} = state, _frame, _now) when map_size(named) == 0 and map_size(messages) == 0, do: state
+
+  defp sense(state, frame, now) do
+    case Readings.fold(state.sensors, state.watch, frame.compid, frame.message, now, fn -> location(state.position) end) do
+      same when same === state.sensors -> state
+      sensors -> %{state | sensors: sensors}
+    end
+  end
+
+  defp location(nil), do: nil
+  defp location(p), do: Dolphin.Geo.Location.new(p.lat, p.lon, p.alt)
 
   # Sequence numbers are per component; a gap is frames lost on the way.
   defp count(%{link: link, seqs: seqs} = state, %Frame{compid: compid, seq: seq}, now_ms) do
@@ -245,7 +267,7 @@ defmodule Dolphin.Vehicles.State do
   @spec changes(t(), t()) :: [{atom(), term()}]
   def changes(old, new) do
     fields =
-      for field <- [:type, :autopilot, :mode, :armed, :system_status, :position, :home, :battery, :mission, :landed, :status_texts, :uid, :components],
+      for field <- [:type, :autopilot, :mode, :armed, :system_status, :position, :home, :battery, :mission, :landed, :status_texts, :uid, :components, :sensors],
           Map.fetch!(old, field) != Map.fetch!(new, field),
           do: {field, Map.fetch!(new, field)}
 

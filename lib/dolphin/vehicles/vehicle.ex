@@ -13,12 +13,13 @@ defmodule Dolphin.Vehicles.Vehicle do
   alias Dolphin.Link.Connection
   alias Dolphin.MAVLink.Frame
   alias Dolphin.MAVLink.Ardupilotmega, as: M
+  alias Dolphin.Sensors.Readings
   alias Dolphin.Vehicles.{CommandProtocol, MissionProtocol, ParamProtocol, Paths, Settings, State, View, Views}
 
   @lost_floor_real_ms 3_000
   @late_real_ms 100
 
-  defstruct [:id, :sysid, :network, :paths, :judge_due, :state, :heard, :timeout_ms, :check_due_ms, :check_timer, :requests_left, exact_timeout?: false, lost: false, view: nil, ops: %{}, queued: %{}]
+  defstruct [:id, :sysid, :network, :paths, :judge_due, :state, :heard, :timeout_ms, :check_due_ms, :check_timer, :requests_left, exact_timeout?: false, lost: false, view: nil, ops: %{}, queued: %{}, sensor_limits: %{}]
 
   # The process's state. `paths`: one path per link (and address) the vehicle
   # is heard on (Dolphin.Vehicles.Paths), the one it was discovered on in
@@ -33,7 +34,8 @@ defmodule Dolphin.Vehicles.Vehicle do
   # requests to repeat until position telemetry comes. `ops`: operations
   # under way, by key (a command id, or :mission: one transfer at a time),
   # each %{pid, from, monitor, what}; `queued`: what waits for each key, a
-  # queue of {module, request, opts, monitor}.
+  # queue of {module, request, opts, monitor}. `sensor_limits`: the sensor
+  # sources watched, with their staleness limits (Dolphin.Vehicles.Settings.sensors/0).
   @type t :: %__MODULE__{
           id: Dolphin.Vehicles.Id.t(),
           sysid: byte(),
@@ -50,7 +52,8 @@ defmodule Dolphin.Vehicles.Vehicle do
           lost: boolean(),
           view: View.t() | nil,
           ops: %{term() => map()},
-          queued: %{term() => :queue.queue()}
+          queued: %{term() => :queue.queue()},
+          sensor_limits: %{Dolphin.Sensors.Sensor.source() => Readings.config()}
         }
 
   # Messages asked for by interval (µs of vehicle time) on top of the streams:
@@ -124,7 +127,8 @@ defmodule Dolphin.Vehicles.Vehicle do
        judge_due: real + judge_period(),
        # Seen now (it was just heard, or its process restarted): silence from
        # here on makes it lost.
-       state: %{put_in(State.new(id).link.last_seen_ms, now) | uid: uid},
+       state: State.watch_sensors(%{put_in(State.new(id).link.last_seen_ms, now) | uid: uid}, Readings.watch(Settings.sensors())),
+       sensor_limits: Settings.sensors(),
        timeout_ms: timeout,
        exact_timeout?: set != nil,
        check_due_ms: now + check_period(timeout),
@@ -155,7 +159,9 @@ defmodule Dolphin.Vehicles.Vehicle do
 
       :fresh ->
         Views.heard(s.heard, now)
-        s = publish(s, %{State.apply(s.state, frame, now) | link_quality: Paths.quality(s.paths)})
+        old = s.state
+        s = publish(s, %{State.apply(old, frame, now) | link_quality: Paths.quality(s.paths)})
+        arm_staleness(s, Readings.fresh(old.sensors, s.state.sensors))
         route_to_op(s, frame)
 
         # Position telemetry flowing means the requests were heard.
@@ -165,6 +171,11 @@ defmodule Dolphin.Vehicles.Vehicle do
   end
 
   def handle_cast(:settings_changed, s), do: {:noreply, publish_view(s)}
+
+  def handle_cast(:sensors_changed, s) do
+    limits = Settings.sensors()
+    {:noreply, publish(%{s | sensor_limits: limits}, State.watch_sensors(s.state, Readings.watch(limits)))}
+  end
 
   def handle_cast({:send, message}, s) do
     send_message(s, message)
@@ -200,6 +211,16 @@ defmodule Dolphin.Vehicles.Vehicle do
 
   @impl true
   def handle_info(:request_telemetry, %{requests_left: 0} = s), do: {:noreply, s}
+
+  # A reading that outlived a staleness limit with no newer one: the view
+  # says so at that moment, so that a condition on it is judged then, even
+  # when nothing else of the vehicle changes.
+  def handle_info({:sensor_stale, source, at, ms}, s) do
+    case Readings.stale(s.state.sensors, source, at, ms) do
+      :unchanged -> {:noreply, s}
+      sensors -> {:noreply, publish(s, %{s.state | sensors: sensors})}
+    end
+  end
 
   def handle_info(:request_telemetry, s) do
     s = request_telemetry(s)
@@ -301,6 +322,15 @@ defmodule Dolphin.Vehicles.Vehicle do
   end
 
   defp real_ms, do: System.monotonic_time(:millisecond)
+
+  defp arm_staleness(_s, []), do: :ok
+
+  defp arm_staleness(s, fresh) do
+    for {source, at} <- fresh, %{stale_after: limits} <- [Map.get(s.sensor_limits, source)], ms <- limits,
+        do: Clock.send_after(self(), {:sensor_stale, source, at, ms}, ms)
+
+    :ok
+  end
 
   @doc """
   The silence, in clock time, after which a vehicle with the default

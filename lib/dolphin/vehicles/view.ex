@@ -33,6 +33,7 @@ defmodule Dolphin.Vehicles.View do
   | `home` | `Dolphin.Geo.Location` of its home, or `nil` until reported |
   | `system_status` | MAV_STATE number (0 UNINIT, 1 BOOT, ... 4 ACTIVE), `nil` until reported |
   | `link` | `%{rtt_ms, loss_in, loss_out}`: round trip and loss each way, `nil`s until measured (`Dolphin.Vehicles.LinkQuality`) |
+  | `sensors` | the readings of the sensors scripts declared (`Dolphin.Sensors.Readings`), by source; `%{}` until one is heard |
   | `status_texts` | the autopilot's last STATUSTEXTs, `{severity, text}`, newest first (see `Dolphin.Vehicles.State`); what it said since an earlier view is `Dolphin.Vehicles.State.texts_since/2` of the two |
   """
 
@@ -57,7 +58,8 @@ defmodule Dolphin.Vehicles.View do
             home: nil,
             system_status: nil,
             link: %{rtt_ms: nil, loss_in: nil, loss_out: nil},
-            status_texts: []
+            status_texts: [],
+            sensors: %{}
 
   @type class :: :uav | :ugv | :usv | :uuv | :other
   @type airframe :: Dolphin.Airframe.t()
@@ -83,7 +85,8 @@ defmodule Dolphin.Vehicles.View do
           home: Dolphin.Geo.Location.t() | nil,
           system_status: non_neg_integer() | nil,
           link: %{rtt_ms: non_neg_integer() | nil, loss_in: float() | nil, loss_out: float() | nil},
-          status_texts: [{non_neg_integer(), String.t()}]
+          status_texts: [{non_neg_integer(), String.t()}],
+          sensors: Dolphin.Sensors.Readings.t()
         }
 
   @doc """
@@ -272,7 +275,8 @@ defmodule Dolphin.Vehicles.View do
       home: state.home && Dolphin.Geo.Location.new(state.home.lat, state.home.lon, state.home.alt),
       system_status: state.system_status,
       link: Map.take(Dolphin.Vehicles.State.link_figures(state), [:rtt_ms, :loss_in, :loss_out]),
-      status_texts: state.status_texts
+      status_texts: state.status_texts,
+      sensors: state.sensors
     }
   end
 

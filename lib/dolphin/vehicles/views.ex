@@ -22,7 +22,7 @@ defmodule Dolphin.Vehicles.Views do
        after the view (whoever hears of a loss finds the view saying so);
     5. `{:vehicle_changed, id}` is published on topic `:vehicles` when what a
        pick matches on, but the position, changed (`type`, `payloads`,
-       `connected?`, or a first view): the fleet serves its waiting picks
+       `connected?`, a sensor heard for the first time, or a first view): the fleet serves its waiting picks
        again then, and on a slow tick for picks by region.
 
   Every source of views announces through here (a vehicle of this node, the
@@ -165,8 +165,10 @@ defmodule Dolphin.Vehicles.Views do
     if events?, do: Enum.each(transitions, fn {event, meta} -> Events.emit(event, meta) end)
     for {event, _} <- transitions, event in @notices, do: PubSub.publish(:vehicles, {event, id})
 
-    if old == nil or old.type != new.type or old.airframe != new.airframe or old.payloads != new.payloads or old.connected? != new.connected?,
-      do: PubSub.publish(:vehicles, {:vehicle_changed, id})
+    # A sensor heard for the first time is one too (`pick(sensors: ...)`); its readings are not.
+    if old == nil or old.type != new.type or old.airframe != new.airframe or old.payloads != new.payloads or old.connected? != new.connected? or
+         map_size(old.sensors) != map_size(new.sensors),
+       do: PubSub.publish(:vehicles, {:vehicle_changed, id})
 
     :ok
   end

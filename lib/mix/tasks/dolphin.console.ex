@@ -75,7 +75,7 @@ defmodule Mix.Tasks.Dolphin.Console do
 
   @options Dolphin.CLI.Values.fleet_options() ++ Dolphin.CLI.Cluster.switches()
 
-  @usage "usage: iex -S mix dolphin.console [--connect ENDPOINT]... [--sim N | --sitl N|AIRFRAME:N,...] [--fleet FILE] [--home LAT,LON] [--speedup K] [--seed N]  [--tlog FILE] [--forward ENDPOINT]... [--sname NAME | --name NAME@HOST] [--cookie C] [--join NODE]..."
+  @usage "usage: iex -S mix dolphin.console [--connect ENDPOINT]... [--sim N | --sitl N|AIRFRAME:N,...] [--fleet FILE] [--world FILE] [--home LAT,LON] [--speedup K] [--seed N]  [--tlog FILE] [--forward ENDPOINT]... [--sname NAME | --name NAME@HOST] [--cookie C] [--join NODE]..."
 
   @impl Mix.Task
   def run(argv) do
@@ -205,7 +205,7 @@ defmodule Mix.Tasks.Dolphin.Console do
 
   defp start_sim(n, opts, link_opts) do
     # The console's simulated fleet lives as long as the VM.
-    case Dolphin.Sim.Local.start(n, [seed: Keyword.get(opts, :seed, 1), home: opts[:home]] ++ link_opts) do
+    case Dolphin.Sim.Local.start(n, [seed: Keyword.get(opts, :seed, 1), home: opts[:home], world: opts[:world]] ++ link_opts) do
       {:ok, sim} -> {:ok, ["#{Dolphin.CLI.Vehicles.sim_words(n)} #{Dolphin.Fleet.VehicleSet.format(sim.sysids)} on 127.0.0.1:#{sim.port}"]}
       {:error, e} -> {:error, %CommandLineError{reason: :failed, message: Exception.message(e), cause: e}}
     end

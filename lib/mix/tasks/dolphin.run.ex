@@ -46,6 +46,13 @@ defmodule Mix.Tasks.Dolphin.Run do
       system id, for `pick(payload: ...)` (a vehicle needs no `position`
       there: it reports its own); the pre-flight check of `--sim` and
       `--sitl` counts them too
+    * `--sim copter:2+smoke` — simulated vehicles whose companion
+      computer carries sensors (`smoke`, `water_temp`, `range`:
+      `Dolphin.Sim.Companion`), publishing NAMED_VALUE_FLOAT readings
+    * `--world FILE` — what simulated sensors sense (`Dolphin.Sim.World`:
+      fires and their smoke drifting with the wind, water temperature,
+      obstacles), with `--sim`; a file with a mistyped or missing key, a
+      value out of range or bad JSON is refused with the key and its line
     * `--home LAT,LON[,ALT]` — where `--sim` and `--sitl` vehicles start
       (around that point, 30 m apart; default the report's, in Serra da
       Estrela; a submarine starts at the surface)
@@ -176,7 +183,7 @@ defmodule Mix.Tasks.Dolphin.Run do
                no_check: :boolean
              ] ++ Dolphin.CLI.Cluster.switches()
 
-  @usage "usage: mix dolphin.run SCRIPT [--connect ENDPOINT]... [--sim N | --sitl N|AIRFRAME:N,... | --fake N] [--fleet FILE] [--home LAT,LON] [--speedup K] [--for DURATION] [--events FILE] [--tlog FILE | --no-tlog] [--forward ENDPOINT]... [--quiet] [--report FILE] [--web PORT [--web-bind ADDRESS]] [--no-check] [--sname NAME | --name NAME@HOST] [--cookie C] [--join NODE]..."
+  @usage "usage: mix dolphin.run SCRIPT [--connect ENDPOINT]... [--sim N | --sitl N|AIRFRAME:N,... | --fake N] [--fleet FILE] [--world FILE] [--home LAT,LON] [--speedup K] [--for DURATION] [--events FILE] [--tlog FILE | --no-tlog] [--forward ENDPOINT]... [--quiet] [--report FILE] [--web PORT [--web-bind ADDRESS]] [--no-check] [--sname NAME | --name NAME@HOST] [--cookie C] [--join NODE]..."
 
   @impl Mix.Task
   def run(argv) do
@@ -286,6 +293,7 @@ defmodule Mix.Tasks.Dolphin.Run do
            :ok <- exclusive(opts),
            :ok <- web(opts),
            :ok <- report(opts),
+           {:ok, opts} <- Values.world(opts),
            :ok <- cluster(opts),
            {:ok, for_ms} <- duration(opts[:for]),
            :ok <- within_a_timer(for_ms, opts),

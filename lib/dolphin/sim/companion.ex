@@ -1,0 +1,94 @@
+defmodule Dolphin.Sim.Companion do
+  @moduledoc """
+  A simulated vehicle's companion computer: a component of its own (191,
+  MAV_COMP_ID_ONBOARD_COMPUTER) on the vehicle's system id, with a
+  HEARTBEAT at 1 Hz (MAV_TYPE_ONBOARD_CONTROLLER) and its sensors' readings
+  as NAMED_VALUE_FLOAT, each at its rate, with noise, from where the
+  vehicle truly is in a `Dolphin.Sim.World` — as a real companion computer
+  with a smoke sensor on a serial port reports them.
+
+  The sensor models (`models/0`):
+
+  | model | NAMED_VALUE_FLOAT | reads | noise (σ) by default |
+  | --- | --- | --- | --- |
+  | `smoke` | `SMOKE` | `Dolphin.Sim.World.smoke/3`, 0..1 | 0.02 |
+  | `water_temp` | `WTEMP` | `Dolphin.Sim.World.water_temperature/3`, °C | 0.05 |
+  | `range` | `RANGE` | `Dolphin.Sim.World.range/5`, metres | 0.05 |
+
+  A pure model like `Dolphin.Sim.Copter`: `step/2` is given the vehicle as
+  it is now, and returns what the companion says by then.
+  """
+
+  alias Dolphin.MAVLink.Ardupilotmega, as: M
+  alias Dolphin.Sim.{Copter, World}
+
+  @compid 191
+  @models %{smoke: {"SMOKE", 0.02}, water_temp: {"WTEMP", 0.05}, range: {"RANGE", 0.05}}
+
+  defstruct sensors: [], world: %World{}, period_ms: 500, noise: %{}, due: 0, heartbeat_due: 0, rand: nil
+
+  @type model :: :smoke | :water_temp | :range
+  @type t :: %__MODULE__{sensors: [model()], world: World.t(), period_ms: pos_integer(), noise: %{model() => float()}, due: integer(), heartbeat_due: integer(), rand: :rand.state()}
+
+  @doc "The sensor models a simulated vehicle can carry."
+  @spec models() :: [model()]
+  def models, do: @models |> Map.keys() |> Enum.sort()
+
+  @doc "The NAMED_VALUE_FLOAT name a model's readings carry."
+  @spec value_name(model()) :: String.t()
+  def value_name(model), do: @models |> Map.fetch!(model) |> elem(0)
+
+  @doc """
+  A companion with sensors `sensors` in `world`; options `rate_hz` (default
+  2), `noise` (σ for every sensor, or a map by model), `seed` (any term:
+  each vehicle's its own, so that two vehicles side by side read apart).
+  """
+  @spec new([model()], World.t(), keyword()) :: t()
+  def new(sensors, world, opts \\ []) do
+    noise = Keyword.get(opts, :noise)
+    noise = Map.new(sensors, fn m -> {m, noise_of(noise, m)} end)
+    rate = Keyword.get(opts, :rate_hz, 2)
+
+    %__MODULE__{
+      sensors: Enum.uniq(sensors),
+      world: world || %World{},
+      period_ms: max(round(1000 / rate), 1),
+      noise: noise,
+      rand: :rand.seed_s(:exsss, {:erlang.phash2(Keyword.get(opts, :seed, 1)), 191, length(sensors)})
+    }
+  end
+
+  defp noise_of(nil, model), do: @models |> Map.fetch!(model) |> elem(1)
+  defp noise_of(%{} = by_model, model), do: Map.get(by_model, model) || noise_of(nil, model)
+  defp noise_of(sigma, _model) when is_number(sigma), do: sigma * 1.0
+
+  @doc "What the companion says up to the vehicle's time now, `{compid, message}` oldest first."
+  @spec step(t(), Copter.t()) :: {[{byte(), struct()}], t()}
+  def step(%__MODULE__{} = c, %Copter{time_ms: now} = vehicle) do
+    {beats, c} = heartbeat(c, now)
+
+    if now >= c.due do
+      position = Copter.position(vehicle)
+      {readings, rand} = Enum.map_reduce(c.sensors, c.rand, &reading(&1, &2, c, vehicle, position, now))
+      {beats ++ readings, %{c | rand: rand, due: now + c.period_ms}}
+    else
+      {beats, c}
+    end
+  end
+
+  defp heartbeat(%{heartbeat_due: due} = c, now) when now >= due,
+    do: {[{@compid, %M.Heartbeat{type: 18, autopilot: 8, base_mode: 0, custom_mode: 0, system_status: 4, mavlink_version: 3}}], %{c | heartbeat_due: now + 1000}}
+
+  defp heartbeat(c, _now), do: {[], c}
+
+  defp reading(model, rand, c, vehicle, position, now) do
+    {noise, rand} = :rand.normal_s(rand)
+    value = truth(model, c.world, vehicle, position) + noise * Map.fetch!(c.noise, model)
+    value = if model in [:smoke, :range], do: max(value, 0.0), else: value
+    {{@compid, %M.NamedValueFloat{time_boot_ms: now, name: value_name(model), value: value}}, rand}
+  end
+
+  defp truth(:smoke, world, _vehicle, p), do: World.smoke(world, p.lat, p.lon)
+  defp truth(:water_temp, world, _vehicle, p), do: World.water_temperature(world, p.lat, p.lon)
+  defp truth(:range, world, vehicle, p), do: World.range(world, p.lat, p.lon, p.alt, Copter.ground(vehicle))
+end

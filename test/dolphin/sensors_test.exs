@@ -1,0 +1,184 @@
+defmodule Dolphin.SensorsTest do
+  # Sensors as a script declares and reads them: the declaration's checks
+  # at compile time, the readings folded into a vehicle's view from real
+  # frames of a simulated vehicle's companion computer, and their
+  # staleness. Each test in an instance of its own: async.
+  use ExUnit.Case, async: true
+
+  alias Dolphin.{Clock, Script, Sensors, Vehicles}
+  alias Dolphin.Engine.Snapshot
+  alias Dolphin.Script.Error
+  alias Dolphin.Sensors.Readings
+  alias Dolphin.Sim.World
+  alias Dolphin.Test.{GroundStation, Wait}
+
+  doctest Dolphin.Sensors
+  doctest Dolphin.Sensors.Readings
+  doctest Dolphin.Sensors.Detection
+
+  @smoke_source {:named_value, "SMOKE"}
+
+  defp compile(source) do
+    case Script.compile_string(source, "sensors.exs") do
+      {:ok, script} ->
+        Script.purge(script)
+        :ok
+
+      {:error, %Error{} = e} ->
+        {e.line, e.message}
+    end
+  end
+
+  describe "declaring and reading, checked when the script is compiled" do
+    test "a declared sensor reads in conditions and statements; every reader compiles" do
+      assert :ok =
+               compile("""
+               use Dolphin.Script
+               sensor :smoke, from: {:named_value, "SMOKE"}, stale_after: seconds(5), keep: minutes(2)
+               sensor :water_temp, from: {:message, :SCALED_PRESSURE2, :temperature}, scale: 0.01, unit: :celsius
+               v = pick(sensors: [:smoke, :water_temp])
+               execute wait_for(sensor(v, :smoke) > 0.4 and peak(v, :smoke, within: seconds(30)) > 0.5)
+               message(inspect({sensor(v, :water_temp), sensor_age(v, :smoke), peak_position(v, :smoke, within: minutes(1))}))
+               """)
+    end
+
+    test "a typo in a sensor's name is an error at its line, with the name that is near" do
+      assert {4, message} =
+               compile("""
+               use Dolphin.Script
+               sensor :smoke, from: {:named_value, "SMOKE"}
+               v = pick()
+               execute wait_for(sensor(v, :smok) > 0.4)
+               """)
+
+      assert message =~ "unknown sensor :smok; did you mean :smoke?; declared: :smoke"
+    end
+
+    test "a sensor read before any is declared says how to declare one" do
+      assert {2, message} = compile("use Dolphin.Script\nmessage(inspect(sensor(1, :smoke)))\n")
+      assert message =~ ~s|no sensor is declared above this line (sensor :smoke, from: {:named_value, "NAME"})|
+    end
+
+    test "a message or field the dialect does not have, or a field that is no number, is an error at the declaration's line" do
+      for {from, said} <- [
+            {"{:message, :SCALED_PRESURE2, :temperature}", "no message SCALED_PRESURE2 in the dialect; did you mean SCALED_PRESSURE2"},
+            {"{:message, :SCALED_PRESSURE2, :temperatur}", "SCALED_PRESSURE2 has no field :temperatur; did you mean :temperature"},
+            {"{:message, :STATUSTEXT, :text}", "STATUSTEXT.text is not a number (char[50]): a sensor reads one numeric field"},
+            {~s({:named_value, "MUCH_TOO_LONG"}), "a named value's name has 1 to 10 characters"},
+            {"{:named, \"SMOKE\"}", "from: takes {:named_value, \"NAME\"} or {:message, :MESSAGE_NAME, :field}"}
+          ] do
+        assert {3, message} = compile("use Dolphin.Script\n_ = 1\nsensor :s, from: #{from}\n"), from
+        assert message =~ said
+      end
+
+      assert {2, message} = compile("use Dolphin.Script\nsensor :s, from: {:named_value, \"S\"}, stale: 5\n")
+      assert message =~ "unknown option :stale; did you mean :scale, :stale_after?"
+    end
+
+    test "a peak over longer than the sensor keeps is refused, naming the keep: that would do" do
+      assert {3, message} =
+               compile("""
+               use Dolphin.Script
+               sensor :smoke, from: {:named_value, "SMOKE"}
+               execute wait_for(peak(1, :smoke, within: minutes(2)) > 0.4)
+               """)
+
+      assert message =~ "sensor :smoke keeps 60000 ms of readings; declare it with keep: 120000 or more"
+    end
+
+    test "a sensor declared twice differently, or with options that need the script's variables, is refused" do
+      assert {3, message} = compile("use Dolphin.Script\nsensor :s, from: {:named_value, \"S\"}\nsensor :s, from: {:named_value, \"T\"}\n")
+      assert message =~ "sensor :s is declared twice, differently"
+
+      assert {3, message} = compile("use Dolphin.Script\nname = \"S\"\nsensor :s, from: {:named_value, name}\n")
+      assert message =~ "its options are fixed values"
+    end
+  end
+
+  describe "readings" do
+    test "a source declared twice keeps the longest history and each staleness limit" do
+      {:ok, a} = Sensors.new(:a, from: {:named_value, "X"}, stale_after: 2_000, keep: 10_000)
+      {:ok, b} = Sensors.new(:b, from: {:named_value, "X"}, stale_after: 5_000)
+      assert %{{:named_value, "X"} => %{keep: 60_000, stale_after: [2_000, 5_000]}} = Readings.declare(%{}, [a, b])
+    end
+
+    test "a reading is stale only while it is the latest; a newer one is fresh again" do
+      watch = Readings.watch(%{@smoke_source => %{keep: 60_000, stale_after: [1_000]}})
+      msg = %Dolphin.MAVLink.Ardupilotmega.NamedValueFloat{name: "SMOKE", value: 0.3}
+      r = Readings.fold(%{}, watch, 191, msg, 1_000, nil)
+      assert [{@smoke_source, 1_000}] = Readings.fresh(%{}, r)
+      stale = Readings.stale(r, @smoke_source, 1_000, 1_000)
+      assert stale[@smoke_source].stale == [1_000]
+      assert :unchanged = Readings.stale(stale, @smoke_source, 1_000, 1_000)
+      newer = Readings.fold(stale, watch, 191, %{msg | value: 0.4}, 1_500, nil)
+      assert newer[@smoke_source].stale == []
+      assert :unchanged = Readings.stale(newer, @smoke_source, 1_000, 1_000)
+      # NaN (the codec's :nan) is no reading.
+      assert Readings.fold(newer, watch, 191, %{msg | value: :nan}, 1_600, nil) == newer
+    end
+  end
+
+  describe "on a simulated vehicle" do
+    setup do
+      Dolphin.Test.Instance.start!()
+      Clock.set_speedup(20)
+      %{port: GroundStation.open()}
+    end
+
+    # A copter whose companion carries a smoke sensor, standing 10 m from a fire.
+    defp smoky_copter(port) do
+      home = %{lat: 40.444233, lon: -7.375234, alt: 820.0}
+      fire = Dolphin.Geo.tangent_offset(home, 10, 0)
+      world = %World{fires: [%{lat: fire.lat, lon: fire.lon, radius_m: 40.0, intensity: 0.9}]}
+      {:ok, [id]} = Dolphin.Sim.start(gcs: port, count: 1, speedup: 20, home: home, sensors: [:smoke], world: world, sensor_noise: 0.0)
+      Wait.until(fn -> match?({:ok, %{type: :uav}}, Vehicles.view(id)) end, 2_000, fn -> "vehicle #{id}" end)
+      id
+    end
+
+    test "a declared named value and a message field reach the view, from the companion's component; stale, the reading is unknown", %{port: port} do
+      id = smoky_copter(port)
+      {:ok, smoke} = Sensors.new(:smoke, from: {:named_value, "SMOKE"}, stale_after: 2_000)
+      {:ok, volts} = Sensors.new(:volts, from: {:message, :SYS_STATUS, :voltage_battery}, scale: 0.001)
+      Vehicles.subscribe(id)
+      :ok = Vehicles.watch_sensors([smoke, volts])
+
+      view = await_view(id, &(Map.has_key?(&1.sensors, @smoke_source) and Map.has_key?(&1.sensors, volts.source)))
+      assert %{compid: 191, value: value, position: %Dolphin.Geo.Location{}} = view.sensors[@smoke_source]
+      # 0.9 at the fire's centre, 10 m away over a 40 m radius: e^(-1/16).
+      assert_in_delta value, 0.9 * :math.exp(-1 / 16), 0.01
+      assert_in_delta Snapshot.sensor(nil, id, smoke), value, 1.0e-9
+      assert Snapshot.sensor(nil, id, volts) > 10
+      assert view.sensors[volts.source].compid == 1
+
+      # The companion falls silent (the whole vehicle does): 2 s of clock
+      # time later its view says the reading is stale, with nothing else heard.
+      :ok = Dolphin.Sim.set_faults(id, silence: true)
+      stale = await_view(id, &match?(%{stale: [2_000]}, &1.sensors[@smoke_source]))
+      assert stale.connected?
+      assert Snapshot.sensor(nil, id, smoke) == nil
+      assert Snapshot.sensor_age(nil, id, smoke) >= 2_000
+    end
+
+    test "a sensor not declared is not kept; peak and its position over a window", %{port: port} do
+      id = smoky_copter(port)
+      Vehicles.subscribe(id)
+      {:ok, %{sensors: none}} = Vehicles.view(id)
+      assert none == %{}
+
+      {:ok, smoke} = Sensors.new(:smoke, from: {:named_value, "SMOKE"})
+      :ok = Vehicles.watch_sensors([smoke])
+      view = await_view(id, &(length(Map.get(&1.sensors, @smoke_source, %{history: []}).history) >= 3))
+      peak = Snapshot.peak(nil, id, smoke, 60_000)
+      assert peak == view.sensors[@smoke_source].history |> Enum.map(&elem(&1, 1)) |> Enum.max()
+      assert %Dolphin.Geo.Location{} = Snapshot.peak_position(nil, id, smoke, 60_000)
+    end
+
+    defp await_view(id, fun) do
+      receive do
+        {:dolphin, {:vehicle, ^id}, {:view, view}} -> if fun.(view), do: view, else: await_view(id, fun)
+      after
+        Clock.to_real_ms(60_000) -> flunk("vehicle #{id}: no view as expected: #{inspect(Vehicles.view(id))}")
+      end
+    end
+  end
+end
