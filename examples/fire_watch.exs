@@ -19,10 +19,10 @@ sensor :smoke, from: {:named_value, "SMOKE"}, stale_after: seconds(5)
 
 base = location(40.444233, -7.375234, 820)
 
-# Each at its own height: their ways to their halves cross.
+# Each at its own height: their ways to their halves cross. No `home`: each
+# mission has its vehicle's own, and each lands back on its own pad.
 survey = fn name, corner ->
   mission name do
-    home base
     take_off location(base.lat, base.lon, corner.h)
     survey_area corner, 250, 160, 80, :north_east
     return_home_and_land()
@@ -38,7 +38,6 @@ look = fn d ->
   message("smoke #{Float.round(d.value, 2)} read by vehicle #{d.vehicle} at #{Float.round(p.lat, 6)}, #{Float.round(p.lon, 6)}")
 
   mission "Look at the smoke" do
-    home base
     take_off location(p.lat, p.lon, 870)
     loiter_turns location(p.lat, p.lon, 870), 1, 30
     capture_several_photos 4, 2
@@ -47,7 +46,6 @@ end
 
 going_home =
   mission "Home" do
-    home base
     return_home_and_land()
   end
 

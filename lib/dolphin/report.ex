@@ -101,9 +101,9 @@ defmodule Dolphin.Report do
   @doc "Like `write/4`, but returns the page (iodata) and its summary (`path` nil) instead of writing it."
   @spec build(Path.t(), Path.t() | nil, keyword()) :: {:ok, iodata(), summary()} | {:error, Error.t()}
   def build(tlog_path, events_path, opts \\ []) when is_list(opts) do
-    with {:ok, whole} <- read_log(tlog_path),
+    with {:ok, events, bad} <- read_events(events_path),
+         {:ok, whole} <- read_log(tlog_path, Model.sensors(events)),
          {:ok, log, runs, run} <- select_run(whole, opts[:run], tlog_path),
-         {:ok, events, bad} <- read_events(events_path),
          {:ok, offset} <- Events.align(events, Model.anchors(log), events_path) do
       model = Model.build(log, events, offset)
       title = Keyword.get(opts, :title, "Flight report")
@@ -142,8 +142,9 @@ defmodule Dolphin.Report do
     end
   end
 
-  defp read_log(path) do
-    case FlightLog.read_file(path) do
+  # The readings of the sensors the run declared are read too.
+  defp read_log(path, sensors) do
+    case FlightLog.read_file(path, sensors: Enum.map(sensors, & &1.source)) do
       {:ok, %FlightLog{stats: %{frames: 0, bytes: 0}}} ->
         {:error, %Error{reason: :no_frames, path: path, detail: "the file is empty"}}
 

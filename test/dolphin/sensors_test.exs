@@ -118,6 +118,39 @@ defmodule Dolphin.SensorsTest do
     end
   end
 
+  describe "the world file" do
+    test "the world of docs/simulator.md and the examples' worlds are worlds" do
+      doc = File.read!(Path.expand("../../docs/simulator.md", __DIR__))
+      [_, json] = Regex.run(~r/<!-- world -->\n```json\n(.*?)```/s, doc)
+      assert {:ok, %World{fires: [_], obstacles: [_], water: %{fields: [_]}}} = World.parse(json)
+
+      for path <- Path.wildcard(Path.expand("../../examples/worlds/*.json", __DIR__)),
+          do: assert({:ok, %World{}} = World.read(path), path)
+    end
+
+    test "a world's fields: smoke over a fire and down its plume, water toward a field, range to an obstacle" do
+      here = %{lat: 40.0, lon: -7.0}
+      east = fn m -> Dolphin.Geo.tangent_offset(here, 0, m) end
+      still = %World{fires: [%{lat: 40.0, lon: -7.0, radius_m: 30.0, intensity: 0.8}]}
+      windy = %{still | wind: %{from_deg: 270.0, speed_ms: 5.0}}
+      assert_in_delta World.smoke(still, 40.0, -7.0), 0.8, 1.0e-9
+      # 150 m east: nothing without wind; downwind of a west wind, the plume.
+      assert World.smoke(still, east.(150).lat, east.(150).lon) < 0.001
+      assert World.smoke(windy, east.(150).lat, east.(150).lon) > 0.05
+      # Upwind, no plume.
+      assert World.smoke(windy, east.(-150).lat, east.(-150).lon) < 0.001
+
+      water = %World{water: %{base_celsius: 15.0, fields: [%{lat: 40.0, lon: -7.0, radius_m: 100.0, celsius: 20.0}]}}
+      assert_in_delta World.water_temperature(water, 40.0, -7.0), 20.0, 1.0e-9
+      assert_in_delta World.water_temperature(water, east.(1000).lat, east.(1000).lon), 15.0, 1.0e-6
+
+      mast = %World{obstacles: [%{lat: 40.0, lon: -7.0, radius_m: 5.0, height_m: 30.0}]}
+      assert_in_delta World.range(mast, east.(20).lat, east.(20).lon, 110.0, 100.0), 15.0, 0.05
+      # Above its top: out of reach.
+      assert World.range(mast, east.(20).lat, east.(20).lon, 140.0, 100.0) == World.range_max()
+    end
+  end
+
   describe "on a simulated vehicle" do
     setup do
       Dolphin.Test.Instance.start!()

@@ -229,21 +229,14 @@ defmodule Dolphin.CLI.Values do
   end
 
   @doc """
-  `--world FILE` read (`Dolphin.Sim.World`), in place of its path: refused
-  with the file's line and key when it is wrong, and without `--sim`
-  (nothing else senses it).
+  `--world FILE` goes with `--sim`: nothing else senses it (the file itself
+  is read as the vehicles start: `Dolphin.CLI.Vehicles`).
   """
-  @spec world(keyword()) :: {:ok, keyword()} | {:error, CommandLineError.t()}
+  @spec world(keyword()) :: :ok | {:error, CommandLineError.t()}
   def world(opts) do
-    cond do
-      opts[:world] == nil -> {:ok, opts}
-      opts[:sim] == nil -> CommandLineError.usage_error("--world is what simulated sensors sense: it goes with --sim")
-      true -> with {:error, why} <- world_file(opts[:world], opts), do: {:error, CommandLineError.failed("--world", why)}
-    end
-  end
-
-  defp world_file(path, opts) do
-    with {:ok, world} <- Dolphin.Sim.World.read(path), do: {:ok, Keyword.put(opts, :world, world)}
+    if opts[:world] != nil and opts[:sim] == nil,
+      do: CommandLineError.usage_error("--world is what simulated sensors sense: it goes with --sim"),
+      else: :ok
   end
 
   # --- kinds ------------------------------------------------------------------

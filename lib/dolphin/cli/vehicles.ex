@@ -79,15 +79,26 @@ defmodule Dolphin.CLI.Vehicles do
   end
 
   defp start_sim(n, opts, link_opts, out, defer) do
-    case Dolphin.Sim.Local.start(n, [seed: Keyword.get(opts, :seed, 1), home: opts[:home], world: opts[:world]] ++ link_opts) do
-      {:ok, sim} ->
-        defer.(fn -> Dolphin.Sim.Local.stop(sim) end)
-        IO.puts(out, "#{sim_words(n)} #{Dolphin.Fleet.VehicleSet.format(sim.sysids)} on 127.0.0.1:#{sim.port}")
-        :ok
+    with {:ok, world} <- world(opts[:world]) do
+      case Dolphin.Sim.Local.start(n, [seed: Keyword.get(opts, :seed, 1), home: opts[:home], world: world] ++ link_opts) do
+        {:ok, sim} ->
+          defer.(fn -> Dolphin.Sim.Local.stop(sim) end)
+          IO.puts(out, "#{sim_words(n)} #{Dolphin.Fleet.VehicleSet.format(sim.sysids)} on 127.0.0.1:#{sim.port}")
+          :ok
 
-      {:error, why} ->
-        {:error, Dolphin.CommandLineError.failed(nil, why)}
+        {:error, why} ->
+          {:error, Dolphin.CommandLineError.failed(nil, why)}
+      end
     end
+  end
+
+  @doc false
+  # The world file of --world (`Dolphin.Sim.World`), or what is wrong in it (its line and key).
+  @spec world(Path.t() | nil) :: {:ok, Dolphin.Sim.World.t() | nil} | {:error, Dolphin.CommandLineError.t()}
+  def world(nil), do: {:ok, nil}
+
+  def world(path) do
+    with {:error, why} <- Dolphin.Sim.World.read(path), do: {:error, Dolphin.CommandLineError.failed("--world", why)}
   end
 
   defp start_sitl(n, opts, link_opts, out, defer) do

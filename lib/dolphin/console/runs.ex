@@ -144,8 +144,17 @@ defmodule Dolphin.Console.Runs do
   end
 
   def handle_call({:ask, run, prompt, gl}, {pid, _} = from, s) do
-    # The console of the run, else the asker's own output.
-    gl = if run && s.runs[run], do: s.runs[run].gl, else: gl
+    # The console of the run (one still starting: a script may ask before
+    # its start is answered), else the asker's own output.
+    starting = Enum.find(Map.values(s.starting), &(run != nil and &1.id == run))
+
+    gl =
+      cond do
+        run && s.runs[run] -> s.runs[run].gl
+        starting -> starting.gl
+        true -> gl
+      end
+
     who = if run, do: "run #{run} asks", else: "a script asks"
     say(gl, "#{who}: #{prompt}  (answer(\"...\") to answer)")
     ask = %{run: run, prompt: prompt, from: from, ref: Process.monitor(pid)}

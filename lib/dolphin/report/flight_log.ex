@@ -53,7 +53,9 @@ defmodule Dolphin.Report.FlightLog do
               rally: %{},
               reached: [],
               photos: [],
-              texts: []
+              texts: [],
+              # Sensor readings: source => [{ts, raw value}] (see `read_file/2`'s :sensors).
+              sensors: %{}
   end
 
   # `links`: per system id, {last seq, frames received, frames lost} of its
@@ -61,17 +63,20 @@ defmodule Dolphin.Report.FlightLog do
   # `previous_us`: the last record's stamp; `silence`: {first stamp after the
   # latest silence, last stamp before it}; `starts`: those of the silences
   # that began a run, newest first.
-  defstruct vehicles: %{}, links: %{}, first_us: nil, last_us: nil, boot_ms: 0, boot_real_us: 0, boot_last: %{}, stats: nil, previous_us: nil, silence: nil, starts: []
+  # `sensors`: the sources to read, as `sensor_sources/1` indexes them.
+  defstruct sensors: %{named: MapSet.new(), fields: %{}}, vehicles: %{}, links: %{}, first_us: nil, last_us: nil, boot_ms: 0, boot_real_us: 0, boot_last: %{}, stats: nil, previous_us: nil, silence: nil, starts: []
 
   @type t :: %__MODULE__{}
 
   @doc false
-  @spec read_file(Path.t()) :: {:ok, t()} | {:error, File.posix()}
-  def read_file(path) do
+  # Option `sensors`: the sources of the sensors a run declared
+  # (`Dolphin.Sensors.Sensor` sources), whose readings each vehicle keeps.
+  @spec read_file(Path.t(), keyword()) :: {:ok, t()} | {:error, File.posix()}
+  def read_file(path, opts \\ []) do
     case File.open(path, [:read, :binary, :raw, :read_ahead]) do
       {:ok, io} ->
         try do
-          {:ok, read_io(io, Tlog.reader(unknown: :drop), new())}
+          {:ok, read_io(io, Tlog.reader(unknown: :drop), %{new() | sensors: sensor_sources(Keyword.get(opts, :sensors, []))})}
         after
           File.close(io)
         end
@@ -97,13 +102,21 @@ defmodule Dolphin.Report.FlightLog do
   @spec new() :: t()
   def new, do: %__MODULE__{}
 
+  # Named values by name, message fields by message module.
+  defp sensor_sources(sources) do
+    Enum.reduce(sources, %{named: MapSet.new(), fields: %{}}, fn
+      {:named_value, name}, acc -> %{acc | named: MapSet.put(acc.named, name)}
+      {:message, module, field}, acc -> %{acc | fields: Map.update(acc.fields, module, [field], &[field | &1])}
+    end)
+  end
+
   @doc false
   # One record into the log.
   @spec add({non_neg_integer(), Frame.t()}, t()) :: t()
   def add({ts, %Frame{} = frame}, log) do
     silence = if log.previous_us && ts - log.previous_us >= @silence_us, do: {ts, log.previous_us}, else: log.silence
     log = %{log | first_us: log.first_us || ts, last_us: max(log.last_us || ts, ts), previous_us: ts, silence: silence, links: sequence(log.links, frame)}
-    message(frame.message, ts, frame, log)
+    message(frame.message, ts, frame, sense(frame.message, ts, frame, log))
   end
 
   defp message(%M.Heartbeat{autopilot: ap, type: type} = hb, ts, frame, log) when ap != @mav_autopilot_invalid and type != @mav_type_gcs do
@@ -170,6 +183,24 @@ defmodule Dolphin.Report.FlightLog do
     do: update_id(log, target, &Map.update!(&1, list_key(type), fn items -> Map.put(items, item.seq, {item.command, item.x, item.y, item.z, item.param1}) end))
 
   defp message(_other, _ts, _frame, log), do: log
+
+  # A declared sensor's reading (any component), besides what the message says otherwise.
+  defp sense(%m{name: name, value: value}, ts, frame, log) when m in [M.NamedValueFloat, M.NamedValueInt] and is_number(value) do
+    if MapSet.member?(log.sensors.named, name), do: reading(log, frame, {:named_value, name}, ts, value), else: log
+  end
+
+  defp sense(%module{} = msg, ts, frame, %{sensors: %{fields: fields}} = log) when is_map_key(fields, module) do
+    Enum.reduce(Map.fetch!(fields, module), log, fn field, log ->
+      case Map.fetch!(msg, field) do
+        value when is_number(value) -> reading(log, frame, {:message, module, field}, ts, value)
+        _ -> log
+      end
+    end)
+  end
+
+  defp sense(_message, _ts, _frame, log), do: log
+
+  defp reading(log, frame, source, ts, value), do: update(log, frame, &%{&1 | sensors: Map.update(&1.sensors, source, [{ts, value}], fn list -> [{ts, value} | list] end)})
 
   defp list_key(1), do: :fence
   defp list_key(2), do: :rally
@@ -254,7 +285,8 @@ defmodule Dolphin.Report.FlightLog do
              uploads: uploads,
              reached: Enum.reverse(v.reached),
              photos: Enum.reverse(v.photos),
-             texts: Enum.reverse(v.texts)
+             texts: Enum.reverse(v.texts),
+             sensors: Map.new(v.sensors, fn {source, list} -> {source, Enum.reverse(list)} end)
          }}
       end
 
@@ -310,7 +342,8 @@ defmodule Dolphin.Report.FlightLog do
         uploads: Enum.filter(v.uploads, &within.(&1.at)),
         reached: keep.(v.reached),
         photos: keep.(v.photos),
-        texts: keep.(v.texts)
+        texts: keep.(v.texts),
+        sensors: Map.new(v.sensors, fn {source, list} -> {source, keep.(list)} end)
     }
   end
 

@@ -40,7 +40,7 @@ defmodule Dolphin.Report.HTML do
       script_result(model.script),
       summary(model),
       "</section>\n",
-      "<section id=\"map-section\"><h2>Map</h2><p class=\"hint\">Solid: flown; dashed: planned (each mission uploaded); ▲ take-off, ▼ landing, ■ home, small squares: photos, circles: where each task started (hollow) and ended (filled, coloured by result); the fence uploaded: green dashes its inclusion zones, red shading its no-fly zones, R its rally points. Grid in metres, north up. Hover for details.</p>",
+      "<section id=\"map-section\"><h2>Map</h2><p class=\"hint\">Solid: flown; dashed: planned (each mission uploaded); ▲ take-off, ▼ landing, ■ home, small squares: photos, circles: where each task started (hollow) and ended (filled, coloured by result); the fence uploaded: green dashes its inclusion zones, red shading its no-fly zones, R its rally points. Grid in metres, north up. Hover for details; ◎ where a sensor read what the script waited for.</p>",
       SVG.map(model),
       "</section>\n",
       "<section id=\"timeline-section\"><h2>Time line</h2><p class=\"hint\">A bar per task, coloured by how it ended: <span class=\"key result-done\">done</span> <span class=\"key result-stopped\">stopped</span> <span class=\"key result-failed\">failed</span> <span class=\"key result-unfinished\">unfinished</span>. Marks: ▲ condition met, ◆ mode change, ✕ lost, ○ reconnected, ‖ held apart from another vehicle, ▶ going on, • message. Hover for the reason.</p>",
@@ -52,6 +52,7 @@ defmodule Dolphin.Report.HTML do
       SVG.plot(model, :speed, "ground speed", "m/s", nil),
       SVG.plot(model, :link, "link quality (frames received)", "%", 100),
       if(length(model.vehicles) > 1, do: SVG.separation_plot(model), else: []),
+      Enum.map(model.sensors, &SVG.plot(model, {:sensor, &1.name}, "sensor #{&1.name}", &1.unit || "", nil, "sensor")),
       "</section>\n<script>",
       js(),
       "</script></body></html>\n"
@@ -221,6 +222,7 @@ defmodule Dolphin.Report.HTML do
     .mark-condition path{fill:#6a3d9a;stroke:none}.mark-mode path{fill:#888;stroke:none}.mark-text circle,.mark-message circle{fill:#1f77b4;stroke:none}
     .series{fill:none;stroke:var(--c);stroke-width:1.5}
     .mark-separation_hold path{stroke:#c62828;stroke-width:2.5;fill:none}.mark-separation_clear path{fill:#1a7f37;stroke:none}
+    .detection{fill:none;stroke:#e65100;stroke-width:2.5;vector-effect:non-scaling-stroke}.detection-dot{fill:#e65100}
     svg.separation .series{stroke:#333}svg.separation .limit{stroke:#c62828;stroke-width:1.5;stroke-dasharray:6 4}
     .hidden{display:none}
     g.vehicle:hover .flown,.series:hover{stroke-width:4}

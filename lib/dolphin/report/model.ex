@@ -35,10 +35,12 @@ defmodule Dolphin.Report.Model do
     events = Enum.map(events, &Map.put(&1, "t", &1["t_ms"] / 1000 + offset_s))
     tasks = tasks(events, span)
 
+    sensors = sensors(events)
+
     vehicles =
       ids
       |> Enum.with_index()
-      |> Enum.map(fn {id, i} -> vehicle(log.vehicles[id], i, clock, project, events, tasks) end)
+      |> Enum.map(fn {id, i} -> vehicle(log.vehicles[id], i, clock, project, events, tasks, sensors) end)
 
     %{
       speedup: k,
@@ -48,8 +50,45 @@ defmodule Dolphin.Report.Model do
       vehicles: vehicles,
       script: script(events, span),
       script_marks: script_marks(events, tasks),
-      separation: separation(log, events)
+      separation: separation(log, events),
+      sensors: sensors,
+      detections: detections(events, project)
     }
+  end
+
+  @doc false
+  # The sensors the run declared (its `sensor_declared` events), each once:
+  # %{name, source, scale, offset, unit}; a source that names no message
+  # field of the dialect (an events file from elsewhere) is left out.
+  @spec sensors([map()]) :: [map()]
+  def sensors(events) do
+    for %{"event" => "sensor_declared", "sensor" => name, "source" => text} = e <- events,
+        {:ok, source} <- [source(text)],
+        uniq: true,
+        do: %{name: name, source: source, scale: number(e["scale"], 1.0), offset: number(e["offset"], 0.0), unit: e["unit"]}
+  end
+
+  defp source("NAMED_VALUE " <> name), do: {:ok, {:named_value, name}}
+
+  defp source(text) do
+    with [message, field] <- String.split(text, ".", parts: 2),
+         module when module != nil <- Dolphin.MAVLink.Ardupilotmega.message_module(message),
+         %{name: field} <- Enum.find(module.__mavlink__(:fields), &(Atom.to_string(&1.name) == field)) do
+      {:ok, {:message, module, field}}
+    else
+      _ -> :error
+    end
+  end
+
+  defp number(n, _default) when is_number(n), do: n
+  defp number(_, default), do: default
+
+  # Where sensors read what a script waited for (`sensor_threshold`), on the map.
+  defp detections(events, project) do
+    for %{"event" => "sensor_threshold", "lat" => lat, "lon" => lon} = e <- events, is_number(lat) and is_number(lon) do
+      {x, y} = project.(lat * 1.0e7, lon * 1.0e7)
+      %{x: x, y: y, t: e["t"], vehicle: e["vehicle"], sensor: e["sensor"], value: e["value"], unit: e["unit"], sent: e["sent"]}
+    end
   end
 
   # The nearest-vehicle distance over time (Report.Separation) against the
@@ -116,7 +155,7 @@ defmodule Dolphin.Report.Model do
 
   # --- one vehicle ---
 
-  defp vehicle(v, index, clock, project, events, tasks) do
+  defp vehicle(v, index, clock, project, events, tasks, sensors) do
     points = for {ts, lat, lon, rel_mm, vx, vy} <- v.positions, {x, y} = project.(lat, lon), do: {clock.(ts), x, y, rel_mm / 1000, :math.sqrt(vx * vx + vy * vy) / 100}
     at = position_finder(points)
     {flight_s, distance, takeoffs, landings} = flight(points)
@@ -142,7 +181,13 @@ defmodule Dolphin.Report.Model do
         height: points |> Enum.map(fn {t, _, _, h, _} -> {t, h} end) |> Simplify.series(@plot_buckets),
         speed: points |> Enum.map(fn {t, _, _, _, s} -> {t, s} end) |> Simplify.series(@plot_buckets),
         link: v.link |> link_quality(clock) |> Simplify.series(@plot_buckets)
-      },
+      }
+      |> Map.merge(
+        Map.new(sensors, fn s ->
+          readings = Map.get(v.sensors, s.source, [])
+          {{:sensor, s.name}, readings |> Enum.map(fn {ts, raw} -> {clock.(ts), raw * s.scale + s.offset} end) |> Simplify.series(@plot_buckets)}
+        end)
+      ),
       summary: %{
         flight_s: flight_s,
         distance_m: distance,

@@ -33,6 +33,7 @@ defmodule Dolphin.Report.SVG do
       model.vehicles |> Enum.flat_map(& &1.zones) |> Enum.uniq() |> Enum.map(&zone/1),
       Enum.map(model.vehicles, &vehicle_map(&1, ctx)),
       model.vehicles |> Enum.flat_map(& &1.rally) |> Enum.uniq() |> Enum.map(&rally_point(&1, font)),
+      Enum.map(Map.get(model, :detections, []), &detection(&1, r)),
       scale_bar(minx, miny, span, font, nice(span / 8)),
       north_arrow(maxx, maxy, span, font),
       "</svg>"
@@ -116,6 +117,17 @@ defmodule Dolphin.Report.SVG do
 
   defp zone(%{shape: :circle, inclusion?: inclusion?, centre: {x, y}, radius: r}),
     do: ~s(<circle class="zone #{side(inclusion?)}" cx="#{num(x)}" cy="#{num(-y)}" r="#{num(r)}"><title>fence: #{side(inclusion?)} zone, #{metres(r)} radius</title></circle>)
+
+  # Where a sensor read what the script waited for: a ring and its centre.
+  defp detection(d, r) do
+    sent = if d.sent, do: "; vehicle #{d.sent} sent to look", else: ""
+    title = "#{esc(to_string(d.sensor))} #{d.value}#{if d.unit, do: " #{esc(to_string(d.unit))}"} read by vehicle #{d.vehicle} at #{num(d.t, 1)} s#{sent}"
+
+    [
+      ~s(<g class="detection-mark"><circle class="detection" cx="#{num(d.x)}" cy="#{num(-d.y)}" r="#{num(r * 4)}"/>),
+      ~s(<circle class="detection-dot" cx="#{num(d.x)}" cy="#{num(-d.y)}" r="#{num(r)}"/><title>#{title}</title></g>)
+    ]
+  end
 
   defp side(true), do: "inclusion"
   defp side(false), do: "exclusion"
@@ -326,18 +338,19 @@ defmodule Dolphin.Report.SVG do
   @plot_bottom 12
 
   @doc false
-  @spec plot(map(), atom(), String.t(), String.t(), number() | nil) :: iodata()
-  def plot(model, key, title, unit, fixed_max) do
+  # `class`: what kind of plot it is besides its key's (`plot-KEY`): "sensor".
+  @spec plot(map(), atom() | {:sensor, String.t()}, String.t(), String.t(), number() | nil, String.t() | nil) :: iodata()
+  def plot(model, key, title, unit, fixed_max, class \\ nil) do
     span = max(model.span_s, 1.0)
     x = fn t -> @label_w + max(0.0, min(t, span)) / span * (@width - @label_w - @right_pad) end
-    values = for v <- model.vehicles, {_, y} <- v.series[key], do: y
+    values = for v <- model.vehicles, {_, y} <- Map.get(v.series, key, []), do: y
     {lo, hi} = range(values, fixed_max)
     inner = @plot_h - @plot_top - @plot_bottom
     y = fn val -> @plot_top + inner - (val - lo) / (hi - lo) * inner end
     ticks = Stream.iterate(lo, &(&1 + nice((hi - lo) / 4))) |> Enum.take_while(&(&1 <= hi + 1.0e-9))
 
     [
-      ~s(<svg class="plot plot-#{key}" xmlns="http://www.w3.org/2000/svg" viewBox="0 0 #{@width} #{@plot_h}">),
+      ~s(<svg class="plot #{class || "plot-#{key}"}" xmlns="http://www.w3.org/2000/svg" viewBox="0 0 #{@width} #{@plot_h}">),
       ~s(<text class="plot-title" x="#{@label_w}" y="14">#{title}</text>),
       ~s(<g class="axis">),
       Enum.map(ticks, fn v ->
@@ -345,7 +358,7 @@ defmodule Dolphin.Report.SVG do
       end),
       "</g>",
       Enum.map(model.vehicles, fn v ->
-        case v.series[key] do
+        case Map.get(v.series, key, []) do
           [] ->
             []
 

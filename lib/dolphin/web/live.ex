@@ -42,9 +42,20 @@ defmodule Dolphin.Web.Live do
     v = if view.battery && (old == nil or pct(old.battery) != pct(view.battery)), do: %{v | battery: bounded([{ts, pct(view.battery)} | v.battery])}, else: v
     v = if view.mode && (old == nil or old.mode != view.mode), do: %{v | modes: bounded([{ts, view.mode} | v.modes])}, else: v
     v = if old == nil or old.armed? != view.armed?, do: %{v | arming: bounded([{ts, view.armed?} | v.arming])}, else: v
+    v = readings(v, old, view)
     count = Map.get(live.counts, id, 0) + added
     {v, count} = if count > @max_points, do: {%{v | positions: thin(v.positions)}, div(count + 1, 2)}, else: {v, count}
     %{live | vehicles: Map.put(live.vehicles, id, v), views: Map.put(live.views, id, view), counts: Map.put(live.counts, id, count)}
+  end
+
+  # Each new sensor reading, at its own time (the report's plots draw them).
+  defp readings(v, old, %View{sensors: sensors}) do
+    Enum.reduce(sensors, v, fn {source, %{at: at, value: value}}, v ->
+      case old && Map.get(old.sensors, source) do
+        %{at: ^at} -> v
+        _ -> %{v | sensors: Map.update(v.sensors, source, [{at * 1000, value}], &bounded([{at * 1000, value} | &1]))}
+      end
+    end)
   end
 
   defp pct(nil), do: nil
@@ -150,7 +161,14 @@ defmodule Dolphin.Web.Live do
   end
 
   defp chronological(v) do
-    %{v | positions: Enum.reverse(v.positions), battery: Enum.reverse(v.battery), modes: Enum.reverse(v.modes), arming: Enum.reverse(v.arming)}
+    %{
+      v
+      | positions: Enum.reverse(v.positions),
+        battery: Enum.reverse(v.battery),
+        modes: Enum.reverse(v.modes),
+        arming: Enum.reverse(v.arming),
+        sensors: Map.new(v.sensors, fn {source, list} -> {source, Enum.reverse(list)} end)
+    }
   end
 
   @doc false
@@ -191,7 +209,7 @@ defmodule Dolphin.Web.Live do
 
     [
       ~s(<section id="live-status"><h2>Now <span class="live-state" id="live-state">live</span></h2>),
-      ~s(<table class="summary"><thead><tr><th>vehicle</th><th>link</th><th>mode</th><th>armed</th><th>battery</th><th>height</th><th>position</th><th>mission</th><th>task</th></tr></thead><tbody>),
+      ~s(<table class="summary"><thead><tr><th>vehicle</th><th>link</th><th>mode</th><th>armed</th><th>battery</th><th>height</th><th>position</th><th>mission</th><th>task</th>#{if model.sensors != [], do: "<th>sensors</th>"}</tr></thead><tbody>),
       for id <- vehicles(live), view = live.views[id], view != nil do
         {lat, lon} = if view.position, do: {HTML.num(view.position.lat, 7), HTML.num(view.position.lon, 7)}, else: {"", ""}
 
@@ -209,11 +227,24 @@ defmodule Dolphin.Web.Live do
           "<td>#{case live.running[id] do
             {task, kind, name} -> HTML.esc("#{task} #{kind} “#{name}”")
             nil -> "—"
-          end}</td></tr>"
+          end}</td>",
+          if(model.sensors != [], do: ["<td class=\"sensors\">", sensors_now(view, model.sensors), "</td>"], else: []),
+          "</tr>"
         ]
       end,
       "</tbody></table></section>\n"
     ]
+  end
+
+  # The latest reading of each sensor the run declared, on one vehicle.
+  defp sensors_now(view, sensors) do
+    Enum.map_join(sensors, ", ", fn s ->
+      case Map.get(view.sensors, s.source) do
+        %{value: raw, stale: []} -> HTML.esc("#{s.name} #{HTML.num(raw * s.scale + s.offset, 2)}#{if s.unit, do: " #{s.unit}"}")
+        %{value: raw} -> HTML.esc("#{s.name} #{HTML.num(raw * s.scale + s.offset, 2)} (stale)")
+        nil -> HTML.esc("#{s.name} —")
+      end
+    end)
   end
 
   # The page follows the run: it listens to /events (Server-Sent Events) and

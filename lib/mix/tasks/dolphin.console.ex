@@ -117,6 +117,7 @@ defmodule Mix.Tasks.Dolphin.Console do
           {:ok, opts} ->
             cond do
               opts[:sim] != nil and opts[:sitl] != nil -> {:error, "--sim and --sitl do not go together"}
+              opts[:world] != nil and opts[:sim] == nil -> {:error, "--world is what simulated sensors sense: it goes with --sim"}
               # `iex --sname op -S mix dolphin.console --join ...`: the node has its name already.
               (problem = Dolphin.CLI.Cluster.check(opts, Node.alive?())) != :ok -> problem
               true -> {:ok, opts}
@@ -205,9 +206,11 @@ defmodule Mix.Tasks.Dolphin.Console do
 
   defp start_sim(n, opts, link_opts) do
     # The console's simulated fleet lives as long as the VM.
-    case Dolphin.Sim.Local.start(n, [seed: Keyword.get(opts, :seed, 1), home: opts[:home], world: opts[:world]] ++ link_opts) do
-      {:ok, sim} -> {:ok, ["#{Dolphin.CLI.Vehicles.sim_words(n)} #{Dolphin.Fleet.VehicleSet.format(sim.sysids)} on 127.0.0.1:#{sim.port}"]}
-      {:error, e} -> {:error, %CommandLineError{reason: :failed, message: Exception.message(e), cause: e}}
+    with {:ok, world} <- Dolphin.CLI.Vehicles.world(opts[:world]) do
+      case Dolphin.Sim.Local.start(n, [seed: Keyword.get(opts, :seed, 1), home: opts[:home], world: world] ++ link_opts) do
+        {:ok, sim} -> {:ok, ["#{Dolphin.CLI.Vehicles.sim_words(n)} #{Dolphin.Fleet.VehicleSet.format(sim.sysids)} on 127.0.0.1:#{sim.port}"]}
+        {:error, e} -> {:error, %CommandLineError{reason: :failed, message: Exception.message(e), cause: e}}
+      end
     end
   end
 

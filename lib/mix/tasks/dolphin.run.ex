@@ -293,7 +293,7 @@ defmodule Mix.Tasks.Dolphin.Run do
            :ok <- exclusive(opts),
            :ok <- web(opts),
            :ok <- report(opts),
-           {:ok, opts} <- Values.world(opts),
+           :ok <- Values.world(opts),
            :ok <- cluster(opts),
            {:ok, for_ms} <- duration(opts[:for]),
            :ok <- within_a_timer(for_ms, opts),

@@ -120,5 +120,32 @@ defmodule Mix.Tasks.FlagValuesTest do
     end
   end
 
+  test "mix dolphin.run: a simulated sensor no model has, a world file that is wrong, a world without --sim", %{tmp_dir: dir} do
+    script = Path.join(dir, "hello.exs")
+    File.write!(script, "use Dolphin.Script\nmessage \"hello\"\n")
+    world = Path.join(dir, "world.json")
+    File.write!(world, ~s({\n  "fires": [\n    {"lat": 40.44, "lon": -7.37, "radius_m": 40,\n     "intensty": 0.9}\n  ]\n}\n))
+    far = Path.join(dir, "far.json")
+    File.write!(far, ~s({"fires": [{"lat": 40.44, "lon": -7.37, "radius_m": 40, "intensity": 0.9}],\n "wind": {"from_deg": 90, "speed_ms": 400}}))
+    broken = Path.join(dir, "broken.json")
+    File.write!(broken, ~s({"fires": [\n  {"lat": 40.44,}\n]}))
+
+    assert [{2, sensor}, {1, key}, {1, range}, {1, json}, {2, alone}] =
+             run_all([
+               ["dolphin.run", script, "--sim", "copter:2+smke", "--no-tlog"],
+               ["dolphin.run", script, "--sim", "copter:1+smoke", "--world", world, "--no-tlog"],
+               ["dolphin.run", script, "--sim", "1", "--world", far, "--no-tlog"],
+               ["dolphin.run", script, "--sim", "1", "--world", broken, "--no-tlog"],
+               ["dolphin.run", script, "--fake", "1", "--world", world]
+             ])
+
+    assert sensor =~ ~s(mix dolphin.run: --sim copter:2+smke: no simulated sensor "smke": the simulator's sensors are range, smoke, water_temp)
+    assert key =~ ~s|#{world}: line 4: fires[0]: unknown key "intensty" (did you mean "intensity"?); a fire takes lat, lon, radius_m, intensity|
+    assert range =~ ~s|#{far}: line 2: wind.speed_ms: 400 is out of range: the wind's speed_ms is 0..40|
+    assert json =~ ~s|#{broken}: line 2, column 17 (byte 29): unexpected "}|
+    assert alone =~ "mix dolphin.run: --world is what simulated sensors sense: it goes with --sim"
+    for {_, output} <- [key, range, json], do: refute(output =~ "hello")
+  end
+
   defp run_all(commands), do: Dolphin.Test.MixCommand.run_all(commands, [{"ERL_EPMD_ADDRESS", "127.0.0.1"}])
 end

@@ -1,0 +1,61 @@
+defmodule Dolphin.Examples.FireWatchTest do
+  # examples/fire_watch.exs as its header says to run it, on the built-in
+  # simulator with the world file it names: the fire, which the script does
+  # not know of, is found, looked at, and both surveys are flown to their end.
+  use ExUnit.Case, async: false
+
+  alias Dolphin.Test.ExampleRun
+
+  @moduletag :tmp_dir
+  @moduletag timeout: 600_000
+
+  @world Path.expand("../../examples/worlds/serra_fire.json", __DIR__)
+
+  setup do
+    ExampleRun.clean_up_after_test()
+  end
+
+  # The fire of the world file, and how far from it a look is a look at it.
+  @fire Dolphin.Geo.location(40.4470, -7.3740)
+  @near_m 80
+
+  test "on the simulator: the fire is found, circled and photographed; the survey it broke off goes on; both land", %{tmp_dir: dir} do
+    run = ExampleRun.run(dir, "fire_watch", "-sim", ["--sim", "copter:2+smoke", "--world", @world, "--speedup", "20"], nil)
+    assert run.code == 0, run.output
+    assert run.result == "done"
+
+    # One detection, near the fire, and the vehicle that read it sent to look.
+    assert [detection] = for(%{"event" => "sensor_threshold"} = e <- run.events, do: e)
+    assert %{"sensor" => "smoke", "condition" => "smoke above 0.4", "sent" => sent, "vehicle" => sent} = detection
+    assert detection["value"] > 0.4
+    at = Dolphin.Geo.location(detection["lat"], detection["lon"])
+    assert Dolphin.Geo.distance(at, @fire) < @near_m, "detected #{round(Dolphin.Geo.distance(at, @fire))} m from the fire"
+    assert run.output =~ ~r/message: smoke 0\.\d+ read by vehicle #{sent} at 40\.44\d+, -7\.37\d+/
+
+    missions = for %{"event" => "task_finished", "kind" => "mission"} = e <- run.events, do: {e["name"], e["vehicle"], e["result"]}
+    # Its survey stopped to look, the look done, the rest of the survey flown to its landing.
+    assert {"Look at the smoke", ^sent, "done"} = Enum.find(missions, &(elem(&1, 0) == "Look at the smoke"))
+    assert [{_, ^sent, "stopped"}, {_, ^sent, "done"}] = for({"Survey " <> _, ^sent, _} = m <- missions, do: m)
+    [other] = [1, 2] -- [sent]
+    assert [{_, ^other, "done"}] = for({"Survey " <> _, ^other, _} = m <- missions, do: m)
+    assert run.disarmed_at_end
+    refute run.output =~ "a battery is low"
+
+    # Looked at within two minutes of clock time of the detection, photographs taken.
+    t = fn name -> Enum.find_value(run.events, &(&1["event"] == "task_finished" and &1["name"] == name && &1["t_ms"])) end
+    detected_at = Enum.find_value(run.events, &(&1["event"] == "sensor_threshold" && &1["t_ms"]))
+    assert t.("Look at the smoke") - detected_at < 120_000
+
+    # Never closer than the least separation in the air (each lands on its own pad).
+    {:ok, log} = Dolphin.Report.FlightLog.read_file(run.tlog)
+    assert Dolphin.Report.Separation.closest(log).least.across > 20
+
+    # The report of the run plots the smoke read and marks the detection on the map.
+    html = Path.join(dir, "report.html")
+    assert {:ok, _} = Dolphin.Report.write(run.tlog, Path.join(dir, "fire_watch-sim.jsonl"), html)
+    page = File.read!(html)
+    assert page =~ ~s(<svg class="plot sensor")
+    assert page =~ "smoke"
+    assert page =~ ~s(class="detection")
+  end
+end
