@@ -150,6 +150,7 @@ defmodule Dolphin.SITL do
                 home: if(Dolphin.Airframe.heights(airframe) == :depth, do: %{home | alt: 0.0}, else: home),
                 speedup: Dolphin.Clock.speedup(),
                 gcs_port: send_to.(port),
+                companion_port: Keyword.get(opts, :companion_port),
                 dir: Path.join(root, "vehicle-#{sysid}")
               }
             end

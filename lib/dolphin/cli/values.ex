@@ -229,13 +229,14 @@ defmodule Dolphin.CLI.Values do
   end
 
   @doc """
-  `--world FILE` goes with `--sim`: nothing else senses it (the file itself
-  is read as the vehicles start: `Dolphin.CLI.Vehicles`).
+  `--world FILE` goes with `--sim` or `--sitl` (SITL's sensors are a
+  sidecar's, `Dolphin.Sim.Sidecar`): nothing else senses it (the file
+  itself is read as the vehicles start: `Dolphin.CLI.Vehicles`).
   """
   @spec world(keyword()) :: :ok | {:error, CommandLineError.t()}
   def world(opts) do
-    if opts[:world] != nil and opts[:sim] == nil,
-      do: CommandLineError.usage_error("--world is what simulated sensors sense: it goes with --sim"),
+    if opts[:world] != nil and opts[:sim] == nil and opts[:sitl] == nil,
+      do: CommandLineError.usage_error("--world is what simulated sensors sense: it goes with --sim or --sitl"),
       else: :ok
   end
 
@@ -266,7 +267,7 @@ defmodule Dolphin.CLI.Values do
 
   # N copters, or airframes and counts: "copter:2,plane:1,boat:1,sub:3".
   defp value(:sim_fleet, text), do: fleet_spec(text, Dolphin.Sim.airframes(), Dolphin.Sim.Companion.models())
-  defp value(:sitl_fleet, text), do: fleet_spec(text, Dolphin.SITL.airframes())
+  defp value(:sitl_fleet, text), do: fleet_spec(text, Dolphin.SITL.airframes(), Dolphin.Sim.Companion.models())
 
   defp value(:vehicles, text), do: integer(text, 1..@max_sysid, "a number of vehicles from 1 to #{@max_sysid} (each needs a system id of its own)")
   defp value(:sysid, text), do: integer(text, 1..@max_sysid, "a system id from 1 to #{@max_sysid} (255 is the ground station's)")

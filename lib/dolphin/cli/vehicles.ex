@@ -104,14 +104,50 @@ defmodule Dolphin.CLI.Vehicles do
   defp start_sitl(n, opts, link_opts, out, defer) do
     sitl_opts = [bin: opts[:sitl_bin], defaults: Keyword.get_values(opts, :sitl_defaults), home: opts[:home]] ++ link_opts ++ Keyword.get(opts, :sitl_extra, [])
 
-    case Dolphin.SITL.start(n, Enum.reject(sitl_opts, fn {_, v} -> v in [nil, []] end)) do
-      {:ok, fleet} ->
-        defer.(fn -> Dolphin.SITL.stop(fleet) end)
-        IO.puts(out, "#{sitl_words(n)}, vehicles #{Enum.join(fleet.sysids, ", ")}, on 127.0.0.1:#{fleet.port} at #{Dolphin.Clock.speedup()}x")
-        :ok
+    with {:ok, fleet, lines} <- sitl_fleet(n, sitl_opts, opts, defer) do
+      defer.(fn -> Dolphin.SITL.stop(fleet) end)
+      Enum.each(lines, &IO.puts(out, &1))
+      IO.puts(out, "#{sitl_words(n)}, vehicles #{Enum.join(fleet.sysids, ", ")}, on 127.0.0.1:#{fleet.port} at #{Dolphin.Clock.speedup()}x")
+    end
+  end
 
-      {:error, why} ->
-        {:error, Dolphin.CommandLineError.failed(nil, why)}
+  @doc false
+  # `--sitl N` or `--sitl copter:2+smoke,...`: the SITL fleet, with a sensor
+  # sidecar as the companion computer of the vehicles that carry sensors
+  # (sensing --world); what to say of the sidecar. `defer` gets its undoing.
+  @spec sitl_fleet(pos_integer() | list(), keyword(), keyword(), (fun() -> any())) :: {:ok, Dolphin.SITL.t(), [String.t()]} | {:error, Dolphin.CommandLineError.t()}
+  def sitl_fleet(n, sitl_opts, opts, defer) do
+    groups = Dolphin.Sim.Local.groups(n)
+    fleet = if is_integer(n), do: n, else: Enum.map(groups, fn {airframe, count, _} -> {airframe, count} end)
+
+    with {:ok, companion, lines} <- sidecar(groups, opts, defer) do
+      case Dolphin.SITL.start(fleet, Enum.reject(sitl_opts ++ [companion_port: companion], fn {_, v} -> v in [nil, []] end)) do
+        {:ok, fleet} -> {:ok, fleet, lines}
+        {:error, why} -> {:error, Dolphin.CommandLineError.failed(nil, why)}
+      end
+    end
+  end
+
+  # The companion computers of the SITL vehicles that carry sensors: a
+  # sidecar on their second telemetry port. Its port, or nil when no
+  # vehicle carries one.
+  defp sidecar(groups, opts, defer) do
+    by_sysid =
+      groups
+      |> Enum.flat_map(fn {_airframe, count, sensors} -> List.duplicate(sensors, count) end)
+      |> Enum.with_index(1)
+      |> Map.new(fn {sensors, sysid} -> {sysid, sensors} end)
+
+    if Enum.all?(Map.values(by_sysid), &(&1 == [])) do
+      {:ok, nil, []}
+    else
+      with {:ok, world} <- world(opts[:world]) do
+        {:ok, pid} = Dolphin.Sim.Sidecar.start_link(listen: 0, sensors: by_sysid, world: world, seed: Keyword.get(opts, :seed, 1))
+        Process.unlink(pid)
+        defer.(fn -> Dolphin.Sim.Sidecar.stop(pid) end)
+        port = Dolphin.Sim.Sidecar.port(pid)
+        {:ok, port, ["sensor sidecar on 127.0.0.1:#{port} (the SITL vehicles' --serial1)"]}
+      end
     end
   end
 
@@ -129,7 +165,11 @@ defmodule Dolphin.CLI.Vehicles do
   # What --sitl started, in words: "2 ArduCopter SITL instance(s)", "3 SITL instance(s): 1 plane, 2 boat".
   @spec sitl_words(pos_integer() | keyword()) :: String.t()
   def sitl_words(n) when is_integer(n), do: "#{n} ArduCopter SITL instance(s)"
-  def sitl_words(fleet), do: "#{fleet |> Keyword.values() |> Enum.sum()} SITL instance(s) (#{Enum.map_join(fleet, ", ", fn {a, n} -> "#{n} #{a}" end)})"
+  def sitl_words(fleet) do
+    groups = Dolphin.Sim.Local.groups(fleet)
+    total = groups |> Enum.map(&elem(&1, 1)) |> Enum.sum()
+    "#{total} SITL instance(s) (#{Enum.map_join(groups, ", ", fn {a, n, sensors} -> "#{n} #{a}#{Enum.map(sensors, &"+#{&1}")}" end)})"
+  end
 
   defp start_fake(n, out, defer) do
     name = :"dolphin_run_fakes_#{System.unique_integer([:positive])}"

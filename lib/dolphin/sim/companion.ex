@@ -23,6 +23,10 @@ defmodule Dolphin.Sim.Companion do
   alias Dolphin.Sim.{Copter, World}
 
   @compid 191
+
+  @doc "The component id a companion computer speaks as (MAV_COMP_ID_ONBOARD_COMPUTER)."
+  @spec compid() :: byte()
+  def compid, do: @compid
   @models %{smoke: {"SMOKE", 0.02}, water_temp: {"WTEMP", 0.05}, range: {"RANGE", 0.05}}
 
   defstruct sensors: [], world: %World{}, period_ms: 500, noise: %{}, due: 0, heartbeat_due: 0, rand: nil
@@ -62,14 +66,24 @@ defmodule Dolphin.Sim.Companion do
   defp noise_of(%{} = by_model, model), do: Map.get(by_model, model) || noise_of(nil, model)
   defp noise_of(sigma, _model) when is_number(sigma), do: sigma * 1.0
 
-  @doc "What the companion says up to the vehicle's time now, `{compid, message}` oldest first."
+  @typedoc "Where the vehicle truly is: degrees, metres above sea level, and the ground's height under it."
+  @type place :: %{lat: float(), lon: float(), alt: float(), ground: float()}
+
+  @doc "What the companion says up to the simulated vehicle's time now, `{compid, message}` oldest first."
   @spec step(t(), Copter.t()) :: {[{byte(), struct()}], t()}
-  def step(%__MODULE__{} = c, %Copter{time_ms: now} = vehicle) do
+  def step(%__MODULE__{} = c, %Copter{time_ms: now} = vehicle), do: step_at(c, now, Map.put(Copter.position(vehicle), :ground, Copter.ground(vehicle)))
+
+  @doc """
+  What the companion says up to `now` (the vehicle's boot time, ms) with
+  the vehicle at `place`: what a sidecar computes for a vehicle it only
+  hears (`Dolphin.Sim.Sidecar`).
+  """
+  @spec step_at(t(), integer(), place()) :: {[{byte(), struct()}], t()}
+  def step_at(%__MODULE__{} = c, now, place) do
     {beats, c} = heartbeat(c, now)
 
     if now >= c.due do
-      position = Copter.position(vehicle)
-      {readings, rand} = Enum.map_reduce(c.sensors, c.rand, &reading(&1, &2, c, vehicle, position, now))
+      {readings, rand} = Enum.map_reduce(c.sensors, c.rand, &reading(&1, &2, c, place, now))
       {beats ++ readings, %{c | rand: rand, due: now + c.period_ms}}
     else
       {beats, c}
@@ -81,14 +95,14 @@ defmodule Dolphin.Sim.Companion do
 
   defp heartbeat(c, _now), do: {[], c}
 
-  defp reading(model, rand, c, vehicle, position, now) do
+  defp reading(model, rand, c, place, now) do
     {noise, rand} = :rand.normal_s(rand)
-    value = truth(model, c.world, vehicle, position) + noise * Map.fetch!(c.noise, model)
+    value = truth(model, c.world, place) + noise * Map.fetch!(c.noise, model)
     value = if model in [:smoke, :range], do: max(value, 0.0), else: value
     {{@compid, %M.NamedValueFloat{time_boot_ms: now, name: value_name(model), value: value}}, rand}
   end
 
-  defp truth(:smoke, world, _vehicle, p), do: World.smoke(world, p.lat, p.lon)
-  defp truth(:water_temp, world, _vehicle, p), do: World.water_temperature(world, p.lat, p.lon)
-  defp truth(:range, world, vehicle, p), do: World.range(world, p.lat, p.lon, p.alt, Copter.ground(vehicle))
+  defp truth(:smoke, world, p), do: World.smoke(world, p.lat, p.lon)
+  defp truth(:water_temp, world, p), do: World.water_temperature(world, p.lat, p.lon)
+  defp truth(:range, world, p), do: World.range(world, p.lat, p.lon, p.alt, p.ground)
 end

@@ -47,7 +47,7 @@ defmodule Dolphin.SITL.Instance do
     args =
       ~w(--model #{spec.model} --speedup #{format_number(spec.speedup)} -I #{spec.instance} --sysid #{spec.sysid}) ++
         ["--home", home_arg(spec.home), "--defaults", Enum.join(defaults, ","), "-w"] ++
-        ~w(--serial0 udpclient:127.0.0.1:#{spec.gcs_port} --serial1 none --serial2 none)
+        ~w(--serial0 udpclient:127.0.0.1:#{spec.gcs_port} --serial1 #{serial1(spec)} --serial2 none)
 
     port =
       Port.open({:spawn_executable, spec.bin}, [:binary, :exit_status, :stderr_to_stdout, {:line, 1024}, args: args, cd: dir])
@@ -65,6 +65,10 @@ defmodule Dolphin.SITL.Instance do
        cmdline: Enum.join([spec.bin | args], " ")
      }}
   end
+
+  # A companion computer's port (the sensor sidecar's), else none.
+  defp serial1(%{companion_port: port}) when is_integer(port), do: "udpclient:127.0.0.1:#{port}"
+  defp serial1(_spec), do: "none"
 
   @impl true
   def handle_call(:kill, _from, s) do

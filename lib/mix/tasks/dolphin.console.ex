@@ -117,7 +117,7 @@ defmodule Mix.Tasks.Dolphin.Console do
           {:ok, opts} ->
             cond do
               opts[:sim] != nil and opts[:sitl] != nil -> {:error, "--sim and --sitl do not go together"}
-              opts[:world] != nil and opts[:sim] == nil -> {:error, "--world is what simulated sensors sense: it goes with --sim"}
+              opts[:world] != nil and opts[:sim] == nil and opts[:sitl] == nil -> {:error, "--world is what simulated sensors sense: it goes with --sim or --sitl"}
               # `iex --sname op -S mix dolphin.console --join ...`: the node has its name already.
               (problem = Dolphin.CLI.Cluster.check(opts, Node.alive?())) != :ok -> problem
               true -> {:ok, opts}
@@ -218,9 +218,9 @@ defmodule Mix.Tasks.Dolphin.Console do
     # Like the simulated fleet, the console's SITL instances live as long as the VM.
     sitl_opts = [bin: opts[:sitl_bin], defaults: Keyword.get_values(opts, :sitl_defaults), home: opts[:home]] ++ link_opts
 
-    case Dolphin.SITL.start(n, Enum.reject(sitl_opts, fn {_, v} -> v in [nil, []] end)) do
-      {:ok, fleet} -> {:ok, ["#{Dolphin.CLI.Vehicles.sitl_words(n)}, vehicles #{Enum.join(fleet.sysids, ", ")}, on 127.0.0.1:#{fleet.port}"]}
-      {:error, e} -> {:error, %CommandLineError{reason: :failed, message: Exception.message(e), cause: e}}
+    case Dolphin.CLI.Vehicles.sitl_fleet(n, sitl_opts, opts, fn _undo -> :ok end) do
+      {:ok, fleet, lines} -> {:ok, lines ++ ["#{Dolphin.CLI.Vehicles.sitl_words(n)}, vehicles #{Enum.join(fleet.sysids, ", ")}, on 127.0.0.1:#{fleet.port}"]}
+      {:error, e} -> {:error, e}
     end
   end
 

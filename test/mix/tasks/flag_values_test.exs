@@ -143,7 +143,7 @@ defmodule Mix.Tasks.FlagValuesTest do
     assert key =~ ~s|#{world}: line 4: fires[0]: unknown key "intensty" (did you mean "intensity"?); a fire takes lat, lon, radius_m, intensity|
     assert range =~ ~s|#{far}: line 2: wind.speed_ms: 400 is out of range: the wind's speed_ms is 0..40|
     assert json =~ ~s|#{broken}: line 2, column 17 (byte 29): unexpected "}|
-    assert alone =~ "mix dolphin.run: --world is what simulated sensors sense: it goes with --sim"
+    assert alone =~ "mix dolphin.run: --world is what simulated sensors sense: it goes with --sim or --sitl"
     for {_, output} <- [key, range, json], do: refute(output =~ "hello")
   end
 
