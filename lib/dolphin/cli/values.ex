@@ -399,7 +399,7 @@ defmodule Dolphin.CLI.Values do
 
   # "copter:2,boat:1": airframes and counts; a simulated group may carry
   # sensors, "copter:2+smoke+range" (and "2+smoke": N copters with them).
-  defp fleet_spec(text, airframes, sensors \\ []) do
+  defp fleet_spec(text, airframes, sensors) do
     if String.contains?(text, [":", "+"]), do: groups(text, airframes, sensors), else: value(:vehicles, text)
   end
 

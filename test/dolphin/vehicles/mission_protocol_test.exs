@@ -176,7 +176,7 @@ defmodule Dolphin.Vehicles.MissionProtocolTest do
   # An upload whose final ACCEPTED was lost ends :unconfirmed; the reading
   # back says. `nil` when the vehicle has exactly `mission` and the ground
   # station read it back so, else what went wrong.
-  defp upload_and_verify(sysid, vehicle, mission, opts \\ []) do
+  defp upload_and_verify(sysid, vehicle, mission, opts) do
     upload = Vehicles.upload_mission(sysid, mission, opts)
     download = Vehicles.download_mission(sysid, opts)
     type = Map.fetch!(%{mission: 0, fence: 1, rally: 2}, Keyword.get(opts, :mission_type, :mission))
