@@ -22,6 +22,7 @@ bench: bootstrap
 	MIX_ENV=prod mix run bench/mission_upload.exs
 	MIX_ENV=prod mix run bench/sim.exs
 	MIX_ENV=prod mix run bench/reaction.exs
+	MIX_ENV=prod mix run bench/sensor_reaction.exs
 	MIX_ENV=prod mix run bench/report.exs
 	MIX_ENV=prod mix run bench/cluster.exs
 	MIX_ENV=prod mix run bench/separation.exs

@@ -28,7 +28,8 @@ defmodule Mix.Tasks.Dolphin.Sensors do
     * `--noise SIGMA` — the noise's standard deviation (default each model's)
     * `--seed N` — seeds the noise
     * `--for SECONDS` — stop after that many seconds (default: until interrupted)
-    * `--quiet` — no status lines (one every 10 s: the readings sent to each vehicle)
+    * `--quiet` — no status lines (one every 10 s, and at the end: the
+      readings sent to each vehicle)
 
   ## Exit status
 
@@ -139,6 +140,7 @@ defmodule Mix.Tasks.Dolphin.Sensors do
     left = if until == :infinity, do: 10_000, else: min(10_000, until - System.monotonic_time(:millisecond))
 
     if left <= 0 do
+      unless quiet?, do: status(pid)
       Sidecar.stop(pid)
     else
       receive do
