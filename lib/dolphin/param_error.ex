@@ -4,7 +4,9 @@ defmodule Dolphin.ParamError do
   vehicle, and why (`result`: `:timeout` when no PARAM_VALUE came within
   the retries, `:refused` when the vehicle answered with another value than
   the one asked — it has no such parameter, or keeps it within its range —,
-  `:vehicle_gone` when the vehicle's process went away).
+  `:vehicle_gone` when the vehicle's process went away, `:unknown` when the
+  vehicle's parameter list has no such name: `detail` then names the ones
+  near).
 
       iex> e = %Dolphin.ParamError{param: "FENCE_ACTION", vehicle: 3, result: :refused, asked: 9.0, kept: 1.0, attempts: 1}
       iex> Exception.message(e)
@@ -22,6 +24,8 @@ defmodule Dolphin.ParamError do
         :timeout -> "vehicle #{vehicle} did not answer for parameter #{param} (#{e.attempts} attempts)"
         :refused -> "vehicle #{vehicle} kept #{param} at #{number(e.kept)} when asked for #{number(e.asked)}"
         :vehicle_gone -> "vehicle #{vehicle} went away while setting #{param}"
+        :unknown -> "vehicle #{vehicle} has no parameter #{param}"
+        :failed -> "parameter #{param} on vehicle #{vehicle} failed"
         other -> "parameter #{param} on vehicle #{vehicle}: #{other}"
       end
 

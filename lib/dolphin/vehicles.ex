@@ -394,16 +394,61 @@ defmodule Dolphin.Vehicles do
   `{:error, %Dolphin.ParamError{}}` — `:refused` when it keeps another value.
   """
   @spec set_param(Id.t(), String.t(), number(), keyword()) :: {:ok, float()} | {:error, Dolphin.ParamError.t()}
-  def set_param(id, name, value, opts \\ []) when is_binary(name) and is_number(value), do: param(id, name, value * 1.0, opts)
+  def set_param(id, name, value, opts \\ []) when is_binary(name) and is_number(value), do: param_request(id, name, value * 1.0, opts)
 
   @doc "Reads parameter `name` of vehicle `id`: `{:ok, value}` or `{:error, %Dolphin.ParamError{}}`."
   @spec read_param(Id.t(), String.t(), keyword()) :: {:ok, float()} | {:error, Dolphin.ParamError.t()}
-  def read_param(id, name, opts \\ []) when is_binary(name), do: param(id, name, nil, opts)
+  def read_param(id, name, opts \\ []) when is_binary(name), do: param_request(id, name, nil, opts)
 
-  defp param(id, name, value, opts) do
+  @doc """
+  Parameter `name` of vehicle `id` as its type says (an integer for the
+  integer types: `Dolphin.Vehicles.ParamProtocol.typed/2`), read, or set
+  to `value` and read back. A name the vehicle does not answer for is
+  looked up in its parameter list: one it does not have is
+  `{:error, %Dolphin.ParamError{result: :unknown}}`, with the names that are
+  near; a value it keeps otherwise is `:refused`.
+  """
+  @spec param(Id.t(), String.t(), number() | nil, keyword()) :: {:ok, number()} | {:error, Dolphin.ParamError.t()}
+  def param(id, name, value, opts) when is_binary(name) and (value == nil or is_number(value)) do
+    case param_request(id, name, value && value * 1.0, Keyword.put(opts, :typed, true)) do
+      {:error, %Dolphin.ParamError{result: :timeout} = e} -> {:error, unknown_or(e, id, name, opts)}
+      reply -> reply
+    end
+  end
+
+  # A name the vehicle did not answer for: one its list lacks is unknown.
+  defp unknown_or(e, id, name, opts) do
+    case param_list(id, opts) do
+      {:ok, list} ->
+        names = Enum.map(list, & &1.name)
+        if name in names, do: e, else: %{e | result: :unknown, detail: Dolphin.Sensors.near(name, names, & &1) |> String.trim_leading("; ") |> then(&(if &1 == "", do: nil, else: &1))}
+
+      {:error, _} ->
+        e
+    end
+  end
+
+  @doc """
+  Every parameter of vehicle `id` (`Dolphin.Vehicles.ParamList`): `{:ok,
+  [%{name, value, type, index}]}` in index order, values typed; the ones a
+  lossy link lost asked for again by index.
+  """
+  @spec param_list(Id.t(), keyword()) :: {:ok, [map()]} | {:error, Dolphin.ParamError.t()}
+  def param_list(id, opts \\ []) do
+    gone = %Dolphin.ParamError{param: "(the list)", vehicle: id, result: :vehicle_gone, attempts: 0}
+
+    case call_vehicle(id, {:param_list, opts}, :infinity) do
+      {:ok, reply} -> reply
+      :no_vehicle -> {:error, %{gone | detail: "no such vehicle"}}
+      :gone -> {:error, gone}
+    end
+  end
+
+  defp param_request(id, name, value, opts) do
     gone = %Dolphin.ParamError{param: name, vehicle: id, result: :vehicle_gone, asked: value, attempts: 0}
+    {typed, opts} = Keyword.pop(opts, :typed, false)
 
-    case call_vehicle(id, {:param, %{name: name, value: value}, opts}, :infinity) do
+    case call_vehicle(id, {:param, %{name: name, value: value, typed: typed}, opts}, :infinity) do
       {:ok, reply} -> reply
       :no_vehicle -> {:error, %{gone | detail: "no such vehicle"}}
       :gone -> {:error, gone}

@@ -12,9 +12,16 @@ defmodule Dolphin.Test.ScriptedVehicle do
   127.0.0.1, behind a link that can drop, duplicate and reorder datagrams in
   both directions.
 
+  It also keeps parameters, as ArduPilot serves them: PARAM_REQUEST_LIST
+  answered with every PARAM_VALUE (index, count, MAV_PARAM_TYPE, the value
+  cast to a float), PARAM_REQUEST_READ by name or index, PARAM_SET of a
+  known name answered with the value kept (clamped to its range), an
+  unknown name ignored.
+
   Options: `:port` (the ground station's), `:sysid`, `:limit` (items), `:loss`,
   `:duplicate`, `:reorder` (probabilities), `:seed`, `:speedup` (of its own
-  timers, to match `Dolphin.Clock`).
+  timers, to match `Dolphin.Clock`), `:params` (`%{name => {value, type,
+  range}}`, range `{low, high}` or nil; default `params(300)`).
   """
 
   use GenServer
@@ -34,6 +41,24 @@ defmodule Dolphin.Test.ScriptedVehicle do
   @doc "Changes the link's faults."
   def set_faults(pid, faults), do: GenServer.call(pid, {:faults, faults})
 
+  @doc """
+  Given its process: the parameters it keeps now, `%{name => value}`.
+  Given a number `n`: `n` parameters of every MAV_PARAM_TYPE ArduPilot
+  uses (INT8, INT16, INT32, REAL32), named as ArduPilot's are (`P0_GAIN`,
+  ...), every fourth one with a range (its `:params` option).
+  """
+  def params(pid) when is_pid(pid), do: GenServer.call(pid, :params)
+
+  def params(n) when is_integer(n) do
+    types = [2, 4, 6, 9]
+
+    Map.new(0..(n - 1)//1, fn i ->
+      type = Enum.at(types, rem(i, 4))
+      value = if type == 9, do: i / 8, else: rem(i * 7, 120) - 20
+      {"P#{i}_#{Enum.at(["GAIN", "RATE", "MAX", "TRIM"], rem(i, 4))}", {value, type, if(rem(i, 4) == 3, do: {-10.0, 10.0})}}
+    end)
+  end
+
   @impl true
   def init(opts) do
     {:ok, socket} = :gen_udp.open(0, [:binary, active: true, ip: {127, 0, 0, 1}])
@@ -50,7 +75,8 @@ defmodule Dolphin.Test.ScriptedVehicle do
       timer: nil,
       commands: [],
       held: nil,
-      seq: 0
+      seq: 0,
+      params: Keyword.get_lazy(opts, :params, fn -> params(300) end)
     }
 
     send(self(), :heartbeat)
@@ -61,6 +87,7 @@ defmodule Dolphin.Test.ScriptedVehicle do
   def handle_call({:mission, type}, _from, s), do: {:reply, Enum.map(MissionServer.items(s.missions, type), &normalise/1), s}
   def handle_call(:commands, _from, s), do: {:reply, Enum.reverse(s.commands), s}
   def handle_call({:faults, faults}, _from, s), do: {:reply, :ok, %{s | faults: Map.new(faults)}}
+  def handle_call(:params, _from, s), do: {:reply, Map.new(s.params, fn {name, {value, _, _}} -> {name, value} end), s}
 
   @impl true
   def handle_info(:heartbeat, s) do
@@ -116,7 +143,47 @@ defmodule Dolphin.Test.ScriptedVehicle do
     reply(%{s | missions: missions}, replies)
   end
 
+  defp handle_frame(%M.ParamRequestList{}, s) do
+    s.params |> names() |> Enum.with_index() |> Enum.reduce(s, fn {name, i}, s -> transmit(s, param_value(s, name, i)) end)
+  end
+
+  defp handle_frame(%M.ParamRequestRead{param_index: i}, s) when i >= 0 do
+    case Enum.at(names(s.params), i) do
+      nil -> s
+      name -> transmit(s, param_value(s, name, i))
+    end
+  end
+
+  defp handle_frame(%M.ParamRequestRead{param_id: name}, s) do
+    case Enum.find_index(names(s.params), &(&1 == name)) do
+      nil -> s
+      i -> transmit(s, param_value(s, name, i))
+    end
+  end
+
+  defp handle_frame(%M.ParamSet{param_id: name, param_value: asked}, s) do
+    case s.params do
+      %{^name => {_, type, range}} ->
+        kept = clamp(if(type == 9, do: asked, else: round(asked)), range)
+        s = %{s | params: Map.put(s.params, name, {kept, type, range})}
+        transmit(s, param_value(s, name, Enum.find_index(names(s.params), &(&1 == name))))
+
+      _ ->
+        s
+    end
+  end
+
   defp handle_frame(_other, s), do: s
+
+  defp names(params), do: params |> Map.keys() |> Enum.sort()
+
+  defp clamp(v, nil), do: v
+  defp clamp(v, {low, high}), do: v |> max(low) |> min(high)
+
+  defp param_value(s, name, i) do
+    {value, type, _} = Map.fetch!(s.params, name)
+    %M.ParamValue{param_id: name, param_value: value * 1.0, param_type: type, param_count: map_size(s.params), param_index: i}
+  end
 
   # The vehicle's clock: real time sped up as the ground station's is.
   defp now(s), do: System.monotonic_time(:millisecond) * s.speedup

@@ -22,7 +22,8 @@ defmodule Dolphin.Vehicles.ParamProtocol do
 
   @doc """
   Starts the protocol, linked to the caller (the vehicle process).
-  `request`: `%{sysid, vehicle, name, value (nil: a read), send, reply_to}`.
+  `request`: `%{sysid, vehicle, name, value (nil: a read), send, reply_to}`,
+  and `typed: true` for the value typed by its MAV_PARAM_TYPE (`typed/2`).
   Options as `Dolphin.Vehicles.CommandProtocol.start_link/2`'s: `:attempts`,
   `:loss`, `:rtt_ms`, `:ack_timeout_ms`.
   """
@@ -51,16 +52,34 @@ defmodule Dolphin.Vehicles.ParamProtocol do
       else: finish(data, {:error, %ParamError{param: data.name, vehicle: data.vehicle, result: :timeout, asked: data.value, attempts: n}})
   end
 
-  def handle_event(:info, {:param, %M.ParamValue{param_value: kept}}, _state, %{value: nil} = data), do: finish(data, {:ok, kept})
+  def handle_event(:info, {:param, %M.ParamValue{param_value: kept} = v}, _state, %{value: nil} = data), do: finish(data, {:ok, answer(data, v, kept)})
 
-  def handle_event(:info, {:param, %M.ParamValue{param_value: kept}}, _state, data) do
+  def handle_event(:info, {:param, %M.ParamValue{param_value: kept} = v}, _state, data) do
     # Compared as the float32 the vehicle keeps.
     if same?(kept, data.value),
-      do: finish(data, {:ok, kept}),
+      do: finish(data, {:ok, answer(data, v, kept)}),
       else: finish(data, {:error, %ParamError{param: data.name, vehicle: data.vehicle, result: :refused, asked: data.value, kept: kept, attempts: data.sent}})
   end
 
   defp same?(a, b), do: <<a::float-32>> == <<b::float-32>>
+
+  @doc """
+  A PARAM_VALUE's value as its MAV_PARAM_TYPE says (ArduPilot sends every
+  value as a float, cast from its type): an integer for the integer types
+  (1..8), a float otherwise.
+
+      iex> Dolphin.Vehicles.ParamProtocol.typed(3.0, 2)
+      3
+      iex> Dolphin.Vehicles.ParamProtocol.typed(0.25, 9)
+      0.25
+  """
+  @spec typed(number(), non_neg_integer()) :: number()
+  def typed(value, type) when type in 1..8 and is_number(value), do: round(value)
+  def typed(value, _type), do: value
+
+  # Typed (`typed/2`) when the caller asked for it.
+  defp answer(%{typed: true}, v, kept), do: typed(kept, v.param_type)
+  defp answer(_data, _v, kept), do: kept
 
   defp finish(data, reply) do
     if data.reply_to, do: :gen_statem.reply(data.reply_to, reply)

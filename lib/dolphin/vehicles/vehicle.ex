@@ -14,7 +14,7 @@ defmodule Dolphin.Vehicles.Vehicle do
   alias Dolphin.MAVLink.Frame
   alias Dolphin.MAVLink.Ardupilotmega, as: M
   alias Dolphin.Sensors.Readings
-  alias Dolphin.Vehicles.{CommandProtocol, MissionProtocol, ParamProtocol, Paths, Settings, State, View, Views}
+  alias Dolphin.Vehicles.{CommandProtocol, MissionProtocol, ParamList, ParamProtocol, Paths, Settings, State, View, Views}
 
   @lost_floor_real_ms 3_000
   @late_real_ms 100
@@ -201,6 +201,7 @@ defmodule Dolphin.Vehicles.Vehicle do
   def handle_call({:command, request, opts}, from, s), do: {:noreply, run_op(s, request.command, CommandProtocol, request, opts, from)}
   def handle_call({:mission, request, opts}, from, s), do: {:noreply, run_op(s, :mission, MissionProtocol, request, opts, from)}
   def handle_call({:param, request, opts}, from, s), do: {:noreply, run_op(s, {:param, request.name}, ParamProtocol, request, opts, from)}
+  def handle_call({:param_list, opts}, from, s), do: {:noreply, run_op(s, :param_list, ParamList, %{}, opts, from)}
 
   # The name goes with the process, not a moment later when the registry
   # hears of the exit: once Dolphin.Vehicles.forget/1 has stopped a vehicle,
@@ -453,7 +454,11 @@ defmodule Dolphin.Vehicles.Vehicle do
     do: notify_op(s, command, {:ack, ack, compid})
 
   defp route_to_op(s, %{message: %m{} = message}) when m in @mission_messages, do: notify_op(s, :mission, {:mission, message})
-  defp route_to_op(s, %{message: %M.ParamValue{param_id: name} = value}), do: notify_op(s, {:param, name}, {:param, value})
+  # A parameter's value answers a read or set of it, and belongs to a list being fetched.
+  defp route_to_op(s, %{message: %M.ParamValue{param_id: name} = value}) do
+    notify_op(s, {:param, name}, {:param, value})
+    notify_op(s, :param_list, {:param, value})
+  end
   defp route_to_op(_s, _frame), do: :ok
 
   defp notify_op(s, key, event) do
@@ -484,6 +489,7 @@ defmodule Dolphin.Vehicles.Vehicle do
       case module do
         MissionProtocol -> {:mission, request.operation, request.mission_type}
         ParamProtocol -> {:param, request.name, request.value}
+        ParamList -> {:param_list}
         CommandProtocol -> {:command, key}
       end
 
@@ -528,6 +534,9 @@ defmodule Dolphin.Vehicles.Vehicle do
 
   defp crashed(s, {:param, name, value}, reason),
     do: %Dolphin.ParamError{param: name, vehicle: s.id, result: :failed, asked: value, attempts: 0, detail: "stopped: #{op_words(reason)}"}
+
+  defp crashed(s, {:param_list}, reason),
+    do: %Dolphin.ParamError{param: "(the list)", vehicle: s.id, result: :failed, attempts: 0, detail: "stopped: #{op_words(reason)}"}
 
   defp crashed(s, {:command, command}, reason),
     do: %Dolphin.CommandError{command: command, vehicle: s.id, result: :failed, attempts: 0, detail: "stopped: #{op_words(reason)}"}
