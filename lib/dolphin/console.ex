@@ -309,6 +309,24 @@ defmodule Dolphin.Console do
   defdelegate messages(id), to: Vehicle
 
   @doc """
+  A parameter of the vehicle, by name (`param(1, "WPNAV_SPEED")`), as its
+  type says; a name it does not have is said with the names near.
+  """
+  @spec param(vehicle_id(), String.t()) :: printed()
+  defdelegate param(id, name), to: Vehicle
+
+  @doc "Sets a parameter and reads it back: the value the vehicle keeps (refused: another one)."
+  @spec set_param(vehicle_id(), String.t(), number()) :: printed()
+  defdelegate set_param(id, name, value), to: Vehicle
+
+  @doc """
+  The vehicle's parameters whose names contain `filter` (`params(1, "FENCE")`;
+  `""`: all of them, fetched whole: missing ones are asked for again by index).
+  """
+  @spec params(vehicle_id(), String.t()) :: printed()
+  defdelegate params(id, filter \\ ""), to: Vehicle
+
+  @doc """
   The last `n` events (default 20) of `Dolphin.Events`, oldest first.
   Filters: `vehicle: id`, `run: id`, `event: name` (or a list of names).
   """

@@ -19,7 +19,7 @@ defmodule Dolphin.DSL do
   | `action do ... end`, `condition(c)`, `until(t, c)`, `wait_for(c)`, `wait_for(c, then: t)`, `one_of do c -> t ... end`, `all_of do ... end` | `Dolphin.Engine` with a `Dolphin.Engine.Cond` |
   | `execute(t)`, `execute(%{v1 => t1, _: t2})`, `execute action do ... end` | `Dolphin.Script.Statements.execute/1` |
   | `forever do ... end`, `forever(state, fn s -> ... end)`, `repeat(n) do ... end` | `Dolphin.Script.Statements.forever/1,2`, `Dolphin.Script.Statements.repeat/2` |
-  | `message`, `post`, `consume`, `poll`, `pause`, `halt`, `ask`, `send_message` | `Dolphin.Script.Statements` |
+  | `message`, `post`, `consume`, `poll`, `pause`, `halt`, `ask`, `send_message`, `param`, `set_param` | `Dolphin.Script.Statements` |
 
   Conditions are ordinary expressions — `battery(v1) < 0.3`, `poll(:go)`,
   `connected?(v) and mode(v) == :guided` — re-evaluated whenever what they
@@ -514,6 +514,26 @@ defmodule Dolphin.DSL do
       if ask("Fly? (y/n)") == "y", do: execute survey
   """
   defdelegate ask(prompt), to: Statements
+
+  @doc """
+  A vehicle's parameter (the PARAM micro-service), by name, typed: an
+  integer for the integer types, a float otherwise. A statement, not a
+  condition's reader (it asks the vehicle and waits for its answer). A
+  name the vehicle does not have fails the script at this line, naming the
+  ones near (`vehicle 1 has no parameter WPNAV_SPED (did you mean WPNAV_SPEED?)`).
+
+      speed = param(v, "WPNAV_SPEED")
+  """
+  defmacro param(v, name), do: at_line(quote(do: Dolphin.Script.Statements.param(unquote(v), unquote(name))), __CALLER__)
+
+  @doc """
+  Sets a vehicle's parameter and reads it back; returns the value kept. A
+  value the vehicle keeps otherwise (out of its range), or a name it does
+  not have, fails the script at this line.
+
+      set_param(v, "WPNAV_SPEED", 800)
+  """
+  defmacro set_param(v, name, value), do: at_line(quote(do: Dolphin.Script.Statements.set_param(unquote(v), unquote(name), unquote(value))), __CALLER__)
 
   @doc """
   Sends a raw MAVLink message struct to every vehicle of `set`; `:ok`.

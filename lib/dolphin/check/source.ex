@@ -29,6 +29,16 @@ defmodule Dolphin.Check.Source do
   @impl true
   def send_message(%{test: t}, id, message), do: FakeSource.send_message(t, id, message)
 
+  # A stand-in's parameters are unknown to the check: a read gives 0 (the
+  # script goes on), a set is kept.
+  @impl true
+  def param(%{test: t}, id, name, value) do
+    case FakeSource.param(t, id, name, value) do
+      {:error, %Dolphin.ParamError{result: :unknown}} -> {:ok, 0}
+      other -> other
+    end
+  end
+
   @doc false
   # Called by Dolphin.Mission.Platform.start/3 in the engine's leaf process,
   # whose context names the script's code process (the line it is at).

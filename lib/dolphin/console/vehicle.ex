@@ -302,6 +302,45 @@ defmodule Dolphin.Console.Vehicle do
     end)
   end
 
+  @spec param(Console.vehicle_id(), String.t()) :: Console.printed()
+  def param(id, name) do
+    command(id, :any, [], [], fn _view, _ ->
+      case Vehicles.param(id, to_string(name), nil, []) do
+        {:ok, value} -> say("vehicle #{id}: #{name} = #{value}")
+        {:error, e} -> say(Exception.message(e))
+      end
+    end)
+  end
+
+  @spec set_param(Console.vehicle_id(), String.t(), number()) :: Console.printed()
+  def set_param(id, name, value) do
+    command(id, :any, [], [], fn _view, _ ->
+      cond do
+        not is_number(value) -> say("set_param takes a number, got: #{inspect(value)}")
+        true -> param_answer(id, name, Vehicles.param(id, to_string(name), value, []))
+      end
+    end)
+  end
+
+  defp param_answer(id, name, {:ok, kept}), do: say("vehicle #{id}: #{name} set to #{kept}")
+  defp param_answer(_id, _name, {:error, e}), do: say(Exception.message(e))
+
+  @spec params(Console.vehicle_id(), String.t()) :: Console.printed()
+  def params(id, filter \\ "") do
+    command(id, :any, [], [], fn _view, _ ->
+      case Vehicles.param_list(id) do
+        {:ok, list} ->
+          shown = Enum.filter(list, &String.contains?(&1.name, to_string(filter)))
+          width = shown |> Enum.map(&String.length(&1.name)) |> Enum.max(fn -> 0 end)
+          Enum.each(shown, &say(String.pad_trailing(&1.name, width) <> "  #{&1.value}"))
+          say("#{length(shown)} of #{length(list)} parameters")
+
+        {:error, e} ->
+          say(Exception.message(e))
+      end
+    end)
+  end
+
   @spec events(pos_integer(), keyword()) :: Console.printed()
   def events(n \\ 20, opts \\ []) do
     with {:ok, n} <- Arguments.count(n),

@@ -172,6 +172,17 @@ defmodule Dolphin.Fleet.FakeSource do
     end
   end
 
+  # A fake vehicle's parameters are what was set: a read of one never set is unknown.
+  @impl Dolphin.Fleet.Source
+  def param(name, id, param, value) do
+    case {:ets.lookup(name, id), value, :ets.lookup(name, {:param, id, param})} do
+      {[], _, _} -> {:error, %Dolphin.ParamError{param: param, vehicle: id, result: :vehicle_gone, attempts: 0, detail: "no such vehicle"}}
+      {[_], nil, [{_, kept}]} -> {:ok, kept}
+      {[_], nil, []} -> {:error, %Dolphin.ParamError{param: param, vehicle: id, result: :unknown, attempts: 0, detail: "a fake vehicle has only the parameters set on it"}}
+      {[_], value, _} -> ok(:ets.insert(name, {{:param, id, param}, value})) && {:ok, value}
+    end
+  end
+
   defp ok(true), do: :ok
 
   @impl GenServer

@@ -53,4 +53,7 @@ defmodule Dolphin.Fleet.MAVLinkSource do
 
   @impl true
   def send_message(_arg, id, message), do: Dolphin.Vehicles.send_message(id, message)
+
+  @impl true
+  def param(_arg, id, name, value), do: Dolphin.Vehicles.param(id, name, value, [])
 end

@@ -55,6 +55,14 @@ defmodule Dolphin.Fleet.Source do
   @doc "Sends a raw message (for MAVLink, a message struct) to a vehicle."
   @callback send_message(arg :: term(), id(), term()) :: :ok | {:error, term()}
 
+  @doc """
+  A vehicle's parameter `name`: read (`value` nil), or set to `value` and
+  read back; typed (an integer for the integer types). Optional: a source
+  without it has no parameters.
+  """
+  @callback param(arg :: term(), id(), String.t(), number() | nil) :: {:ok, number()} | {:error, Exception.t()}
+  @optional_callbacks param: 4
+
   @doc false
   def list({m, a}), do: m.list(a)
   @doc false
@@ -68,6 +76,15 @@ defmodule Dolphin.Fleet.Source do
   def released({m, a}, ids), do: if(function_exported?(m, :released, 2), do: m.released(a, ids), else: :ok)
   @doc false
   def send_message({m, a}, id, msg), do: m.send_message(a, id, msg)
+
+  @doc false
+  def param({m, a}, id, name, value) do
+    Code.ensure_loaded(m)
+
+    if function_exported?(m, :param, 4),
+      do: m.param(a, id, name, value),
+      else: {:error, %Dolphin.ParamError{param: name, vehicle: id, result: :unknown, asked: value && value * 1.0, detail: "its vehicles (#{inspect(m)}) have no parameters"}}
+  end
 
   @doc "Subscribes the caller to a vehicle's views (`{:dolphin, {:vehicle, id}, {:view, view}}`), whatever the source."
   @spec subscribe(id()) :: :ok

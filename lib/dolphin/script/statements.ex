@@ -244,6 +244,35 @@ defmodule Dolphin.Script.Statements do
     end
   end
 
+  @doc """
+  A one-vehicle set's parameter `name`, typed (an integer for the integer
+  types); raises `Dolphin.ParamError` (no such parameter, with the names
+  near; the vehicle did not answer).
+  """
+  @spec param(VehicleSet.t() | term(), String.t()) :: number()
+  def param(v, name) when is_binary(name), do: param!(v, name, nil)
+  def param(_v, name), do: raise(ArgumentError, "param takes the parameter's name as a string (\"WPNAV_SPEED\"), got: #{inspect(name)}")
+
+  @doc """
+  Sets a one-vehicle set's parameter `name` to `value` and reads it back;
+  returns the value kept. Raises `Dolphin.ParamError` when the vehicle keeps
+  another (out of its range), has no such parameter or does not answer.
+  """
+  @spec set_param(VehicleSet.t() | term(), String.t(), number()) :: number()
+  def set_param(v, name, value) when is_binary(name) and is_number(value), do: param!(v, name, value)
+
+  def set_param(_v, name, value),
+    do: raise(ArgumentError, "set_param takes the parameter's name as a string and a number, got: #{inspect(name)}, #{inspect(value)}")
+
+  defp param!(v, name, value) do
+    id = VehicleSet.one!(v, if(value == nil, do: :param, else: :set_param))
+
+    case Dolphin.Fleet.Source.param(Context.source(Context.current()), id, name, value) do
+      {:ok, kept} -> kept
+      {:error, e} -> raise e
+    end
+  end
+
   @doc "Sends a raw message (a MAVLink message struct) to every vehicle of `set`."
   @spec send_message(VehicleSet.t(), term()) :: :ok
   def send_message(set, message) do
