@@ -340,4 +340,40 @@ defmodule Dolphin.SITLTest do
     assert %{to_gcs: %{dropped: a}, to_vehicle: %{dropped: b}} = UDPProxy.stats(proxy)
     assert a > 100 and b > 100
   end
+
+  # The parameter micro-service on the real autopilot, behind the same bad
+  # radio link: ArduCopter's whole list (over a thousand), each index once
+  # and exactly as read one by one; a set read back; a value kept within
+  # its range refused; a name it does not have said with the names near.
+  test "parameters on ArduCopter over 30 % loss each way: the whole list exact, typed; set, refused, unknown" do
+    test = self()
+
+    send_to = fn gcs_port ->
+      {:ok, proxy} = UDPProxy.start_link(gcs: gcs_port, seed: 5)
+      send(test, {:proxy, proxy})
+      UDPProxy.port(proxy)
+    end
+
+    [id] = Backend.start(:sitl, 1, send_to: send_to, speedup: 5)
+    assert_received {:proxy, proxy}
+    # Clean first: the reference list.
+    assert {:ok, clean} = Vehicles.param_list(id)
+    assert length(clean) > 1000
+    assert Enum.map(clean, & &1.index) == Enum.to_list(0..(length(clean) - 1))
+
+    :ok = UDPProxy.set(proxy, both: [loss: 0.3, duplicate: 0.1, reorder: 0.1])
+    assert {:ok, lossy} = Vehicles.param_list(id)
+    assert Enum.map(lossy, &{&1.name, &1.value}) == Enum.map(clean, &{&1.name, &1.value})
+
+    # Typed as ArduPilot says: FENCE_ACTION is an INT8, WPNAV_SPEED a REAL32.
+    assert %{type: 2, value: action} = Enum.find(clean, &(&1.name == "FENCE_ACTION"))
+    assert {:ok, ^action} = Vehicles.param(id, "FENCE_ACTION", nil, [])
+    assert {:ok, 750.0} = Vehicles.param(id, "WPNAV_SPEED", 750, [])
+    assert {:ok, 750.0} = Vehicles.param(id, "WPNAV_SPEED", nil, [])
+
+    # ArduCopter keeps WPNAV_SPEED within 20..2000 cm/s.
+    assert {:error, %Dolphin.ParamError{result: :refused}} = Vehicles.param(id, "WPNAV_SPEED", 5, [])
+    assert {:error, %Dolphin.ParamError{result: :unknown} = e} = Vehicles.param(id, "WPNAV_SPEEED", nil, attempts: 3)
+    assert Exception.message(e) =~ "has no parameter WPNAV_SPEEED (did you mean WPNAV_SPEED"
+  end
 end
