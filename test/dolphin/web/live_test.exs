@@ -33,6 +33,26 @@ defmodule Dolphin.Web.LiveTest do
     assert [{1_000_000, true}] = v.arming
   end
 
+  test "a declared sensor's readings: plotted as they come, and each vehicle's latest in its row" do
+    smoke = {:named_value, "SMOKE"}
+    reading = fn value, at, stale -> %{smoke => %{value: value, at: at, compid: 191, position: nil, history: [], stale: stale}} end
+
+    live =
+      Live.new(0)
+      |> Live.event(%{event: :sensor_declared, at_ms: 0, sensor: :smoke, source: "NAMED_VALUE SMOKE", unit: nil, scale: 1.0, offset: 0.0, stale_after: 5_000})
+      |> Live.view(view(1, 40.44, sensors: reading.(0.2, 1_000, [])), 1_000)
+      |> Live.view(view(1, 40.44, sensors: reading.(0.2, 1_000, [])), 1_500)
+      |> Live.view(view(1, 40.44, sensors: reading.(0.61, 2_000, [])), 2_000)
+      |> Live.view(view(2, 40.45, sensors: reading.(0.1, 2_000, [5_000])), 7_000)
+
+    # One sample per reading, not per view.
+    assert [{2_000_000, 0.61}, {1_000_000, 0.2}] = live.vehicles[1].sensors[smoke]
+    page = Live.page(live, 10_000)
+    assert page =~ ~s(<svg class="plot sensor")
+    assert page =~ ~s(<td class="sensors">smoke 0.61</td>)
+    assert page =~ ~s[<td class="sensors">smoke 0.10 (stale)</td>]
+  end
+
   test "keeps the last events, and the task each vehicle flies now" do
     live = Enum.reduce(1..5_100, Live.new(0), fn i, live -> Live.event(live, %{event: :message, at_ms: i, text: "m#{i}", run: 1}) end)
     assert live.n_events == 5_000
