@@ -33,6 +33,27 @@ defmodule Dolphin.Examples.FireWatchTest do
     end
   end
 
+  test "a fleet file gives a simulated vehicle its sensors: the pick finds the one that carries smoke", %{tmp_dir: dir} do
+    script = Path.join(dir, "who_smells.exs")
+    File.write!(script, """
+    use Dolphin.Script
+    sensor :smoke, from: {:named_value, "SMOKE"}
+    v = pick(sensors: [:smoke], timeout: seconds(30))
+    message("picked \#{inspect(Dolphin.Fleet.VehicleSet.ids(v))}")
+    """)
+
+    fleet = Path.join(dir, "fleet.json")
+    File.write!(fleet, ~s({"vehicles": [{"id": 2, "sensors": ["smoke"]}]}))
+    run = ExampleRun.run(dir, script, "", ["--sim", "2", "--fleet", fleet, "--world", @world, "--speedup", "20"], nil)
+    assert run.code == 0, run.output
+    assert run.output =~ "message: picked [2]"
+
+    File.write!(fleet, ~s({"vehicles": [{"id": 2, "sensors": ["smoek"]}]}))
+    {:ok, out} = StringIO.open("")
+    assert Mix.Tasks.Dolphin.Run.main([script, "--sim", "2", "--fleet", fleet, "--no-tlog"], out: out, err: out) == 1
+    assert elem(StringIO.contents(out), 1) =~ ~s[vehicle #1: no simulated sensor "smoek" (the simulator's sensors are range, smoke, water_temp)]
+  end
+
   defp found_and_looked_at!(run, label, dir) do
     assert run.code == 0, run.output
     assert run.result == "done"

@@ -22,7 +22,10 @@ defmodule Dolphin.Check.FleetFile do
   `"thermal_camera"` or `"sidescan"`, as `pick(payload: ...)` writes them;
   default none), `battery` (the charge it starts with, 0.0..1.0; default
   1.0), `position` (`[lat, lon, height above sea level]`, where it stands —
-  its home; required by a check), `airborne` (default false: on the ground).
+  its home; required by a check), `airborne` (default false: on the ground),
+  `sensors` (with `--sim` or `--sitl`: the simulator's sensors its companion
+  computer carries, `"smoke"`, `"water_temp"`, `"range"`, as
+  `--sim copter:2+smoke` gives them; default none).
 
   In a run, a vehicle's type, airframe and position are what it reports: the
   file gives it only its payloads — those it cannot announce over MAVLink
@@ -34,7 +37,7 @@ defmodule Dolphin.Check.FleetFile do
   and line).
 
       iex> Dolphin.Check.FleetFile.parse(~s({"vehicles":[{"id":3,"payloads":["camera"],"position":[41.0,-8.0,100]}]}))
-      {:ok, [%{id: 3, type: :uav, airframe: :copter, payloads: [:camera], battery: 1.0, position: %Dolphin.Geo.Location{lat: 41.0, lon: -8.0, h: 100.0}, airborne?: false}]}
+      {:ok, [%{id: 3, type: :uav, airframe: :copter, payloads: [:camera], battery: 1.0, position: %Dolphin.Geo.Location{lat: 41.0, lon: -8.0, h: 100.0}, airborne?: false, sensors: []}]}
       iex> {:ok, [v]} = Dolphin.Check.FleetFile.parse(~s({"vehicles":[{"id":4,"airframe":"sub","payloads":["sidescan"],"position":[38.4,-8.8,0]}]}))
       iex> {v.type, v.airframe, v.payloads}
       {:uuv, :sub, [:sidescan]}
@@ -55,7 +58,7 @@ defmodule Dolphin.Check.FleetFile do
   @airframes for a <- View.airframes(), do: {Atom.to_string(a), a}
   @payload_name ~r/^[a-z][a-z0-9_]{0,63}$/
 
-  @type vehicle :: %{id: 0..255, type: atom(), airframe: View.airframe() | nil, payloads: [atom()], battery: float(), position: Location.t() | nil, airborne?: boolean()}
+  @type vehicle :: %{id: 0..255, type: atom(), airframe: View.airframe() | nil, payloads: [atom()], battery: float(), position: Location.t() | nil, airborne?: boolean(), sensors: [atom()]}
 
   @doc """
   Reads and parses a fleet file. Option `position: :optional` (a run's
@@ -124,7 +127,8 @@ defmodule Dolphin.Check.FleetFile do
       payloads: v |> field("payloads", [], &(is_list(&1) and Enum.all?(&1, fn p -> is_binary(p) end)), "a list of strings") |> and_then(&payloads/1),
       battery: field(v, "battery", 1.0, &(is_number(&1) and &1 >= 0 and &1 <= 1), "a number from 0.0 to 1.0"),
       position: field(v, "position", position, &(position?(&1) or (&1 == nil and position == nil)), "[latitude, longitude, height above sea level], latitude -90..90, longitude -180..180"),
-      airborne: field(v, "airborne", false, &is_boolean/1, "true or false")
+      airborne: field(v, "airborne", false, &is_boolean/1, "true or false"),
+      sensors: v |> field("sensors", [], &(is_list(&1) and Enum.all?(&1, fn p -> is_binary(p) end)), "a list of strings") |> and_then(&sensors/1)
     ]
 
     fields = fields ++ [kind: kind(fields[:type], fields[:airframe])]
@@ -133,7 +137,7 @@ defmodule Dolphin.Check.FleetFile do
       [] ->
         f = Map.new(fields, fn {k, {:ok, value}} -> {k, value} end)
         {type, airframe} = f.kind
-        {:ok, %{id: f.id, type: type, airframe: airframe, payloads: Enum.sort(f.payloads), battery: f.battery * 1.0, position: location(f.position), airborne?: f.airborne}}
+        {:ok, %{id: f.id, type: type, airframe: airframe, payloads: Enum.sort(f.payloads), battery: f.battery * 1.0, position: location(f.position), airborne?: f.airborne, sensors: f.sensors}}
 
       whys ->
         {:error, whys}
@@ -190,6 +194,16 @@ defmodule Dolphin.Check.FleetFile do
 
   # A problem with either is said by its own field.
   defp kind(_type, _airframe), do: {:ok, nil}
+
+  # The simulator's sensor models (Dolphin.Sim.Companion) a simulated vehicle carries.
+  defp sensors(names) do
+    models = Enum.map(Dolphin.Sim.Companion.models(), &Atom.to_string/1)
+
+    case Enum.reject(names, &(&1 in models)) do
+      [] -> {:ok, names |> Enum.uniq() |> Enum.map(&String.to_existing_atom/1)}
+      bad -> {:error, "no simulated sensor #{Enum.map_join(bad, ", ", &inspect/1)} (the simulator's sensors are #{Enum.join(models, ", ")})"}
+    end
+  end
 
   # A payload is whatever the operator's vehicles carry: any name a script
   # could write as an atom (`pick(payload: :thermal_camera)`). The file is the

@@ -79,8 +79,9 @@ defmodule Dolphin.CLI.Vehicles do
   end
 
   defp start_sim(n, opts, link_opts, out, defer) do
-    with {:ok, world} <- world(opts[:world]) do
-      case Dolphin.Sim.Local.start(n, [seed: Keyword.get(opts, :seed, 1), home: opts[:home], world: world] ++ link_opts) do
+    with {:ok, world} <- world(opts[:world]),
+         {:ok, carried} <- fleet_sensors(opts[:fleet]) do
+      case Dolphin.Sim.Local.start(n, [seed: Keyword.get(opts, :seed, 1), home: opts[:home], world: world, sensors: carried] ++ link_opts) do
         {:ok, sim} ->
           defer.(fn -> Dolphin.Sim.Local.stop(sim) end)
           IO.puts(out, "#{sim_words(n)} #{Dolphin.Fleet.VehicleSet.format(sim.sysids)} on 127.0.0.1:#{sim.port}")
@@ -90,6 +91,15 @@ defmodule Dolphin.CLI.Vehicles do
           {:error, Dolphin.CommandLineError.failed(nil, why)}
       end
     end
+  end
+
+  @doc false
+  # The sensors the fleet file (--fleet) gives simulated vehicles, by system id.
+  @spec fleet_sensors(Path.t() | nil) :: {:ok, %{byte() => [atom()]}} | {:error, Dolphin.CommandLineError.t()}
+  def fleet_sensors(nil), do: {:ok, %{}}
+
+  def fleet_sensors(path) do
+    with {:ok, vehicles} <- fleet_file(path), do: {:ok, for(%{id: id, sensors: [_ | _] = s} <- vehicles, into: %{}, do: {id, s})}
   end
 
   @doc false
@@ -132,12 +142,16 @@ defmodule Dolphin.CLI.Vehicles do
   # sidecar on their second telemetry port. Its port, or nil when no
   # vehicle carries one.
   defp sidecar(groups, opts, defer) do
-    by_sysid =
+    with {:ok, carried} <- fleet_sensors(opts[:fleet]) do
       groups
       |> Enum.flat_map(fn {_airframe, count, sensors} -> List.duplicate(sensors, count) end)
       |> Enum.with_index(1)
-      |> Map.new(fn {sensors, sysid} -> {sysid, sensors} end)
+      |> Map.new(fn {sensors, sysid} -> {sysid, Enum.uniq(sensors ++ Map.get(carried, sysid, []))} end)
+      |> start_sidecar(opts, defer)
+    end
+  end
 
+  defp start_sidecar(by_sysid, opts, defer) do
     if Enum.all?(Map.values(by_sysid), &(&1 == [])) do
       {:ok, nil, []}
     else

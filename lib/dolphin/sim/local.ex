@@ -14,7 +14,8 @@ defmodule Dolphin.Sim.Local do
   @doc """
   Starts `count` simulated vehicles (or the groups of `groups/1`) on a new
   local link. Options: `:seed`, `:first_sysid` (default 1), `:world` (what
-  their sensors sense: a `Dolphin.Sim.World` or a world file's path), and the link's options (`:tlog`, `:forward`). Returns once the fleet knows every
+  their sensors sense: a `Dolphin.Sim.World` or a world file's path),
+  `:sensors` (more sensors by system id, a fleet file's), and the link's options (`:tlog`, `:forward`). Returns once the fleet knows every
   vehicle (or after 10 s of real time), or an error saying what failed.
   """
   @spec start(pos_integer() | [{atom(), pos_integer()}], keyword()) :: {:ok, t()} | {:error, Dolphin.Sim.Error.t()}
@@ -28,6 +29,7 @@ defmodule Dolphin.Sim.Local do
     {seed, opts} = Keyword.pop(opts, :seed, 1)
     {first, opts} = Keyword.pop(opts, :first_sysid, 1)
     {home, opts} = Keyword.pop(opts, :home)
+    {carried, opts} = Keyword.pop(opts, :sensors, %{})
     {world, link_opts} = Keyword.pop(opts, :world)
 
     case Dolphin.Link.connect("udpin:127.0.0.1:0", [name: name] ++ link_opts) do
@@ -37,7 +39,7 @@ defmodule Dolphin.Sim.Local do
         # They boot as ArduCopter does: 2 s of MAV_STATE BOOT refusing uploads.
         sim_opts = [gcs: {{127, 0, 0, 1}, port}, speedup: Dolphin.Clock.speedup(), seed: seed, camera: true, boot_ms: 2_000] ++ if(world, do: [world: world], else: [])
 
-        case start_groups(fleet, first, count, home, sim_opts) do
+        case start_groups(fleet, first, count, home, carried, sim_opts) do
           {:ok, sysids} ->
             await_fleet(sysids)
             {:ok, %{link: link, port: port, sysids: sysids}}
@@ -54,7 +56,7 @@ defmodule Dolphin.Sim.Local do
 
   # One Dolphin.Sim.start per airframe, the homes of the whole fleet spread
   # once (a submarine's at the surface, sea level), system ids in order.
-  defp start_groups(fleet, first, count, home, sim_opts) do
+  defp start_groups(fleet, first, count, home, carried, sim_opts) do
     around = if home, do: [home: home], else: []
     homes = Dolphin.Sim.homes(count, around)
     # The fleet's charging station is at the centre its homes are spread
@@ -65,6 +67,9 @@ defmodule Dolphin.Sim.Local do
     |> Enum.reduce_while({:ok, [], first, homes}, fn {airframe, n, sensors}, {:ok, started, next, homes} ->
       {mine, rest} = Enum.split(homes, n)
       mine = if Dolphin.Airframe.heights(airframe) == :depth, do: Enum.map(mine, &%{&1 | alt: 0.0}), else: mine
+
+      # A group's sensors, and those the fleet file gives each of its vehicles.
+      sensors = Map.new(next..(next + n - 1), &{&1, Enum.uniq(sensors ++ Map.get(carried, &1, []))})
 
       case Dolphin.Sim.start(sim_opts ++ [count: n, first_sysid: next, homes: mine, charger: charger, airframe: airframe, sensors: sensors]) do
         {:ok, sysids} -> {:cont, {:ok, started ++ sysids, next + n, rest}}
