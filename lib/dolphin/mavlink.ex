@@ -29,9 +29,14 @@ defmodule Dolphin.MAVLink do
 
   alias Dolphin.MAVLink.{Frame, Message}
 
-  @default_dialect Dolphin.MAVLink.Ardupilotmega
+  # With messages of the user's own, the dialect that decodes them and hands
+  # the rest to ArduPilot's.
+  @default_dialect if Dolphin.MAVLink.UserDialect.messages() == [], do: Dolphin.MAVLink.Ardupilotmega, else: Dolphin.MAVLink.UserDialect
 
-  @doc "The dialect used when none is given: `Dolphin.MAVLink.Ardupilotmega`."
+  @doc """
+  The dialect used when none is given: `Dolphin.MAVLink.Ardupilotmega`, or
+  `Dolphin.MAVLink.UserDialect` when the project has messages of its own.
+  """
   @spec default_dialect() :: module()
   def default_dialect, do: @default_dialect
 

@@ -67,7 +67,7 @@ defmodule Dolphin.Sensors do
   defp source(name, {:message, message, field}) when is_atom(message) and is_atom(field) do
     text = Atom.to_string(message)
 
-    case @dialect.message_module(text) do
+    case @dialect.message_module(text) || Dolphin.MAVLink.UserDialect.message_module(text) do
       nil ->
         {:error, "sensor #{inspect(name)}: no message #{text} in the dialect#{near(text, message_names(), & &1)}"}
 
@@ -109,7 +109,7 @@ defmodule Dolphin.Sensors do
   defp unit(_name, unit) when is_atom(unit), do: {:ok, unit}
   defp unit(name, other), do: {:error, "sensor #{inspect(name)}: unit: takes an atom (:celsius, :cm, ...), got: #{inspect(other)}"}
 
-  defp message_names, do: Enum.map(@dialect.messages(), & &1.__mavlink__(:name))
+  defp message_names, do: Enum.map(@dialect.messages() ++ Dolphin.MAVLink.UserDialect.messages(), & &1.__mavlink__(:name))
 
   # The names nearest `word`, as "; did you mean A, B?" (empty when none is near).
   @doc false

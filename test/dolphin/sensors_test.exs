@@ -206,6 +206,27 @@ defmodule Dolphin.SensorsTest do
       assert %Dolphin.Geo.Location{} = Snapshot.peak_position(nil, id, smoke, 60_000)
     end
 
+    test "a message of the user's own dialect (test/fixtures/mavlink/user) is a sensor's source like any", %{port: port} do
+      alias Dolphin.MAVLink.UserDialect.SmokeSensor
+      {:ok, ppm} = Sensors.new(:ppm, from: {:message, :SMOKE_SENSOR, :ppm}, stale_after: 5_000)
+      assert ppm.unit == :ppm
+      assert {:error, why} = Sensors.new(:ppm, from: {:message, :SMOKE_SENSR, :ppm})
+      assert why =~ "did you mean SMOKE_SENSOR"
+      :ok = Vehicles.watch_sensors([ppm])
+
+      # A vehicle of its own (a socket of this test): its autopilot's heartbeat, its companion's readings.
+      {:ok, socket} = :gen_udp.open(0, [:binary, ip: {127, 0, 0, 1}, active: false])
+      say = fn compid, message -> :ok = :gen_udp.send(socket, {127, 0, 0, 1}, port, Dolphin.MAVLink.Frame.encode(message, sysid: 77, compid: compid, seq: 0)) end
+      say.(1, %Dolphin.MAVLink.Ardupilotmega.Heartbeat{type: 2, autopilot: 3, base_mode: 0, custom_mode: 0, system_status: 4, mavlink_version: 3})
+      Wait.until(fn -> match?({:ok, %{type: :uav}}, Vehicles.view(77)) end)
+      Vehicles.subscribe(77)
+      say.(191, %SmokeSensor{sensor_id: 1, ppm: 412.5, temperature: 2150})
+      view = await_view(77, &Map.has_key?(&1.sensors, ppm.source))
+      assert %{value: 412.5, compid: 191} = view.sensors[ppm.source]
+      assert Snapshot.sensor(nil, 77, ppm) == 412.5
+      :gen_udp.close(socket)
+    end
+
     defp await_view(id, fun) do
       receive do
         {:dolphin, {:vehicle, ^id}, {:view, view}} -> if fun.(view), do: view, else: await_view(id, fun)

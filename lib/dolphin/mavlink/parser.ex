@@ -22,7 +22,8 @@ defmodule Dolphin.MAVLink.Parser do
 
   Options of `new/1`:
 
-    * `:dialect` — the dialect module (default `Dolphin.MAVLink.Ardupilotmega`);
+    * `:dialect` — the dialect module (default `Dolphin.MAVLink.default_dialect/0`:
+      ArduPilot's, with the user's own messages when there are any);
     * `:signing` — a `Dolphin.MAVLink.Signing` state: signed frames are then
       verified (bad signature or replayed timestamp: dropped), unsigned ones
       follow its policy. Without it, frames pass unverified.
@@ -62,7 +63,7 @@ defmodule Dolphin.MAVLink.Parser do
   @doc "A parser; see the module doc for options."
   @spec new(keyword()) :: t()
   def new(opts \\ []) do
-    dialect = Keyword.get(opts, :dialect, Dolphin.MAVLink.Ardupilotmega)
+    dialect = Keyword.get_lazy(opts, :dialect, &Dolphin.MAVLink.default_dialect/0)
 
     %__MODULE__{
       dialect: dialect,
