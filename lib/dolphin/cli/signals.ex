@@ -91,6 +91,38 @@ defmodule Dolphin.CLI.Signals do
     :ok
   end
 
+  @doc """
+  Waits, for a task that runs something until told to stop (`mix
+  dolphin.sim`, `mix dolphin.sensors`): calls `status` every 10 s of real
+  time, and `stop` when `left_ms` (a function giving the real ms left, or
+  `:infinity`) reaches 0 — or when a caught signal comes, saying so as
+  `"SIGNAL: stopping WHAT"`, then exiting with the signal's status.
+  """
+  @spec run_until((-> number() | :infinity), String.t(), (-> any()), (-> any())) :: :ok
+  def run_until(left_ms, what, status, stop) do
+    left =
+      case left_ms.() do
+        :infinity -> 10_000
+        ms -> min(10_000, ms)
+      end
+
+    if left <= 0 do
+      stop.()
+      :ok
+    else
+      receive do
+        {:dolphin_signal, sig} ->
+          Mix.shell().info("#{name(sig)}: stopping #{what}")
+          stop.()
+          exit({:shutdown, status(sig)})
+      after
+        round(left) ->
+          status.()
+          run_until(left_ms, what, status, stop)
+      end
+    end
+  end
+
   @doc "How long after a first signal another is taken as its repeat (real milliseconds)."
   @spec repeat_ms() :: pos_integer()
   def repeat_ms, do: @repeat_ms

@@ -84,8 +84,13 @@ defmodule Mix.Tasks.Dolphin.Sensors do
 
     if signals?, do: Signals.catch_signals(self())
     unless opts[:quiet], do: Mix.shell().info("sensor sidecar on #{opts[:connect]}: #{Enum.join(opts[:sensors], ", ")} for every vehicle heard, sensing #{opts[:world]}")
-    until = if opts[:for], do: System.monotonic_time(:millisecond) + round(opts[:for] * 1000), else: :infinity
-    loop(pid, until, opts[:quiet])
+    until = if opts[:for], do: System.monotonic_time(:millisecond) + round(opts[:for] * 1000)
+    left = fn -> if until, do: until - System.monotonic_time(:millisecond), else: :infinity end
+    status = fn -> unless opts[:quiet], do: status(pid) end
+    Signals.run_until(left, "the sensor sidecar", status, fn ->
+      status.()
+      Sidecar.stop(pid)
+    end)
   end
 
   @doc false
@@ -135,26 +140,6 @@ defmodule Mix.Tasks.Dolphin.Sensors do
   defp rate(nil), do: :ok
   defp rate(hz) when hz <= 50, do: :ok
   defp rate(hz), do: Dolphin.CommandLineError.usage_error("--rate #{hz}: readings a second, more than 0 and at most 50")
-
-  defp loop(pid, until, quiet?) do
-    left = if until == :infinity, do: 10_000, else: min(10_000, until - System.monotonic_time(:millisecond))
-
-    if left <= 0 do
-      unless quiet?, do: status(pid)
-      Sidecar.stop(pid)
-    else
-      receive do
-        {:dolphin_signal, sig} ->
-          Mix.shell().info("#{Signals.name(sig)}: stopping the sensor sidecar")
-          Sidecar.stop(pid)
-          exit({:shutdown, Signals.status(sig)})
-      after
-        left ->
-          unless quiet?, do: status(pid)
-          loop(pid, until, quiet?)
-      end
-    end
-  end
 
   defp status(pid) do
     case Sidecar.vehicles(pid) do

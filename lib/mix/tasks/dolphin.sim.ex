@@ -116,27 +116,9 @@ defmodule Mix.Tasks.Dolphin.Sim do
   end
 
   defp wait(sysids, opts) do
-    until = if opts[:for], do: Dolphin.Clock.now_ms() + round(opts[:for] * 1000), else: :infinity
-    loop(sysids, until, opts[:quiet])
-  end
-
-  defp loop(sysids, until, quiet?) do
-    left = if until == :infinity, do: 10_000, else: min(10_000, Dolphin.Clock.to_real_ms(until - Dolphin.Clock.now_ms()))
-
-    if left <= 0 do
-      Dolphin.Sim.stop()
-    else
-      receive do
-        {:dolphin_signal, sig} ->
-          Mix.shell().info("#{Signals.name(sig)}: stopping the simulated vehicles")
-          Dolphin.Sim.stop()
-          exit({:shutdown, Signals.status(sig)})
-      after
-        left ->
-          unless quiet?, do: Enum.each(sysids, &status/1)
-          loop(sysids, until, quiet?)
-      end
-    end
+    until = if opts[:for], do: Dolphin.Clock.now_ms() + round(opts[:for] * 1000)
+    left = fn -> if until, do: Dolphin.Clock.to_real_ms(until - Dolphin.Clock.now_ms()), else: :infinity end
+    Signals.run_until(left, "the simulated vehicles", fn -> unless opts[:quiet], do: Enum.each(sysids, &status/1) end, &Dolphin.Sim.stop/0)
   end
 
   defp status(sysid) do
