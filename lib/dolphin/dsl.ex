@@ -528,7 +528,7 @@ defmodule Dolphin.DSL do
 
   @doc """
   Sets a vehicle's parameter and reads it back; returns the value kept. A
-  value the vehicle keeps otherwise (out of its range), or a name it does
+  value the vehicle keeps otherwise (a whole number for an integer type), or a name it does
   not have, fails the script at this line.
 
       set_param(v, "WPNAV_SPEED", 800)

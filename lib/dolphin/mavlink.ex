@@ -31,7 +31,7 @@ defmodule Dolphin.MAVLink do
 
   # With messages of the user's own, the dialect that decodes them and hands
   # the rest to ArduPilot's.
-  @default_dialect if Dolphin.MAVLink.UserDialect.messages() == [], do: Dolphin.MAVLink.Ardupilotmega, else: Dolphin.MAVLink.UserDialect
+  @default_dialect if Dolphin.MAVLink.UserDialect.user_messages() == [], do: Dolphin.MAVLink.Ardupilotmega, else: Dolphin.MAVLink.UserDialect
 
   @doc """
   The dialect used when none is given: `Dolphin.MAVLink.Ardupilotmega`, or

@@ -3,7 +3,7 @@ defmodule Dolphin.ParamError do
   A parameter that could not be set or read on a vehicle: which, on which
   vehicle, and why (`result`: `:timeout` when no PARAM_VALUE came within
   the retries, `:refused` when the vehicle answered with another value than
-  the one asked — it has no such parameter, or keeps it within its range —,
+  the one asked — it keeps another: a whole number for an integer type, a value it bounds —,
   `:vehicle_gone` when the vehicle's process went away, `:unknown` when the
   vehicle's parameter list has no such name: `detail` then names the ones
   near).

@@ -21,7 +21,6 @@ defmodule Dolphin.Sensors do
 
   alias Dolphin.Sensors.Sensor
 
-  @dialect Dolphin.MAVLink.Ardupilotmega
   @options [:from, :scale, :offset, :unit, :stale_after, :keep]
   @numeric [:uint8_t, :int8_t, :uint16_t, :int16_t, :uint32_t, :int32_t, :uint64_t, :int64_t, :float, :double, :uint8, :int8, :uint16, :int16, :uint32, :int32, :uint64, :int64]
 
@@ -67,7 +66,7 @@ defmodule Dolphin.Sensors do
   defp source(name, {:message, message, field}) when is_atom(message) and is_atom(field) do
     text = Atom.to_string(message)
 
-    case @dialect.message_module(text) || Dolphin.MAVLink.UserDialect.message_module(text) do
+    case Dolphin.MAVLink.UserDialect.message_module(text) do
       nil ->
         {:error, "sensor #{inspect(name)}: no message #{text} in the dialect#{near(text, message_names(), & &1)}"}
 
@@ -109,7 +108,7 @@ defmodule Dolphin.Sensors do
   defp unit(_name, unit) when is_atom(unit), do: {:ok, unit}
   defp unit(name, other), do: {:error, "sensor #{inspect(name)}: unit: takes an atom (:celsius, :cm, ...), got: #{inspect(other)}"}
 
-  defp message_names, do: Enum.map(@dialect.messages() ++ Dolphin.MAVLink.UserDialect.messages(), & &1.__mavlink__(:name))
+  defp message_names, do: Enum.map(Dolphin.MAVLink.UserDialect.messages(), & &1.__mavlink__(:name))
 
   # The names nearest `word`, as "; did you mean A, B?" (empty when none is near).
   @doc false

@@ -14,9 +14,11 @@ defmodule Dolphin.MAVLink.UserDialect do
   `ardupilotmega` already uses is a compile error naming both. Adding,
   changing or removing a file recompiles this module.
 
-  `frame_decoder/1` decodes the user's messages and hands every other id to
-  `Dolphin.MAVLink.Ardupilotmega`: with user messages, it is the dialect the
-  links parse with (`Dolphin.MAVLink.default_dialect/0`).
+  As a dialect it has every function `Dolphin.MAVLink.Ardupilotmega` has,
+  answering for the user's messages and handing the rest to ArduPilot's
+  (`frame_decoder/1`, `message_module/1`, ...): with user messages, it is
+  the dialect the links and the codec's tasks use
+  (`Dolphin.MAVLink.default_dialect/0`).
   """
 
   alias Dolphin.MAVLink.{Ardupilotmega, Generator, XML}
@@ -55,16 +57,38 @@ defmodule Dolphin.MAVLink.UserDialect do
   end
 
   @doc "The XML files the user's messages were compiled from."
+  @spec user_files() :: [Path.t()]
+  def user_files, do: @files
+
+  @doc "The user's own message modules, by ascending id (`[]` when there are none)."
+  @spec user_messages() :: [module()]
+  def user_messages, do: @specs |> Enum.sort_by(& &1.id) |> Enum.map(& &1.module)
+
+  @doc "The module of one of the user's own messages by its XML name, or `nil`."
+  @spec user_message_module(String.t()) :: module() | nil
+  def user_message_module(name), do: Map.get(unquote(Macro.escape(Map.new(@specs, &{&1.name, &1.module}))), name)
+
+  # As a dialect (what Dolphin.MAVLink.Ardupilotmega's functions are): the
+  # user's messages and ArduPilot's together, ArduPilot's enums.
+
+  @doc "The XML files of both: ArduPilot's, then the user's."
   @spec files() :: [Path.t()]
-  def files, do: @files
+  def files, do: Ardupilotmega.files() ++ @files
 
-  @doc "The user's message modules, by ascending id (`[]` when there are none)."
+  @doc "Every message module, ArduPilot's and the user's, by ascending id."
   @spec messages() :: [module()]
-  def messages, do: @specs |> Enum.sort_by(& &1.id) |> Enum.map(& &1.module)
+  def messages, do: Enum.sort_by(Ardupilotmega.messages() ++ user_messages(), & &1.__mavlink__(:id))
 
-  @doc "The module of a user's message by its XML name, or `nil`."
+  @doc "The module of a message by its XML name: the user's, else ArduPilot's; `nil` for neither."
   @spec message_module(String.t()) :: module() | nil
-  def message_module(name), do: Map.get(unquote(Macro.escape(Map.new(@specs, &{&1.name, &1.module}))), name)
+  def message_module(name), do: user_message_module(name) || Ardupilotmega.message_module(name)
+
+  defdelegate bitmask?(enum), to: Ardupilotmega
+  defdelegate enum_entries(enum), to: Ardupilotmega
+  defdelegate enum_flags(enum, value), to: Ardupilotmega
+  defdelegate enum_name(enum, value), to: Ardupilotmega
+  defdelegate enum_value(enum, entry), to: Ardupilotmega
+  defdelegate enums(), to: Ardupilotmega
 
   @doc false
   # What Dolphin.MAVLink.Frame needs to decode a frame with this id: the

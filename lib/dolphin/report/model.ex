@@ -72,7 +72,7 @@ defmodule Dolphin.Report.Model do
 
   defp source(text) do
     with [message, field] <- String.split(text, ".", parts: 2),
-         module when module != nil <- Dolphin.MAVLink.Ardupilotmega.message_module(message) || Dolphin.MAVLink.UserDialect.message_module(message),
+         module when module != nil <- Dolphin.MAVLink.UserDialect.message_module(message),
          %{name: field} <- Enum.find(module.__mavlink__(:fields), &(Atom.to_string(&1.name) == field)) do
       {:ok, {:message, module, field}}
     else

@@ -256,7 +256,7 @@ defmodule Dolphin.Script.Statements do
   @doc """
   Sets a one-vehicle set's parameter `name` to `value` and reads it back;
   returns the value kept. Raises `Dolphin.ParamError` when the vehicle keeps
-  another (out of its range), has no such parameter or does not answer.
+  another (a whole number for an integer type), has no such parameter or does not answer.
   """
   @spec set_param(VehicleSet.t() | term(), String.t(), number()) :: number()
   def set_param(v, name, value) when is_binary(name) and is_number(value), do: param!(v, name, value)

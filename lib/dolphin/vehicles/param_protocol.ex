@@ -6,7 +6,7 @@ defmodule Dolphin.Vehicles.ParamProtocol do
   PARAM_VALUE the vehicle keeps) or a read (PARAM_REQUEST_READ). Sent again
   when no answer comes within the wait, as the command protocol does
   (`Dolphin.Vehicles.Retry`); a set answered with another value than asked
-  (the vehicle has no such parameter, or keeps it within its range) is
+  (it keeps a whole number for an integer type, or bounds the value) is
   `{:error, %Dolphin.ParamError{result: :refused}}`; otherwise the reply is
   `{:ok, value}` to the caller given at start.
   """
@@ -36,7 +36,7 @@ defmodule Dolphin.Vehicles.ParamProtocol do
   @impl true
   def init({request, opts}) do
     wait = Retry.answer_wait(Keyword.get(opts, :ack_timeout_ms, 1_500), Keyword.get(opts, :rtt_ms))
-    data = Map.merge(request, %{attempts: Keyword.get_lazy(opts, :attempts, fn -> Retry.attempts(Keyword.get(opts, :loss)) end), wait_ms: wait, sent: 0})
+    data = Map.merge(request, %{attempts: Keyword.get_lazy(opts, :attempts, fn -> Retry.attempts(Keyword.get(opts, :loss)) end), wait_ms: wait, sent: 0, other: nil})
     {:ok, {:waiting, 1}, data}
   end
 
@@ -47,19 +47,31 @@ defmodule Dolphin.Vehicles.ParamProtocol do
   end
 
   def handle_event(:state_timeout, :resend, {:waiting, n}, data) do
-    if n < data.attempts,
-      do: {:next_state, {:waiting, n + 1}, data},
-      else: finish(data, {:error, %ParamError{param: data.name, vehicle: data.vehicle, result: :timeout, asked: data.value, attempts: n}})
+    cond do
+      n < data.attempts -> {:next_state, {:waiting, n + 1}, data}
+      # Answered only with another value: that is what it keeps.
+      data.other != nil -> refused(data, elem(data.other, 0))
+      true -> finish(data, {:error, %ParamError{param: data.name, vehicle: data.vehicle, result: :timeout, asked: data.value, attempts: n}})
+    end
   end
 
   def handle_event(:info, {:param, %M.ParamValue{param_value: kept} = v}, _state, %{value: nil} = data), do: finish(data, {:ok, answer(data, v, kept)})
 
-  def handle_event(:info, {:param, %M.ParamValue{param_value: kept} = v}, _state, data) do
-    # Compared as the float32 the vehicle keeps.
-    if same?(kept, data.value),
-      do: finish(data, {:ok, answer(data, v, kept)}),
-      else: finish(data, {:error, %ParamError{param: data.name, vehicle: data.vehicle, result: :refused, asked: data.value, kept: kept, attempts: data.sent}})
+  # Compared as the float32 the vehicle keeps. Another value may be a copy
+  # of an older PARAM_VALUE of that name come late (a list being fetched, a
+  # duplicate on the radio): it is noted, and the set goes on as if
+  # unanswered — sent again when its wait is over. The same other value in
+  # answer to a later sending is the vehicle's refusal.
+  def handle_event(:info, {:param, %M.ParamValue{param_value: kept} = v}, {:waiting, n}, data) do
+    cond do
+      same?(kept, data.value) -> finish(data, {:ok, answer(data, v, kept)})
+      match?({_other, earlier} when earlier < n, data.other) and same?(kept, elem(data.other, 0)) -> refused(data, kept)
+      true -> {:keep_state, %{data | other: {kept, n}}}
+    end
   end
+
+  defp refused(data, kept),
+    do: finish(data, {:error, %ParamError{param: data.name, vehicle: data.vehicle, result: :refused, asked: data.value, kept: kept, attempts: data.sent}})
 
   defp same?(a, b), do: <<a::float-32>> == <<b::float-32>>
 

@@ -23,7 +23,7 @@ defmodule Mix.Tasks.Dolphin.Param do
 
   A name the vehicle does not have is said with the names near (`vehicle 1
   has no parameter WPNAV_SPED (did you mean WPNAV_SPEED?)`); a value it
-  keeps otherwise (out of its range) with the value kept.
+  keeps otherwise (a whole number for an integer type) with the value kept.
 
   ## Options
 
