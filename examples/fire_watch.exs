@@ -44,6 +44,7 @@ look = fn d ->
   end
 end
 
+# After a look, a copter whose survey is over goes home; so do both when a battery runs low.
 going_home =
   mission "Home" do
     return_home_and_land()
@@ -55,7 +56,7 @@ b = pick(type: :uav, sensors: [:smoke], timeout: seconds(30))
 low = fn -> battery(a) < 0.3 or battery(b) < 0.3 end
 
 execute wait_for(battery(a) >= 0.9 and battery(b) >= 0.9,
-          then: until(on_sensor(%{a => west, b => east}, :smoke, above: 0.4, apart: 150, then: look), battery(a) < 0.3 or battery(b) < 0.3))
+          then: until(on_sensor(%{a => west, b => east}, :smoke, above: 0.4, apart: 150, then: look, finally: going_home), battery(a) < 0.3 or battery(b) < 0.3))
 
 if low.() do
   message("a battery is low: both go home")

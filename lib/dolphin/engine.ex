@@ -197,13 +197,15 @@ defmodule Dolphin.Engine do
   `sensor` (a `Dolphin.Sensors.Sensor`) above `above:` at a new place
   (farther than `apart:` metres, default 100, from the detections made)
   sends the nearest vehicle free to fly `then:`'s task for it, its mission
-  resumed afterwards. See `Dolphin.Engine.OnSensor`.
+  resumed afterwards (`finally:`, a task for a vehicle with nothing left of
+  its mission after a look). See `Dolphin.Engine.OnSensor`.
   """
   @spec on_sensor(map() | [{term(), term()}], Dolphin.Sensors.Sensor.t(), keyword()) :: OnSensor.t()
   def on_sensor(missions, %Dolphin.Sensors.Sensor{} = sensor, opts) do
     {above, opts} = Keyword.pop(opts, :above)
     {apart, opts} = Keyword.pop(opts, :apart, 100)
     {then, opts} = Keyword.pop(opts, :then)
+    {finally, opts} = Keyword.pop(opts, :finally)
 
     unless is_number(above), do: raise(ArgumentError, "on_sensor takes above: (the threshold, a number), got: #{inspect(above)}")
     unless is_number(apart) and apart >= 0, do: raise(ArgumentError, "on_sensor takes apart: (metres, 0 or more), got: #{inspect(apart)}")
@@ -219,7 +221,7 @@ defmodule Dolphin.Engine do
       end
 
     if missions == [], do: raise(ArgumentError, "on_sensor takes at least one vehicle and its mission")
-    build(%OnSensor{missions: missions, sensor: sensor, above: above, apart: apart * 1.0, then: then}, opts)
+    build(%OnSensor{missions: missions, sensor: sensor, above: above, apart: apart * 1.0, then: then, finally: finally && Task.new!(finally)}, opts)
   end
 
   @doc "A task of a platform (see `Dolphin.Engine.Platform`); `spec` is the platform's description of it."

@@ -421,11 +421,24 @@ defmodule Dolphin.Vehicles do
     case param_list(id, opts) do
       {:ok, list} ->
         names = Enum.map(list, & &1.name)
-        if name in names, do: e, else: %{e | result: :unknown, detail: Dolphin.Sensors.near(name, names, & &1) |> String.trim_leading("; ") |> then(&(if &1 == "", do: nil, else: &1))}
+        if name in names, do: e, else: unknown_param(id, name, names)
 
       {:error, _} ->
         e
     end
+  end
+
+  @doc false
+  # A name vehicle `id`'s parameter list (`names`) lacks, with the names near.
+  @spec unknown_param(Id.t(), String.t(), [String.t()]) :: Dolphin.ParamError.t()
+  def unknown_param(id, name, names) do
+    detail =
+      case Dolphin.Sensors.near(name, names, & &1) do
+        "" -> nil
+        "; " <> near -> near
+      end
+
+    %Dolphin.ParamError{param: name, vehicle: id, result: :unknown, attempts: 0, detail: detail}
   end
 
   @doc """

@@ -33,6 +33,22 @@ defmodule Dolphin.Examples.FireWatchTest do
     end
   end
 
+  test "two fires, one in each half: each copter looks at its own while the other flies on, and both go back to their surveys", %{tmp_dir: dir} do
+    world = Path.expand("../fixtures/sensors/two_fires.json", __DIR__)
+    run = ExampleRun.run(dir, "fire_watch", "-two", ["--sim", "copter:2+smoke", "--world", world, "--speedup", "20"], nil)
+    assert run.code == 0, run.output
+    assert run.result == "done"
+
+    detections = for %{"event" => "sensor_threshold"} = e <- run.events, do: e
+    assert detections |> Enum.map(& &1["sent"]) |> Enum.sort() == [1, 2]
+
+    looks = for %{"event" => "task_finished", "name" => "Look at the smoke"} = e <- run.events, do: {e["vehicle"], e["result"]}
+    assert Enum.sort(looks) == [{1, "done"}, {2, "done"}]
+    # Each went back to its survey after its look.
+    for v <- [1, 2], do: assert(Enum.count(run.events, &(&1["event"] == "task_started" and &1["vehicle"] == v and String.starts_with?(&1["name"] || "", "Survey"))) == 2)
+    assert run.disarmed_at_end
+  end
+
   test "a fleet file gives a simulated vehicle its sensors: the pick finds the one that carries smoke", %{tmp_dir: dir} do
     script = Path.join(dir, "who_smells.exs")
     File.write!(script, """

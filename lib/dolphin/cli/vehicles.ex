@@ -130,7 +130,9 @@ defmodule Dolphin.CLI.Vehicles do
     groups = Dolphin.Sim.Local.groups(n)
     fleet = if is_integer(n), do: n, else: Enum.map(groups, fn {airframe, count, _} -> {airframe, count} end)
 
-    with {:ok, companion, lines} <- sidecar(groups, opts, defer) do
+    # A wrong world file is said before anything starts, sensors or not.
+    with {:ok, _world} <- world(opts[:world]),
+         {:ok, companion, lines} <- sidecar(groups, opts, defer) do
       case Dolphin.SITL.start(fleet, Enum.reject(sitl_opts ++ [companion_port: companion], fn {_, v} -> v in [nil, []] end)) do
         {:ok, fleet} -> {:ok, fleet, lines}
         {:error, why} -> {:error, Dolphin.CommandLineError.failed(nil, why)}

@@ -10,13 +10,17 @@ defmodule Dolphin.Engine.OnSensor do
   the detection runs on it, and when that task ends its mission goes on
   from where it stopped (`Dolphin.Mission.Resume`: a half-flown survey pass
   is flown again whole). The others fly on meanwhile. A detection made
-  while every vehicle is looking is queued for the first one free.
+  while every vehicle is looking is queued for the first one free. A
+  vehicle whose mission has nothing left after its look (it was over, or
+  the look came at its end) flies `finally` (a task: home, say), else
+  stays where the look left it; a mission that cannot be resumed (it
+  jumps, its home is unknown) fails the whole.
 
   Done once every mission is done (and the tasks `then` made); a failure
   of either fails it, stopping the rest. The missions' vehicles are reserved
   as each starts, not before the run.
   """
-  use Dolphin.Engine.Task.Struct, missions: [], sensor: nil, above: nil, apart: 100.0, then: nil
+  use Dolphin.Engine.Task.Struct, missions: [], sensor: nil, above: nil, apart: 100.0, then: nil, finally: nil
   @behaviour Dolphin.Engine.Node
 
   import Dolphin.Engine.Node, only: [completed: 1]
@@ -29,7 +33,8 @@ defmodule Dolphin.Engine.OnSensor do
           sensor: Sensor.t(),
           above: number(),
           apart: number(),
-          then: (Detection.t() -> term())
+          then: (Detection.t() -> term()),
+          finally: Dolphin.Engine.Task.t() | nil
         }
 
   @impl true
@@ -52,6 +57,7 @@ defmodule Dolphin.Engine.OnSensor do
       places: [],
       queue: [],
       finding: nil,
+      detect: false,
       failed: nil
     }
 
@@ -64,8 +70,10 @@ defmodule Dolphin.Engine.OnSensor do
   def handle({:finished, _key, _result}, %{failed: failed} = st) when failed != nil, do: {[], st}
   def handle({:code_result, _key, _result}, %{failed: failed} = st) when failed != nil, do: {[], st}
 
-  # A detection: found, and the vehicle to send chosen, by a helper (live reads).
-  def handle({:condition, :detect}, st), do: {[{:unwatch, :detect}, find(st)], %{st | finding: :detect}}
+  # A detection: found, and the vehicle to send chosen, by a helper (live
+  # reads); one helper at a time: while another runs, it is found after it.
+  def handle({:condition, :detect}, %{finding: nil} = st), do: {[{:unwatch, :detect}, find(st)], %{st | finding: :detect}}
+  def handle({:condition, :detect}, st), do: {[{:unwatch, :detect}], %{st | detect: true}}
 
   def handle({:code_result, :find, {:ok, nil}}, st), do: next(%{st | finding: nil}, [watch(st)])
 
@@ -73,16 +81,20 @@ defmodule Dolphin.Engine.OnSensor do
     st = %{st | finding: nil, places: [d.position | st.places]}
     event = {:emit, :sensor_threshold, Detection.event_fields(d, source(st.task), sent)}
 
-    case sent do
-      nil -> {[event, watch(st)], %{st | queue: st.queue ++ [d]}}
-      v -> send_to(v, d, st, [event, watch(st)])
-    end
+    {effects, st} =
+      case sent do
+        nil -> {[event, watch(st)], %{st | queue: st.queue ++ [d]}}
+        v -> send_to(v, d, st, [event, watch(st)])
+      end
+
+    next(st, effects)
   end
 
   # A queued detection, and the nearest vehicle now free.
   def handle({:code_result, :nearest, {:ok, v}}, st) do
     [d | rest] = st.queue
-    send_to(v, d, %{st | queue: rest, finding: nil}, [])
+    {effects, st} = send_to(v, d, %{st | queue: rest, finding: nil}, [])
+    next(st, effects)
   end
 
   # Stopped to look: where it got to is read before anything else flies on it.
@@ -109,20 +121,27 @@ defmodule Dolphin.Engine.OnSensor do
     next(st, [{:start_new, {:mission, v}, Dolphin.Engine.on(rest, [v]), [v]}])
   end
 
-  # Nothing left of it (or it cannot be resumed): the vehicle is done.
-  def handle({:code_result, {:resume, v}, {:ok, {:error, _why}}}, st), do: next(%{st | doing: Map.put(st.doing, v, :done), current: Map.put(st.current, v, nil)}, [])
+  # Nothing left of it: the vehicle's mission is over.
+  def handle({:code_result, {:resume, v}, {:ok, {:error, %Dolphin.Mission.Failure{cause: cause}}}}, st) when cause == :nothing_but_take_off or elem(cause, 0) == :nothing_left,
+    do: over(v, %{st | current: Map.put(st.current, v, nil)})
+
+  # One that cannot be resumed (it jumps, its home is unknown) fails the whole.
+  def handle({:code_result, {:resume, _v}, {:ok, {:error, why}}}, st), do: fail_with(st, {:failed, why})
+
+  def handle({:finished, {:finally, _v}, {:failed, _} = failed}, st), do: fail_with(st, failed)
+  def handle({:finished, {:finally, v}, _}, st), do: next(%{st | doing: Map.put(st.doing, v, :done)}, [])
 
   def handle({:code_result, _key, {:error, reason}}, st), do: fail_with(st, {:failed, {:on_sensor_failed, reason}})
 
   # --- the steps ---
 
-  # A flying vehicle is stopped first (it holds); one done goes at once.
+  # A flying vehicle is stopped first (it holds); one done goes at once;
+  # one taken meanwhile leaves the detection queued, first.
   defp send_to(v, d, st, effects) do
-    st = %{st | pending: Map.put(st.pending, v, d)}
-
     case st.doing[v] do
-      :mission -> {effects ++ [{:stop, [{:mission, v}], {:sent_to_look, st.task.id}}], %{st | doing: Map.put(st.doing, v, :stopping)}}
-      :done -> make(v, st, effects)
+      :mission -> {effects ++ [{:stop, [{:mission, v}], {:sent_to_look, st.task.id}}], %{st | doing: Map.put(st.doing, v, :stopping), pending: Map.put(st.pending, v, d)}}
+      :done -> make(v, %{st | pending: Map.put(st.pending, v, d)}, effects)
+      _busy -> {effects, %{st | queue: [d | st.queue]}}
     end
   end
 
@@ -135,7 +154,7 @@ defmodule Dolphin.Engine.OnSensor do
   defp after_look(v, st) do
     case st.current[v] do
       nil ->
-        next(%{st | doing: Map.put(st.doing, v, :done)}, [])
+        over(v, st)
 
       mission ->
         reached = st.reached[v]
@@ -143,17 +162,28 @@ defmodule Dolphin.Engine.OnSensor do
     end
   end
 
-  # A vehicle free again takes the oldest queued detection; with nothing to
-  # do and every mission done, the whole is.
+  # A vehicle with nothing left of its mission after a look flies `finally`.
+  defp over(v, %{task: %{finally: nil}} = st), do: next(%{st | doing: Map.put(st.doing, v, :done)}, [])
+  defp over(v, st), do: {[{:start_new, {:finally, v}, Dolphin.Engine.on(st.task.finally, [v]), [v]}], %{st | doing: Map.put(st.doing, v, :finishing)}}
+
+  # A vehicle free again takes the oldest queued detection; a detection
+  # that came while a helper ran is found; with nothing to do and every
+  # mission done, the whole is.
   defp next(st, effects) do
     free = free(st)
 
     cond do
-      st.queue != [] and free != [] and st.finding == nil ->
+      st.finding != nil ->
+        {effects, st}
+
+      st.queue != [] and free != [] ->
         at = hd(st.queue).position
         {effects ++ [{:run_code, :nearest, fn -> nearest(free, at) end}], %{st | finding: :queue}}
 
-      st.queue == [] and st.finding == nil and Enum.all?(st.doing, fn {_, what} -> what == :done end) ->
+      st.detect ->
+        {effects ++ [find(st)], %{st | finding: :detect, detect: false}}
+
+      st.queue == [] and Enum.all?(st.doing, fn {_, what} -> what == :done end) ->
         {effects ++ [{:unwatch, :detect}, {:finish, :done}], st}
 
       true ->
@@ -166,7 +196,8 @@ defmodule Dolphin.Engine.OnSensor do
   defp fail_with(st, failed) do
     running = for {v, what} <- st.doing, what in [:mission, :stopping], do: {:mission, v}
     looking = for {v, :looking} <- st.doing, do: {:look, v}
-    {[{:unwatch, :detect}, {:stop, running ++ looking, :failed}, {:finish, completed(failed)}], %{st | failed: failed}}
+    finishing = for {v, :finishing} <- st.doing, do: {:finally, v}
+    {[{:unwatch, :detect}, {:stop, running ++ looking ++ finishing, :failed}, {:finish, completed(failed)}], %{st | failed: failed}}
   end
 
   # --- reading the vehicles ---

@@ -14,7 +14,7 @@ defmodule Dolphin.Sensors.Readings do
   | `at` | when it was heard, clock ms |
   | `compid` | the component that said it (191: an onboard computer) |
   | `position` | where the vehicle was then (`Dolphin.Geo.Location`), `nil` while unknown |
-  | `history` | `{at, value, position}` of the readings of the last `keep` ms, newest first (this one included) |
+  | `history` | `{at, value, position}` of the readings of the last `keep` ms (at most the last 512), newest first (this one included) |
   | `stale` | the `stale_after` limits (ms) this reading has outlived with no newer one (`stale/4`) |
 
       iex> alias Dolphin.Sensors.Readings
@@ -30,6 +30,10 @@ defmodule Dolphin.Sensors.Readings do
 
   alias Dolphin.MAVLink.Ardupilotmega, as: M
   alias Dolphin.Sensors.Sensor
+
+  # Readings kept per source at most (each view carries them to its
+  # subscribers): a 2 Hz sensor's whole minute, a 50 Hz one's last ten seconds.
+  @max_history 512
 
   @typedoc "What one source keeps: readings for `keep` ms; the staleness limits declared."
   @type config :: %{keep: pos_integer(), stale_after: [pos_integer()]}
@@ -105,7 +109,7 @@ defmodule Dolphin.Sensors.Readings do
       end
 
     position = if is_function(position, 0), do: position.(), else: position
-    history = Enum.take_while([{now, value, position} | history], fn {at, _, _} -> now - at <= keep end)
+    history = [{now, value, position} | history] |> Enum.take(@max_history) |> Enum.take_while(fn {at, _, _} -> now - at <= keep end)
     Map.put(readings, source, %{value: value, at: now, compid: compid, position: position, history: history, stale: []})
   end
 

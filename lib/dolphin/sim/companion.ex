@@ -80,6 +80,8 @@ defmodule Dolphin.Sim.Companion do
   """
   @spec step_at(t(), integer(), place()) :: {[{byte(), struct()}], t()}
   def step_at(%__MODULE__{} = c, now, place) do
+    # The vehicle's boot time went back (it rebooted): the timers start again.
+    c = if now < c.due - c.period_ms or now < c.heartbeat_due - 1000, do: %{c | due: now, heartbeat_due: now}, else: c
     {beats, c} = heartbeat(c, now)
 
     if now >= c.due do

@@ -75,11 +75,9 @@ defmodule Dolphin.Sim.Sidecar do
           peers: %{}
         }
 
-        case Keyword.get(opts, :connect) do
-          nil -> :ok
-          {ip, port} -> send_frame(s, {ip, port}, 0, 0, %M.Heartbeat{type: 18, autopilot: 8, base_mode: 0, custom_mode: 0, system_status: 4, mavlink_version: 3})
-        end
-
+        # Sending first (udpout): a heartbeat a second until the autopilot answers.
+        s = Map.put(s, :hello, Keyword.get(opts, :connect))
+        if s.hello, do: send(self(), :hello)
         {:ok, s}
 
       {:error, why} ->
@@ -94,6 +92,8 @@ defmodule Dolphin.Sim.Sidecar do
   @impl true
   def handle_info({:udp, socket, ip, port, data}, %{socket: socket} = s) do
     from = {ip, port}
+    # Heard from where it sent first: no more hellos.
+    s = if s.hello == from, do: %{s | hello: nil}, else: s
     {frames, parser} = Parser.feed(Map.get(s.parser, from, Parser.new()), data)
     s = %{s | parser: Map.put(s.parser, from, parser)}
     {:noreply, Enum.reduce(frames, s, &frame(&2, from, &1))}
@@ -101,6 +101,14 @@ defmodule Dolphin.Sim.Sidecar do
 
   def handle_info({:udp_passive, socket}, %{socket: socket} = s) do
     :ok = :inet.setopts(socket, active: 100)
+    {:noreply, s}
+  end
+
+  def handle_info(:hello, %{hello: nil} = s), do: {:noreply, s}
+
+  def handle_info(:hello, %{hello: to} = s) do
+    send_frame(s, to, 0, 0, %M.Heartbeat{type: 18, autopilot: 8, base_mode: 0, custom_mode: 0, system_status: 4, mavlink_version: 3})
+    Process.send_after(self(), :hello, 1_000)
     {:noreply, s}
   end
 

@@ -73,7 +73,9 @@ defmodule Dolphin.Vehicles.ParamProtocol do
   defp refused(data, kept),
     do: finish(data, {:error, %ParamError{param: data.name, vehicle: data.vehicle, result: :refused, asked: data.value, kept: kept, attempts: data.sent}})
 
-  defp same?(a, b), do: <<a::float-32>> == <<b::float-32>>
+  # NaN and infinities (atoms from the codec) are no value asked for.
+  defp same?(a, b) when is_number(a) and is_number(b), do: <<a::float-32>> == <<b::float-32>>
+  defp same?(_a, _b), do: false
 
   @doc """
   A PARAM_VALUE's value as its MAV_PARAM_TYPE says (ArduPilot sends every

@@ -174,7 +174,15 @@ defmodule Dolphin.Vehicles.Vehicle do
 
   def handle_cast(:sensors_changed, s) do
     limits = Settings.sensors()
-    {:noreply, publish(%{s | sensor_limits: limits}, State.watch_sensors(s.state, Readings.watch(limits)))}
+    s = publish(%{s | sensor_limits: limits}, State.watch_sensors(s.state, Readings.watch(limits)))
+    # The readings held already are judged by the limits declared now (a
+    # limit already passed marks its reading at once).
+    now = Clock.now_ms()
+
+    for {source, %{at: at}} <- s.state.sensors, %{stale_after: ms_list} <- [Map.get(limits, source)], ms <- ms_list,
+        do: Clock.send_after(self(), {:sensor_stale, source, at, ms}, max(at + ms - now, 0))
+
+    {:noreply, s}
   end
 
   def handle_cast({:send, message}, s) do
@@ -454,10 +462,12 @@ defmodule Dolphin.Vehicles.Vehicle do
     do: notify_op(s, command, {:ack, ack, compid})
 
   defp route_to_op(s, %{message: %m{} = message}) when m in @mission_messages, do: notify_op(s, :mission, {:mission, message})
-  # A parameter's value answers a read or set of it, and belongs to a list being fetched.
-  defp route_to_op(s, %{message: %M.ParamValue{param_id: name} = value}) do
+  # A parameter's value answers a read or set of it, and belongs to a list
+  # being fetched when the autopilot sent it (another component's list is
+  # another count).
+  defp route_to_op(s, %{message: %M.ParamValue{param_id: name} = value, compid: compid}) do
     notify_op(s, {:param, name}, {:param, value})
-    notify_op(s, :param_list, {:param, value})
+    if compid in [1, s.state.autopilot_compid], do: notify_op(s, :param_list, {:param, value})
   end
   defp route_to_op(_s, _frame), do: :ok
 

@@ -143,8 +143,24 @@ defmodule Mix.Tasks.Dolphin.Param do
     end
   end
 
+  # The vehicle's list first: a name it does not have is said at once,
+  # with the names near, not after the retries of a set nobody answers.
   defp load(id, file, params) do
-    results = for {name, value, _line} <- params, do: {name, value, Vehicles.param(id, name, value, [])}
+    with {:ok, all} <- fetch(id) do
+      names = Enum.map(all, & &1.name)
+
+      results =
+        for {name, value, _line} <- params do
+          if name in names,
+            do: {name, value, Vehicles.param(id, name, value, [])},
+            else: {name, value, {:error, Vehicles.unknown_param(id, name, names)}}
+        end
+
+      loaded(id, file, results)
+    end
+  end
+
+  defp loaded(id, file, results) do
     failed = for {_name, _value, {:error, e}} <- results, do: Exception.message(e)
     set = length(results) - length(failed)
 
