@@ -12,6 +12,7 @@ in vehicle time (divided by SPEEDUP), as a ground station at speed-up must.
 """
 import json
 import math
+import socket
 import sys
 import time
 
@@ -19,6 +20,9 @@ from pymavlink import mavutil
 
 port, sysid, speedup = int(sys.argv[1]), int(sys.argv[2]), float(sys.argv[3])
 mav = mavutil.mavlink_connection("udpin:127.0.0.1:%d" % port, source_system=255, source_component=190, dialect="ardupilotmega")
+# A sped-up vehicle sends fast and this reader is slow: a large receive
+# buffer keeps a busy machine from dropping what it has not read yet.
+mav.port.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 8 * 1024 * 1024)
 m = mavutil.mavlink
 
 
@@ -139,6 +143,13 @@ while time.time() < deadline and not disarmed:
         # one may be lost on a busy machine: UDP, and this reader is slow).
         if not armed and reached and reached[-1] == len(items) - 1:
             disarmed = True
+
+# What the vehicle said as it disarmed may come after the heartbeat that shows it.
+until = time.time() + real(2)
+while time.time() < until:
+    msg = mav.recv_match(type="STATUSTEXT", blocking=True, timeout=real(1))
+    if msg is not None:
+        texts.append(msg.text)
 
 last = mav.recv_match(type="GLOBAL_POSITION_INT", blocking=True, timeout=answer(5))
 distance = math.hypot((last.lat / 1e7 - home[0]) * 111_111, (last.lon / 1e7 - home[1]) * 111_111 * math.cos(math.radians(home[0])))
