@@ -417,8 +417,9 @@ defmodule Dolphin.Vehicles do
   end
 
   # A name the vehicle did not answer for: one its list lacks is unknown.
+  # (The list with its own patience: the caller's attempts were for one value.)
   defp unknown_or(e, id, name, opts) do
-    case param_list(id, opts) do
+    case param_list(id, Keyword.delete(opts, :attempts)) do
       {:ok, list} ->
         names = Enum.map(list, & &1.name)
         if name in names, do: e, else: unknown_param(id, name, names)

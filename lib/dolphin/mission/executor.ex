@@ -47,6 +47,11 @@ defmodule Dolphin.Mission.Executor do
   # (docs/ardupilot.md); a copter held armed there by a delay disarms
   # itself after 10 s (DISARM_DELAY).
   @grounded_timeout_ms 60_000
+  # And never under this much real time: a simulation sped up on a busy
+  # host falls behind its clock (a simulated copter beside SITL fleets and
+  # busy loops stood "armed on the ground" for 60 s of clock, 6 s of real
+  # time at 10x, while it was merely late), not a real vehicle at 1x.
+  @grounded_floor_real_ms 15_000
   # Standing still this long (clock ms) short of a waypoint in AUTO, the
   # vehicle is stuck: ArduRover stops short of its fence and says nothing.
   @stuck_timeout_ms 60_000
@@ -549,7 +554,7 @@ defmodule Dolphin.Mission.Executor do
         {%{data | grounded: nil}, [{{:timeout, :grounded}, :cancel}]}
 
       on_ground_armed?(st) and data.grounded == nil ->
-        {%{data | grounded: %{at: st.position}}, [{{:timeout, :grounded}, Clock.to_real_ms(@grounded_timeout_ms), :grounded}]}
+        {%{data | grounded: %{at: st.position}}, [{{:timeout, :grounded}, max(Clock.to_real_ms(@grounded_timeout_ms), @grounded_floor_real_ms), :grounded}]}
 
       true ->
         {data, []}

@@ -4,8 +4,8 @@ defmodule Dolphin.Vehicles.ParamList do
   protocol, as a `:gen_statem` started by the vehicle's process (which
   routes every PARAM_VALUE to it): PARAM_REQUEST_LIST, then each
   PARAM_VALUE kept by its `param_index` (of `param_count`). Once the values
-  pause (a quarter of the wait for an answer; the whole wait before the
-  first), the ones still missing are asked for by index
+  pause (a quarter of the wait for an answer, at least 250 ms; a second
+  before the first), the ones still missing are asked for by index
   (PARAM_REQUEST_READ), fifty at a time, again and again while each round
   brings some: a lossy link costs the missing ones, never a restart. It
   ends with every parameter, or with an error once `attempts` rounds in a
@@ -25,6 +25,9 @@ defmodule Dolphin.Vehicles.ParamList do
 
   # Missing parameters asked for at once, by index.
   @batch 50
+  # Real ms a round lasts at least, and before the list's first value.
+  @least_round_ms 250
+  @least_first_ms 1_000
 
   @doc """
   Starts the protocol, linked to the caller (the vehicle process).
@@ -40,13 +43,17 @@ defmodule Dolphin.Vehicles.ParamList do
 
   @impl true
   def init({request, opts}) do
-    wait = Retry.answer_wait(Keyword.get(opts, :ack_timeout_ms, 1_500), Keyword.get(opts, :rtt_ms))
+    # Never shorter than an autopilot takes to start its list (ArduPilot
+    # sends it from its main loop, at a pace of its own, whatever the
+    # clock's speed-up) or to answer a few reads.
+    answer = Retry.answer_wait(Keyword.get(opts, :ack_timeout_ms, 1_500), Keyword.get(opts, :rtt_ms))
+    wait = max(answer, @least_round_ms)
     attempts = Keyword.get_lazy(opts, :attempts, fn -> Retry.attempts(Keyword.get(opts, :loss)) end)
     # Once values come, a pause this long between two of them ends the round.
     gap = max(div(wait, 4), 100)
-    data = Map.merge(request, %{attempts: attempts, wait_ms: wait, gap_ms: gap, count: nil, values: %{}, fruitless: 0, received: 0, rounds: 1, asked: []})
+    data = Map.merge(request, %{attempts: attempts, wait_ms: wait, first_ms: max(wait, @least_first_ms), gap_ms: gap, count: nil, values: %{}, fruitless: 0, received: 0, rounds: 1, asked: []})
     data.send.(%M.ParamRequestList{target_system: data.sysid, target_component: 1})
-    {:ok, :listing, data, [{:state_timeout, wait, :quiet}]}
+    {:ok, :listing, data, [{:state_timeout, data.first_ms, :quiet}]}
   end
 
   @impl true
@@ -66,6 +73,12 @@ defmodule Dolphin.Vehicles.ParamList do
     end
   end
 
+  # Another count: the vehicle's list changed under us (parameters appear
+  # when a feature is enabled); its indexes may have moved, so it is taken
+  # anew, from what comes now.
+  def handle_event(:info, {:param, %M.ParamValue{param_index: i, param_count: n}} = msg, state, data) when i < n and n != data.count,
+    do: handle_event(:info, msg, state, %{data | count: nil, values: %{}, received: 0})
+
   def handle_event(:info, {:param, _other}, _state, _data), do: :keep_state_and_data
 
   def handle_event(:state_timeout, :quiet, _state, data), do: next_round(data)
@@ -84,7 +97,7 @@ defmodule Dolphin.Vehicles.ParamList do
 
       data.count == nil ->
         data.send.(%M.ParamRequestList{target_system: data.sysid, target_component: 1})
-        {:next_state, :listing, data, [{:state_timeout, data.wait_ms, :quiet}]}
+        {:next_state, :listing, data, [{:state_timeout, data.first_ms, :quiet}]}
 
       true ->
         missing = Enum.reject(0..(data.count - 1), &Map.has_key?(data.values, &1)) |> Enum.take(@batch)
