@@ -37,6 +37,16 @@ defmodule Dolphin.SITLTest do
     fake
   end
 
+  # What SITL sends to instead of the ground station's port: a proxy in
+  # between (its faults `opts`), announced to `test` as {:proxy, pid}.
+  defp behind_proxy(test, opts) do
+    fn gcs_port ->
+      {:ok, proxy} = UDPProxy.start_link([gcs: gcs_port] ++ opts)
+      send(test, {:proxy, proxy})
+      UDPProxy.port(proxy)
+    end
+  end
+
   describe "Dolphin.SITL" do
     test "a missing binary or defaults file is a clear error" do
       assert {:error, %SITL.Error{} = e} = SITL.start(1, bin: "/nonexistent/arducopter")
@@ -291,11 +301,7 @@ defmodule Dolphin.SITLTest do
   test "over a link that loses 20 % each way, duplicates and reorders, a mission uploads exactly and flies" do
     test = self()
 
-    send_to = fn gcs_port ->
-      {:ok, proxy} = UDPProxy.start_link(gcs: gcs_port, seed: 7, both: [loss: 0.2, duplicate: 0.05, reorder: 0.05])
-      send(test, {:proxy, proxy})
-      UDPProxy.port(proxy)
-    end
+    send_to = behind_proxy(test, seed: 7, both: [loss: 0.2, duplicate: 0.05, reorder: 0.05])
 
     [id] = Backend.start(:sitl, 1, send_to: send_to)
     assert_received {:proxy, proxy}
@@ -314,11 +320,7 @@ defmodule Dolphin.SITLTest do
   test "over 30 % loss each way, 10 % duplicates and 10 % reordering, 100-item uploads and their read-backs are exact" do
     test = self()
 
-    send_to = fn gcs_port ->
-      {:ok, proxy} = UDPProxy.start_link(gcs: gcs_port, seed: 3)
-      send(test, {:proxy, proxy})
-      UDPProxy.port(proxy)
-    end
+    send_to = behind_proxy(test, seed: 3)
 
     [id] = Backend.start(:sitl, 1, send_to: send_to, speedup: 5)
     assert_received {:proxy, proxy}
@@ -348,11 +350,7 @@ defmodule Dolphin.SITLTest do
   test "parameters on ArduCopter over 30 % loss each way: the whole list exact, typed; set, refused, unknown" do
     test = self()
 
-    send_to = fn gcs_port ->
-      {:ok, proxy} = UDPProxy.start_link(gcs: gcs_port, seed: 5)
-      send(test, {:proxy, proxy})
-      UDPProxy.port(proxy)
-    end
+    send_to = behind_proxy(test, seed: 5)
 
     [id] = Backend.start(:sitl, 1, send_to: send_to, speedup: 5)
     assert_received {:proxy, proxy}

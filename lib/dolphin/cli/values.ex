@@ -206,6 +206,22 @@ defmodule Dolphin.CLI.Values do
   end
 
   @doc """
+  A command line of options only (no arguments), parsed with `options`
+  and checked (`check/2`), then given to `more` for the task's own rules;
+  an argument or an unknown option is bad usage, saying which
+  (`unexpected` words an argument: `fn arg -> text end`).
+  """
+  @spec parse_options([String.t()], spec(), (keyword() -> {:ok, keyword()} | {:error, CommandLineError.t()}), (String.t() -> String.t())) ::
+          {:ok, keyword()} | {:error, CommandLineError.t()}
+  def parse_options(argv, options, more \\ &{:ok, &1}, unexpected \\ &"unexpected argument #{inspect(&1)}") do
+    case OptionParser.parse(argv, strict: switches(options)) do
+      {opts, [], []} -> with {:ok, opts} <- check(opts, options), do: more.(opts)
+      {_, [arg | _], []} -> CommandLineError.usage_error(unexpected.(arg))
+      {_, _, [{switch, value} | _]} -> CommandLineError.usage_error("bad option #{switch}#{if value, do: " " <> value, else: ""}")
+    end
+  end
+
+  @doc """
   The options of every command that brings a fleet up (`mix dolphin.run`,
   `mix dolphin.console`): its links, simulated or SITL vehicles, the
   speed-up, the telemetry log and where to forward it.

@@ -97,22 +97,14 @@ defmodule Mix.Tasks.Dolphin.Sensors do
   # The options, checked; --sensors as a list of models.
   @spec parse([String.t()]) :: {:ok, keyword()} | {:error, Dolphin.CommandLineError.t()}
   def parse(argv) do
-    case OptionParser.parse(argv, strict: Values.switches(@options)) do
-      {opts, [], []} ->
-        with {:ok, opts} <- Values.check(opts, @options),
-             :ok <- required(opts),
-             {:ok, sensors} <- sensors(Keyword.get(opts, :sensors, "smoke")),
-             :ok <- rate(opts[:rate]),
-             {:ok, noise} <- noise(opts[:noise]) do
-          {:ok, opts |> Keyword.put(:sensors, sensors) |> Keyword.put(:noise, noise) |> Keyword.put_new(:connect, "udpin:127.0.0.1:14560")}
-        end
-
-      {_, [extra | _], _} ->
-        Dolphin.CommandLineError.usage_error("unexpected argument #{inspect(extra)}")
-
-      {_, _, [{switch, value} | _]} ->
-        Dolphin.CommandLineError.usage_error("bad option #{switch}#{if value, do: " " <> value, else: ""}")
-    end
+    Values.parse_options(argv, @options, fn opts ->
+      with :ok <- required(opts),
+           {:ok, sensors} <- sensors(Keyword.get(opts, :sensors, "smoke")),
+           :ok <- rate(opts[:rate]),
+           {:ok, noise} <- noise(opts[:noise]) do
+        {:ok, opts |> Keyword.put(:sensors, sensors) |> Keyword.put(:noise, noise) |> Keyword.put_new(:connect, "udpin:127.0.0.1:14560")}
+      end
+    end)
   end
 
   defp required(opts), do: if(opts[:world], do: :ok, else: Dolphin.CommandLineError.usage_error("--world FILE is required: what the sensors sense"))

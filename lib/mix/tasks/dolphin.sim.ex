@@ -85,24 +85,16 @@ defmodule Mix.Tasks.Dolphin.Sim do
   # The options, checked, as `Dolphin.Sim.start/1` takes them (plus :for and :quiet).
   @spec parse([String.t()]) :: {:ok, keyword()} | {:error, Dolphin.CommandLineError.t()}
   def parse(argv) do
-    case OptionParser.parse(argv, strict: Values.switches(@options)) do
-      {opts, [], []} ->
-        with {:ok, opts} <- Values.check(opts, @options),
-             {:ok, _} <- Values.sysids(Keyword.get(opts, :count, 1), Keyword.get(opts, :first_sysid, 1), "--count", "--first-sysid") do
-          {:ok,
-           opts
-           |> Keyword.put_new(:gcs, "udpout:127.0.0.1:14550")
-           |> Keyword.update(:ekf_ready, nil, &round(&1 * 1000))
-           |> rename(:ekf_ready, :ekf_ready_ms)
-           |> Enum.reject(fn {_k, v} -> v == nil end)}
-        end
-
-      {_, [extra | _], _} ->
-        Dolphin.CommandLineError.usage_error("unexpected argument #{inspect(extra)}")
-
-      {_, _, [{switch, value} | _]} ->
-        Dolphin.CommandLineError.usage_error("bad option #{switch}#{if value, do: " " <> value, else: ""}")
-    end
+    Values.parse_options(argv, @options, fn opts ->
+      with {:ok, _} <- Values.sysids(Keyword.get(opts, :count, 1), Keyword.get(opts, :first_sysid, 1), "--count", "--first-sysid") do
+        {:ok,
+         opts
+         |> Keyword.put_new(:gcs, "udpout:127.0.0.1:14550")
+         |> Keyword.update(:ekf_ready, nil, &round(&1 * 1000))
+         |> rename(:ekf_ready, :ekf_ready_ms)
+         |> Enum.reject(fn {_k, v} -> v == nil end)}
+      end
+    end)
   end
 
   @doc false

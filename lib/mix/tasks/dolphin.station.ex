@@ -100,24 +100,20 @@ defmodule Mix.Tasks.Dolphin.Station do
   # The options of a command line, checked.
   @spec parse([String.t()]) :: {:ok, keyword()} | {:error, Dolphin.CommandLineError.t()}
   def parse(argv) do
-    case OptionParser.parse(argv, strict: Values.switches(@options)) do
-      {opts, [], []} ->
-        with {:ok, opts} <- Values.check(opts, @options) do
-          cond do
-            opts[:sname] == nil and opts[:name] == nil -> Dolphin.CommandLineError.usage_error("a station needs a node name: give --sname NAME or --name NAME@HOST")
-            (problem = Dolphin.CLI.Cluster.check(opts)) != :ok -> Dolphin.CommandLineError.usage_error(elem(problem, 1))
-            opts[:first_sysid] != nil and opts[:sim] == nil -> Dolphin.CommandLineError.usage_error("--first-sysid goes with --sim")
-            opts[:sim] != nil -> with({:ok, _} <- Values.sysids(opts[:sim], Keyword.get(opts, :first_sysid, 1), "--sim", "--first-sysid"), do: {:ok, opts})
-            true -> {:ok, opts}
-          end
+    Values.parse_options(
+      argv,
+      @options,
+      fn opts ->
+        cond do
+          opts[:sname] == nil and opts[:name] == nil -> Dolphin.CommandLineError.usage_error("a station needs a node name: give --sname NAME or --name NAME@HOST")
+          (problem = Dolphin.CLI.Cluster.check(opts)) != :ok -> Dolphin.CommandLineError.usage_error(elem(problem, 1))
+          opts[:first_sysid] != nil and opts[:sim] == nil -> Dolphin.CommandLineError.usage_error("--first-sysid goes with --sim")
+          opts[:sim] != nil -> with({:ok, _} <- Values.sysids(opts[:sim], Keyword.get(opts, :first_sysid, 1), "--sim", "--first-sysid"), do: {:ok, opts})
+          true -> {:ok, opts}
         end
-
-      {_, [arg | _], []} ->
-        Dolphin.CommandLineError.usage_error("unexpected argument #{inspect(arg)} (a station runs no script: mix dolphin.run SCRIPT --join NODE does)")
-
-      {_, _, [{switch, value} | _]} ->
-        Dolphin.CommandLineError.usage_error("bad option #{switch}#{if value, do: " " <> value, else: ""}")
-    end
+      end,
+      &"unexpected argument #{inspect(&1)} (a station runs no script: mix dolphin.run SCRIPT --join NODE does)"
+    )
   end
 
   defp serve(opts, io, out, err) do
