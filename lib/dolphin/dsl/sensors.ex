@@ -86,9 +86,10 @@ defmodule Dolphin.DSL.Sensors do
   Missions flown while a sensor is watched (`Dolphin.Engine.OnSensor`):
   a reading above `above:` at a new place sends the nearest vehicle free to
   fly the task `then:` makes of the `Dolphin.Sensors.Detection`, then its
-  mission goes on where it stopped; the others fly on meanwhile.
+  mission goes on where it stopped; the others fly on meanwhile. A vehicle
+  with nothing left of its mission after its look flies `finally:`.
 
-      on_sensor(%{a => west, b => east}, :smoke, above: 0.4, apart: 150, then: fn d -> look_at.(d.position) end)
+      on_sensor(%{a => west, b => east}, :smoke, above: 0.4, apart: 150, then: fn d -> look_at.(d.position) end, finally: home)
   """
   defmacro on_sensor(missions, name, opts) do
     sensor = fetch!(name, __CALLER__)
