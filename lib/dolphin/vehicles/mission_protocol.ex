@@ -160,7 +160,9 @@ defmodule Dolphin.Vehicles.MissionProtocol do
         answered: false,
         # Upload: items ever sent; download: items received.
         sent: MapSet.new(),
-        received: %{}
+        received: %{},
+        # Clear: the try a refusal came in answer to (see :clear).
+        refused: nil
       })
       |> reset_transaction()
 
@@ -317,9 +319,10 @@ defmodule Dolphin.Vehicles.MissionProtocol do
     do: open_exchange(data, tries, :clear, %M.MissionClearAll{target_system: data.sysid, target_component: data.component, mission_type: data.type})
 
   def handle_event(:state_timeout, :rto, {:clear, tries}, data) do
-    case stall(data) do
-      {:retry, data} -> {:next_state, {:clear, tries + 1}, data}
-      {:give_up, data} -> give_up(data, "no MISSION_ACK after MISSION_CLEAR_ALL")
+    case {stall(data), data.refused} do
+      {{:retry, data}, _} -> {:next_state, {:clear, tries + 1}, data}
+      {{:give_up, data}, nil} -> give_up(data, "no MISSION_ACK after MISSION_CLEAR_ALL")
+      {{:give_up, data}, {_try, result}} -> fail(data, result(result), nil)
     end
   end
 
@@ -327,9 +330,17 @@ defmodule Dolphin.Vehicles.MissionProtocol do
       when type == data.type,
       do: finish(data, :ok)
 
-  def handle_event(:info, {:mission, %M.MissionAck{type: result, mission_type: type}}, {:clear, _}, %{operation: :clear} = data)
-      when type == data.type,
-      do: fail(data, result(result), nil)
+  # A refusal may be a late answer to something else (an item of the upload
+  # before, sent again while the vehicle had it already): the clear goes on
+  # as if unanswered, and only a refusal in answer to a later sending is
+  # the vehicle's (ArduCopter refuses while its mission runs in AUTO).
+  def handle_event(:info, {:mission, %M.MissionAck{type: result, mission_type: type}}, {:clear, tries}, %{operation: :clear} = data)
+      when type == data.type do
+    case data.refused do
+      {earlier, _} when earlier < tries -> fail(data, result(result), nil)
+      _ -> {:keep_state, %{data | refused: {tries, result}}}
+    end
+  end
 
   # Anything else (duplicates, other mission types, late answers) is not for this state.
   def handle_event(:info, {:mission, _message}, _state, _data), do: :keep_state_and_data
