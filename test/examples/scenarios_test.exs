@@ -34,7 +34,6 @@ defmodule Dolphin.Examples.Scenario do
     end
   end
 
-  alias Dolphin.MAVLink.JSON
   alias Dolphin.Test.GroundStation
   alias Mix.Tasks.Dolphin.Run
 
@@ -61,16 +60,7 @@ defmodule Dolphin.Examples.Scenario do
     GroundStation.forget_vehicles()
     output = elem(StringIO.contents(out), 1) <> elem(StringIO.contents(err), 1)
 
-    parsed =
-      events
-      |> File.read!()
-      |> String.split("\n", trim: true)
-      |> Enum.map(fn line ->
-        {:ok, e} = JSON.decode(line)
-        e
-      end)
-
-    {code, output, parsed}
+    {code, output, Dolphin.Test.ExampleRun.read_events(events)}
   end
 
   def events(all, name), do: Enum.filter(all, &(&1["event"] == name))

@@ -45,14 +45,7 @@ defmodule Dolphin.Test.ExampleRun do
     code = Run.main(argv, [out: out, err: err] ++ io)
     GroundStation.forget_vehicles()
 
-    all =
-      events
-      |> File.read!()
-      |> String.split("\n", trim: true)
-      |> Enum.map(fn line ->
-        {:ok, e} = JSON.decode(line)
-        e
-      end)
+    all = read_events(events)
 
     %{
       code: code,
@@ -64,6 +57,17 @@ defmodule Dolphin.Test.ExampleRun do
       speedup: speedup(args),
       tlog: tlog
     }
+  end
+
+  @doc "The events of an events file (`--events`), as maps, in order."
+  def read_events(path) do
+    path
+    |> File.read!()
+    |> String.split("\n", trim: true)
+    |> Enum.map(fn line ->
+      {:ok, e} = JSON.decode(line)
+      e
+    end)
   end
 
   @doc """
