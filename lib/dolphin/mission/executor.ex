@@ -39,6 +39,7 @@ defmodule Dolphin.Mission.Executor do
   @reason_ms 1_000
   @takeoff 22
   @land 21
+  @return_to_launch 20
   # A landed vehicle this close to a mission's landing point is there.
   @here_m 5
   @boot_timeout_ms 60_000
@@ -420,17 +421,22 @@ defmodule Dolphin.Mission.Executor do
     end
   end
 
-  defp landing_here?(%{ending: {:landing, seq}} = data, %{position: %{lat: lat, lon: lon}}) do
+  defp landing_here?(%{ending: {:landing, seq}} = data, %{position: %{lat: lat, lon: lon}} = st) do
     item = Enum.at(data.items, seq)
     at = Dolphin.Geo.location(lat, lon)
 
     cond do
       item.command == @land and item.x != 0 -> Dolphin.Geo.distance(at, Dolphin.Geo.location(item.x / 1.0e7, item.y / 1.0e7)) <= @here_m
+      # A return lands at home, unless a rally point is nearer (then it is not known here).
+      item.command == @return_to_launch and st.home != nil and rally_points(data) == [] -> Dolphin.Geo.distance(at, st.home) <= @here_m
       true -> false
     end
   end
 
   defp landing_here?(_data, _st), do: false
+
+  defp rally_points(%{fence: %Dolphin.Fence{rally: rally}}), do: rally
+  defp rally_points(_data), do: []
 
   # The items for this vehicle (its airframe, its home), then a look at it again at once.
   defp with_items(data, st) do

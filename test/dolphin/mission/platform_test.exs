@@ -230,6 +230,24 @@ defmodule Dolphin.Mission.PlatformTest do
     assert {:ok, %{photos: 1}} = Sim.info(1)
   end
 
+  test "a mission that only returns and lands is done at once on a copter standing at its home; elsewhere it is refused", %{port: port} do
+    [{1, home}] = start_fleet(port, count: 1)
+    Events.subscribe()
+    home_again = Mission.new("home again") |> Mission.add(C.home(home)) |> Mission.add(C.return_home_and_land())
+    Wait.until(fn -> match?({:ok, %{landed: :on_ground}}, Vehicles.state(1)) end)
+
+    assert {:ok, :done} = Engine.run(Engine.on(home_again, [1]))
+    # Nothing was sent to fly: no upload, no arming.
+    refute Enum.any?(flush(), &match?({:dolphin, :events, %{event: :mission_uploaded}}, &1))
+    assert {:ok, %{armed: false}} = Vehicles.state(1)
+
+    # Landed 80 m away, the same mission has nothing it can fly.
+    away = Mission.new("away") |> Mission.add(C.home(home)) |> Mission.add(C.take_off(%{home | h: home.h + 20})) |> Mission.add(C.landing_point(Dolphin.Geo.offset(home, 80, 0)))
+    assert {:ok, :done} = Engine.run(Engine.on(away, [1]))
+    assert {:error, failure} = Engine.run(Engine.on(home_again, [1]))
+    assert Exception.message(Dolphin.Engine.TaskError.exception(failure: failure)) =~ "on the ground and the mission has no take-off"
+  end
+
   test "the second of two missions reports its own progress from the start, and its take-off is an item reached", %{port: port} do
     [{1, home}] = start_fleet(port, count: 1)
     # The first mission's last item reached is its take-off, item 1: the second one's take-off has the same number.
