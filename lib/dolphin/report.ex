@@ -104,8 +104,8 @@ defmodule Dolphin.Report do
     with {:ok, events, bad} <- read_events(events_path),
          {:ok, whole} <- read_log(tlog_path, Model.sensors(events)),
          {:ok, log, runs, run} <- select_run(whole, opts[:run], tlog_path),
-         {:ok, offset} <- Events.align(events, Model.anchors(log), events_path) do
-      model = Model.build(log, events, offset)
+         {:ok, timeline} <- Events.align(events, Model.anchors(log), events_path) do
+      model = Model.build(log, events, timeline)
       title = Keyword.get(opts, :title, "Flight report")
       page = HTML.page(model, %{title: title, tlog: tlog_path, events: events_path, events_skipped: bad, runs: {runs, run}})
 

@@ -86,8 +86,9 @@ defmodule Dolphin.ReportTest do
   end
 
   # The run's events, their clock starting `lead_s` before the log's.
-  defp events(dir, lead_s \\ 1.0, name \\ "run.jsonl", edit \\ & &1) do
-    ms = fn t -> round((t + lead_s) * 1000) end
+  # `rate`: the vehicles' pace against the clock of the events (below 1: they fell behind it).
+  defp events(dir, lead_s \\ 1.0, name \\ "run.jsonl", edit \\ & &1, rate \\ 1.0) do
+    ms = fn t -> round((t / rate + lead_s) * 1000) end
 
     lines =
       [
@@ -161,8 +162,23 @@ defmodule Dolphin.ReportTest do
   test "the events are placed on the log's time line by what both record", %{tmp_dir: dir} do
     {:ok, log} = Dolphin.Report.FlightLog.read_file(tlog(dir))
     {:ok, events, 0} = Dolphin.Report.Events.read_file(events(dir, 7.5))
-    assert {:ok, offset} = Dolphin.Report.Events.align(events, Dolphin.Report.Model.anchors(log), "run.jsonl")
+    assert {:ok, {scale, offset}} = Dolphin.Report.Events.align(events, Dolphin.Report.Model.anchors(log), "run.jsonl")
+    assert_in_delta scale, 1.0, 0.05
     assert_in_delta offset, -7.5, 0.6
+  end
+
+  test "events of vehicles that fell behind the clock's speed-up (a loaded machine) are placed by rate and origin", %{tmp_dir: dir} do
+    {:ok, log} = Dolphin.Report.FlightLog.read_file(tlog(dir))
+    # The clock ran at the speed-up asked for, the vehicles at 0.6 of it: 5 s of theirs is 8.3 s of the events'.
+    {:ok, events, 0} = Dolphin.Report.Events.read_file(events(dir, 7.5, "slow.jsonl", & &1, 0.6))
+    assert {:ok, {scale, offset}} = Dolphin.Report.Events.align(events, Dolphin.Report.Model.anchors(log), "slow.jsonl")
+    assert_in_delta scale, 0.6, 0.05
+    assert_in_delta offset, -0.6 * 7.5, 0.6
+
+    # The report is written, with each task where the vehicles flew it.
+    out = Path.join(dir, "slow.html")
+    assert {:ok, _} = Report.write(tlog(dir), Path.join(dir, "slow.jsonl"), out)
+    assert File.read!(out) =~ "<b>East</b>: the vehicle left its mission"
   end
 
   test "without events: the log alone", %{tmp_dir: dir} do

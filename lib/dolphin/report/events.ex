@@ -17,6 +17,17 @@ defmodule Dolphin.Report.Events do
   # Clock seconds within which an event and its frame are the same moment:
   # heartbeats come once a second and a sped-up link stamps frames late.
   @tolerance_s 3.0
+  # Anchors this many seconds apart, or more, measure the rate of one time
+  # line against the other (the tolerance above is small beside it).
+  @rate_span_s 20.0
+  # The most anchors the rate is measured on (pairs of them: the square).
+  @rate_anchors 200
+  # The vehicles' pace against the clock asked for: a tenth of it at worst,
+  # and no faster than a quarter more (a boot clock's jitter).
+  @least_rate 0.1
+  # A rate other than 1 is measured on no fewer anchors than this.
+  @rated_least_anchors 4
+  @most_rate 1.25
 
   @doc false
   @spec read_file(Path.t()) :: {:ok, [map()], non_neg_integer()} | {:error, Error.t()}
@@ -56,40 +67,77 @@ defmodule Dolphin.Report.Events do
   end
 
   @doc false
-  # The seconds to add to an event's `t_ms / 1000` to put it on the log's time
-  # line. `log` is the log's anchors: %{vehicles: [id], span_s: s, speedup: k, arming: %{id
+  # Where the events go on the log's time line: `{scale, offset}`, an event
+  # at `t_ms` is at `scale * t_ms / 1000 + offset` seconds of the log's
+  # clock. The log's clock is the vehicles' own (their boot clocks against
+  # the log's stamps); the events' is the ground station's, which runs at the
+  # speed-up asked for. A vehicle that cannot keep that pace (ArduCopter SITL
+  # on a loaded machine, at half its speed-up) falls behind it, so the two
+  # time lines differ in rate as well as in origin: both are fitted. `log` is
+  # the log's anchors: %{vehicles: [id], span_s: s, speedup: k, arming: %{id
   # => [t]}, modes: %{id => [{t, mode}]}, reached: %{id => [{t, seq}]}, cut: bool}.
-  @spec align([map()], map(), Path.t()) :: {:ok, float()} | {:error, Error.t()}
-  def align([], _log, _path), do: {:ok, 0.0}
+  @spec align([map()], map(), Path.t()) :: {:ok, {float(), float()}} | {:error, Error.t()}
+  def align([], _log, _path), do: {:ok, {1.0, 0.0}}
 
   def align(events, log, path) do
     foreign = events |> Enum.flat_map(&vehicles/1) |> Enum.uniq() |> Enum.reject(&(&1 in log.vehicles)) |> Enum.sort()
-    diffs = anchors(events, log)
+    pairs = anchors(events, log)
 
     cond do
       foreign != [] ->
         mismatch(path, "its vehicles #{Enum.join(foreign, ", ")} are not in the telemetry log (which has #{Enum.join(log.vehicles, ", ")})")
 
-      diffs != [] ->
-        offset = median(diffs)
-        agree = Enum.count(diffs, &(abs(&1 - offset) <= @tolerance_s))
+      pairs != [] ->
+        n = length(pairs)
+        {rated, rated_agree} = fit(pairs, rate(pairs))
+        {plain, plain_agree} = fit(pairs, 1.0)
 
-        if agree * 2 < length(diffs),
-          do: mismatch(path, "only #{agree} of #{length(diffs)} arming, mode and mission-item events line up with the telemetry log's frames"),
-          else: overlap(events, offset, log, path)
+        # Two free numbers fit a few scattered anchors more easily than one:
+        # a rate of its own is taken only when nearly all anchors agree with it.
+        cond do
+          n >= @rated_least_anchors and rated_agree >= 0.8 * n -> overlap(events, rated, log, path)
+          plain_agree * 2 >= n -> overlap(events, plain, log, path)
+          true -> mismatch(path, "only #{plain_agree} of #{n} arming, mode and mission-item events line up with the telemetry log's frames")
+        end
 
       true ->
-        overlap(events, 0.0, log, path)
+        overlap(events, {1.0, 0.0}, log, path)
     end
   end
+
+  # The log's seconds per event second: the median of the slopes between
+  # anchors far enough apart in time to measure one (Theil and Sen's
+  # estimator: a few anchors off by a heartbeat do not move it). 1.0 when
+  # they are too few or too close; never outside what a vehicle's pace can
+  # be against the clock asked for (it falls behind, it does not run far
+  # ahead).
+  defp rate(pairs) do
+    sample = pairs |> Enum.sort() |> take_every(max(1, div(length(pairs), @rate_anchors)))
+
+    slopes = for {{e1, t1}, i} <- Enum.with_index(sample), {e2, t2} <- Enum.drop(sample, i + 1), e2 - e1 >= @rate_span_s, do: (t2 - t1) / (e2 - e1)
+
+    case slopes do
+      [] -> 1.0
+      _ -> slopes |> median() |> max(@least_rate) |> min(@most_rate)
+    end
+  end
+
+  # The time line at `scale` through the anchors, and how many of them agree with it.
+  defp fit(pairs, scale) do
+    offset = median(for {e, t} <- pairs, do: t - scale * e)
+    {{scale, offset}, Enum.count(pairs, fn {e, t} -> abs(t - (scale * e + offset)) <= @tolerance_s end)}
+  end
+
+  defp take_every(list, 1), do: list
+  defp take_every(list, n), do: Enum.take_every(list, n)
 
   # Both files start when the run starts and end when it ends (the log a
   # little later: the vehicles and links stop after the script, a few real
   # seconds); events far outside the log's time are another run's. A log cut
   # short may end before the events do.
-  defp overlap(events, offset, log, path) do
-    first = hd(events)["t_ms"] / 1000 + offset
-    last = List.last(events)["t_ms"] / 1000 + offset
+  defp overlap(events, {scale, offset} = timeline, log, path) do
+    first = scale * hd(events)["t_ms"] / 1000 + offset
+    last = scale * List.last(events)["t_ms"] / 1000 + offset
     slack = max(30.0, 0.2 * log.span_s)
     teardown = 30.0 + 0.1 * log.span_s + 5.0 * log.speedup
     finished = Enum.any?(events, &(&1["event"] == "script_finished"))
@@ -105,7 +153,7 @@ defmodule Dolphin.Report.Events do
         mismatch(path, "its script ended #{round(log.span_s - last)} s before the end of the telemetry log (of #{round(log.span_s)} s)")
 
       true ->
-        {:ok, offset}
+        {:ok, timeline}
     end
   end
 
@@ -116,26 +164,25 @@ defmodule Dolphin.Report.Events do
   defp vehicles(_), do: []
 
   # The nth arming (mode, item) of a vehicle in the events against the nth in
-  # the log: the differences of their times.
+  # the log: their times, {event's, log's}.
   defp anchors(events, log) do
     by = fn name -> events |> Enum.filter(&(&1["event"] == name)) |> Enum.group_by(& &1["vehicle"]) end
 
-    armed =
-      for {v, es} <- by.("armed"), {e, t} <- Enum.zip(es, Map.get(log.arming, v, [])), do: t - e["t_ms"] / 1000
+    armed = for {v, es} <- by.("armed"), {e, t} <- Enum.zip(es, Map.get(log.arming, v, [])), do: {e["t_ms"] / 1000, t}
 
     modes =
       for {v, es} <- by.("mode_changed"),
           {mode, group} <- Enum.group_by(es, & &1["mode"]),
           logged = for({t, m} <- Map.get(log.modes, v, []), to_string(m) == mode, do: t),
           {e, t} <- Enum.zip(group, logged),
-          do: t - e["t_ms"] / 1000
+          do: {e["t_ms"] / 1000, t}
 
     reached =
       for {v, es} <- by.("mission_item_reached"),
           {seq, group} <- Enum.group_by(es, & &1["seq"]),
           logged = for({t, s} <- Map.get(log.reached, v, []), s == seq, do: t),
           {e, t} <- Enum.zip(group, logged),
-          do: t - e["t_ms"] / 1000
+          do: {e["t_ms"] / 1000, t}
 
     armed ++ modes ++ reached
   end

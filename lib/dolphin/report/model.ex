@@ -24,15 +24,17 @@ defmodule Dolphin.Report.Model do
   @wgs84_e2 6.69437999014e-3
 
   @doc false
-  @spec build(FlightLog.t(), [map()], float()) :: map()
-  def build(%FlightLog{} = log, events, offset_s) do
+  @spec build(FlightLog.t(), [map()], {float(), float()}) :: map()
+  # `timeline`: where an event goes on the log's time line, {scale, offset}
+  # (Dolphin.Report.Events.align/3).
+  def build(%FlightLog{} = log, events, {scale, offset} = _timeline) do
     k = FlightLog.speedup(log)
     clock = FlightLog.clock(log)
     span = clock.(log.last_us)
     ids = log.vehicles |> Map.keys() |> Enum.sort()
     ref = reference(log, ids)
     project = projection(ref)
-    events = Enum.map(events, &Map.put(&1, "t", &1["t_ms"] / 1000 + offset_s))
+    events = Enum.map(events, &Map.put(&1, "t", scale * &1["t_ms"] / 1000 + offset))
     tasks = tasks(events, span)
 
     sensors = sensors(events)
@@ -176,18 +178,19 @@ defmodule Dolphin.Report.Model do
       rally: for({_seq, {5100, lat, lon, _z, _}} <- Enum.sort(v.rally), do: project.(lat, lon)),
       tasks: Enum.map(my_tasks, &Map.merge(&1, %{from: at.(&1.start), to: at.(&1.stop)})),
       marks: marks(v, mine, clock),
-      series: %{
-        battery: v.battery |> Enum.map(fn {ts, pct} -> {clock.(ts), pct} end) |> Simplify.series(@plot_buckets),
-        height: points |> Enum.map(fn {t, _, _, h, _} -> {t, h} end) |> Simplify.series(@plot_buckets),
-        speed: points |> Enum.map(fn {t, _, _, _, s} -> {t, s} end) |> Simplify.series(@plot_buckets),
-        link: v.link |> link_quality(clock) |> Simplify.series(@plot_buckets)
-      }
-      |> Map.merge(
-        Map.new(sensors, fn s ->
-          readings = Map.get(v.sensors, s.source, [])
-          {{:sensor, s.name}, readings |> Enum.map(fn {ts, raw} -> {clock.(ts), raw * s.scale + s.offset} end) |> Simplify.series(@plot_buckets)}
-        end)
-      ),
+      series:
+        %{
+          battery: v.battery |> Enum.map(fn {ts, pct} -> {clock.(ts), pct} end) |> Simplify.series(@plot_buckets),
+          height: points |> Enum.map(fn {t, _, _, h, _} -> {t, h} end) |> Simplify.series(@plot_buckets),
+          speed: points |> Enum.map(fn {t, _, _, _, s} -> {t, s} end) |> Simplify.series(@plot_buckets),
+          link: v.link |> link_quality(clock) |> Simplify.series(@plot_buckets)
+        }
+        |> Map.merge(
+          Map.new(sensors, fn s ->
+            readings = Map.get(v.sensors, s.source, [])
+            {{:sensor, s.name}, readings |> Enum.map(fn {ts, raw} -> {clock.(ts), raw * s.scale + s.offset} end) |> Simplify.series(@plot_buckets)}
+          end)
+        ),
       summary: %{
         flight_s: flight_s,
         distance_m: distance,

@@ -140,7 +140,7 @@ defmodule Dolphin.Web.Live do
       stats: nil
     }
 
-    model = %{Model.build(log, :queue.to_list(live.events), 0.0) | started_at: live.started_at}
+    model = %{Model.build(log, :queue.to_list(live.events), {1.0, 0.0}) | started_at: live.started_at}
     info = %{title: live.title, tlog: live.tlog || "none", events: "live", events_skipped: 0}
     page = model |> HTML.page(info) |> IO.iodata_to_binary()
 
