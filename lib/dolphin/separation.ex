@@ -192,6 +192,7 @@ defmodule Dolphin.Separation do
         {across, height} = Prediction.apart(mine, theirs)
         seen = %{distance: across, height: height, closest: closest, in_s: in_s, limits: limits}
         {holder, ahead} = holder(f, other)
+        s = give_way_back(s, ahead, holder, now)
 
         cond do
           holder.held == nil -> hold(s, holder, ahead, seen, now)
@@ -211,6 +212,16 @@ defmodule Dolphin.Separation do
 
   defp later?(a, b) do
     if abs(a.started_at - b.started_at) >= @together_ms, do: a.started_at > b.started_at, else: {a.rank, a.id} > {b.rank, b.id}
+  end
+
+  # The one with the right of way held for the holder (held when the holder
+  # flew none of our missions; it started a later one since): it goes on,
+  # or the two would wait for each other.
+  defp give_way_back(s, ahead, holder, now) do
+    case s.flying[ahead] do
+      %Flying{held: %{other: other}} = f when other == holder.id -> let_go(s, f, [holder], now)
+      _ -> s
+    end
   end
 
   defp hold(s, holder, other, seen, now) do

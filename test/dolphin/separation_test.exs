@@ -157,6 +157,21 @@ defmodule Dolphin.SeparationTest do
     assert_receive {:separation, :hold, %{vehicle: ^a, other: ^b}}
   end
 
+  test "held for a vehicle flying none of our missions, a vehicle goes on once that one starts a later mission of ours, which holds instead", %{ids: {a, b, _c}} do
+    # b hovers over the base, heard but not ours; a comes at it.
+    flying(b, 0, 0, {0.0, 0.0, 0.0})
+    executor(a, 1_000)
+    flying(a, 0, -50, {0.0, 10.0, 0.0})
+    assert_receive {:separation, :hold, %{vehicle: ^a, other: ^b}}
+
+    # b's mission starts after a's: b is the later one, a has the right of way.
+    executor(b, 2_000)
+    flying(b, 0, 0, {0.0, 0.0, 0.0})
+    assert_receive {:separation, :clear, %{vehicle: ^a}}
+    assert_receive {:separation, :hold, %{vehicle: ^b, other: ^a}}
+    assert Map.take(Separation.held(), [a, b]) == %{b => a}
+  end
+
   test "two already too close but moving apart are left to part", %{ids: {a, b, _c} = ids} do
     executor(a, 1_000)
     executor(b, 2_000)
