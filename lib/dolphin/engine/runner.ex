@@ -35,7 +35,8 @@ defmodule Dolphin.Engine.Runner do
     :tick,
     :debug,
     children: %{},
-    order: [],
+    pids: %{},
+    started: 0,
     watches: [],
     timers: %{},
     code: %{},
@@ -46,7 +47,9 @@ defmodule Dolphin.Engine.Runner do
   @typedoc """
   A node's state: its task and where it stands (`parent`, `parent_id`,
   `run`, `ctx`); `cstate`, its combinator's own state (`Dolphin.Engine.Node`);
-  `children`, key => %{pid, task}, and `order`, their keys in start order;
+  `children`, key => %{pid, task, n} (n: how many children this node had
+  started before it, which orders them), `pids`, pid => key of each child,
+  and `started`, how many children it has started;
   `watches`, [{key, cond}] in watch order, and `watcher`, what those
   conditions read (and the vehicle of a platform task); `timers`, key =>
   {ref, token}; `code`, key => {:pending, ref, token, fun} | {:running, pid};
@@ -71,8 +74,9 @@ defmodule Dolphin.Engine.Runner do
           platform: pid() | nil,
           tick: reference() | nil,
           debug: [:sys.dbg_opt()],
-          children: %{term() => %{pid: pid(), task: Task.t()}},
-          order: [term()],
+          children: %{term() => %{pid: pid(), task: Task.t(), n: non_neg_integer()}},
+          pids: %{pid() => term()},
+          started: non_neg_integer(),
           watches: [{term(), Dolphin.Engine.Cond.t()}],
           timers: %{term() => {reference(), reference()}},
           code: %{term() => {:pending, reference(), reference(), function()} | {:running, pid()}},
@@ -301,7 +305,7 @@ defmodule Dolphin.Engine.Runner do
   # :sys.terminate/2: the subtree stops first, as on any other way out.
   def system_terminate(reason, _parent, _debug, {_phase, s}) do
     halt(s, :shutdown)
-    Enum.each(s.order, &collected(s, s.children[&1]))
+    Enum.each(in_start_order(s), &collected(s, &1))
     exit(reason)
   end
 
@@ -341,8 +345,18 @@ defmodule Dolphin.Engine.Runner do
     end
   end
 
-  defp child_key(s, pid), do: Enum.find_value(s.children, fn {k, c} -> if c.pid == pid, do: k end)
-  defp drop_child(s, key), do: %{s | children: Map.delete(s.children, key), order: List.delete(s.order, key)}
+  # A concurrent node of a thousand children looks them up by pid and drops
+  # them as each ends: by map, not by walking a list (which made a burst of
+  # endings quadratic).
+  defp child_key(s, pid), do: Map.get(s.pids, pid)
+
+  defp drop_child(s, key) do
+    {%{pid: pid}, children} = Map.pop(s.children, key)
+    %{s | children: children, pids: Map.delete(s.pids, pid)}
+  end
+
+  # The children still running, in the order they were started.
+  defp in_start_order(s), do: s.children |> Map.values() |> Enum.sort_by(& &1.n)
 
   # --- effects ---
 
@@ -355,7 +369,7 @@ defmodule Dolphin.Engine.Runner do
 
   defp effect({:start, key, task}, s) do
     case start_node(task, s.ctx, s.run, s.id) do
-      {:ok, pid} -> %{s | children: Map.put(s.children, key, %{pid: pid, task: task}), order: s.order ++ [key]}
+      {:ok, pid} -> %{s | children: Map.put(s.children, key, %{pid: pid, task: task, n: s.started}), pids: Map.put(s.pids, pid, key), started: s.started + 1}
       {:finished, result} -> feed(s, {:finished, key, result})
       {:error, reason} -> feed(s, {:finished, key, {:failed, failure(task, reason)}})
     end
@@ -518,8 +532,11 @@ defmodule Dolphin.Engine.Runner do
               # reaction (stopping a subtree, say) is what is waited for.
               if List.keymember?(s.watches, key, 0), do: s, else: %{s | watcher: Watcher.forget(s.watcher, key)}
 
-            {:ok, false} -> s
-            {:error, e, _} -> finish(s, {:failed, {:condition_error, cond.source, e}})
+            {:ok, false} ->
+              s
+
+            {:error, e, _} ->
+              finish(s, {:failed, {:condition_error, cond.source, e}})
           end
       end
     end)
@@ -568,7 +585,7 @@ defmodule Dolphin.Engine.Runner do
     Enum.each(s.timers, fn {_, {ref, _}} -> s.ctx.clock.cancel(ref) end)
     if s.tick, do: s.ctx.clock.cancel(elem(s.tick, 0))
     kill_code(s)
-    Enum.each(s.order, &stop_node(s.children[&1].pid, reason))
+    Enum.each(in_start_order(s), &stop_node(&1.pid, reason))
     {outcome, s} = platform_stop(s, reason)
     %{s | timers: %{}, tick: nil, watches: [], code: %{}, halted: outcome}
   end
@@ -586,7 +603,7 @@ defmodule Dolphin.Engine.Runner do
 
   # Phase 2: children's results in start order, then this node's.
   defp finish_stopped(s, reason, report?) do
-    results = Enum.map(s.order, fn key -> collected(s, s.children[key]) end)
+    results = Enum.map(in_start_order(s), &collected(s, &1))
     platform = if match?({:error, _}, s.halted), do: [{:failed, elem(s.halted, 1)}], else: []
 
     result =
@@ -609,7 +626,7 @@ defmodule Dolphin.Engine.Runner do
     # Whatever still runs under this node stops first (after a condition
     # error, say): nothing outlives its parent. No timer outlives it either.
     s = halt(s, :stopped)
-    Enum.each(s.order, &collected(s, s.children[&1]))
+    Enum.each(in_start_order(s), &collected(s, &1))
     result = wrap(result, s)
     emit_finished(s, result, nil)
 
