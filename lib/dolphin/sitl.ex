@@ -71,6 +71,20 @@ defmodule Dolphin.SITL do
   its landed, disarmed vehicles at the same rate, as a charging station would,
   by resetting the autopilot's remaining charge upwards with
   MAV_CMD_BATTERY_RESET (`charge_per_s: 0` turns that off).
+
+  ## Pace
+
+  Each ArduPilot runs its clock at the speed-up it was given only while the
+  machine has the cores for it; a loaded machine slows it (measured on two
+  cores beside other test runs: 0.43 to 0.81 of 15×). The script's time —
+  every `during`, a run's `--for`, the charging — is the ground station's
+  clock, which would then run ahead of the vehicles and ask of them more
+  than their time allows. So, while the fleet runs, the clock follows it:
+  once a second the pace of each vehicle (its `time_boot_ms` against when
+  it arrived, over the last seconds) is measured and the clock's speed-up
+  set to the slowest one's, never above the one asked for
+  (`follow_pace: false` turns that off). Engine timers and a run's `--for`
+  keep their clock-time deadline through the change.
   """
 
   alias Dolphin.SITL.{Charger, Error, Instance}
@@ -82,7 +96,8 @@ defmodule Dolphin.SITL do
           sysids: [byte()],
           instances: [pid()],
           numbers: [non_neg_integer()],
-          charger: pid() | nil
+          charger: pid() | nil,
+          pace: pid() | nil
         }
 
   # SITL answers within a heartbeat of simulated time once it runs; starting
@@ -98,7 +113,7 @@ defmodule Dolphin.SITL do
   the last lines of a failing instance's output).
 
   Options: `:bin`, `:defaults`, `:params` (see above), `:camera` (default true), `:first_sysid` (1),
-  `:home` / `:homes` (as `Dolphin.Sim.start/1`), `:charge_per_s` (charge in
+  `:home` / `:homes` (as `Dolphin.Sim.start/1`), `:follow_pace` (default true, see "Pace"), `:charge_per_s` (charge in
   percent per second of clock time, default 0.5), `:ready_timeout_ms` (real
   time, default 60 s), `:send_to` (a function from the link's port to the
   port SITL sends to, for something standing between them such as a test's
@@ -125,7 +140,7 @@ defmodule Dolphin.SITL do
           # Where SITL sends: the link, or what stands between (a test's proxy).
           send_to = Keyword.get(opts, :send_to, & &1)
           numbers = take_instances(count)
-          fleet = %{link: link, port: port, sysids: sysids, instances: [], numbers: numbers, charger: nil}
+          fleet = %{link: link, port: port, sysids: sysids, instances: [], numbers: numbers, charger: nil, pace: nil}
           root = Path.join(System.tmp_dir!(), "dolphin-sitl-#{System.unique_integer([:positive])}")
 
           specs =
@@ -163,7 +178,7 @@ defmodule Dolphin.SITL do
 
           case await_fleet(fleet, deadline) do
             :ok ->
-              {:ok, %{fleet | charger: start_charger(sysids, Keyword.get(opts, :charge_per_s, 0.5))}}
+              {:ok, %{fleet | charger: start_charger(sysids, Keyword.get(opts, :charge_per_s, 0.5)), pace: start_pace(sysids, Keyword.get(opts, :follow_pace, true))}}
 
             {:error, why} ->
               stop(fleet)
@@ -181,6 +196,7 @@ defmodule Dolphin.SITL do
   @spec stop(t()) :: :ok
   def stop(%{link: link, sysids: sysids, instances: instances, numbers: numbers} = fleet) do
     if pid = fleet.charger, do: DynamicSupervisor.terminate_child(Dolphin.Instance.names().sitls, pid)
+    if pid = Map.get(fleet, :pace), do: DynamicSupervisor.terminate_child(Dolphin.Instance.names().sitls, pid)
     # The link first: a frame still on its way would make a forgotten vehicle known again.
     Dolphin.Link.disconnect(link)
     Enum.each(instances, &DynamicSupervisor.terminate_child(Dolphin.Instance.names().sitls, &1))
@@ -388,6 +404,13 @@ defmodule Dolphin.SITL do
   defp add_payload(sysids, payload), do: Enum.each(sysids, &Dolphin.Vehicles.put_payloads(&1, [payload | Dolphin.Vehicles.given_payloads(&1)]))
 
   defp remove_payload(sysids, payload), do: Enum.each(sysids, &Dolphin.Vehicles.put_payloads(&1, List.delete(Dolphin.Vehicles.given_payloads(&1), payload)))
+
+  defp start_pace(_sysids, false), do: nil
+
+  defp start_pace(sysids, true) do
+    {:ok, pid} = DynamicSupervisor.start_child(Dolphin.Instance.names().sitls, {Dolphin.SITL.Pace, ids: sysids, speedup: Dolphin.Clock.speedup()})
+    pid
+  end
 
   defp start_charger(_sysids, rate) when rate <= 0, do: nil
 

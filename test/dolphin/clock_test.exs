@@ -36,6 +36,19 @@ defmodule Dolphin.ClockTest do
     assert_raise ArgumentError, ~r/a number from 0.01 to 1000/, fn -> Clock.set_speedup(0) end
   end
 
+  test "an engine timer keeps its clock-time deadline when the clock slows down after it was set" do
+    # idle 10 s of clock time: 0.5 s of real time at 20x, set when the run starts.
+    Clock.set_speedup(20)
+    t0 = Clock.now_ms()
+    {:ok, run} = Dolphin.Engine.start(Dolphin.Engine.idle(10_000))
+    Process.sleep(100)
+    # Halved (the clock follows SITL vehicles that fell behind): the timer, due
+    # after 0.5 s of real time, fires early and is set again for what is left.
+    Clock.set_speedup(10)
+    assert {:ok, :done} = Dolphin.Engine.await(run, 30_000)
+    assert Clock.now_ms() - t0 >= 10_000
+  end
+
   test "the speed-up stays within what the clock and the simulator hold" do
     for k <- [0, -1, 0.001, 1000.5, 1.0e9, :fast, "10"] do
       refute Clock.speedup?(k)

@@ -52,7 +52,7 @@ defmodule Dolphin.Engine.Runner do
   and `started`, how many children it has started;
   `watches`, [{key, cond}] in watch order, and `watcher`, what those
   conditions read (and the vehicle of a platform task); `timers`, key =>
-  {ref, token}; `code`, key => {:pending, ref, token, fun} | {:running, pid};
+  {ref, token, at} (at: its deadline in clock ms); `code`, key => {:pending, ref, token, fun} | {:running, pid};
   `platform`, the platform task's process (a leaf); `tick`, the 1 s timer of
   conditions on time; `acked`, whether the parent was told it started;
   `halted`, the outcome of the platform's stop in phase 1; `debug`, the :sys
@@ -78,7 +78,7 @@ defmodule Dolphin.Engine.Runner do
           pids: %{pid() => term()},
           started: non_neg_integer(),
           watches: [{term(), Dolphin.Engine.Cond.t()}],
-          timers: %{term() => {reference(), reference()}},
+          timers: %{term() => {reference(), reference(), integer()}},
           code: %{term() => {:pending, reference(), reference(), function()} | {:running, pid()}},
           acked: boolean(),
           halted: term()
@@ -219,7 +219,7 @@ defmodule Dolphin.Engine.Runner do
 
       {:"$dolphin_timer", key, token} ->
         case s.timers do
-          %{^key => {_ref, ^token}} -> %{s | timers: Map.delete(s.timers, key)} |> feed({:timeout, key}) |> loop()
+          %{^key => {_ref, ^token, at}} -> s |> timer_fired(key, token, at) |> loop()
           _ -> loop(s)
         end
 
@@ -421,12 +421,12 @@ defmodule Dolphin.Engine.Runner do
   defp effect({:timer, key, ms}, s) do
     token = make_ref()
     ref = s.ctx.clock.send_after(self(), {:"$dolphin_timer", key, token}, ms)
-    %{s | timers: Map.put(s.timers, key, {ref, token})}
+    %{s | timers: Map.put(s.timers, key, {ref, token, s.ctx.clock.now_ms() + ms})}
   end
 
   defp effect({:cancel_timer, key}, s) do
     case Map.pop(s.timers, key) do
-      {{ref, _}, timers} ->
+      {{ref, _, _}, timers} ->
         s.ctx.clock.cancel(ref)
         %{s | timers: timers}
 
@@ -577,12 +577,26 @@ defmodule Dolphin.Engine.Runner do
     end)
   end
 
+  # A timer that fires before its deadline (the clock slowed down after it
+  # was set: it follows SITL vehicles that fall behind) is set again for
+  # what is left.
+  defp timer_fired(s, key, token, at) do
+    case at - s.ctx.clock.now_ms() do
+      left when left > 0 ->
+        ref = s.ctx.clock.send_after(self(), {:"$dolphin_timer", key, token}, left)
+        %{s | timers: Map.put(s.timers, key, {ref, token, at})}
+
+      _ ->
+        %{s | timers: Map.delete(s.timers, key)} |> feed({:timeout, key})
+    end
+  end
+
   # --- stopping and finishing ---
 
   # Phase 1 of a stop: nothing more starts; children are told to stop (they
   # all stop at once), user code is killed, the platform task is stopped.
   defp halt(s, reason) do
-    Enum.each(s.timers, fn {_, {ref, _}} -> s.ctx.clock.cancel(ref) end)
+    Enum.each(s.timers, fn {_, {ref, _, _}} -> s.ctx.clock.cancel(ref) end)
     if s.tick, do: s.ctx.clock.cancel(elem(s.tick, 0))
     kill_code(s)
     Enum.each(in_start_order(s), &stop_node(&1.pid, reason))

@@ -56,8 +56,9 @@ defmodule Dolphin.Script.Runner do
       end)
 
     Dolphin.Events.emit(:script_started, %{script: script.file}, started)
-    if ms = opts[:for], do: ctx.clock.send_after(self(), :deadline, ms)
-    {:ok, %{script: script, caller: caller, reply_to: reply_to, code: code, ctx: ctx, started: started}}
+    deadline = if ms = opts[:for], do: ctx.clock.now_ms() + ms
+    if deadline, do: ctx.clock.send_after(self(), :deadline, opts[:for])
+    {:ok, %{script: script, caller: caller, reply_to: reply_to, code: code, ctx: ctx, started: started, deadline: deadline}}
   end
 
   defp execute(script) do
@@ -75,9 +76,18 @@ defmodule Dolphin.Script.Runner do
   def handle_info({:script_done, code, {:error, kind, reason, stack, line}}, %{code: code} = s),
     do: finish(s, {:error, error(s.script, kind, reason, stack, line)})
 
+  # Early when the clock slowed down after the timer was set (it follows
+  # SITL vehicles that fall behind): set again for what is left.
   def handle_info(:deadline, s) do
-    stop_code(s, :deadline)
-    finish(s, {:ok, :stopped}, :deadline)
+    case s.deadline - s.ctx.clock.now_ms() do
+      left when left > 0 ->
+        s.ctx.clock.send_after(self(), :deadline, left)
+        {:noreply, s}
+
+      _ ->
+        stop_code(s, :deadline)
+        finish(s, {:ok, :stopped}, :deadline)
+    end
   end
 
   def handle_info({:"$dolphin_script_stop", reason}, s) do

@@ -19,6 +19,7 @@ defmodule Dolphin.Vehicles.State do
   | `components` | HEARTBEAT of other components | e.g. `:camera`, `:gimbal` |
   | `link` | every frame | `%{received, lost, last_seen_ms}`: `lost` counts sequence gaps |
   | `link_quality` | TIMESYNC answers, sequence gaps | a `Dolphin.Vehicles.LinkQuality`: round trip and loss both ways (`link_figures/1`) |
+  | `boot` | GLOBAL_POSITION_INT (autopilot component) | `{time_boot_ms, monotonic µs}`: the autopilot's clock and ours as it came, `nil` until heard |
   """
 
   import Bitwise
@@ -52,7 +53,8 @@ defmodule Dolphin.Vehicles.State do
             link: %{received: 0, lost: 0, last_seen_ms: nil},
             link_quality: LinkQuality.new(),
             autopilot_compid: nil,
-            seqs: %{}
+            seqs: %{},
+            boot: nil
 
   @type t :: %__MODULE__{}
 
@@ -85,6 +87,14 @@ defmodule Dolphin.Vehicles.State do
 
   defp location(nil), do: nil
   defp location(p), do: Dolphin.Geo.Location.new(p.lat, p.lon, p.alt)
+
+  # The autopilot's own clock against ours: {its time_boot_ms, our monotonic
+  # µs when it came} (Dolphin.SITL.Pace measures a simulated vehicle's pace
+  # with it). Not in the view: it changes with every frame.
+  defp boot_clock(%{autopilot_compid: compid} = state, from, time_boot_ms) when from == compid or (compid == nil and from == 1),
+    do: %{state | boot: {time_boot_ms, System.monotonic_time(:microsecond)}}
+
+  defp boot_clock(state, _from, _time_boot_ms), do: state
 
   # Sequence numbers are per component; a gap is frames lost on the way.
   defp count(%{link: link, seqs: seqs} = state, %Frame{compid: compid, seq: seq}, now_ms) do
@@ -148,9 +158,11 @@ defmodule Dolphin.Vehicles.State do
 
   # ArduPilot reports 0, 0 until its position estimate has an origin (SITL
   # for its first seconds): no position yet.
-  defp message(state, _compid, %M.GlobalPositionInt{lat: 0, lon: 0}), do: state
+  defp message(state, compid, %M.GlobalPositionInt{lat: 0, lon: 0} = p), do: boot_clock(state, compid, p.time_boot_ms)
 
-  defp message(state, _compid, %M.GlobalPositionInt{} = p) do
+  defp message(state, compid, %M.GlobalPositionInt{} = p) do
+    state = boot_clock(state, compid, p.time_boot_ms)
+
     position = %{
       lat: p.lat / 1.0e7,
       lon: p.lon / 1.0e7,
