@@ -22,6 +22,13 @@
 #
 # `make bench` runs it on one scheduler (+S 1), so the figures are per core.
 # Environment: BENCH_FILE, BENCH_ROUNDS (default 9), BENCH_CHUNK (default 4096).
+#
+# Beside ours, in the same run: the MAVLink C library on the same file
+# (bench/peers/mavlink_c.c, built with headers the pinned pymavlink's mavgen
+# generates from the same dialect XML, in _build/bench_peers; needs gcc and
+# the project's virtualenv, which scripts/bootstrap makes), run before and
+# after ours, its best rounds kept; the ratios printed are its time per frame
+# over ours (above 1: ours is faster).
 defmodule CodecBench do
   alias Dolphin.MAVLink.{Frame, Parser}
 
@@ -37,6 +44,8 @@ defmodule CodecBench do
       end
 
     heaps = [link: Dolphin.Link.Connection.spawn_opt(), default: []]
+    peer = CPeer.build()
+    c_before = CPeer.run(peer, path, rounds)
     decode = best(rounds, heaps, fn -> decode_all(bytes, chunk) end)
     {_, _, {n, stats}} = decode[:link]
 
@@ -50,6 +59,7 @@ defmodule CodecBench do
     if size != byte_size(bytes) or IO.iodata_to_binary(Enum.map(frames, &encode/1)) != bytes,
       do: Mix.raise("re-encoded bytes differ from #{path}")
 
+    c = CPeer.best(c_before, CPeer.run(peer, path, rounds))
     rate = fn us -> round(n / (max(us, 1) / 1_000_000)) end
     line = fn {us, cpu, _} -> "#{rate.(us)} frames/s wall (#{Float.round(us / n * 1000, 1)} ns/frame), #{rate.(cpu)} frames/s CPU" end
 
@@ -64,6 +74,7 @@ defmodule CodecBench do
     decode: #{line.(decode[:default])}
     encode: #{line.(encode[:default])}
     re-encoded bytes identical to the file: yes
+    #{CPeer.describe(c, n, decode[:link], encode[:link])}
     """)
   end
 
@@ -132,6 +143,80 @@ defmodule CodecBench do
       {:DOWN, ^ref, :process, ^pid, {:round, us, cpu, result}} -> {us, cpu, result}
       {:DOWN, ^ref, :process, ^pid, reason} -> Mix.raise("benchmark failed: #{Exception.format_exit(reason)}")
     end
+  end
+end
+
+defmodule CPeer do
+  @moduledoc false
+  # The MAVLink C library's figures on the same file: bench/peers/mavlink_c.c.
+
+  @dir Path.expand("../_build/bench_peers", __DIR__)
+  @python Path.expand("../.venv/bin/python", __DIR__)
+  @dialect Path.expand("../priv/mavlink/ardupilotmega.xml", __DIR__)
+
+  # The program, built once per source change: {:ok, path} or {:error, why}.
+  def build do
+    binary = Path.join(@dir, "mavlink_c")
+    sources = [Path.expand("peers/mavlink_c.c", __DIR__), Path.expand("peers/make_c_switch.py", __DIR__), @dialect]
+
+    cond do
+      System.find_executable("gcc") == nil -> {:error, "no gcc"}
+      not File.exists?(@python) -> {:error, "no virtualenv at #{@python} (scripts/bootstrap makes it)"}
+      File.exists?(binary) and Enum.all?(sources, &(mtime(&1) <= mtime(binary))) -> {:ok, binary}
+      true -> generate_and_compile(binary)
+    end
+  end
+
+  defp mtime(path), do: File.stat!(path, time: :posix).mtime
+
+  defp generate_and_compile(binary) do
+    include = Path.join(@dir, "include")
+    File.rm_rf!(include)
+    File.mkdir_p!(include)
+
+    with :ok <- cmd(@python, [Path.join(Path.dirname(@python), "mavgen.py"), "--lang=C", "--wire-protocol=2.0", "-o", include, @dialect]),
+         :ok <- cmd(@python, [Path.expand("peers/make_c_switch.py", __DIR__), @dialect, Path.join(include, "peer_switch.h")]),
+         :ok <- cmd("gcc", ["-O2", "-w", "-I", include, "-o", binary, Path.expand("peers/mavlink_c.c", __DIR__)]) do
+      {:ok, binary}
+    end
+  end
+
+  defp cmd(program, args) do
+    case System.cmd(program, args, stderr_to_stdout: true) do
+      {_, 0} -> :ok
+      {out, status} -> {:error, "#{Path.basename(program)} exited with #{status}: #{String.slice(out, -500, 500)}"}
+    end
+  end
+
+  # %{decode_ns:, encode_ns:, ...} of one run of the program, or {:error, why}.
+  def run({:ok, binary}, path, rounds) do
+    case System.cmd(binary, [path, to_string(rounds)]) do
+      {line, 0} ->
+        fields = for [k, v] <- Regex.scan(~r/(\w+)=(\S+)/, line, capture: :all_but_first), into: %{}, do: {k, v}
+
+        if fields["identical"] == "yes" and fields["errors"] == "0",
+          do: %{decode_ns: String.to_float(fields["decode_ns"]), encode_ns: String.to_float(fields["encode_ns"])},
+          else: {:error, "the C library's run did not reproduce the file: #{String.trim(line)}"}
+
+      {out, status} ->
+        {:error, "mavlink_c exited with #{status}: #{out}"}
+    end
+  end
+
+  def run({:error, _} = error, _path, _rounds), do: error
+
+  def best(%{} = a, %{} = b), do: %{decode_ns: min(a.decode_ns, b.decode_ns), encode_ns: min(a.encode_ns, b.encode_ns)}
+  def best({:error, _} = error, _), do: error
+  def best(_, {:error, _} = error), do: error
+
+  def describe({:error, why}, _n, _decode, _encode), do: "the MAVLink C library: not measured (#{why})"
+
+  def describe(c, n, {decode_us, _, _}, {encode_us, _, _}) do
+    ours_decode = decode_us * 1000 / n
+    ours_encode = encode_us * 1000 / n
+
+    "the MAVLink C library (mavgen, gcc -O2), same file, wall clock, best rounds: decode #{Float.round(c.decode_ns, 1)} ns/frame, encode #{Float.round(c.encode_ns, 1)} ns/frame\n" <>
+      "ours against it (its time over ours, with a link's options): decode #{Float.round(c.decode_ns / ours_decode, 2)}x, encode #{Float.round(c.encode_ns / ours_encode, 2)}x"
   end
 end
 
