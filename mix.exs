@@ -2,13 +2,16 @@ defmodule Mix.Tasks.Compile.DolphinNative do
   @moduledoc false
   # Builds the C libraries of c_src/ into priv/ (scripts/bootstrap installs the
   # compiler): dolphin_crc.so, the MAVLink checksum that Dolphin.MAVLink.CRC
-  # loads, and dolphin_signals.so, Ctrl-C for Dolphin.CLI.Signals. Without a C
-  # compiler the build goes on: the checksum runs in Erlang, slower, and
-  # Ctrl-C opens the Erlang BREAK menu.
+  # loads, dolphin_frames.so, the parser's fast path
+  # (Dolphin.MAVLink.Parser.Batch), and dolphin_signals.so, Ctrl-C for
+  # Dolphin.CLI.Signals. Without a C compiler the build goes on: the checksum
+  # and the decoding run in Erlang, slower, and Ctrl-C opens the Erlang BREAK
+  # menu.
   use Mix.Task.Compiler
 
   @libraries [
     {"c_src/dolphin_crc.c", "priv/dolphin_crc.so", "the MAVLink checksum will run in Erlang, several times slower"},
+    {"c_src/dolphin_frames.c", "priv/dolphin_frames.so", "MAVLink frames will be decoded in Erlang alone, about twice as slow"},
     {"c_src/dolphin_signals.c", "priv/dolphin_signals.so", "Ctrl-C will open the Erlang BREAK menu instead of stopping a task"}
   ]
 
@@ -20,7 +23,7 @@ defmodule Mix.Tasks.Compile.DolphinNative do
 
   defp build({source, target, without}) do
     cond do
-      not Mix.Utils.stale?([source], [target]) ->
+      not Mix.Utils.stale?([source | Path.wildcard("c_src/*.h")], [target]) ->
         :ok
 
       cc = System.get_env("CC") || System.find_executable("cc") ->

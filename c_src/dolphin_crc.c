@@ -17,36 +17,12 @@
 #include <erl_nif.h>
 #include <stdint.h>
 
-#define POLY 0x8408
-
-static uint16_t table[8][256];
+#include "crc16.h"
 
 static int load(ErlNifEnv *env, void **priv_data, ERL_NIF_TERM load_info) {
   (void)env; (void)priv_data; (void)load_info;
-  for (int b = 0; b < 256; b++) {
-    uint16_t crc = (uint16_t)b;
-    for (int i = 0; i < 8; i++) crc = (crc & 1) ? (uint16_t)((crc >> 1) ^ POLY) : (uint16_t)(crc >> 1);
-    table[0][b] = crc;
-  }
-  for (int k = 1; k < 8; k++)
-    for (int b = 0; b < 256; b++)
-      table[k][b] = (uint16_t)((table[k - 1][b] >> 8) ^ table[0][table[k - 1][b] & 0xFF]);
+  crc16_init();
   return 0;
-}
-
-static uint16_t accumulate(uint16_t crc, const unsigned char *p, size_t n) {
-  while (n >= 8) {
-    crc = table[7][(p[0] ^ crc) & 0xFF] ^ table[6][(p[1] ^ (crc >> 8)) & 0xFF] ^
-          table[5][p[2]] ^ table[4][p[3]] ^ table[3][p[4]] ^ table[2][p[5]] ^ table[1][p[6]] ^ table[0][p[7]];
-    p += 8;
-    n -= 8;
-  }
-  while (n--) crc = (uint16_t)((crc >> 8) ^ table[0][(crc ^ *p++) & 0xFF]);
-  return crc;
-}
-
-static uint16_t accumulate_byte(uint16_t crc, unsigned byte) {
-  return (uint16_t)((crc >> 8) ^ table[0][(crc ^ byte) & 0xFF]);
 }
 
 /* checksum(Binary, Offset, Length, CrcExtra): the CRC from 0xFFFF over Length
@@ -59,7 +35,7 @@ static ERL_NIF_TERM checksum(ErlNifEnv *env, int argc, const ERL_NIF_TERM argv[]
       !enif_get_uint(env, argv[2], &length) || !enif_get_uint(env, argv[3], &extra) || extra > 255 ||
       (size_t)offset + length > bin.size)
     return enif_make_badarg(env);
-  return enif_make_uint(env, accumulate_byte(accumulate(0xFFFF, bin.data + offset, length), extra));
+  return enif_make_uint(env, crc16_accumulate_byte(crc16_accumulate(0xFFFF, bin.data + offset, length), extra));
 }
 
 /* frame_checksum(Header, MsgId, Payload, Length, CrcExtra): the checksum of a
@@ -78,8 +54,8 @@ static ERL_NIF_TERM frame_checksum(ErlNifEnv *env, int argc, const ERL_NIF_TERM 
     return enif_make_badarg(env);
   for (int i = 0; i < 6; i++) head[i] = (unsigned char)(header >> (8 * (i + 1)));
   for (int i = 0; i < 3; i++) head[6 + i] = (unsigned char)(msgid >> (8 * i));
-  uint16_t crc = accumulate(accumulate(0xFFFF, head, sizeof head), payload.data, length);
-  return enif_make_uint(env, accumulate_byte(crc, extra));
+  uint16_t crc = crc16_accumulate(crc16_accumulate(0xFFFF, head, sizeof head), payload.data, length);
+  return enif_make_uint(env, crc16_accumulate_byte(crc, extra));
 }
 
 static ERL_NIF_TERM implementation(ErlNifEnv *env, int argc, const ERL_NIF_TERM argv[]) {

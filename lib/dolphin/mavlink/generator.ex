@@ -197,9 +197,34 @@ defmodule Dolphin.MAVLink.Generator do
         end
       end
 
+    # The struct from its field values in a tuple (definition order), as the
+    # parser's C fast path decodes them (Dolphin.MAVLink.Parser.Batch).
+    from_values =
+      quote do
+        @doc false
+        def __from_values__({unquote_splicing(vars)}), do: new(__MODULE__, unquote_splicing(vars))
+      end
+
     if Enum.any?(spec.wire, &scalar_float?/1),
-      do: quote(do: (unquote(fast); unquote(decode_clause(spec, true)); unquote(new))),
-      else: quote(do: (unquote(fast); unquote(new)))
+      do:
+        quote(
+          do:
+            (
+              unquote(fast)
+              unquote(decode_clause(spec, true))
+              unquote(from_values)
+              unquote(new)
+            )
+        ),
+      else:
+        quote(
+          do:
+            (
+              unquote(fast)
+              unquote(from_values)
+              unquote(new)
+            )
+        )
   end
 
   defp decode_clause(spec, floats_as_bits?) do
@@ -408,11 +433,9 @@ defmodule Dolphin.MAVLink.Generator do
     by_name = Map.new(specs, &{&1.name, &1.module})
     modules = Enum.map(specs, & &1.module)
 
-    enum_values =
-      Map.new(enums, fn e -> {enum_atom(e.name), Map.new(e.entries, &{enum_atom(&1.name), &1.value})} end)
+    enum_values = Map.new(enums, fn e -> {enum_atom(e.name), Map.new(e.entries, &{enum_atom(&1.name), &1.value})} end)
 
-    enum_names =
-      Map.new(enums, fn e -> {enum_atom(e.name), Map.new(e.entries, &{&1.value, enum_atom(&1.name)})} end)
+    enum_names = Map.new(enums, fn e -> {enum_atom(e.name), Map.new(e.entries, &{&1.value, enum_atom(&1.name)})} end)
 
     enum_entries = Map.new(enums, fn e -> {enum_atom(e.name), Enum.map(e.entries, &{enum_atom(&1.name), &1.value})} end)
     bitmasks = for e <- enums, e.bitmask, do: enum_atom(e.name)

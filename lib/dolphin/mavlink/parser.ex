@@ -35,15 +35,19 @@ defmodule Dolphin.MAVLink.Parser do
       a frame comes out once the byte after it has arrived). Either way they
       are counted as `unknown_id`.
 
+    * `:batch` — `false` decodes every frame in Elixir, without the C fast
+      path of `Dolphin.MAVLink.Parser.Batch` (the frames are the same).
+
   The frames returned never depend on how the stream was cut into chunks.
   """
 
   alias Dolphin.MAVLink.{Frame, Signing}
 
-  alias Dolphin.MAVLink.Parser.Stats
+  alias Dolphin.MAVLink.Parser.{Batch, Stats}
 
   defstruct dialect: Dolphin.MAVLink.Ardupilotmega,
             decoder: nil,
+            batch: nil,
             signing: nil,
             unknown: :drop,
             buffer: <<>>,
@@ -53,6 +57,7 @@ defmodule Dolphin.MAVLink.Parser do
   @type t :: %__MODULE__{
           dialect: module(),
           decoder: function() | nil,
+          batch: Batch.table() | nil,
           signing: Signing.t() | nil,
           unknown: :drop | :forward,
           buffer: binary(),
@@ -64,11 +69,14 @@ defmodule Dolphin.MAVLink.Parser do
   @spec new(keyword()) :: t()
   def new(opts \\ []) do
     dialect = Keyword.get_lazy(opts, :dialect, &Dolphin.MAVLink.default_dialect/0)
+    signing = Keyword.get(opts, :signing)
 
     %__MODULE__{
       dialect: dialect,
       decoder: Frame.decoder(dialect),
-      signing: Keyword.get(opts, :signing),
+      # Signed links verify every frame (unsigned ones by their policy): no fast path.
+      batch: if(signing == nil and Keyword.get(opts, :batch, true), do: Batch.for_dialect(dialect)),
+      signing: signing,
       unknown: unknown!(Keyword.get(opts, :unknown, :drop))
     }
   end
@@ -104,7 +112,20 @@ defmodule Dolphin.MAVLink.Parser do
   # per feed: a struct update per frame costs more than decoding a small message.
   # `at_end` is false while the stream goes on; in finish/1 it is :first until a
   # cut-off candidate has been counted as truncated, then true.
-  defp loop(buf, at, parser, acc, frames \\ 0, unknown \\ 0, at_end \\ false) do
+  # The fast path first: every healthy frame from `at` on, in C; whatever it
+  # stops at, one step in Elixir, then the fast path again.
+  defp loop(buf, at, parser, acc, frames \\ 0, unknown \\ 0, at_end \\ false)
+
+  defp loop(buf, at, %__MODULE__{batch: batch} = parser, acc, frames, unknown, at_end) when batch != nil do
+    case Batch.decode(buf, at, batch, acc) do
+      {acc, next, n} when n > 0 -> loop(buf, next, %{parser | in_sync: true}, acc, frames + n, unknown, at_end)
+      _none -> step(buf, at, parser, acc, frames, unknown, at_end)
+    end
+  end
+
+  defp loop(buf, at, parser, acc, frames, unknown, at_end), do: step(buf, at, parser, acc, frames, unknown, at_end)
+
+  defp step(buf, at, parser, acc, frames, unknown, at_end) do
     case Frame.decode_at(buf, at, parser.decoder, decode_opts(parser.unknown, parser.in_sync, at_end)) do
       {:ok, %Frame{signature: nil} = frame, next} when parser.signing == nil ->
         loop_ok(buf, next, parser, [frame | acc], frame, frames, unknown, at_end)
