@@ -2,16 +2,16 @@ defmodule Mix.Tasks.Compile.DolphinNative do
   @moduledoc false
   # Builds the C libraries of c_src/ into priv/ (scripts/bootstrap installs the
   # compiler): dolphin_crc.so, the MAVLink checksum that Dolphin.MAVLink.CRC
-  # loads, dolphin_frames.so, the parser's fast path
-  # (Dolphin.MAVLink.Parser.Batch), and dolphin_signals.so, Ctrl-C for
+  # loads, dolphin_native.so, the codec's fast paths
+  # (Dolphin.MAVLink.Native), and dolphin_signals.so, Ctrl-C for
   # Dolphin.CLI.Signals. Without a C compiler the build goes on: the checksum
-  # and the decoding run in Erlang, slower, and Ctrl-C opens the Erlang BREAK
+  # and the codec run in Erlang, slower, and Ctrl-C opens the Erlang BREAK
   # menu.
   use Mix.Task.Compiler
 
   @libraries [
     {"c_src/dolphin_crc.c", "priv/dolphin_crc.so", "the MAVLink checksum will run in Erlang, several times slower"},
-    {"c_src/dolphin_frames.c", "priv/dolphin_frames.so", "MAVLink frames will be decoded in Erlang alone, about twice as slow"},
+    {"c_src/dolphin_native.c", "priv/dolphin_native.so", "the MAVLink codec will run in Erlang alone, about twice as slow"},
     {"c_src/dolphin_signals.c", "priv/dolphin_signals.so", "Ctrl-C will open the Erlang BREAK menu instead of stopping a task"}
   ]
 

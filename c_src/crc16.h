@@ -1,7 +1,7 @@
 /*
  * The MAVLink checksum (CRC-16/MCRF4XX, "X.25" in MAVLink's sources), slicing
- * by 8: shared by dolphin_crc.c (Dolphin.MAVLink.CRC) and dolphin_frames.c
- * (Dolphin.MAVLink.Parser.Batch). crc16_init() fills the tables once, from
+ * by 8: shared by dolphin_crc.c (Dolphin.MAVLink.CRC) and dolphin_native.c
+ * (Dolphin.MAVLink.Native). crc16_init() fills the tables once, from
  * the library's load callback.
  */
 #ifndef DOLPHIN_CRC16_H

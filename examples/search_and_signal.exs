@@ -1,7 +1,8 @@
 # Two vehicles search two sectors at once. The first to finish its sector
 # posts a signal; a third vehicle, standing by, then flies to that sector and
-# circles it, until the operator has had a look (a minute) or its battery runs
-# low — whichever comes first.
+# circles it, until the operator has had a look (three minutes from its
+# start: its upload, take-off and the 300 m there take about one) or its
+# battery runs low — whichever comes first.
 #
 #   mix dolphin.run examples/search_and_signal.exs --sim 3 --speedup 50
 #
@@ -52,7 +53,7 @@ message("sending the stand-by vehicle to the #{name} sector")
 execute %{
   c =>
     one_of do
-      battery(c) >= 0.3 -> during(minutes(1), look.(sector)) >>> home_again
+      battery(c) >= 0.3 -> during(minutes(3), look.(sector)) >>> home_again
       battery(c) < 0.3 -> home_again
     end
 }

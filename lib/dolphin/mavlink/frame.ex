@@ -35,10 +35,9 @@ defmodule Dolphin.MAVLink.Frame do
   and strips trailing zero bytes from MAVLink 2 payloads (keeping one).
   """
 
-
   import Bitwise, only: [&&&: 2, |||: 2, <<<: 2]
 
-  alias Dolphin.MAVLink.{CRC, Message, Value}
+  alias Dolphin.MAVLink.{CRC, Message, Native, Value}
 
   @magic_v1 0xFE
   @magic_v2 0xFD
@@ -117,12 +116,11 @@ defmodule Dolphin.MAVLink.Frame do
           {:ok, t(), non_neg_integer()} | {:more, non_neg_integer()} | {:error, error_reason(), non_neg_integer()}
   def decode_at(buf, at, decoder, opts) do
     case buf do
-      <<_::binary-size(at), @magic_v2, len, 0, compat, seq, sysid, compid, msgid::little-24, payload::binary-size(len),
-        crc::little-16, _::binary>> ->
+      <<_::binary-size(at), @magic_v2, len, 0, compat, seq, sysid, compid, msgid::little-24, payload::binary-size(len), crc::little-16, _::binary>> ->
         checked(buf, at, 12 + len, crc, payload, decoder, opts, 2, 0, compat, seq, sysid, compid, msgid, nil)
 
-      <<_::binary-size(at), @magic_v2, len, @signed, compat, seq, sysid, compid, msgid::little-24,
-        payload::binary-size(len), crc::little-16, link_id, timestamp::little-48, signature::binary-6, _::binary>> ->
+      <<_::binary-size(at), @magic_v2, len, @signed, compat, seq, sysid, compid, msgid::little-24, payload::binary-size(len), crc::little-16, link_id, timestamp::little-48, signature::binary-6,
+        _::binary>> ->
         signature = %{link_id: link_id, timestamp: timestamp, signature: signature}
         checked(buf, at, 25 + len, crc, payload, decoder, opts, 2, @signed, compat, seq, sysid, compid, msgid, signature)
 
@@ -235,7 +233,19 @@ defmodule Dolphin.MAVLink.Frame do
   that does not fit, or a message id above 255 in MAVLink 1.
   """
   @spec encode(Message.t(), [encode_opt()]) :: binary()
-  def encode(%module{} = message, opts \\ []), do: encode(opts, module.__frame__(message), message, 2, 0, 0, 0, 0, nil)
+  def encode(%module{} = message, opts \\ []) do
+    # The C fast path (Dolphin.MAVLink.Native) for the default dialect's
+    # unsigned MAVLink 2 frames of plain values; everything else here.
+    case Native.encode(message, Native.for_dialect(Dolphin.MAVLink.default_dialect()), opts) do
+      :slow -> encode(opts, module.__frame__(message), message, 2, 0, 0, 0, 0, nil)
+      frame -> frame
+    end
+  end
+
+  @doc false
+  # encode/2 in Elixir alone: what the C fast path must agree with (its property test).
+  @spec encode_in_elixir(Message.t(), [encode_opt()]) :: binary()
+  def encode_in_elixir(%module{} = message, opts), do: encode(opts, module.__frame__(message), message, 2, 0, 0, 0, 0, nil)
 
   # The message module's `__frame__/1` gives `{id, crc_extra, min_len,
   # payload}` in one call (the struct's module is looked up once). The options

@@ -198,7 +198,7 @@ defmodule Dolphin.MAVLink.Generator do
       end
 
     # The struct from its field values in a tuple (definition order), as the
-    # parser's C fast path decodes them (Dolphin.MAVLink.Parser.Batch).
+    # parser's C fast path decodes them (Dolphin.MAVLink.Native).
     from_values =
       quote do
         @doc false

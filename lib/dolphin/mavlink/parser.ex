@@ -36,14 +36,15 @@ defmodule Dolphin.MAVLink.Parser do
       are counted as `unknown_id`.
 
     * `:batch` — `false` decodes every frame in Elixir, without the C fast
-      path of `Dolphin.MAVLink.Parser.Batch` (the frames are the same).
+      path of `Dolphin.MAVLink.Native` (the frames are the same).
 
   The frames returned never depend on how the stream was cut into chunks.
   """
 
   alias Dolphin.MAVLink.{Frame, Signing}
 
-  alias Dolphin.MAVLink.Parser.{Batch, Stats}
+  alias Dolphin.MAVLink.Native
+  alias Dolphin.MAVLink.Parser.Stats
 
   defstruct dialect: Dolphin.MAVLink.Ardupilotmega,
             decoder: nil,
@@ -57,7 +58,7 @@ defmodule Dolphin.MAVLink.Parser do
   @type t :: %__MODULE__{
           dialect: module(),
           decoder: function() | nil,
-          batch: Batch.table() | nil,
+          batch: Native.table() | nil,
           signing: Signing.t() | nil,
           unknown: :drop | :forward,
           buffer: binary(),
@@ -75,7 +76,7 @@ defmodule Dolphin.MAVLink.Parser do
       dialect: dialect,
       decoder: Frame.decoder(dialect),
       # Signed links verify every frame (unsigned ones by their policy): no fast path.
-      batch: if(signing == nil and Keyword.get(opts, :batch, true), do: Batch.for_dialect(dialect)),
+      batch: if(signing == nil and Keyword.get(opts, :batch, true), do: Native.for_dialect(dialect)),
       signing: signing,
       unknown: unknown!(Keyword.get(opts, :unknown, :drop))
     }
@@ -117,7 +118,7 @@ defmodule Dolphin.MAVLink.Parser do
   defp loop(buf, at, parser, acc, frames \\ 0, unknown \\ 0, at_end \\ false)
 
   defp loop(buf, at, %__MODULE__{batch: batch} = parser, acc, frames, unknown, at_end) when batch != nil do
-    case Batch.decode(buf, at, batch, acc) do
+    case Native.decode(buf, at, batch, acc) do
       {acc, next, n} when n > 0 -> loop(buf, next, %{parser | in_sync: true}, acc, frames + n, unknown, at_end)
       _none -> step(buf, at, parser, acc, frames, unknown, at_end)
     end

@@ -64,10 +64,10 @@ defmodule Dolphin.MAVLink.PropertiesTest do
     )
   end
 
-  # Dolphin.MAVLink.Parser.Batch: the C fast path builds the very terms the
+  # Dolphin.MAVLink.Native: the C fast path builds the very terms the
   # Elixir decoder builds, and stops where it must (the stats agree too).
   test "the parser's C fast path decodes every stream exactly as the Elixir decoder does, in any chunks" do
-    assert Dolphin.MAVLink.Parser.Batch.available?(), "c_src/dolphin_frames.c was not built (no C compiler?)"
+    assert Dolphin.MAVLink.Native.available?(), "c_src/dolphin_native.c was not built (no C compiler?)"
 
     check(
       forall({noisy_stream(), chunk_sizes(), T.elements([:drop, :forward])}, fn {bytes, sizes, unknown} ->
@@ -79,6 +79,30 @@ defmodule Dolphin.MAVLink.PropertiesTest do
       end),
       numtests: 1000
     )
+  end
+
+  test "the C fast path encodes every message exactly as the Elixir encoder does, or leaves it to it" do
+    table = Dolphin.MAVLink.Native.for_dialect(@dialect)
+
+    check(
+      forall({any_message(), header()}, fn {message, {sysid, compid, seq, compat}} ->
+        opts = [sysid: sysid, compid: compid, seq: seq, compat_flags: compat]
+
+        case Dolphin.MAVLink.Native.encode(message, table, opts) do
+          :slow -> assert Frame.encode(message, opts) == Frame.encode_in_elixir(message, opts)
+          bytes -> assert bytes == Frame.encode_in_elixir(message, opts)
+        end
+      end),
+      numtests: 3000
+    )
+
+    # Values it leaves to Elixir: NaN, a short array, a value out of range (which Elixir refuses).
+    heartbeat = %APM.Heartbeat{type: 2, autopilot: 3}
+    assert is_binary(Dolphin.MAVLink.Native.encode(heartbeat, table, sysid: 1))
+    assert Dolphin.MAVLink.Native.encode(%APM.Attitude{roll: :nan}, table, []) == :slow
+    assert Dolphin.MAVLink.Native.encode(%APM.Heartbeat{type: 256}, table, []) == :slow
+    assert Dolphin.MAVLink.Native.encode(%APM.Statustext{text: :binary.copy("x", 51)}, table, []) == :slow
+    assert Dolphin.MAVLink.Native.encode(heartbeat, table, version: 1) == :slow
   end
 
   test "valid frames behind garbage without magic bytes are all recovered, in order, in any chunks" do

@@ -230,10 +230,11 @@ defmodule Dolphin.Mission.PlatformTest do
     assert {:ok, %{photos: 1}} = Sim.info(1)
   end
 
-  test "a mission that only returns and lands is done at once on a copter standing at its home; elsewhere it is refused", %{port: port} do
+  # A plan's return to launch (MAV_CMD_NAV_RETURN_TO_LAUNCH: QGroundControl ends its plans with one) lands at the vehicle's home.
+  test "a mission that only returns to launch is done at once on a copter standing at its home; elsewhere it is refused", %{port: port} do
     [{1, home}] = start_fleet(port, count: 1)
     Events.subscribe()
-    home_again = Mission.new("home again") |> Mission.add(C.home(home)) |> Mission.add(C.return_home_and_land())
+    home_again = Mission.new("home again") |> Mission.add(C.home(home)) |> Mission.add(C.item(:mav_cmd_nav_return_to_launch))
     Wait.until(fn -> match?({:ok, %{landed: :on_ground}}, Vehicles.state(1)) end)
 
     assert {:ok, :done} = Engine.run(Engine.on(home_again, [1]))
