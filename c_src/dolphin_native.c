@@ -1,8 +1,7 @@
 /*
- * The codec's fast paths, for Dolphin.MAVLink.Native (see there for how the
- * parser and the encoder use them): runs of well-formed MAVLink frames
- * checked and decoded in one call, and a MAVLink 2 frame encoded from a
- * message struct of plain values.
+ * The codec's fast path, for Dolphin.MAVLink.Native (see there for how the
+ * parser uses it): runs of well-formed MAVLink frames checked and decoded in
+ * one call.
  *
  * Why C: per frame, the Elixir decoder's time went to the checksum call, to
  * reading each float (a runtime call each), and to the two structs; the
@@ -18,15 +17,6 @@
  * random streams both ways). The structs are built in Elixir, from a tuple
  * per frame: a map built here through the NIF API takes a key tuple and a
  * sort of its keys of its own, which cost more than all the decoding.
- *
- * Encoding: the generated Elixir encoders write each field with a segment
- * of a binary construction, each a call into the runtime on OTP 25, and
- * encoded at a third of the C library's speed. native_encode/6 reads the
- * struct's fields from the map and writes the frame in one buffer; any value
- * that is not plain (a NaN or an infinity as an atom, a short array, a
- * number out of range, a string too long) makes it answer `slow`, and the
- * Elixir encoder, which writes the special values and explains the bad
- * ones, does that frame.
  *
  * A call decodes at most MAX_FRAMES frames (each a few hundred bytes at most:
  * well under a millisecond); the table of messages is built once per dialect
@@ -48,8 +38,7 @@ enum { T_CHAR, T_UINT8, T_INT8, T_UINT16, T_INT16, T_UINT32, T_INT32, T_UINT64, 
 static const unsigned type_size[T_COUNT] = {1, 1, 1, 2, 2, 4, 4, 8, 8, 4, 8};
 
 typedef struct {
-  ERL_NIF_TERM name; /* the struct's key: an atom, global, never collected */
-  unsigned offset;   /* in the payload */
+  unsigned offset; /* in the payload */
   unsigned type;
   unsigned count; /* array length; 0: a scalar */
 } field_t;
@@ -66,13 +55,11 @@ typedef struct {
 typedef struct {
   size_t n;
   message_t *messages; /* sorted by id */
-  size_t slots;        /* the modules' open-addressing hash, a power of two */
-  message_t **by_module;
 } table_t;
 
 static ErlNifResourceType *table_type;
 
-static ERL_NIF_TERM atom_nan, atom_infinity, atom_neg_infinity, atom_struct, atom_slow;
+static ERL_NIF_TERM atom_nan, atom_infinity, atom_neg_infinity;
 
 static void table_free(ErlNifEnv *env, void *obj) {
   table_t *t = obj;
@@ -81,7 +68,6 @@ static void table_free(ErlNifEnv *env, void *obj) {
     free(t->messages[i].fields);
   }
   free(t->messages);
-  free(t->by_module);
 }
 
 static int load(ErlNifEnv *env, void **priv_data, ERL_NIF_TERM load_info) {
@@ -93,8 +79,6 @@ static int load(ErlNifEnv *env, void **priv_data, ERL_NIF_TERM load_info) {
   atom_nan = enif_make_atom(env, "nan");
   atom_infinity = enif_make_atom(env, "infinity");
   atom_neg_infinity = enif_make_atom(env, "neg_infinity");
-  atom_struct = enif_make_atom(env, "__struct__");
-  atom_slow = enif_make_atom(env, "slow");
   return 0;
 }
 
@@ -103,7 +87,7 @@ static int by_id(const void *a, const void *b) {
   return (x > y) - (x < y);
 }
 
-/* One message of table/1's list: {Id, CrcExtra, MaxLen, Module, [{Name, Type, Count, Offset}]}. */
+/* One message of table/1's list: {Id, CrcExtra, MaxLen, Module, [{Type, Count, Offset}]}. */
 static int read_message(ErlNifEnv *env, ERL_NIF_TERM spec, message_t *m) {
   const ERL_NIF_TERM *tuple;
   int arity;
@@ -127,11 +111,10 @@ static int read_message(ErlNifEnv *env, ERL_NIF_TERM spec, message_t *m) {
   for (unsigned i = 0; enif_get_list_cell(env, list, &head, &list); i++) {
     const ERL_NIF_TERM *f;
     unsigned type, count, offset;
-    if (!enif_get_tuple(env, head, &arity, &f) || arity != 4 || !enif_is_atom(env, f[0]) || !enif_get_uint(env, f[1], &type) ||
-        type >= T_COUNT || !enif_get_uint(env, f[2], &count) || !enif_get_uint(env, f[3], &offset) ||
-        offset + type_size[type] * (count ? count : 1) > max_len)
+    if (!enif_get_tuple(env, head, &arity, &f) || arity != 3 || !enif_get_uint(env, f[0], &type) || type >= T_COUNT ||
+        !enif_get_uint(env, f[1], &count) || !enif_get_uint(env, f[2], &offset) || offset + type_size[type] * (count ? count : 1) > max_len)
       return 0;
-    m->fields[i] = (field_t){f[0], offset, type, count};
+    m->fields[i] = (field_t){offset, type, count};
   }
   return 1;
 }
@@ -156,16 +139,6 @@ static ERL_NIF_TERM table(ErlNifEnv *env, int argc, const ERL_NIF_TERM argv[]) {
     if (!read_message(env, head, m)) return enif_make_badarg(env);
   }
   qsort(t->messages, t->n, sizeof(message_t), by_id);
-
-  /* Modules to messages, for the encoder: at most half full. */
-  for (t->slots = 16; t->slots < 2 * t->n; t->slots *= 2) {}
-  t->by_module = calloc(t->slots, sizeof(message_t *));
-  if (t->by_module == NULL) return enif_make_badarg(env);
-  for (size_t i = 0; i < t->n; i++) {
-    size_t at = (size_t)enif_hash(ERL_NIF_INTERNAL_HASH, t->messages[i].module, 0) & (t->slots - 1);
-    while (t->by_module[at] != NULL) at = (at + 1) & (t->slots - 1);
-    t->by_module[at] = &t->messages[i];
-  }
   return result;
 }
 
@@ -340,133 +313,9 @@ static ERL_NIF_TERM decode(ErlNifEnv *env, int argc, const ERL_NIF_TERM argv[]) 
   return enif_make_tuple2(env, in_order, enif_make_uint64(env, pos));
 }
 
-/* --- encoding --- */
-
-static const message_t *lookup_module(const table_t *t, ERL_NIF_TERM module) {
-  size_t at = (size_t)enif_hash(ERL_NIF_INTERNAL_HASH, module, 0) & (t->slots - 1);
-  while (t->by_module[at] != NULL) {
-    if (enif_is_identical(t->by_module[at]->module, module)) return t->by_module[at];
-    at = (at + 1) & (t->slots - 1);
-  }
-  return NULL;
-}
-
-static void write_le(unsigned char *p, uint64_t v, unsigned size) {
-  for (unsigned i = 0; i < size; i++) p[i] = (unsigned char)(v >> (8 * i));
-}
-
-/* One plain value into its bytes; 0 when it is not plain (the Elixir encoder
- * then writes it, or says why it cannot). */
-static int put_scalar(ErlNifEnv *env, ERL_NIF_TERM v, unsigned type, unsigned char *p) {
-  ErlNifSInt64 i;
-  ErlNifUInt64 u;
-  double d;
-  switch (type) {
-  case T_UINT8: case T_UINT16: case T_UINT32: {
-    unsigned size = type_size[type];
-    if (!enif_get_uint64(env, v, &u) || (size < 8 && u >> (8 * size))) return 0;
-    write_le(p, u, size);
-    return 1;
-  }
-  case T_INT8: case T_INT16: case T_INT32: {
-    unsigned size = type_size[type];
-    int64_t lo = -((int64_t)1 << (8 * size - 1)), hi = ((int64_t)1 << (8 * size - 1)) - 1;
-    if (!enif_get_int64(env, v, &i) || i < lo || i > hi) return 0;
-    write_le(p, (uint64_t)i, size);
-    return 1;
-  }
-  case T_UINT64:
-    if (!enif_get_uint64(env, v, &u)) return 0;
-    write_le(p, u, 8);
-    return 1;
-  case T_INT64:
-    if (!enif_get_int64(env, v, &i)) return 0;
-    write_le(p, (uint64_t)i, 8);
-    return 1;
-  default: /* T_FLOAT, T_DOUBLE: a float, or an integer as a binary construction takes it */
-    if (!enif_get_double(env, v, &d)) {
-      if (!enif_get_int64(env, v, &i)) return 0;
-      d = (double)i;
-    }
-    if (type == T_FLOAT) {
-      float f = (float)d;
-      uint32_t bits;
-      memcpy(&bits, &f, sizeof bits);
-      write_le(p, bits, 4);
-    } else {
-      uint64_t bits;
-      memcpy(&bits, &d, sizeof bits);
-      write_le(p, bits, 8);
-    }
-    return 1;
-  }
-}
-
-static int put_field(ErlNifEnv *env, ERL_NIF_TERM v, const field_t *f, unsigned char *payload) {
-  unsigned char *p = payload + f->offset;
-  if (f->type == T_CHAR) {
-    ErlNifBinary bin;
-    unsigned n = f->count ? f->count : 1;
-    if (!enif_inspect_binary(env, v, &bin) || bin.size > n) return 0;
-    memcpy(p, bin.data, bin.size);
-    return 1; /* the rest of the payload is zero already */
-  }
-  if (f->count == 0) return put_scalar(env, v, f->type, p);
-  /* An array: exactly its length (a short list is padded by the Elixir encoder). */
-  unsigned size = type_size[f->type], n = 0;
-  ERL_NIF_TERM head, list = v;
-  while (enif_get_list_cell(env, list, &head, &list)) {
-    if (n == f->count || !put_scalar(env, head, f->type, p + n * size)) return 0;
-    n++;
-  }
-  return enif_is_empty_list(env, list) && n == f->count;
-}
-
-/* native_encode(Message, Table, SysId, CompId, Seq, CompatFlags): the
- * MAVLink 2 frame of a message struct whose every value is plain (trailing
- * zero bytes of its payload cut, at least one kept), or `slow`. */
-static ERL_NIF_TERM encode(ErlNifEnv *env, int argc, const ERL_NIF_TERM argv[]) {
-  table_t *t;
-  unsigned sysid, compid, seq, compat;
-  ERL_NIF_TERM module, value;
-  unsigned char frame[10 + 255 + 2];
-  (void)argc;
-  if (!enif_get_resource(env, argv[1], table_type, (void **)&t) || !enif_get_uint(env, argv[2], &sysid) || sysid > 255 ||
-      !enif_get_uint(env, argv[3], &compid) || compid > 255 || !enif_get_uint(env, argv[4], &seq) || seq > 255 ||
-      !enif_get_uint(env, argv[5], &compat) || compat > 255)
-    return enif_make_badarg(env);
-  if (!enif_get_map_value(env, argv[0], atom_struct, &module)) return atom_slow;
-  const message_t *m = lookup_module(t, module);
-  if (m == NULL) return atom_slow;
-
-  unsigned char *payload = frame + 10;
-  memset(payload, 0, m->max_len);
-  for (unsigned i = 0; i < m->nfields; i++)
-    if (!enif_get_map_value(env, argv[0], m->fields[i].name, &value) || !put_field(env, value, &m->fields[i], payload)) return atom_slow;
-
-  unsigned len = m->max_len;
-  while (len > 1 && payload[len - 1] == 0) len--;
-  frame[0] = MAGIC_V2;
-  frame[1] = (unsigned char)len;
-  frame[2] = 0;
-  frame[3] = (unsigned char)compat;
-  frame[4] = (unsigned char)seq;
-  frame[5] = (unsigned char)sysid;
-  frame[6] = (unsigned char)compid;
-  write_le(frame + 7, m->id, 3);
-  uint16_t crc = crc16_accumulate_byte(crc16_accumulate(0xFFFF, frame + 1, 9 + len), m->crc_extra);
-  frame[10 + len] = (unsigned char)crc;
-  frame[11 + len] = (unsigned char)(crc >> 8);
-
-  ERL_NIF_TERM out;
-  memcpy(enif_make_new_binary(env, 12 + len, &out), frame, 12 + len);
-  return out;
-}
-
 static ErlNifFunc functions[] = {
     {"table", 1, table, 0},
     {"native_decode", 3, decode, 0},
-    {"native_encode", 6, encode, 0},
 };
 
 ERL_NIF_INIT(Elixir.Dolphin.MAVLink.Native, functions, load, NULL, NULL, NULL)

@@ -37,7 +37,7 @@ defmodule Dolphin.MAVLink.Frame do
 
   import Bitwise, only: [&&&: 2, |||: 2, <<<: 2]
 
-  alias Dolphin.MAVLink.{CRC, Message, Native, Value}
+  alias Dolphin.MAVLink.{CRC, Message, Value}
 
   @magic_v1 0xFE
   @magic_v2 0xFD
@@ -233,19 +233,7 @@ defmodule Dolphin.MAVLink.Frame do
   that does not fit, or a message id above 255 in MAVLink 1.
   """
   @spec encode(Message.t(), [encode_opt()]) :: binary()
-  def encode(%module{} = message, opts \\ []) do
-    # The C fast path (Dolphin.MAVLink.Native) for the default dialect's
-    # unsigned MAVLink 2 frames of plain values; everything else here.
-    case Native.encode(message, Native.for_dialect(Dolphin.MAVLink.default_dialect()), opts) do
-      :slow -> encode(opts, module.__frame__(message), message, 2, 0, 0, 0, 0, nil)
-      frame -> frame
-    end
-  end
-
-  @doc false
-  # encode/2 in Elixir alone: what the C fast path must agree with (its property test).
-  @spec encode_in_elixir(Message.t(), [encode_opt()]) :: binary()
-  def encode_in_elixir(%module{} = message, opts), do: encode(opts, module.__frame__(message), message, 2, 0, 0, 0, 0, nil)
+  def encode(%module{} = message, opts \\ []), do: encode(opts, module.__frame__(message), message, 2, 0, 0, 0, 0, nil)
 
   # The message module's `__frame__/1` gives `{id, crc_extra, min_len,
   # payload}` in one call (the struct's module is looked up once). The options

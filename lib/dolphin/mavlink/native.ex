@@ -1,32 +1,23 @@
 defmodule Dolphin.MAVLink.Native do
   @moduledoc """
-  The codec's fast paths, in C (`c_src/dolphin_native.c`), for what a
-  healthy link carries; everything else stays in Elixir.
+  The codec's fast path in C (`c_src/dolphin_native.c`), for what a healthy
+  link carries: one call checks and decodes every frame of a buffer, from
+  an offset, that is whole, unsigned, of a message the dialect defines and
+  whose checksum holds, and stops at the first that is anything else.
+  `Dolphin.MAVLink.Parser` then takes that one in Elixir (it resynchronises,
+  verifies signatures, forwards or refuses unknown ids, and counts what it
+  drops) and calls again after it. The frames are the terms
+  `Dolphin.MAVLink.Frame.decode/3` builds, field for field (a property test
+  decodes random streams both ways).
 
-    * **Decoding** (`decode/4`, used by `Dolphin.MAVLink.Parser`): one call
-      checks and decodes every frame of a buffer, from an offset, that is
-      whole, unsigned, of a message the dialect defines and whose checksum
-      holds, and stops at the first that is anything else. The parser then
-      takes that one in Elixir (it resynchronises, verifies signatures,
-      forwards or refuses unknown ids, and counts what it drops) and calls
-      again after it. The frames are the terms `Dolphin.MAVLink.Frame.decode/3`
-      builds, field for field.
-    * **Encoding** (`encode/2`, used by `Dolphin.MAVLink.Frame.encode/2`):
-      an unsigned MAVLink 2 frame of a message whose values are all plain
-      numbers in range, whole arrays and strings that fit; anything else
-      (NaN or an infinity as an atom, a short array, a bad value to
-      explain, MAVLink 1, signing) answers `:slow` and the Elixir encoder
-      does that frame.
-
-  Property tests decode random streams and encode random messages both
-  ways and find the same frames, bytes and counts. Why: the Elixir codec
-  decoded the benchmark's telemetry at about half the speed of the MAVLink C
-  library, and encoded it at a third (docs/benchmarks.md has the figures
-  before and after).
+  Why: the Elixir decoder spent its time per frame on the checksum call, on
+  each float (a runtime call each) and on building the two structs, and
+  decoded the benchmark's telemetry at about 0.6 of the speed of the MAVLink
+  C library; see docs/benchmarks.md for the figures before and after.
 
   Each dialect's messages are put in a table once (`for_dialect/1`, kept in
   `:persistent_term`). Without a C compiler the library is not built:
-  `available?/0` is false and the codec runs in Elixir alone, as before.
+  `available?/0` is false and the parser decodes in Elixir alone, as before.
   """
 
   alias Dolphin.MAVLink.{Frame, Value}
@@ -73,15 +64,15 @@ defmodule Dolphin.MAVLink.Native do
   # Each message the dialect decodes, as its frame decoder gives it (so that
   # both paths know the same ids, CRC_EXTRA and lengths): id, CRC_EXTRA,
   # length, module, and each field in the order of its definition (the
-  # order of `__from_values__/1`) with its name, type, array length (0: a
-  # scalar) and offset in the payload (from the wire order).
+  # order of `__from_values__/1`) with its type, array length (0: a scalar)
+  # and offset in the payload (from the wire order).
   defp specs(dialect) do
     for module <- dialect.messages(),
         id = module.__mavlink__(:id),
         {crc_extra, max_len, _decode} <- [dialect.frame_decoder(id)] do
       {wire, _end} =
         Enum.map_reduce(module.__mavlink__(:wire), 0, fn {name, type, count}, offset ->
-          {{name, {name, Map.fetch!(@types, type), count || 0, offset}}, offset + Value.size(type) * (count || 1)}
+          {{name, {Map.fetch!(@types, type), count || 0, offset}}, offset + Value.size(type) * (count || 1)}
         end)
 
       wire = Map.new(wire)
@@ -130,29 +121,6 @@ defmodule Dolphin.MAVLink.Native do
       raw: raw
     }
   end
-
-  @doc """
-  The unsigned MAVLink 2 frame of `message` with the header options a
-  link gives (`:sysid`, `:compid`, `:seq`, `:compat_flags`), from `table`
-  (its dialect's), or `:slow` when the Elixir encoder must do it (see the
-  module doc; also for any other option).
-  """
-  @spec encode(struct(), table() | nil, keyword()) :: binary() | :slow
-  def encode(_message, nil, _opts), do: :slow
-  def encode(message, table, opts), do: encode(opts, message, table, 0, 0, 0, 0)
-
-  defp encode([], message, table, sysid, compid, seq, compat), do: __MODULE__.native_encode(message, table, sysid, compid, seq, compat)
-  defp encode([{:sysid, v} | t], m, table, _, c, q, f) when v in 0..255, do: encode(t, m, table, v, c, q, f)
-  defp encode([{:compid, v} | t], m, table, y, _, q, f) when v in 0..255, do: encode(t, m, table, y, v, q, f)
-  defp encode([{:seq, v} | t], m, table, y, c, _, f) when v in 0..255, do: encode(t, m, table, y, c, v, f)
-  defp encode([{:compat_flags, v} | t], m, table, y, c, q, _) when v in 0..255, do: encode(t, m, table, y, c, q, v)
-  defp encode([{:version, 2} | t], m, table, y, c, q, f), do: encode(t, m, table, y, c, q, f)
-  defp encode([{:signing, nil} | t], m, table, y, c, q, f), do: encode(t, m, table, y, c, q, f)
-  defp encode(_other, _m, _table, _y, _c, _q, _f), do: :slow
-
-  @doc false
-  # The C library's encoding: the frame, or :slow.
-  def native_encode(_message, _table, _sysid, _compid, _seq, _compat), do: :erlang.nif_error(:not_loaded)
 
   @doc false
   # The C library's decoding: {frames, next_offset}, each frame {module,

@@ -81,30 +81,6 @@ defmodule Dolphin.MAVLink.PropertiesTest do
     )
   end
 
-  test "the C fast path encodes every message exactly as the Elixir encoder does, or leaves it to it" do
-    table = Dolphin.MAVLink.Native.for_dialect(@dialect)
-
-    check(
-      forall({any_message(), header()}, fn {message, {sysid, compid, seq, compat}} ->
-        opts = [sysid: sysid, compid: compid, seq: seq, compat_flags: compat]
-
-        case Dolphin.MAVLink.Native.encode(message, table, opts) do
-          :slow -> assert Frame.encode(message, opts) == Frame.encode_in_elixir(message, opts)
-          bytes -> assert bytes == Frame.encode_in_elixir(message, opts)
-        end
-      end),
-      numtests: 3000
-    )
-
-    # Values it leaves to Elixir: NaN, a short array, a value out of range (which Elixir refuses).
-    heartbeat = %APM.Heartbeat{type: 2, autopilot: 3}
-    assert is_binary(Dolphin.MAVLink.Native.encode(heartbeat, table, sysid: 1))
-    assert Dolphin.MAVLink.Native.encode(%APM.Attitude{roll: :nan}, table, []) == :slow
-    assert Dolphin.MAVLink.Native.encode(%APM.Heartbeat{type: 256}, table, []) == :slow
-    assert Dolphin.MAVLink.Native.encode(%APM.Statustext{text: :binary.copy("x", 51)}, table, []) == :slow
-    assert Dolphin.MAVLink.Native.encode(heartbeat, table, version: 1) == :slow
-  end
-
   test "valid frames behind garbage without magic bytes are all recovered, in order, in any chunks" do
     check(
       forall({T.resize(12, T.list({garbage(:no_magic), frame()})), garbage(:no_magic), chunk_sizes()}, fn {pairs, tail, sizes} ->
