@@ -171,7 +171,9 @@ defmodule Dolphin.MAVLink.Frame do
   # module the compiler folds it into a constant map that every frame then
   # updates key by key; built from variables, the map takes one allocation
   # with a shared key table. (The same holds for the generated message structs.)
-  defp new(struct, version, flags, compat, seq, sysid, compid, msgid, message, payload, signature, raw) do
+  # Dolphin.MAVLink.Native builds its frames with it too.
+  @doc false
+  def new(struct, version, flags, compat, seq, sysid, compid, msgid, message, payload, signature, raw) do
     %{
       __struct__: struct,
       version: version,

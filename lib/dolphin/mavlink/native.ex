@@ -101,26 +101,7 @@ defmodule Dolphin.MAVLink.Native do
   defp frames([], acc, count), do: {acc, count}
 
   defp frames([{module, values, version, sysid, compid, seq, msgid, compat, payload, raw} | rest], acc, count),
-    do: frames(rest, [frame(Frame, version, sysid, compid, seq, msgid, compat, module.__from_values__(values), payload, raw) | acc], count + 1)
-
-  # The struct from the module as an argument, as Dolphin.MAVLink.Frame
-  # builds it: one allocation with a shared key table.
-  defp frame(struct, version, sysid, compid, seq, msgid, compat, message, payload, raw) do
-    %{
-      __struct__: struct,
-      version: version,
-      sysid: sysid,
-      compid: compid,
-      seq: seq,
-      msgid: msgid,
-      incompat_flags: 0,
-      compat_flags: compat,
-      message: message,
-      payload: payload,
-      signature: nil,
-      raw: raw
-    }
-  end
+    do: frames(rest, [Frame.new(Frame, version, 0, compat, seq, sysid, compid, msgid, module.__from_values__(values), payload, nil, raw) | acc], count + 1)
 
   @doc false
   # The C library's decoding: {frames, next_offset}, each frame {module,
