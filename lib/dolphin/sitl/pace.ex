@@ -10,7 +10,8 @@ defmodule Dolphin.SITL.Pace do
   # before its battery ran down. Once a second (real time), this compares
   # each vehicle's time_boot_ms with the moment it arrived, over the last
   # few seconds, and sets the clock's speed-up to the slowest vehicle's
-  # pace, never above the speed-up asked for.
+  # pace, never above the speed-up asked for. Stopped (the fleet stops), it
+  # gives the clock back the speed-up asked for.
 
   use GenServer, restart: :temporary
 
@@ -30,6 +31,8 @@ defmodule Dolphin.SITL.Pace do
 
   @impl true
   def init(%{ids: ids, speedup: k}) do
+    # So that a supervisor's shutdown runs terminate/2.
+    Process.flag(:trap_exit, true)
     Process.send_after(self(), :measure, @every_real_ms)
     {:ok, %{ids: ids, asked: k, samples: %{}}}
   end
@@ -48,6 +51,9 @@ defmodule Dolphin.SITL.Pace do
 
     {:noreply, %{s | samples: samples}}
   end
+
+  @impl true
+  def terminate(_reason, s), do: Clock.set_speedup(s.asked)
 
   # The vehicle's {time_boot_ms, µs} samples of the last window, newest
   # first; a reboot (its clock going back) starts them again.

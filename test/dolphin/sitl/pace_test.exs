@@ -43,7 +43,7 @@ defmodule Dolphin.SITL.PaceTest do
     send_frames(socket, port, now, boot_ms, pace)
   end
 
-  test "the clock slows to the pace of a vehicle that falls behind, and comes back with it, never past the speed-up asked for", %{port: port} do
+  test "the clock slows to the pace of a vehicle that falls behind, comes back with it, never past the speed-up asked for, and is given it back at the end", %{port: port} do
     sender = vehicle(port)
     Wait.until(fn -> match?({:ok, %{boot: {_, _}}}, Vehicles.state(@sysid)) end)
     {:ok, pace} = SITL.Pace.start_link(ids: [@sysid], speedup: @asked)
@@ -54,6 +54,11 @@ defmodule Dolphin.SITL.PaceTest do
     # Back at full pace, and beyond it: the clock back to the speed-up asked for, not past it.
     send(sender, {:pace, @asked * 2.0})
     Wait.until(fn -> Clock.speedup() == @asked end, 1_000, fn -> "back at #{@asked}x, the clock at #{Clock.speedup()}x" end)
+
+    # Slowed again, then stopped (the fleet stops): the clock is given back the speed-up asked for.
+    send(sender, {:pace, @asked * 0.5})
+    Wait.until(fn -> Clock.speedup() < @asked * 0.6 end, 1_000, fn -> "slowed again, the clock at #{Clock.speedup()}x" end)
     GenServer.stop(pace)
+    assert Clock.speedup() == @asked
   end
 end
