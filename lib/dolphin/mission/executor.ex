@@ -53,6 +53,16 @@ defmodule Dolphin.Mission.Executor do
   # busy loops stood "armed on the ground" for 60 s of clock, 6 s of real
   # time at 10x, while it was merely late), not a real vehicle at 1x.
   @grounded_floor_real_ms 15_000
+  # Armed for its take-off, then seen disarmed on the ground before the
+  # flight began: ArduCopter disarms a copter armed without taking off
+  # after DISARM_DELAY (10 s), which a slow, lossy link can let pass between
+  # the arm and MISSION_START (seen on the simulator over 30 % loss on a
+  # loaded machine: the start came 20 s of clock time after the arm). After
+  # this grace (a view may lag the arm), the vehicle is set to GUIDED, armed
+  # and started again, at most @rearms times.
+  @rearm_grace_ms 5_000
+  @rearm_grace_floor_real_ms 2_000
+  @rearms 3
   # Standing still this long (clock ms) short of a waypoint in AUTO, the
   # vehicle is stuck: ArduRover stops short of its fence and says nothing.
   @stuck_timeout_ms 60_000
@@ -110,6 +120,10 @@ defmodule Dolphin.Mission.Executor do
       airframe: nil,
       # Where the vehicle was first seen armed on the ground in :flying, while it stays so.
       grounded: nil,
+      # Seen disarmed on the ground in :flying before its flight began (a
+      # timer runs), and how many times it was armed and started again.
+      disarmed_idle: false,
+      rearms: 0,
       # Where and at which item the vehicle was first seen standing still
       # short of a waypoint in :flying, while it stays so.
       still: nil,
@@ -251,6 +265,14 @@ defmodule Dolphin.Mission.Executor do
     if still_grounded?(data, st),
       do: fail(:flying, data, grounded(data, st), vehicle_fault?: true, texts: texts(data)),
       else: judge(%{data | grounded: nil}, st)
+  end
+
+  def handle_event({:timeout, :disarmed}, :disarmed, :flying, %{view: st} = data) do
+    cond do
+      not disarmed_before_flight?(data, st) -> judge(%{data | disarmed_idle: false}, st)
+      data.rearms < @rearms -> next(:guided, %{data | rearms: data.rearms + 1, disarmed_idle: false, flight: Flight.new(data.ending)})
+      true -> fail(:flying, data, {:disarmed_before_take_off, data.rearms + 1}, vehicle_fault?: true, texts: texts(data))
+    end
   end
 
   def handle_event({:timeout, :stuck}, :stuck, :flying, %{view: st} = data) do
@@ -524,7 +546,8 @@ defmodule Dolphin.Mission.Executor do
     data = back_in_mission(data, st)
     {data, grounded} = watch_grounded(%{data | flight: flight}, st)
     {data, still} = watch_still(data, st)
-    watch = grounded ++ still
+    {data, disarmed} = watch_disarmed(data, st)
+    watch = grounded ++ still ++ disarmed
     if progress, do: Platform.progress(data.owner, progress)
 
     case verdict do
@@ -566,6 +589,27 @@ defmodule Dolphin.Mission.Executor do
         {data, []}
     end
   end
+
+  # Disarmed on the ground before the flight began (see @rearm_grace_ms): a
+  # timer from the first time it is seen so, cancelled once it is not.
+  defp watch_disarmed(data, st) do
+    idle = disarmed_before_flight?(data, st)
+
+    cond do
+      idle and not data.disarmed_idle ->
+        {%{data | disarmed_idle: true}, [{{:timeout, :disarmed}, max(Clock.to_real_ms(@rearm_grace_ms), @rearm_grace_floor_real_ms), :disarmed}]}
+
+      not idle and data.disarmed_idle ->
+        {%{data | disarmed_idle: false}, [{{:timeout, :disarmed}, :cancel}]}
+
+      true ->
+        {data, []}
+    end
+  end
+
+  # A vehicle that takes off, never seen armed in this flight, disarmed on the ground.
+  defp disarmed_before_flight?(data, st),
+    do: Airframe.takes_off?(data.airframe) and not data.flight.armed_seen and not st.armed? and st.landed in [:on_ground, nil]
 
   # Standing still in AUTO short of the waypoint it flies to (not at a
   # loiter or a delay, where standing is the mission, nor held apart from

@@ -36,6 +36,9 @@ defmodule Dolphin.Mission.Failure do
       (ArduRover stops short of its fence and says nothing);
     * `{:left_auto, mode}` — the vehicle left AUTO (a failsafe, the pilot);
     * `:disarmed` — it disarmed before the mission ended;
+    * `{:disarmed_before_take_off, times}` — armed for its take-off, it
+      disarmed on the ground before the flight began, `times` times (it was
+      armed and started again after each but the last);
     * `{:landed_early, current, total}` — it landed and disarmed before the end;
     * `:has_jumps`, `:nothing_but_take_off`, `{:nothing_left, reached}`,
       `{:home_unknown, vehicle}`, `{:position_unknown, vehicle}`,
@@ -63,6 +66,7 @@ defmodule Dolphin.Mission.Failure do
           | {:stuck, non_neg_integer(), {non_neg_integer(), non_neg_integer(), String.t(), non_neg_integer()}}
           | {:left_auto, String.t()}
           | :disarmed
+          | {:disarmed_before_take_off, pos_integer()}
           | {:landed_early, term(), term()}
           | :has_jumps
           | {:cannot_resume, String.t()}
@@ -127,6 +131,11 @@ defmodule Dolphin.Mission.Failure do
 
   defp words(%{cause: {:left_auto, mode}}), do: "the vehicle left AUTO for #{mode} before the mission ended"
   defp words(%{cause: :disarmed}), do: "the vehicle disarmed before the mission ended"
+
+  defp words(%{cause: {:disarmed_before_take_off, times}} = f),
+    do:
+      "vehicle #{f.vehicle} disarmed on the ground before its take-off, #{times} time(s) (a copter armed without taking off disarms itself after DISARM_DELAY: the mission's start reached it too late each time)"
+
   defp words(%{cause: {:landed_early, current, total}}), do: "the vehicle landed and disarmed before the mission's end (at item #{current} of #{total})"
   defp words(%{cause: {:cannot_resume, text}} = f), do: "mission #{inspect(f.mission)} cannot be resumed: #{text}"
   defp words(%{cause: :has_jumps} = f), do: "mission #{inspect(f.mission)} has jumps (DO_JUMP): it cannot be resumed on another vehicle"

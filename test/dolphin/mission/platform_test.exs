@@ -249,6 +249,30 @@ defmodule Dolphin.Mission.PlatformTest do
     assert Exception.message(Dolphin.Engine.TaskError.exception(failure: failure)) =~ "on the ground and the mission has no take-off"
   end
 
+  test "a copter that disarms on the ground before MISSION_START reaches it is armed and started again, and flies once the start comes in time", %{port: port} do
+    # Every datagram takes 0.5 s of the vehicle's time each way, and it
+    # disarms 0.2 s after its arm (DISARM_DELAY): the start, sent when the
+    # arm's answer comes, comes too late, as ArduCopter's 10 s can pass on a
+    # slow, lossy link; the task would wait in AUTO, disarmed, for ever.
+    [{1, home}] = start_fleet(port, count: 1, disarm_delay_ms: 200)
+    :ok = Sim.set_faults(1, latency: 500)
+    test = self()
+
+    # The link is quick again when the executor sets GUIDED the second time.
+    spawn_link(fn ->
+      Events.subscribe()
+      send(test, :watching)
+      receive do: ({:dolphin, :events, %{event: :mode_changed, vehicle: 1, mode: :guided}} -> :ok)
+      receive do: ({:dolphin, :events, %{event: :mode_changed, vehicle: 1, mode: :auto}} -> :ok)
+      :ok = Sim.set_faults(1, latency: 0)
+    end)
+
+    assert_receive :watching
+    assert {:ok, :done} = Engine.run(Engine.on(out_and_back(home), [1]))
+    {:ok, info} = Sim.info(1)
+    assert Dolphin.Geo.distance(Dolphin.Geo.location(info.position.lat, info.position.lon), home) < 3
+  end
+
   test "the second of two missions reports its own progress from the start, and its take-off is an item reached", %{port: port} do
     [{1, home}] = start_fleet(port, count: 1)
     # The first mission's last item reached is its take-off, item 1: the second one's take-off has the same number.
