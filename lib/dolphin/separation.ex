@@ -37,8 +37,9 @@ defmodule Dolphin.Separation do
   where it was) once, for a second of clock time, no vehicle in the air is
   closer than one and a half times the separation and none would come
   closer than that within the horizon were it to fly on as it was flying
-  when held; `separation_clear` says so, with how long it was held. The
-  hold counts in its task's time.
+  when held (a vehicle itself held for this one does not count: it waits
+  for this one to go); `separation_clear` says so, with how long it was
+  held. The hold counts in its task's time.
 
   Vehicles on the ground are not kept apart (a landing beside a parked
   vehicle is the pre-flight check's to judge); a submarine is kept apart
@@ -277,7 +278,10 @@ defmodule Dolphin.Separation do
   # to were it to fly on as it flew when held.
   defp clear?(%Flying{view: view}, _others, _now) when view == nil or view.position == nil, do: true
 
+  # (One held for this vehicle waits for it to go: it does not keep it held,
+  # or two would wait for each other.)
   defp clear?(f, others, now) do
+    others = Enum.reject(others, &match?(%Flying{held: %{other: id}} when id == f.id, &1))
     plane = Geo.tangent_plane(f.view.position)
     # From where it is across, at the height it was held at (one that moved
     # aside goes back to it as it goes on).

@@ -172,6 +172,26 @@ defmodule Dolphin.SeparationTest do
     assert Map.take(Separation.held(), [a, b]) == %{b => a}
   end
 
+  test "held for a third vehicle, a vehicle goes on once that one is gone, though one held for it stands near", %{ids: {a, b, c}} do
+    # c hovers over the base, not ours; a comes at it and holds.
+    flying(c, 0, 0, {0.0, 0.0, 0.0})
+    executor(a, 1_000)
+    flying(a, 0, -50, {0.0, 10.0, 0.0})
+    assert_receive {:separation, :hold, %{vehicle: ^a, other: ^c}}
+    flying(a, 0, -45, {0.0, 0.0, 0.0})
+
+    # b, whose mission started later, comes at a and holds 10 m from it.
+    executor(b, 2_000)
+    flying(b, 0, -80, {0.0, 10.0, 0.0})
+    assert_receive {:separation, :hold, %{vehicle: ^b, other: ^a}}
+    flying(b, 0, -55, {0.0, 0.0, 0.0})
+
+    # c leaves: a goes on (b, which waits for a, does not keep it), then b.
+    flying(c, 500, 500, {0.0, 0.0, 0.0})
+    assert_receive {:separation, :clear, %{vehicle: ^a}}, 5_000
+    refute Map.has_key?(Separation.held(), a)
+  end
+
   test "two already too close but moving apart are left to part", %{ids: {a, b, _c} = ids} do
     executor(a, 1_000)
     executor(b, 2_000)
