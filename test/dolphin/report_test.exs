@@ -167,6 +167,16 @@ defmodule Dolphin.ReportTest do
     assert_in_delta offset, -7.5, 0.6
   end
 
+  test "events with no arming, mode or item are placed by the vehicles' discovery, when starting the run took long", %{tmp_dir: dir} do
+    {:ok, log} = Dolphin.Report.FlightLog.read_file(tlog(dir))
+    # A short look at the vehicles (nothing armed, no mode changed): the links took 45 s of clock time to start.
+    quiet = fn lines -> Enum.reject(lines, &(&1.event in ["armed", "mode_changed", "mission_item_reached"])) end
+    {:ok, events, 0} = Dolphin.Report.Events.read_file(events(dir, 45.0, "look.jsonl", quiet))
+    assert {:ok, {1.0, offset}} = Dolphin.Report.Events.align(events, Dolphin.Report.Model.anchors(log), "look.jsonl")
+    # Discovered half a second into the log (its first heartbeat: at 0.5 s too).
+    assert_in_delta offset, -45.0, 1.0
+  end
+
   test "events of vehicles that fell behind the clock's speed-up (a loaded machine) are placed by rate and origin", %{tmp_dir: dir} do
     {:ok, log} = Dolphin.Report.FlightLog.read_file(tlog(dir))
     # The clock ran at the speed-up asked for, the vehicles at 0.6 of it: 5 s of theirs is 8.3 s of the events'.

@@ -28,6 +28,10 @@ defmodule Dolphin.Report.Events do
   # A rate other than 1 is measured on no fewer anchors than this.
   @rated_least_anchors 4
   @most_rate 1.25
+  # Clock seconds, and real seconds at the run's speed-up, that starting a
+  # run's links and vehicles may take.
+  @start_s 30.0
+  @start_real_s 20.0
 
   @doc false
   @spec read_file(Path.t()) :: {:ok, [map()], non_neg_integer()} | {:error, Error.t()}
@@ -75,7 +79,8 @@ defmodule Dolphin.Report.Events do
   # on a loaded machine, at half its speed-up) falls behind it, so the two
   # time lines differ in rate as well as in origin: both are fitted. `log` is
   # the log's anchors: %{vehicles: [id], span_s: s, speedup: k, arming: %{id
-  # => [t]}, modes: %{id => [{t, mode}]}, reached: %{id => [{t, seq}]}, cut: bool}.
+  # => [t]}, modes: %{id => [{t, mode}]}, reached: %{id => [{t, seq}]},
+  # heard: %{id => t}, cut: bool}.
   @spec align([map()], map(), Path.t()) :: {:ok, {float(), float()}} | {:error, Error.t()}
   def align([], _log, _path), do: {:ok, {1.0, 0.0}}
 
@@ -101,7 +106,23 @@ defmodule Dolphin.Report.Events do
         end
 
       true ->
-        overlap(events, {1.0, 0.0}, log, path)
+        overlap(events, {1.0, starting(events, log)}, log, path)
+    end
+  end
+
+  # Without an arming, a mode or an item to go by, the vehicles' discovery
+  # (an event, and their first heartbeat in the log) places the events,
+  # if it came within what starting a run takes: the clock runs from the
+  # events file's first line while the links and vehicles start, which
+  # on a loaded machine at a high speed-up is a minute of clock time or
+  # more. Later than that, the events are left where they begin, for the
+  # overlap to judge.
+  defp starting(events, log) do
+    offsets = for %{"event" => "vehicle_discovered", "vehicle" => v, "t_ms" => t} <- events, heard = log.heard[v], do: heard - t / 1000
+
+    case offsets do
+      [] -> 0.0
+      _ -> offsets |> median() |> then(&if(-&1 <= @start_s + @start_real_s * log.speedup, do: &1, else: 0.0))
     end
   end
 

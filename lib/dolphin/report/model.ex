@@ -123,6 +123,8 @@ defmodule Dolphin.Report.Model do
       # The first mode is where the vehicle was found, not a change.
       modes: Map.new(vs, fn v -> {v.id, for({ts, m} <- Enum.drop(v.modes, 1), do: {clock.(ts), m})} end),
       reached: Map.new(vs, fn v -> {v.id, for({ts, s} <- v.reached, do: {clock.(ts), s})} end),
+      # Its autopilot's first heartbeat: the moment it was discovered.
+      heard: Map.new(for v <- vs, [{ts, _, _} | _] <- [v.link], do: {v.id, clock.(ts)}),
       cut: log.stats != nil and log.stats.bytes_skipped > 0
     }
   end
