@@ -17,6 +17,10 @@ defmodule Dolphin.CLI.Values do
 
     * `:vehicles` — a number of vehicles, 1..254: each needs a system id of
       its own (1..254; 255 is the ground station's);
+    * `:fleet_size` — a number of vehicles that may be spread over
+      networks (`networks/3` checks that they fit): 1..#{254 * 64};
+    * `{:range, first..last, rule}` — a whole number in the range (`rule`
+      says what is allowed);
     * `:sysid` — a system id, 1..254;
     * `:vehicle_id` — a vehicle as `vehicles()` names it: a system id
       1..254, or `SYSID@NETWORK` for another vehicle with that system id
@@ -52,6 +56,8 @@ defmodule Dolphin.CLI.Values do
 
   @type kind ::
           :vehicles
+          | :fleet_size
+          | {:range, Range.t(), String.t()}
           | :sysid
           | :vehicle_id
           | :speedup
@@ -76,6 +82,7 @@ defmodule Dolphin.CLI.Values do
   @type spec :: [{atom(), kind() | :keep | {:keep, kind()}}]
 
   @max_sysid 254
+  @max_networks 64
   @latitudes -90..90
   @longitudes -180..180
   @altitudes -1000..10_000
@@ -145,6 +152,43 @@ defmodule Dolphin.CLI.Values do
     if last <= @max_sysid,
       do: {:ok, first..last},
       else: CommandLineError.usage_error("#{count_flag} #{count} with #{first_flag} #{first}: system ids #{first}..#{last} do not fit in 1..#{@max_sysid} (255 is the ground station's)")
+  end
+
+  @doc """
+  The system ids on each network of `count` vehicles spread evenly over
+  `networks` networks, each numbered from `first`; the error says why
+  they do not fit in 1..254 (`--count`, `--networks` and `--first-sysid`
+  named).
+
+      iex> Dolphin.CLI.Values.networks(2000, 8, 1)
+      {:ok, 1..250}
+      iex> {:error, e} = Dolphin.CLI.Values.networks(300, 1, 1)
+      iex> e.message
+      "--count 300: a network holds 254 vehicles at most (system ids 1..254, 255 is the ground station's): --networks spreads more over several"
+      iex> {:error, e} = Dolphin.CLI.Values.networks(2000, 4, 1)
+      iex> e.message
+      "--count 2000 over --networks 4: 500 vehicles a network, system ids 1..500, do not fit in 1..254 (255 is the ground station's)"
+  """
+  @spec networks(pos_integer(), pos_integer(), pos_integer()) :: {:ok, Range.t()} | {:error, CommandLineError.t()}
+  def networks(count, 1, first) when first + count - 1 > @max_sysid and first == 1,
+    do:
+      CommandLineError.usage_error("--count #{count}: a network holds #{@max_sysid} vehicles at most (system ids 1..#{@max_sysid}, 255 is the ground station's): --networks spreads more over several")
+
+  def networks(count, 1, first), do: sysids(count, first, "--count", "--first-sysid")
+
+  def networks(count, networks, _first) when count < networks,
+    do: CommandLineError.usage_error("--networks #{networks} for --count #{count}: each network needs a vehicle at least")
+
+  def networks(count, networks, first) do
+    per = div(count + networks - 1, networks)
+    last = first + per - 1
+
+    if last <= @max_sysid,
+      do: {:ok, first..last},
+      else:
+        CommandLineError.usage_error(
+          "--count #{count} over --networks #{networks}#{if first != 1, do: " with --first-sysid #{first}"}: #{per} vehicles a network, system ids #{first}..#{last}, do not fit in 1..#{@max_sysid} (255 is the ground station's)"
+        )
   end
 
   @doc """
@@ -286,6 +330,11 @@ defmodule Dolphin.CLI.Values do
   defp value(:sitl_fleet, text), do: fleet_spec(text, Dolphin.SITL.airframes(), Dolphin.Sim.Companion.models())
 
   defp value(:vehicles, text), do: integer(text, 1..@max_sysid, "a number of vehicles from 1 to #{@max_sysid} (each needs a system id of its own)")
+
+  defp value(:fleet_size, text),
+    do: integer(text, 1..(@max_sysid * @max_networks), "a number of vehicles from 1 to #{@max_sysid} a network (each needs a system id of its own there), #{@max_sysid * @max_networks} at most")
+
+  defp value({:range, range, rule}, text), do: integer(text, range, rule)
   defp value(:sysid, text), do: integer(text, 1..@max_sysid, "a system id from 1 to #{@max_sysid} (255 is the ground station's)")
 
   defp value(:vehicle_id, text) do

@@ -34,7 +34,7 @@ defmodule Mix.Tasks.FlagValuesTest do
     assert latitude =~ "--home 200,0,0: the latitude 200 is not within -90..90"
     assert speedup =~ "--speedup 1e9: a number from 0.01 to 1000 (beyond 1000 the simulated vehicles cannot keep up with the clock)"
     assert for_zero =~ "--for 0: a number of seconds, more than 0"
-    assert count =~ "--count 0: a number of vehicles from 1 to 254 (each needs a system id of its own)"
+    assert count =~ "--count 0: a number of vehicles from 1 to 254 a network (each needs a system id of its own there)"
     for {_, output} <- results, do: refute(output =~ ~r/bad :\w+|simulating/)
   end
 
