@@ -1,0 +1,145 @@
+# The ground station's telemetry intake at fleet scale.
+#
+#   VEHICLES simulated vehicles (default 2,000) over NETWORKS networks
+#   (default 8, system ids repeating on each) run in *another OS process*
+#   (`mix dolphin.sim --count VEHICLES --networks NETWORKS`), each sending
+#   from its own UDP socket what the ground station asks every vehicle for
+#   (its usual telemetry: GLOBAL_POSITION_INT at 5 Hz, SYS_STATUS, ATTITUDE,
+#   VFR_HUD, MISSION_CURRENT, ... at 1-2 Hz, HEARTBEAT at 1 Hz: ~16 frames
+#   a second). This VM is the ground station: one `udpin` link per network,
+#   a vehicle process per vehicle, the views every reader reads.
+#
+#   Once every vehicle is discovered and its telemetry flows, the bench
+#   measures over WINDOW seconds (default 10): frames received a second,
+#   the CPU of this VM (all its threads: /proc/self/stat) per frame and per
+#   vehicle, and the simulator's CPU beside it. When the simulator stops it
+#   says how many frames its vehicles sent: the frames the links did not
+#   receive are the drops, and the kernel's count of datagrams it dropped
+#   for want of room in a socket's buffer (/proc/net/snmp, UDP
+#   RcvbufErrors, machine-wide) says where they went.
+#
+#   MIX_ENV=prod mix run bench/intake.exs     (VEHICLES=500 NETWORKS=2 WINDOW=5 for a smaller one)
+
+alias Dolphin.Link
+alias Dolphin.Link.Connection
+
+vehicles = String.to_integer(System.get_env("VEHICLES", "2000"))
+networks = String.to_integer(System.get_env("NETWORKS", "8"))
+window_s = String.to_integer(System.get_env("WINDOW", "10"))
+
+defmodule Bench.Intake do
+  # CPU milliseconds of an OS process (user + system), from /proc.
+  def cpu_ms(pid) do
+    [utime, stime] = File.read!("/proc/#{pid}/stat") |> String.split(" ") |> Enum.slice(13, 2) |> Enum.map(&String.to_integer/1)
+    (utime + stime) * 10
+  end
+
+  def rcvbuf_errors do
+    [names, values | _] = File.read!("/proc/net/snmp") |> String.split("\n") |> Enum.filter(&String.starts_with?(&1, "Udp:"))
+    Enum.zip(String.split(names), String.split(values)) |> Map.new() |> Map.fetch!("RcvbufErrors") |> String.to_integer()
+  end
+
+  # One udpin link per network, on consecutive ports of 127.0.0.1.
+  def open_links(networks) do
+    base = 20_000 + :rand.uniform(40_000)
+
+    results = for k <- 1..networks, do: Link.connect("udpin:127.0.0.1:#{base + k - 1}", name: "net#{k}")
+
+    if Enum.all?(results, &match?({:ok, _}, &1)) do
+      {base, for(k <- 1..networks, do: "net#{k}")}
+    else
+      for {{:ok, _}, k} <- Enum.with_index(results, 1), do: Link.disconnect("net#{k}")
+      open_links(networks)
+    end
+  end
+
+  def frames(links), do: links |> Enum.map(&Connection.info(&1).stats.frames) |> Enum.sum()
+
+  # Lines of the simulator's output, as they come, until `pattern` matches one.
+  def await_line(port, pattern, timeout_ms) do
+    receive do
+      {^port, {:data, {:eol, line}}} -> if line =~ pattern, do: line, else: await_line(port, pattern, timeout_ms)
+      {^port, {:data, {:noeol, _}}} -> await_line(port, pattern, timeout_ms)
+      {^port, {:exit_status, status}} -> raise "the simulator exited (#{status}) before printing #{inspect(pattern)}"
+    after
+      timeout_ms -> raise "the simulator printed no #{inspect(pattern)} within #{timeout_ms} ms"
+    end
+  end
+
+  def wait_until(what, timeout_ms, fun) do
+    deadline = System.monotonic_time(:millisecond) + timeout_ms
+
+    Stream.repeatedly(fn -> Process.sleep(500) && fun.() end)
+    |> Enum.find(fn ok -> ok or System.monotonic_time(:millisecond) > deadline end) ||
+      raise "#{what}: not within #{div(timeout_ms, 1000)} s"
+  end
+end
+
+alias Bench.Intake
+
+{base, links} = Intake.open_links(networks)
+rcvbuf0 = Intake.rcvbuf_errors()
+
+# Discovery and the telemetry requests take a while for thousands of
+# vehicles: the simulator runs long enough for that and the window.
+run_s = 90 + window_s
+mix = System.find_executable("mix")
+args = ~w(dolphin.sim --count #{vehicles} --networks #{networks} --gcs udpout:127.0.0.1:#{base} --for #{run_s})
+sim = Port.open({:spawn_executable, mix}, [:binary, :exit_status, {:line, 4096}, args: args, env: [{~c"MIX_ENV", ~c"#{Mix.env()}"}]])
+{:os_pid, sim_pid} = Port.info(sim, :os_pid)
+Intake.await_line(sim, ~r/^simulating/, 120_000)
+
+IO.puts("telemetry intake: #{vehicles} simulated vehicles over #{networks} networks (another OS process), #{System.schedulers_online()} schedulers, OTP #{System.otp_release()}")
+
+started = System.monotonic_time(:millisecond)
+Intake.wait_until("every vehicle discovered", 80_000, fn ->
+  n = length(Dolphin.Vehicles.list())
+  if System.get_env("DEBUG"), do: IO.puts("  #{n} discovered")
+  n >= vehicles
+end)
+discovered_s = (System.monotonic_time(:millisecond) - started) / 1000
+
+# Telemetry flowing: the rate of frames steady (two 2-second rates within 5 %).
+rate = fn ->
+  f0 = Intake.frames(links)
+  Process.sleep(2_000)
+  (Intake.frames(links) - f0) / 2
+end
+
+Intake.wait_until("the telemetry steady", 60_000, fn ->
+  {a, b} = {rate.(), rate.()}
+  a > 0 and abs(a - b) / a < 0.05
+end)
+
+frames0 = Intake.frames(links)
+cpu0 = Intake.cpu_ms(System.pid())
+sim_cpu0 = Intake.cpu_ms(sim_pid)
+wall0 = System.monotonic_time(:millisecond)
+Process.sleep(window_s * 1000)
+frames1 = Intake.frames(links)
+cpu1 = Intake.cpu_ms(System.pid())
+sim_cpu1 = Intake.cpu_ms(sim_pid)
+wall1 = System.monotonic_time(:millisecond)
+
+frames = frames1 - frames0
+wall_ms = wall1 - wall0
+cpu_ms = cpu1 - cpu0
+
+# The simulator's end: how many frames its vehicles sent.
+[_, sent] = Regex.run(~r/sent (\d+) frames/, Intake.await_line(sim, ~r/sent \d+ frames/, (run_s + 120) * 1000))
+sent = String.to_integer(sent)
+receive do: ({^sim, {:exit_status, _}} -> :ok), after: (30_000 -> :ok)
+# What was still in a socket or a mailbox when the simulator stopped.
+Process.sleep(1_000)
+received = Intake.frames(links)
+kernel_drops = Intake.rcvbuf_errors() - rcvbuf0
+
+IO.puts("""
+  all #{vehicles} discovered in #{Float.round(discovered_s, 1)} s; measured over #{wall_ms} ms once their telemetry was steady:
+  #{frames} frames received (#{round(frames * 1000 / wall_ms)} frames/s, #{Float.round(frames * 1000 / wall_ms / vehicles, 1)} a vehicle)
+  ground station CPU #{cpu_ms} ms = #{Float.round(cpu_ms / wall_ms * 100, 1)} % of one core, #{Float.round(cpu_ms / wall_ms * 100 / vehicles, 4)} % a vehicle, \
+#{Float.round(cpu_ms * 1000 / max(frames, 1), 2)} µs of CPU a frame
+  simulator CPU #{Float.round((sim_cpu1 - sim_cpu0) / wall_ms * 100, 1)} % of one core
+  over the whole run: #{sent} frames sent, #{received} received, #{sent - received} lost (#{Float.round(max(sent - received, 0) * 100 / max(sent, 1), 3)} %); \
+the kernel dropped #{kernel_drops} datagram(s) for want of socket buffer (machine-wide)
+""")
