@@ -202,6 +202,13 @@ defmodule Dolphin.Examples.ScenariosTest.ContinuousRelay do
 
   @relay_reach 30 + 20
 
+  # The vehicles' events from `from_ms` on, one a line (a failure's account).
+  defp around(all, from_ms) do
+    all
+    |> Enum.filter(&(&1["t_ms"] >= from_ms and &1["event"] in ~w(task_started task_finished condition_met armed disarmed mode_changed separation_hold separation_clear)))
+    |> Enum.map_join("\n", &inspect(Map.drop(&1, ["run", "parent_id"])))
+  end
+
   test "the continuous relay keeps a vehicle on station over each area every second, from the first arrival to the end",
        %{tmp_dir: dir} do
     # 13 minutes: three shifts of about 165 s each after the first arrival
@@ -260,7 +267,8 @@ defmodule Dolphin.Examples.ScenariosTest.ContinuousRelay do
         assert {_, covered_to} = hd(merged)
 
         assert covered_to >= run_end - 1_000,
-               "the #{name} area was watched up to #{covered_to} ms, the run went on to #{run_end} ms"
+               "the #{name} area was watched up to #{covered_to} ms, the run went on to #{run_end} ms; " <>
+                 "what the vehicles did from a minute before (events' clock, ms):\n" <> around(all, covered_to - 60_000)
 
         # The ring went round: a vehicle watched, landed, and watched again (it
         # takes off only at 90 %: it recharged).
