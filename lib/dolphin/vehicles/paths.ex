@@ -62,9 +62,13 @@ defmodule Dolphin.Vehicles.Paths do
   as the vehicle is (`uid/1`; a restarted process is given it back with
   `identified/3`). `identity_asks/3` names the paths to ask for their
   autopilot's unique id — the path in use until the vehicle's is known, and
-  each pending path — every second of clock time (and at least half a second
-  of real time: at a speed-up an autopilot still needs its time to answer),
-  at most 5 times each (the path in use again when a new path is pending);
+  each pending path — at most 5 times each (the path in use again when a new
+  path is pending), a second of clock time apart at least and, in real
+  time, half a second after the first ask, doubling after each (an
+  autopilot on a loaded host answers late; at a speed-up it still needs its
+  time; two vehicles taken for one are worse than a path decided late): a
+  path that never answers is given up 15.5 s of real time after its first
+  ask at the soonest;
   `identified/3` records what a path's autopilot answered; `settle/3` decides:
 
     * the vehicle's and the path's ids known, non-zero and different:
@@ -96,7 +100,8 @@ defmodule Dolphin.Vehicles.Paths do
   # How long (real ms) another path must stay clearly better before it takes over.
   @better_for_real_ms 2_000
   # Asking a path for its autopilot's uid: this many times, this often (clock
-  # ms, and at least the real floor), before taking it as unidentifiable.
+  # ms, and at least the real floor, doubled after each ask), before taking
+  # it as unidentifiable.
   @identity_asks 5
   @identity_ask_every_ms 1_000
   @identity_ask_real_floor_ms 500
@@ -228,8 +233,8 @@ defmodule Dolphin.Vehicles.Paths do
   defp ask_due?(%{asks: asks}, _now_ms, _real_ms) when asks >= @identity_asks, do: false
   defp ask_due?(path, now_ms, real_ms), do: waited?(path, now_ms, real_ms)
 
-  defp waited?(%{asked: {at, real_at}}, now_ms, real_ms),
-    do: now_ms - at >= @identity_ask_every_ms and real_ms - real_at >= @identity_ask_real_floor_ms
+  defp waited?(%{asked: {at, real_at}, asks: asks}, now_ms, real_ms),
+    do: now_ms - at >= @identity_ask_every_ms and real_ms - real_at >= @identity_ask_real_floor_ms * Integer.pow(2, max(asks - 1, 0))
 
   # Asked as often as it is asked, and no answer in the last wait.
   defp gave_up?(%{uid: nil, asks: asks} = path, now_ms, real_ms), do: asks >= @identity_asks and waited?(path, now_ms, real_ms)

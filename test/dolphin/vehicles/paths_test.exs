@@ -224,14 +224,18 @@ defmodule Dolphin.Vehicles.PathsTest do
       {:fresh, p} = Paths.heard(p, :a, frame(1), 30, 30)
       assert [%{via: :a, identity: :same}, %{via: :b, identity: :pending, uid: nil}] = Paths.list(p)
 
-      # Both asked (a again: its id is not known yet), then every second of clock time.
+      # Both asked (a again: its id is not known yet), then a second of clock
+      # time apart, and half a second of real time, then one, then two...
       assert {[:b, :a], p} = Paths.identity_asks(p, 30, 30)
       assert {[], p} = Paths.identity_asks(p, 500, 500)
       assert {[:b, :a], p} = Paths.identity_asks(p, 1_030, 530)
       assert {p, []} = Paths.settle(p, 1_030, 530)
       p = Paths.identified(p, :a, 7)
       assert Paths.uid(p) == 7
-      assert {[:b], p} = Paths.identity_asks(p, 2_030, 1_030)
+      assert {[], p} = Paths.identity_asks(p, 2_030, 1_029)
+      assert {[:b], p} = Paths.identity_asks(p, 2_030, 1_530)
+      assert {[], p} = Paths.identity_asks(p, 3_030, 3_529)
+      assert {[:b], p} = Paths.identity_asks(p, 3_030, 3_530)
 
       # The path in use silent, b heard: a stays (b is not known to be the vehicle).
       {:unidentified, p} = Paths.heard(p, :b, frame(2), 5_000, 5_000)
@@ -268,20 +272,26 @@ defmodule Dolphin.Vehicles.PathsTest do
       {:unidentified, p} = Paths.heard(Paths.new(:a, 0, 0), :b, frame(0, 0, 2), 0, 0)
       assert {_, [b: :unidentifiable]} = p |> Paths.identified(:a, 7) |> Paths.identified(:b, 0) |> Paths.settle(0, 0)
 
-      # No answer: asked 5 times, a second apart, then taken for the same.
+      # No answer: asked 5 times, 1, 1, 2 and 4 s apart (at speed-up 1),
+      # then 8 s more, then taken for the same.
       {:unidentified, p} = Paths.heard(Paths.new(:a, 0, 0), :b, frame(0, 0, 2), 0, 0)
 
       p =
-        Enum.reduce(0..4, p, fn k, p ->
+        [0, 1_000, 2_000, 4_000, 8_000]
+        |> Enum.with_index()
+        |> Enum.reduce(p, fn {t, k}, p ->
           # (a heard all along: its silence would end the wait.)
-          {:fresh, p} = Paths.heard(p, :a, frame(k), k * 1_000, k * 1_000)
-          assert {[:b, :a], p} = Paths.identity_asks(p, k * 1_000, k * 1_000)
-          assert {p, []} = Paths.settle(p, k * 1_000, k * 1_000)
+          {:fresh, p} = Paths.heard(p, :a, frame(k), t, t)
+          assert {[:b, :a], p} = Paths.identity_asks(p, t, t)
+          assert {p, []} = Paths.settle(p, t, t)
           p
         end)
 
-      assert {[], p} = Paths.identity_asks(p, 5_000, 5_000)
-      assert {p, [b: :unidentifiable]} = Paths.settle(p, 5_000, 5_000)
+      {:fresh, p} = Paths.heard(p, :a, frame(5), 15_000, 15_000)
+      assert {[], p} = Paths.identity_asks(p, 15_000, 15_000)
+      assert {p, []} = Paths.settle(p, 15_000, 15_000)
+      assert {[], p} = Paths.identity_asks(p, 16_000, 16_000)
+      assert {p, [b: :unidentifiable]} = Paths.settle(p, 16_000, 16_000)
       assert [%{identity: :same}, %{identity: :same}] = Paths.list(p)
     end
   end
