@@ -92,11 +92,20 @@ Intake.await_line(sim, ~r/^simulating/, 120_000)
 IO.puts("telemetry intake: #{vehicles} simulated vehicles over #{networks} networks (another OS process), #{System.schedulers_online()} schedulers, OTP #{System.otp_release()}")
 
 started = System.monotonic_time(:millisecond)
-Intake.wait_until("every vehicle discovered", 80_000, fn ->
-  n = length(Dolphin.Vehicles.list())
-  if System.get_env("DEBUG"), do: IO.puts("  #{n} discovered")
-  n >= vehicles
-end)
+try do
+  Intake.wait_until("every vehicle discovered", 80_000, fn ->
+    n = length(Dolphin.Vehicles.list())
+    if System.get_env("DEBUG"), do: IO.puts("  #{n} discovered")
+    n >= vehicles
+  end)
+rescue
+  e ->
+    # Which system ids were heard fewer times than there are networks.
+    short = Dolphin.Vehicles.list() |> Enum.frequencies_by(&Dolphin.Vehicles.Id.sysid/1) |> Enum.filter(fn {_, n} -> n < networks end)
+    IO.puts("  system ids heard on fewer than #{networks} networks: #{inspect(short)}")
+    for {sysid, _} <- Enum.take(short, 2), do: IO.inspect(:sys.get_state(Dolphin.Vehicles.whereis(sysid)).paths, label: "  paths of #{sysid}")
+    reraise e, __STACKTRACE__
+end
 discovered_s = (System.monotonic_time(:millisecond) - started) / 1000
 
 # Telemetry flowing: the rate of frames steady (two 2-second rates within 5 %).
@@ -111,17 +120,38 @@ Intake.wait_until("the telemetry steady", 60_000, fn ->
   a > 0 and abs(a - b) / a < 0.05
 end)
 
+reductions = fn -> for pid <- Process.list(), {:reductions, r} <- [Process.info(pid, :reductions)], into: %{}, do: {pid, r} end
+red0 = if System.get_env("DEBUG"), do: reductions.()
 frames0 = Intake.frames(links)
 cpu0 = Intake.cpu_ms(System.pid())
 sim_cpu0 = Intake.cpu_ms(sim_pid)
 wall0 = System.monotonic_time(:millisecond)
-Process.sleep(window_s * 1000)
+# PERF=FILE: a perf profile of this VM over the window (run with ERL_FLAGS="+JPperf true").
+if perf = System.get_env("PERF"), do: System.cmd("perf", ["record", "-F", "999", "-g", "-p", System.pid(), "-o", perf, "--", "sleep", "#{window_s}"], stderr_to_stdout: true), else: Process.sleep(window_s * 1000)
 frames1 = Intake.frames(links)
 cpu1 = Intake.cpu_ms(System.pid())
 sim_cpu1 = Intake.cpu_ms(sim_pid)
 wall1 = System.monotonic_time(:millisecond)
 
 frames = frames1 - frames0
+
+if red0 do
+  # Where the work went: reductions by kind of process.
+  kind = fn pid ->
+    case Process.info(pid, [:dictionary, :registered_name, :initial_call]) do
+      nil -> :gone
+      info -> info[:dictionary][:"$initial_call"] || info[:registered_name] || info[:initial_call]
+    end
+  end
+
+  reductions.()
+  |> Enum.map(fn {pid, r} -> {kind.(pid), r - Map.get(red0, pid, 0)} end)
+  |> Enum.group_by(&elem(&1, 0), &elem(&1, 1))
+  |> Enum.map(fn {k, rs} -> {k, Enum.sum(rs), length(rs)} end)
+  |> Enum.sort_by(&(-elem(&1, 1)))
+  |> Enum.take(12)
+  |> Enum.each(fn {k, r, n} -> IO.puts("  #{inspect(k)}: #{r} reductions in #{n} process(es)") end)
+end
 wall_ms = wall1 - wall0
 cpu_ms = cpu1 - cpu0
 

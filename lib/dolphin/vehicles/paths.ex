@@ -77,8 +77,9 @@ defmodule Dolphin.Vehicles.Paths do
       the path to that other vehicle, `Dolphin.Vehicles.Id`);
     * the same id: the same vehicle;
     * no id to compare (an autopilot that reports 0; one that does not
-      answer 5 times; the vehicle's own not known while its path in use is
-      silent or did not answer): taken to be the same vehicle, as a
+      answer 5 times; the vehicle's own not known while its path in use did
+      not answer or has been quiet for 5 s of clock time and 3 s of real
+      time): taken to be the same vehicle, as a
       redundant radio is — two vehicles that cannot be told apart are
       not.
   """
@@ -105,6 +106,10 @@ defmodule Dolphin.Vehicles.Paths do
   @identity_asks 5
   @identity_ask_every_ms 1_000
   @identity_ask_real_floor_ms 500
+  # The path in use quiet this long (clock, and real) before a pending path
+  # is decided without the vehicle's own id.
+  @identity_silence_ms 5_000
+  @identity_silence_real_ms 3_000
 
   defstruct paths: %{}, in_use: nil, recent: %{}, fresh: %{}, challenger: nil, uid: nil
 
@@ -251,7 +256,7 @@ defmodule Dolphin.Vehicles.Paths do
   def settle(%__MODULE__{} = p, now_ms, real_ms) do
     # The vehicle's id cannot come: its path in use did not answer, or is silent.
     own = p.paths[p.in_use]
-    own_unknowable? = p.uid == nil and (gave_up?(own, now_ms, real_ms) or silent?(own, now_ms, real_ms))
+    own_unknowable? = p.uid == nil and (gave_up?(own, now_ms, real_ms) or gone_quiet?(own, now_ms, real_ms))
 
     decisions =
       for {via, %{identity: :pending} = path} <- Enum.sort(p.paths),
@@ -274,6 +279,12 @@ defmodule Dolphin.Vehicles.Paths do
   defp decide(uid, own, _over?) when is_integer(uid) and is_integer(own), do: {:refused, uid, own}
   defp decide(_uid, _own, true), do: :unidentifiable
   defp decide(_uid, _own, false), do: nil
+
+  # Quiet long enough for its autopilot's id not to come: longer than a path
+  # is silent, as a vehicle heard only by its 1 Hz heartbeat (before it is
+  # asked for telemetry) on a loaded host is at times; a vehicle rebooting
+  # onto a new address is quiet far longer than this before it is heard there.
+  defp gone_quiet?(path, now_ms, real_ms), do: now_ms - path.last_heard_ms > @identity_silence_ms and real_ms - path.last_heard_real_ms > @identity_silence_real_ms
 
   defp silent?(path, now_ms, real_ms), do: now_ms - path.last_heard_ms > @silence_ms and real_ms - path.last_heard_real_ms > @silence_real_floor_ms
 

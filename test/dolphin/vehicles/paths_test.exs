@@ -244,9 +244,18 @@ defmodule Dolphin.Vehicles.PathsTest do
       assert {_, []} = Paths.settle(p, 5_000, 5_000)
     end
 
-    test "the vehicle's own id unknown and its path in use silent (a reboot onto a new port): a new path that answers joins at once" do
-      {:unidentified, p} = Paths.heard(Paths.new(:a, 0, 0), :b, frame(0, 0, 2), 5_000, 5_000)
-      assert {_, [b: :unidentifiable]} = p |> Paths.identified(:b, 9) |> Paths.settle(5_000, 5_000)
+    test "the vehicle's own id unknown and its path in use quiet (a reboot onto a new port): a new path that answers joins" do
+      {:unidentified, p} = Paths.heard(Paths.new(:a, 0, 0), :b, frame(0, 0, 2), 6_000, 6_000)
+      assert {_, [b: :unidentifiable]} = p |> Paths.identified(:b, 9) |> Paths.settle(6_000, 6_000)
+    end
+
+    test "the path in use quiet for two heartbeats (a loaded host): a new path waits for the vehicle's own id" do
+      {:unidentified, p} = Paths.heard(Paths.new(:a, 0, 0), :b, frame(0, 0, 2), 2_000, 2_000)
+      p = Paths.identified(p, :b, 9)
+      assert {p, []} = Paths.settle(p, 2_500, 2_500)
+      # Heard again, and its id another one: another vehicle.
+      {:fresh, p} = Paths.heard(p, :a, frame(1), 2_600, 2_600)
+      assert {_, [b: {:refused, 9, 7}]} = p |> Paths.identified(:a, 7) |> Paths.settle(2_700, 2_700)
     end
 
     test "two unique ids: another vehicle, refused for good and sent nothing" do
