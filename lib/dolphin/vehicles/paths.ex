@@ -61,14 +61,14 @@ defmodule Dolphin.Vehicles.Paths do
   `Dolphin.Vehicles.State.unique_id/1`) is the vehicle's, kept for as long
   as the vehicle is (`uid/1`; a restarted process is given it back with
   `identified/3`). `identity_asks/3` names the paths to ask for their
-  autopilot's unique id — the path in use until the vehicle's is known, and
-  each pending path — at most 5 times each (the path in use again when a new
-  path is pending), a second of clock time apart at least and, in real
-  time, half a second after the first ask, doubling after each (an
+  autopilot's unique id — each pending path, at most 5 times, and the path
+  in use until the vehicle's is known (asked anew when a new path is
+  pending) —, a second of clock time apart at least and, in real time,
+  half a second after the first ask, doubling after each up to 8 s (an
   autopilot on a loaded host answers late; at a speed-up it still needs its
   time; two vehicles taken for one are worse than a path decided late): a
-  path that never answers is given up 15.5 s of real time after its first
-  ask at the soonest;
+  pending path that never answers is given up 15.5 s of real time after
+  its first ask at the soonest;
   `identified/3` records what a path's autopilot answered; `settle/3` decides:
 
     * the vehicle's and the path's ids known, non-zero and different:
@@ -77,9 +77,9 @@ defmodule Dolphin.Vehicles.Paths do
       the path to that other vehicle, `Dolphin.Vehicles.Id`);
     * the same id: the same vehicle;
     * no id to compare (an autopilot that reports 0; one that does not
-      answer 5 times; the vehicle's own not known while its path in use did
-      not answer or has been quiet for 5 s of clock time and 3 s of real
-      time): taken to be the same vehicle, as a
+      answer 5 times; the vehicle's own not known while its path in use has
+      been quiet for 5 s of clock time and 3 s of real time): taken to be
+      the same vehicle, as a
       redundant radio is — two vehicles that cannot be told apart are
       not.
   """
@@ -228,7 +228,9 @@ defmodule Dolphin.Vehicles.Paths do
   def identity_asks(%__MODULE__{} = p, now_ms, real_ms) do
     pending = for {via, %{identity: :pending, uid: nil} = path} <- p.paths, ask_due?(path, now_ms, real_ms), do: via
     own = p.paths[p.in_use]
-    asks = Enum.sort(pending) ++ if(p.uid == nil and ask_due?(own, now_ms, real_ms), do: [p.in_use], else: [])
+    # The vehicle's own id: 5 times, and for as long as a path waits for it.
+    waiting? = Enum.any?(p.paths, fn {_, path} -> path.identity == :pending end)
+    asks = Enum.sort(pending) ++ if(p.uid == nil and (ask_due?(own, now_ms, real_ms) or (waiting? and waited?(own, now_ms, real_ms))), do: [p.in_use], else: [])
 
     paths = Enum.reduce(asks, p.paths, fn via, paths -> Map.update!(paths, via, &%{&1 | asks: &1.asks + 1, asked: {now_ms, real_ms}}) end)
     {asks, %{p | paths: paths}}
@@ -239,7 +241,7 @@ defmodule Dolphin.Vehicles.Paths do
   defp ask_due?(path, now_ms, real_ms), do: waited?(path, now_ms, real_ms)
 
   defp waited?(%{asked: {at, real_at}, asks: asks}, now_ms, real_ms),
-    do: now_ms - at >= @identity_ask_every_ms and real_ms - real_at >= @identity_ask_real_floor_ms * Integer.pow(2, max(asks - 1, 0))
+    do: now_ms - at >= @identity_ask_every_ms and real_ms - real_at >= @identity_ask_real_floor_ms * Integer.pow(2, min(max(asks - 1, 0), @identity_asks - 1))
 
   # Asked as often as it is asked, and no answer in the last wait.
   defp gave_up?(%{uid: nil, asks: asks} = path, now_ms, real_ms), do: asks >= @identity_asks and waited?(path, now_ms, real_ms)
@@ -254,9 +256,12 @@ defmodule Dolphin.Vehicles.Paths do
   """
   @spec settle(t(), integer(), integer()) :: {t(), [{via(), :same | :unidentifiable | {:refused, non_neg_integer(), non_neg_integer()}}]}
   def settle(%__MODULE__{} = p, now_ms, real_ms) do
-    # The vehicle's id cannot come: its path in use did not answer, or is silent.
+    # The vehicle's id cannot come: its path in use has gone quiet. (Heard
+    # but not answering — a lossy link, an autopilot too busy — it is asked
+    # again: a pending path that answered waits for it, a path that did not
+    # is given up on by itself.)
     own = p.paths[p.in_use]
-    own_unknowable? = p.uid == nil and (gave_up?(own, now_ms, real_ms) or gone_quiet?(own, now_ms, real_ms))
+    own_unknowable? = p.uid == nil and gone_quiet?(own, now_ms, real_ms)
 
     decisions =
       for {via, %{identity: :pending} = path} <- Enum.sort(p.paths),

@@ -200,7 +200,7 @@ defmodule Mix.Tasks.Dolphin.Sim do
     stop = fn ->
       sent =
         sysids
-        |> Enum.map(&Dolphin.Sim.info/1)
+        |> infos()
         |> Enum.reduce(0, fn
           {:ok, i}, n -> n + i.sent
           _gone, n -> n
@@ -214,26 +214,49 @@ defmodule Mix.Tasks.Dolphin.Sim do
   end
 
   @listed 10
+  @info_timeout_ms 5_000
 
   defp status(ids) when length(ids) <= @listed, do: Enum.each(ids, &vehicle_status/1)
 
   # A large fleet: one line that counts the vehicles by mode and state.
   defp status(ids) do
-    infos = for id <- ids, {:ok, i} <- [Dolphin.Sim.info(id)], do: i
+    answers = infos(ids)
+    infos = for {:ok, i} <- answers, do: i
     groups = infos |> Enum.frequencies_by(&"#{&1.mode}#{if &1.armed, do: " armed", else: ""} #{&1.landed}") |> Enum.sort_by(fn {text, n} -> {-n, text} end)
     lag = infos |> Enum.map(& &1.lag_ms) |> Enum.max(fn -> 0 end)
-    gone = length(ids) - length(infos)
+    gone = Enum.count(answers, &(&1 == {:error, :unknown_vehicle}))
+    busy = Enum.count(answers, &(&1 == {:error, :busy}))
 
     Mix.shell().info(
       "#{length(infos)} vehicles: " <>
-        Enum.map_join(groups, ", ", fn {text, n} -> "#{n} #{text}" end) <> "; the furthest behind the clock by #{lag} ms" <> if(gone > 0, do: "; #{gone} gone", else: "")
+        Enum.map_join(groups, ", ", fn {text, n} -> "#{n} #{text}" end) <>
+        "; the furthest behind the clock by #{lag} ms" <>
+        if(gone > 0, do: "; #{gone} gone", else: "") <> if(busy > 0, do: "; #{busy} too busy to answer within #{div(@info_timeout_ms, 1000)} s", else: "")
     )
+  end
+
+  # Each vehicle's info, asked of many at once; a vehicle too busy to answer
+  # in time (a fleet larger than the host can fly) is said to be, and never
+  # ends the simulation.
+  defp infos(ids) do
+    ids
+    |> Task.async_stream(&info/1, max_concurrency: 64, timeout: @info_timeout_ms + 1_000, on_timeout: :kill_task)
+    |> Enum.map(fn
+      {:ok, answer} -> answer
+      {:exit, _} -> {:error, :busy}
+    end)
+  end
+
+  defp info(id) do
+    Dolphin.Sim.info(id)
+  catch
+    :exit, _ -> {:error, :busy}
   end
 
   defp vehicle_status(id) do
     name = if network(id), do: "vehicle #{sysid(id)} of network #{network(id)}", else: "vehicle #{id}"
 
-    case Dolphin.Sim.info(id) do
+    case info(id) do
       {:ok, i} ->
         p = i.position
 
@@ -245,6 +268,9 @@ defmodule Mix.Tasks.Dolphin.Sim do
 
       {:error, :unknown_vehicle} ->
         Mix.shell().info("#{name}: gone")
+
+      {:error, :busy} ->
+        Mix.shell().info("#{name}: too busy to answer within #{div(@info_timeout_ms, 1000)} s")
     end
   end
 

@@ -299,9 +299,28 @@ defmodule Dolphin.Vehicles.PathsTest do
       {:fresh, p} = Paths.heard(p, :a, frame(5), 15_000, 15_000)
       assert {[], p} = Paths.identity_asks(p, 15_000, 15_000)
       assert {p, []} = Paths.settle(p, 15_000, 15_000)
-      assert {[], p} = Paths.identity_asks(p, 16_000, 16_000)
+      # a, asked for as long as b waits for it (8 s apart now); b given up on.
+      assert {[:a], p} = Paths.identity_asks(p, 16_000, 16_000)
       assert {p, [b: :unidentifiable]} = Paths.settle(p, 16_000, 16_000)
       assert [%{identity: :same}, %{identity: :same}] = Paths.list(p)
+      # Nothing waits for a's id any more: its 5 asks and this one were all.
+      assert {[], _} = Paths.identity_asks(p, 60_000, 60_000)
+    end
+
+    test "a new path that answers waits for the vehicle's own id as long as its path in use is heard (a busy autopilot, a lossy link)" do
+      {:unidentified, p} = Paths.heard(Paths.new(:a, 0, 0), :b, frame(0, 0, 2), 0, 0)
+      p = Paths.identified(p, :b, 9)
+
+      p =
+        Enum.reduce(1..60, p, fn s, p ->
+          {:fresh, p} = Paths.heard(p, :a, frame(s), s * 1_000, s * 1_000)
+          {_asks, p} = Paths.identity_asks(p, s * 1_000, s * 1_000)
+          assert {p, []} = Paths.settle(p, s * 1_000, s * 1_000)
+          p
+        end)
+
+      # A minute later a's autopilot answers: two vehicles.
+      assert {_, [b: {:refused, 9, 7}]} = p |> Paths.identified(:a, 7) |> Paths.settle(60_500, 60_500)
     end
   end
 end
