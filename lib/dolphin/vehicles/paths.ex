@@ -78,7 +78,7 @@ defmodule Dolphin.Vehicles.Paths do
     * the same id: the same vehicle;
     * no id to compare (an autopilot that reports 0; one that does not
       answer 5 times; the vehicle's own not known while its path in use has
-      been quiet for 5 s of clock time and 3 s of real time): taken to be
+      been quiet for 15 s of clock time and 10 s of real time): taken to be
       the same vehicle, as a
       redundant radio is — two vehicles that cannot be told apart are
       not.
@@ -108,8 +108,8 @@ defmodule Dolphin.Vehicles.Paths do
   @identity_ask_real_floor_ms 500
   # The path in use quiet this long (clock, and real) before a pending path
   # is decided without the vehicle's own id.
-  @identity_silence_ms 5_000
-  @identity_silence_real_ms 3_000
+  @identity_silence_ms 15_000
+  @identity_silence_real_ms 10_000
 
   defstruct paths: %{}, in_use: nil, recent: %{}, fresh: %{}, challenger: nil, uid: nil
 

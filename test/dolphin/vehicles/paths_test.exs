@@ -245,8 +245,8 @@ defmodule Dolphin.Vehicles.PathsTest do
     end
 
     test "the vehicle's own id unknown and its path in use quiet (a reboot onto a new port): a new path that answers joins" do
-      {:unidentified, p} = Paths.heard(Paths.new(:a, 0, 0), :b, frame(0, 0, 2), 6_000, 6_000)
-      assert {_, [b: :unidentifiable]} = p |> Paths.identified(:b, 9) |> Paths.settle(6_000, 6_000)
+      {:unidentified, p} = Paths.heard(Paths.new(:a, 0, 0), :b, frame(0, 0, 2), 16_000, 16_000)
+      assert {_, [b: :unidentifiable]} = p |> Paths.identified(:b, 9) |> Paths.settle(16_000, 16_000)
     end
 
     test "the path in use quiet for two heartbeats (a loaded host): a new path waits for the vehicle's own id" do
