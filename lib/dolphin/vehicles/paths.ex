@@ -218,6 +218,10 @@ defmodule Dolphin.Vehicles.Paths do
   @spec uid(t()) :: non_neg_integer() | nil
   def uid(%__MODULE__{uid: uid}), do: uid
 
+  @doc "Whether the vehicle has been heard on more than one path."
+  @spec several?(t()) :: boolean()
+  def several?(%__MODULE__{paths: paths}), do: map_size(paths) > 1
+
   @doc """
   The paths to ask now (at `now_ms` clock, `real_ms` real) for their
   autopilot's unique id, counted as asked: the pending ones whose uid is not

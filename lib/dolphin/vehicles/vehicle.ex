@@ -19,7 +19,25 @@ defmodule Dolphin.Vehicles.Vehicle do
   @lost_floor_real_ms 3_000
   @late_real_ms 100
 
-  defstruct [:id, :sysid, :network, :paths, :judge_due, :state, :heard, :timeout_ms, :check_due_ms, :check_timer, :requests_left, exact_timeout?: false, lost: false, view: nil, ops: %{}, queued: %{}, sensor_limits: %{}]
+  defstruct [
+    :id,
+    :sysid,
+    :network,
+    :paths,
+    :judge_due,
+    :state,
+    :heard,
+    :timeout_ms,
+    :check_due_ms,
+    :check_timer,
+    :requests_left,
+    exact_timeout?: false,
+    lost: false,
+    view: nil,
+    ops: %{},
+    queued: %{},
+    sensor_limits: %{}
+  ]
 
   # The process's state. `paths`: one path per link (and address) the vehicle
   # is heard on (Dolphin.Vehicles.Paths), the one it was discovered on in
@@ -80,9 +98,14 @@ defmodule Dolphin.Vehicles.Vehicle do
 
   # The paths are judged this often (clock ms; at least every @judge_real_ms
   # of real time): a path in use that goes silent (1.5 s, see
-  # Dolphin.Vehicles.Paths) is replaced within 2 s of clock time.
+  # Dolphin.Vehicles.Paths) is replaced within 2 s of clock time. A vehicle
+  # heard on one path has none to change to: its path is judged once a
+  # second (its silence shown, its autopilot asked for its id), a timer
+  # that a fleet of thousands would otherwise run ten times a second each.
   @judge_every_ms 100
   @judge_real_ms 50
+  @judge_alone_ms 1_000
+  @judge_alone_real_ms 250
 
   def child_spec({id, _link, _opts} = args),
     do: %{id: {__MODULE__, id}, start: {__MODULE__, :start_link, [args]}, restart: :permanent}
@@ -105,7 +128,6 @@ defmodule Dolphin.Vehicles.Vehicle do
     check_timer = Clock.send_after(self(), :check_link, check_period(timeout))
     now = Clock.now_ms()
     real = real_ms()
-    Process.send_after(self(), :judge_paths, judge_period())
 
     heard = Views.heard_cell(id)
     Views.heard(heard, now)
@@ -115,6 +137,7 @@ defmodule Dolphin.Vehicles.Vehicle do
     uid = last_view && last_view.uid
     paths = Paths.new(link, now, real)
     paths = if uid, do: Paths.identified(paths, link, uid), else: paths
+    Process.send_after(self(), :judge_paths, judge_period(paths))
 
     {:ok,
      %__MODULE__{
@@ -124,7 +147,7 @@ defmodule Dolphin.Vehicles.Vehicle do
        heard: heard,
        paths: paths,
        view: last_view,
-       judge_due: real + judge_period(),
+       judge_due: real + judge_period(paths),
        # Seen now (it was just heard, or its process restarted): silence from
        # here on makes it lost.
        state: State.watch_sensors(%{put_in(State.new(id).link.last_seen_ms, now) | uid: uid}, Readings.watch(Settings.sensors())),
@@ -179,7 +202,9 @@ defmodule Dolphin.Vehicles.Vehicle do
     # limit already passed marks its reading at once).
     now = Clock.now_ms()
 
-    for {source, %{at: at}} <- s.state.sensors, %{stale_after: ms_list} <- [Map.get(limits, source)], ms <- ms_list,
+    for {source, %{at: at}} <- s.state.sensors,
+        %{stale_after: ms_list} <- [Map.get(limits, source)],
+        ms <- ms_list,
         do: Clock.send_after(self(), {:sensor_stale, source, at, ms}, max(at + ms - now, 0))
 
     {:noreply, s}
@@ -272,7 +297,7 @@ defmodule Dolphin.Vehicles.Vehicle do
   # does not judge: the frames of the while this host was held up may still
   # wait in the mailbox, and a path would look silent for want of reading them.
   def handle_info(:judge_paths, s) do
-    period = judge_period()
+    period = judge_period(s.paths)
     Process.send_after(self(), :judge_paths, period)
     now = real_ms()
     on_time? = now - s.judge_due <= period
@@ -335,8 +360,7 @@ defmodule Dolphin.Vehicles.Vehicle do
   defp arm_staleness(_s, []), do: :ok
 
   defp arm_staleness(s, fresh) do
-    for {source, at} <- fresh, %{stale_after: limits} <- [Map.get(s.sensor_limits, source)], ms <- limits,
-        do: Clock.send_after(self(), {:sensor_stale, source, at, ms}, ms)
+    for {source, at} <- fresh, %{stale_after: limits} <- [Map.get(s.sensor_limits, source)], ms <- limits, do: Clock.send_after(self(), {:sensor_stale, source, at, ms}, ms)
 
     :ok
   end
@@ -389,7 +413,11 @@ defmodule Dolphin.Vehicles.Vehicle do
     %{s | paths: paths}
   end
 
-  defp judge_period, do: max(Clock.to_real_ms(@judge_every_ms), @judge_real_ms)
+  defp judge_period(paths) do
+    if Paths.several?(paths),
+      do: max(Clock.to_real_ms(@judge_every_ms), @judge_real_ms),
+      else: max(Clock.to_real_ms(@judge_alone_ms), @judge_alone_real_ms)
+  end
 
   # Everything to the vehicle goes on the path in use at the time of sending.
   defp send_message(s, message), do: Connection.send_via(Paths.in_use(s.paths), s.sysid, message)
@@ -469,6 +497,7 @@ defmodule Dolphin.Vehicles.Vehicle do
     notify_op(s, {:param, name}, {:param, value})
     if compid in [1, s.state.autopilot_compid], do: notify_op(s, :param_list, {:param, value})
   end
+
   defp route_to_op(_s, _frame), do: :ok
 
   defp notify_op(s, key, event) do
