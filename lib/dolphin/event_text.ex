@@ -115,7 +115,7 @@ defmodule Dolphin.EventText do
     do: "vehicle #{e.vehicle}: #{Enum.join(e.stations, " and ")} hear two different vehicles (#{e.reason}); following #{hd(e.stations)} only"
 
   def event_text(%{event: :path_changed} = e),
-    do: "vehicle #{e.vehicle}: now through #{e.to} (#{if e.reason in [:silent, "silent"], do: "#{e.from} went silent", else: "better than #{e.from}"})"
+    do: "vehicle #{e.vehicle}: now through #{e.to} (#{path_reason(e.reason, e.from)})"
 
   def event_text(%{event: :system_id_shared} = e),
     do: "vehicle #{e.vehicle}: another vehicle with its system id is heard on #{e.path} (unique id #{e.uid}, not #{e.vehicle_uid}): that is vehicle #{e.other}"
@@ -190,4 +190,8 @@ defmodule Dolphin.EventText do
 
   defp cut(nil, _n), do: ""
   defp cut(text, n), do: if(String.length(text) > n, do: String.slice(text, 0, n - 1) <> "…", else: text)
+
+  defp path_reason(reason, from) when reason in [:silent, "silent"], do: "#{from} went silent"
+  defp path_reason(reason, from) when reason in [:another_vehicle, "another_vehicle"], do: "#{from} is another vehicle's"
+  defp path_reason(_better, from), do: "better than #{from}"
 end

@@ -208,11 +208,34 @@ defmodule Dolphin.Vehicles.Paths do
   @spec identified(t(), via(), non_neg_integer()) :: t()
   def identified(%__MODULE__{} = p, via, uid) do
     case p.paths do
-      %{^via => %{identity: :same} = path} -> %{p | paths: Map.put(p.paths, via, %{path | uid: uid}), uid: uid}
-      %{^via => path} -> %{p | paths: Map.put(p.paths, via, %{path | uid: uid})}
-      _ -> p
+      # The path in use: the vehicle's own id, unless known already. Paths
+      # taken for the vehicle's that reported another id are decided again.
+      %{^via => %{identity: :same} = path} when via == p.in_use and p.uid == nil ->
+        recheck(%{p | paths: Map.put(p.paths, via, %{path | uid: uid}), uid: uid})
+
+      %{^via => path} ->
+        recheck(%{p | paths: Map.put(p.paths, via, %{path | uid: uid})})
+
+      _ ->
+        p
     end
   end
+
+  # A path taken for the vehicle's for want of an answer (on a host too
+  # loaded to answer in time) whose autopilot then reports an id other than
+  # the vehicle's is another vehicle's after all: pending again, `settle/3`
+  # refuses it, and `judge/3` moves off it if it was in use.
+  defp recheck(%__MODULE__{uid: own} = p) when is_integer(own) and own != 0 do
+    paths =
+      Map.new(p.paths, fn
+        {via, %{identity: :same, uid: uid} = path} when is_integer(uid) and uid != 0 and uid != own -> {via, %{path | identity: :pending}}
+        other -> other
+      end)
+
+    %{p | paths: paths}
+  end
+
+  defp recheck(p), do: p
 
   @doc "The vehicle's unique id, as the autopilot on its own paths reported it (nil until then)."
   @spec uid(t()) :: non_neg_integer() | nil
@@ -387,9 +410,10 @@ defmodule Dolphin.Vehicles.Paths do
   Judges the paths at `now_ms` (clock) and `real_ms` (real): which are
   silent, and which to use (see "The path in use"). Returns the paths and,
   when the path in use changed, `{from, to, reason}` with reason `:silent`
-  (the path in use went silent) or `:better`.
+  (the path in use went silent), `:another_vehicle` (it turned out to be
+  another vehicle's) or `:better`.
   """
-  @spec judge(t(), integer(), integer()) :: {t(), nil | {via(), via(), :silent | :better}}
+  @spec judge(t(), integer(), integer()) :: {t(), nil | {via(), via(), :silent | :another_vehicle | :better}}
   def judge(%__MODULE__{} = p, now_ms, real_ms) do
     paths = Map.new(p.paths, fn {via, path} -> {via, %{path | state: if(silent?(path, now_ms, real_ms), do: :silent, else: path.state)}} end)
 
@@ -400,6 +424,7 @@ defmodule Dolphin.Vehicles.Paths do
     {in_use, reason, challenger} =
       cond do
         heard == [] -> {p.in_use, nil, nil}
+        current.identity != :same -> {hd(heard).via, :another_vehicle, nil}
         current.state == :silent -> {hd(heard).via, :silent, nil}
         true -> challenge(current, Enum.reject(heard, &(&1.via == current.via)), p.challenger, real_ms)
       end

@@ -307,6 +307,32 @@ defmodule Dolphin.Vehicles.PathsTest do
       assert {[], _} = Paths.identity_asks(p, 60_000, 60_000)
     end
 
+    test "a path taken for the vehicle's for want of an answer that then reports another id is refused, and left if in use" do
+      {:unidentified, p} = Paths.heard(Paths.new(:a, 0, 0), :b, frame(0, 0, 2), 0, 0)
+      p = Paths.identified(p, :a, 7)
+
+      # b does not answer in time (a host too loaded): given up on, taken for the vehicle's.
+      p =
+        Enum.reduce([0, 1_000, 2_000, 4_000, 8_000, 16_000], p, fn t, p ->
+          {:fresh, p} = Paths.heard(p, :a, frame(div(t, 1_000)), t, t)
+          {_asks, p} = Paths.identity_asks(p, t, t)
+          p
+        end)
+
+      assert {p, [b: :unidentifiable]} = Paths.settle(p, 16_000, 16_000)
+      # a falls silent: b is used.
+      {:fresh, p} = Paths.heard(p, :b, frame(1, 0, 2), 18_000, 18_000)
+      {p, {:a, :b, :silent}} = Paths.judge(p, 18_000, 18_000)
+
+      # Then b's autopilot answers: another one. Refused, and a (heard again) is used.
+      {:fresh, p} = Paths.heard(p, :a, frame(20), 19_000, 19_000)
+      p = Paths.identified(p, :b, 9)
+      assert Paths.uid(p) == 7
+      assert {p, [b: {:refused, 9, 7}]} = Paths.settle(p, 19_000, 19_000)
+      assert {p, {:b, :a, :another_vehicle}} = Paths.judge(p, 19_000, 19_000)
+      assert {:unidentified, _} = Paths.heard(p, :b, frame(2, 0, 2), 19_100, 19_100)
+    end
+
     test "a new path that answers waits for the vehicle's own id as long as its path in use is heard (a busy autopilot, a lossy link)" do
       {:unidentified, p} = Paths.heard(Paths.new(:a, 0, 0), :b, frame(0, 0, 2), 0, 0)
       p = Paths.identified(p, :b, 9)
