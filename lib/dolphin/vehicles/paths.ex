@@ -62,8 +62,8 @@ defmodule Dolphin.Vehicles.Paths do
   as the vehicle is (`uid/1`; a restarted process is given it back with
   `identified/3`). `identity_asks/3` names the paths to ask for their
   autopilot's unique id — each pending path, at most 5 times, and the path
-  in use until the vehicle's is known (asked anew when a new path is
-  pending) —, a second of clock time apart at least and, in real time,
+  the vehicle was discovered on until the vehicle's is known (asked anew
+  when a new path is pending; the vehicle's id is its autopilot's) —, a second of clock time apart at least and, in real time,
   half a second after the first ask, doubling after each up to 8 s (an
   autopilot on a loaded host answers late; at a speed-up it still needs its
   time; two vehicles taken for one are worse than a path decided late): a
@@ -77,8 +77,8 @@ defmodule Dolphin.Vehicles.Paths do
       the path to that other vehicle, `Dolphin.Vehicles.Id`);
     * the same id: the same vehicle;
     * no id to compare (an autopilot that reports 0; one that does not
-      answer 5 times; the vehicle's own not known while its path in use has
-      been quiet for 15 s of clock time and 10 s of real time): taken to be
+      answer 5 times; the vehicle's own not known while the path it was
+      discovered on has been quiet for 15 s of clock time and 10 s of real time): taken to be
       the same vehicle, as a
       redundant radio is — two vehicles that cannot be told apart are
       not.
@@ -111,7 +111,7 @@ defmodule Dolphin.Vehicles.Paths do
   @identity_silence_ms 15_000
   @identity_silence_real_ms 10_000
 
-  defstruct paths: %{}, in_use: nil, recent: %{}, fresh: %{}, challenger: nil, uid: nil
+  defstruct paths: %{}, in_use: nil, own: nil, recent: %{}, fresh: %{}, challenger: nil, uid: nil
 
   @typedoc """
   A path's name: what the link gives with each frame (a
@@ -125,6 +125,7 @@ defmodule Dolphin.Vehicles.Paths do
   @type t :: %__MODULE__{
           paths: %{via() => map()},
           in_use: via() | nil,
+          own: via() | nil,
           recent: %{byte() => %{byte() => {integer(), MapSet.t(), integer(), non_neg_integer()}}},
           fresh: %{byte() => non_neg_integer()},
           challenger: nil | {via(), integer()},
@@ -146,7 +147,8 @@ defmodule Dolphin.Vehicles.Paths do
 
   @doc "The paths of a vehicle first heard on `via` at `now_ms` (clock) and `real_ms` (real): that path in use."
   @spec new(via(), integer(), integer()) :: t()
-  def new(via, now_ms, real_ms), do: %__MODULE__{paths: %{via => path(via, now_ms, real_ms, :active, :same)}, in_use: via}
+  # `own`: the path the vehicle was discovered on, whose autopilot's id is the vehicle's.
+  def new(via, now_ms, real_ms), do: %__MODULE__{paths: %{via => path(via, now_ms, real_ms, :active, :same)}, in_use: via, own: via}
 
   defp path(via, now_ms, real_ms, state, identity) do
     %{
@@ -193,10 +195,10 @@ defmodule Dolphin.Vehicles.Paths do
   end
 
   # A pending path; while the vehicle's own unique id is not known, the path
-  # in use is asked again from now on.
+  # it was discovered on is asked again from now on.
   defp new_path(p, via, now_ms, real_ms) do
     paths = Map.put(p.paths, via, path(via, now_ms, real_ms, :standby, :pending))
-    paths = if p.uid == nil, do: Map.update!(paths, p.in_use, &%{&1 | asks: 0, asked: nil}), else: paths
+    paths = if p.uid == nil, do: Map.update!(paths, own_via(p), &%{&1 | asks: 0, asked: nil}), else: paths
     %{p | paths: paths}
   end
 
@@ -210,7 +212,7 @@ defmodule Dolphin.Vehicles.Paths do
     case p.paths do
       # The path in use: the vehicle's own id, unless known already. Paths
       # taken for the vehicle's that reported another id are decided again.
-      %{^via => %{identity: :same} = path} when via == p.in_use and p.uid == nil ->
+      %{^via => %{identity: :same} = path} when p.uid == nil and (via == p.own or (via == p.in_use and not is_map_key(p.paths, p.own))) ->
         recheck(%{p | paths: Map.put(p.paths, via, %{path | uid: uid}), uid: uid})
 
       %{^via => path} ->
@@ -237,6 +239,10 @@ defmodule Dolphin.Vehicles.Paths do
 
   defp recheck(p), do: p
 
+  # The path the vehicle was discovered on (its autopilot's id is the
+  # vehicle's), or the one in use once that one is forgotten.
+  defp own_via(%__MODULE__{own: own, paths: paths, in_use: in_use}), do: if(is_map_key(paths, own), do: own, else: in_use)
+
   @doc "The vehicle's unique id, as the autopilot on its own paths reported it (nil until then)."
   @spec uid(t()) :: non_neg_integer() | nil
   def uid(%__MODULE__{uid: uid}), do: uid
@@ -254,10 +260,10 @@ defmodule Dolphin.Vehicles.Paths do
   @spec identity_asks(t(), integer(), integer()) :: {[via()], t()}
   def identity_asks(%__MODULE__{} = p, now_ms, real_ms) do
     pending = for {via, %{identity: :pending, uid: nil} = path} <- p.paths, ask_due?(path, now_ms, real_ms), do: via
-    own = p.paths[p.in_use]
+    own = p.paths[own_via(p)]
     # The vehicle's own id: 5 times, and for as long as a path waits for it.
     waiting? = Enum.any?(p.paths, fn {_, path} -> path.identity == :pending end)
-    asks = Enum.sort(pending) ++ if(p.uid == nil and (ask_due?(own, now_ms, real_ms) or (waiting? and waited?(own, now_ms, real_ms))), do: [p.in_use], else: [])
+    asks = Enum.sort(pending) ++ if(p.uid == nil and (ask_due?(own, now_ms, real_ms) or (waiting? and waited?(own, now_ms, real_ms))), do: [own.via], else: [])
 
     paths = Enum.reduce(asks, p.paths, fn via, paths -> Map.update!(paths, via, &%{&1 | asks: &1.asks + 1, asked: {now_ms, real_ms}}) end)
     {asks, %{p | paths: paths}}
@@ -287,7 +293,7 @@ defmodule Dolphin.Vehicles.Paths do
     # but not answering — a lossy link, an autopilot too busy — it is asked
     # again: a pending path that answered waits for it, a path that did not
     # is given up on by itself.)
-    own = p.paths[p.in_use]
+    own = p.paths[own_via(p)]
     own_unknowable? = p.uid == nil and gone_quiet?(own, now_ms, real_ms)
 
     decisions =

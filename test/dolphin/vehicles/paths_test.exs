@@ -333,6 +333,31 @@ defmodule Dolphin.Vehicles.PathsTest do
       assert {:unidentified, _} = Paths.heard(p, :b, frame(2, 0, 2), 19_100, 19_100)
     end
 
+    test "the vehicle's id is that of the autopilot on the path it was discovered on, not of a path taken for it and in use" do
+      {:unidentified, p} = Paths.heard(Paths.new(:a, 0, 0), :b, frame(0, 0, 2), 0, 0)
+
+      # Neither answers in time: b given up on, taken for the vehicle's; a falls silent, b is used.
+      p =
+        Enum.reduce([0, 1_000, 2_000, 4_000, 8_000, 16_000], p, fn t, p ->
+          {:fresh, p} = Paths.heard(p, :a, frame(div(t, 1_000)), t, t)
+          {_asks, p} = Paths.identity_asks(p, t, t)
+          p
+        end)
+
+      assert {p, [b: :unidentifiable]} = Paths.settle(p, 16_000, 16_000)
+      {:fresh, p} = Paths.heard(p, :b, frame(1, 0, 2), 18_000, 18_000)
+      {p, {:a, :b, :silent}} = Paths.judge(p, 18_000, 18_000)
+
+      # b's autopilot answers first: not the vehicle's id. Then a's: b is another vehicle.
+      p = Paths.identified(p, :b, 9)
+      assert Paths.uid(p) == nil
+      {:fresh, p} = Paths.heard(p, :a, frame(20), 19_000, 19_000)
+      p = Paths.identified(p, :a, 7)
+      assert Paths.uid(p) == 7
+      assert {p, [b: {:refused, 9, 7}]} = Paths.settle(p, 19_000, 19_000)
+      assert {_, {:b, :a, :another_vehicle}} = Paths.judge(p, 19_000, 19_000)
+    end
+
     test "a new path that answers waits for the vehicle's own id as long as its path in use is heard (a busy autopilot, a lossy link)" do
       {:unidentified, p} = Paths.heard(Paths.new(:a, 0, 0), :b, frame(0, 0, 2), 0, 0)
       p = Paths.identified(p, :b, 9)
