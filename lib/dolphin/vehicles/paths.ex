@@ -104,6 +104,7 @@ defmodule Dolphin.Vehicles.Paths do
   # ms, and at least the real floor, doubled after each ask), before taking
   # it as unidentifiable.
   @identity_asks 5
+  @identity_asks_after 10
   @identity_ask_every_ms 1_000
   @identity_ask_real_floor_ms 500
   # The path in use quiet this long (clock, and real) before a pending path
@@ -260,10 +261,21 @@ defmodule Dolphin.Vehicles.Paths do
   @spec identity_asks(t(), integer(), integer()) :: {[via()], t()}
   def identity_asks(%__MODULE__{} = p, now_ms, real_ms) do
     pending = for {via, %{identity: :pending, uid: nil} = path} <- p.paths, ask_due?(path, now_ms, real_ms), do: via
+
+    # Paths taken for the vehicle's for want of an answer are asked on, 8 s
+    # apart, 10 times more (a host loaded for a minute): an answer with
+    # another id makes them another vehicle's (identified/3).
+    unsure =
+      for {via, %{identity: :same, uid: nil, asks: asks} = path} <- p.paths,
+          via != own_via(p),
+          asks >= @identity_asks and asks < @identity_asks + @identity_asks_after,
+          waited?(path, now_ms, real_ms),
+          do: via
+
     own = p.paths[own_via(p)]
     # The vehicle's own id: 5 times, and for as long as a path waits for it.
     waiting? = Enum.any?(p.paths, fn {_, path} -> path.identity == :pending end)
-    asks = Enum.sort(pending) ++ if(p.uid == nil and (ask_due?(own, now_ms, real_ms) or (waiting? and waited?(own, now_ms, real_ms))), do: [own.via], else: [])
+    asks = Enum.sort(pending ++ unsure) ++ if(p.uid == nil and (ask_due?(own, now_ms, real_ms) or (waiting? and waited?(own, now_ms, real_ms))), do: [own.via], else: [])
 
     paths = Enum.reduce(asks, p.paths, fn via, paths -> Map.update!(paths, via, &%{&1 | asks: &1.asks + 1, asked: {now_ms, real_ms}}) end)
     {asks, %{p | paths: paths}}

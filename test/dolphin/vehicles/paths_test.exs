@@ -303,8 +303,9 @@ defmodule Dolphin.Vehicles.PathsTest do
       assert {[:a], p} = Paths.identity_asks(p, 16_000, 16_000)
       assert {p, [b: :unidentifiable]} = Paths.settle(p, 16_000, 16_000)
       assert [%{identity: :same}, %{identity: :same}] = Paths.list(p)
-      # Nothing waits for a's id any more: its 5 asks and this one were all.
-      assert {[], _} = Paths.identity_asks(p, 60_000, 60_000)
+      # Nothing waits for a's id any more: its 5 asks and this one were all;
+      # b, taken for the vehicle's for want of an answer, is asked on.
+      assert {[:b], _} = Paths.identity_asks(p, 60_000, 60_000)
     end
 
     test "a path taken for the vehicle's for want of an answer that then reports another id is refused, and left if in use" do
@@ -348,14 +349,18 @@ defmodule Dolphin.Vehicles.PathsTest do
       {:fresh, p} = Paths.heard(p, :b, frame(1, 0, 2), 18_000, 18_000)
       {p, {:a, :b, :silent}} = Paths.judge(p, 18_000, 18_000)
 
+      # b, taken for the vehicle's without an answer, is asked on, 8 s apart.
+      assert {[:b], p} = Paths.identity_asks(p, 24_000, 24_000)
+      assert {[], p} = Paths.identity_asks(p, 31_999, 31_999)
+
       # b's autopilot answers first: not the vehicle's id. Then a's: b is another vehicle.
       p = Paths.identified(p, :b, 9)
       assert Paths.uid(p) == nil
-      {:fresh, p} = Paths.heard(p, :a, frame(20), 19_000, 19_000)
+      {:fresh, p} = Paths.heard(p, :a, frame(20), 32_000, 32_000)
       p = Paths.identified(p, :a, 7)
       assert Paths.uid(p) == 7
-      assert {p, [b: {:refused, 9, 7}]} = Paths.settle(p, 19_000, 19_000)
-      assert {_, {:b, :a, :another_vehicle}} = Paths.judge(p, 19_000, 19_000)
+      assert {p, [b: {:refused, 9, 7}]} = Paths.settle(p, 32_000, 32_000)
+      assert {_, {:b, :a, :another_vehicle}} = Paths.judge(p, 32_000, 32_000)
     end
 
     test "a new path that answers waits for the vehicle's own id as long as its path in use is heard (a busy autopilot, a lossy link)" do
