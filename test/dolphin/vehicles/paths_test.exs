@@ -310,20 +310,8 @@ defmodule Dolphin.Vehicles.PathsTest do
 
     test "a path taken for the vehicle's for want of an answer that then reports another id is refused, and left if in use" do
       {:unidentified, p} = Paths.heard(Paths.new(:a, 0, 0), :b, frame(0, 0, 2), 0, 0)
-      p = Paths.identified(p, :a, 7)
-
-      # b does not answer in time (a host too loaded): given up on, taken for the vehicle's.
-      p =
-        Enum.reduce([0, 1_000, 2_000, 4_000, 8_000, 16_000], p, fn t, p ->
-          {:fresh, p} = Paths.heard(p, :a, frame(div(t, 1_000)), t, t)
-          {_asks, p} = Paths.identity_asks(p, t, t)
-          p
-        end)
-
-      assert {p, [b: :unidentifiable]} = Paths.settle(p, 16_000, 16_000)
-      # a falls silent: b is used.
-      {:fresh, p} = Paths.heard(p, :b, frame(1, 0, 2), 18_000, 18_000)
-      {p, {:a, :b, :silent}} = Paths.judge(p, 18_000, 18_000)
+      # b does not answer in time (a host too loaded): given up on, taken for the vehicle's; a falls silent, b is used.
+      p = given_up_and_used(Paths.identified(p, :a, 7))
 
       # Then b's autopilot answers: another one. Refused, and a (heard again) is used.
       {:fresh, p} = Paths.heard(p, :a, frame(20), 19_000, 19_000)
@@ -336,18 +324,8 @@ defmodule Dolphin.Vehicles.PathsTest do
 
     test "the vehicle's id is that of the autopilot on the path it was discovered on, not of a path taken for it and in use" do
       {:unidentified, p} = Paths.heard(Paths.new(:a, 0, 0), :b, frame(0, 0, 2), 0, 0)
-
       # Neither answers in time: b given up on, taken for the vehicle's; a falls silent, b is used.
-      p =
-        Enum.reduce([0, 1_000, 2_000, 4_000, 8_000, 16_000], p, fn t, p ->
-          {:fresh, p} = Paths.heard(p, :a, frame(div(t, 1_000)), t, t)
-          {_asks, p} = Paths.identity_asks(p, t, t)
-          p
-        end)
-
-      assert {p, [b: :unidentifiable]} = Paths.settle(p, 16_000, 16_000)
-      {:fresh, p} = Paths.heard(p, :b, frame(1, 0, 2), 18_000, 18_000)
-      {p, {:a, :b, :silent}} = Paths.judge(p, 18_000, 18_000)
+      p = given_up_and_used(p)
 
       # b, taken for the vehicle's without an answer, is asked on, 8 s apart.
       assert {[:b], p} = Paths.identity_asks(p, 24_000, 24_000)
@@ -378,5 +356,21 @@ defmodule Dolphin.Vehicles.PathsTest do
       # A minute later a's autopilot answers: two vehicles.
       assert {_, [b: {:refused, 9, 7}]} = p |> Paths.identified(:a, 7) |> Paths.settle(60_500, 60_500)
     end
+  end
+
+  # Path b, pending beside a, asked 5 times without an answer (a heard all
+  # along): taken for the vehicle's at 16 s; then a silent and b used at 18 s.
+  defp given_up_and_used(p) do
+    p =
+      Enum.reduce([0, 1_000, 2_000, 4_000, 8_000, 16_000], p, fn t, p ->
+        {:fresh, p} = Paths.heard(p, :a, frame(div(t, 1_000)), t, t)
+        {_asks, p} = Paths.identity_asks(p, t, t)
+        p
+      end)
+
+    assert {p, [b: :unidentifiable]} = Paths.settle(p, 16_000, 16_000)
+    {:fresh, p} = Paths.heard(p, :b, frame(1, 0, 2), 18_000, 18_000)
+    {p, {:a, :b, :silent}} = Paths.judge(p, 18_000, 18_000)
+    p
   end
 end
