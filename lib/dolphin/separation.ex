@@ -142,7 +142,14 @@ defmodule Dolphin.Separation do
 
   def handle_info(:tick, s), do: {:noreply, look_at_held(%{s | ticking: false})}
 
-  def handle_info({:dolphin, :vehicles, {notice, _id}}, s) when notice in [:vehicle_forgotten, :vehicle_lost], do: {:noreply, %{s | heard: nil}}
+  # A vehicle forgotten is nowhere: its last view is no longer a place to keep
+  # clear of, even while its mission's process has not yet gone.
+  def handle_info({:dolphin, :vehicles, {:vehicle_forgotten, id}}, s) do
+    s = %{s | heard: nil}
+    {:noreply, if(Map.has_key?(s.flying, id), do: put_in(s.flying[id].view, nil), else: s)}
+  end
+
+  def handle_info({:dolphin, :vehicles, {:vehicle_lost, _id}}, s), do: {:noreply, %{s | heard: nil}}
 
   def handle_info({:DOWN, ref, :process, _, _}, s) do
     case Enum.find(s.flying, fn {_, f} -> f.ref == ref end) do

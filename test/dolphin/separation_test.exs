@@ -148,6 +148,15 @@ defmodule Dolphin.SeparationTest do
     refute_receive {:separation, :aside, _}, 300
   end
 
+  test "a vehicle forgotten is no longer kept clear of, even while its mission's process lives on", %{ids: {a, b, _c}} do
+    executor(a, 1_000)
+    flying(a, 0, 5, {0.0, 0.0, 0.0})
+    Views.delete(a)
+    executor(b, 2_000)
+    flying(b, 0, 0, {0.0, 0.0, 0.0})
+    refute_receive {:separation, :hold, %{vehicle: ^b}}, 300
+  end
+
   test "two tasks started together: the one the engine made later holds, whichever registered first", %{ids: {a, b, _c}} do
     flying(a, 0, -60, {0.0, 10.0, 0.0})
     flying(b, -60, 0, {10.0, 0.0, 0.0})
