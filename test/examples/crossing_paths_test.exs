@@ -25,7 +25,7 @@ defmodule Dolphin.Examples.CrossingPathsTest do
     assert [hold] = for(%{"event" => "separation_hold"} = e <- run.events, do: e)
     assert [clear] = for(%{"event" => "separation_clear"} = e <- run.events, do: e)
     assert {clear["vehicle"], clear["other"]} == {hold["vehicle"], hold["other"]}
-    assert hold["in_s"] <= 8 and hold["closest"] < 20
+    assert hold["in_s"] <= 8 and hold["closest"] < 20, "the hold: #{inspect(hold)}"
     assert clear["held_ms"] >= 1_000
 
     # Both missions flown to their end.
