@@ -63,8 +63,9 @@ defmodule Dolphin.Vehicles.Paths do
   `identified/3`). `identity_asks/3` names the paths to ask for their
   autopilot's unique id — each pending path, at most 5 times, and the path
   the vehicle was discovered on until the vehicle's is known (asked anew
-  when a new path is pending; the vehicle's id is its autopilot's) —, a second of clock time apart at least and, in real time,
-  half a second after the first ask, doubling after each up to 8 s (an
+  when a new path is pending; the vehicle's id is its autopilot's) —, a
+  second of clock time apart at least and, in real time, half a second
+  after the first ask, doubling after each up to 8 s (an
   autopilot on a loaded host answers late; at a speed-up it still needs its
   time; two vehicles taken for one are worse than a path decided late): a
   pending path that never answers is given up 15.5 s of real time after
@@ -107,8 +108,8 @@ defmodule Dolphin.Vehicles.Paths do
   @identity_asks_after 10
   @identity_ask_every_ms 1_000
   @identity_ask_real_floor_ms 500
-  # The path in use quiet this long (clock, and real) before a pending path
-  # is decided without the vehicle's own id.
+  # The path the vehicle was discovered on quiet this long (clock, and real)
+  # before a pending path is decided without the vehicle's own id.
   @identity_silence_ms 15_000
   @identity_silence_real_ms 10_000
 
@@ -210,10 +211,13 @@ defmodule Dolphin.Vehicles.Paths do
   """
   @spec identified(t(), via(), non_neg_integer()) :: t()
   def identified(%__MODULE__{} = p, via, uid) do
+    own? = p.uid == nil and via == own_via(p)
+
     case p.paths do
-      # The path in use: the vehicle's own id, unless known already. Paths
-      # taken for the vehicle's that reported another id are decided again.
-      %{^via => %{identity: :same} = path} when p.uid == nil and (via == p.own or (via == p.in_use and not is_map_key(p.paths, p.own))) ->
+      # The path the vehicle was discovered on: the vehicle's own id, unless
+      # known already. Paths taken for the vehicle's that reported another
+      # id are decided again.
+      %{^via => %{identity: :same} = path} when own? ->
         recheck(%{p | paths: Map.put(p.paths, via, %{path | uid: uid}), uid: uid})
 
       %{^via => path} ->
@@ -301,7 +305,7 @@ defmodule Dolphin.Vehicles.Paths do
   """
   @spec settle(t(), integer(), integer()) :: {t(), [{via(), :same | :unidentifiable | {:refused, non_neg_integer(), non_neg_integer()}}]}
   def settle(%__MODULE__{} = p, now_ms, real_ms) do
-    # The vehicle's id cannot come: its path in use has gone quiet. (Heard
+    # The vehicle's id cannot come: its own path has gone quiet. (Heard
     # but not answering — a lossy link, an autopilot too busy — it is asked
     # again: a pending path that answered waits for it, a path that did not
     # is given up on by itself.)
