@@ -326,7 +326,9 @@ defmodule Dolphin.Separation do
 
   # Every other vehicle in the air that `f` is kept apart from: the
   # registered ones as their views came, the ground station's others as the
-  # table has them now.
+  # table has them now. One with no view (forgotten) is near no one.
+  defp others(s, %Flying{view: nil}), do: {[], s}
+
   defp others(s, f) do
     registered = for {id, o} <- s.flying, id != f.id, airborne?(o.view), same_medium?(f.view, o.view), do: o
     {heard, s} = heard(s)

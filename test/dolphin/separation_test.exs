@@ -157,6 +157,22 @@ defmodule Dolphin.SeparationTest do
     refute_receive {:separation, :hold, %{vehicle: ^b}}, 300
   end
 
+  test "a held vehicle forgotten is let go, and the monitor goes on judging the others", %{ids: {a, b, c}} do
+    flying(b, 0, 0, {0.0, 0.0, 0.0})
+    executor(b, 1_000)
+    executor(a, 2_000)
+    flying(a, 0, -50, {0.0, 10.0, 0.0})
+    assert_receive {:separation, :hold, %{vehicle: ^a, other: ^b}}
+
+    Views.delete(a)
+    flying(b, 0, 1, {0.0, 0.0, 0.0})
+    assert_receive {:separation, :clear, %{vehicle: ^a}}, 5_000
+
+    executor(c, 3_000)
+    flying(c, 0, -50, {0.0, 10.0, 0.0})
+    assert_receive {:separation, :hold, %{vehicle: ^c, other: ^b}}
+  end
+
   test "two tasks started together: the one the engine made later holds, whichever registered first", %{ids: {a, b, _c}} do
     flying(a, 0, -60, {0.0, 10.0, 0.0})
     flying(b, -60, 0, {10.0, 0.0, 0.0})
