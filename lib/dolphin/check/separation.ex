@@ -53,11 +53,13 @@ defmodule Dolphin.Check.Separation do
   defp seconds(ms), do: "#{Float.round(ms / 60_000, 1)} min"
 
   @doc false
-  @spec conflicts([timeline()], %{horizontal: number(), vertical: number()}) :: [conflict()]
-  def conflicts(timelines, limits) do
+  # `all_pairs: true` tries every pair, as a test's reference for the sweep.
+  @spec conflicts([timeline()], %{horizontal: number(), vertical: number()}, keyword()) :: [conflict()]
+  def conflicts(timelines, limits, opts \\ []) do
     timelines = Enum.reject(timelines, &(&1.points == []))
+    pairs = if opts[:all_pairs], do: for({a, i} <- Enum.with_index(timelines), {b, j} <- Enum.with_index(timelines), i < j, do: {a, b}), else: near_pairs(timelines, limits)
 
-    for {a, i} <- Enum.with_index(timelines), {b, j} <- Enum.with_index(timelines), i < j, same_space?(a, b), conflict <- pair(a, b, limits) do
+    for {a, b} <- pairs, same_space?(a, b), conflict <- pair(a, b, limits) do
       conflict
     end
     # Per pair of missions, their closest episode, and how many there were
@@ -65,6 +67,57 @@ defmodule Dolphin.Check.Separation do
     |> Enum.group_by(&{&1.vehicles, &1.missions})
     |> Enum.map(fn {_, episodes} -> Map.put(Enum.min_by(episodes, &apart/1), :times, length(episodes)) end)
     |> Enum.sort_by(& &1.at_ms)
+  end
+
+  # The pairs (in the timelines' order) whose boxes — the least and most
+  # latitude, longitude and height each reaches, widened by the limits —
+  # meet: no other pair can come within them. A sweep along the latitude
+  # finds them without trying every pair (a thousand vehicles that each
+  # stay over their own spot are a thousand boxes that meet none).
+  defp near_pairs(timelines, limits) do
+    boxes = timelines |> Enum.with_index() |> Enum.map(fn {t, i} -> box(t, i, limits) end) |> Enum.sort_by(& &1.lat_min)
+    sweep(boxes, []) |> Enum.sort() |> Enum.map(fn {_i, _j, a, b} -> {a, b} end)
+  end
+
+  defp sweep([], found), do: found
+
+  defp sweep([a | rest], found) do
+    found =
+      rest
+      |> Enum.take_while(&(&1.lat_min <= a.lat_max))
+      |> Enum.reduce(found, fn b, found ->
+        if meet?(a, b), do: [if(a.index < b.index, do: {a.index, b.index, a.timeline, b.timeline}, else: {b.index, a.index, b.timeline, a.timeline}) | found], else: found
+      end)
+
+    sweep(rest, found)
+  end
+
+  defp meet?(a, b), do: a.lon_min <= b.lon_max and b.lon_min <= a.lon_max and a.h_min <= b.h_max and b.h_min <= a.h_max
+
+  # Widened by the limits, in degrees at the box's latitude (and a metre
+  # more, for the straight lines between the points); a box that wraps the
+  # 180th meridian spans every longitude.
+  defp box(%{points: points} = timeline, index, limits) do
+    places = Enum.map(points, &elem(&1, 1))
+    {lat_min, lat_max} = places |> Enum.map(& &1.lat) |> Enum.min_max()
+    {lon_min, lon_max} = places |> Enum.map(& &1.lon) |> Enum.min_max()
+    {h_min, h_max} = places |> Enum.map(& &1.h) |> Enum.min_max()
+    across = limits.horizontal + 1.0
+    dlat = across / 110_000
+    cos = :math.cos(min(max(abs(lat_min), abs(lat_max)) + dlat, 89.9) * :math.pi() / 180)
+    dlon = across / (111_320 * cos)
+    {lon_min, lon_max} = if lon_max - lon_min > 180, do: {-540.0, 540.0}, else: {lon_min - dlon, lon_max + dlon}
+
+    %{
+      index: index,
+      timeline: timeline,
+      lat_min: lat_min - dlat,
+      lat_max: lat_max + dlat,
+      lon_min: lon_min,
+      lon_max: lon_max,
+      h_min: h_min - limits.vertical,
+      h_max: h_max + limits.vertical
+    }
   end
 
   defp same_space?(a, b), do: Map.get(a, :airframe) == :sub == (Map.get(b, :airframe) == :sub)

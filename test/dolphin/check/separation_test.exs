@@ -1,6 +1,8 @@
 defmodule Dolphin.Check.SeparationTest do
   use ExUnit.Case, async: true
 
+  import Dolphin.Property
+
   alias Dolphin.Check.Separation
   alias Dolphin.Geo
 
@@ -36,6 +38,30 @@ defmodule Dolphin.Check.SeparationTest do
     sub = Map.put(timeline(2, [{0, @base, true}, {10_000, @base, true}]), :airframe, :sub)
     other_sub = Map.put(timeline(3, [{0, @base, true}, {10_000, @base, true}]), :airframe, :sub)
     assert [%{vehicles: {2, 3}}] = Separation.conflicts([plane, sub, other_sub], @limits)
+  end
+
+  test "only pairs whose reach meets are tried: the same conflicts as trying every pair, for fleets anywhere on the map" do
+    check(
+      forall({:proper_types.integer(-80, 80), :proper_types.integer(-179, 179), :proper_types.list(track())}, fn {lat, lon, tracks} ->
+        base = Geo.location(lat * 1.0, lon + 0.5, 100)
+
+        timelines =
+          for {{steps, up}, id} <- Enum.with_index(tracks, 1) do
+            points = for {{n, e}, k} <- Enum.with_index(steps), do: {k * 10_000, Geo.offset(base, n * 1.0, e * 1.0, up * 1.0), true}
+            timeline(id, points)
+          end
+
+        assert Separation.conflicts(timelines, @limits) == Separation.conflicts(timelines, @limits, all_pairs: true)
+        true
+      end),
+      numtests: 50
+    )
+  end
+
+  # A vehicle's points, 10 s apart, within a few hundred metres of the base, at one of a few heights.
+  defp track do
+    step = {:proper_types.integer(-300, 300), :proper_types.integer(-300, 300)}
+    {:proper_types.non_empty(:proper_types.list(step)), :proper_types.oneof([20, 25, 40])}
   end
 
   test "the finding names both missions and is at the line of the later one" do
