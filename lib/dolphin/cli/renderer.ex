@@ -83,6 +83,7 @@ defmodule Dolphin.CLI.Renderer do
     tty = Keyword.get(opts, :terminal)
     live = tty != nil
     if live, do: Process.send_after(self(), :redraw, @redraw_ms)
+    {rows, columns} = if live, do: size(tty), else: {24, 80}
 
     {:ok,
      %{
@@ -96,7 +97,11 @@ defmodule Dolphin.CLI.Renderer do
        tasks: %{},
        # The link each vehicle is reached through, once it changed (path_changed).
        paths: %{},
-       columns: if(live, do: columns(tty), else: 80)
+       # The block as last rendered, drawn again under each log line.
+       lines: [],
+       columns: columns,
+       # The block keeps the upper half of the terminal for the log.
+       block_lines: max(div(rows, 2), 5)
      }}
   end
 
@@ -129,8 +134,10 @@ defmodule Dolphin.CLI.Renderer do
 
   defp print_line(p, at_ms, text) do
     log = EventText.stamp(at_ms, p.origin, text) <> "\n"
-    # The block is erased, the line written where it was, and the block drawn again below.
-    if p.live, do: draw_block(%{p | block: 0}, [StatusBlock.erase(p.block), log]), else: IO.write(p.out, log) && p
+    # The block is erased, the line written where it was, and the block drawn
+    # again below — as it was last rendered: a burst of lines from a large
+    # fleet does not render it once a line.
+    if p.live, do: IO.write(p.out, [StatusBlock.erase(p.block), log, StatusBlock.redraw(0, p.lines)]) && p, else: IO.write(p.out, log) && p
   end
 
   # Which task each vehicle flies, for the status block.
@@ -157,19 +164,20 @@ defmodule Dolphin.CLI.Renderer do
 
     tasks = Map.new(p.tasks, fn {v, {_id, name}} -> {v, name} end)
     # A line wider than the terminal would wrap, and the block's redraw would miss its rows.
-    lines = StatusBlock.render(vehicles, tasks, Dolphin.Clock.now_ms() - p.origin, p.paths) |> Enum.map(&String.slice(&1, 0, p.columns - 1))
+    lines = StatusBlock.render(vehicles, tasks, Dolphin.Clock.now_ms() - p.origin, p.paths, p.block_lines) |> Enum.map(&String.slice(&1, 0, p.columns - 1))
     IO.write(p.out, [before, StatusBlock.redraw(p.block, lines)])
-    %{p | block: length(lines)}
+    %{p | block: length(lines), lines: lines}
   end
 
-  # Its width: `mix` has no shell to ask, and the BEAM's child processes no
+  # Its height and width: `mix` has no shell to ask, and the BEAM's child processes no
   # controlling terminal, so the device itself is asked.
-  defp columns(device) do
-    with [_rows, cols] <- :os.cmd(String.to_charlist("stty size < #{device} 2>/dev/null")) |> to_string() |> String.split(),
-         {n, ""} when n > 20 <- Integer.parse(cols) do
-      n
+  defp size(device) do
+    with [rows, cols] <- :os.cmd(String.to_charlist("stty size < #{device} 2>/dev/null")) |> to_string() |> String.split(),
+         {rows, ""} when rows > 0 <- Integer.parse(rows),
+         {cols, ""} when cols > 20 <- Integer.parse(cols) do
+      {rows, cols}
     else
-      _ -> 80
+      _ -> {24, 80}
     end
   end
 end

@@ -15,8 +15,13 @@ defmodule Dolphin.CLI.StatusBlock do
       iex> Dolphin.CLI.StatusBlock.vehicle_line(v, nil, "udpin:0.0.0.0:14551")
       "  2  AUTO      armed     [#######---]  72 %  alt  380 m  item  3/42  link 45 ms, loss in 10 % / out 12 % via udpin:0.0.0.0:14551"
 
-  `render/3` draws the block (a header and the lines) and `redraw/2` gives the
+  `render/5` draws the block (a header and the lines) and `redraw/2` gives the
   ANSI sequence that replaces a block of `n` lines with a new one.
+
+  A fleet larger than the block's room (`max_lines`, from the terminal's
+  height) is summed up: a line of counts (armed, on a task, lost, the
+  batteries' range), then the vehicles that most need a look — lost ones,
+  then the emptiest batteries — and how many are not shown.
   """
 
   alias Dolphin.Vehicles.View, as: Vehicle
@@ -29,18 +34,55 @@ defmodule Dolphin.CLI.StatusBlock do
   vehicle id to the name of the link it is reached through, for vehicles
   heard on several (`path_changed` events).
   """
-  @spec render([Vehicle.t()], %{optional(non_neg_integer()) => String.t()}, non_neg_integer(), %{optional(non_neg_integer()) => String.t()}) ::
+  @spec render([Vehicle.t()], %{optional(Dolphin.Vehicles.Id.t()) => String.t()}, non_neg_integer(), %{optional(Dolphin.Vehicles.Id.t()) => String.t()}, pos_integer() | :infinity) ::
           [String.t()]
-  def render(vehicles, tasks, clock_ms, paths \\ %{}) do
+  def render(vehicles, tasks, clock_ms, paths \\ %{}, max_lines \\ :infinity) do
     header = "── #{clock(clock_ms)} ── #{length(vehicles)} vehicle(s) " <> String.duplicate("─", 40)
-    [header | Enum.map(Enum.sort_by(vehicles, & &1.id), &vehicle_line(&1, Map.get(tasks, &1.id), Map.get(paths, &1.id)))]
+    line = &vehicle_line(&1, Map.get(tasks, &1.id), Map.get(paths, &1.id))
+
+    if max_lines == :infinity or length(vehicles) < max_lines do
+      [header | Enum.map(Enum.sort_by(vehicles, & &1.id), line)]
+    else
+      # Room for the header, the counts, and the line that says how many are left out.
+      shown = vehicles |> Enum.sort_by(&concern/1) |> Enum.take(max(max_lines - 3, 1))
+      left = length(vehicles) - length(shown)
+      [header, counts(vehicles, tasks) | Enum.map(Enum.sort_by(shown, & &1.id), line)] ++ ["  ... and #{left} more (mix dolphin.console lists them all: vehicles())"]
+    end
   end
+
+  @doc """
+  The counts line of a large fleet's block.
+
+      iex> fleet = [%Dolphin.Vehicles.View{id: 1, armed?: true, battery: 0.9}, %Dolphin.Vehicles.View{id: 2, battery: 0.4}, %Dolphin.Vehicles.View{id: 3, connected?: false}]
+      iex> Dolphin.CLI.StatusBlock.counts(fleet, %{1 => "Hop"})
+      "  1 armed, 1 on a task, 1 lost; battery 40..90 %"
+  """
+  @spec counts([Vehicle.t()], map()) :: String.t()
+  def counts(vehicles, tasks) do
+    armed = Enum.count(vehicles, &(&1.connected? and &1.armed?))
+    lost = Enum.count(vehicles, &(not &1.connected?))
+    on_task = Enum.count(vehicles, &Map.has_key?(tasks, &1.id))
+
+    batteries =
+      case for(%{battery: b} when is_number(b) <- vehicles, do: round(b * 100)) do
+        [] -> ""
+        known -> "; battery #{Enum.min(known)}..#{Enum.max(known)} %"
+      end
+
+    "  #{armed} armed, #{on_task} on a task, #{lost} lost" <> batteries
+  end
+
+  # Lost vehicles first, then the emptiest batteries, then by id.
+  defp concern(%Vehicle{connected?: false, id: id}), do: {0, 0, id}
+  defp concern(%Vehicle{battery: b, id: id}) when is_number(b), do: {1, b, id}
+  defp concern(%Vehicle{id: id}), do: {2, 0, id}
 
   @doc "One vehicle's line; `via`, the link it is reached through when it is heard on several (else nil)."
   @spec vehicle_line(Vehicle.t(), String.t() | nil, String.t() | nil) :: String.t()
   def vehicle_line(%Vehicle{} = v, task, via \\ nil) do
     mode = v.mode |> mode_name() |> String.pad_trailing(9)
     state = if(not v.connected?, do: "LOST", else: if(v.armed?, do: "armed", else: "disarmed")) |> String.pad_trailing(9)
+
     item =
       case v.mission_progress do
         nil -> "item  ?/?"
