@@ -122,12 +122,18 @@ defmodule Dolphin.Check do
   def sim_fleet(n, home) when is_integer(n), do: sim_fleet([copter: n], home)
 
   def sim_fleet(fleet, home) when is_list(fleet) do
-    airframes = Enum.flat_map(fleet, fn {airframe, n} -> List.duplicate(airframe, n); {airframe, n, _sensors} -> List.duplicate(airframe, n) end)
+    airframes =
+      Enum.flat_map(fleet, fn
+        {airframe, n} -> List.duplicate(airframe, n)
+        {airframe, n, _sensors} -> List.duplicate(airframe, n)
+      end)
+
     base = with {lat, lon, alt} <- home, do: %Dolphin.Geo.Location{lat: lat * 1.0, lon: lon * 1.0, h: alt * 1.0}, else: (nil -> @sim_home)
     # Where the simulator puts them (Dolphin.Sim.homes/2: a few tens of metres apart).
     spread = Dolphin.Sim.homes(length(airframes), home: %{lat: base.lat, lon: base.lon, alt: base.h})
 
-    for {{airframe, id}, at} <- Enum.zip(Enum.with_index(airframes, 1), spread) do
+    # Named as the ground station names the simulator's (beyond 254, "1@sim2", ...).
+    for {{airframe, id}, at} <- Enum.zip(Enum.zip(airframes, Dolphin.Sim.Local.names(length(airframes))), spread) do
       at = Dolphin.Geo.location(at.lat, at.lon, at.alt)
       position = if Dolphin.Airframe.heights(airframe) == :depth, do: %{at | h: 0.0}, else: at
       %{id: id, type: View.airframe_class(airframe), airframe: airframe, payloads: [:camera], battery: 1.0, position: position, airborne?: false}

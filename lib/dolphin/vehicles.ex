@@ -667,9 +667,16 @@ defmodule Dolphin.Vehicles do
       Dolphin.Vehicles.Views.assigned(sysid, uid) ||
         Enum.find_value(Dolphin.Vehicles.Views.all(), fn view -> if Id.sysid(view.id) == sysid and view.uid == uid, do: view.id end)
 
-    id = owner || Id.qualified(sysid, via)
+    id = owner || unused_name(sysid, via)
     :ok = Dolphin.Vehicles.Views.assign(sysid, via, id, uid)
     id
+  end
+
+  # By its network; on a named network (Dolphin.Link.Connection's :network)
+  # that already has a vehicle of that system id, by its address as well.
+  defp unused_name(sysid, via) do
+    name = Id.qualified(sysid, via)
+    if Dolphin.Vehicles.Views.owns_name?(name), do: Id.qualified_by_address(sysid, via), else: name
   end
 
   defp discover(id, %Frame{message: %Heartbeat{type: type, autopilot: autopilot}} = frame, link)

@@ -10,10 +10,10 @@ defmodule Dolphin.Test.GroundStation do
 
   alias Dolphin.{Link, Vehicles}
 
-  @doc "Opens a link (closed when the test ends) and returns the port simulated vehicles send to."
-  def open do
+  @doc "Opens a link (closed when the test ends; `opts` as `Dolphin.Link.connect/2`'s) and returns the port simulated vehicles send to."
+  def open(opts \\ []) do
     name = "test-gcs-#{System.unique_integer([:positive])}"
-    {:ok, link} = Link.connect("udpin:127.0.0.1:0", name: name)
+    {:ok, link} = Link.connect("udpin:127.0.0.1:0", [name: name] ++ opts)
     instance = Dolphin.Instance.current()
 
     on_exit(fn ->

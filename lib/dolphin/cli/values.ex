@@ -326,13 +326,14 @@ defmodule Dolphin.CLI.Values do
   end
 
   # N copters, or airframes and counts: "copter:2,plane:1,boat:1,sub:3".
-  defp value(:sim_fleet, text), do: fleet_spec(text, Dolphin.Sim.airframes(), Dolphin.Sim.Companion.models())
-  defp value(:sitl_fleet, text), do: fleet_spec(text, Dolphin.SITL.airframes(), Dolphin.Sim.Companion.models())
+  # The simulator's fleet may be several networks (Dolphin.Sim.Local); SITL's is one.
+  defp value(:sim_fleet, text), do: fleet_spec(text, Dolphin.Sim.airframes(), Dolphin.Sim.Companion.models(), :fleet_size)
+  defp value(:sitl_fleet, text), do: fleet_spec(text, Dolphin.SITL.airframes(), Dolphin.Sim.Companion.models(), :vehicles)
 
   defp value(:vehicles, text), do: integer(text, 1..@max_sysid, "a number of vehicles from 1 to #{@max_sysid} (each needs a system id of its own)")
 
   defp value(:fleet_size, text),
-    do: integer(text, 1..(@max_sysid * @max_networks), "a number of vehicles from 1 to #{@max_sysid} a network (each needs a system id of its own there), #{@max_sysid * @max_networks} at most")
+    do: integer(text, 1..(@max_sysid * @max_networks), "a number of vehicles from 1 to #{@max_sysid * @max_networks} (#{@max_sysid} a network, each with a system id of its own there)")
 
   defp value({:range, range, rule}, text), do: integer(text, range, rule)
   defp value(:sysid, text), do: integer(text, 1..@max_sysid, "a system id from 1 to #{@max_sysid} (255 is the ground station's)")
@@ -464,11 +465,12 @@ defmodule Dolphin.CLI.Values do
 
   # "copter:2,boat:1": airframes and counts; a simulated group may carry
   # sensors, "copter:2+smoke+range" (and "2+smoke": N copters with them).
-  defp fleet_spec(text, airframes, sensors) do
-    if String.contains?(text, [":", "+"]), do: groups(text, airframes, sensors), else: value(:vehicles, text)
+  defp fleet_spec(text, airframes, sensors, size) do
+    if String.contains?(text, [":", "+"]), do: groups(text, airframes, sensors, size), else: value(size, text)
   end
 
-  defp groups(text, airframes, sensors) do
+  defp groups(text, airframes, sensors, size) do
+    max = if size == :fleet_size, do: @max_sysid * @max_networks, else: @max_sysid
     known = Enum.map(airframes, &Atom.to_string/1)
     models = Enum.map(sensors, &Atom.to_string/1)
 
@@ -476,30 +478,30 @@ defmodule Dolphin.CLI.Values do
       for part <- String.split(text, ",", trim: true) do
         [group | carried] = String.split(part, "+")
 
-        with {:ok, airframe, n} <- group(group, known),
+        with {:ok, airframe, n} <- group(group, known, size),
              {:ok, carried} <- carried(carried, models) do
           if carried == [], do: {airframe, n}, else: {airframe, n, carried}
         end
       end
 
     rule =
-      "a number of copters, or airframes and counts such as #{Enum.at(known, -2)}:1,#{List.last(known)}:3 (airframes: #{Enum.join(known, ", ")}; #{@max_sysid} vehicles at most)" <>
+      "a number of copters, or airframes and counts such as #{Enum.at(known, -2)}:1,#{List.last(known)}:3 (airframes: #{Enum.join(known, ", ")}; #{max} vehicles at most)" <>
         if(sensors == [], do: "", else: "; sensors after +, as copter:2+smoke (#{Enum.join(models, ", ")})")
 
     case Enum.find(fleet, &match?({:error, _}, &1)) do
       {:error, {:sensor, name}} -> {:error, "no simulated sensor #{inspect(name)}: the simulator's sensors are #{Enum.join(models, ", ")}"}
       {:error, _} -> {:error, rule}
-      nil -> if Enum.sum(Enum.map(fleet, &elem(&1, 1))) <= @max_sysid, do: {:ok, fleet}, else: {:error, rule}
+      nil -> if Enum.sum(Enum.map(fleet, &elem(&1, 1))) <= max, do: {:ok, fleet}, else: {:error, rule}
     end
   end
 
-  defp group(text, known) do
+  defp group(text, known, size) do
     case String.split(text, ":") do
       [n] ->
-        with {:ok, n} <- value(:vehicles, n), do: {:ok, :copter, n}, else: (_ -> {:error, :group})
+        with {:ok, n} <- value(size, n), do: {:ok, :copter, n}, else: (_ -> {:error, :group})
 
       [name, n] ->
-        with true <- name in known, {:ok, count} <- value(:vehicles, n), do: {:ok, String.to_existing_atom(name), count}, else: (_ -> {:error, :group})
+        with true <- name in known, {:ok, count} <- value(size, n), do: {:ok, String.to_existing_atom(name), count}, else: (_ -> {:error, :group})
 
       _ ->
         {:error, :group}

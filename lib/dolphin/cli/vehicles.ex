@@ -84,7 +84,7 @@ defmodule Dolphin.CLI.Vehicles do
       case Dolphin.Sim.Local.start(n, [seed: Keyword.get(opts, :seed, 1), home: opts[:home], world: world, sensors: carried] ++ link_opts) do
         {:ok, sim} ->
           defer.(fn -> Dolphin.Sim.Local.stop(sim) end)
-          IO.puts(out, "#{sim_words(n)} #{Dolphin.Fleet.VehicleSet.format(sim.sysids)} on 127.0.0.1:#{sim.port}")
+          IO.puts(out, "#{sim_words(n)} #{Dolphin.Sim.Local.describe(sim)}")
           :ok
 
         {:error, why} ->
@@ -171,6 +171,7 @@ defmodule Dolphin.CLI.Vehicles do
   # What --sim started, in words: "2 simulated vehicle(s)", "4 simulated vehicle(s) (1 boat, 3 sub)".
   @spec sim_words(pos_integer() | list()) :: String.t()
   def sim_words(n) when is_integer(n), do: "#{n} simulated vehicle(s)"
+
   def sim_words(fleet) do
     groups = Dolphin.Sim.Local.groups(fleet)
     total = groups |> Enum.map(&elem(&1, 1)) |> Enum.sum()
@@ -181,6 +182,7 @@ defmodule Dolphin.CLI.Vehicles do
   # What --sitl started, in words: "2 ArduCopter SITL instance(s)", "3 SITL instance(s): 1 plane, 2 boat".
   @spec sitl_words(pos_integer() | keyword()) :: String.t()
   def sitl_words(n) when is_integer(n), do: "#{n} ArduCopter SITL instance(s)"
+
   def sitl_words(fleet) do
     groups = Dolphin.Sim.Local.groups(fleet)
     total = groups |> Enum.map(&elem(&1, 1)) |> Enum.sum()

@@ -31,7 +31,14 @@ defmodule Dolphin.Link.Connection do
       are signed; incoming signed frames are verified; with `require: true`
       unsigned ones are dropped;
     * `:router` — a 2-arity function given each frame and the path it came
-      by, a `t:via/0` (default `Dolphin.Vehicles.route/2`).
+      by, a `t:via/0` (default `Dolphin.Vehicles.route/2`);
+    * `:network` — the name of the network this link is (see
+      `Dolphin.Vehicles.Id`): the vehicles it hears are told apart by system
+      id alone, whatever address each sends from, and a vehicle whose system
+      id another vehicle has is named `SYSID@NAME`. Without it each remote
+      address of a `udpin` link is a network of its own, and any other link is
+      one, named by the link's name. (`Dolphin.Sim.Local` names the
+      simulator's networks beyond the first so: `sim2`, `sim3`, ...)
 
   ## Links that share a .tlog
 
@@ -69,7 +76,7 @@ defmodule Dolphin.Link.Connection do
 
   @doc "Starts a link; see the module doc for options."
   @spec start_link(keyword()) :: GenServer.on_start()
-  def start_link(opts), do: GenServer.start_link(__MODULE__, opts, name: via(name(opts)), spawn_opt: spawn_opt())
+  def start_link(opts), do: GenServer.start_link(__MODULE__, opts, name: registered(name(opts), opts[:network]), spawn_opt: spawn_opt())
 
   @doc """
   The process options of a link: a young heap of 32 Ki words (256 KiB).
@@ -112,6 +119,22 @@ defmodule Dolphin.Link.Connection do
 
   defp name(opts), do: Keyword.get_lazy(opts, :name, fn -> Endpoint.to_string(Keyword.fetch!(opts, :endpoint)) end)
   defp via(name), do: {:via, Registry, {Dolphin.Instance.names().registry, {:link, name}}}
+
+  @doc """
+  The network a link was given (its `:network` option), or nil: the
+  network a path of it (`t:via/0`) belongs to, named in `Dolphin.Vehicles.Id`.
+  """
+  @spec network(term()) :: String.t() | nil
+  def network(name) do
+    case Registry.lookup(Dolphin.Instance.names().registry, {:link, name}) do
+      [{_pid, network}] when is_binary(network) -> network
+      _ -> nil
+    end
+  end
+
+  # The link's network is kept beside its name, for network/1 to read without calling it.
+  defp registered(name, network) when is_binary(network), do: {:via, Registry, {Dolphin.Instance.names().registry, {:link, name}, network}}
+  defp registered(name, nil), do: via(name)
 
   @impl true
   def init(opts) do
@@ -278,6 +301,7 @@ defmodule Dolphin.Link.Connection do
   def terminate(_reason, state) do
     close_socket(state.endpoint.kind, state.socket)
     with {socket, _targets} <- state.forward, do: :gen_udp.close(socket)
+
     with {io, path} <- state.tlog do
       File.close(io)
       Dolphin.Link.Recorded.forget(path, state.name)

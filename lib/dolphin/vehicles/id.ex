@@ -10,7 +10,10 @@ defmodule Dolphin.Vehicles.Id do
   another network, is named by a *qualified name*, `"SYSID@NETWORK"`: the
   system id and the network it was first heard on, e.g.
   `"1@127.0.0.1:14561"` (a `udpin` link's remote address) or
-  `"1@udpout:127.0.0.1:14570"` (a link, by its name). Every vehicle also
+  `"1@udpout:127.0.0.1:14570"` (a link, by its name), or a network a link
+  was given a name for (its `:network` option: every address it hears is
+  that network), e.g. `"1@sim2"`, the simulator's second network of
+  `--sim` beyond 254 vehicles. Every vehicle also
   answers to its qualified name, the first one included
   (`Dolphin.Vehicles.resolve/1`), so a script that must not depend on which
   vehicle was heard first names both by network.
@@ -63,12 +66,30 @@ defmodule Dolphin.Vehicles.Id do
   @spec qualified(0..255, term()) :: String.t()
   def qualified(sysid, via), do: "#{sysid}@#{network(via)}"
 
-  @doc "The network of path `via`: a `udpin` link's remote address, else the link's name."
+  @doc """
+  The network of path `via`: the network its link was given
+  (`Dolphin.Link.Connection`'s `:network`), else a `udpin` link's remote
+  address, else the link's name.
+  """
   @spec network(term()) :: String.t()
-  def network({_link, {ip, port}}) when is_tuple(ip) and is_integer(port), do: "#{:inet.ntoa(ip)}:#{port}"
-  def network({link, nil}), do: network(link)
-  def network(link) when is_binary(link), do: link
-  def network(link), do: link |> inspect() |> String.replace(~r/\s+/, "")
+  def network({link, _address} = via), do: Dolphin.Link.Connection.network(link) || by_address(via)
+
+  def network(link), do: by_address({link, nil})
+
+  @doc """
+  The qualified name of the vehicle with system id `sysid` heard first on
+  path `via` by the path's address even on a named network: for a second
+  vehicle with the same system id on one named network (a misconfigured
+  fleet), which that network's name alone cannot tell apart.
+  """
+  @spec qualified_by_address(0..255, term()) :: String.t()
+  def qualified_by_address(sysid, via), do: "#{sysid}@#{by_address(via)}"
+
+  defp by_address({_link, {ip, port}}) when is_tuple(ip) and is_integer(port), do: "#{:inet.ntoa(ip)}:#{port}"
+  defp by_address({link, nil}), do: name(link)
+
+  defp name(link) when is_binary(link), do: link
+  defp name(link), do: link |> inspect() |> String.replace(~r/\s+/, "")
 
   @doc """
   A vehicle id from what a user wrote: a system id (an integer, or digits)

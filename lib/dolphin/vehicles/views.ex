@@ -206,6 +206,10 @@ defmodule Dolphin.Vehicles.Views do
     end
   end
 
+  @doc "Whether a vehicle has id `id` already: a view, or paths given to it."
+  @spec owns_name?(Dolphin.Vehicles.Id.t()) :: boolean()
+  def owns_name?(id), do: :ets.member(table(), id) or :ets.match(paths(), {:_, id, :_}, 1) != :"$end_of_table"
+
   @doc false
   # The notice of a vehicle forgotten, for every owner of views.
   @spec forgotten(Dolphin.Vehicles.Id.t()) :: :ok

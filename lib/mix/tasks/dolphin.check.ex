@@ -24,7 +24,8 @@ defmodule Mix.Tasks.Dolphin.Check do
 
     * `--sim N` — the fleet is N simulated ArduCopters (as `mix dolphin.run
       --sim N` starts them): UAVs with a camera, full, on the ground at the
-      simulator's home (the default: `--sim 1`); N from 1 to 254
+      simulator's home (the default: `--sim 1`); N from 1 to 254, and
+      beyond named as `mix dolphin.run --sim N` names them (`1@sim2`, ...)
     * `--fleet FILE` — the fleet described in a JSON file:
 
           {"vehicles": [{"id": 1, "type": "uav", "payloads": ["camera"],
@@ -70,7 +71,7 @@ defmodule Mix.Tasks.Dolphin.Check do
 
   alias Dolphin.CLI.Values
 
-  @options [sim: :vehicles, fleet: :string, connect: {:keep, :endpoint}, wait: :wait, max_distance: :metres, max_height: :metres, max_depth: :metres, json: :boolean]
+  @options [sim: :fleet_size, fleet: :string, connect: {:keep, :endpoint}, wait: :wait, max_distance: :metres, max_height: :metres, max_depth: :metres, json: :boolean]
   @usage "usage: mix dolphin.check SCRIPT [--sim N | --fleet FILE | --connect ENDPOINT... [--wait SECONDS]] [--max-distance M] [--max-height M] [--max-depth M] [--json]"
 
   @impl Mix.Task

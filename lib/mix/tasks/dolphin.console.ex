@@ -28,7 +28,8 @@ defmodule Mix.Tasks.Dolphin.Console do
     * `--connect ENDPOINT` — a link to vehicles (`udpin:0.0.0.0:14550`,
       `udpout:HOST:PORT`, `tcp:HOST:PORT`); repeatable
     * `--sim N` — start N simulated vehicles (`Dolphin.Sim`: ArduCopters with
-      a camera) on a local link (127.0.0.1); N from 1 to 254, as for `--sitl`;
+      a camera) on a local link (127.0.0.1); N from 1 to 254, as for `--sitl`,
+      and beyond on more networks (`SYSID@sim2`, ...: as for `mix dolphin.run`);
       `--sim copter:1,boat:1,sub:2` those airframes (as for `mix dolphin.run`)
     * `--sitl N` — start N ArduCopter SITL instances (`Dolphin.SITL`) on a
       local link (`--sitl plane:1,boat:2,sub:3`: those airframes, as for
@@ -208,7 +209,7 @@ defmodule Mix.Tasks.Dolphin.Console do
     # The console's simulated fleet lives as long as the VM.
     with {:ok, world} <- Dolphin.CLI.Vehicles.world(opts[:world]) do
       case Dolphin.Sim.Local.start(n, [seed: Keyword.get(opts, :seed, 1), home: opts[:home], world: world] ++ link_opts) do
-        {:ok, sim} -> {:ok, ["#{Dolphin.CLI.Vehicles.sim_words(n)} #{Dolphin.Fleet.VehicleSet.format(sim.sysids)} on 127.0.0.1:#{sim.port}"]}
+        {:ok, sim} -> {:ok, ["#{Dolphin.CLI.Vehicles.sim_words(n)} #{Dolphin.Sim.Local.describe(sim)}"]}
         {:error, e} -> {:error, %CommandLineError{reason: :failed, message: Exception.message(e), cause: e}}
       end
     end

@@ -24,7 +24,10 @@ defmodule Mix.Tasks.Dolphin.Run do
       `udpout:HOST:PORT`, `tcp:HOST:PORT`); repeatable
     * `--sim N` — start N simulated vehicles (`Dolphin.Sim`: ArduCopters with a
       camera) on a local link; N from 1 to 254 (one system id each), as for
-      `--sitl` and `--fake`; `--sim copter:2,plane:1,rover:1,boat:1,sub:3`
+      `--sitl` and `--fake`, and beyond on more networks of 254, a local
+      link each, whose vehicles are named `SYSID@sim2`, `SYSID@sim3`, ... (up
+      to 16,256: `Dolphin.Sim.Local`; on two cores a thousand keep up at 1x);
+      `--sim copter:2,plane:1,rover:1,boat:1,sub:3`
       those airframes (ArduPlane's planes, ArduRover's rovers and boats,
       ArduSub's submarines), system ids in that order
     * `--sitl N` — start N ArduCopter SITL instances (`Dolphin.SITL`: ArduPilot's

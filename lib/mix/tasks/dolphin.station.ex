@@ -194,7 +194,7 @@ defmodule Mix.Tasks.Dolphin.Station do
         case Dolphin.Sim.Local.start(n, sim_opts) do
           {:ok, sim} ->
             defer(fn -> Dolphin.Sim.Local.stop(sim) end)
-            {:ok, ["#{n} simulated vehicle(s) #{Dolphin.Fleet.VehicleSet.format(sim.sysids)} on 127.0.0.1:#{sim.port}"]}
+            {:ok, ["#{n} simulated vehicle(s) #{Dolphin.Sim.Local.describe(sim)}"]}
 
           {:error, e} ->
             {:error, Dolphin.CommandLineError.failed(nil, e)}

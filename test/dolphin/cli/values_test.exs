@@ -83,7 +83,7 @@ defmodule Dolphin.CLI.ValuesTest do
       File.write!(script, "use Dolphin.Script\n")
       check = &Mix.Tasks.Dolphin.Check.parse/1
       assert {:error, e} = check.([script, "--sim", "0"])
-      assert e.message =~ "--sim 0: a number of vehicles from 1 to 254"
+      assert e.message =~ "--sim 0: a number of vehicles from 1 to 16256"
       assert {:error, e} = check.([script, "--connect", "udpin:127.0.0.1:14550", "--wait", "0"])
       assert e.message =~ "--wait 0: a number of seconds, more than 0"
       assert {:error, e} = check.([script, "--wait", "3"])

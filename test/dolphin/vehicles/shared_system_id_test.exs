@@ -120,6 +120,21 @@ defmodule Dolphin.Vehicles.SharedSystemIdTest do
     assert flown_heights(sims) == [15, 20]
   end
 
+  test "on a link given a network's name, a vehicle sharing a system id is named by it; a second one of that id on it, by its address too" do
+    plain = GroundStation.open()
+    radio = GroundStation.open(network: "radio2")
+    [{_, _}] = fleet_of_ones([plain])
+
+    {:ok, [a]} = Sim.start(count: 1, gcs: radio, network: "a", speedup: @speedup, home: %{lat: 40.4452, lon: -7.375234, alt: 820.0})
+    {:ok, [b]} = Sim.start(count: 1, gcs: radio, network: "b", speedup: @speedup, home: %{lat: 40.4457, lon: -7.375234, alt: 820.0})
+    addresses = for sim <- [a, b], {:ok, %{port: port}} = Sim.info(sim), do: "1@127.0.0.1:#{port}"
+    Wait.until(fn -> length(Vehicles.list()) == 3 end, 3_000, fn -> "three vehicles with system id 1; known: #{inspect(Vehicles.list())}" end)
+
+    assert [1, by_address, "1@radio2"] = Vehicles.list()
+    assert by_address in addresses
+    assert {:ok, %{network: "radio2"}} = Vehicles.view("1@radio2")
+  end
+
   test "the paths of one other autopilot, given away before its vehicle has a view, make one vehicle, and are its for good" do
     via = fn port -> {"test-shared-#{port}", {{127, 0, 0, 1}, port}} end
     # Two paths of autopilot 99 refused in one pass: one vehicle.

@@ -15,7 +15,7 @@ defmodule Mix.Tasks.Dolphin.ConsoleTest do
                {:ok, [connect: "udpin:0.0.0.0:14550", connect: "tcp:127.0.0.1:5760"]}
 
       assert "bad option --bogus" = message(Task.parse(["--bogus"]))
-      assert "--sim 0: a number of vehicles from 1 to 254 (each needs a system id of its own)" = message(Task.parse(["--sim", "0"]))
+      assert "--sim 0: a number of vehicles from 1 to 16256 (254 a network, each with a system id of its own there)" = message(Task.parse(["--sim", "0"]))
       assert "--speedup -1: a number from 0.01 to 1000" <> _ = message(Task.parse(["--speedup", "-1"]))
       assert "--sitl 255: a number of vehicles from 1 to 254" <> _ = message(Task.parse(["--sitl", "255"]))
       assert "--forward udpin:0.0.0.0:14551: udpout:HOST:PORT here, not udpin" = message(Task.parse(["--forward", "udpin:0.0.0.0:14551"]))

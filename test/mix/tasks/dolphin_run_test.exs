@@ -48,7 +48,7 @@ defmodule Mix.Tasks.Dolphin.RunTest do
       assert err =~ "--sitl blimp:1,boat:2: a number of copters, or airframes and counts such as boat:1,sub:3 (airframes: copter, plane, rover, boat, sub; 254 vehicles at most)"
       assert {2, _, _} = main([ok, "--sitl", "boat:0"])
       assert {2, _, err} = main([ok, "--sim", "quadplane:1"])
-      assert err =~ "--sim quadplane:1: a number of copters, or airframes and counts such as boat:1,sub:3 (airframes: copter, plane, rover, boat, sub; 254 vehicles at most)"
+      assert err =~ "--sim quadplane:1: a number of copters, or airframes and counts such as boat:1,sub:3 (airframes: copter, plane, rover, boat, sub; 16256 vehicles at most)"
     end
   end
 

@@ -20,7 +20,7 @@ defmodule Mix.Tasks.Dolphin.SimTest do
     assert opts[:ekf_ready_ms] == 2_000 and opts[:battery_failsafe] == :rtl
     assert opts[:gcs] == "udpout:127.0.0.1:14550"
 
-    assert message(~w(--count many)) == "--count many: a number of vehicles from 1 to 254 a network (each needs a system id of its own there), 16256 at most"
+    assert message(~w(--count many)) == "--count many: a number of vehicles from 1 to 16256 (254 a network, each with a system id of its own there)"
     assert message(~w(--home north)) =~ "--home north: LAT,LON,ALT"
     assert message(~w(extra)) =~ ~s(unexpected argument "extra")
     assert message(~w(--battery-failsafe maybe)) == "--battery-failsafe maybe: land, none or rtl"
@@ -35,7 +35,7 @@ defmodule Mix.Tasks.Dolphin.SimTest do
     assert message(~w(--for -5)) == "--for -5: a number of seconds, more than 0"
     assert message(~w(--speedup 1e9)) == "--speedup 1e9: a number from 0.01 to 1000 (beyond 1000 the simulated vehicles cannot keep up with the clock)"
     assert message(~w(--speedup 0)) =~ "--speedup 0: a number from 0.01 to 1000"
-    assert message(~w(--count 0)) =~ "--count 0: a number of vehicles from 1 to 254 a network"
+    assert message(~w(--count 0)) =~ "--count 0: a number of vehicles from 1 to 16256 (254 a network"
     assert message(~w(--count 300)) =~ "--count 300: a network holds 254 vehicles at most (system ids 1..254, 255 is the ground station's): --networks spreads more over several"
     assert message(~w(--count 2000 --networks 4)) =~ "--count 2000 over --networks 4: 500 vehicles a network, system ids 1..500, do not fit in 1..254"
     assert message(~w(--count 3 --networks 4)) == "--networks 4 for --count 3: each network needs a vehicle at least"

@@ -34,7 +34,7 @@ defmodule Mix.Tasks.FlagValuesTest do
     assert latitude =~ "--home 200,0,0: the latitude 200 is not within -90..90"
     assert speedup =~ "--speedup 1e9: a number from 0.01 to 1000 (beyond 1000 the simulated vehicles cannot keep up with the clock)"
     assert for_zero =~ "--for 0: a number of seconds, more than 0"
-    assert count =~ "--count 0: a number of vehicles from 1 to 254 a network (each needs a system id of its own there)"
+    assert count =~ "--count 0: a number of vehicles from 1 to 16256 (254 a network, each with a system id of its own there)"
     for {_, output} <- results, do: refute(output =~ ~r/bad :\w+|simulating/)
   end
 
@@ -68,7 +68,7 @@ defmodule Mix.Tasks.FlagValuesTest do
              ])
 
     assert station =~ "mix dolphin.station: --first-sysid 255: a system id from 1 to 254 (255 is the ground station's)"
-    assert console =~ "mix dolphin.console: --sim 0: a number of vehicles from 1 to 254"
+    assert console =~ "mix dolphin.console: --sim 0: a number of vehicles from 1 to 16256"
     assert forward =~ "mix dolphin.console: --forward tcp:127.0.0.1:5760: udpout:HOST:PORT here, not tcp"
   end
 
