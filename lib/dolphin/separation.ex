@@ -326,27 +326,74 @@ defmodule Dolphin.Separation do
 
   # Every other vehicle in the air that `f` is kept apart from: the
   # registered ones as their views came, the ground station's others as the
-  # table has them now. One with no view (forgotten) is near no one.
+  # table has them now. One with no view (forgotten) is near no one. Only
+  # those within reach are looked at (see "The station's vehicles"): a
+  # fleet of a thousand is not a million pairs a view.
   defp others(s, %Flying{view: nil}), do: {[], s}
 
   defp others(s, f) do
-    registered = for {id, o} <- s.flying, id != f.id, airborne?(o.view), same_medium?(f.view, o.view), do: o
     {heard, s} = heard(s)
-    unregistered = for %{id: id} = o <- heard, not Map.has_key?(s.flying, id), same_medium?(f.view, o.view), do: o
+    ids = nearby(heard, f)
+    registered = for id <- ids, id != f.id, o = s.flying[id], o != nil, airborne?(o.view), same_medium?(f.view, o.view), do: o
+    unregistered = for id <- ids, not Map.has_key?(s.flying, id), o = heard.airborne[id], o != nil, same_medium?(f.view, o.view), do: o
     {registered ++ unregistered, s}
   end
 
-  # The station's vehicles in the air, read from the views' table at most
-  # once a tick (the registered ones' views come to the monitor itself).
-  defp heard(%{heard: {at, heard}} = s) do
+  # --- the station's vehicles -----------------------------------------------------
+  #
+  # Read from the views' table at most once a tick (the registered ones'
+  # views come to the monitor itself): those in the air, and where every
+  # placed vehicle was then, in cells of @cell_m metres. A vehicle's
+  # candidates are the vehicles of the cells within its reach: the
+  # separation (half as much again, for letting go), and how far the two
+  # could close within the horizon — its speed (or the one it was held at)
+  # and the fastest vehicle's — and the tick's worth of moving since the
+  # cells were made.
+
+  @cell_m 100.0
+  @metres_a_degree 111_000
+
+  defp heard(%{heard: %{at: at} = heard} = s) do
     if Clock.now_ms() - at < @tick_ms, do: {heard, s}, else: heard(%{s | heard: nil})
   end
 
   defp heard(s) do
     now = Clock.now_ms()
-    heard = for view <- Views.all(), airborne?(view), do: %{id: view.id, view: view, seen_at: now}
-    {heard, %{s | heard: {now, heard}}}
+    views = Views.all()
+    placed = Enum.filter(views, &(&1.position != nil))
+    airborne = for view <- placed, airborne?(view), into: %{}, do: {view.id, %{id: view.id, view: view, seen_at: now}}
+    cells = Enum.group_by(placed, &cell(&1.position), & &1.id)
+    fastest = Enum.reduce(placed, 0.0, &max(Dolphin.Vehicles.View.speed(&1), &2))
+    widest = Enum.reduce(Map.values(s.flying), @default_limits.horizontal, &max(&1.limits.horizontal, &2))
+    heard = %{at: now, airborne: airborne, cells: cells, fastest: fastest, widest: widest}
+    {heard, %{s | heard: heard}}
   end
+
+  defp cell(%{lat: lat, lon: lon}), do: {floor(lat * @metres_a_degree / @cell_m), floor(lon * @metres_a_degree / @cell_m)}
+
+  # The ids of the cells within `f`'s reach, in order (every placed vehicle
+  # when the cells cannot say: near a pole or the 180th meridian).
+  defp nearby(heard, %Flying{view: %{position: %{lat: lat, lon: lon} = at}} = f) do
+    own = max(Dolphin.Vehicles.View.speed(f.view), if(f.held, do: speed(f.held.velocity), else: 0.0))
+    reach = max(f.limits.horizontal, heard.widest) * @clear_margin + @horizon_s * (own + heard.fastest) + 2 * @tick_ms / 1000 * heard.fastest
+    cos = :math.cos(abs(lat) * :math.pi() / 180)
+
+    if cos < 0.05 or abs(lon) > 179 do
+      heard.cells |> Map.values() |> List.flatten() |> Enum.sort()
+    else
+      # A cell is a little under @cell_m across north-south (a degree of
+      # latitude is more than @metres_a_degree), and @cell_m * cos across east-west.
+      rings_lat = ceil(reach / (@cell_m * 0.99)) + 1
+      rings_lon = ceil(reach / (@cell_m * 0.99 * cos)) + 1
+      {cn, ce} = cell(at)
+      for(dn <- -rings_lat..rings_lat, de <- -rings_lon..rings_lon, id <- Map.get(heard.cells, {cn + dn, ce + de}, []), do: id) |> Enum.sort()
+    end
+  end
+
+  defp nearby(_heard, _f), do: []
+
+  defp speed({vn, ve, _vu}), do: :math.sqrt(vn * vn + ve * ve)
+  defp speed(_), do: 0.0
 
   defp limits(%Flying{limits: mine}, %Flying{limits: theirs}), do: %{horizontal: max(mine.horizontal, theirs.horizontal), vertical: max(mine.vertical, theirs.vertical)}
   defp limits(%Flying{limits: mine}, _other), do: mine

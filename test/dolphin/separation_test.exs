@@ -37,7 +37,7 @@ defmodule Dolphin.SeparationTest do
       armed?: Keyword.get(opts, :armed?, true),
       landed: Keyword.get(opts, :landed, :in_air),
       mode: :auto,
-      position: Geo.offset(@base, north, east, up),
+      position: Geo.offset(Keyword.get(opts, :base, @base), north, east, up),
       relative_altitude: up * 1.0,
       velocity: velocity
     })
@@ -171,6 +171,23 @@ defmodule Dolphin.SeparationTest do
     executor(c, 3_000)
     flying(c, 0, -50, {0.0, 10.0, 0.0})
     assert_receive {:separation, :hold, %{vehicle: ^c, other: ^b}}
+  end
+
+  test "only vehicles within reach are judged against, yet one far off coming fast is, wherever on the map", %{ids: {a, b, c}} do
+    for {base, heading} <- [{Geo.location(69.9, 25.1, 100), :east}, {Geo.location(-0.3, 178.9, 10), :north}, {@base, :east}] do
+      opts = [base: base]
+      # c hovers a kilometre away: out of reach, never judged against.
+      flying(c, 0, 1_000, {0.0, 0.0, 0.0}, opts)
+      executor(a, 1_000)
+      flying(a, 0, 0, {0.0, 0.0, 0.0}, opts)
+      # b, not ours, is 190 m off and comes at a at 22 m/s: within 20 m in 8 s.
+      if heading == :east, do: flying(b, 0, 190, {0.0, -22.0, 0.0}, opts), else: flying(b, 190, 0, {-22.0, 0.0, 0.0}, opts)
+      flying(a, 0, 0, {0.0, 0.0, 0.0}, opts)
+      assert_receive {:separation, :hold, %{vehicle: ^a, other: ^b}}, 2_000
+      refute_received {:separation, :hold, %{other: ^c}}
+      for id <- [a, b, c], do: Views.delete(id)
+      assert_receive {:separation, :clear, %{vehicle: ^a}}, 5_000
+    end
   end
 
   test "two tasks started together: the one the engine made later holds, whichever registered first", %{ids: {a, b, _c}} do
