@@ -65,6 +65,7 @@ defmodule Dolphin.Link do
   @spec connect(String.t(), keyword()) :: {:ok, pid()} | {:error, EndpointError.t()}
   def connect(endpoint, opts \\ []) do
     with {:ok, %Endpoint{} = ep} <- Endpoint.parse(endpoint),
+         :ok <- network_name(endpoint, opts[:network]),
          {:ok, forward} <- parse_all(Keyword.get(opts, :forward, [])) do
       opts = Keyword.put(opts, :forward, forward)
 
@@ -89,6 +90,11 @@ defmodule Dolphin.Link do
     _ = DynamicSupervisor.terminate_child(Dolphin.Instance.names().links, link)
     :ok
   end
+
+  # A network's name ends a vehicle's qualified name ("1@radio2"): some text.
+  defp network_name(_endpoint, nil), do: :ok
+  defp network_name(_endpoint, name) when is_binary(name) and name != "", do: :ok
+  defp network_name(endpoint, other), do: {:error, %EndpointError{endpoint: endpoint, reason: :failed, detail: "network: a network's name is some text, such as \"radio2\", got: #{inspect(other)}"}}
 
   defp parse_all(endpoints) do
     Enum.reduce_while(endpoints, {:ok, []}, fn

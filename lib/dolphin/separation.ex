@@ -114,7 +114,8 @@ defmodule Dolphin.Separation do
   def init(:ok) do
     # A vehicle forgotten or lost leaves the station's vehicles read last (heard/1) at once.
     Dolphin.Vehicles.subscribe(:all)
-    {:ok, %{flying: %{}, ticking: false, heard: nil}}
+    # `holding`: the ids of the held vehicles (looked at on every view and tick).
+    {:ok, %{flying: %{}, holding: MapSet.new(), ticking: false, heard: nil}}
   end
 
   @impl true
@@ -168,7 +169,7 @@ defmodule Dolphin.Separation do
       {f, flying} ->
         Process.demonitor(f.ref, [:flush])
         Dolphin.PubSub.unsubscribe({:vehicle, id})
-        %{s | flying: flying}
+        %{s | flying: flying, holding: MapSet.delete(s.holding, id)}
     end
   end
 
@@ -236,6 +237,7 @@ defmodule Dolphin.Separation do
     send(holder.pid, {:separation, :hold, Map.merge(seen, %{vehicle: holder.id, other: other})})
     emit_hold(holder.id, other, seen, :hold)
     held = %{other: other, since: now, velocity: velocity(holder.view), height: holder.view.position.h, aside: false, clear_since: nil}
+    s = %{s | holding: MapSet.put(s.holding, holder.id)}
     tick(put_in(s.flying[holder.id], %{holder | held: held}))
   end
 
@@ -264,8 +266,8 @@ defmodule Dolphin.Separation do
 
   defp look_at_held(s) do
     now = Clock.now_ms()
-    s = Enum.reduce(Map.keys(s.flying), s, fn id, s -> if s.flying[id].held, do: look_at(s, id, now), else: s end)
-    if Enum.any?(s.flying, fn {_, f} -> f.held end), do: tick(s), else: s
+    s = Enum.reduce(Enum.sort(s.holding), s, fn id, s -> if s.flying[id].held, do: look_at(s, id, now), else: s end)
+    if MapSet.size(s.holding) > 0, do: tick(s), else: s
   end
 
   defp look_at(s, id, now) do
@@ -306,7 +308,7 @@ defmodule Dolphin.Separation do
     send(f.pid, {:separation, :clear, %{vehicle: f.id}})
     distance = with %{} = other <- Enum.find(others, &(&1.id == f.held.other)), do: distance(f, other), else: (_ -> nil)
     Events.emit(:separation_clear, %{vehicle: f.id, other: f.held.other, distance: distance, held_ms: now - f.held.since})
-    put_in(s.flying[f.id].held, nil)
+    put_in(%{s | holding: MapSet.delete(s.holding, f.id)}.flying[f.id].held, nil)
   end
 
   defp distance(f, other) do

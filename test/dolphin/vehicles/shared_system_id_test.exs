@@ -133,6 +133,9 @@ defmodule Dolphin.Vehicles.SharedSystemIdTest do
     assert [1, by_address, "1@radio2"] = Vehicles.list()
     assert by_address in addresses
     assert {:ok, %{network: "radio2"}} = Vehicles.view("1@radio2")
+
+    assert {:error, e} = Dolphin.Link.connect("udpin:127.0.0.1:0", network: :radio3)
+    assert Exception.message(e) == ~s|udpin:127.0.0.1:0: network: a network's name is some text, such as "radio2", got: :radio3|
   end
 
   test "the paths of one other autopilot, given away before its vehicle has a view, make one vehicle, and are its for good" do
