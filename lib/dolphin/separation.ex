@@ -89,7 +89,7 @@ defmodule Dolphin.Separation do
   @spec flying(Dolphin.Vehicles.Id.t(), keyword()) :: :ok
   def flying(id, opts \\ []) do
     started = {Keyword.get(opts, :started_at, Clock.now_ms()), Keyword.get(opts, :rank)}
-    GenServer.call(server(), {:flying, id, self(), started, Keyword.get(opts, :limits) || @default_limits})
+    GenServer.call(server(), {:flying, id, self(), started, Keyword.get(opts, :limits) || @default_limits}, 15_000)
   end
 
   @doc "The vehicles held now: id => the vehicle it was first held for."
@@ -112,6 +112,9 @@ defmodule Dolphin.Separation do
 
   @impl true
   def init(:ok) do
+    # Safety first: on a host too busy for all its work, a hold does not wait
+    # behind the rest (a thousand vehicles' views come here).
+    Process.flag(:priority, :high)
     # A vehicle forgotten or lost leaves the station's vehicles read last (heard/1) at once.
     Dolphin.Vehicles.subscribe(:all)
     # `holding`: the ids of the held vehicles (looked at on every view and tick).
@@ -131,14 +134,20 @@ defmodule Dolphin.Separation do
 
   @impl true
   def handle_info({:dolphin, {:vehicle, id}, {:view, view}}, s) do
-    case s.flying do
-      %{^id => f} ->
-        s = put_in(s.flying[id], %{f | view: view, seen_at: Clock.now_ms()})
-        {:noreply, s |> judge(id) |> look_at_held()}
+    # The views queued behind this one too, each vehicle judged once on its
+    # latest: a large fleet's views are not judged one stale view at a time.
+    views = latest_views(%{id => view})
+    now = Clock.now_ms()
 
-      _ ->
-        {:noreply, s}
-    end
+    s =
+      Enum.reduce(Enum.sort(Map.keys(views)), s, fn id, s ->
+        case s.flying do
+          %{^id => f} -> judge(put_in(s.flying[id], %{f | view: views[id], seen_at: now}), id)
+          _ -> s
+        end
+      end)
+
+    {:noreply, look_at_held(s)}
   end
 
   def handle_info(:tick, s), do: {:noreply, look_at_held(%{s | ticking: false})}
@@ -160,6 +169,14 @@ defmodule Dolphin.Separation do
   end
 
   def handle_info(_other, s), do: {:noreply, s}
+
+  defp latest_views(views) do
+    receive do
+      {:dolphin, {:vehicle, id}, {:view, view}} -> latest_views(Map.put(views, id, view))
+    after
+      0 -> views
+    end
+  end
 
   defp forget(s, id) do
     case Map.pop(s.flying, id) do

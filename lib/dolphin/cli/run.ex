@@ -256,9 +256,10 @@ defmodule Dolphin.CLI.Run do
     {:ok, renderer} = Renderer.start_link(out: out, origin_ms: origin, quiet: opts[:quiet] == true, terminal: terminal)
     defer(fn -> Renderer.stop(renderer) end, :output)
 
-    with {:ok, writer} <- start_writer(opts[:events], origin),
+    err = Keyword.get(opts, :err, :stderr)
+
+    with {:ok, writer} <- start_writer(opts[:events], origin, err),
          {:ok, log} <- start_tlog(opts[:tlog]) do
-      err = Keyword.get(opts, :err, :stderr)
       if opts[:signals], do: Signals.catch_signals(self(), again: &exit_at_once(&1, renderer, writer, err))
       if log && !opts[:quiet], do: IO.puts(out, log)
       {:ok, renderer}
@@ -271,9 +272,9 @@ defmodule Dolphin.CLI.Run do
 
   defp start_tlog(path), do: Dolphin.CLI.OutputFile.start_log(path)
 
-  defp start_writer(nil, _origin), do: {:ok, nil}
+  defp start_writer(nil, _origin, _err), do: {:ok, nil}
 
-  defp start_writer(path, origin) do
+  defp start_writer(path, origin, err) do
     # A writer that cannot open its file stops in its init, and its exit
     # would take this process with it: trapped while it starts, it is a
     # message, and the run ends with what went wrong instead.
@@ -282,7 +283,14 @@ defmodule Dolphin.CLI.Run do
     try do
       case Dolphin.Events.Writer.start_link(path: path, origin_ms: origin) do
         {:ok, writer} ->
-          defer(fn -> Dolphin.Events.Writer.stop(writer) end, :output)
+          defer(
+            fn ->
+              with {:error, :timeout} <- Dolphin.Events.Writer.stop(writer),
+                   do: IO.puts(err, "--events #{path}: still writing after 5 minutes, stopped: the file may lack the run's last events")
+            end,
+            :output
+          )
+
           {:ok, writer}
 
         {:error, why} ->

@@ -142,6 +142,11 @@ defmodule Dolphin.Link.Connection do
     # Trapping exits makes a supervisor's shutdown run terminate/2, which
     # closes the sockets and flushes the tlog; a crash loses at most its last 200 ms.
     Process.flag(:trap_exit, true)
+    # The ground station's ear comes first: on a host too busy for all its
+    # work the bytes are taken off the socket before anything else runs, so
+    # that the kernel's buffer does not overflow and drop them, and the
+    # vehicles' processes (which hold what is heard) wait instead.
+    Process.flag(:priority, :high)
 
     # The log first: a log that cannot be written leaves no socket behind.
     with {:ok, tlog} <- open_tlog(opts[:tlog]),
