@@ -127,7 +127,9 @@ defmodule Dolphin.Separation do
     Dolphin.Vehicles.subscribe(id)
     view = with {:ok, v} <- Views.get(id), do: v, else: (_ -> nil)
     flying = %Flying{id: id, pid: pid, ref: Process.monitor(pid), started_at: started_at, rank: rank, limits: limits, view: view, seen_at: Clock.now_ms()}
-    {:reply, :ok, put_in(s.flying[id], flying)}
+    # The station's vehicles are read anew for a new mission (what the table
+    # holds now, not what it held up to a tick ago).
+    {:reply, :ok, put_in(%{s | heard: nil}.flying[id], flying)}
   end
 
   def handle_call(:held, _from, s), do: {:reply, for({id, %{held: %{other: other}}} <- s.flying, into: %{}, do: {id, other}), s}

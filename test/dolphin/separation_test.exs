@@ -178,10 +178,9 @@ defmodule Dolphin.SeparationTest do
       opts = [base: base]
       # c hovers a kilometre away: out of reach, never judged against.
       flying(c, 0, 1_000, {0.0, 0.0, 0.0}, opts)
-      executor(a, 1_000)
-      flying(a, 0, 0, {0.0, 0.0, 0.0}, opts)
       # b, not ours, is 190 m off and comes at a at 22 m/s: within 20 m in 8 s.
       if heading == :east, do: flying(b, 0, 190, {0.0, -22.0, 0.0}, opts), else: flying(b, 190, 0, {-22.0, 0.0, 0.0}, opts)
+      executor(a, 1_000)
       flying(a, 0, 0, {0.0, 0.0, 0.0}, opts)
       assert_receive {:separation, :hold, %{vehicle: ^a, other: ^b}}, 2_000
       refute_received {:separation, :hold, %{other: ^c}}
