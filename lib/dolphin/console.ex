@@ -76,17 +76,41 @@ defmodule Dolphin.Console do
 
   # --- the fleet ---------------------------------------------------------------
 
+  @page_rows 50
+
   @doc """
   The fleet at a glance: per vehicle its id, type, mode, whether armed,
   battery, position, altitude above home, link quality (frames received
   against sequence gaps), when it was last heard (or how long it has been
   lost) and the task it runs (or who picked it).
+
+  A fleet of more than #{@page_rows} is shown #{@page_rows} at a time, in id
+  order: `vehicles()` the first page, `vehicles(2)` the second, ...,
+  `vehicles(:all)` every one; a line under the table says which.
   """
-  @spec vehicles() :: printed()
-  def vehicles do
-    Overview.vehicles() |> Overview.rows() |> Format.vehicles() |> say()
+  @spec vehicles(pos_integer() | :all) :: printed()
+  def vehicles(page \\ 1)
+
+  def vehicles(:all) do
+    {entries, _count} = Overview.vehicles(:all)
+    entries |> Overview.rows() |> Format.vehicles() |> say()
     done()
   end
+
+  def vehicles(page) when is_integer(page) and page >= 1 do
+    {entries, count} = Overview.vehicles({page, @page_rows})
+    pages = max(div(count + @page_rows - 1, @page_rows), 1)
+
+    cond do
+      count <= @page_rows -> entries |> Overview.rows() |> Format.vehicles() |> say()
+      entries == [] -> say("no page #{page}: #{count} vehicles are #{pages} pages of #{@page_rows} (vehicles(:all) shows every one)")
+      true -> say(Format.vehicles(Overview.rows(entries)) <> "\n" <> Format.page_line(page, pages, @page_rows, count))
+    end
+
+    done()
+  end
+
+  def vehicles(other), do: say("vehicles/1 takes a page number (1, 2, ...) or :all, not #{inspect(other)}") && done()
 
   @doc """
   The running task trees: scripts started here, the runs (`execute`s) of
@@ -346,7 +370,9 @@ defmodule Dolphin.Console do
 
   def web(:stop, _opts) do
     case Process.whereis(@web) do
-      nil -> say("no live view to stop")
+      nil ->
+        say("no live view to stop")
+
       pid ->
         Dolphin.Web.stop(pid)
         say("live view stopped")

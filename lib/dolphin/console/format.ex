@@ -49,11 +49,13 @@ defmodule Dolphin.Console.Format do
     |> Enum.with_index(1)
     |> Enum.flat_map(fn {node, i} ->
       last? = i == count
-      {branch, further} = cond do
-        top? -> {"", ""}
-        last? -> {"└─ ", "   "}
-        true -> {"├─ ", "│  "}
-      end
+
+      {branch, further} =
+        cond do
+          top? -> {"", ""}
+          last? -> {"└─ ", "   "}
+          true -> {"├─ ", "│  "}
+        end
 
       [{indent <> branch, node.text, Map.get(node, :state)} | flatten(Map.get(node, :children, []), indent <> further, false)]
     end)
@@ -129,6 +131,20 @@ defmodule Dolphin.Console.Format do
   def vehicles(rows) do
     paths = for r <- rows, length(Map.get(r, :paths, [])) > 1, do: paths(r.id, r.paths)
     Enum.join([vehicles_table(rows) | paths], "\n")
+  end
+
+  @doc """
+  The line under a page of a large fleet's table.
+
+      iex> Dolphin.Console.Format.page_line(2, 20, 50, 1000)
+      "vehicles 51-100 of 1000 (page 2 of 20): vehicles(3) for the next, vehicles(:all) for every one"
+      iex> Dolphin.Console.Format.page_line(3, 3, 50, 120)
+      "vehicles 101-120 of 120 (page 3 of 3): vehicles(:all) for every one"
+  """
+  @spec page_line(pos_integer(), pos_integer(), pos_integer(), non_neg_integer()) :: String.t()
+  def page_line(page, pages, rows, count) do
+    next = if page < pages, do: "vehicles(#{page + 1}) for the next, ", else: ""
+    "vehicles #{(page - 1) * rows + 1}-#{min(page * rows, count)} of #{count} (page #{page} of #{pages}): #{next}vehicles(:all) for every one"
   end
 
   @doc false

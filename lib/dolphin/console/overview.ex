@@ -13,12 +13,21 @@ defmodule Dolphin.Console.Overview do
   # vehicle of another source), view (Dolphin.Vehicles.View, or nil), paths (Dolphin.Vehicles.paths/1),
   # fleet (%Dolphin.Vehicles.View{} or nil), picked_by, busy, task (the
   # platform task flying it, or nil)}.
+  # `page`: `{number, rows}`, that page of them in id order, and how many there are in all.
   @spec vehicles() :: [map()]
-  def vehicles do
+  def vehicles, do: elem(vehicles(:all), 0)
+
+  @spec vehicles(:all | {pos_integer(), pos_integer()}) :: {[map()], non_neg_integer()}
+  def vehicles(page) do
     fleet = Map.new(safe(fn -> Fleet.vehicles() end, []), &{&1.vehicle.id, &1})
     leaves = for t <- Engine.tasks(), t.vehicle != nil, into: %{}, do: {t.vehicle, t}
-    ids = Enum.sort(Enum.uniq(Vehicles.list() ++ Map.keys(fleet)))
+    all = Enum.sort(Enum.uniq(Vehicles.list() ++ Map.keys(fleet)))
+    ids = if page == :all, do: all, else: Enum.slice(all, (elem(page, 0) - 1) * elem(page, 1), elem(page, 1))
 
+    {vehicle_entries(ids, fleet, leaves), length(all)}
+  end
+
+  defp vehicle_entries(ids, fleet, leaves) do
     for id <- ids do
       state =
         case Vehicles.state(id) do
@@ -174,8 +183,7 @@ defmodule Dolphin.Console.Overview do
 
     others = runs |> Enum.filter(&match?({:script, _}, owners[&1.run])) |> Enum.group_by(&elem(owners[&1.run], 1))
 
-    other_groups =
-      for {runner, rs} <- others, do: %{text: "script #{inspect(runner)} (not started from this console)", state: nil, runs: Enum.map(rs, & &1.run)}
+    other_groups = for {runner, rs} <- others, do: %{text: "script #{inspect(runner)} (not started from this console)", state: nil, runs: Enum.map(rs, & &1.run)}
 
     task_runs = for %{kind: :task} = c <- console, into: %{}, do: {c.id, c}
 
