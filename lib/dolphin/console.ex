@@ -102,8 +102,8 @@ defmodule Dolphin.Console do
     pages = max(div(count + @page_rows - 1, @page_rows), 1)
 
     cond do
+      entries == [] and count > 0 -> say("no page #{page}: #{count} vehicle(s), #{pages} page(s) of #{@page_rows} (vehicles(:all) shows every one)")
       count <= @page_rows -> entries |> Overview.rows() |> Format.vehicles() |> say()
-      entries == [] -> say("no page #{page}: #{count} vehicles are #{pages} pages of #{@page_rows} (vehicles(:all) shows every one)")
       true -> say(Format.vehicles(Overview.rows(entries)) <> "\n" <> Format.page_line(page, pages, @page_rows, count))
     end
 

@@ -135,48 +135,56 @@ defmodule Dolphin.Separation do
   def handle_call(:held, _from, s), do: {:reply, for({id, %{held: %{other: other}}} <- s.flying, into: %{}, do: {id, other}), s}
 
   @impl true
-  def handle_info({:dolphin, {:vehicle, id}, {:view, view}}, s) do
-    # The views queued behind this one too, each vehicle judged once on its
-    # latest: a large fleet's views are not judged one stale view at a time.
-    views = latest_views(%{id => view})
-    now = Clock.now_ms()
-
-    s =
-      Enum.reduce(Enum.sort(Map.keys(views)), s, fn id, s ->
-        case s.flying do
-          %{^id => f} -> judge(put_in(s.flying[id], %{f | view: views[id], seen_at: now}), id)
-          _ -> s
-        end
-      end)
-
+  def handle_info({:dolphin, {:vehicle, _id}, {:view, _view}} = message, s) do
+    # The views queued behind this one too, in their order with the ends and
+    # losses among them, and each vehicle judged once, on its latest: a large
+    # fleet's views are not judged one stale view at a time.
+    {s, seen} = Enum.reduce([message | queued_updates()], {s, MapSet.new()}, &update/2)
+    s = Enum.reduce(Enum.sort(seen), s, fn id, s -> if match?(%Flying{view: %{}}, s.flying[id]), do: judge(s, id), else: s end)
     {:noreply, look_at_held(s)}
   end
 
   def handle_info(:tick, s), do: {:noreply, look_at_held(%{s | ticking: false})}
 
-  # A vehicle forgotten is nowhere: its last view is no longer a place to keep
-  # clear of, even while its mission's process has not yet gone.
-  def handle_info({:dolphin, :vehicles, {:vehicle_forgotten, id}}, s) do
-    s = %{s | heard: nil}
-    {:noreply, if(Map.has_key?(s.flying, id), do: put_in(s.flying[id].view, nil), else: s)}
-  end
+  def handle_info({:dolphin, :vehicles, {event, _id}} = message, s) when event in [:vehicle_forgotten, :vehicle_lost], do: {:noreply, elem(update(message, {s, MapSet.new()}), 0)}
 
-  def handle_info({:dolphin, :vehicles, {:vehicle_lost, _id}}, s), do: {:noreply, %{s | heard: nil}}
-
-  def handle_info({:DOWN, ref, :process, _, _}, s) do
-    case Enum.find(s.flying, fn {_, f} -> f.ref == ref end) do
-      {id, _} -> {:noreply, s |> forget(id) |> look_at_held()}
-      nil -> {:noreply, s}
-    end
-  end
+  def handle_info({:DOWN, _ref, :process, _, _} = message, s), do: {:noreply, look_at_held(elem(update(message, {s, MapSet.new()}), 0))}
 
   def handle_info(_other, s), do: {:noreply, s}
 
-  defp latest_views(views) do
+  # What changes the vehicles the monitor follows, queued now.
+  defp queued_updates do
     receive do
-      {:dolphin, {:vehicle, id}, {:view, view}} -> latest_views(Map.put(views, id, view))
+      {:dolphin, {:vehicle, _}, {:view, _}} = message -> [message | queued_updates()]
+      {:dolphin, :vehicles, {event, _}} = message when event in [:vehicle_forgotten, :vehicle_lost] -> [message | queued_updates()]
+      {:DOWN, _, :process, _, _} = message -> [message | queued_updates()]
     after
-      0 -> views
+      0 -> []
+    end
+  end
+
+  # One of them applied; `seen`: the registered vehicles a view came for.
+  defp update({:dolphin, {:vehicle, id}, {:view, view}}, {s, seen}) do
+    case s.flying do
+      %{^id => f} -> {put_in(s.flying[id], %{f | view: view, seen_at: Clock.now_ms()}), MapSet.put(seen, id)}
+      _ -> {s, seen}
+    end
+  end
+
+  # A vehicle forgotten is nowhere: its last view is no longer a place to keep
+  # clear of, even while its mission's process has not yet gone.
+  defp update({:dolphin, :vehicles, {:vehicle_forgotten, id}}, {s, seen}) do
+    s = %{s | heard: nil}
+    {if(Map.has_key?(s.flying, id), do: put_in(s.flying[id].view, nil), else: s), seen}
+  end
+
+  # (Either leaves the station's vehicles read last at once.)
+  defp update({:dolphin, :vehicles, {:vehicle_lost, _id}}, {s, seen}), do: {%{s | heard: nil}, seen}
+
+  defp update({:DOWN, ref, :process, _, _}, {s, seen}) do
+    case Enum.find(s.flying, fn {_, f} -> f.ref == ref end) do
+      {id, _} -> {forget(s, id), MapSet.delete(seen, id)}
+      nil -> {s, seen}
     end
   end
 
@@ -368,8 +376,8 @@ defmodule Dolphin.Separation do
   # candidates are the vehicles of the cells within its reach: the
   # separation (half as much again, for letting go), and how far the two
   # could close within the horizon — its speed (or the one it was held at)
-  # and the fastest vehicle's — and the tick's worth of moving since the
-  # cells were made.
+  # and the fastest vehicle's — and how far a view is moved on for its age
+  # and since the cells were made.
 
   @cell_m 100.0
   @metres_a_degree 111_000
@@ -386,7 +394,10 @@ defmodule Dolphin.Separation do
     cells = Enum.group_by(placed, &cell(&1.position), & &1.id)
     fastest = Enum.reduce(placed, 0.0, &max(Dolphin.Vehicles.View.speed(&1), &2))
     widest = Enum.reduce(Map.values(s.flying), @default_limits.horizontal, &max(&1.limits.horizontal, &2))
-    heard = %{at: now, airborne: airborne, cells: cells, fastest: fastest, widest: widest}
+    # How far a registered vehicle is moved on from where its last view (the
+    # cells') put it, at most: its speed for the age of that view.
+    drift = Enum.reduce(Map.values(s.flying), 0.0, fn o, most -> if o.view, do: max(most, Dolphin.Vehicles.View.speed(o.view) * max(now - o.seen_at, 0) / 1000), else: most end)
+    heard = %{at: now, airborne: airborne, cells: cells, fastest: fastest, widest: widest, drift: drift}
     {heard, %{s | heard: heard}}
   end
 
@@ -396,7 +407,10 @@ defmodule Dolphin.Separation do
   # when the cells cannot say: near a pole or the 180th meridian).
   defp nearby(heard, %Flying{view: %{position: %{lat: lat, lon: lon} = at}} = f) do
     own = max(Dolphin.Vehicles.View.speed(f.view), if(f.held, do: speed(f.held.velocity), else: 0.0))
-    reach = max(f.limits.horizontal, heard.widest) * @clear_margin + @horizon_s * (own + heard.fastest) + 2 * @tick_ms / 1000 * heard.fastest
+    # Its own view moved on for its age, the others' (heard.drift), and the
+    # tick's worth of moving since the cells were made (twice: both may move).
+    moved = Dolphin.Vehicles.View.speed(f.view) * max(Clock.now_ms() - f.seen_at, 0) / 1000 + heard.drift + 2 * @tick_ms / 1000 * heard.fastest
+    reach = max(f.limits.horizontal, heard.widest) * @clear_margin + @horizon_s * (own + heard.fastest) + moved
     cos = :math.cos(abs(lat) * :math.pi() / 180)
 
     if cos < 0.05 or abs(lon) > 179 do

@@ -173,20 +173,32 @@ defmodule Dolphin.SeparationTest do
     assert_receive {:separation, :hold, %{vehicle: ^c, other: ^b}}
   end
 
-  test "only vehicles within reach are judged against, yet one far off coming fast is, wherever on the map", %{ids: {a, b, c}} do
+  test "a vehicle far off coming fast is judged against, wherever on the map", %{ids: {a, b, c}} do
     for {base, heading} <- [{Geo.location(69.9, 25.1, 100), :east}, {Geo.location(-0.3, 178.9, 10), :north}, {@base, :east}] do
       opts = [base: base]
-      # c hovers a kilometre away: out of reach, never judged against.
+      # (c hovers a kilometre away, in the cells too.)
       flying(c, 0, 1_000, {0.0, 0.0, 0.0}, opts)
       # b, not ours, is 190 m off and comes at a at 22 m/s: within 20 m in 8 s.
       if heading == :east, do: flying(b, 0, 190, {0.0, -22.0, 0.0}, opts), else: flying(b, 190, 0, {-22.0, 0.0, 0.0}, opts)
       executor(a, 1_000)
       flying(a, 0, 0, {0.0, 0.0, 0.0}, opts)
       assert_receive {:separation, :hold, %{vehicle: ^a, other: ^b}}, 2_000
-      refute_received {:separation, :hold, %{other: ^c}}
       for id <- [a, b, c], do: Views.delete(id)
       assert_receive {:separation, :clear, %{vehicle: ^a}}, 5_000
     end
+  end
+
+  test "a vehicle whose last view is old is judged where it has flown since, not where that view put it", %{ids: {a, b, _c}} do
+    Dolphin.Clock.set_speedup(100)
+    on_exit(fn -> Dolphin.Clock.set_speedup(1) end)
+    # b, ours, 700 m east flying west at 15 m/s; then nothing new from it for 30 s of clock time.
+    executor(b, 1_000)
+    flying(b, 0, 700, {0.0, -15.0, 0.0})
+    Process.sleep(300)
+    # a, started later, flies east at 15 m/s: b is 250 m off by now, closing at 30 m/s.
+    executor(a, 2_000)
+    flying(a, 0, 0, {0.0, 15.0, 0.0})
+    assert_receive {:separation, :hold, %{vehicle: ^a, other: ^b}}, 2_000
   end
 
   test "two tasks started together: the one the engine made later holds, whichever registered first", %{ids: {a, b, _c}} do

@@ -95,8 +95,7 @@ defmodule Dolphin.Check.Separation do
   defp meet?(a, b), do: a.lon_min <= b.lon_max and b.lon_min <= a.lon_max and a.h_min <= b.h_max and b.h_min <= a.h_max
 
   # Widened by the limits, in degrees at the box's latitude (and a metre
-  # more, for the straight lines between the points); a box that wraps the
-  # 180th meridian spans every longitude.
+  # more, for the straight lines between the points).
   defp box(%{points: points} = timeline, index, limits) do
     places = Enum.map(points, &elem(&1, 1))
     {lat_min, lat_max} = places |> Enum.map(& &1.lat) |> Enum.min_max()
@@ -104,9 +103,12 @@ defmodule Dolphin.Check.Separation do
     {h_min, h_max} = places |> Enum.map(& &1.h) |> Enum.min_max()
     across = limits.horizontal + 1.0
     dlat = across / 110_000
-    cos = :math.cos(min(max(abs(lat_min), abs(lat_max)) + dlat, 89.9) * :math.pi() / 180)
-    dlon = across / (111_320 * cos)
-    {lon_min, lon_max} = if lon_max - lon_min > 180, do: {-540.0, 540.0}, else: {lon_min - dlon, lon_max + dlon}
+    nearest_pole = max(abs(lat_min), abs(lat_max)) + dlat
+    # Near a pole a metre is too many degrees of longitude, and across the 180th meridian the box wraps: every longitude then.
+    {lon_min, lon_max} =
+      if nearest_pole > 89.9 or lon_max - lon_min > 180,
+        do: {-540.0, 540.0},
+        else: {lon_min - across / (111_320 * :math.cos(nearest_pole * :math.pi() / 180)), lon_max + across / (111_320 * :math.cos(nearest_pole * :math.pi() / 180))}
 
     %{
       index: index,

@@ -11,6 +11,8 @@ defmodule Dolphin.Events.Writer do
 
   use GenServer
 
+  require Logger
+
   @doc "Starts a writer; options `:path` (required), `:origin_ms` (default: now on `Dolphin.Clock`)."
   @spec start_link(keyword()) :: GenServer.on_start()
   def start_link(opts), do: GenServer.start_link(__MODULE__, opts)
@@ -26,6 +28,8 @@ defmodule Dolphin.Events.Writer do
     GenServer.stop(writer, :normal, 300_000)
   catch
     :exit, {:timeout, _} ->
+      # (Linked to the run: unlinked first, or its kill would take the run with it.)
+      Process.unlink(writer)
       Process.exit(writer, :kill)
       {:error, :timeout}
 
@@ -47,7 +51,7 @@ defmodule Dolphin.Events.Writer do
         Dolphin.Events.subscribe()
         # Written on stop, whatever the reason, so no event already received is lost.
         Process.flag(:trap_exit, true)
-        {:ok, %{io: io, path: path, origin: Keyword.get_lazy(opts, :origin_ms, &Dolphin.Clock.now_ms/0)}}
+        {:ok, %{io: io, path: path, failed: false, origin: Keyword.get_lazy(opts, :origin_ms, &Dolphin.Clock.now_ms/0)}}
 
       {:error, why} ->
         {:stop, "cannot write #{path}: #{:file.format_error(why)}"}
@@ -55,10 +59,7 @@ defmodule Dolphin.Events.Writer do
   end
 
   @impl true
-  def handle_info({:dolphin, :events, event}, s) do
-    write(s, [event | queued(@batch - 1)])
-    {:noreply, s}
-  end
+  def handle_info({:dolphin, :events, event}, s), do: {:noreply, write(s, [event | queued(@batch - 1)])}
 
   def handle_info(_other, s), do: {:noreply, s}
 
@@ -72,7 +73,7 @@ defmodule Dolphin.Events.Writer do
   defp drain(s) do
     case queued(@batch) do
       [] -> :ok
-      events -> write(s, events) && drain(s)
+      events -> drain(write(s, events))
     end
   end
 
@@ -87,10 +88,18 @@ defmodule Dolphin.Events.Writer do
     end
   end
 
+  # A file that cannot be written (a full disk) is said once and written no
+  # more: the run goes on without its record rather than stop mid-flight.
+  defp write(%{failed: true} = s, _events), do: s
+
   defp write(s, events) do
     case :file.write(s.io, Enum.map(events, &[Dolphin.Events.to_json(&1, s.origin), ?\n])) do
-      :ok -> true
-      {:error, why} -> raise File.Error, reason: why, action: "write events to", path: s.path
+      :ok ->
+        s
+
+      {:error, why} ->
+        Logger.error("--events #{s.path}: cannot write (#{:file.format_error(why)}): the run's events from now on are not in it")
+        %{s | failed: true}
     end
   end
 end

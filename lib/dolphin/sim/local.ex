@@ -69,7 +69,7 @@ defmodule Dolphin.Sim.Local do
       [first_network | others] = plan
 
       with {:ok, network} <- start_network(first_network, sim_opts, link_opts),
-           _ = await_known(network),
+           :ok <- await_known(network, others),
            {:ok, more} <- start_networks(others, sim_opts, link_opts, [network]) do
         networks = [network | more]
         sim = %{link: network.link, port: network.port, sysids: Enum.flat_map(networks, &ids/1), networks: networks}
@@ -131,8 +131,8 @@ defmodule Dolphin.Sim.Local do
       {:ok, n} ->
         with {:ok, more} <- start_networks(rest, sim_opts, link_opts, [n | started]), do: {:ok, [n | more]}
 
-      {:error, e, _} ->
-        {:error, e, started}
+      {:error, e, partial} ->
+        {:error, e, partial ++ started}
     end
   end
 
@@ -249,11 +249,25 @@ defmodule Dolphin.Sim.Local do
   defp network_number("sim" <> k), do: String.to_integer(k)
 
   # The first network's vehicles announce themselves within a heartbeat:
-  # discovered, they own their system ids before any other network's is heard.
-  defp await_known(%{sysids: sysids}, tries \\ 200) do
-    if tries > 0 and not Enum.all?(sysids, &match?({:ok, _}, Dolphin.Vehicles.Views.get(&1))) do
-      Process.sleep(50)
-      await_known(%{sysids: sysids}, tries - 1)
+  # discovered, they own their system ids before any other network's is
+  # heard. (Alone, there is nothing to wait for.) Not all heard within 30 s
+  # of real time: the others would take some of their names, and the fleet
+  # is not started.
+  defp await_known(_network, []), do: :ok
+  defp await_known(network, _others), do: await_known(network.sysids, network, 600)
+
+  defp await_known(sysids, network, tries) do
+    case Enum.reject(sysids, &match?({:ok, _}, Dolphin.Vehicles.Views.get(&1))) do
+      [] ->
+        :ok
+
+      waiting when tries == 0 ->
+        {:error, %Dolphin.Sim.Error{reason: :start_failed, message: "#{length(waiting)} of the first network's #{length(network.sysids)} vehicles were not heard within 30 s (the host too busy?)"},
+         [network]}
+
+      waiting ->
+        Process.sleep(50)
+        await_known(waiting, network, tries - 1)
     end
   end
 

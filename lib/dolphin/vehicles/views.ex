@@ -206,9 +206,16 @@ defmodule Dolphin.Vehicles.Views do
     end
   end
 
-  @doc "Whether a vehicle has id `id` already: a view, or paths given to it."
+  @doc """
+  Whether a vehicle has id `id` already: a view, or paths given to it on a
+  link still open (a fleet stopped with its links, such as `--sim`'s, leaves
+  its names to the next).
+  """
   @spec owns_name?(Dolphin.Vehicles.Id.t()) :: boolean()
-  def owns_name?(id), do: :ets.member(table(), id) or :ets.match(paths(), {:_, id, :_}, 1) != :"$end_of_table"
+  def owns_name?(id) do
+    :ets.member(table(), id) or
+      Enum.any?(:ets.match(paths(), {{:_, {:"$1", :_}}, id, :_}), fn [link] -> Registry.lookup(Dolphin.Instance.names().registry, {:link, link}) != [] end)
+  end
 
   @doc false
   # The notice of a vehicle forgotten, for every owner of views.

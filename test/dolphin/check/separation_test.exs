@@ -42,26 +42,30 @@ defmodule Dolphin.Check.SeparationTest do
 
   test "only pairs whose reach meets are tried: the same conflicts as trying every pair, for fleets anywhere on the map" do
     check(
-      forall({:proper_types.integer(-80, 80), :proper_types.integer(-179, 179), :proper_types.list(track())}, fn {lat, lon, tracks} ->
-        base = Geo.location(lat * 1.0, lon + 0.5, 100)
+      forall({:proper_types.integer(-8_995, 8_995), :proper_types.integer(-17_999, 17_999), :proper_types.list(track())}, fn {lat, lon, tracks} ->
+        base = Geo.location(lat / 100, lon / 100, 100)
 
         timelines =
-          for {{steps, up}, id} <- Enum.with_index(tracks, 1) do
-            points = for {{n, e}, k} <- Enum.with_index(steps), do: {k * 10_000, Geo.offset(base, n * 1.0, e * 1.0, up * 1.0), true}
+          for {{{n0, e0}, steps, up}, id} <- Enum.with_index(tracks, 1) do
+            points = for {{n, e}, k} <- Enum.with_index(steps), do: {k * 10_000, Geo.offset(base, (n0 + n) * 1.0, (e0 + e) * 1.0, up * 1.0), true}
             timeline(id, points)
           end
 
         assert Separation.conflicts(timelines, @limits) == Separation.conflicts(timelines, @limits, all_pairs: true)
         true
       end),
-      numtests: 50
+      numtests: 150,
+      max_size: 12
     )
   end
 
-  # A vehicle's points, 10 s apart, within a few hundred metres of the base, at one of a few heights.
+  # A vehicle's one to three points, 10 s apart, a few metres about its own
+  # place within 40 m of the base, at one of a few heights: pairs near and far from the
+  # limits' edge, boxes that meet and boxes that do not.
   defp track do
-    step = {:proper_types.integer(-300, 300), :proper_types.integer(-300, 300)}
-    {:proper_types.non_empty(:proper_types.list(step)), :proper_types.oneof([20, 25, 40])}
+    place = {:proper_types.integer(-40, 40), :proper_types.integer(-40, 40)}
+    step = {:proper_types.integer(-3, 3), :proper_types.integer(-3, 3)}
+    {place, :proper_types.oneof([[step], [step, step], [step, step, step]]), :proper_types.oneof([20, 25, 40])}
   end
 
   test "the finding names both missions and is at the line of the later one" do

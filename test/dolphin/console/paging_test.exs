@@ -31,7 +31,18 @@ defmodule Dolphin.Console.PagingTest do
     assert last =~ "vehicles 101-120 of 120 (page 3 of 3): vehicles(:all) for every one"
 
     assert ids_shown(capture_io(fn -> Dolphin.Console.vehicles(:all) end)) == Enum.to_list(1..120)
-    assert capture_io(fn -> Dolphin.Console.vehicles(4) end) =~ "no page 4: 120 vehicles are 3 pages of 50 (vehicles(:all) shows every one)"
+    assert capture_io(fn -> Dolphin.Console.vehicles(4) end) =~ "no page 4: 120 vehicle(s), 3 page(s) of 50 (vehicles(:all) shows every one)"
     assert capture_io(fn -> Dolphin.Console.vehicles(0) end) =~ "vehicles/1 takes a page number (1, 2, ...) or :all, not 0"
+  end
+
+  test "a fleet of one page is shown whole, and a page beyond it said to be none" do
+    name = :"paging_few_#{System.unique_integer([:positive])}"
+    start_supervised!({FakeSource, name: name}, id: :few)
+    for id <- 1..3, do: FakeSource.add(name, id, type: :uav, airframe: :copter)
+    :ok = Dolphin.Fleet.set_source(FakeSource.source(name))
+    shown = capture_io(fn -> Dolphin.Console.vehicles() end)
+    assert ids_shown(shown) == [1, 2, 3]
+    refute shown =~ "page"
+    assert capture_io(fn -> Dolphin.Console.vehicles(2) end) =~ "no page 2: 3 vehicle(s), 1 page(s) of 50"
   end
 end

@@ -25,4 +25,15 @@ defmodule Dolphin.Events.WriterTest do
     assert {:error, "cannot write " <> why} = Writer.start_link(path: Path.join([dir, "no such dir", "events.jsonl"]))
     assert why =~ "no such file or directory"
   end
+
+  test "a file that cannot be written (a full disk) is said once, and the writer goes on to its stop" do
+    log =
+      ExUnit.CaptureLog.capture_log(fn ->
+        {:ok, writer} = Writer.start_link(path: "/dev/full", origin_ms: 0)
+        for i <- 1..3_000, do: send(writer, {:dolphin, :events, %{event: :armed, vehicle: i, at_ms: i}})
+        assert :ok = Writer.stop(writer)
+      end)
+
+    assert [_once] = Regex.scan(~r/--events \/dev\/full: cannot write \(no space left on device\): the run's events from now on are not in it/, log)
+  end
 end

@@ -49,6 +49,16 @@ defmodule Dolphin.Sim.LocalTest do
     assert Sim.vehicles() == []
   end
 
+  test "a fleet stopped leaves its names to the next: started again, the same vehicles are named alike" do
+    {:ok, sim} = Local.start(3, network_size: 2)
+    assert sim.sysids == [1, 2, "1@sim2"]
+    :ok = Local.stop(sim)
+    {:ok, again} = Local.start(3, network_size: 2)
+    assert again.sysids == [1, 2, "1@sim2"]
+    assert Enum.sort(Vehicles.list()) == [1, 2, "1@sim2"]
+    :ok = Local.stop(again)
+  end
+
   test "a fleet that does not fit, or networks of no size, are refused before anything starts" do
     assert {:error, e} = Local.start(2 * 64 + 1, network_size: 2)
     assert Exception.message(e) == "--sim: 129 vehicles: at most 128 (64 networks of 2)"
