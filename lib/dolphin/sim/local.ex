@@ -11,14 +11,14 @@ defmodule Dolphin.Sim.Local do
   @typedoc """
   What `start/2` started: the vehicles as the ground station names them
   (`sysids`: system ids, and `"SYSID@simK"` beyond the first network), and
-  each network's link, its port and its vehicles' system ids; `link` and
+  each network's number, link, port and its vehicles' system ids; `link` and
   `port` are the first network's.
   """
   @type t :: %{
           link: pid(),
           port: :inet.port_number(),
           sysids: [Dolphin.Vehicles.Id.t()],
-          networks: [%{name: String.t() | nil, link: pid(), port: :inet.port_number(), sysids: [byte()]}]
+          networks: [%{number: pos_integer(), name: String.t() | nil, link: pid(), port: :inet.port_number(), sysids: [byte()]}]
         }
 
   # A network's system ids: 1..254 (255 is the ground station's).
@@ -164,7 +164,7 @@ defmodule Dolphin.Sim.Local do
           end
         end)
         |> case do
-          {:ok, started} -> {:ok, Map.delete(started, :number)}
+          {:ok, started} -> {:ok, started}
           {:error, e, [started]} -> {:error, e, [started]}
         end
 
@@ -240,13 +240,12 @@ defmodule Dolphin.Sim.Local do
   end
 
   defp stop_network(%{link: link, sysids: sysids} = network) do
-    key = if network.name, do: &{network_number(network.name), &1}, else: & &1
+    # The simulator names a vehicle of a later network {network's number, system id} (Dolphin.Sim).
+    key = if network.number > 1, do: &{network.number, &1}, else: & &1
     Enum.each(sysids, &Dolphin.Sim.stop(key.(&1)))
     Enum.each(ids(network), &Dolphin.Vehicles.forget/1)
     Dolphin.Link.disconnect(link)
   end
-
-  defp network_number("sim" <> k), do: String.to_integer(k)
 
   # The first network's vehicles announce themselves within a heartbeat:
   # discovered, they own their system ids before any other network's is
