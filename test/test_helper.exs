@@ -37,4 +37,5 @@ browser_exclude =
 # Tests that fly simulated fleets each have a Dolphin.Instance of their own
 # and run async, at most twice the cores at once (ExUnit's default; more
 # were barely quicker on a loaded machine, see docs/testing.md).
-ExUnit.start(exclude: sitl_exclude ++ shared_exclude ++ browser_exclude)
+# DOLPHIN_TEST_TIMES=FILE: each module's time written there (Dolphin.Test.Timings).
+ExUnit.start(exclude: sitl_exclude ++ shared_exclude ++ browser_exclude, formatters: Dolphin.Test.Timings.formatters())

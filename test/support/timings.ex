@@ -1,0 +1,76 @@
+defmodule Dolphin.Test.Timings do
+  @moduledoc """
+  An ExUnit formatter beside the usual one: where a part of the suite spent
+  its time. For each test module, from its first test's start to its last
+  test's end (wall clock, as it ran beside the others), the sum of its tests'
+  own times and how many ran; written, longest first, to the file named by
+  `DOLPHIN_TEST_TIMES` when the suite ends (`scripts/test` sets it for each
+  part and prints the longest).
+
+      module                                      wall_s  tests_s  tests  file
+  """
+  use GenServer
+
+  @doc "Formatters for `ExUnit.start/1`: the usual one, and this one when `DOLPHIN_TEST_TIMES` names a file."
+  @spec formatters() :: [module()]
+  def formatters do
+    case System.get_env("DOLPHIN_TEST_TIMES") do
+      path when is_binary(path) and path != "" -> [ExUnit.CLIFormatter, __MODULE__]
+      _ -> [ExUnit.CLIFormatter]
+    end
+  end
+
+  @impl true
+  def init(_opts), do: {:ok, %{path: System.fetch_env!("DOLPHIN_TEST_TIMES"), modules: %{}}}
+
+  @impl true
+  def handle_cast({:module_started, %ExUnit.TestModule{name: name, file: file}}, s),
+    do: {:noreply, put_in(s.modules[name], %{file: file, started: now(), finished: nil, tests_us: 0, tests: 0})}
+
+  def handle_cast({:test_finished, %ExUnit.Test{module: module, time: time, state: state}}, s) when not is_tuple(state) or elem(state, 0) != :excluded do
+    case s.modules do
+      %{^module => m} -> {:noreply, put_in(s.modules[module], %{m | tests_us: m.tests_us + time, tests: m.tests + 1})}
+      _ -> {:noreply, s}
+    end
+  end
+
+  def handle_cast({:module_finished, %ExUnit.TestModule{name: name}}, s) do
+    case s.modules do
+      %{^name => m} -> {:noreply, put_in(s.modules[name], %{m | finished: now()})}
+      _ -> {:noreply, s}
+    end
+  end
+
+  def handle_cast({:suite_finished, _times}, s) do
+    write(s)
+    {:noreply, s}
+  end
+
+  def handle_cast(_event, s), do: {:noreply, s}
+
+  defp now, do: System.monotonic_time(:millisecond)
+
+  defp write(%{path: path, modules: modules}) do
+    rows =
+      modules
+      |> Enum.filter(fn {_, m} -> m.tests > 0 end)
+      |> Enum.map(fn {name, m} -> {name, (m.finished || now()) - m.started, m} end)
+      |> Enum.sort_by(fn {_, wall, _} -> -wall end)
+      |> Enum.map(fn {name, wall, m} ->
+        Enum.join(
+          [
+            String.pad_trailing(inspect(name), 52),
+            String.pad_leading(:erlang.float_to_binary(wall / 1000, decimals: 1), 8),
+            String.pad_leading(:erlang.float_to_binary(m.tests_us / 1_000_000, decimals: 1), 8),
+            String.pad_leading(Integer.to_string(m.tests), 6),
+            "  " <> Path.relative_to_cwd(m.file || "")
+          ],
+          ""
+        )
+      end)
+
+    header = String.pad_trailing("module", 52) <> String.pad_leading("wall_s", 8) <> String.pad_leading("tests_s", 8) <> String.pad_leading("tests", 6) <> "  file"
+    File.mkdir_p!(Path.dirname(path))
+    File.write!(path, Enum.join([header | rows], "\n") <> "\n")
+  end
+end
