@@ -98,7 +98,10 @@ defmodule Dolphin.Sim do
       `:descent_speed`, `:wp_radius`, `:rtl_alt`, `:disarm_delay_ms`,
       `:arm_min_battery`, `:battery_low`, `:battery_critical`,
       `:battery_failsafe` (`:none`, `:rtl`, `:land`), `:gcs_failsafe`,
-      `:gcs_sysid`, `:request_int` (ask for items with MISSION_REQUEST_INT).
+      `:gcs_sysid`, `:request_int` (ask for items with MISSION_REQUEST_INT),
+      `:disarms_at_arming` (a fault: the vehicle disarms itself at once
+      after each of its next N arms, in the same instant, as ArduRover SITL
+      was seen doing once on a loaded host; default 0).
 
   Every option is checked before anything starts, so that no vehicle is
   started with a value it cannot report in MAVLink or that means nothing:
@@ -325,6 +328,7 @@ defmodule Dolphin.Sim do
     battery_failsafe: {{:one_of, [:none, :rtl, :land]}, nil},
     airframe: {{:one_of, [:copter, :plane, :rover, :boat, :sub]}, nil},
     gcs_failsafe: {:boolean, nil},
+    disarms_at_arming: {{:one_of, Enum.to_list(0..100)}, "a number of arms"},
     request_int: {:boolean, nil},
     gcs_sysid: {{:one_of, Enum.to_list(1..255)}, "a system id"}
   }

@@ -1,32 +1,20 @@
-defmodule Dolphin.Docs.LanguageTest do
-  # Every example of docs/language.md runs, as a user runs it:
-  # `mix dolphin.run FILE ARGS` on fake vehicles or the simulator. Each
-  # ```elixir block is preceded by a marker saying how:
+defmodule Dolphin.Docs.LanguageBlocks do
+  # The ```elixir blocks of docs/language.md and how each is checked. Each
+  # block is preceded by a marker saying how:
   #
   #   <!-- run: --fake 2 | status 1 | prints "text" -->   run it, check its exit status (default 0)
   #                                                      and that its output holds each text
   #   <!-- compile -->                                    compile it only (long flights)
   #
   # A block without a marker is a mistake: examples that are never run rot.
-  # Its own Dolphin.Instance (its vehicles, links and clock): async.
-  use ExUnit.Case, async: true
-
-  setup do
-    Dolphin.Test.Instance.start!()
-    :ok
-  end
-
-  alias Dolphin.Test.GroundStation
-  alias Mix.Tasks.Dolphin.Run
-
-  @moduletag :tmp_dir
-  @moduletag timeout: 300_000
+  @moduledoc false
 
   @doc_path Path.expand("../../docs/language.md", __DIR__)
-  @external_resource @doc_path
+
+  def path, do: @doc_path
 
   # [{line, marker, code}] of every ```elixir block, in order.
-  defp blocks(text) do
+  def blocks(text \\ File.read!(@doc_path)) do
     lines = String.split(text, "\n")
 
     {blocks, _} =
@@ -42,6 +30,9 @@ defmodule Dolphin.Docs.LanguageTest do
     Enum.reverse(blocks)
   end
 
+  # The runnable blocks, [{line, marker, code}].
+  def runnable, do: for({line, %{} = m, code} <- blocks(), do: {line, m, code})
+
   defp marker("<!-- compile -->"), do: :compile
 
   defp marker("<!-- run: " <> rest) do
@@ -54,28 +45,28 @@ defmodule Dolphin.Docs.LanguageTest do
   end
 
   defp marker(_), do: nil
+end
 
-  defp run_script(path, args) do
-    {:ok, out} = StringIO.open("")
-    {:ok, err} = StringIO.open("")
-    code = Run.main([path | args] ++ ["--no-tlog"], out: out, err: err)
-    GroundStation.forget_vehicles()
-    {code, elem(StringIO.contents(out), 1) <> elem(StringIO.contents(err), 1)}
-  end
+defmodule Dolphin.Docs.LanguageTest do
+  # Every example of docs/language.md is checked (Dolphin.Docs.LanguageBlocks):
+  # here, that each says how and that the compile-only ones compile; the
+  # runnable ones run, as a user runs them (`mix dolphin.run FILE ARGS` on
+  # fake vehicles or the simulator), in the modules below.
+  use ExUnit.Case, async: true
 
-  setup do
-    Dolphin.Test.Instance.on_exit(&GroundStation.forget_vehicles/0)
-  end
+  alias Dolphin.Docs.LanguageBlocks
+
+  @external_resource LanguageBlocks.path()
 
   test "every elixir block of docs/language.md says how it is checked" do
-    blocks = blocks(File.read!(@doc_path))
+    blocks = LanguageBlocks.blocks()
     assert length(blocks) > 20
     unmarked = for {line, nil, _} <- blocks, do: line
     assert unmarked == [], "blocks without a <!-- run: ... --> or <!-- compile --> marker, at lines #{inspect(unmarked)}"
   end
 
   test "the compile-only examples compile" do
-    for {line, :compile, code} <- blocks(File.read!(@doc_path)) do
+    for {line, :compile, code} <- LanguageBlocks.blocks() do
       file = "docs/language.md:#{line}"
 
       case Dolphin.Script.compile_string(code, file) do
@@ -85,17 +76,51 @@ defmodule Dolphin.Docs.LanguageTest do
     end
   end
 
-  test "the runnable examples run as documented", %{tmp_dir: dir} do
-    runnable = for {line, %{} = m, code} <- blocks(File.read!(@doc_path)), do: {line, m, code}
-    assert length(runnable) > 15
+  test "there are runnable examples, each run by one of the modules below" do
+    assert length(LanguageBlocks.runnable()) > 15
+  end
+end
 
-    for {line, m, code} <- runnable do
-      path = Path.join(dir, "language_#{line}.exs")
-      File.write!(path, code)
-      {status, output} = run_script(path, m.args)
-      where = "the example at docs/language.md:#{line} (mix dolphin.run #{Enum.join(m.args, " ")})"
-      assert status == m.status, "#{where} exited with #{status}, not #{m.status}:\n#{output}"
-      for text <- m.prints, do: assert(output =~ text, "#{where} did not print #{inspect(text)}:\n#{output}")
+# The runnable examples, a share of them per module: the modules run side by
+# side, each in its own Dolphin.Instance (its vehicles, links and clock).
+for share <- 0..3 do
+  defmodule Module.concat(Dolphin.Docs.LanguageTest, "Runs#{share}") do
+    use ExUnit.Case, async: true
+
+    alias Dolphin.Docs.LanguageBlocks
+    alias Dolphin.Test.GroundStation
+    alias Mix.Tasks.Dolphin.Run
+
+    @moduletag :tmp_dir
+    @moduletag timeout: 300_000
+    @external_resource LanguageBlocks.path()
+    @share share
+
+    setup do
+      Dolphin.Test.Instance.start!()
+      Dolphin.Test.Instance.on_exit(&GroundStation.forget_vehicles/0)
+    end
+
+    defp run_script(path, args) do
+      {:ok, out} = StringIO.open("")
+      {:ok, err} = StringIO.open("")
+      code = Run.main([path | args] ++ ["--no-tlog"], out: out, err: err)
+      GroundStation.forget_vehicles()
+      {code, elem(StringIO.contents(out), 1) <> elem(StringIO.contents(err), 1)}
+    end
+
+    test "the runnable examples run as documented (share #{share} of 4)", %{tmp_dir: dir} do
+      mine = LanguageBlocks.runnable() |> Enum.with_index() |> Enum.filter(fn {_, i} -> rem(i, 4) == @share end)
+      assert mine != []
+
+      for {{line, m, code}, _} <- mine do
+        path = Path.join(dir, "language_#{line}.exs")
+        File.write!(path, code)
+        {status, output} = run_script(path, m.args)
+        where = "the example at docs/language.md:#{line} (mix dolphin.run #{Enum.join(m.args, " ")})"
+        assert status == m.status, "#{where} exited with #{status}, not #{m.status}:\n#{output}"
+        for text <- m.prints, do: assert(output =~ text, "#{where} did not print #{inspect(text)}:\n#{output}")
+      end
     end
   end
 end

@@ -4,7 +4,9 @@ defmodule Dolphin.Examples.CrossingPathsTest do
   # separation monitor holds one and lets it go on, both missions end done,
   # and the log shows the two never came within the least separation. On
   # the built-in simulator, and on ArduCopter SITL.
-  use ExUnit.Case, async: false
+  # Its own Dolphin.Instance (vehicles, links, clock): its simulator runs
+  # beside other tests; `make test` runs its SITL test alone (--max-cases 1).
+  use ExUnit.Case, async: true
 
   alias Dolphin.Test.ExampleRun
 
@@ -14,7 +16,8 @@ defmodule Dolphin.Examples.CrossingPathsTest do
   @example Path.expand("../../examples/crossing_paths.exs", __DIR__)
 
   setup do
-    ExampleRun.clean_up_after_test()
+    Dolphin.Test.Instance.start!()
+    :ok
   end
 
   defp kept_apart!(run) do

@@ -2,7 +2,9 @@ defmodule Dolphin.Examples.FireWatchTest do
   # examples/fire_watch.exs as its header says to run it, on the built-in
   # simulator with the world file it names: the fire, which the script does
   # not know of, is found, looked at, and both surveys are flown to their end.
-  use ExUnit.Case, async: false
+  # Its own Dolphin.Instance (vehicles, links, clock): its simulator runs
+  # beside other tests; `make test` runs its SITL test alone (--max-cases 1).
+  use ExUnit.Case, async: true
 
   alias Dolphin.Test.ExampleRun
 
@@ -12,7 +14,8 @@ defmodule Dolphin.Examples.FireWatchTest do
   @world Path.expand("../../examples/worlds/serra_fire.json", __DIR__)
 
   setup do
-    ExampleRun.clean_up_after_test()
+    Dolphin.Test.Instance.start!()
+    :ok
   end
 
   # The fire of the world file, and how far from it a look is a look at it.
@@ -85,9 +88,10 @@ defmodule Dolphin.Examples.FireWatchTest do
     missions = for %{"event" => "task_finished", "kind" => "mission"} = e <- run.events, do: {e["name"], e["vehicle"], e["result"]}
     # Its survey stopped to look, the look done, the rest of the survey flown to its landing.
     assert {"Look at the smoke", ^sent, "done"} = Enum.find(missions, &(elem(&1, 0) == "Look at the smoke"))
-    assert [{_, ^sent, "stopped"}, {_, ^sent, "done"}] = for({"Survey " <> _, ^sent, _} = m <- missions, do: m)
+    surveys = for({"Survey " <> _, _, _} = m <- missions, do: m)
     [other] = [1, 2] -- [sent]
-    assert [{_, ^other, "done"}] = for({"Survey " <> _, ^other, _} = m <- missions, do: m)
+    assert match?([{_, ^sent, "stopped"}, {_, ^sent, "done"}], for({_, ^sent, _} = m <- surveys, do: m)), "the surveys: #{inspect(surveys)}\n#{run.output}"
+    assert match?([{_, ^other, "done"}], for({_, ^other, _} = m <- surveys, do: m)), "the surveys: #{inspect(surveys)}\n#{run.output}"
     assert run.disarmed_at_end
     refute run.output =~ "a battery is low"
 

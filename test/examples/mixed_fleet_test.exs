@@ -3,7 +3,9 @@ defmodule Dolphin.Examples.MixedFleetTest do
   # and a boat picked by airframe, one composition of their three tasks. On
   # the built-in simulator, and on ArduPlane, ArduCopter and ArduRover SITL
   # with the same history.
-  use ExUnit.Case, async: false
+  # Its own Dolphin.Instance (vehicles, links, clock): its simulator runs
+  # beside other tests; `make test` runs its SITL test alone (--max-cases 1).
+  use ExUnit.Case, async: true
 
   alias Dolphin.SITL
   alias Dolphin.Test.ExampleRun
@@ -12,7 +14,8 @@ defmodule Dolphin.Examples.MixedFleetTest do
   @moduletag timeout: 600_000
 
   setup do
-    ExampleRun.clean_up_after_test()
+    Dolphin.Test.Instance.start!()
+    :ok
   end
 
   # Runs the example on `vehicles`; each mission's vehicle and result, in the
@@ -42,10 +45,10 @@ defmodule Dolphin.Examples.MixedFleetTest do
   if SITL.available?(:plane) and SITL.available?(:boat) do
     @tag :sitl
     test "on ArduPlane, ArduCopter and ArduRover SITL: the same history as on the simulator", %{tmp_dir: dir} do
+      sim = ExampleRun.beside(fn -> fly(["--sim", "plane:1,copter:1,boat:1"], 10, dir) end)
       sitl = fly(["--sitl", "plane:1,copter:1,boat:1"], 10, dir)
       as_written!(sitl)
-      Dolphin.Test.GroundStation.forget_vehicles()
-      sim = fly(["--sim", "plane:1,copter:1,boat:1"], 10, dir)
+      sim = Task.await(sim, :infinity)
       assert Enum.sort(sim.finished) == Enum.sort(sitl.finished)
     end
   end

@@ -4,7 +4,9 @@ defmodule Dolphin.Examples.SidescanSurveyTest do
   # the example's fleet file. Each surveys its own part at 5 m deep and
   # surfaces at home; the script says "Done!". On the built-in simulator's
   # submarines, and on ArduSub SITL with the same history.
-  use ExUnit.Case, async: false
+  # Its own Dolphin.Instance (vehicles, links, clock): its simulator runs
+  # beside other tests; `make test` runs its SITL test alone (--max-cases 1).
+  use ExUnit.Case, async: true
 
   alias Dolphin.SITL
   alias Dolphin.Test.ExampleRun
@@ -15,7 +17,8 @@ defmodule Dolphin.Examples.SidescanSurveyTest do
   @root Path.expand("../..", __DIR__)
 
   setup do
-    ExampleRun.clean_up_after_test()
+    Dolphin.Test.Instance.start!()
+    :ok
   end
 
   # Runs the example with `vehicles` (`--sim sub:3` or `--sitl sub:3`); its
@@ -48,10 +51,10 @@ defmodule Dolphin.Examples.SidescanSurveyTest do
   if SITL.available?(:sub) do
     @tag :sitl
     test "on ArduSub SITL: the same history as on the simulator", %{tmp_dir: dir} do
+      sim = ExampleRun.beside(fn -> fly(["--sim", "sub:3"], dir) end)
       sitl = fly(["--sitl", "sub:3"], dir)
       surveyed!(sitl)
-      Dolphin.Test.GroundStation.forget_vehicles()
-      assert fly(["--sim", "sub:3"], dir) == sitl
+      assert Task.await(sim, :infinity) == sitl
     end
   end
 end

@@ -271,7 +271,7 @@ defmodule Dolphin.Mission.Executor do
     cond do
       not disarmed_before_flight?(data, st) -> judge(%{data | disarmed_idle: false}, st)
       data.rearms < @rearms -> next(:guided, %{data | rearms: data.rearms + 1, disarmed_idle: false, flight: Flight.new(data.ending)})
-      true -> fail(:flying, data, {:disarmed_before_take_off, data.rearms + 1}, vehicle_fault?: true, texts: texts(data))
+      true -> fail(:flying, data, disarmed_before_start(data), vehicle_fault?: true, texts: texts(data))
     end
   end
 
@@ -607,9 +607,18 @@ defmodule Dolphin.Mission.Executor do
     end
   end
 
-  # A vehicle that takes off, never seen armed in this flight, disarmed on the ground.
+  # Never seen armed in this flight, disarmed (on the ground, for one that
+  # takes off). A rover, boat or submarine too: ArduRover SITL on a loaded
+  # host once armed and disarmed in one instant, and the mission would have
+  # waited in AUTO, disarmed, for ever.
   defp disarmed_before_flight?(data, st),
-    do: Airframe.takes_off?(data.airframe) and not data.flight.armed_seen and not st.armed? and st.landed in [:on_ground, nil]
+    do: not data.flight.armed_seen and not st.armed? and st.landed in [:on_ground, nil]
+
+  defp disarmed_before_start(data) do
+    if Airframe.takes_off?(data.airframe),
+      do: {:disarmed_before_take_off, data.rearms + 1},
+      else: {:disarmed_before_start, data.rearms + 1}
+  end
 
   # Standing still in AUTO short of the waypoint it flies to (not at a
   # loiter or a delay, where standing is the mission, nor held apart from

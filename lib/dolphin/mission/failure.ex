@@ -39,6 +39,8 @@ defmodule Dolphin.Mission.Failure do
     * `{:disarmed_before_take_off, times}` — armed for its take-off, it
       disarmed on the ground before the flight began, `times` times (it was
       armed and started again after each but the last);
+    * `{:disarmed_before_start, times}` — the same for a rover, boat or
+      submarine: armed for its mission, it disarmed before it began;
     * `{:landed_early, current, total}` — it landed and disarmed before the end;
     * `:has_jumps`, `:nothing_but_take_off`, `{:nothing_left, reached}`,
       `{:home_unknown, vehicle}`, `{:position_unknown, vehicle}`,
@@ -67,6 +69,7 @@ defmodule Dolphin.Mission.Failure do
           | {:left_auto, String.t()}
           | :disarmed
           | {:disarmed_before_take_off, pos_integer()}
+          | {:disarmed_before_start, pos_integer()}
           | {:landed_early, term(), term()}
           | :has_jumps
           | {:cannot_resume, String.t()}
@@ -135,6 +138,9 @@ defmodule Dolphin.Mission.Failure do
   defp words(%{cause: {:disarmed_before_take_off, times}} = f),
     do:
       "vehicle #{f.vehicle} disarmed on the ground before its take-off, #{times} time(s) (a copter armed without taking off disarms itself after DISARM_DELAY: the mission's start reached it too late each time)"
+
+  defp words(%{cause: {:disarmed_before_start, times}} = f),
+    do: "vehicle #{f.vehicle} disarmed before its mission began, #{times} time(s) (it was armed and the mission started again after each but the last)"
 
   defp words(%{cause: {:landed_early, current, total}}), do: "the vehicle landed and disarmed before the mission's end (at item #{current} of #{total})"
   defp words(%{cause: {:cannot_resume, text}} = f), do: "mission #{inspect(f.mission)} cannot be resumed: #{text}"

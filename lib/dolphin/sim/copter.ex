@@ -55,6 +55,8 @@ defmodule Dolphin.Sim.Copter do
                 battery_critical: 0.1,
                 battery_failsafe: :none,
                 gcs_failsafe: false,
+                # A fault: disarmed again at once after each of the next N arms.
+                disarms_at_arming: 0,
                 gcs_sysid: 255,
                 request_int: false
               },

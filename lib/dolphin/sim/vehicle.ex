@@ -115,6 +115,8 @@ defmodule Dolphin.Sim.Vehicle do
       photos: m.photos,
       speed: m.speed,
       faults: Faults.to_map(s.faults_out),
+      # The :disarms_at_arming fault's disarms still to come.
+      disarms_at_arming: m.config.disarms_at_arming,
       sensors: if(s.companion, do: s.companion.sensors, else: []),
       sent: s.sent,
       received: s.received

@@ -273,6 +273,27 @@ defmodule Dolphin.Mission.PlatformTest do
     assert Dolphin.Geo.distance(Dolphin.Geo.location(info.position.lat, info.position.lon), home) < 3
   end
 
+  test "a boat that disarms itself in the instant it is armed (never seen armed) is armed and started again, and drives its mission", %{port: port} do
+    # As ArduRover SITL once did on a loaded host: the mission would have
+    # waited in AUTO, disarmed, for ever.
+    [{1, home}] = start_fleet(port, count: 1, airframe: :boat, disarms_at_arming: 2)
+    drive = Mission.new("drive") |> Mission.add(C.home(home)) |> Mission.add(C.move(60, 0, 0))
+
+    assert {:ok, :done} = Engine.run(Engine.on(drive, [1]))
+    {:ok, info} = Sim.info(1)
+    assert_in_delta Dolphin.Geo.distance(Dolphin.Geo.location(info.position.lat, info.position.lon), home), 60, 5
+    # Armed three times: twice disarmed at once, then driven.
+    assert info.disarms_at_arming == 0
+  end
+
+  test "a boat that disarms itself at every arm fails its mission, saying so, instead of waiting for ever", %{port: port} do
+    [{1, home}] = start_fleet(port, count: 1, airframe: :boat, disarms_at_arming: 100)
+    drive = Mission.new("drive") |> Mission.add(C.home(home)) |> Mission.add(C.move(60, 0, 0))
+
+    assert {:error, failure} = Engine.run(Engine.on(drive, [1]))
+    assert Exception.message(Dolphin.Engine.TaskError.exception(failure: failure)) =~ "vehicle 1 disarmed before its mission began, 4 time(s)"
+  end
+
   test "the second of two missions reports its own progress from the start, and its take-off is an item reached", %{port: port} do
     [{1, home}] = start_fleet(port, count: 1)
     # The first mission's last item reached is its take-off, item 1: the second one's take-off has the same number.

@@ -51,9 +51,16 @@ defmodule Dolphin.Sim.Copter.Modes do
     else
       # ArduCopter writes home into the mission's item 0 as it arms.
       c = %{c | armed: true, ground_since: c.time_ms, failsafe: nil, jumps: %{}, missions: MissionServer.home_written(c.missions)}
-      {@accepted, text(c, 6, "Arming motors")}
+      {@accepted, c |> text(6, "Arming motors") |> disarm_at_arming()}
     end
   end
+
+  # The :disarms_at_arming fault: armed and disarmed in one instant (no
+  # HEARTBEAT says it was armed), as ArduRover SITL once did on a loaded host.
+  defp disarm_at_arming(%{config: %{disarms_at_arming: n} = config} = c) when n > 0,
+    do: disarm_now(%{c | config: %{config | disarms_at_arming: n - 1}})
+
+  defp disarm_at_arming(c), do: c
 
   @spec disarm(Copter.t(), boolean()) :: {result(), Copter.t()}
   def disarm(%{armed: false} = c, _force), do: {@accepted, c}
