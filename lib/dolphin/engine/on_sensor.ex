@@ -215,11 +215,18 @@ defmodule Dolphin.Engine.OnSensor do
   defp detected?(snap, id, task, places) do
     value = Snapshot.sensor(snap, id, task.sensor)
     position = Snapshot.position(snap, id)
-    value != nil and value > task.above and position != nil and Enum.all?(places, &(&1 == nil or Dolphin.Geo.distance(&1, position) > task.apart))
+    value != nil and value > task.above and away?(position, task, places)
   end
 
+  defp away?(nil, _task, _places), do: false
+  defp away?(position, task, places), do: Enum.all?(places, &(&1 == nil or Dolphin.Geo.distance(&1, position) > task.apart))
+
   # Live, in a helper: the detection (the highest reading above the
-  # threshold) and the nearest vehicle free to look at it (nil: none).
+  # threshold away from every detection made, among those the vehicles
+  # keep: the reading that made the condition hold is found even when the
+  # vehicle has flown out of the smoke by the time the helper runs, as a
+  # loaded host lets it) and the nearest vehicle free to look at it (nil:
+  # none).
   defp find(st) do
     task = st.task
     ids = Enum.map(task.missions, &elem(&1, 0))
@@ -229,15 +236,26 @@ defmodule Dolphin.Engine.OnSensor do
     {:run_code, :find,
      fn ->
        ids
-       |> Enum.filter(&detected?(nil, &1, task, places))
-       |> Enum.map(&Watcher.detection(&1, task.sensor))
-       |> Enum.reject(&is_nil/1)
-       |> Enum.max_by(& &1.value, fn -> nil end)
+       |> Enum.flat_map(&Watcher.detections(&1, task.sensor))
+       |> strongest(task, places)
        |> case do
          nil -> nil
          d -> {d, nearest(free, d.position)}
        end
      end}
+  end
+
+  @doc """
+  Of `readings` (`Dolphin.Sensors.Detection`s: those the vehicles keep),
+  the detection an `on_sensor` task makes: the highest above its threshold
+  at a place farther than `apart` from every place in `places` (those of the
+  detections made); `nil` when none is.
+  """
+  @spec strongest([Detection.t()], t(), [Dolphin.Geo.Location.t() | nil]) :: Detection.t() | nil
+  def strongest(readings, %__MODULE__{} = task, places) do
+    readings
+    |> Enum.filter(&(&1.value != nil and &1.value > task.above and away?(&1.position, task, places)))
+    |> Enum.max_by(& &1.value, fn -> nil end)
   end
 
   defp nearest([], _at), do: nil

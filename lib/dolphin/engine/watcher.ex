@@ -195,4 +195,18 @@ defmodule Dolphin.Engine.Watcher do
       _ -> nil
     end
   end
+
+  @doc """
+  Every reading of `sensor` a vehicle keeps (`Dolphin.Sensors.Detection.kept/2`),
+  read live as `vehicle/2` does; `[]` when the vehicle is unknown.
+  """
+  @spec detections(VehicleSet.t() | Dolphin.Vehicles.Id.t(), Dolphin.Sensors.Sensor.t()) :: [Dolphin.Sensors.Detection.t()]
+  def detections(ref, sensor) do
+    with [id] <- VehicleSet.ids(VehicleSet.new(ref)),
+         {:ok, view} <- Source.vehicle(Context.source(Context.current()), id) do
+      Dolphin.Sensors.Detection.kept(view, sensor)
+    else
+      _ -> []
+    end
+  end
 end

@@ -35,6 +35,18 @@ defmodule Dolphin.Sensors.Detection do
   end
 
   @doc """
+  Every reading of `sensor` a vehicle's view keeps (the last `keep` ms of
+  them, `Dolphin.Sensors.Readings`), newest first, each as a detection.
+  """
+  @spec kept(%{id: term(), sensors: map()}, Sensor.t()) :: [t()]
+  def kept(%{id: id, sensors: readings}, %Sensor{source: source} = sensor) do
+    case Map.get(readings, source) do
+      %{history: history} -> for {at, raw, position} <- history, do: %__MODULE__{vehicle: id, sensor: sensor.name, value: Sensors.value(sensor, raw), unit: sensor.unit, position: position, at_ms: at}
+      _ -> []
+    end
+  end
+
+  @doc """
   The fields of its `sensor_threshold` event (`Dolphin.Events`), given the
   condition's text and the vehicle sent to look (nil: none).
 
