@@ -1,6 +1,6 @@
 defmodule Dolphin.CheckTest do
-  # Not async: the stand-in vehicles publish on the shared pub/sub topics.
-  use ExUnit.Case
+  # Dry runs work in an instance of their own and take turns (Dolphin.Check): async.
+  use ExUnit.Case, async: true
 
   alias Dolphin.Check
   alias Dolphin.Check.{FleetFile, FleetFileError}

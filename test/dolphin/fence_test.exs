@@ -1,8 +1,9 @@
 defmodule Dolphin.FenceTest do
   # A fence put on a vehicle and breached, on the simulator and on
-  # ArduCopter SITL alike (docs/ardupilot.md, "Fences"). Starts vehicles and
-  # sets the clock: not async.
-  use ExUnit.Case, async: false
+  # ArduCopter SITL alike (docs/ardupilot.md, "Fences"), in a Dolphin.Instance
+  # of the test's own (vehicles, fleet, clock): async; `make test` runs its
+  # SITL tests alone (--max-cases 1).
+  use ExUnit.Case, async: true
 
   alias Dolphin.{Engine, Fence, Geo, Mission, Vehicles}
   alias Dolphin.Geo.Shapes
@@ -14,6 +15,7 @@ defmodule Dolphin.FenceTest do
   doctest Dolphin.Fence
 
   setup do
+    Dolphin.Test.Instance.start!()
     Dolphin.Fleet.set_source({Dolphin.Fleet.MAVLinkSource, nil})
     :ok
   end
@@ -35,7 +37,7 @@ defmodule Dolphin.FenceTest do
   defp flies_into_the_zone(backend) do
     [id] = Backend.start(backend, 1)
     home = Backend.home(id)
-    {:ok, _} = Dolphin.Fleet.pick(Dolphin.Fleet, self(), id: id)
+    {:ok, _} = Dolphin.Fleet.pick(Dolphin.Instance.names().fleet, self(), id: id)
     fence = fence(home, :rtl)
 
     # Put on, read back as it was sent, enabled with its action and ceiling.
@@ -63,7 +65,7 @@ defmodule Dolphin.FenceTest do
     refute Shapes.contains?(zone, view.position)
 
     # Released, it is given back as it was found: no fence, no rally point, its parameters as they were.
-    :ok = Dolphin.Fleet.release(Dolphin.Fleet, self(), [id])
+    :ok = Dolphin.Fleet.release(Dolphin.Instance.names().fleet, self(), [id])
 
     Wait.until(
       fn ->
@@ -85,7 +87,7 @@ defmodule Dolphin.FenceTest do
   defp drives_at_the_zone(backend) do
     [id] = Backend.start(backend, [rover: 1], speedup: if(backend == :sim, do: 20, else: 10))
     home = Backend.home(id)
-    {:ok, _} = Dolphin.Fleet.pick(Dolphin.Fleet, self(), id: id)
+    {:ok, _} = Dolphin.Fleet.pick(Dolphin.Instance.names().fleet, self(), id: id)
     {:ok, zone} = Shapes.polygon(for {n, e} <- [{80, -50}, {80, 50}, {120, 50}, {120, -50}], do: Geo.offset(home, n, e))
     fence = Fence.new!(exclude: [zone], on_breach: :hold)
     drive = Mission.new("Drive", [C.home(home), C.move(200, 0, 0)]) |> Map.put(:fence, fence)
@@ -98,7 +100,7 @@ defmodule Dolphin.FenceTest do
     refute Shapes.contains?(zone, view.position)
     {north, _} = Geo.ne_offset(home, view.position)
     # Released, given back as it was found (before the vehicle is stopped).
-    :ok = Dolphin.Fleet.release(Dolphin.Fleet, self(), [id])
+    :ok = Dolphin.Fleet.release(Dolphin.Instance.names().fleet, self(), [id])
     assert :ok = Vehicles.Fences.await_returns(30_000)
     assert {:ok, 1.0} = Vehicles.read_param(id, "FENCE_ACTION")
     {round(north), short}

@@ -3,7 +3,7 @@ defmodule Dolphin.SeparationTest do
   # process puts them (one per frame that changes something), with this
   # test's processes standing in for the missions' executors; and its
   # prediction against brute-force sampling.
-  use ExUnit.Case, async: false
+  use ExUnit.Case, async: true
 
   import Dolphin.Property
 
@@ -18,10 +18,10 @@ defmodule Dolphin.SeparationTest do
   # Each test's three vehicles have ids of their own: what the monitor still
   # does about another test's vehicles is no concern of this one's.
   setup do
+    Dolphin.Test.Instance.start!()
     base = 10_000 + 10 * System.unique_integer([:positive, :monotonic])
     ids = {base + 1, base + 2, base + 3}
     Dolphin.Events.subscribe()
-    on_exit(fn -> ids |> Tuple.to_list() |> Enum.each(&Views.delete/1) end)
     %{ids: ids}
   end
 
@@ -48,9 +48,11 @@ defmodule Dolphin.SeparationTest do
   # `rank`: the engine's {run, task id}, which orders tasks started together.
   defp executor(id, started_at, rank \\ nil) do
     test = self()
+    instance = Dolphin.Instance.current()
 
     pid =
       spawn_link(fn ->
+        Dolphin.Instance.put(instance)
         :ok = Separation.flying(id, started_at: started_at, rank: rank, limits: @limits)
         send(test, {:registered, id})
         forward(test)
@@ -190,7 +192,6 @@ defmodule Dolphin.SeparationTest do
 
   test "a vehicle whose last view is old is judged where it has flown since, not where that view put it", %{ids: {a, b, _c}} do
     Dolphin.Clock.set_speedup(100)
-    on_exit(fn -> Dolphin.Clock.set_speedup(1) end)
     # b, ours, 700 m east flying west at 15 m/s; then nothing new from it for 30 s of clock time.
     executor(b, 1_000)
     flying(b, 0, 700, {0.0, -15.0, 0.0})

@@ -1,8 +1,8 @@
 defmodule Dolphin.SimTest do
   # Simulated vehicles against the real ground-station stack (link, vehicles,
-  # command and mission protocols), over UDP on 127.0.0.1. Changes the global
-  # clock speed-up and shares the vehicle registry: not async.
-  use ExUnit.Case, async: false
+  # command and mission protocols), over UDP on 127.0.0.1, in a
+  # Dolphin.Instance of the test's own (vehicles, clock): async.
+  use ExUnit.Case, async: true
 
   alias Dolphin.{Clock, Sim, Vehicles}
   alias Dolphin.MAVLink.Ardupilotmega, as: M
@@ -11,6 +11,7 @@ defmodule Dolphin.SimTest do
   doctest Dolphin.Sim.Error
 
   setup do
+    Dolphin.Test.Instance.start!()
     %{port: Dolphin.Test.GroundStation.open()}
   end
 
@@ -69,7 +70,16 @@ defmodule Dolphin.SimTest do
 
     for id <- [1, 2, 3], do: assert_receive({:dolphin, :vehicles, {:vehicle_discovered, ^id}}, 3_000)
 
-    homes = wait(fn -> homes = Enum.map([1, 2, 3], &state(&1).home); Enum.all?(homes) && homes end, 10, "homes reported")
+    homes =
+      wait(
+        fn ->
+          homes = Enum.map([1, 2, 3], &state(&1).home)
+          Enum.all?(homes) && homes
+        end,
+        10,
+        "homes reported"
+      )
+
     [a, b, c] = Enum.map(homes, fn h -> {h.lat, h.lon} end)
     assert a != b and b != c
     assert_in_delta distance(a, b), 30, 0.5
@@ -113,7 +123,15 @@ defmodule Dolphin.SimTest do
 
     assert closest_until_reached(1, north, 2) < 3
 
-    wait(fn -> s = state(1); s.mission.state == :complete and not s.armed and s.landed == :on_ground end, 60, "mission complete, landed, disarmed")
+    wait(
+      fn ->
+        s = state(1)
+        s.mission.state == :complete and not s.armed and s.landed == :on_ground
+      end,
+      60,
+      "mission complete, landed, disarmed"
+    )
+
     s = state(1)
     assert s.mode == :auto
     assert distance({s.position.lat, s.position.lon}, {home.lat, home.lon}) < 3
@@ -127,7 +145,7 @@ defmodule Dolphin.SimTest do
   test "a clear and a command wait out a vehicle whose host stalls past the clock's patience", %{port: port} do
     {:ok, [9]} = Sim.start(sysids: [9], gcs: port, speedup: 25)
     wait(fn -> state(9).autopilot == :ardupilot end, 5, "discovery")
-    [{sim, _}] = Registry.lookup(Dolphin.Registry, {:sim, 9})
+    [{sim, _}] = Registry.lookup(Dolphin.Instance.names().registry, {:sim, 9})
 
     for exchange <- [fn -> Vehicles.clear_mission(9) end, fn -> Vehicles.set_mode(9, :guided) end] do
       :ok = :sys.suspend(sim)
@@ -154,7 +172,15 @@ defmodule Dolphin.SimTest do
     {:ok, :accepted} = Vehicles.set_mode(1, :guided)
     arm(1)
     {:ok, :accepted} = Vehicles.takeoff(1, 20)
-    wait(fn -> s = state(1); s.position && s.position.relative_alt > 19.5 end, 30, "take-off to 20 m")
+
+    wait(
+      fn ->
+        s = state(1)
+        s.position && s.position.relative_alt > 19.5
+      end,
+      30,
+      "take-off to 20 m"
+    )
 
     for mode <- [:brake, :guided] do
       {:ok, :accepted} = Vehicles.set_mode(1, mode)

@@ -413,6 +413,16 @@ defmodule Dolphin.Mission.Executor do
   # The autopilot would not arm (not ready, a failed check): the vehicle's own fault.
   defp answered(:arm, {:error, e}, data), do: fail(:arm, data, {:refused, e}, vehicle_fault?: true)
   defp answered(:start, :ok, data), do: next(:flying, data)
+
+  # Refused: a copter that touched down since the mission was looked at (its
+  # landing was under way, as a stopped mission leaves one) has no take-off
+  # to fly; one that only comes back and lands is done if it stands there.
+  defp answered(:start, {:error, e}, data) do
+    case Vehicles.view(data.vehicle) do
+      {:ok, st} -> if on_the_ground(data, st) == :already_there, do: done(data), else: fail(:start, data, {:refused, e})
+      _ -> fail(:start, data, {:refused, e})
+    end
+  end
   defp answered(state, {:error, e}, data), do: fail(state, data, {:refused, e})
 
   defp uploaded(data) do
@@ -428,12 +438,13 @@ defmodule Dolphin.Mission.Executor do
   end
 
   # A copter on the ground can only start a mission that takes off (ArduCopter
-  # refuses the others: "Auto: Missing Takeoff Cmd"). One that only comes back
-  # and lands is already done when the vehicle stands at its landing point.
+  # refuses the others: "Auto: Missing Takeoff Cmd"), armed or not (one just
+  # landed is armed until it disarms). One that only comes back and lands is
+  # already done when the vehicle stands at its landing point.
   # (A rover, boat or submarine starts where it is.)
   defp on_the_ground(data, st) do
     takes_off? = Enum.any?(data.items, &(&1.command == @takeoff))
-    grounded? = not st.armed? and st.landed in [:on_ground, nil]
+    grounded? = st.landed == :on_ground or (not st.armed? and st.landed == nil)
 
     cond do
       not Airframe.takes_off?(data.airframe) -> :ok

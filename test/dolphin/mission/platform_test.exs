@@ -1,7 +1,7 @@
 defmodule Dolphin.Mission.PlatformTest do
-  # Missions as engine tasks flown by simulated copters over UDP on 127.0.0.1.
-  # Changes the clock speed-up and uses the global fleet: not async.
-  use ExUnit.Case, async: false
+  # Missions as engine tasks flown by simulated copters over UDP on 127.0.0.1,
+  # in a Dolphin.Instance of the test's own (vehicles, fleet, clock): async.
+  use ExUnit.Case, async: true
 
   alias Dolphin.{Clock, Engine, Mission, Sim, Events, Vehicles}
   alias Dolphin.Mission.Command, as: C
@@ -10,6 +10,7 @@ defmodule Dolphin.Mission.PlatformTest do
   @speedup 50
 
   setup do
+    Dolphin.Test.Instance.start!()
     Dolphin.Fleet.set_source({Dolphin.Fleet.MAVLinkSource, nil})
     %{port: Dolphin.Test.GroundStation.open()}
   end
@@ -19,7 +20,7 @@ defmodule Dolphin.Mission.PlatformTest do
     Wait.until(fn -> Enum.all?(ids, &match?({:ok, %{home: %{}}}, Vehicles.state(&1))) end, 1_500, fn -> "homes of #{inspect(ids)}" end)
 
     # Missions run on picked vehicles.
-    for id <- ids, do: {:ok, _} = Dolphin.Fleet.pick(Dolphin.Fleet, self(), id: id)
+    for id <- ids, do: {:ok, _} = Dolphin.Fleet.pick(Dolphin.Instance.names().fleet, self(), id: id)
 
     for id <- ids do
       {:ok, %{home: h}} = Vehicles.state(id)
@@ -118,7 +119,7 @@ defmodule Dolphin.Mission.PlatformTest do
   test "a vehicle still booting (which refuses uploads with NO_SPACE, as ArduCopter does) is waited for", %{port: port} do
     {:ok, [5]} = Sim.start(sysids: [5], gcs: port, speedup: @speedup, boot_ms: 20_000, ekf_ready_ms: 25_000)
     Wait.until(fn -> match?({:ok, %{system_status: 1}}, Vehicles.state(5)) end, 200)
-    {:ok, _} = Dolphin.Fleet.pick(Dolphin.Fleet, self(), id: 5)
+    {:ok, _} = Dolphin.Fleet.pick(Dolphin.Instance.names().fleet, self(), id: 5)
     home = Dolphin.Geo.location(40.444233, -7.375234, 820)
     assert {:ok, :done} = Engine.run(Engine.on(out_and_back(home), [5]))
   end
@@ -126,7 +127,7 @@ defmodule Dolphin.Mission.PlatformTest do
   test "arming refused for longer than the bound fails the task with the autopilot's reason", %{port: port} do
     {:ok, [4]} = Sim.start(sysids: [4], gcs: port, speedup: @speedup, ekf_ready_ms: 3_600_000)
     Wait.until(fn -> match?({:ok, _}, Vehicles.state(4)) end)
-    {:ok, _} = Dolphin.Fleet.pick(Dolphin.Fleet, self(), id: 4)
+    {:ok, _} = Dolphin.Fleet.pick(Dolphin.Instance.names().fleet, self(), id: 4)
     home = Dolphin.Geo.location(40.444233, -7.375234, 820)
     mission = out_and_back(home)
 
@@ -169,9 +170,11 @@ defmodule Dolphin.Mission.PlatformTest do
   test "the engine's leaf killed: the mission's process makes the vehicle hold", %{port: port} do
     [{1, home}] = start_fleet(port, count: 1)
     test = self()
+    instance = Dolphin.Instance.current()
 
     leaf =
       spawn(fn ->
+        Dolphin.Instance.put(instance)
         # A loiter of an hour: in the air in AUTO however slowly this test looks.
         hover = Mission.new("hover") |> Mission.add(C.home(home)) |> Mission.add(C.take_off(%{home | h: home.h + 20})) |> Mission.add(C.move_and_loiter_time(0, 0, 0, 3_600))
         {:ok, pid} = Dolphin.Mission.Executor.start_link(hover, 1, owner: self())
@@ -257,9 +260,11 @@ defmodule Dolphin.Mission.PlatformTest do
     [{1, home}] = start_fleet(port, count: 1, disarm_delay_ms: 200)
     :ok = Sim.set_faults(1, latency: 500)
     test = self()
+    instance = Dolphin.Instance.current()
 
     # The link is quick again when the executor sets GUIDED the second time.
     spawn_link(fn ->
+      Dolphin.Instance.put(instance)
       Events.subscribe()
       send(test, :watching)
       receive do: ({:dolphin, :events, %{event: :mode_changed, vehicle: 1, mode: :guided}} -> :ok)
@@ -271,6 +276,21 @@ defmodule Dolphin.Mission.PlatformTest do
     assert {:ok, :done} = Engine.run(Engine.on(out_and_back(home), [1]))
     {:ok, info} = Sim.info(1)
     assert Dolphin.Geo.distance(Dolphin.Geo.location(info.position.lat, info.position.lon), home) < 3
+  end
+
+  test "a copter just landed at home, still armed, has nothing to fly of a mission that only comes back and lands: done", %{port: port} do
+    # ArduCopter refuses AUTO on the ground without a take-off, armed or not
+    # ("Auto: Missing Takeoff Cmd"): a mission stopped in its landing leaves
+    # a copter so, and the next one brings it home.
+    [{1, home}] = start_fleet(port, count: 1, disarm_delay_ms: 600_000)
+    :ok = Dolphin.Vehicles.Manoeuvres.guided(1, within: 60_000)
+    {:ok, _} = Dolphin.Vehicles.arm(1)
+    Wait.until(fn -> match?({:ok, %{armed?: true, landed: :on_ground}}, Vehicles.view(1)) end)
+    back = Mission.new("Home") |> Mission.add(C.home(home)) |> Mission.add(C.return_home_and_land())
+
+    assert {:ok, :done} = Engine.run(Engine.on(back, [1]))
+    {:ok, info} = Sim.info(1)
+    assert info.mode == :guided and info.armed
   end
 
   test "a boat that disarms itself in the instant it is armed (never seen armed) is armed and started again, and drives its mission", %{port: port} do

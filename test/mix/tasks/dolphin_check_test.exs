@@ -1,5 +1,11 @@
 defmodule Mix.Tasks.Dolphin.CheckTest do
-  use ExUnit.Case
+  # The --connect tests' vehicles in a Dolphin.Instance of the test's own: async.
+  use ExUnit.Case, async: true
+
+  setup do
+    Dolphin.Test.Instance.start!()
+    :ok
+  end
 
   alias Mix.Tasks.Dolphin.Check, as: Task
 
@@ -52,10 +58,6 @@ defmodule Mix.Tasks.Dolphin.CheckTest do
   end
 
   describe "--connect" do
-    setup do
-      on_exit(&Dolphin.Test.GroundStation.forget_vehicles/0)
-    end
-
     test "checks against the vehicles that answer on the link, then lets them go" do
       {:ok, socket} = :gen_udp.open(0, ip: {127, 0, 0, 1})
       {:ok, port} = :inet.port(socket)

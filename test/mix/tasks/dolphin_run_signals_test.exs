@@ -1,13 +1,19 @@
 defmodule Mix.Tasks.Dolphin.RunSignalsTest do
   # `mix dolphin.run` in its own OS process, interrupted as an operator or a
   # service manager would: SIGINT (Ctrl-C) and SIGTERM. The --connect runs fly
-  # a simulator of this VM: it changes the clock's speed-up, so not async.
-  use ExUnit.Case, async: false
+  # a simulator of this VM, in a Dolphin.Instance of the test's own (its
+  # vehicles, its clock's speed-up): async.
+  use ExUnit.Case, async: true
 
   import Dolphin.Test.MixCommand, only: [kill: 2, kill_twice: 3, wait_for: 2, wait_exit: 2, open: 1]
 
   @moduletag :tmp_dir
   @moduletag timeout: 300_000
+
+  setup do
+    Dolphin.Test.Instance.start!()
+    :ok
+  end
 
   @hover """
   use Dolphin.Script

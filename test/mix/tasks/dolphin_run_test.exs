@@ -1,6 +1,6 @@
 defmodule Mix.Tasks.Dolphin.RunTest do
-  # Changes the application's fleet source and the clock's speed-up: not async.
-  use ExUnit.Case, async: false
+  # In a Dolphin.Instance of the test's own (fleet source, vehicles, clock): async.
+  use ExUnit.Case, async: true
 
   alias Mix.Tasks.Dolphin.Run
 
@@ -10,8 +10,8 @@ defmodule Mix.Tasks.Dolphin.RunTest do
 
   # A run's vehicles are discovered afresh: none left known by a test before.
   setup do
-    Dolphin.Test.GroundStation.forget_vehicles()
-    on_exit(&Dolphin.Test.GroundStation.forget_vehicles/0)
+    Dolphin.Test.Instance.start!()
+    :ok
   end
 
   defp script(dir, name, source) do

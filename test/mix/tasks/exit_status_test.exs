@@ -3,8 +3,7 @@ defmodule Mix.Tasks.ExitStatusTest do
   # failure at run time, 2 bad usage, 130 SIGINT, 143 SIGTERM. Each task's
   # bad usage, as an OS process, in a fresh VM (signals: signals_test.exs
   # and dolphin_run_signals_test.exs).
-  # Each runs a VM: one at a time, the machine is shared.
-  use ExUnit.Case, async: false
+  use ExUnit.Case, async: true
 
   import Dolphin.Test.MixCommand, only: [run: 1]
 

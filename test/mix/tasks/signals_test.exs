@@ -3,7 +3,7 @@ defmodule Mix.Tasks.SignalsTest do
   # in its own OS process, interrupted by SIGINT (Ctrl-C) or SIGTERM: never
   # the BREAK menu, never OTP's shutdown (status 0 and an EXIT trace), but
   # 130 or 143 and a line that says so.
-  use ExUnit.Case, async: false
+  use ExUnit.Case, async: true
 
   import Dolphin.Test.MixCommand, only: [start: 1, start: 2, kill: 2, wait_for: 2, wait_exit: 2]
 
