@@ -199,8 +199,11 @@ defmodule Dolphin.SITL do
     if pid = Map.get(fleet, :pace), do: DynamicSupervisor.terminate_child(Dolphin.Instance.names().sitls, pid)
     # The link first: a frame still on its way would make a forgotten vehicle known again.
     Dolphin.Link.disconnect(link)
+    # Each instance's process gives its number back as it ends (so does one
+    # whose Dolphin.Instance stops without this call); those of instances
+    # never started are given back here.
     Enum.each(instances, &DynamicSupervisor.terminate_child(Dolphin.Instance.names().sitls, &1))
-    release_instances(numbers)
+    release_instances(Enum.drop(numbers, length(instances)))
     remove_payload(sysids, :camera)
     Enum.each(sysids, &Dolphin.Vehicles.forget/1)
     :ok
@@ -433,6 +436,13 @@ defmodule Dolphin.SITL do
       free
     end)
   end
+
+  @doc false
+  # An instance number given back by the process that held it (Dolphin.SITL.Instance).
+  @spec release_instance(non_neg_integer()) :: :ok
+  def release_instance(number), do: release_instances([number])
+
+  defp release_instances([]), do: :ok
 
   defp release_instances(numbers) do
     :global.trans({@instances_key, self()}, fn ->

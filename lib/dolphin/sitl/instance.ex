@@ -49,8 +49,7 @@ defmodule Dolphin.SITL.Instance do
         ["--home", home_arg(spec.home), "--defaults", Enum.join(defaults, ","), "-w"] ++
         ~w(--serial0 udpclient:127.0.0.1:#{spec.gcs_port} --serial1 #{serial1(spec)} --serial2 none)
 
-    port =
-      Port.open({:spawn_executable, spec.bin}, [:binary, :exit_status, :stderr_to_stdout, {:line, 1024}, args: args, cd: dir])
+    port = Port.open({:spawn_executable, spec.bin}, [:binary, :exit_status, :stderr_to_stdout, {:line, 1024}, args: args, cd: dir])
 
     {:os_pid, os_pid} = Port.info(port, :os_pid)
 
@@ -98,7 +97,9 @@ defmodule Dolphin.SITL.Instance do
   def terminate(_reason, s) do
     if s.port, do: stop_os_process(s)
     File.rm_rf(s.dir)
-    :ok
+    # Its -I is free once its process is gone, however the fleet ends (a
+    # Dolphin.Instance stopped whole ends it without Dolphin.SITL.stop/1).
+    Dolphin.SITL.release_instance(s.instance)
   end
 
   defp stop_os_process(%{port: port, os_pid: os_pid}) do
