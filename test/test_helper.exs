@@ -38,4 +38,5 @@ browser_exclude =
 # and run async, at most twice the cores at once (ExUnit's default; more
 # were barely quicker on a loaded machine, see docs/testing.md).
 # DOLPHIN_TEST_TIMES=FILE: each module's time written there (Dolphin.Test.Timings).
-ExUnit.start(exclude: sitl_exclude ++ shared_exclude ++ browser_exclude, formatters: Dolphin.Test.Timings.formatters())
+ExUnit.start(exclude: sitl_exclude ++ shared_exclude ++ browser_exclude)
+ExUnit.configure(formatters: Dolphin.Test.Timings.formatters(ExUnit.configuration()[:formatters]))

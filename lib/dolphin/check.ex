@@ -194,8 +194,10 @@ defmodule Dolphin.Check do
   @dry_run_instance Dolphin.Check.DryRun
 
   defp in_own_instance(fun) do
+    # The lock's requester is the caller: one shared requester id would let
+    # every caller in at once (a :global lock is re-entrant for its requester).
     :global.trans(
-      {__MODULE__, :dry_run},
+      {{__MODULE__, :dry_run}, self()},
       fn ->
         sup = start_dry_run_instance()
         previous = Dolphin.Instance.put(@dry_run_instance)

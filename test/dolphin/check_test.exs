@@ -1,6 +1,8 @@
 defmodule Dolphin.CheckTest do
-  # Dry runs work in an instance of their own and take turns (Dolphin.Check): async.
-  use ExUnit.Case, async: true
+  # Not async: a test looks at the default instance's events, vehicles and
+  # fleet, and at the dry run's instance being gone (another test's dry run,
+  # waiting its turn, would start it at once).
+  use ExUnit.Case
 
   alias Dolphin.Check
   alias Dolphin.Check.{FleetFile, FleetFileError}

@@ -2,9 +2,10 @@ defmodule Dolphin.Examples.FireWatchTest do
   # examples/fire_watch.exs as its header says to run it, on the built-in
   # simulator with the world file it names: the fire, which the script does
   # not know of, is found, looked at, and both surveys are flown to their end.
-  # Its own Dolphin.Instance (vehicles, links, clock): its simulator runs
-  # beside other tests; `make test` runs its SITL test alone (--max-cases 1).
-  use ExUnit.Case, async: true
+  # Not async: in an instance of its own, the SITL run's events twice did
+  # not line up with its telemetry log for the report (not understood yet,
+  # docs/testing.md); in the application's instance they always have.
+  use ExUnit.Case, async: false
 
   alias Dolphin.Test.ExampleRun
 
@@ -14,8 +15,7 @@ defmodule Dolphin.Examples.FireWatchTest do
   @world Path.expand("../../examples/worlds/serra_fire.json", __DIR__)
 
   setup do
-    Dolphin.Test.Instance.start!()
-    :ok
+    ExampleRun.clean_up_after_test()
   end
 
   # The fire of the world file, and how far from it a look is a look at it.

@@ -11,12 +11,12 @@ defmodule Dolphin.Test.Timings do
   """
   use GenServer
 
-  @doc "Formatters for `ExUnit.start/1`: the usual one, and this one when `DOLPHIN_TEST_TIMES` names a file."
-  @spec formatters() :: [module()]
-  def formatters do
+  @doc "`formatters` (those ExUnit has), and this one when `DOLPHIN_TEST_TIMES` names a file."
+  @spec formatters([module()]) :: [module()]
+  def formatters(formatters) do
     case System.get_env("DOLPHIN_TEST_TIMES") do
-      path when is_binary(path) and path != "" -> [ExUnit.CLIFormatter, __MODULE__]
-      _ -> [ExUnit.CLIFormatter]
+      path when is_binary(path) and path != "" -> formatters ++ [__MODULE__]
+      _ -> formatters
     end
   end
 

@@ -235,8 +235,12 @@ defmodule Dolphin.Engine.OnSensor do
 
     {:run_code, :find,
      fn ->
+       # A reading older than the sensor's staleness is unknown, as in the condition.
+       since = Dolphin.Clock.now_ms() - (task.sensor.stale_after || task.sensor.keep)
+
        ids
        |> Enum.flat_map(&Watcher.detections(&1, task.sensor))
+       |> Enum.filter(&(&1.at_ms >= since))
        |> strongest(task, places)
        |> case do
          nil -> nil
