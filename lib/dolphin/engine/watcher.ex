@@ -188,11 +188,9 @@ defmodule Dolphin.Engine.Watcher do
   """
   @spec detection(VehicleSet.t() | Dolphin.Vehicles.Id.t(), Dolphin.Sensors.Sensor.t()) :: Dolphin.Sensors.Detection.t() | nil
   def detection(ref, sensor) do
-    with [id] <- VehicleSet.ids(VehicleSet.new(ref)),
-         {:ok, view} <- Source.vehicle(Context.source(Context.current()), id) do
-      Dolphin.Sensors.Detection.of(view, sensor)
-    else
-      _ -> nil
+    case live_view(ref) do
+      {:ok, view} -> Dolphin.Sensors.Detection.of(view, sensor)
+      :error -> nil
     end
   end
 
@@ -202,11 +200,20 @@ defmodule Dolphin.Engine.Watcher do
   """
   @spec detections(VehicleSet.t() | Dolphin.Vehicles.Id.t(), Dolphin.Sensors.Sensor.t()) :: [Dolphin.Sensors.Detection.t()]
   def detections(ref, sensor) do
+    case live_view(ref) do
+      {:ok, view} -> Dolphin.Sensors.Detection.kept(view, sensor)
+      :error -> []
+    end
+  end
+
+  # The view of one vehicle (a one-vehicle set or an id), read live from the
+  # calling process's context's source; :error for another set or an unknown vehicle.
+  defp live_view(ref) do
     with [id] <- VehicleSet.ids(VehicleSet.new(ref)),
          {:ok, view} <- Source.vehicle(Context.source(Context.current()), id) do
-      Dolphin.Sensors.Detection.kept(view, sensor)
+      {:ok, view}
     else
-      _ -> []
+      _ -> :error
     end
   end
 end

@@ -163,10 +163,6 @@ defmodule Dolphin.Sim.Local do
             {:error, e} -> {:halt, {:error, e, [started]}}
           end
         end)
-        |> case do
-          {:ok, started} -> {:ok, started}
-          {:error, e, [started]} -> {:error, e, [started]}
-        end
 
       {:error, e} ->
         {:error, %Dolphin.Sim.Error{reason: :start_failed, message: "cannot open a local link: #{Exception.message(e)}"}, []}
