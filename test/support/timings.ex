@@ -8,6 +8,10 @@ defmodule Dolphin.Test.Timings do
   part and prints the longest).
 
       module                                      wall_s  tests_s  tests  file
+
+  Beside it, in the same name with `.failures` for `.txt`, one line per test
+  that failed (its file and line, its name, the first line of what went
+  wrong), so that the last lines of a long log can name every failure.
   """
   use GenServer
 
@@ -21,13 +25,15 @@ defmodule Dolphin.Test.Timings do
   end
 
   @impl true
-  def init(_opts), do: {:ok, %{path: System.fetch_env!("DOLPHIN_TEST_TIMES"), modules: %{}}}
+  def init(_opts), do: {:ok, %{path: System.fetch_env!("DOLPHIN_TEST_TIMES"), modules: %{}, failures: []}}
 
   @impl true
   def handle_cast({:module_started, %ExUnit.TestModule{name: name, file: file}}, s),
     do: {:noreply, put_in(s.modules[name], %{file: file, started: now(), finished: nil, tests_us: 0, tests: 0})}
 
-  def handle_cast({:test_finished, %ExUnit.Test{module: module, time: time, state: state}}, s) when not is_tuple(state) or elem(state, 0) != :excluded do
+  def handle_cast({:test_finished, %ExUnit.Test{module: module, time: time, state: state} = test}, s) when not is_tuple(state) or elem(state, 0) != :excluded do
+    s = record_failure(s, test)
+
     case s.modules do
       %{^module => m} -> {:noreply, put_in(s.modules[module], %{m | tests_us: m.tests_us + time, tests: m.tests + 1})}
       _ -> {:noreply, s}
@@ -50,7 +56,26 @@ defmodule Dolphin.Test.Timings do
 
   defp now, do: System.monotonic_time(:millisecond)
 
-  defp write(%{path: path, modules: modules}) do
+  defp record_failure(s, %ExUnit.Test{state: {:failed, [{kind, reason, stack} | _]}} = test),
+    do: %{s | failures: [failure_line(test, what_went_wrong(kind, reason, stack)) | s.failures]}
+
+  defp record_failure(s, %ExUnit.Test{state: {:invalid, _}} = test), do: %{s | failures: [failure_line(test, "its module's setup_all failed") | s.failures]}
+  defp record_failure(s, _test), do: s
+
+  defp failure_line(%ExUnit.Test{name: name, tags: tags}, what),
+    do: "#{Path.relative_to_cwd(tags[:file] || "?")}:#{tags[:line]} #{name}: #{String.slice(what, 0, 200)}"
+
+  defp what_went_wrong(:error, %ExUnit.AssertionError{message: message, expr: expr}, _stack) do
+    if expr == ExUnit.AssertionError.no_value(),
+      do: first_line(message),
+      else: first_line(message) <> " " <> first_line(Macro.to_string(expr))
+  end
+
+  defp what_went_wrong(kind, reason, stack), do: first_line(Exception.format_banner(kind, reason, stack))
+
+  defp first_line(text), do: text |> String.trim() |> String.split("\n", parts: 2) |> hd()
+
+  defp write(%{path: path, modules: modules, failures: failures}) do
     rows =
       modules
       |> Enum.filter(fn {_, m} -> m.tests > 0 end)
@@ -72,5 +97,8 @@ defmodule Dolphin.Test.Timings do
     header = String.pad_trailing("module", 52) <> String.pad_leading("wall_s", 8) <> String.pad_leading("tests_s", 8) <> String.pad_leading("tests", 6) <> "  file"
     File.mkdir_p!(Path.dirname(path))
     File.write!(path, Enum.join([header | rows], "\n") <> "\n")
+    File.write!(failures_path(path), Enum.map(Enum.reverse(failures), &[&1, "\n"]))
   end
+
+  defp failures_path(path), do: Path.rootname(path) <> ".failures"
 end
