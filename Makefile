@@ -25,6 +25,7 @@ bench: bootstrap
 	MIX_ENV=prod mix run bench/reaction.exs
 	MIX_ENV=prod mix run bench/sensor_reaction.exs
 	MIX_ENV=prod mix run bench/report.exs
+	MIX_ENV=prod mix run bench/live_view.exs
 	MIX_ENV=prod mix run bench/cluster.exs
 	MIX_ENV=prod mix run bench/separation.exs
 

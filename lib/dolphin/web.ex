@@ -16,10 +16,15 @@ defmodule Dolphin.Web do
   ## What it serves
 
     * `GET /` — the page as it is now (it reads well without its script);
+      a fleet of more than 50 vehicles is shown a page of 50 at a time,
+      `/?page=N` (in the order of their names), each page counting the whole
+      fleet in one line (connected, lost, armed, flying a task, the emptiest
+      batteries) and drawing its own vehicles and the events that concern
+      them; a page number that is not one is a 400;
       `/?frames=N`: the page stops following after N frames (a snapshot
       through the live path, for a headless browser, whose `--dump-dom`
       would wait for ever on an open stream);
-    * `GET /events` — a stream of Server-Sent Events: a `frame` event (one
+    * `GET /events` (`/events?page=N`: page N's) — a stream of Server-Sent Events: a `frame` event (one
       line of JSON, `{"pieces": [[id, html], ...]}`) with the parts of the
       page that changed (each section, the legend, the line under the
       heading), at most four times a second (less when the page takes long

@@ -31,7 +31,12 @@ defmodule Dolphin.WebTest do
     :gen_tcp.close(socket)
     [head, body] = :binary.split(response, "\r\n\r\n")
     [status | headers] = String.split(head, "\r\n")
-    {status, Map.new(headers, fn h -> [k, v] = String.split(h, ": ", parts: 2); {String.downcase(k), v} end), body}
+
+    {status,
+     Map.new(headers, fn h ->
+       [k, v] = String.split(h, ": ", parts: 2)
+       {String.downcase(k), v}
+     end), body}
   end
 
   defp read_all(socket, acc) do
@@ -42,9 +47,9 @@ defmodule Dolphin.WebTest do
   end
 
   # Opens the event stream: the socket, the response's head and the data read past it.
-  defp open_stream(port) do
+  defp open_stream(port, path \\ "/events") do
     socket = connect(port)
-    :ok = :gen_tcp.send(socket, "GET /events HTTP/1.1\r\nhost: 127.0.0.1\r\naccept: text/event-stream\r\n\r\n")
+    :ok = :gen_tcp.send(socket, "GET #{path} HTTP/1.1\r\nhost: 127.0.0.1\r\naccept: text/event-stream\r\n\r\n")
     {head, rest} = read_head(socket, "")
     {socket, head, rest}
   end
@@ -106,30 +111,53 @@ defmodule Dolphin.WebTest do
     PubSub.publish({:vehicle, @id}, {:view, view(lat, opts)})
   end
 
-  describe "HTTP" do
-    test "a view and each browser's process are supervised: the view under Dolphin.Web.Supervisor, its clients under Dolphin.Web.Connections", %{web: web, port: port} do
-    assert {:undefined, web, :worker, [Dolphin.Web.Hub]} in DynamicSupervisor.which_children(Dolphin.Web.Supervisor)
-    {socket, _head, _rest} = open_stream(port)
-    Wait.until(fn -> Task.Supervisor.children(Dolphin.Web.Connections) != [] end, 30_000, fn -> "no client process under Dolphin.Web.Connections" end)
-    :gen_tcp.close(socket)
-    Web.stop(web)
-    refute Enum.any?(DynamicSupervisor.which_children(Dolphin.Web.Supervisor), &match?({_, ^web, _, _}, &1))
+  # n vehicles named "1@webpages" ... the view discovers and sees.
+  defp fleet(web, n) do
+    ids = for i <- 1..n, do: "#{i}@webpages"
+    for id <- ids, do: PubSub.publish(:vehicles, {:vehicle_discovered, id})
+    _ = :sys.get_state(web)
+    for {id, i} <- Enum.with_index(ids), do: PubSub.publish({:vehicle, id}, {:view, %{view(40.44 + i / 10_000, []) | id: id}})
   end
 
-  test "GET / is the page, with the report's sections and the vehicles now", %{port: port} do
+  describe "HTTP" do
+    test "a view and each browser's process are supervised: the view under Dolphin.Web.Supervisor, its clients under Dolphin.Web.Connections", %{web: web, port: port} do
+      assert {:undefined, web, :worker, [Dolphin.Web.Hub]} in DynamicSupervisor.which_children(Dolphin.Web.Supervisor)
+      {socket, _head, _rest} = open_stream(port)
+      Wait.until(fn -> Task.Supervisor.children(Dolphin.Web.Connections) != [] end, 30_000, fn -> "no client process under Dolphin.Web.Connections" end)
+      :gen_tcp.close(socket)
+      Web.stop(web)
+      refute Enum.any?(DynamicSupervisor.which_children(Dolphin.Web.Supervisor), &match?({_, ^web, _, _}, &1))
+    end
+
+    test "GET / is the page, with the report's sections and the vehicles now", %{port: port} do
       {status, headers, body} = request(port, "GET", "/")
       assert status == "HTTP/1.1 200 OK"
       assert headers["content-type"] == "text/html; charset=utf-8"
       assert String.to_integer(headers["content-length"]) == byte_size(body)
 
       for id <- ~w(live-status summary map-section timeline-section plots), do: assert(body =~ ~s(<section id="#{id}">))
-      assert body =~ "new EventSource('events')"
+      assert body =~ "new EventSource('events'"
     end
 
     test "anything else is 404, and anything but GET 405: the view is read-only", %{port: port} do
       assert {"HTTP/1.1 404 Not Found", _, "not found" <> _} = request(port, "GET", "/nothing")
       assert {"HTTP/1.1 405 Method Not Allowed", %{"allow" => "GET"}, _} = request(port, "POST", "/")
       assert {"HTTP/1.1 405 Method Not Allowed", _, _} = request(port, "DELETE", "/events")
+    end
+
+    test "a fleet of more than a page: GET /?page=N is page N, counted whole; a page that is not a number is a 400", %{web: web, port: port} do
+      fleet(web, 60)
+      Wait.until(fn -> request(port, "GET", "/?page=2") |> elem(2) =~ ~s(data-vehicle="55@webpages") end, 30_000, fn -> "page 2 never showed vehicle 55@webpages" end)
+      {"HTTP/1.1 200 OK", _, body} = request(port, "GET", "/?page=2")
+      assert body =~ ~s(<nav class="pager">)
+      assert body =~ ~r/<p class="fleet-counts">\d+ vehicles: /
+      refute body =~ ~s(<tr class="v-5@webpages live-vehicle")
+      {"HTTP/1.1 200 OK", _, first} = request(port, "GET", "/")
+      assert first =~ ~s(<tr class="v-5@webpages live-vehicle")
+
+      for bad <- ["/?page=0", "/?page=two", "/events?page=-1"] do
+        assert {"HTTP/1.1 400 Bad Request", _, "bad page: ?page= takes a page number (1, 2, ...)\n"} = request(port, "GET", bad)
+      end
     end
 
     test "garbage instead of a request is a 400, and the server goes on", %{port: port} do
@@ -189,6 +217,21 @@ defmodule Dolphin.WebTest do
       end
     end
 
+    test "each client follows its own page of a large fleet (?page=N)", %{web: web, port: port} do
+      fleet(web, 60)
+      {second, _head, rest2} = open_stream(port, "/events?page=2")
+      {first, _head, rest1} = open_stream(port)
+      {"frame", data, rest2} = next_event(second, rest2)
+      {"frame", data1, rest1} = next_event(first, rest1)
+      {page2, _} = await_piece(second, {pieces(data), rest2}, "live-status", ~s(data-vehicle="55@webpages"))
+      {page1, _} = await_piece(first, {pieces(data1), rest1}, "live-status", ~s(data-vehicle="5@webpages"))
+      refute page2["live-status"] =~ ~s(data-vehicle="5@webpages")
+      refute page1["live-status"] =~ ~s(data-vehicle="55@webpages")
+      assert page2["map-section"] =~ ~s(class="now v-55@webpages")
+      :gen_tcp.close(first)
+      :gen_tcp.close(second)
+    end
+
     test "a client that goes away is dropped", %{web: web, port: port} do
       {socket, _head, rest} = open_stream(port)
       {"frame", _first, _rest} = next_event(socket, rest)
@@ -220,7 +263,7 @@ defmodule Dolphin.WebTest do
       for i <- 1..12 do
         fly(web, 40.44 + i / 10_000)
         # One frame per change: wait until the hub has sent it (or held it back).
-        Wait.until(fn -> not :sys.get_state(web).dirty end)
+        Wait.until(fn -> not :sys.get_state(web).unsent end)
       end
 
       {:message_queue_len, queued} = Process.info(client, :message_queue_len)

@@ -21,7 +21,7 @@ defmodule Dolphin.Console.Overview do
   def vehicles(page) do
     fleet = Map.new(safe(fn -> Fleet.vehicles() end, []), &{&1.vehicle.id, &1})
     leaves = for t <- Engine.tasks(), t.vehicle != nil, into: %{}, do: {t.vehicle, t}
-    all = Enum.sort(Enum.uniq(Vehicles.list() ++ Map.keys(fleet)))
+    all = Dolphin.Vehicles.Id.sort(Enum.uniq(Vehicles.list() ++ Map.keys(fleet)))
     ids = if page == :all, do: all, else: Enum.slice(all, (elem(page, 0) - 1) * elem(page, 1), elem(page, 1))
 
     {vehicle_entries(ids, fleet, leaves), length(all)}

@@ -92,6 +92,29 @@ defmodule Dolphin.Vehicles.Id do
   defp name(link), do: link |> inspect() |> String.replace(~r/\s+/, "")
 
   @doc """
+  Vehicle ids in the order a listing shows them: system ids first, then
+  the qualified names network by network, each by its system id (`"2@sim2"`
+  before `"10@sim2"`).
+
+      iex> Dolphin.Vehicles.Id.sort(["10@sim2", 7, "2@sim2", "1@sim10", 3])
+      [3, 7, "2@sim2", "10@sim2", "1@sim10"]
+  """
+  @spec sort([t()]) :: [t()]
+  def sort(ids), do: Enum.sort_by(ids, &order/1)
+
+  defp order(id) when is_integer(id), do: {0, [], id}
+
+  defp order(id) when is_binary(id) do
+    case split(id) do
+      {:ok, sysid, network} -> {1, natural(network), sysid}
+      _ -> {2, id, 0}
+    end
+  end
+
+  # A network's name with its runs of digits as numbers ("sim2" before "sim10").
+  defp natural(name), do: for(part <- Regex.split(~r/\d+/, name, include_captures: true, trim: true), do: if(part =~ ~r/\A\d+\z/, do: {0, String.to_integer(part)}, else: {1, part}))
+
+  @doc """
   A vehicle id from what a user wrote: a system id (an integer, or digits)
   or a qualified name `"SYSID@NETWORK"`; `:error` for anything else.
   """

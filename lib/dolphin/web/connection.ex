@@ -36,7 +36,7 @@ defmodule Dolphin.Web.Connection do
     case :gen_tcp.recv(socket, 0, @request_ms) do
       {:ok, {:http_request, method, {:abs_path, target}, _version}} ->
         case headers(socket, 0) do
-          :ok -> route(method, target |> String.split("?") |> hd(), socket, hub)
+          :ok -> route(method, target, socket, hub)
           :error -> respond(socket, 400, "text/plain", "bad request\n")
         end
 
@@ -60,15 +60,46 @@ defmodule Dolphin.Web.Connection do
     end
   end
 
-  defp route(:GET, path, socket, hub) when path in ["/", "/index.html"] do
-    case call(fn -> Hub.page(hub) end) do
+  defp route(:GET, target, socket, hub) do
+    [path | query] = String.split(target, "?", parts: 2)
+
+    case {path, page_asked(query)} do
+      {_, :error} -> respond(socket, 400, "text/plain", "bad page: ?page= takes a page number (1, 2, ...)\n")
+      {path, {:ok, n}} when path in ["/", "/index.html"] -> serve_page(socket, hub, n)
+      {"/events", {:ok, n}} -> serve_events(socket, hub, n)
+      _ -> respond(socket, 404, "text/plain", "not found: the live view is at /\n")
+    end
+  end
+
+  defp route(_method, _target, socket, _hub), do: respond(socket, 405, "text/plain", "the live view is read-only: GET only\n", [{"allow", "GET"}])
+
+  # The page a client shows (?page=N, from 1; past the last it is shown the last).
+  defp page_asked([]), do: {:ok, 1}
+
+  defp page_asked([query]) do
+    case URI.decode_query(query) do
+      %{"page" => text} ->
+        case Integer.parse(text) do
+          {n, ""} when n >= 1 and n <= 1_000_000 -> {:ok, n}
+          _ -> :error
+        end
+
+      _ ->
+        {:ok, 1}
+    end
+  rescue
+    ArgumentError -> :error
+  end
+
+  defp serve_page(socket, hub, n) do
+    case call(fn -> Hub.page(hub, n) end) do
       {:ok, page} -> respond(socket, 200, "text/html; charset=utf-8", page)
       :error -> respond(socket, 503, "text/plain", "the live view has stopped\n")
     end
   end
 
-  defp route(:GET, "/events", socket, hub) do
-    case call(fn -> Hub.subscribe(hub) end) do
+  defp serve_events(socket, hub, n) do
+    case call(fn -> Hub.subscribe(hub, n) end) do
       {:ok, {:ok, pieces}} ->
         ref = Process.monitor(hub)
         head = "HTTP/1.1 200 OK\r\ncontent-type: text/event-stream\r\ncache-control: no-store\r\nconnection: keep-alive\r\nx-content-type-options: nosniff\r\n\r\n"
@@ -85,9 +116,6 @@ defmodule Dolphin.Web.Connection do
         respond(socket, 503, "text/plain", "the live view has stopped\n")
     end
   end
-
-  defp route(:GET, _path, socket, _hub), do: respond(socket, 404, "text/plain", "not found: the live view is at /\n")
-  defp route(_method, _path, socket, _hub), do: respond(socket, 405, "text/plain", "the live view is read-only: GET only\n", [{"allow", "GET"}])
 
   # A hub that stopped while asked is a 503, not a crash.
   defp call(fun) do
@@ -129,7 +157,10 @@ defmodule Dolphin.Web.Connection do
 
   defp respond(socket, status, type, body, extra \\ []) do
     reason = %{200 => "OK", 400 => "Bad Request", 404 => "Not Found", 405 => "Method Not Allowed", 503 => "Service Unavailable"}[status]
-    head = Enum.map([{"content-type", type}, {"content-length", Integer.to_string(byte_size(body))}, {"cache-control", "no-store"}, {"connection", "close"} | extra], fn {k, v} -> [k, ": ", v, "\r\n"] end)
+
+    head =
+      Enum.map([{"content-type", type}, {"content-length", Integer.to_string(byte_size(body))}, {"cache-control", "no-store"}, {"connection", "close"} | extra], fn {k, v} -> [k, ": ", v, "\r\n"] end)
+
     :gen_tcp.send(socket, ["HTTP/1.1 #{status} #{reason}\r\n", head, "\r\n", body])
   end
 end

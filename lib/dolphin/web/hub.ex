@@ -36,14 +36,14 @@ defmodule Dolphin.Web.Hub do
   def child_spec(opts), do: %{id: __MODULE__, start: {__MODULE__, :start_link, [opts]}, restart: :temporary, shutdown: 15_000}
 
   @doc false
-  # The page now (binary).
-  @spec page(pid()) :: binary()
-  def page(hub), do: GenServer.call(hub, :page, 15_000)
+  # Page n of the view now (binary; a fleet of more than a page's vehicles is shown a page at a time).
+  @spec page(pid(), pos_integer()) :: binary()
+  def page(hub, n \\ 1), do: GenServer.call(hub, {:page, n}, 15_000)
 
   @doc false
-  # Registers the calling connection; the whole state to send it first.
-  @spec subscribe(pid()) :: {:ok, [{String.t(), binary()}]} | {:error, :busy}
-  def subscribe(hub), do: GenServer.call(hub, {:subscribe, self()}, 15_000)
+  # Registers the calling connection, which shows page n; the whole state to send it first.
+  @spec subscribe(pid(), pos_integer()) :: {:ok, [{String.t(), binary()}]} | {:error, :busy}
+  def subscribe(hub, n \\ 1), do: GenServer.call(hub, {:subscribe, self(), n}, 15_000)
 
   @impl true
   def init(opts) do
@@ -63,7 +63,8 @@ defmodule Dolphin.Web.Hub do
       started_at = DateTime.add(DateTime.utc_now(), -Clock.to_real_ms(max(Clock.now_ms() - origin, 0)), :millisecond)
       live = Live.new(origin, [started_at: started_at] ++ Keyword.take(opts, [:title, :tlog]))
       live = opts |> Keyword.get(:history, []) |> Enum.reduce(live, &Live.event(&2, &1))
-      s = %{listen: listen, port: actual, bind: bind, owner: opts[:owner], live: live, watched: MapSet.new(), dirty: true, page: nil, pieces: [], clients: %{}}
+      # rendered: page number => {page, pieces}, for the pages asked for since the model last changed.
+      s = %{listen: listen, port: actual, bind: bind, owner: opts[:owner], live: live, watched: MapSet.new(), unsent: true, rendered: %{}, clients: %{}}
       Process.send_after(self(), :frame, @frame_ms)
       {:ok, Enum.reduce(Vehicles.list(), s, &watch/2)}
     else
@@ -126,28 +127,28 @@ defmodule Dolphin.Web.Hub do
       Vehicles.subscribe(id)
 
       case Vehicles.view(id) do
-        {:ok, view} -> %{s | live: Live.view(s.live, view, Clock.now_ms()), watched: MapSet.put(s.watched, id), dirty: true}
+        {:ok, view} -> %{changed(s, Live.view(s.live, view, Clock.now_ms())) | watched: MapSet.put(s.watched, id)}
         {:error, :unknown_vehicle} -> %{s | watched: MapSet.put(s.watched, id)}
       end
     end
   end
 
   @impl true
-  def handle_call(:page, _from, s) do
-    s = render(s)
-    {:reply, s.page, s}
+  def handle_call({:page, n}, _from, s) do
+    {{page, _pieces}, s} = render(s, n)
+    {:reply, page, s}
   end
 
   def handle_call(:port, _from, s), do: {:reply, s.port, s}
   def handle_call(:where, _from, s), do: {:reply, {s.bind, s.port}, s}
 
-  def handle_call({:subscribe, pid}, _from, s) do
+  def handle_call({:subscribe, pid, n}, _from, s) do
     if map_size(s.clients) >= @max_clients do
       {:reply, {:error, :busy}, s}
     else
-      s = render(s)
+      {{_page, pieces}, s} = render(s, n)
       Process.monitor(pid)
-      {:reply, {:ok, s.pieces}, %{s | clients: Map.put(s.clients, pid, Map.new(s.pieces))}}
+      {:reply, {:ok, pieces}, %{s | clients: Map.put(s.clients, pid, {n, Map.new(pieces)})}}
     end
   end
 
@@ -155,14 +156,14 @@ defmodule Dolphin.Web.Hub do
   def handle_info({:dolphin, :vehicles, {:vehicle_discovered, id}}, s), do: {:noreply, watch(id, s)}
 
   def handle_info({:dolphin, {:vehicle, _id}, {:view, view}}, s) do
-    {:noreply, %{s | live: Live.view(s.live, view, Clock.now_ms()), dirty: true}}
+    {:noreply, changed(s, Live.view(s.live, view, Clock.now_ms()))}
   end
 
-  def handle_info({:dolphin, :events, event}, s), do: {:noreply, %{s | live: Live.event(s.live, event), dirty: true}}
+  def handle_info({:dolphin, :events, event}, s), do: {:noreply, changed(s, Live.event(s.live, event))}
 
-  def handle_info(:frame, %{dirty: true} = s) when s.clients != %{} do
+  def handle_info(:frame, %{unsent: true} = s) when s.clients != %{} do
     started = System.monotonic_time(:millisecond)
-    s = push(render(s))
+    s = push(%{s | unsent: false})
     Process.send_after(self(), :frame, max(@frame_ms, @frame_cost * (System.monotonic_time(:millisecond) - started)))
     {:noreply, s}
   end
@@ -180,34 +181,44 @@ defmodule Dolphin.Web.Hub do
   @impl true
   def terminate(_reason, s), do: :gen_tcp.close(s.listen)
 
-  defp render(%{dirty: false, page: page} = s) when page != nil, do: s
+  # The model changed: its pages are drawn again when asked for, and the
+  # clients sent what changed at the next frame.
+  defp changed(s, live), do: %{s | live: live, rendered: %{}, unsent: true}
 
-  defp render(s) do
-    page = Live.page(s.live, Clock.now_ms())
-    %{s | page: page, pieces: Live.pieces(page), dirty: false}
+  # Page n as the model is now: drawn once per change of the model, whoever asks.
+  defp render(s, n) do
+    case s.rendered do
+      %{^n => rendered} ->
+        {rendered, s}
+
+      _ ->
+        page = Live.page(s.live, Clock.now_ms(), n)
+        rendered = {page, Live.pieces(page)}
+        {rendered, %{s | rendered: Map.put(s.rendered, n, rendered)}}
+    end
   end
 
-  # Each client gets the pieces that differ from what it was last sent; one
-  # that is behind gets nothing now, and all it missed at a later frame.
+  # Each client gets the pieces of its page that differ from what it was
+  # last sent; one that is behind gets nothing now, and all it missed at a
+  # later frame.
   defp push(s) do
-    clients =
-      Map.new(s.clients, fn {pid, sent} ->
-        case Process.info(pid, :message_queue_len) do
-          {:message_queue_len, n} when n <= @max_queue ->
-            case for({id, html} <- s.pieces, Map.get(sent, id) != html, do: {id, html}) do
-              [] ->
-                {pid, sent}
+    Enum.reduce(s.clients, s, fn {pid, {n, sent}}, s ->
+      case Process.info(pid, :message_queue_len) do
+        {:message_queue_len, queued} when queued <= @max_queue ->
+          {{_page, pieces}, s} = render(s, n)
 
-              changed ->
-                send(pid, {:web_frame, changed})
-                {pid, Map.merge(sent, Map.new(changed))}
-            end
+          case for({id, html} <- pieces, Map.get(sent, id) != html, do: {id, html}) do
+            [] ->
+              s
 
-          _behind_or_gone ->
-            {pid, sent}
-        end
-      end)
+            changed ->
+              send(pid, {:web_frame, changed})
+              put_in(s.clients[pid], {n, Map.merge(sent, Map.new(changed))})
+          end
 
-    %{s | clients: clients}
+        _behind_or_gone ->
+          s
+      end
+    end)
   end
 end

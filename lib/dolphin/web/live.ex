@@ -16,6 +16,14 @@ defmodule Dolphin.Web.Live do
   @max_samples 2_000
   # Events kept: the oldest go beyond this.
   @max_events 5_000
+  # Vehicles drawn on one page: a larger fleet is shown a page at a time (in
+  # the order of their names, Dolphin.Vehicles.Id.sort/1, so that a vehicle stays on its page), with the
+  # whole fleet counted above the rows. Drawing every vehicle of a fleet of
+  # thousands four times a second would take the view's whole share of a
+  # core for a page nobody can read.
+  @page_size 50
+  # Vehicles named in the counts line (the lost ones, the emptiest batteries).
+  @named 5
 
   defstruct origin_ms: 0, started_at: nil, title: "Live run", tlog: nil, vehicles: %{}, views: %{}, counts: %{}, events: :queue.new(), n_events: 0, running: %{}
 
@@ -126,21 +134,44 @@ defmodule Dolphin.Web.Live do
   defp running(running, _e), do: running
 
   @doc false
-  @spec vehicles(t()) :: [non_neg_integer()]
-  def vehicles(live), do: live.vehicles |> Map.keys() |> Enum.sort()
+  @spec vehicles(t()) :: [Dolphin.Vehicles.Id.t()]
+  def vehicles(live), do: live.vehicles |> Map.keys() |> Dolphin.Vehicles.Id.sort()
 
   @doc false
-  # The whole page at clock time now_ms (a binary: its pieces are cut from it).
-  @spec page(t(), integer()) :: binary()
-  def page(live, now_ms) do
+  # How many pages the fleet fills (at least one).
+  @spec pages(t()) :: pos_integer()
+  def pages(live), do: max(1, div(map_size(live.vehicles) + @page_size - 1, @page_size))
+
+  @doc false
+  # The vehicles of page n (from 1; past the last, the last), in name order.
+  @spec page_vehicles(t(), pos_integer()) :: [Dolphin.Vehicles.Id.t()]
+  def page_vehicles(live, n) do
+    ids = vehicles(live)
+    n = n |> max(1) |> min(pages(live))
+    if length(ids) > @page_size, do: ids |> Enum.drop((n - 1) * @page_size) |> Enum.take(@page_size), else: ids
+  end
+
+  @doc false
+  # Page n of the view (from 1; past the last, the last) at clock time now_ms
+  # (a binary: its pieces are cut from it): the report drawn for the page's
+  # vehicles, the events that concern them or no vehicle, and the whole
+  # fleet counted.
+  @spec page(t(), integer(), pos_integer()) :: binary()
+  def page(live, now_ms, n \\ 1) do
+    n = n |> max(1) |> min(pages(live))
+    ids = page_vehicles(live, n)
+    on_page = MapSet.new(ids)
+    events = :queue.to_list(live.events)
+    events = if map_size(live.vehicles) > @page_size, do: Enum.filter(events, &concerns?(&1, on_page)), else: events
+
     log = %FlightLog{
-      vehicles: Map.new(live.vehicles, fn {id, v} -> {id, chronological(v)} end),
+      vehicles: Map.new(ids, fn id -> {id, chronological(live.vehicles[id])} end),
       first_us: live.origin_ms * 1000,
       last_us: max(now_ms, live.origin_ms) * 1000,
       stats: nil
     }
 
-    model = %{Model.build(log, :queue.to_list(live.events), {1.0, 0.0}) | started_at: live.started_at}
+    model = %{Model.build(log, events, {1.0, 0.0}) | started_at: live.started_at}
     info = %{title: live.title, tlog: live.tlog || "none", events: "live", events_skipped: 0}
     page = model |> HTML.page(info) |> IO.iodata_to_binary()
 
@@ -149,10 +180,15 @@ defmodule Dolphin.Web.Live do
       |> mark_positions(model)
       |> String.replace("</style>", css() <> "</style>", global: false)
       |> String.replace(~r{<p class="files">.*?</p>}s, files(live), global: false)
+
     [head, summary] = :binary.split(page, ~s(<section id="summary">))
     [tail, ""] = :binary.split(summary, "</body></html>\n")
-    IO.iodata_to_binary([head, status(live, model), ~s(<section id="summary">), tail, "<script>", js(), "</script></body></html>\n"])
+    IO.iodata_to_binary([head, status(live, model, ids, n), ~s(<section id="summary">), tail, "<script>", js(), "</script></body></html>\n"])
   end
+
+  defp concerns?(%{"vehicle" => v}, on_page) when v != nil, do: MapSet.member?(on_page, v)
+  defp concerns?(%{"vehicles" => vs}, on_page) when is_list(vs), do: Enum.any?(vs, &MapSet.member?(on_page, &1))
+  defp concerns?(_event, _on_page), do: true
 
   # Where the page's data comes from (the report's line names its files).
   defp files(live) do
@@ -192,6 +228,7 @@ defmodule Dolphin.Web.Live do
         dots =
           for %{track: [_ | _] = track} = v <- model.vehicles do
             {x, y} = List.last(track)
+
             ~s(<circle class="now v-#{v.id}" data-vehicle="#{v.id}" cx="#{HTML.num(x, 2)}" cy="#{HTML.num(-y, 2)}" r="#{HTML.num(r, 2)}" style="--c:#{HTML.color(v.index)}"><title>vehicle #{v.id} now</title></circle>)
           end
 
@@ -203,14 +240,17 @@ defmodule Dolphin.Web.Live do
     end
   end
 
-  # What each vehicle is doing now: one row per vehicle.
-  defp status(live, model) do
+  # What each vehicle of the page is doing now: one row per vehicle, under
+  # the whole fleet's counts and, when there are several, the pages.
+  defp status(live, model, ids, n) do
     index = Map.new(model.vehicles, &{&1.id, &1.index})
 
     [
       ~s(<section id="live-status"><h2>Now <span class="live-state" id="live-state">live</span></h2>),
+      counts(live),
+      pager(live, ids, n),
       ~s(<table class="summary"><thead><tr><th>vehicle</th><th>link</th><th>mode</th><th>armed</th><th>battery</th><th>height</th><th>position</th><th>mission</th><th>task</th>#{if model.sensors != [], do: "<th>sensors</th>"}</tr></thead><tbody>),
-      for id <- vehicles(live), view = live.views[id], view != nil do
+      for id <- ids, view = live.views[id], view != nil do
         {lat, lon} = if view.position, do: {HTML.num(view.position.lat, 7), HTML.num(view.position.lon, 7)}, else: {"", ""}
 
         [
@@ -234,6 +274,47 @@ defmodule Dolphin.Web.Live do
       end,
       "</tbody></table></section>\n"
     ]
+  end
+
+  # The whole fleet in one line: how many are connected, lost, armed and
+  # flying a task; which are lost and which have the emptiest batteries.
+  defp counts(%{views: views}) when map_size(views) == 0, do: []
+
+  defp counts(live) do
+    views = Map.values(live.views)
+    lost = views |> Enum.reject(& &1.connected?) |> Enum.map(& &1.id) |> Enum.sort()
+    armed = Enum.count(views, & &1.armed?)
+    emptiest = views |> Enum.filter(& &1.battery) |> Enum.sort_by(&{&1.battery, &1.id}) |> Enum.take(@named)
+
+    [
+      ~s(<p class="fleet-counts">),
+      "#{count(length(views), "vehicle")}: #{length(views) - length(lost)} connected, ",
+      if(lost == [], do: "none lost", else: ["<b>#{length(lost)} lost</b> (", HTML.esc(names(lost)), ")"]),
+      "; #{armed} armed; #{map_size(live.running)} flying a task",
+      if(emptiest == [], do: [], else: ["; emptiest batteries: ", HTML.esc(Enum.map_join(emptiest, ", ", &"#{&1.id} #{pct(&1.battery)} %"))]),
+      "</p>"
+    ]
+  end
+
+  defp names(ids) when length(ids) > @named, do: Enum.map_join(Enum.take(ids, @named), ", ") <> " and #{length(ids) - @named} more"
+  defp names(ids), do: Enum.join(ids, ", ")
+
+  defp count(1, noun), do: "1 #{noun}"
+  defp count(n, noun), do: "#{n} #{noun}s"
+
+  # Which vehicles this page shows and links to the pages beside it (?page=N).
+  defp pager(live, ids, n) do
+    case pages(live) do
+      1 ->
+        []
+
+      pages ->
+        first = (n - 1) * @page_size + 1
+        previous = if n > 1, do: ~s(<a href="?page=#{n - 1}">‹ page #{n - 1}</a> · ), else: ""
+        next = if n < pages, do: ~s( · <a href="?page=#{n + 1}">page #{n + 1} ›</a>), else: ""
+
+        ~s[<nav class="pager">#{previous}vehicles #{first}–#{first + length(ids) - 1} of #{map_size(live.vehicles)} (#{HTML.esc(hd(ids))} to #{HTML.esc(List.last(ids))}), page #{n} of #{pages}, on the map and in every section below#{next}</nav>]
+    end
   end
 
   # The latest reading of each sensor the run declared, on one vehicle.
@@ -277,7 +358,8 @@ defmodule Dolphin.Web.Live do
       }
       if(!window.EventSource) return;
       var limit = +(new URLSearchParams(location.search).get('frames') || 0);
-      var source = new EventSource('events');
+      var page = new URLSearchParams(location.search).get('page');
+      var source = new EventSource('events' + (page ? '?page=' + encodeURIComponent(page) : ''));
       source.addEventListener('frame', function(ev){
         var frame = JSON.parse(ev.data);
         frame.pieces.forEach(function(p){ place(p[0], p[1]); });
@@ -307,6 +389,7 @@ defmodule Dolphin.Web.Live do
   defp css do
     ".live-state{font-size:12px;font-weight:normal;color:#fff;background:#2e9d4d;border-radius:3px;padding:1px 6px;margin-left:8px}" <>
       ".live-state.lost{background:#e0a030}.live-state.ended{background:#777}" <>
-      "circle.now{fill:var(--c);stroke:#000;stroke-width:1.5;vector-effect:non-scaling-stroke}"
+      "circle.now{fill:var(--c);stroke:#000;stroke-width:1.5;vector-effect:non-scaling-stroke}" <>
+      ".fleet-counts{margin:4px 0}.pager{margin:4px 0 8px}"
   end
 end

@@ -108,7 +108,12 @@ defmodule Dolphin.Web.BrowserTest do
     # A bar per mission on its vehicle's lane, longer later.
     bars = fn dom -> for t <- elements(dom, "g", "task"), t["data-kind"] == "mission", into: %{}, do: {t["data-name"], t} end
     assert %{"North" => %{"data-result" => "unfinished"}, "East" => %{"data-result" => "unfinished"}} = bars.(first)
-    width = fn dom, name -> [w] = Regex.run(~r/data-name="#{name}"[^>]*>\s*<rect class="task-bar[^"]*" x="[^"]*" y="[^"]*" width="([\d.]+)"/, dom, capture: :all_but_first); String.to_float(w) end
+
+    width = fn dom, name ->
+      [w] = Regex.run(~r/data-name="#{name}"[^>]*>\s*<rect class="task-bar[^"]*" x="[^"]*" y="[^"]*" width="([\d.]+)"/, dom, capture: :all_but_first)
+      String.to_float(w)
+    end
+
     assert width.(later, "North") > width.(first, "North")
 
     # And a person can look at it.
@@ -118,5 +123,26 @@ defmodule Dolphin.Web.BrowserTest do
     if System.get_env("DOLPHIN_KEEP_SCREENSHOT"), do: File.cp!(png, System.get_env("DOLPHIN_KEEP_SCREENSHOT"))
 
     assert Task.await(run, 200_000) == 0, "the run failed: #{elem(StringIO.contents(err), 1)}"
+  end
+
+  test "a large fleet's page N (?page=N) follows its own page's stream", %{tmp_dir: dir} do
+    {:ok, web} = Dolphin.Web.start(port: 0)
+    on_exit(fn -> Dolphin.Web.stop(web) end)
+    ids = for i <- 1..60, do: "#{i}@browser"
+    for id <- ids, do: Dolphin.PubSub.publish(:vehicles, {:vehicle_discovered, id})
+    _ = :sys.get_state(web)
+
+    view = fn id, lat ->
+      %Dolphin.Vehicles.View{id: id, type: :uav, battery: 0.7, position: Dolphin.Geo.location(lat, -7.375, 820), relative_altitude: 20.0, mode: :guided, armed?: true}
+    end
+
+    for {id, i} <- Enum.with_index(ids), do: Dolphin.PubSub.publish({:vehicle, id}, {:view, view.(id, 40.44 + i / 10_000)})
+    Wait.until(fn -> get(Dolphin.Web.url(web) <> "?page=2") =~ ~s(data-vehicle="60@browser") end)
+    # The stream's first frame replaces the rows the page was served with: page 2's again only
+    # if the page asked its stream for page 2.
+    dom = Browser.dump_dom(Dolphin.Web.url(web) <> "?page=2&frames=1", Path.join(dir, "chromium"), ["--virtual-time-budget=20000"])
+    assert dom =~ ~s(data-frames="1"), "the page did not follow the stream"
+    page2 = for row <- elements(dom, "tr", "v-\\S+ live-vehicle"), do: row["data-vehicle"]
+    assert page2 == for(i <- 51..60, do: "#{i}@browser")
   end
 end

@@ -81,6 +81,10 @@ defmodule Dolphin.Web.LiveTest do
     assert page =~ ~s(<circle class="now v-2" data-vehicle="2")
     assert page =~ ~s(data-name="North" data-kind="mission" data-result="unfinished")
 
+    # A fleet of one page: counted, no pages.
+    assert page =~ ~s(<p class="fleet-counts">2 vehicles: 2 connected, none lost; 2 armed; 1 flying a task; emptiest batteries: 1 90 %, 2 90 %</p>)
+    refute page =~ ~s(class="pager")
+
     pieces = Live.pieces(page)
     assert Enum.map(pieces, &elem(&1, 0)) == ~w(when legend live-status summary map-section timeline-section plots)
     # Each piece is what its element holds: put back in place, it is the page again.
@@ -119,6 +123,44 @@ defmodule Dolphin.Web.LiveTest do
     assert page =~ ~s(<svg class="plot separation")
     assert page =~ ~r/least 11\.0 m at [^,]+, vehicles [12] and [12]/
     assert page =~ ~s(<g class="mark mark-separation_hold">)
+  end
+
+  test "a fleet of more than a page: every vehicle counted, one page drawn (in name order), links to the pages beside it" do
+    ids = Enum.to_list(1..100) ++ for(n <- 1..20, do: "#{n}@sim2")
+
+    live =
+      Enum.reduce(ids, Live.new(0), fn id, live ->
+        opts = %{7 => [connected?: false], 33 => [battery: 0.12], "4@sim2" => [battery: 0.2]}
+        Enum.reduce(0..1, live, fn i, live -> Live.view(live, view(id, 40.44 + i / 100_000, Map.get(opts, id, [])), i * 1000) end)
+      end)
+      |> Live.event(%{event: :task_started, at_ms: 1500, run: 1, task_id: 1, parent_id: nil, kind: :mission, name: "North", vehicle: 1})
+      |> Live.event(%{event: :task_started, at_ms: 1500, run: 1, task_id: 2, parent_id: nil, kind: :mission, name: "South", vehicle: 60})
+      |> Live.event(%{event: :message, at_ms: 1600, run: 1, text: "to every page"})
+
+    assert Live.pages(live) == 3
+    counts = ~s[<p class="fleet-counts">120 vehicles: 119 connected, <b>1 lost</b> (7); 120 armed; 2 flying a task; emptiest batteries: 33 12 %, 4@sim2 20 %, 1 90 %, 2 90 %, 3 90 %</p>]
+
+    second = Live.page(live, 2_000, 2)
+    assert second =~ counts
+
+    assert second =~
+             ~s[<nav class="pager"><a href="?page=1">‹ page 1</a> · vehicles 51–100 of 120 (51 to 100), page 2 of 3, on the map and in every section below · <a href="?page=3">page 3 ›</a></nav>]
+
+    rows = Regex.scan(~r/<tr class="v-(\S+) live-vehicle"/, second, capture: :all_but_first)
+    assert rows == for(id <- 51..100, do: ["#{id}"])
+    # The report's sections draw the page's vehicles, and the events that concern them or none.
+    assert second =~ ~s(<circle class="now v-60")
+    refute second =~ ~s(<circle class="now v-1")
+    assert second =~ ~s(data-name="South")
+    refute second =~ ~s(data-name="North")
+
+    # Past the last page: the last, qualified names by network and system id.
+    last = Live.page(live, 2_000, 99)
+    assert last =~ counts
+    assert last =~ ~s[vehicles 101–120 of 120 (1@sim2 to 20@sim2), page 3 of 3]
+    refute last =~ "?page=4"
+    assert Regex.scan(~r/<tr class="v-(\S+) live-vehicle"/, last, capture: :all_but_first) == for(n <- 1..20, do: ["#{n}@sim2"])
+    assert Live.page(live, 2_000) =~ ~s(data-name="North")
   end
 
   test "a page with no vehicle yet" do
