@@ -21,6 +21,10 @@
 #   mailboxes are unbounded.)
 #
 #   MIX_ENV=prod mix run bench/intake.exs     (VEHICLES=500 NETWORKS=2 WINDOW=5 for a smaller one)
+#
+#   The ground station's VM as docs/operating.md advises for a large fleet
+#   (no busy-waiting schedulers; the simulator's VM keeps the defaults):
+#   MIX_ENV=prod elixir --erl "+sbwt none +sbwtdcpu none +sbwtdio none" -S mix run bench/intake.exs
 
 alias Dolphin.Link
 alias Dolphin.Link.Connection
@@ -107,7 +111,9 @@ sim = Port.open({:spawn_executable, mix}, [:binary, :exit_status, {:line, 4096},
 {:os_pid, sim_pid} = Port.info(sim, :os_pid)
 Intake.await_line(sim, ~r/^simulating/, 120_000)
 
-IO.puts("telemetry intake: #{vehicles} simulated vehicles over #{networks} networks (another OS process), #{System.schedulers_online()} schedulers, OTP #{System.otp_release()}")
+# The emulator's own flags (before "--" on its command line): the schedulers' busy waiting among them.
+vm_flags = File.read!("/proc/self/cmdline") |> String.split(<<0>>) |> Enum.drop(1) |> Enum.take_while(&(&1 != "--")) |> Enum.join(" ")
+IO.puts("telemetry intake: #{vehicles} simulated vehicles over #{networks} networks (another OS process), #{System.schedulers_online()} schedulers, OTP #{System.otp_release()}, VM flags: #{if vm_flags == "", do: "none", else: vm_flags}")
 
 started = System.monotonic_time(:millisecond)
 

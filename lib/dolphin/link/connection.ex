@@ -60,6 +60,7 @@ defmodule Dolphin.Link.Connection do
   alias Dolphin.Clock
   alias Dolphin.Link.Endpoint
   alias Dolphin.MAVLink.{Frame, Parser, Signing, Tlog}
+  alias Dolphin.MAVLink.Parser.Stats
   alias Dolphin.MAVLink.Ardupilotmega.Heartbeat
 
   @heartbeat_ms 1_000
@@ -167,7 +168,9 @@ defmodule Dolphin.Link.Connection do
          seq: 0,
          gcs: {Keyword.get_lazy(opts, :gcs_sysid, fn -> Application.get_env(:dolphin, :gcs_sysid, 255) end), Keyword.get(opts, :gcs_compid, 190)},
          router: Keyword.get(opts, :router, &Dolphin.Vehicles.route/2),
-         stats: Parser.stats(Parser.new()),
+         stats: %Stats{},
+         # Fresh, for each datagram (see handle_info/2); signed links verify every frame: no fast path.
+         datagram_parser: Parser.new(batch: opts[:signing] == nil),
          stream: nil,
          signing: signing(opts[:signing]),
          forward: forward,
@@ -224,8 +227,9 @@ defmodule Dolphin.Link.Connection do
   @impl true
   def handle_info({:udp, socket, ip, port, datagram}, %{socket: socket} = state) do
     forward(state, datagram)
-    # A datagram is whole frames: decode it on its own, then end it.
-    {frames, parser} = Parser.feed(Parser.new(signing: state.signing), datagram)
+    # A datagram is whole frames: decode it on its own (a fresh parser, made
+    # once: a parser's making costs more than a small frame's decoding), then end it.
+    {frames, parser} = Parser.feed(%{state.datagram_parser | signing: state.signing}, datagram)
     {last, parser} = Parser.finish(parser)
     state = %{state | stats: add_stats(state.stats, Parser.stats(parser)), signing: parser.signing}
     {:noreply, deliver(state, frames ++ last, {ip, port})}
@@ -332,9 +336,15 @@ defmodule Dolphin.Link.Connection do
       record_in(state, frame)
       # A reply addressed to another ground station on the link is not ours.
       if for_us?(frame.message, gcs_sysid), do: state.router.(frame, {state.name, if(state.endpoint.kind == :udpin, do: from)})
-      if from == :tcp, do: state, else: %{state | peers: Map.put(state.peers, frame.sysid, from), heard_from: MapSet.put(state.heard_from, from)}
+      heard(state, frame.sysid, from)
     end)
   end
+
+  # Where each system id (and each address) was heard last; most frames
+  # change neither, and the maps are not rebuilt for them.
+  defp heard(state, _sysid, :tcp), do: state
+  defp heard(%{peers: peers} = state, sysid, from) when is_map_key(peers, sysid) and :erlang.map_get(sysid, peers) == from, do: state
+  defp heard(state, sysid, from), do: %{state | peers: Map.put(state.peers, sysid, from), heard_from: MapSet.put(state.heard_from, from)}
 
   defp for_us?(%{target_system: target}, gcs_sysid), do: target in [0, gcs_sysid]
   defp for_us?(_message, _gcs_sysid), do: true
@@ -420,13 +430,6 @@ defmodule Dolphin.Link.Connection do
       else: :ok
   end
 
-  defp add_stats(total, more), do: merge_stats(total, more, &+/2)
-  defp diff_stats(now, before), do: merge_stats(now, before, &-/2)
-
-  defp merge_stats(a, b, op) do
-    Map.merge(a, b, fn
-      :__struct__, v, _ -> v
-      _key, x, y -> op.(x, y)
-    end)
-  end
+  defp add_stats(total, more), do: Stats.combine(total, more, :add)
+  defp diff_stats(now, before), do: Stats.combine(now, before, :subtract)
 end

@@ -119,6 +119,8 @@ defmodule Dolphin.MAVLink.Parser do
 
   defp loop(buf, at, %__MODULE__{batch: batch} = parser, acc, frames, unknown, at_end) when batch != nil do
     case Native.decode(buf, at, batch, acc) do
+      # All of it (a datagram's frames, mostly): nothing left to look at.
+      {acc, next, n} when n > 0 and next == byte_size(buf) -> done(buf, next, %{parser | in_sync: true}, acc, frames + n, unknown)
       {acc, next, n} when n > 0 -> loop(buf, next, %{parser | in_sync: true}, acc, frames + n, unknown, at_end)
       _none -> step(buf, at, parser, acc, frames, unknown, at_end)
     end
@@ -150,9 +152,7 @@ defmodule Dolphin.MAVLink.Parser do
         end
 
       {:more, at} when at_end == false or at == byte_size(buf) ->
-        stats = %{parser.stats | frames: parser.stats.frames + frames, unknown_id: parser.stats.unknown_id + unknown}
-        # Keep only the unfinished tail, not the whole chunk it points into.
-        {:lists.reverse(acc), %{parser | buffer: :binary.copy(binary_part(buf, at, byte_size(buf) - at)), stats: stats}}
+        done(buf, at, parser, acc, frames, unknown)
 
       # The stream ended inside this candidate: drop its first byte and look on.
       {:more, at} ->
@@ -163,6 +163,14 @@ defmodule Dolphin.MAVLink.Parser do
       {:error, reason, next} ->
         loop(buf, next, %{parser | in_sync: false, stats: Stats.drop(parser.stats, reason, next - at)}, acc, frames, unknown, at_end)
     end
+  end
+
+  # The frames found, in order, and the parser with the counts and only the
+  # unfinished tail from `at` (not the whole chunk it points into).
+  defp done(buf, at, parser, acc, frames, unknown) do
+    stats = %{parser.stats | frames: parser.stats.frames + frames, unknown_id: parser.stats.unknown_id + unknown}
+    tail = if at == byte_size(buf), do: <<>>, else: :binary.copy(binary_part(buf, at, byte_size(buf) - at))
+    {:lists.reverse(acc), %{parser | buffer: tail, stats: stats}}
   end
 
   # Literal option lists: nothing is built per frame for them.

@@ -9,6 +9,7 @@ defmodule Dolphin.MAVLink.DialectTest do
   doctest Dolphin.MAVLink.Ardupilotmega
   doctest Dolphin.MAVLink.Message
   doctest Dolphin.MAVLink.CRC
+  doctest Dolphin.MAVLink.Parser.Stats
   doctest Dolphin.MAVLink.DialectError
   doctest Dolphin.MAVLink.FieldError
 

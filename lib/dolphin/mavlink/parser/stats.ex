@@ -33,6 +33,49 @@ defmodule Dolphin.MAVLink.Parser.Stats do
           truncated: non_neg_integer()
         }
 
+  @doc """
+  Two counts added (`op` `:add`) or the second taken from the first
+  (`:subtract`), field by field.
+
+      iex> alias Dolphin.MAVLink.Parser.Stats
+      iex> Stats.combine(%Stats{frames: 3, bytes: 90}, %Stats{frames: 1, bytes: 30, bad_crc: 1}, :add)
+      %Stats{frames: 4, bytes: 120, bad_crc: 1}
+      iex> Stats.combine(%Stats{frames: 4, bytes: 120}, %Stats{frames: 1, bytes: 30}, :subtract)
+      %Stats{frames: 3, bytes: 90}
+  """
+  # One struct built per call: a link adds its parser's counts for every
+  # datagram, where merging the maps key by key cost more than decoding.
+  @spec combine(t(), t(), :add | :subtract) :: t()
+  def combine(%__MODULE__{} = a, %__MODULE__{} = b, :add) do
+    %__MODULE__{
+      frames: a.frames + b.frames,
+      bytes: a.bytes + b.bytes,
+      bytes_skipped: a.bytes_skipped + b.bytes_skipped,
+      unknown_id: a.unknown_id + b.unknown_id,
+      bad_crc: a.bad_crc + b.bad_crc,
+      bad_incompat_flags: a.bad_incompat_flags + b.bad_incompat_flags,
+      bad_signature: a.bad_signature + b.bad_signature,
+      old_timestamp: a.old_timestamp + b.old_timestamp,
+      unsigned: a.unsigned + b.unsigned,
+      truncated: a.truncated + b.truncated
+    }
+  end
+
+  def combine(%__MODULE__{} = a, %__MODULE__{} = b, :subtract) do
+    %__MODULE__{
+      frames: a.frames - b.frames,
+      bytes: a.bytes - b.bytes,
+      bytes_skipped: a.bytes_skipped - b.bytes_skipped,
+      unknown_id: a.unknown_id - b.unknown_id,
+      bad_crc: a.bad_crc - b.bad_crc,
+      bad_incompat_flags: a.bad_incompat_flags - b.bad_incompat_flags,
+      bad_signature: a.bad_signature - b.bad_signature,
+      old_timestamp: a.old_timestamp - b.old_timestamp,
+      unsigned: a.unsigned - b.unsigned,
+      truncated: a.truncated - b.truncated
+    }
+  end
+
   @doc false
   # A frame returned: decoded, or raw with an unknown id.
   @spec count(t(), Dolphin.MAVLink.Frame.t()) :: t()
