@@ -417,15 +417,26 @@ defmodule Dolphin.Vehicles do
   end
 
   # A name the vehicle did not answer for: one its list lacks is unknown.
-  # (The list with its own patience: the caller's attempts were for one value.)
+  # The whole list it last gave, when it has not changed since (on a lossy
+  # link fetching a thousand values again may fail where one did); else the
+  # list, with its own patience (the caller's attempts were for one value).
   defp unknown_or(e, id, name, opts) do
-    case param_list(id, Keyword.delete(opts, :attempts)) do
-      {:ok, list} ->
-        names = Enum.map(list, & &1.name)
-        if name in names, do: e, else: unknown_param(id, name, names)
+    names =
+      case call_vehicle(id, :param_names) do
+        {:ok, %MapSet{} = names} ->
+          names
 
-      {:error, _} ->
-        e
+        _none ->
+          case param_list(id, Keyword.delete(opts, :attempts)) do
+            {:ok, list} -> MapSet.new(list, & &1.name)
+            {:error, _} -> nil
+          end
+      end
+
+    cond do
+      names == nil -> e
+      MapSet.member?(names, name) -> e
+      true -> unknown_param(id, name, Enum.sort(names))
     end
   end
 

@@ -41,6 +41,9 @@ defmodule Dolphin.Test.ScriptedVehicle do
   @doc "Changes the link's faults."
   def set_faults(pid, faults), do: GenServer.call(pid, {:faults, faults})
 
+  @doc "A parameter more (its list's count grows, as an autopilot's does when a feature is enabled): REAL32, no range."
+  def add_param(pid, name, value), do: GenServer.call(pid, {:add_param, name, value})
+
   @doc """
   Given its process: the parameters it keeps now, `%{name => value}`.
   Given a number `n`: `n` parameters of every MAV_PARAM_TYPE ArduPilot
@@ -87,6 +90,7 @@ defmodule Dolphin.Test.ScriptedVehicle do
   def handle_call({:mission, type}, _from, s), do: {:reply, Enum.map(MissionServer.items(s.missions, type), &normalise/1), s}
   def handle_call(:commands, _from, s), do: {:reply, Enum.reverse(s.commands), s}
   def handle_call({:faults, faults}, _from, s), do: {:reply, :ok, %{s | faults: Map.new(faults)}}
+  def handle_call({:add_param, name, value}, _from, s), do: {:reply, :ok, %{s | params: Map.put(s.params, name, {value, 9, nil})}}
   def handle_call(:params, _from, s), do: {:reply, Map.new(s.params, fn {name, {value, _, _}} -> {name, value} end), s}
 
   @impl true

@@ -31,7 +31,9 @@ defmodule Dolphin.Vehicles.ParamList do
 
   @doc """
   Starts the protocol, linked to the caller (the vehicle process).
-  `request`: `%{sysid, vehicle, send, reply_to}`. Options: `:attempts`
+  `request`: `%{sysid, vehicle, send, reply_to}`, and `owner`, the
+  vehicle's process, which is sent `{:param_names, count, names}` when a
+  whole list came. Options: `:attempts`
   (rounds in a row that may bring nothing), `:loss`, `:rtt_ms`,
   `:ack_timeout_ms` (as `Dolphin.Vehicles.ParamProtocol`'s).
   """
@@ -112,6 +114,8 @@ defmodule Dolphin.Vehicles.ParamList do
 
   defp finish(data, reply) do
     if data.reply_to, do: :gen_statem.reply(data.reply_to, reply)
+    # The vehicle keeps the names of a whole list (Dolphin.Vehicles.param/4 tells an unknown name by them).
+    with {:ok, list} <- reply, %{owner: owner} <- data, do: send(owner, {:param_names, data.count, MapSet.new(list, & &1.name)})
     {:stop, :normal, data}
   end
 end

@@ -36,7 +36,8 @@ defmodule Dolphin.Vehicles.Vehicle do
     view: nil,
     ops: %{},
     queued: %{},
-    sensor_limits: %{}
+    sensor_limits: %{},
+    param_names: nil
   ]
 
   # The process's state. `paths`: one path per link (and address) the vehicle
@@ -220,6 +221,7 @@ defmodule Dolphin.Vehicles.Vehicle do
   def handle_call(:view, _from, s), do: {:reply, s.view || view(s), s}
 
   def handle_call(:paths, _from, s), do: {:reply, Paths.list(s.paths), s}
+  def handle_call(:param_names, _from, s), do: {:reply, s.param_names && elem(s.param_names, 1), s}
 
   def handle_call({:set_timeout, ms}, _from, s) do
     Process.cancel_timer(s.check_timer)
@@ -255,6 +257,12 @@ defmodule Dolphin.Vehicles.Vehicle do
       sensors -> {:noreply, publish(s, %{s.state | sensors: sensors})}
     end
   end
+
+  # The names of the whole parameter list the autopilot last gave (by its
+  # count: another count says it changed), for telling a name it has not
+  # from one whose answer was lost.
+  def handle_info({:param_names, count, names}, s), do: {:noreply, %{s | param_names: {count, names}}}
+  def handle_info(:param_names_outdated, s), do: {:noreply, %{s | param_names: nil}}
 
   def handle_info(:request_telemetry, s) do
     s = request_telemetry(s)
@@ -496,6 +504,9 @@ defmodule Dolphin.Vehicles.Vehicle do
   defp route_to_op(s, %{message: %M.ParamValue{param_id: name} = value, compid: compid}) do
     notify_op(s, {:param, name}, {:param, value})
     if compid in [1, s.state.autopilot_compid], do: notify_op(s, :param_list, {:param, value})
+    # Another count than the list it last gave: that list is no longer its own.
+    with {count, _names} when compid in [1, s.state.autopilot_compid] and value.param_count != count <- s.param_names,
+         do: send(self(), :param_names_outdated)
   end
 
   defp route_to_op(_s, _frame), do: :ok
@@ -522,7 +533,7 @@ defmodule Dolphin.Vehicles.Vehicle do
     # it is sent: a path that changes during a transfer or between a
     # command's retries is followed, and the exchange never knows.
     vehicle = self()
-    request = Map.put(request, :send, fn message -> GenServer.cast(vehicle, {:send, message}) end)
+    request = Map.merge(request, %{send: fn message -> GenServer.cast(vehicle, {:send, message}) end, owner: vehicle})
 
     what =
       case module do

@@ -62,6 +62,25 @@ defmodule Dolphin.Vehicles.ParamProtocolTest do
     assert Exception.message(e) =~ "vehicle #{sysid} has no parameter P2_MAXX (did you mean P2_MAX"
   end
 
+  test "an unknown name is told by the whole list the vehicle gave last, with the link lost; not once its list has changed", %{port: port} do
+    {sysid, vehicle} = vehicle(port)
+    assert {:ok, _list} = Vehicles.param_list(sysid)
+
+    # Nothing goes through: a name its list lacks is unknown all the same; one it has, not answered, is a timeout.
+    ScriptedVehicle.set_faults(vehicle, loss: 1.0)
+    assert {:error, %ParamError{result: :unknown} = e} = Vehicles.param(sysid, "P2_MAXX", nil, attempts: 1)
+    assert Exception.message(e) =~ "did you mean P2_MAX"
+    assert {:error, %ParamError{result: :timeout}} = Vehicles.param(sysid, "P2_MAX", nil, attempts: 1)
+
+    # A parameter appears: a value with the new count says the list it gave is no longer its own, and a
+    # name is judged by the list as it is now.
+    ScriptedVehicle.set_faults(vehicle, loss: 0.0)
+    :ok = ScriptedVehicle.add_param(vehicle, "P9_FRESH", 1.5)
+    assert {:ok, 1.5} = Vehicles.param(sysid, "P9_FRESH", nil, [])
+    assert {:error, %ParamError{result: :unknown} = e} = Vehicles.param(sysid, "P9_FRESHH", nil, attempts: 1)
+    assert Exception.message(e) =~ "did you mean P9_FRESH"
+  end
+
   # The mission protocol's promise, for parameters: up to 30 % loss each way,
   # 10 % duplicates and 10 % reordering, the list comes whole and exact, and
   # every value set is the one read back, every time.
