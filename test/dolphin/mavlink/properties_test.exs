@@ -3,6 +3,10 @@ defmodule Dolphin.MAVLink.PropertiesTest do
   # and byte streams, checked through Dolphin.Property (test/support).
   use ExUnit.Case, async: true
 
+  # Thousands of cases each, all CPU: 20 s for the module on a quiet machine,
+  # over a minute a test with both cores busy elsewhere.
+  @moduletag timeout: 600_000
+
   import Bitwise
   import Dolphin.Property
 
