@@ -112,12 +112,7 @@ defmodule Dolphin.WebTest do
   end
 
   # n vehicles named "1@webpages" ... the view discovers and sees.
-  defp fleet(web, n) do
-    ids = for i <- 1..n, do: "#{i}@webpages"
-    for id <- ids, do: PubSub.publish(:vehicles, {:vehicle_discovered, id})
-    _ = :sys.get_state(web)
-    for {id, i} <- Enum.with_index(ids), do: PubSub.publish({:vehicle, id}, {:view, %{view(40.44 + i / 10_000, []) | id: id}})
-  end
+  defp fleet(web, n), do: Dolphin.Test.WebFleet.show(web, for(i <- 1..n, do: "#{i}@webpages"), fn id, i -> %{view(40.44 + i / 10_000, []) | id: id} end)
 
   describe "HTTP" do
     test "a view and each browser's process are supervised: the view under Dolphin.Web.Supervisor, its clients under Dolphin.Web.Connections", %{web: web, port: port} do

@@ -37,7 +37,8 @@ defmodule Dolphin.Vehicles.Vehicle do
     ops: %{},
     queued: %{},
     sensor_limits: %{},
-    param_names: nil
+    param_names: nil,
+    param_count: nil
   ]
 
   # The process's state. `paths`: one path per link (and address) the vehicle
@@ -187,6 +188,7 @@ defmodule Dolphin.Vehicles.Vehicle do
         s = publish(s, %{State.apply(old, frame, now) | link_quality: Paths.quality(s.paths)})
         arm_staleness(s, Readings.fresh(old.sensors, s.state.sensors))
         route_to_op(s, frame)
+        s = param_count(s, frame)
 
         # Position telemetry flowing means the requests were heard.
         requests_left = if match?(%M.GlobalPositionInt{}, frame.message), do: 0, else: s.requests_left
@@ -221,7 +223,10 @@ defmodule Dolphin.Vehicles.Vehicle do
   def handle_call(:view, _from, s), do: {:reply, s.view || view(s), s}
 
   def handle_call(:paths, _from, s), do: {:reply, Paths.list(s.paths), s}
-  def handle_call(:param_names, _from, s), do: {:reply, s.param_names && elem(s.param_names, 1), s}
+  # The names of the whole parameter list the autopilot gave last, while its
+  # values still say that list's count (another count: the list changed).
+  def handle_call(:param_names, _from, %{param_names: {count, names}, param_count: count} = s), do: {:reply, names, s}
+  def handle_call(:param_names, _from, s), do: {:reply, nil, s}
 
   def handle_call({:set_timeout, ms}, _from, s) do
     Process.cancel_timer(s.check_timer)
@@ -258,11 +263,9 @@ defmodule Dolphin.Vehicles.Vehicle do
     end
   end
 
-  # The names of the whole parameter list the autopilot last gave (by its
-  # count: another count says it changed), for telling a name it has not
-  # from one whose answer was lost.
+  # The names of a whole parameter list the autopilot gave (ParamList), for
+  # telling a name it has not from one whose answer was lost.
   def handle_info({:param_names, count, names}, s), do: {:noreply, %{s | param_names: {count, names}}}
-  def handle_info(:param_names_outdated, s), do: {:noreply, %{s | param_names: nil}}
 
   def handle_info(:request_telemetry, s) do
     s = request_telemetry(s)
@@ -504,12 +507,16 @@ defmodule Dolphin.Vehicles.Vehicle do
   defp route_to_op(s, %{message: %M.ParamValue{param_id: name} = value, compid: compid}) do
     notify_op(s, {:param, name}, {:param, value})
     if compid in [1, s.state.autopilot_compid], do: notify_op(s, :param_list, {:param, value})
-    # Another count than the list it last gave: that list is no longer its own.
-    with {count, _names} when compid in [1, s.state.autopilot_compid] and value.param_count != count <- s.param_names,
-         do: send(self(), :param_names_outdated)
   end
 
   defp route_to_op(_s, _frame), do: :ok
+
+  # The count of parameters the autopilot's latest value said (the list's size now).
+  defp param_count(s, %{message: %M.ParamValue{param_count: n}, compid: compid}) when n != s.param_count do
+    if compid in [1, s.state.autopilot_compid], do: %{s | param_count: n}, else: s
+  end
+
+  defp param_count(s, _frame), do: s
 
   defp notify_op(s, key, event) do
     with {:ok, %{pid: pid}} <- Map.fetch(s.ops, key), do: send(pid, event)

@@ -145,11 +145,9 @@ defmodule Dolphin.Web.Live do
   @doc false
   # The vehicles of page n (from 1; past the last, the last), in name order.
   @spec page_vehicles(t(), pos_integer()) :: [Dolphin.Vehicles.Id.t()]
-  def page_vehicles(live, n) do
-    ids = vehicles(live)
-    n = n |> max(1) |> min(pages(live))
-    if length(ids) > @page_size, do: ids |> Enum.drop((n - 1) * @page_size) |> Enum.take(@page_size), else: ids
-  end
+  def page_vehicles(live, n), do: Enum.slice(vehicles(live), (page_number(live, n) - 1) * @page_size, @page_size)
+
+  defp page_number(live, n), do: n |> max(1) |> min(pages(live))
 
   @doc false
   # Page n of the view (from 1; past the last, the last) at clock time now_ms
@@ -158,7 +156,7 @@ defmodule Dolphin.Web.Live do
   # fleet counted.
   @spec page(t(), integer(), pos_integer()) :: binary()
   def page(live, now_ms, n \\ 1) do
-    n = n |> max(1) |> min(pages(live))
+    n = page_number(live, n)
     ids = page_vehicles(live, n)
     on_page = MapSet.new(ids)
     events = :queue.to_list(live.events)

@@ -128,15 +128,11 @@ defmodule Dolphin.Web.BrowserTest do
   test "a large fleet's page N (?page=N) follows its own page's stream", %{tmp_dir: dir} do
     {:ok, web} = Dolphin.Web.start(port: 0)
     on_exit(fn -> Dolphin.Web.stop(web) end)
-    ids = for i <- 1..60, do: "#{i}@browser"
-    for id <- ids, do: Dolphin.PubSub.publish(:vehicles, {:vehicle_discovered, id})
-    _ = :sys.get_state(web)
 
-    view = fn id, lat ->
-      %Dolphin.Vehicles.View{id: id, type: :uav, battery: 0.7, position: Dolphin.Geo.location(lat, -7.375, 820), relative_altitude: 20.0, mode: :guided, armed?: true}
-    end
+    Dolphin.Test.WebFleet.show(web, for(i <- 1..60, do: "#{i}@browser"), fn id, i ->
+      %Dolphin.Vehicles.View{id: id, type: :uav, battery: 0.7, position: Dolphin.Geo.location(40.44 + i / 10_000, -7.375, 820), relative_altitude: 20.0, mode: :guided, armed?: true}
+    end)
 
-    for {id, i} <- Enum.with_index(ids), do: Dolphin.PubSub.publish({:vehicle, id}, {:view, view.(id, 40.44 + i / 10_000)})
     Wait.until(fn -> get(Dolphin.Web.url(web) <> "?page=2") =~ ~s(data-vehicle="60@browser") end)
     # The stream's first frame replaces the rows the page was served with: page 2's again only
     # if the page asked its stream for page 2.
