@@ -189,41 +189,48 @@ defmodule Dolphin.Check do
   # A dry run works in an instance of its own (Dolphin.Instance), so that its
   # stand-ins' views, its picks and its script's events are nobody else's: a
   # live view or event log of the caller's instance does not show them, and
-  # its picks claim nothing in a cluster. Dry runs take turns (the check's
-  # clock is one per VM anyway), so one instance name serves them all.
+  # its picks claim nothing in a cluster. Dry runs run side by side, each with
+  # its own clock (Dolphin.Check.Clock); their instances are named
+  # Dolphin.Check.DryRun.1, .2, ...: the first one free, so that there are
+  # never more names than dry runs that ran at once.
   @dry_run_instance Dolphin.Check.DryRun
 
-  defp in_own_instance(fun) do
-    # The lock's requester is the caller: one shared requester id would let
-    # every caller in at once (a :global lock is re-entrant for its requester).
-    :global.trans(
-      {{__MODULE__, :dry_run}, self()},
-      fn ->
-        sup = start_dry_run_instance()
-        previous = Dolphin.Instance.put(@dry_run_instance)
+  defp in_own_instance(fun, slot \\ 1) do
+    instance = Module.concat(@dry_run_instance, Integer.to_string(slot))
+    previous = Dolphin.Instance.put(instance)
 
-        try do
-          fun.()
-        after
-          Dolphin.Instance.put(previous)
-          Process.unlink(sup)
-          Dolphin.Instance.stop(@dry_run_instance)
-        end
-      end,
-      [node()]
-    )
+    outcome =
+      try do
+        Dolphin.Check.Clock.within(instance, fn ->
+          sup = start_dry_run_instance(instance)
+
+          try do
+            fun.()
+          after
+            Process.unlink(sup)
+            Dolphin.Instance.stop(instance)
+          end
+        end)
+      after
+        Dolphin.Instance.put(previous)
+      end
+
+    case outcome do
+      {:ok, result} -> result
+      :taken -> in_own_instance(fun, slot + 1)
+    end
   end
 
   # The instance of a dry run whose caller was killed may still be stopping.
-  defp start_dry_run_instance do
-    case Dolphin.Instance.start_link(name: @dry_run_instance) do
+  defp start_dry_run_instance(instance) do
+    case Dolphin.Instance.start_link(name: instance) do
       {:ok, sup} ->
         sup
 
       {:error, {:already_started, old}} ->
         ref = Process.monitor(old)
         Process.exit(old, :shutdown)
-        receive do: ({:DOWN, ^ref, _, _, _} -> start_dry_run_instance())
+        receive do: ({:DOWN, ^ref, _, _, _} -> start_dry_run_instance(instance))
     end
   end
 

@@ -1,7 +1,6 @@
 defmodule Dolphin.CheckTest do
   # Not async: a test looks at the default instance's events, vehicles and
-  # fleet, and at the dry run's instance being gone (another test's dry run,
-  # waiting its turn, would start it at once).
+  # fleet, at the dry runs' instances being gone, and one keeps both cores busy.
   use ExUnit.Case
 
   alias Dolphin.Check
@@ -149,7 +148,30 @@ defmodule Dolphin.CheckTest do
     refute_received {:dolphin, :events, _}
     assert Dolphin.Vehicles.list() == []
     assert Dolphin.Fleet.vehicles() == []
-    refute Dolphin.Instance.running?(Dolphin.Check.DryRun)
+    for slot <- 1..4, do: refute(Dolphin.Instance.running?(Module.concat(Dolphin.Check.DryRun, "#{slot}")))
+  end
+
+  # Each dry run's clock moves once its own processes wait: neither another
+  # dry run nor a process that never waits (here two, one per core) holds
+  # it up or makes it move early.
+  @tag timeout: 600_000
+  test "dry runs side by side, on a VM kept busy by something else, find what each finds alone", %{fleet: fleet} do
+    {:ok, crossing} = FleetFile.read(Path.join(@dir, "crossing_fleet.json"))
+    runs = [fn -> Check.run("examples/photo_patrol.exs", sim: 3) end, fn -> check("crossing.exs", crossing) end, fn -> check("cut_short.exs", fleet, horizon_ms: 6 * 3_600_000) end]
+    shown = fn report -> {Check.format(report), report.missions} end
+    alone = Enum.map(runs, &shown.(&1.()))
+
+    busy = for _ <- 1..2, do: spawn(fn -> Stream.repeatedly(fn -> :erlang.phash2(make_ref()) end) |> Stream.run() end)
+
+    try do
+      together = runs |> Enum.map(&Task.async(fn -> shown.(&1.()) end)) |> Task.await_many(:infinity)
+
+      for {a, t} <- Enum.zip(alone, together) do
+        assert t == a, "alone:\n#{elem(a, 0)}\nside by side, busy VM:\n#{elem(t, 0)}"
+      end
+    after
+      Enum.each(busy, &Process.exit(&1, :kill))
+    end
   end
 
   test "a mixed fleet: a boat's heights are warned about, a submarine's depths are no error, a take-off on a boat is refused with the line" do

@@ -44,6 +44,7 @@ defmodule Dolphin.Script.Runner do
     Dolphin.Instance.put(base.instance)
     Process.flag(:trap_exit, true)
     Process.link(caller)
+    Dolphin.Engine.Run.take_group_leader(caller)
     signals = Signals.new()
     ctx = %{base | signals: signals, script: self(), owner: nil}
     me = self()
