@@ -32,7 +32,6 @@ defmodule Dolphin.ParamError do
     if e.detail, do: base <> " (" <> e.detail <> ")", else: base
   end
 
-  defp number(v) when is_float(v) and v == trunc(v) and abs(v) < 1.0e15, do: Integer.to_string(trunc(v))
-  defp number(v) when is_float(v), do: :erlang.float_to_binary(v, [:short])
+  defp number(v) when is_number(v), do: Dolphin.Vehicles.ParamProtocol.show(v)
   defp number(v), do: inspect(v)
 end

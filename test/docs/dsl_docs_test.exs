@@ -6,13 +6,16 @@ defmodule Dolphin.Docs.DSLDocsTest do
   import ExUnit.CaptureIO
 
   # The modules whose functions and macros are the words of scripts.
-  @words [Dolphin.DSL, Dolphin.DSL.Values, Dolphin.DSL.Mission, Dolphin.Mission.Command]
+  @words [Dolphin.DSL, Dolphin.DSL.Values, Dolphin.DSL.Mission, Dolphin.DSL.Sensors, Dolphin.Mission.Command]
 
   defp docs(module) do
     {:docs_v1, _, :elixir, _, moduledoc, _, docs} = Code.fetch_docs(module)
 
     entries =
-      for {{kind, name, arity}, _, _, doc, _} <- docs, kind in [:function, :macro], not String.starts_with?(Atom.to_string(name), "__"),
+      for {{kind, name, arity}, _, _, doc, _} <- docs,
+          kind in [:function, :macro],
+          doc != :hidden,
+          not String.starts_with?(Atom.to_string(name), "__"),
           do: {"#{inspect(module)}.#{name}/#{arity}", doc}
 
     {moduledoc, entries}

@@ -86,9 +86,9 @@ defmodule Dolphin.ConsoleTest do
     import Dolphin.DSL.Mission
 
     mission "Patrol" do
-      home @home
-      take_off %{@home | h: 850}
-      move_and_loiter_pos 60, 0, 0, 20
+      home(@home)
+      take_off(%{@home | h: 850})
+      move_and_loiter_pos(60, 0, 0, 20)
     end
   end
 
@@ -179,6 +179,27 @@ defmodule Dolphin.ConsoleTest do
     assert out(io) =~ ~r/vehicle 1 armed\n.*vehicle 1 disarmed\n$/
     events(0)
     assert out(io) =~ "events: a count is a positive integer, got: 0"
+  end
+
+  test "parameters: one read, one set and read back, those whose names match, a name the vehicle does not have", %{io: io} do
+    param(1, "WPNAV_SPEED")
+    assert out(io) =~ ~r/^vehicle 1: WPNAV_SPEED = \d+$/m
+    set_param(1, "WPNAV_SPEED", 750)
+    assert out(io) =~ ~r/^vehicle 1: WPNAV_SPEED set to 750$/m
+    param(1, "WPNAV_SPEED")
+    assert out(io) =~ ~r/^vehicle 1: WPNAV_SPEED = 750$/m
+
+    params(1, "FENCE_")
+    text = out(io)
+    assert text =~ ~r/^FENCE_RADIUS\s+150$/m
+    assert [_, shown, all] = Regex.run(~r/^(\d+) of (\d+) parameters$/m, text)
+    assert String.to_integer(shown) >= 7 and String.to_integer(all) > String.to_integer(shown)
+    refute text =~ "WPNAV"
+
+    param(1, "WPNAV_SPED")
+    assert out(io) =~ ~r/vehicle 1 has no parameter WPNAV_SPED .*WPNAV_SPEED/
+    set_param(1, "WPNAV_SPEED", "fast")
+    assert out(io) =~ ~s(set_param takes a number, got: "fast")
   end
 
   test "a task run: the tree, a vehicle it flies refused, then taken over with force", %{io: io} do

@@ -128,6 +128,25 @@ defmodule Dolphin.SensorsTest do
           do: assert({:ok, %World{}} = World.read(path), path)
     end
 
+    test "a world that is wrong is refused with the key's path and its line: out of range, not a number, missing, not a list" do
+      refused = fn text -> assert({:error, why} = World.parse(text), text) && why end
+
+      assert refused.(~s({"fires": [\n  {"lat": 40.4, "lon": -7.3, "radius_m": 40,\n   "intensity": 1.5}\n]})) ==
+               "line 3: fires[0].intensity: 1.5 is out of range: a fire's intensity is 0..1"
+
+      assert refused.(~s({"fires": [{"lat": 91, "lon": -7.3, "radius_m": 40, "intensity": 0.5}]})) ==
+               "line 1: fires[0].lat: 91 is out of range: a fire's lat is -90..90"
+
+      assert refused.(~s({"obstacles": [\n {"lat": 40.4, "lon": -7.3, "radius_m": "8", "height_m": 25}]})) ==
+               "line 2: obstacles[0].radius_m: must be a number 0.1..1000, got a string"
+
+      assert refused.(~s({"water": {"fields": [\n {"lat": 40.4, "lon": -7.3, "celsius": 19}]}})) ==
+               "line 2: water.fields[0]: radius_m is missing; a water field takes lat, lon, radius_m, celsius"
+
+      assert refused.(~s({"fires": {"lat": 40.4}})) == "line 1: fires: must be a list, got an object"
+      assert refused.(~s([1, 2])) =~ "the world is a JSON object"
+    end
+
     test "a world's fields: smoke over a fire and down its plume, water toward a field, range to an obstacle" do
       here = %{lat: 40.0, lon: -7.0}
       east = fn m -> Dolphin.Geo.tangent_offset(here, 0, m) end
@@ -227,6 +246,48 @@ defmodule Dolphin.SensorsTest do
       assert %{value: 412.5, compid: 191} = view.sensors[ppm.source]
       assert Snapshot.sensor(nil, 77, ppm) == 412.5
       :gen_udp.close(socket)
+    end
+
+    test "wait_for on a sensor waits while it is unknown and while below, fires on the reading above, and says so in a sensor_threshold event", %{port: port} do
+      alias Dolphin.MAVLink.UserDialect.SmokeSensor
+      # A vehicle of its own: its autopilot's heartbeat every 200 ms, its companion's readings when the test says.
+      {:ok, socket} = :gen_udp.open(0, [:binary, ip: {127, 0, 0, 1}, active: false])
+      on_exit(fn -> :gen_udp.close(socket) end)
+      say = fn compid, message -> :gen_udp.send(socket, {127, 0, 0, 1}, port, Dolphin.MAVLink.Frame.encode(message, sysid: 78, compid: compid, seq: 0)) end
+      heartbeat = %Dolphin.MAVLink.Ardupilotmega.Heartbeat{type: 2, autopilot: 3, base_mode: 0, custom_mode: 0, system_status: 3, mavlink_version: 3}
+      spawn_link(fn -> Stream.repeatedly(fn -> say.(1, heartbeat) && Process.sleep(200) end) |> Stream.run() end)
+      Wait.until(fn -> match?({:ok, %{type: :uav}}, Vehicles.view(78)) end)
+
+      {:ok, script} =
+        Script.compile_string(
+          """
+          use Dolphin.Script
+          sensor :ppm, from: {:message, :SMOKE_SENSOR, :ppm}
+          v = pick(id: 78, timeout: seconds(30))
+          execute wait_for(sensor(v, :ppm) > 400)
+          message("smoke at \#{sensor(v, :ppm)} ppm")
+          """,
+          "wait_for_smoke.exs"
+        )
+
+      on_exit(fn -> Script.purge(script) end)
+      me = self()
+      Dolphin.Events.subscribe()
+      {:ok, pid} = Script.start(script, output: &send(me, {:output, &1}))
+      assert_receive {:dolphin, :events, %{event: :task_started}}, Clock.to_real_ms(30_000)
+
+      # Unknown (nothing heard), then heard below: the condition is not met.
+      Vehicles.subscribe(78)
+      say.(191, %SmokeSensor{sensor_id: 1, ppm: 300.0, temperature: 2150})
+      await_view(78, &match?(%{value: 300.0}, Enum.find_value(&1.sensors, fn {_, r} -> r end)))
+      refute_received {:dolphin, :events, %{event: :condition_met}}
+      refute_received {:dolphin, :events, %{event: :sensor_threshold}}
+
+      say.(191, %SmokeSensor{sensor_id: 1, ppm: 412.5, temperature: 2150})
+      assert_receive {:dolphin, :events, %{event: :sensor_threshold, vehicle: 78, sensor: :ppm, value: 412.5, unit: :ppm} = event}, Clock.to_real_ms(30_000)
+      assert event.condition =~ "sensor(v, :ppm) > 400"
+      assert_receive {:output, "smoke at 412.5 ppm"}, Clock.to_real_ms(30_000)
+      assert {:ok, %{result: :done}} = Script.await(pid, Clock.to_real_ms(30_000))
     end
 
     defp await_view(id, fun) do

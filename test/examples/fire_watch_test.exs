@@ -113,7 +113,7 @@ defmodule Dolphin.Examples.FireWatchTest do
     assert run.disarmed_at_end
     refute run.output =~ "a battery is low"
 
-    # Looked at within two minutes of clock time of the detection.
+    # Looked at within two minutes of clock time of the detection (docs/missions.md says so).
     t = fn name -> Enum.find_value(run.events, &(&1["event"] == "task_finished" and &1["name"] == name && &1["t_ms"])) end
     detected_at = Enum.find_value(run.events, &(&1["event"] == "sensor_threshold" && &1["t_ms"]))
     assert t.("Look at the smoke") - detected_at < 120_000

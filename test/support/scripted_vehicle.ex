@@ -38,6 +38,13 @@ defmodule Dolphin.Test.ScriptedVehicle do
   @doc "The commands received so far, oldest first, as `{command, param1}` (repeats included)."
   def commands(pid), do: GenServer.call(pid, :commands)
 
+  @doc """
+  The parameter requests received since the last call, oldest first:
+  `:list` (PARAM_REQUEST_LIST), `{:index, i}` or `{:name, name}`
+  (PARAM_REQUEST_READ), repeats included.
+  """
+  def take_param_requests(pid), do: GenServer.call(pid, :take_param_requests)
+
   @doc "Changes the link's faults."
   def set_faults(pid, faults), do: GenServer.call(pid, {:faults, faults})
 
@@ -77,6 +84,7 @@ defmodule Dolphin.Test.ScriptedVehicle do
       # The mission server's timer: which one is current.
       timer: nil,
       commands: [],
+      param_requests: [],
       held: nil,
       seq: 0,
       params: Keyword.get_lazy(opts, :params, fn -> params(300) end)
@@ -89,6 +97,7 @@ defmodule Dolphin.Test.ScriptedVehicle do
   @impl true
   def handle_call({:mission, type}, _from, s), do: {:reply, Enum.map(MissionServer.items(s.missions, type), &normalise/1), s}
   def handle_call(:commands, _from, s), do: {:reply, Enum.reverse(s.commands), s}
+  def handle_call(:take_param_requests, _from, s), do: {:reply, Enum.reverse(s.param_requests), %{s | param_requests: []}}
   def handle_call({:faults, faults}, _from, s), do: {:reply, :ok, %{s | faults: Map.new(faults)}}
   def handle_call({:add_param, name, value}, _from, s), do: {:reply, :ok, %{s | params: Map.put(s.params, name, {value, 9, nil})}}
   def handle_call(:params, _from, s), do: {:reply, Map.new(s.params, fn {name, {value, _, _}} -> {name, value} end), s}
@@ -148,10 +157,14 @@ defmodule Dolphin.Test.ScriptedVehicle do
   end
 
   defp handle_frame(%M.ParamRequestList{}, s) do
+    s = %{s | param_requests: [:list | s.param_requests]}
+
     s.params |> names() |> Enum.with_index() |> Enum.reduce(s, fn {name, i}, s -> transmit(s, param_value(s, name, i)) end)
   end
 
   defp handle_frame(%M.ParamRequestRead{param_index: i}, s) when i >= 0 do
+    s = %{s | param_requests: [{:index, i} | s.param_requests]}
+
     case Enum.at(names(s.params), i) do
       nil -> s
       name -> transmit(s, param_value(s, name, i))
@@ -159,6 +172,8 @@ defmodule Dolphin.Test.ScriptedVehicle do
   end
 
   defp handle_frame(%M.ParamRequestRead{param_id: name}, s) do
+    s = %{s | param_requests: [{:name, name} | s.param_requests]}
+
     case Enum.find_index(names(s.params), &(&1 == name)) do
       nil -> s
       i -> transmit(s, param_value(s, name, i))

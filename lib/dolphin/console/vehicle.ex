@@ -5,7 +5,7 @@ defmodule Dolphin.Console.Vehicle do
   # each through one common path of checks (`command/5`).
 
   alias Dolphin.{Clock, Console, Engine, ManoeuvreError, Mission, Vehicles}
-  alias Dolphin.Vehicles.Manoeuvres
+  alias Dolphin.Vehicles.{Manoeuvres, ParamProtocol}
   alias Dolphin.Console.{Arguments, EventLog, Format, MissionSource, Overview}
 
   # What IEx does not print (IEx.dont_display_result/0): the helpers print for themselves.
@@ -306,7 +306,7 @@ defmodule Dolphin.Console.Vehicle do
   def param(id, name) do
     command(id, :any, [], [], fn _view, _ ->
       case Vehicles.param(id, to_string(name), nil, []) do
-        {:ok, value} -> say("vehicle #{id}: #{name} = #{value}")
+        {:ok, value} -> say("vehicle #{id}: #{name} = #{ParamProtocol.show(value)}")
         {:error, e} -> say(Exception.message(e))
       end
     end)
@@ -322,7 +322,7 @@ defmodule Dolphin.Console.Vehicle do
     end)
   end
 
-  defp param_answer(id, name, {:ok, kept}), do: say("vehicle #{id}: #{name} set to #{kept}")
+  defp param_answer(id, name, {:ok, kept}), do: say("vehicle #{id}: #{name} set to #{ParamProtocol.show(kept)}")
   defp param_answer(_id, _name, {:error, e}), do: say(Exception.message(e))
 
   @spec params(Console.vehicle_id(), String.t()) :: Console.printed()
@@ -332,7 +332,7 @@ defmodule Dolphin.Console.Vehicle do
         {:ok, list} ->
           shown = Enum.filter(list, &String.contains?(&1.name, to_string(filter)))
           width = shown |> Enum.map(&String.length(&1.name)) |> Enum.max(fn -> 0 end)
-          Enum.each(shown, &say(String.pad_trailing(&1.name, width) <> "  #{&1.value}"))
+          Enum.each(shown, &say(String.pad_trailing(&1.name, width) <> "  " <> ParamProtocol.show(&1.value)))
           say("#{length(shown)} of #{length(list)} parameters")
 
         {:error, e} ->

@@ -39,6 +39,9 @@ defmodule Dolphin.DSL.Sensors do
 
   Read, it gives the latest value of the sensor on a one-vehicle set (or a
   system id), `raw × scale + offset`, or `nil`: not heard yet, or stale.
+
+      sensor :smoke, from: {:named_value, "SMOKE"}, stale_after: seconds(5)
+      execute(wait_for(sensor(v, :smoke) > 0.4))
   """
   defmacro sensor(name, opts) when is_atom(name) and is_list(opts) do
     sensor = declare!(name, opts, __CALLER__)
@@ -130,10 +133,17 @@ defmodule Dolphin.DSL.Sensors do
   # A window written as a fixed value is checked against what the sensor keeps.
   defp check_within(fun, %Sensor{keep: keep, name: name}, [ms], caller) when fun in [:peak, :peak_position] do
     case constant(ms, caller) do
-      {:ok, within} when is_integer(within) and within > 0 and within <= keep -> :ok
-      {:ok, within} when is_integer(within) and within > 0 -> compile_error(caller, "#{fun}(_, #{inspect(name)}, within: #{within}): sensor #{inspect(name)} keeps #{keep} ms of readings; declare it with keep: #{within} or more")
-      {:ok, other} -> compile_error(caller, "#{fun}(_, #{inspect(name)}, ...): within: takes a duration in ms (seconds(30)), got: #{inspect(other)}")
-      :error -> :ok
+      {:ok, within} when is_integer(within) and within > 0 and within <= keep ->
+        :ok
+
+      {:ok, within} when is_integer(within) and within > 0 ->
+        compile_error(caller, "#{fun}(_, #{inspect(name)}, within: #{within}): sensor #{inspect(name)} keeps #{keep} ms of readings; declare it with keep: #{within} or more")
+
+      {:ok, other} ->
+        compile_error(caller, "#{fun}(_, #{inspect(name)}, ...): within: takes a duration in ms (seconds(30)), got: #{inspect(other)}")
+
+      :error ->
+        :ok
     end
   end
 

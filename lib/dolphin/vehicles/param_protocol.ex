@@ -91,6 +91,27 @@ defmodule Dolphin.Vehicles.ParamProtocol do
   def typed(value, type) when type in 1..8 and is_number(value), do: round(value)
   def typed(value, _type), do: value
 
+  @doc """
+  A parameter's value as a person reads and writes it (the console, `mix
+  dolphin.param`, a saved file): whole numbers without a fraction, a
+  float of a REAL32 parameter to six decimals at most (its float32 noise
+  not shown), a very small or very large one in exponent form.
+
+      iex> Dolphin.Vehicles.ParamProtocol.show(1000.0)
+      "1000"
+      iex> Dolphin.Vehicles.ParamProtocol.show(0.10000000149011612)
+      "0.1"
+      iex> Dolphin.Vehicles.ParamProtocol.show(-6)
+      "-6"
+      iex> Dolphin.Vehicles.ParamProtocol.show(2.5e-6)
+      "2.5e-6"
+  """
+  @spec show(number()) :: String.t()
+  def show(value) when is_integer(value), do: Integer.to_string(value)
+  def show(value) when is_float(value) and value == trunc(value) and abs(value) < 1.0e15, do: Integer.to_string(trunc(value))
+  def show(value) when is_float(value) and abs(value) >= 1.0e-4 and abs(value) < 1.0e15, do: :erlang.float_to_binary(value, [{:decimals, 6}, :compact])
+  def show(value) when is_float(value), do: :erlang.float_to_binary(value, [:short])
+
   # Typed (`typed/2`) when the caller asked for it.
   defp answer(%{typed: true}, v, kept), do: typed(kept, v.param_type)
   defp answer(_data, _v, kept), do: kept

@@ -46,6 +46,7 @@ defmodule Mix.Tasks.Dolphin.Param do
 
   alias Dolphin.CLI.Values
   alias Dolphin.{CommandLineError, Vehicles}
+  alias Dolphin.Vehicles.ParamProtocol
 
   @options [connect: :endpoint, vehicle: :vehicle_id, timeout: :wait]
 
@@ -111,14 +112,14 @@ defmodule Mix.Tasks.Dolphin.Param do
 
   defp get(id, name) do
     case Vehicles.param(id, name, nil, []) do
-      {:ok, value} -> {:ok, "vehicle #{id}: #{name} = #{value}"}
+      {:ok, value} -> {:ok, "vehicle #{id}: #{name} = #{ParamProtocol.show(value)}"}
       {:error, e} -> {:error, CommandLineError.failed(nil, e)}
     end
   end
 
   defp set(id, name, value) do
     case Vehicles.param(id, name, value, []) do
-      {:ok, kept} -> {:ok, "vehicle #{id}: #{name} set to #{kept}"}
+      {:ok, kept} -> {:ok, "vehicle #{id}: #{name} set to #{ParamProtocol.show(kept)}"}
       {:error, e} -> {:error, CommandLineError.failed(nil, e)}
     end
   end
@@ -127,14 +128,14 @@ defmodule Mix.Tasks.Dolphin.Param do
     with {:ok, all} <- fetch(id) do
       shown = Enum.filter(all, &String.contains?(&1.name, filter))
       width = shown |> Enum.map(&String.length(&1.name)) |> Enum.max(fn -> 0 end)
-      lines = Enum.map(shown, &(String.pad_trailing(&1.name, width) <> "  #{&1.value}"))
+      lines = Enum.map(shown, &(String.pad_trailing(&1.name, width) <> "  " <> ParamProtocol.show(&1.value)))
       {:ok, Enum.join(lines ++ ["vehicle #{id}: #{length(shown)} of #{length(all)} parameters"], "\n")}
     end
   end
 
   defp save(id, file) do
     with {:ok, all} <- fetch(id) do
-      text = ["# parameters of vehicle #{id}, read by mix dolphin.param\n" | Enum.map(all, &"#{&1.name} #{&1.value}\n")]
+      text = ["# parameters of vehicle #{id}, read by mix dolphin.param\n" | Enum.map(all, &"#{&1.name} #{ParamProtocol.show(&1.value)}\n")]
 
       case File.write(file, text) do
         :ok -> {:ok, "vehicle #{id}: saved #{length(all)} parameters to #{file}"}

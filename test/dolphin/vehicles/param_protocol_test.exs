@@ -97,8 +97,12 @@ defmodule Dolphin.Vehicles.ParamProtocolTest do
       forall({T.integer(0, 30), T.integer(0, 10), T.integer(0, 10), T.integer(0, 299), T.integer(-20, 100)}, fn {loss, dup, reorder, i, value} ->
         ScriptedVehicle.set_faults(vehicle, loss: loss / 100, duplicate: dup / 100, reorder: reorder / 100)
         faults = "#{loss} % loss, #{dup} % duplicates, #{reorder} % reordering"
+        ScriptedVehicle.take_param_requests(vehicle)
         assert {:ok, list} = Vehicles.param_list(sysid), faults
         assert listed(list) == expected(vehicle), "#{faults}: the list read differs from the vehicle's"
+        # Gaps are asked for by index; once they are, the whole list is not asked for again.
+        requests = ScriptedVehicle.take_param_requests(vehicle)
+        refute :list in Enum.drop_while(requests, &(&1 == :list)), "#{faults}: the list was asked for again after its gaps: #{inspect(requests)}"
 
         %{name: name, type: type} = Enum.at(list, i)
         set = if type == 9, do: value / 4, else: value

@@ -16,20 +16,21 @@ defmodule Mix.Tasks.Dolphin.ParamTest do
     {pid, "udpin:127.0.0.1:#{port}"}
   end
 
-  test "get, set (read back), a refused value, an unknown name, save and load", %{tmp_dir: dir} do
-    [{_, at_a}, {b, at_b}, {_, at_c}, {_, at_d}, {_, at_e}, {f, at_f}] = Enum.map(21..26, &vehicle/1)
+  test "get, set (read back), a refused value, an unknown name, list, save and load", %{tmp_dir: dir} do
+    [{_, at_a}, {b, at_b}, {_, at_c}, {_, at_d}, {_, at_e}, {f, at_f}, {_, at_g}] = Enum.map(21..26, &vehicle/1) ++ [vehicle(28)]
     saved = Path.join(dir, "saved.parm")
     to_load = Path.join(dir, "load.parm")
     File.write!(to_load, "# two good, one out of range, one unknown\nP2_MAX 42\nP1_RATE,7\nP3_TRIM\t25.0\nNO_SUCH 1\n")
 
-    assert [{0, get}, {0, set}, {1, refused}, {1, unknown}, {0, save}, {1, load}] =
+    assert [{0, get}, {0, set}, {1, refused}, {1, unknown}, {0, save}, {1, load}, {0, list}] =
              MixCommand.run_all([
                ~w(dolphin.param get P2_MAX --connect #{at_a}),
                ~w(dolphin.param set P2_MAX 42 --connect #{at_b}),
                ~w(dolphin.param set P3_TRIM 25 --connect #{at_c}),
                ~w(dolphin.param get P2_MAXX --connect #{at_d}),
                ~w(dolphin.param save #{saved} --connect #{at_e}),
-               ~w(dolphin.param load #{to_load} --connect #{at_f} --vehicle 26)
+               ~w(dolphin.param load #{to_load} --connect #{at_f} --vehicle 26),
+               ~w(dolphin.param list P12_ --connect #{at_g})
              ])
 
     assert get =~ "vehicle 21: P2_MAX = -6"
@@ -45,6 +46,9 @@ defmodule Mix.Tasks.Dolphin.ParamTest do
     assert load =~ "vehicle 26 kept P3_TRIM at 10 when asked for 25"
     assert load =~ "vehicle 26 has no parameter NO_SUCH"
     assert ScriptedVehicle.params(f)["P1_RATE"] == 7
+    # The whole list fetched, the names that contain the filter shown.
+    assert list =~ ~r/^P12_GAIN  -?\d+(\.\d+)?$/m
+    assert list =~ "vehicle 28: 1 of 300 parameters"
   end
 
   test "bad usage: no command, a value that is no number, a file to load that is not NAME VALUE", %{tmp_dir: dir} do
