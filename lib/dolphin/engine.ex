@@ -276,7 +276,7 @@ defmodule Dolphin.Engine do
     task = Task.new!(task)
     ctx = Context.new(opts)
     run_id = next_ids(1)
-    {:ok, _pid} = DynamicSupervisor.start_child(Dolphin.Engine.Runs, {Run, {task, ctx, self(), run_id}})
+    {:ok, _pid} = DynamicSupervisor.start_child(Dolphin.Engine.Runs, {Run, {task, ctx, {self(), Process.group_leader()}, run_id}})
     {:ok, run_id}
   end
 

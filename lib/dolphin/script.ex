@@ -139,7 +139,7 @@ defmodule Dolphin.Script do
   def start(%__MODULE__{} = script, opts \\ []) do
     # The caller's context (its fleet, clock) is the script's, unless the options say otherwise.
     ctx = Context.new(Keyword.take(opts, [:instance, :fleet, :clock, :tick_ms, :stop_timeout_ms, :ask, :output, :platform_opts]))
-    Runner.start_link(script, ctx, opts, {self(), __MODULE__})
+    Runner.start_link(script, ctx, Keyword.put(opts, :group_leader, Process.group_leader()), {self(), __MODULE__})
   end
 
   @doc "Waits for the end of a script started by the caller."

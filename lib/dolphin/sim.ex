@@ -463,9 +463,9 @@ defmodule Dolphin.Sim do
     with {:ok, sensors} <- sensors,
          nil <- Enum.find_value(sensors, fn {_id, list} -> Enum.find(List.wrap(list), &(&1 not in models)) end) |> unknown_model(models),
          {:ok, world} <- world(Keyword.get(opts, :world)),
-         rate = Keyword.get(opts, :sensor_rate_hz, 2),
+         rate = Keyword.get_lazy(opts, :sensor_rate_hz, fn -> Map.get(world.sensing, :rate_hz, 2) end),
          true <- (is_number(rate) and rate > 0 and rate <= 50) || {:error, "bad :sensor_rate_hz #{inspect(rate)}: readings a second, more than 0 and at most 50"},
-         noise = Keyword.get(opts, :sensor_noise),
+         noise = Keyword.get_lazy(opts, :sensor_noise, fn -> Map.get(world.sensing, :noise) end),
          true <- noise == nil or (is_number(noise) and noise >= 0) || {:error, "bad :sensor_noise #{inspect(noise)}: the noise's standard deviation, 0 or more"} do
       {:ok, %{sensors: Map.new(sensors, fn {id, l} -> {id, List.wrap(l)} end), world: world, rate_hz: rate, noise: noise}}
     else

@@ -122,7 +122,7 @@ defmodule Dolphin.SensorsTest do
     test "the world of docs/simulator.md and the examples' worlds are worlds" do
       doc = File.read!(Path.expand("../../docs/simulator.md", __DIR__))
       [_, json] = Regex.run(~r/<!-- world -->\n```json\n(.*?)```/s, doc)
-      assert {:ok, %World{fires: [_], obstacles: [_], water: %{fields: [_]}}} = World.parse(json)
+      assert {:ok, %World{fires: [_], obstacles: [_], water: %{fields: [_]}, sensing: %{rate_hz: 4.0, noise: 0.02}}} = World.parse(json)
 
       for path <- Path.wildcard(Path.expand("../../examples/worlds/*.json", __DIR__)),
           do: assert({:ok, %World{}} = World.read(path), path)
@@ -144,6 +144,10 @@ defmodule Dolphin.SensorsTest do
                "line 2: water.fields[0]: radius_m is missing; a water field takes lat, lon, radius_m, celsius"
 
       assert refused.(~s({"fires": {"lat": 40.4}})) == "line 1: fires: must be a list, got an object"
+      assert refused.(~s({"sensors": {"rate_hz": 100}})) == "line 1: sensors.rate_hz: 100 is out of range: a simulated sensor's rate_hz is 0.1..50"
+      assert refused.(~s({"sensors": {"rate": 5}})) =~ ~s[line 1: sensors: unknown key "rate" (did you mean "rate_hz"?)]
+      assert {:ok, %World{sensing: %{noise: 0.5} = only_noise}} = World.parse(~s({"sensors": {"noise": 0.5}}))
+      refute Map.has_key?(only_noise, :rate_hz)
       assert refused.(~s([1, 2])) =~ "the world is a JSON object"
     end
 
@@ -211,6 +215,22 @@ defmodule Dolphin.SensorsTest do
       assert stale.connected?
       assert Snapshot.sensor(nil, id, smoke) == nil
       assert Snapshot.sensor_age(nil, id, smoke) >= 2_000
+    end
+
+    test "the world's sensors section sets the companions' rate and noise", %{port: port} do
+      home = %{lat: 40.444233, lon: -7.375234, alt: 820.0}
+      fire = Dolphin.Geo.tangent_offset(home, 10, 0)
+      {:ok, world} = World.parse(~s({"fires": [{"lat": #{fire.lat}, "lon": #{fire.lon}, "radius_m": 40, "intensity": 0.9}], "sensors": {"rate_hz": 10, "noise": 0}}))
+      {:ok, [id]} = Dolphin.Sim.start(gcs: port, count: 1, speedup: 20, home: home, sensors: [:smoke], world: world)
+      {:ok, smoke} = Sensors.new(:smoke, from: {:named_value, "SMOKE"})
+      Vehicles.subscribe(id)
+      :ok = Vehicles.watch_sensors([smoke])
+
+      view = await_view(id, &(length(Map.get(&1.sensors, @smoke_source, %{history: []}).history) >= 6))
+      {times, values, _} = view.sensors[@smoke_source].history |> Enum.take(6) |> :lists.unzip3()
+      # Ten a second of vehicle time (the default is two), none noisy: the same value every time.
+      assert (hd(times) - List.last(times)) / 5 < 250, "readings at #{inspect(times)}"
+      assert [_] = Enum.uniq(values)
     end
 
     test "a sensor not declared is not kept; peak and its position over a window", %{port: port} do

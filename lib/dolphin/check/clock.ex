@@ -71,12 +71,13 @@ defmodule Dolphin.Check.Clock do
   @spec run(pos_integer(), (() -> result)) :: result when result: term()
   def run(horizon_ms, fun) do
     {name, _cells} = clock()
-    :ok = GenServer.call(name, {:start, horizon_ms, self()})
+    :ok = GenServer.call(name, {:start, horizon_ms, self()}, :infinity)
 
     try do
       fun.()
     after
-      GenServer.call(name, :halt)
+      # A clock busy asking a loaded VM's processes answers when it can.
+      GenServer.call(name, :halt, :infinity)
     end
   end
 
@@ -151,7 +152,7 @@ defmodule Dolphin.Check.Clock do
           cells
       end
 
-    {:ok, %{cells: cells, shared: shared_processes(), moving?: false, horizon: nil, owner: nil, timers: :gb_trees.empty(), refs: %{}, seq: 0, busy_since: nil, empty_since: nil}}
+    {:ok, %{cells: cells, shared: shared_processes(), others: %{}, moving?: false, horizon: nil, owner: nil, timers: :gb_trees.empty(), refs: %{}, seq: 0, busy_since: nil, empty_since: nil}}
   end
 
   @impl GenServer
@@ -190,16 +191,21 @@ defmodule Dolphin.Check.Clock do
   defp advance(%{moving?: false} = s), do: {:noreply, s}
 
   defp advance(s) do
-    real = System.monotonic_time(:millisecond)
-    advance(s, idle?(s, real), real)
+    started = System.monotonic_time(:microsecond)
+    real = div(started, 1000)
+    {idle?, s} = idle(s, real)
+    # Asking a busy VM's processes takes time: at most a third of this
+    # clock's goes to it (the dry run's processes need the cores too).
+    again_ms = max(1, div(System.monotonic_time(:microsecond) - started, 500))
+    advance(s, idle?, real, again_ms)
   end
 
-  defp advance(%{timers: timers} = s, idle?, real) do
+  defp advance(%{timers: timers} = s, idle?, real, again_ms) do
     ended? = :atomics.get(s.cells, @ended) == 1
 
     cond do
       not idle? and (s.busy_since == nil or real - s.busy_since < @patience_real_ms) ->
-        look_again(1, %{s | busy_since: s.busy_since || real})
+        look_again(again_ms, %{s | busy_since: s.busy_since || real})
 
       # What reached this clock before its dry run was idle (a timer set,
       # maybe sooner than the next; output a process waits on) is taken
@@ -257,9 +263,15 @@ defmodule Dolphin.Check.Clock do
   # one moment: each is asked twice, and only if none ran in between (its
   # reductions unchanged) were they all waiting at once, between the two
   # rounds.
-  defp idle?(s, real) do
+  defp idle(s, real) do
     quiet? = :erlang.statistics(:total_active_tasks) <= 1
-    not loading?() and (quiet? or (s.busy_since != nil and real - s.busy_since >= @busy_vm_ms and dry_run_waiting?(s.shared)))
+
+    cond do
+      loading?() -> {false, s}
+      quiet? -> {true, s}
+      s.busy_since == nil or real - s.busy_since < @busy_vm_ms -> {false, s}
+      true -> with({idle?, others} <- dry_run_waiting?(s.shared, s.others), do: {idle?, %{s | others: others}})
+    end
   end
 
   defp loading? do
@@ -267,25 +279,52 @@ defmodule Dolphin.Check.Clock do
       Process.info(Process.whereis(:erl_prim_loader), [:status, :current_function]) != [status: :waiting, current_function: {:erl_prim_loader, :loop, 3}]
   end
 
-  defp dry_run_waiting?(shared) do
-    case waiting(shared) do
-      :busy -> false
-      first -> waiting(shared) == first
+  # {idle?, the processes known to be none of the above}.
+  defp dry_run_waiting?(shared, others) do
+    case waiting(shared, others) do
+      {:busy, others} -> {false, others}
+      {first, others} -> {again(first) == first, others}
     end
   end
 
-  # The reductions of the processes above, all waiting; or :busy.
-  defp waiting(shared) do
+  # The reductions of the processes above, all waiting ({pid, reductions}),
+  # or :busy; and the processes known to be none of them: each of the rest
+  # of the VM is asked once it is seen waiting (a process takes its group
+  # leader as it starts, and keeps it).
+  defp waiting(shared, others) do
     me = self()
+    pids = Process.list()
+    others = if map_size(others) > 2 * length(pids), do: Map.take(others, pids), else: others
 
-    Enum.reduce_while(Process.list(), [], fn pid, acc ->
-      case pid != me and Process.info(pid, [:group_leader, :status, :reductions]) do
-        [group_leader: gl, status: status, reductions: reductions] when gl == me or is_map_key(shared, gl) or is_map_key(shared, pid) ->
-          if status == :waiting, do: {:cont, [reductions | acc]}, else: {:halt, :busy}
+    Enum.reduce_while(pids, {[], others}, fn pid, {acc, others} ->
+      if pid == me or is_map_key(others, pid) do
+        {:cont, {acc, others}}
+      else
+        case Process.info(pid, [:group_leader, :status, :reductions]) do
+          [group_leader: gl, status: status, reductions: reductions] when gl == me or is_map_key(shared, gl) or is_map_key(shared, pid) ->
+            if status == :waiting, do: {:cont, {[{pid, reductions} | acc], others}}, else: {:halt, {:busy, others}}
 
-        _ ->
-          {:cont, acc}
+          [group_leader: _, status: :waiting, reductions: _] ->
+            {:cont, {acc, Map.put(others, pid, true)}}
+
+          _ ->
+            {:cont, {acc, others}}
+        end
       end
+    end)
+  end
+
+  # The same processes asked again: their reductions, or :busy.
+  defp again(first) do
+    Enum.reduce_while(first, [], fn {pid, _}, acc ->
+      case Process.info(pid, [:status, :reductions]) do
+        [status: :waiting, reductions: reductions] -> {:cont, [{pid, reductions} | acc]}
+        _ -> {:halt, :busy}
+      end
+    end)
+    |> then(fn
+      :busy -> :busy
+      list -> Enum.reverse(list)
     end)
   end
 

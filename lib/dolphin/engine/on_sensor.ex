@@ -264,11 +264,18 @@ defmodule Dolphin.Engine.OnSensor do
 
   defp nearest([], _at), do: nil
 
-  defp nearest(free, at) do
+  defp nearest(free, at), do: closest(Enum.map(free, &{&1, Snapshot.position(nil, &1)}), at)
+
+  @doc """
+  Of the vehicles free to look (`[{vehicle, its position or nil}]`, in the
+  order the task names them: not one already looking), the one nearest
+  `at`; the first when no position is known.
+  """
+  @spec closest([{term(), Dolphin.Geo.Location.t() | nil}, ...], Dolphin.Geo.Location.t()) :: term()
+  def closest([{first, _} | _] = free, at) do
     free
-    |> Enum.map(fn v -> {v, Snapshot.position(nil, v)} end)
     |> Enum.reject(fn {_, p} -> p == nil end)
-    |> Enum.min_by(fn {_, p} -> Dolphin.Geo.distance(p, at) end, fn -> {hd(free), nil} end)
+    |> Enum.min_by(fn {_, p} -> Dolphin.Geo.distance(p, at) end, fn -> {first, nil} end)
     |> elem(0)
   end
 

@@ -98,21 +98,14 @@ defmodule Dolphin.Engine.Run do
   end
 
   @doc false
-  # A process started under one of the application's supervisors on
-  # `caller`'s behalf writes where `caller` does (else its group leader
-  # would be the application's); a dry run also knows its processes by it
-  # (Dolphin.Check.Clock).
-  @spec take_group_leader(pid()) :: true | nil
-  def take_group_leader(caller) do
-    with {:group_leader, gl} <- Process.info(caller, :group_leader), do: Process.group_leader(self(), gl)
-  end
-
-  @doc false
-  def init({task, ctx, caller, run_id}, sup) do
+  def init({task, ctx, {caller, group_leader}, run_id}, sup) do
+    # The run writes where its caller does (else its group leader would be
+    # the application's); a dry run also knows its processes by it
+    # (Dolphin.Check.Clock). Taken first, before anything could wait.
+    Process.group_leader(self(), group_leader)
     Process.flag(:trap_exit, true)
     Context.put(ctx)
     Process.link(caller)
-    take_group_leader(caller)
     run = %{id: run_id, pid: self()}
     Registry.register(Dolphin.Engine.Registry, {:run, run_id}, %{caller: caller, owner: ctx.owner, task: task, instance: ctx.instance})
     :proc_lib.init_ack({:ok, self()})

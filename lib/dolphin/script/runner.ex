@@ -40,11 +40,13 @@ defmodule Dolphin.Script.Runner do
 
   @impl GenServer
   def init({script, base, opts, {caller, _tag} = reply_to}) do
-    # Under the application's supervisor, working in the context's instance.
+    # Under the application's supervisor, writing where its caller does
+    # (taken first, before anything could wait: Dolphin.Check.Clock knows
+    # a dry run's processes by it), working in the context's instance.
+    if gl = opts[:group_leader], do: Process.group_leader(self(), gl)
     Dolphin.Instance.put(base.instance)
     Process.flag(:trap_exit, true)
     Process.link(caller)
-    Dolphin.Engine.Run.take_group_leader(caller)
     signals = Signals.new()
     ctx = %{base | signals: signals, script: self(), owner: nil}
     me = self()

@@ -8,7 +8,8 @@ defmodule Dolphin.Sim.World do
         "fires": [{"lat": 40.4452, "lon": -7.3741, "radius_m": 40, "intensity": 0.9}],
         "wind": {"from_deg": 270, "speed_ms": 4},
         "water": {"base_celsius": 14, "fields": [{"lat": 38.43, "lon": -8.86, "radius_m": 300, "celsius": 19}]},
-        "obstacles": [{"lat": 40.4447, "lon": -7.3750, "radius_m": 8, "height_m": 25}]
+        "obstacles": [{"lat": 40.4447, "lon": -7.3750, "radius_m": 8, "height_m": 25}],
+        "sensors": {"rate_hz": 4, "noise": 0.02}
       }
 
   Every key is optional (an empty object is a world with nothing in it);
@@ -16,7 +17,11 @@ defmodule Dolphin.Sim.World do
   `wind` `from_deg` (0..360, where it blows from) and `speed_ms` (0..40);
   a water field `lat`, `lon`, `radius_m` and `celsius` (-5..40), over
   `base_celsius` (default 15); an obstacle `lat`, `lon`, `radius_m` (0.1..1000)
-  and `height_m` (0.1..1000). A file that is not JSON, a key that is not
+  and `height_m` (0.1..1000). `sensors` says how the simulated companions
+  read the world: `rate_hz`, readings a second of vehicle time (0.1..50,
+  default 2), and `noise`, the standard deviation added to each reading
+  (0..100, default each sensor model's); `mix dolphin.sensors --rate` and
+  `--noise` take precedence. A file that is not JSON, a key that is not
   one of these (with the nearest that is), a key missing, a value of the
   wrong type or out of range, is refused with the key's path and its line.
 
@@ -29,14 +34,15 @@ defmodule Dolphin.Sim.World do
 
   alias Dolphin.Geo
 
-  defstruct fires: [], wind: %{from_deg: 0.0, speed_ms: 0.0}, water: %{base_celsius: 15.0, fields: []}, obstacles: []
+  defstruct fires: [], wind: %{from_deg: 0.0, speed_ms: 0.0}, water: %{base_celsius: 15.0, fields: []}, obstacles: [], sensing: %{}
 
   @type place :: %{lat: float(), lon: float(), radius_m: float()}
   @type t :: %__MODULE__{
           fires: [%{lat: float(), lon: float(), radius_m: float(), intensity: float()}],
           wind: %{from_deg: float(), speed_ms: float()},
           water: %{base_celsius: float(), fields: [%{lat: float(), lon: float(), radius_m: float(), celsius: float()}]},
-          obstacles: [%{lat: float(), lon: float(), radius_m: float(), height_m: float()}]
+          obstacles: [%{lat: float(), lon: float(), radius_m: float(), height_m: float()}],
+          sensing: %{optional(:rate_hz) => float(), optional(:noise) => float()}
         }
 
   @place [{"lat", -90, 90}, {"lon", -180, 180}]
@@ -46,6 +52,7 @@ defmodule Dolphin.Sim.World do
     "obstacles" => {"an obstacle", @place ++ [{"radius_m", 0.1, 1000}, {"height_m", 0.1, 1000}]}
   }
   @wind [{"from_deg", 0, 360}, {"speed_ms", 0, 40}]
+  @sensing [{"rate_hz", 0.1, 50}, {"noise", 0, 100}]
 
   # A range sensor's reach, metres: beyond it, it reads this.
   @range_max 40.0
@@ -74,13 +81,14 @@ defmodule Dolphin.Sim.World do
   end
 
   defp world(%{} = json) do
-    keys!(json, [], ["fires", "wind", "water", "obstacles"], "a world")
+    keys!(json, [], ["fires", "wind", "water", "obstacles", "sensors"], "a world")
 
     %__MODULE__{
       fires: places(json, ["fires"]),
       wind: if(Map.has_key?(json, "wind"), do: numbers!(object!(json["wind"], ["wind"]), ["wind"], @wind, "the wind"), else: %{from_deg: 0.0, speed_ms: 0.0}),
       water: water(Map.get(json, "water", %{})),
-      obstacles: places(json, ["obstacles"])
+      obstacles: places(json, ["obstacles"]),
+      sensing: if(Map.has_key?(json, "sensors"), do: optional_numbers!(object!(json["sensors"], ["sensors"]), ["sensors"], @sensing, "a simulated sensor"), else: %{})
     }
   end
 
@@ -119,6 +127,12 @@ defmodule Dolphin.Sim.World do
         :error -> fail(path, "#{key} is missing; #{what} takes #{Enum.join(names, ", ")}")
       end
     end)
+  end
+
+  # Numbers of which each may be left out.
+  defp optional_numbers!(map, path, spec, what) do
+    keys!(map, path, Enum.map(spec, &elem(&1, 0)), what)
+    numbers!(map, path, Enum.filter(spec, &Map.has_key?(map, elem(&1, 0))), what)
   end
 
   defp keys!(map, path, allowed, what) do

@@ -38,4 +38,15 @@ defmodule Dolphin.Engine.OnSensorTest do
     assert OnSensor.strongest([%Detection{vehicle: 1, sensor: :smoke, value: 0.9, position: nil}], task(), []) == nil
     assert Detection.kept(%{id: 1, sensors: %{}}, @smoke) == []
   end
+
+  test "the vehicle sent is the free one nearest the detection, not the one that read it" do
+    # 1 read the smoke and is looking at an earlier fire: not free, not offered.
+    far = {2, Dolphin.Geo.offset(@fire, 400, 0)}
+    near = {3, Dolphin.Geo.offset(@fire, -120, 50)}
+    assert OnSensor.closest([far, near], @fire) == 3
+    assert OnSensor.closest([near, far], @fire) == 3
+    # A vehicle whose position is not known is not taken for near; with none known, the first.
+    assert OnSensor.closest([{4, nil}, far], @fire) == 2
+    assert OnSensor.closest([{4, nil}, {5, nil}], @fire) == 4
+  end
 end
