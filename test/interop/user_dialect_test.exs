@@ -10,6 +10,9 @@ defmodule Dolphin.Interop.UserDialectTest do
 
   @moduletag :tmp_dir
 
+  # A user's message whose id is one of ArduPilot's is refused, naming both.
+  doctest Dolphin.MAVLink.Generator, only: [taken_id: 2]
+
   @xml Path.expand("../fixtures/mavlink/user/fire_sensors.xml", __DIR__)
 
   @script """

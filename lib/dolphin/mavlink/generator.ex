@@ -51,6 +51,23 @@ defmodule Dolphin.MAVLink.Generator do
     Enum.map(messages, &message_spec(&1, dialect))
   end
 
+  @doc """
+  Why a message of a user's dialect cannot be added to generated dialect
+  `base` (ArduPilot's): its id is another message's there; `nil` when it can.
+
+      iex> Dolphin.MAVLink.Generator.taken_id(%{id: 0, name: "MY_BEAT"}, Dolphin.MAVLink.Ardupilotmega)
+      "MY_BEAT has id 0, which ardupilotmega's HEARTBEAT has"
+      iex> Dolphin.MAVLink.Generator.taken_id(%{id: 42_999, name: "SMOKE"}, Dolphin.MAVLink.Ardupilotmega)
+      nil
+  """
+  @spec taken_id(%{id: non_neg_integer(), name: String.t()}, module()) :: String.t() | nil
+  def taken_id(%{id: id, name: name}, base) do
+    case base.message_info(id) do
+      nil -> nil
+      {taken, _, _, _} -> "#{name} has id #{id}, which #{base |> Module.split() |> List.last() |> String.downcase()}'s #{taken.__mavlink__(:name)} has"
+    end
+  end
+
   defp message_spec(msg, dialect) do
     fields = Enum.map(msg.fields, &field/1)
     wire = wire_order(fields)

@@ -37,9 +37,9 @@ defmodule Dolphin.MAVLink.UserDialect do
                  end),
         Ardupilotmega.message_module(spec.name) == nil,
         uniq: true do
-      case Ardupilotmega.message_info(spec.id) do
+      case Generator.taken_id(spec, Ardupilotmega) do
         nil -> spec
-        {taken, _, _, _} -> raise CompileError, file: file, line: 0, description: "user MAVLink dialect: #{spec.name} has id #{spec.id}, which ardupilotmega's #{taken.__mavlink__(:name)} has"
+        why -> raise CompileError, file: file, line: 0, description: "user MAVLink dialect: #{why}"
       end
     end
 
