@@ -171,7 +171,11 @@ defmodule Dolphin.Vehicles.PathsFlightTest do
     # Cut before the end.
     assert done < total
 
-    assert :ok = Task.await(upload, 300_000)
+    # A final ACCEPTED lost (on the path cut, or a late one) leaves the
+    # upload unconfirmed, as the mission protocol says: the download says
+    # whether the vehicle holds the whole mission.
+    upload = Task.await(upload, 300_000)
+    assert upload == :ok or match?({:error, %Dolphin.MissionError{result: :unconfirmed}}, upload), inspect(upload)
     {:ok, got} = Vehicles.download_mission(1)
     assert Enum.map(got, & &1.command) == Enum.map(items, & &1.command)
     assert [] == events(:vehicle_lost)
