@@ -84,8 +84,9 @@ defmodule Dolphin.Sim do
       (`Dolphin.Sim.Companion`: `:smoke`, `:water_temp`, `:range`): a list
       for every vehicle, or a map of lists by system id; `:world` — what they
       sense, a `Dolphin.Sim.World` or the path of a world file (default: an
-      empty world); `:sensor_rate_hz` (default 2) and `:sensor_noise` (the
-      noise's standard deviation, default each model's);
+      empty world); `:sensor_rate_hz` and `:sensor_noise` (the noise's
+      standard deviation), by default the world's `sensors` section's, else
+      2 Hz and each model's noise;
     * any vehicle setting: `:airframe` (`:copter`, default, `:plane`, `:rover`,
       `:boat`, `:sub`: whose firmware it behaves as, with that airframe's
       speeds and currents unless given), `:battery` (initial fraction, default 1.0),
@@ -463,9 +464,9 @@ defmodule Dolphin.Sim do
     with {:ok, sensors} <- sensors,
          nil <- Enum.find_value(sensors, fn {_id, list} -> Enum.find(List.wrap(list), &(&1 not in models)) end) |> unknown_model(models),
          {:ok, world} <- world(Keyword.get(opts, :world)),
-         rate = Keyword.get_lazy(opts, :sensor_rate_hz, fn -> Map.get(world.sensing, :rate_hz, 2) end),
-         true <- (is_number(rate) and rate > 0 and rate <= 50) || {:error, "bad :sensor_rate_hz #{inspect(rate)}: readings a second, more than 0 and at most 50"},
-         noise = Keyword.get_lazy(opts, :sensor_noise, fn -> Map.get(world.sensing, :noise) end),
+         rate = Keyword.get(opts, :sensor_rate_hz),
+         true <- rate == nil or (is_number(rate) and rate > 0 and rate <= 50) || {:error, "bad :sensor_rate_hz #{inspect(rate)}: readings a second, more than 0 and at most 50"},
+         noise = Keyword.get(opts, :sensor_noise),
          true <- noise == nil or (is_number(noise) and noise >= 0) || {:error, "bad :sensor_noise #{inspect(noise)}: the noise's standard deviation, 0 or more"} do
       {:ok, %{sensors: Map.new(sensors, fn {id, l} -> {id, List.wrap(l)} end), world: world, rate_hz: rate, noise: noise}}
     else

@@ -334,21 +334,18 @@ defmodule Dolphin.Check.Clock do
   defp shared_processes do
     runtime = for name <- [:init, :erl_prim_loader, :code_server, :logger, :global_name_server], pid = Process.whereis(name), {:group_leader, gl} <- [Process.info(pid, :group_leader)], do: gl
 
-    application =
-      case Process.whereis(Dolphin.Supervisor),
-        do:
-          (
-            nil -> []
-            sup -> static_tree(sup)
-          )
-
+    application = if sup = Process.whereis(Dolphin.Supervisor), do: static_tree(sup), else: []
     Map.new(runtime ++ application, &{&1, true})
   end
 
+  # A supervisor and what it holds, but an instance's tree and what a
+  # dynamic supervisor holds (its children have no id).
   defp static_tree(sup) do
-    [sup] ++
-      for {id, pid, type, _} <- Supervisor.which_children(sup), is_pid(pid), id != :undefined, not match?({Dolphin.Instance, _}, id), reduce: [] do
-        acc -> acc ++ if(type == :supervisor, do: static_tree(pid), else: [pid])
-      end
+    [
+      sup
+      | for {id, pid, type, _} <- Supervisor.which_children(sup), is_pid(pid), id != :undefined, not match?({Dolphin.Instance, _}, id), reduce: [] do
+          acc -> if(type == :supervisor, do: static_tree(pid), else: [pid]) ++ acc
+        end
+    ]
   end
 end

@@ -331,8 +331,7 @@ defmodule Dolphin.Console.Vehicle do
       case Vehicles.param_list(id) do
         {:ok, list} ->
           shown = Enum.filter(list, &String.contains?(&1.name, to_string(filter)))
-          width = shown |> Enum.map(&String.length(&1.name)) |> Enum.max(fn -> 0 end)
-          Enum.each(shown, &say(String.pad_trailing(&1.name, width) <> "  " <> ParamProtocol.show(&1.value)))
+          Enum.each(ParamProtocol.listing(shown), &say/1)
           say("#{length(shown)} of #{length(list)} parameters")
 
         {:error, e} ->

@@ -43,19 +43,21 @@ defmodule Dolphin.Sim.Companion do
   def value_name(model), do: @models |> Map.fetch!(model) |> elem(0)
 
   @doc """
-  A companion with sensors `sensors` in `world`; options `rate_hz` (default
-  2), `noise` (σ for every sensor, or a map by model), `seed` (any term:
+  A companion with sensors `sensors` in `world`; options `rate_hz`, `noise`
+  (σ for every sensor, or a map by model), each by default the world's
+  `sensors` section's, else 2 Hz and each model's noise; `seed` (any term:
   each vehicle's its own, so that two vehicles side by side read apart).
   """
-  @spec new([model()], World.t(), keyword()) :: t()
+  @spec new([model()], World.t() | nil, keyword()) :: t()
   def new(sensors, world, opts \\ []) do
-    noise = Keyword.get(opts, :noise)
+    world = world || %World{}
+    noise = Keyword.get(opts, :noise) || Map.get(world.sensing, :noise)
     noise = Map.new(sensors, fn m -> {m, noise_of(noise, m)} end)
-    rate = Keyword.get(opts, :rate_hz, 2)
+    rate = Keyword.get(opts, :rate_hz) || Map.get(world.sensing, :rate_hz, 2)
 
     %__MODULE__{
       sensors: Enum.uniq(sensors),
-      world: world || %World{},
+      world: world,
       period_ms: max(round(1000 / rate), 1),
       noise: noise,
       rand: :rand.seed_s(:exsss, {:erlang.phash2(Keyword.get(opts, :seed, 1)), 191, length(sensors)})

@@ -65,15 +65,12 @@ defmodule Dolphin.Sim.Sidecar do
 
     case :gen_udp.open(port, [:binary, active: 100, ip: ip]) do
       {:ok, socket} ->
-        # The world's "sensors" section, unless the options say otherwise.
-        world = Keyword.get(opts, :world) || %Dolphin.Sim.World{}
-
         s = %{
           socket: socket,
           parser: %{},
           sensors: Keyword.get(opts, :sensors, [:smoke]),
-          world: world,
-          companion_opts: [rate_hz: Keyword.get_lazy(opts, :rate_hz, fn -> Map.get(world.sensing, :rate_hz, 2) end), noise: Keyword.get_lazy(opts, :noise, fn -> Map.get(world.sensing, :noise) end)],
+          world: Keyword.get(opts, :world) || %Dolphin.Sim.World{},
+          companion_opts: [rate_hz: Keyword.get(opts, :rate_hz), noise: Keyword.get(opts, :noise)],
           seed: Keyword.get(opts, :seed, 1),
           peers: %{}
         }

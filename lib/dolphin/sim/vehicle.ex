@@ -86,7 +86,7 @@ defmodule Dolphin.Sim.Vehicle do
   defp companion(opts, seed) do
     case Keyword.get(opts, :sensors, []) do
       [] -> nil
-      sensors -> Dolphin.Sim.Companion.new(sensors, Keyword.get(opts, :world), rate_hz: Keyword.get(opts, :sensor_rate_hz, 2), noise: Keyword.get(opts, :sensor_noise), seed: {seed, key(opts)})
+      sensors -> Dolphin.Sim.Companion.new(sensors, Keyword.get(opts, :world), rate_hz: Keyword.get(opts, :sensor_rate_hz), noise: Keyword.get(opts, :sensor_noise), seed: {seed, key(opts)})
     end
   end
 

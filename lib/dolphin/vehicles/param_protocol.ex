@@ -112,6 +112,19 @@ defmodule Dolphin.Vehicles.ParamProtocol do
   def show(value) when is_float(value) and abs(value) >= 1.0e-4 and abs(value) < 1.0e15, do: :erlang.float_to_binary(value, [{:decimals, 6}, :compact])
   def show(value) when is_float(value), do: :erlang.float_to_binary(value, [:short])
 
+  @doc """
+  Parameters (`%{name, value}`) as lines of a listing: names in a column,
+  values (`show/1`) after them.
+
+      iex> Dolphin.Vehicles.ParamProtocol.listing([%{name: "RTL_ALT", value: 1500.0}, %{name: "FENCE_ENABLE", value: 0}])
+      ["RTL_ALT       1500", "FENCE_ENABLE  0"]
+  """
+  @spec listing([%{name: String.t(), value: number()}]) :: [String.t()]
+  def listing(params) do
+    width = params |> Enum.map(&String.length(&1.name)) |> Enum.max(fn -> 0 end)
+    Enum.map(params, &(String.pad_trailing(&1.name, width) <> "  " <> show(&1.value)))
+  end
+
   # Typed (`typed/2`) when the caller asked for it.
   defp answer(%{typed: true}, v, kept), do: typed(kept, v.param_type)
   defp answer(_data, _v, kept), do: kept

@@ -127,9 +127,7 @@ defmodule Mix.Tasks.Dolphin.Param do
   defp list(id, filter) do
     with {:ok, all} <- fetch(id) do
       shown = Enum.filter(all, &String.contains?(&1.name, filter))
-      width = shown |> Enum.map(&String.length(&1.name)) |> Enum.max(fn -> 0 end)
-      lines = Enum.map(shown, &(String.pad_trailing(&1.name, width) <> "  " <> ParamProtocol.show(&1.value)))
-      {:ok, Enum.join(lines ++ ["vehicle #{id}: #{length(shown)} of #{length(all)} parameters"], "\n")}
+      {:ok, Enum.join(ParamProtocol.listing(shown) ++ ["vehicle #{id}: #{length(shown)} of #{length(all)} parameters"], "\n")}
     end
   end
 
