@@ -69,6 +69,41 @@ defmodule Dolphin.Examples.FireWatchTest do
     assert run.disarmed_at_end
   end
 
+  test "a battery runs low while a copter looks at the smoke: the look and the other's survey are stopped, both go home and land", %{tmp_dir: dir} do
+    # The example's Listing 3 branch. Its pack cannot drain from 90 % to 30 %
+    # in one survey: the other copter's pack is made to fail (25 %) the
+    # moment the detection is announced, while the look is on its way.
+    Dolphin.Events.subscribe()
+    on_exit(fn -> Dolphin.Events.unsubscribe() end)
+    task = Task.async(fn -> ExampleRun.run(dir, "fire_watch", "-low", ["--sim", "copter:2+smoke", "--world", @world, "--speedup", "20"], nil) end)
+    %{sent: sent} = receive_event(&match?(%{event: :sensor_threshold, sent: s} when is_integer(s), &1))
+    [other] = [1, 2] -- [sent]
+    :ok = Dolphin.Sim.set_battery(other, 0.25)
+    run = Task.await(task, 600_000)
+
+    assert run.code == 0, run.output
+    assert run.result == "done"
+    assert run.output =~ "message: a battery is low: both go home"
+    assert run.output =~ "message: fire watch over"
+
+    missions = for %{"event" => "task_finished", "kind" => "mission"} = e <- run.events, do: {e["name"], e["vehicle"], e["result"]}
+    why = "the missions: #{inspect(missions)}\n#{run.output}"
+    # The look, never finished, and the other's survey stopped by the low battery; then each flew home.
+    refute {"Look at the smoke", sent, "done"} in missions, why
+    assert [{_, ^other, "stopped"}] = for({"Survey " <> _, ^other, _} = m <- missions, do: m), why
+    assert {"Home", sent, "done"} in missions, why
+    assert {"Home", other, "done"} in missions, why
+    assert run.disarmed_at_end
+  end
+
+  defp receive_event(fun) do
+    receive do
+      {:dolphin, :events, e} -> if fun.(e), do: e, else: receive_event(fun)
+    after
+      300_000 -> flunk("no such event in 5 minutes")
+    end
+  end
+
   test "a fleet file gives a simulated vehicle its sensors: the pick finds the one that carries smoke", %{tmp_dir: dir} do
     script = Path.join(dir, "who_smells.exs")
 
