@@ -20,29 +20,68 @@ defmodule Dolphin.Examples.CrossingPathsTest do
     :ok
   end
 
-  defp kept_apart!(run) do
+  # `out_of_step`: on ArduCopter SITL on a loaded host one copter may take
+  # off seconds after the other (each SITL process keeps its own pace), and
+  # then they cross apart: with no hold, the log must show that the
+  # monitor's own judgement never saw them heading within its limit. (In
+  # step they graze it: 19.6 m ahead of them when the later one is held.)
+  defp kept_apart!(run, out_of_step \\ :never) do
     assert run.code == 0, run.output
     assert run.result == "done"
+    {:ok, log} = Dolphin.Report.FlightLog.read_file(run.tlog)
 
     # The later one held, once, for the other; then went on.
-    assert [hold] = for(%{"event" => "separation_hold"} = e <- run.events, do: e)
-    assert [clear] = for(%{"event" => "separation_clear"} = e <- run.events, do: e)
-    assert {clear["vehicle"], clear["other"]} == {hold["vehicle"], hold["other"]}
-    # A conflict predicted within the monitor's 8 s: the least distance ahead
-    # is within the limit (at its edge when the two graze it, 20.0 once rounded).
-    assert hold["in_s"] <= 8 and hold["closest"] <= hold["limit_m"], "the hold: #{inspect(hold)}"
-    assert clear["held_ms"] >= 1_000
+    case for(%{"event" => "separation_hold"} = e <- run.events, do: e) do
+      [] when out_of_step == :may_be ->
+        # The monitor's 20 m, less a metre for the log's samples against the telemetry it judged.
+        refute conflict_in_log?(log, 19.0), "no hold, though the log shows the two heading within 19 m of each other"
+
+      holds ->
+        assert [hold] = holds
+        assert [clear] = for(%{"event" => "separation_clear"} = e <- run.events, do: e)
+        assert {clear["vehicle"], clear["other"]} == {hold["vehicle"], hold["other"]}
+        # A conflict predicted within the monitor's 8 s: the least distance ahead
+        # is within the limit (at its edge when the two graze it, 20.0 once rounded).
+        assert hold["in_s"] <= 8 and hold["closest"] <= hold["limit_m"], "the hold: #{inspect(hold)}"
+        assert clear["held_ms"] >= 1_000
+    end
 
     # Both missions flown to their end.
     assert [%{"result" => "done"}, %{"result" => "done"}] = for(%{"event" => "task_finished", "kind" => "mission"} = e <- run.events, do: e)
     assert run.disarmed_at_end
 
     # Never within 20 m across while within 10 m in height, measured from the log.
-    {:ok, log} = Dolphin.Report.FlightLog.read_file(run.tlog)
     %{least: least, series: series} = Dolphin.Report.Separation.closest(log)
     assert length(series) > 50
     assert least.across > 20, "the two came #{Float.round(least.across, 1)} m apart at #{Float.round(least.at_s, 1)} s"
     least
+  end
+
+  # Whether, at any moment of the log with both in the air, the monitor's
+  # judgement (Dolphin.Separation.Prediction: each flying on at its
+  # velocity for 8 s of clock time) saw the two come within `within_m`
+  # across at the same height.
+  defp conflict_in_log?(log, within_m) do
+    k = Dolphin.Report.FlightLog.speedup(log)
+    # {real s, lat, lon, height, north and east velocity per real second}, from 5 m up.
+    [a, b] =
+      for v <- Map.values(log.vehicles), do: for({ts, lat, lon, rel_mm, vx, vy} <- v.positions, rel_mm > 5_000, do: {ts / 1.0e6, lat / 1.0e7, lon / 1.0e7, rel_mm / 1000, vx / 100 * k, vy / 100 * k})
+
+    plane = Dolphin.Geo.tangent_plane(%{lat: elem(hd(a), 1), lon: elem(hd(a), 2)})
+    limits = %{Dolphin.Separation.default_limits() | horizontal: within_m}
+
+    # Where a sample puts its vehicle at `at`, and how it moves.
+    motion = fn {t, lat, lon, h, vn, ve}, at ->
+      {n, e} = Dolphin.Geo.to_tangent(plane, lat, lon)
+      {{n + vn * (at - t), e + ve * (at - t), h}, {vn, ve, 0.0}}
+    end
+
+    Enum.any?(a, fn {t, _, _, _, _, _} = sample ->
+      case b |> Enum.take_while(&(elem(&1, 0) <= t)) |> List.last() do
+        {tb, _, _, _, _, _} = other when t - tb < 1.0 -> match?({:conflict, _, _}, Dolphin.Separation.Prediction.conflict(motion.(sample, t), motion.(other, t), limits, 8 / k))
+        _ -> false
+      end
+    end)
   end
 
   test "the check finds the conflict at its line; flown on the simulator, the monitor keeps the two apart", %{tmp_dir: dir} do
@@ -83,7 +122,7 @@ defmodule Dolphin.Examples.CrossingPathsTest do
   if Dolphin.SITL.available?(:copter) do
     @tag :sitl
     test "on ArduCopter SITL: held, let go, and kept apart as on the simulator", %{tmp_dir: dir} do
-      kept_apart!(ExampleRun.run(dir, "crossing_paths", "-sitl", ["--sitl", "2", "--speedup", "5"], nil))
+      kept_apart!(ExampleRun.run(dir, "crossing_paths", "-sitl", ["--sitl", "2", "--speedup", "5"], nil), :may_be)
     end
   end
 end

@@ -19,7 +19,11 @@ defmodule Dolphin.Test.ScriptedVehicle do
   unknown name ignored.
 
   Options: `:port` (the ground station's), `:sysid`, `:limit` (items), `:loss`,
-  `:duplicate`, `:reorder` (probabilities), `:seed`, `:speedup` (of its own
+  `:duplicate`, `:reorder` (probabilities), `:silent` (it hears, and counts
+  what it hears, but its answers are lost: only heartbeats come),
+  `:timesync` (answers TIMESYNC as ArduPilot does, so that the ground
+  station measures the link; default false: its loss is then judged
+  total, and every exchange given the most tries), `:seed`, `:speedup` (of its own
   timers, to match `Dolphin.Clock`), `:params` (`%{name => {value, type,
   range}}`, range `{low, high}` or nil; default `params(300)`).
   """
@@ -78,8 +82,9 @@ defmodule Dolphin.Test.ScriptedVehicle do
       socket: socket,
       port: Keyword.fetch!(opts, :port),
       sysid: Keyword.fetch!(opts, :sysid),
-      faults: Map.new(Keyword.take(opts, [:loss, :duplicate, :reorder])),
+      faults: Map.new(Keyword.take(opts, [:loss, :duplicate, :reorder, :silent])),
       speedup: Keyword.get(opts, :speedup, 1),
+      timesync: Keyword.get(opts, :timesync, false),
       missions: MissionServer.new(home: false, limit: Keyword.get(opts, :limit, 700)),
       # The mission server's timer: which one is current.
       timer: nil,
@@ -192,6 +197,8 @@ defmodule Dolphin.Test.ScriptedVehicle do
     end
   end
 
+  defp handle_frame(%M.Timesync{tc1: 0, ts1: ts1}, %{timesync: true} = s), do: transmit(s, %M.Timesync{tc1: System.os_time(:nanosecond), ts1: ts1})
+
   defp handle_frame(_other, s), do: s
 
   defp names(params), do: params |> Map.keys() |> Enum.sort()
@@ -235,6 +242,7 @@ defmodule Dolphin.Test.ScriptedVehicle do
 
     cond do
       not faults? -> send_now(s, bytes)
+      Map.get(s.faults, :silent, false) -> s
       :rand.uniform() < Map.get(s.faults, :loss, 0) -> s
       :rand.uniform() < Map.get(s.faults, :reorder, 0) and s.held == nil -> hold(s, bytes)
       true -> s |> send_now(bytes) |> maybe_duplicate(bytes) |> flush_held()

@@ -125,7 +125,7 @@ defmodule Dolphin.Vehicles.CommandProtocol do
   # A silence shorter than the least patience is not given up on, however
   # many tries went out in it (unless the caller fixed the attempts).
   defp patient?(%{fixed_attempts?: true}), do: false
-  defp patient?(data), do: System.monotonic_time(:millisecond) - data.first_sent_at < Retry.patience_real_ms(0)
+  defp patient?(data), do: Retry.patient?(data.first_sent_at)
 
   defp finish(data, reply) do
     if data.reply_to, do: :gen_statem.reply(data.reply_to, reply)

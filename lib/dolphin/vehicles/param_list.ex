@@ -9,7 +9,8 @@ defmodule Dolphin.Vehicles.ParamList do
   (PARAM_REQUEST_READ), fifty at a time, again and again while each round
   brings some: a lossy link costs the missing ones, never a restart. It
   ends with every parameter, or with an error once `attempts` rounds in a
-  row bring nothing.
+  row bring nothing (and, unless the attempts were given, the least
+  patience has passed since anything came: `Dolphin.Vehicles.Retry.patient?/1`).
 
   The reply is `{:ok, [%{name, value, type, index}]}` in index order —
   `value` typed by MAV_PARAM_TYPE (an integer for the integer types,
@@ -53,7 +54,24 @@ defmodule Dolphin.Vehicles.ParamList do
     attempts = Keyword.get_lazy(opts, :attempts, fn -> Retry.attempts(Keyword.get(opts, :loss)) end)
     # Once values come, a pause this long between two of them ends the round.
     gap = max(div(wait, 4), 100)
-    data = Map.merge(request, %{attempts: attempts, wait_ms: wait, first_ms: max(wait, @least_first_ms), gap_ms: gap, count: nil, values: %{}, fruitless: 0, received: 0, rounds: 1, asked: []})
+    # Given attempts are exact; the link's are tried for at least the least patience too.
+    progress = if Keyword.has_key?(opts, :attempts), do: nil, else: System.monotonic_time(:millisecond)
+
+    data =
+      Map.merge(request, %{
+        attempts: attempts,
+        progress_at: progress,
+        wait_ms: wait,
+        first_ms: max(wait, @least_first_ms),
+        gap_ms: gap,
+        count: nil,
+        values: %{},
+        fruitless: 0,
+        received: 0,
+        rounds: 1,
+        asked: []
+      })
+
     data.send.(%M.ParamRequestList{target_system: data.sysid, target_component: 1})
     {:ok, :listing, data, [{:state_timeout, data.first_ms, :quiet}]}
   end
@@ -89,10 +107,11 @@ defmodule Dolphin.Vehicles.ParamList do
   # nothing new counts against the attempts.
   defp next_round(data) do
     fruitless = if data.received == 0, do: data.fruitless + 1, else: 0
-    data = %{data | fruitless: fruitless, received: 0, rounds: data.rounds + 1}
+    progress = if data.received > 0 and data.progress_at != nil, do: System.monotonic_time(:millisecond), else: data.progress_at
+    data = %{data | fruitless: fruitless, received: 0, rounds: data.rounds + 1, progress_at: progress}
 
     cond do
-      fruitless >= data.attempts ->
+      fruitless >= data.attempts and (progress == nil or not Retry.patient?(progress)) ->
         missing = if data.count, do: data.count - map_size(data.values), else: nil
         detail = if missing, do: "#{missing} of #{data.count} parameters not received", else: "no parameter received"
         finish(data, {:error, %ParamError{param: "(the list)", vehicle: data.vehicle, result: :timeout, attempts: data.rounds - 1, detail: detail}})

@@ -24,7 +24,9 @@ defmodule Dolphin.Vehicles.ParamProtocol do
   Starts the protocol, linked to the caller (the vehicle process).
   `request`: `%{sysid, vehicle, name, value (nil: a read), send, reply_to}`,
   and `typed: true` for the value typed by its MAV_PARAM_TYPE (`typed/2`).
-  Options as `Dolphin.Vehicles.CommandProtocol.start_link/2`'s: `:attempts`,
+  Options as `Dolphin.Vehicles.CommandProtocol.start_link/2`'s: `:attempts`
+  (given, exact; else as many as the link's `:loss` calls for, and as many
+  more as fit in the least patience, `Dolphin.Vehicles.Retry.patient?/1`),
   `:loss`, `:rtt_ms`, `:ack_timeout_ms`.
   """
   @spec start_link(map(), keyword()) :: :gen_statem.start_ret()
@@ -36,7 +38,10 @@ defmodule Dolphin.Vehicles.ParamProtocol do
   @impl true
   def init({request, opts}) do
     wait = Retry.answer_wait(Keyword.get(opts, :ack_timeout_ms, 1_500), Keyword.get(opts, :rtt_ms))
-    data = Map.merge(request, %{attempts: Keyword.get_lazy(opts, :attempts, fn -> Retry.attempts(Keyword.get(opts, :loss)) end), wait_ms: wait, sent: 0, other: nil})
+    attempts = Keyword.get_lazy(opts, :attempts, fn -> Retry.attempts(Keyword.get(opts, :loss)) end)
+    # Given attempts are exact; the link's are tried for at least the least patience too.
+    first = if Keyword.has_key?(opts, :attempts), do: nil, else: System.monotonic_time(:millisecond)
+    data = Map.merge(request, %{attempts: attempts, first_sent_at: first, wait_ms: wait, sent: 0, other: nil})
     {:ok, {:waiting, 1}, data}
   end
 
@@ -48,7 +53,7 @@ defmodule Dolphin.Vehicles.ParamProtocol do
 
   def handle_event(:state_timeout, :resend, {:waiting, n}, data) do
     cond do
-      n < data.attempts -> {:next_state, {:waiting, n + 1}, data}
+      n < data.attempts or (data.first_sent_at != nil and Retry.patient?(data.first_sent_at)) -> {:next_state, {:waiting, n + 1}, data}
       # Answered only with another value: that is what it keeps.
       data.other != nil -> refused(data, elem(data.other, 0))
       true -> finish(data, {:error, %ParamError{param: data.name, vehicle: data.vehicle, result: :timeout, asked: data.value, attempts: n}})

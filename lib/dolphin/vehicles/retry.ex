@@ -56,6 +56,17 @@ defmodule Dolphin.Vehicles.Retry do
   def patience_real_ms(clock_ms, speedup \\ Clock.speedup()), do: max(Clock.to_real_ms(clock_ms, speedup), @least_patience_real_ms)
 
   @doc """
+  Whether an exchange whose latest progress (its first request, or the
+  latest answer that brought something) was at `since` (monotonic real ms)
+  is still within the least patience: a silence shorter than that is not
+  given up on, however many tries went out in it. A link's loss is measured
+  over the latest twenty seconds or so: one that has just got worse shows
+  less loss than it has, and asks for fewer tries than it needs.
+  """
+  @spec patient?(integer()) :: boolean()
+  def patient?(since), do: System.monotonic_time(:millisecond) - since < patience_real_ms(0)
+
+  @doc """
   The round-trip loss of a link whose loss is `loss_in` towards the ground
   station and `loss_out` towards the vehicle (nil if either is unknown).
 

@@ -81,6 +81,30 @@ defmodule Dolphin.Vehicles.ParamProtocolTest do
     assert Exception.message(e) =~ "did you mean P9_FRESH"
   end
 
+  # A link is measured over its latest twenty seconds or so: one that has
+  # just got worse asks for fewer tries than it needs. However few, a read
+  # goes on for the least patience (5 s of real time), as a command does;
+  # at 20x a try on a measured link waits a few tens of milliseconds.
+  test "a link that has just got worse: a read goes on for the least patience, past the tries its measured loss asks for", %{port: port} do
+    Dolphin.Clock.set_speedup(20)
+    {sysid, vehicle} = vehicle(port, timesync: true)
+    # Measured clean: five tries (a few more once the silence below begins to count).
+    Wait.until(fn -> match?({:ok, %{link: %{loss_out: loss}}} when loss != nil, Dolphin.Vehicles.Views.get(sysid)) end)
+    tries = Dolphin.Vehicles.Retry.attempts(0.15)
+
+    heard = fn kind ->
+      n = Process.get(kind, 0) + Enum.count(ScriptedVehicle.take_param_requests(vehicle), &match?({^kind, _}, &1))
+      Process.put(kind, n)
+      n
+    end
+
+    ScriptedVehicle.set_faults(vehicle, silent: true)
+    read = Task.async(fn -> Vehicles.param(sysid, "P2_MAX", nil, []) end)
+    Wait.until(fn -> heard.(:name) > tries + 2 end)
+    ScriptedVehicle.set_faults(vehicle, [])
+    assert {:ok, -6} = Task.await(read)
+  end
+
   # The mission protocol's promise, for parameters: up to 30 % loss each way,
   # 10 % duplicates and 10 % reordering, the list comes whole and exact, and
   # every value set is the one read back, every time.
