@@ -37,9 +37,10 @@ defmodule Dolphin.Separation do
   where it was) once, for a second of clock time, no vehicle in the air is
   closer than one and a half times the separation and none would come
   closer than that within the horizon were it to fly on as it was flying
-  when held (a vehicle itself held for this one does not count: it waits
-  for this one to go); `separation_clear` says so, with how long it was
-  held. The hold counts in its task's time.
+  when held (a vehicle itself held, for this one or for another, whose
+  task started later does not count: it waits for this one to go, so that
+  of several held together the first goes first); `separation_clear` says
+  so, with how long it was held. The hold counts in its task's time.
 
   Vehicles on the ground are not kept apart (a landing beside a parked
   vehicle is the pre-flight check's to judge); a submarine is kept apart
@@ -314,10 +315,12 @@ defmodule Dolphin.Separation do
   # to were it to fly on as it flew when held.
   defp clear?(%Flying{view: view}, _others, _now) when view == nil or view.position == nil, do: true
 
-  # (One held for this vehicle waits for it to go: it does not keep it held,
-  # or two would wait for each other.)
+  # (One held that waits for this vehicle to go — held for it, or due to
+  # give way to it, its task having started later — does not keep it held,
+  # or two would wait for each other: two held for a third at one place, a
+  # pad two take off from as a third lands on it, would stay held for ever.)
   defp clear?(f, others, now) do
-    others = Enum.reject(others, &match?(%Flying{held: %{other: id}} when id == f.id, &1))
+    others = Enum.reject(others, &waits_for?(&1, f))
     plane = Geo.tangent_plane(f.view.position)
     # From where it is across, at the height it was held at (one that moved
     # aside goes back to it as it goes on).
@@ -330,6 +333,9 @@ defmodule Dolphin.Separation do
       Prediction.apart?(going_on, theirs, limits) and Prediction.conflict(going_on, theirs, limits, @horizon_s) == :clear
     end)
   end
+
+  defp waits_for?(%Flying{held: %{other: other}} = o, f), do: other == f.id or later?(o, f)
+  defp waits_for?(_other, _f), do: false
 
   defp let_go(s, f, others, now) do
     send(f.pid, {:separation, :clear, %{vehicle: f.id}})

@@ -246,6 +246,28 @@ defmodule Dolphin.SeparationTest do
     refute Map.has_key?(Separation.held(), a)
   end
 
+  test "two held for a third at one place: once it is gone, the one whose task started first goes on, then the other once that one has climbed away", %{ids: {a, b, c}} do
+    # c, flying none of our missions, comes down 9 m over the pad that a and
+    # b, on the ground side by side and armed, are taking off from: both hold for it.
+    flying(c, 0, 0, {0.0, 0.0, -1.0}, up: 9, landed: :landing)
+    executor(a, 1_000)
+    executor(b, 2_000)
+    flying(b, 0, 1, {0.0, 0.0, 0.0}, up: 0, landed: :takeoff)
+    assert_receive {:separation, :hold, %{vehicle: ^b, other: ^c}}
+    flying(a, 0, 0, {0.0, 0.0, 0.0}, up: 0, landed: :takeoff)
+    assert_receive {:separation, :hold, %{vehicle: ^a, other: ^c}}
+
+    # c lands and disarms: a goes on (b, whose task started later, waits for it), b does not yet.
+    flying(c, 0, 0, {0.0, 0.0, 0.0}, up: 0, landed: :on_ground, armed?: false)
+    assert_receive {:separation, :clear, %{vehicle: ^a}}, 5_000
+    refute_received {:separation, :clear, %{vehicle: ^b}}
+    assert Map.has_key?(Separation.held(), b)
+
+    # a climbs away: b goes on.
+    flying(a, 0, 0, {0.0, 0.0, 2.5}, up: 30)
+    assert_receive {:separation, :clear, %{vehicle: ^b}}, 5_000
+  end
+
   test "two already too close but moving apart are left to part", %{ids: {a, b, _c} = ids} do
     executor(a, 1_000)
     executor(b, 2_000)
