@@ -71,8 +71,7 @@ defmodule Dolphin.Vehicles.CommandProtocol do
       Map.merge(request, %{
         attempts: Keyword.get_lazy(opts, :attempts, fn -> Retry.attempts(Keyword.get(opts, :loss)) end),
         # Given attempts are exact; the link's are tried for at least the least patience too.
-        fixed_attempts?: Keyword.has_key?(opts, :attempts),
-        first_sent_at: System.monotonic_time(:millisecond),
+        first_sent_at: Retry.patience_from(opts),
         wait_ms: Retry.answer_wait(Keyword.get(opts, :ack_timeout_ms, 1_500), Keyword.get(opts, :rtt_ms)),
         progress_timeout_ms: Keyword.get(opts, :progress_timeout_ms, 30_000),
         sent: 0
@@ -90,7 +89,7 @@ defmodule Dolphin.Vehicles.CommandProtocol do
   end
 
   def handle_event(:state_timeout, :resend, {:waiting, n}, data) do
-    if n < data.attempts or patient?(data),
+    if n < data.attempts or Retry.patient?(data.first_sent_at),
       do: {:next_state, {:waiting, n + 1}, data},
       else: finish(data, {:error, error(data, :timeout, nil)})
   end
@@ -121,11 +120,6 @@ defmodule Dolphin.Vehicles.CommandProtocol do
     detail = if param2 != 0, do: "result_param2 #{param2}"
     finish(data, {:error, error(data, result(n), detail)})
   end
-
-  # A silence shorter than the least patience is not given up on, however
-  # many tries went out in it (unless the caller fixed the attempts).
-  defp patient?(%{fixed_attempts?: true}), do: false
-  defp patient?(data), do: Retry.patient?(data.first_sent_at)
 
   defp finish(data, reply) do
     if data.reply_to, do: :gen_statem.reply(data.reply_to, reply)

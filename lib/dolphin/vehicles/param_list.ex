@@ -54,13 +54,12 @@ defmodule Dolphin.Vehicles.ParamList do
     attempts = Keyword.get_lazy(opts, :attempts, fn -> Retry.attempts(Keyword.get(opts, :loss)) end)
     # Once values come, a pause this long between two of them ends the round.
     gap = max(div(wait, 4), 100)
-    # Given attempts are exact; the link's are tried for at least the least patience too.
-    progress = if Keyword.has_key?(opts, :attempts), do: nil, else: System.monotonic_time(:millisecond)
 
     data =
       Map.merge(request, %{
         attempts: attempts,
-        progress_at: progress,
+        # Given attempts are exact; the link's are tried for at least the least patience too.
+        progress_at: Retry.patience_from(opts),
         wait_ms: wait,
         first_ms: max(wait, @least_first_ms),
         gap_ms: gap,
@@ -107,11 +106,11 @@ defmodule Dolphin.Vehicles.ParamList do
   # nothing new counts against the attempts.
   defp next_round(data) do
     fruitless = if data.received == 0, do: data.fruitless + 1, else: 0
-    progress = if data.received > 0 and data.progress_at != nil, do: System.monotonic_time(:millisecond), else: data.progress_at
+    progress = if data.received > 0 and data.progress_at, do: System.monotonic_time(:millisecond), else: data.progress_at
     data = %{data | fruitless: fruitless, received: 0, rounds: data.rounds + 1, progress_at: progress}
 
     cond do
-      fruitless >= data.attempts and (progress == nil or not Retry.patient?(progress)) ->
+      fruitless >= data.attempts and not Retry.patient?(progress) ->
         missing = if data.count, do: data.count - map_size(data.values), else: nil
         detail = if missing, do: "#{missing} of #{data.count} parameters not received", else: "no parameter received"
         finish(data, {:error, %ParamError{param: "(the list)", vehicle: data.vehicle, result: :timeout, attempts: data.rounds - 1, detail: detail}})

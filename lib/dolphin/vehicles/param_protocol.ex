@@ -40,8 +40,7 @@ defmodule Dolphin.Vehicles.ParamProtocol do
     wait = Retry.answer_wait(Keyword.get(opts, :ack_timeout_ms, 1_500), Keyword.get(opts, :rtt_ms))
     attempts = Keyword.get_lazy(opts, :attempts, fn -> Retry.attempts(Keyword.get(opts, :loss)) end)
     # Given attempts are exact; the link's are tried for at least the least patience too.
-    first = if Keyword.has_key?(opts, :attempts), do: nil, else: System.monotonic_time(:millisecond)
-    data = Map.merge(request, %{attempts: attempts, first_sent_at: first, wait_ms: wait, sent: 0, other: nil})
+    data = Map.merge(request, %{attempts: attempts, first_sent_at: Retry.patience_from(opts), wait_ms: wait, sent: 0, other: nil})
     {:ok, {:waiting, 1}, data}
   end
 
@@ -53,7 +52,7 @@ defmodule Dolphin.Vehicles.ParamProtocol do
 
   def handle_event(:state_timeout, :resend, {:waiting, n}, data) do
     cond do
-      n < data.attempts or (data.first_sent_at != nil and Retry.patient?(data.first_sent_at)) -> {:next_state, {:waiting, n + 1}, data}
+      n < data.attempts or Retry.patient?(data.first_sent_at) -> {:next_state, {:waiting, n + 1}, data}
       # Answered only with another value: that is what it keeps.
       data.other != nil -> refused(data, elem(data.other, 0))
       true -> finish(data, {:error, %ParamError{param: data.name, vehicle: data.vehicle, result: :timeout, asked: data.value, attempts: n}})

@@ -56,14 +56,24 @@ defmodule Dolphin.Vehicles.Retry do
   def patience_real_ms(clock_ms, speedup \\ Clock.speedup()), do: max(Clock.to_real_ms(clock_ms, speedup), @least_patience_real_ms)
 
   @doc """
-  Whether an exchange whose latest progress (its first request, or the
-  latest answer that brought something) was at `since` (monotonic real ms)
-  is still within the least patience: a silence shorter than that is not
-  given up on, however many tries went out in it. A link's loss is measured
-  over the latest twenty seconds or so: one that has just got worse shows
-  less loss than it has, and asks for fewer tries than it needs.
+  Where an exchange started with options `opts` counts its least patience
+  from (`patient?/1`): now (monotonic real ms), or nil when the caller gave
+  its `:attempts` — those are exact.
   """
-  @spec patient?(integer()) :: boolean()
+  @spec patience_from(keyword()) :: integer() | nil
+  def patience_from(opts), do: if(Keyword.has_key?(opts, :attempts), do: nil, else: System.monotonic_time(:millisecond))
+
+  @doc """
+  Whether an exchange whose latest progress (its first request, or the
+  latest answer that brought something) was at `since` (monotonic real ms,
+  nil: its attempts were given, no patience) is still within the least
+  patience: a silence shorter than that is not given up on, however many
+  tries went out in it. A link's loss is measured over the latest twenty
+  seconds or so: one that has just got worse shows less loss than it has,
+  and asks for fewer tries than it needs.
+  """
+  @spec patient?(integer() | nil) :: boolean()
+  def patient?(nil), do: false
   def patient?(since), do: System.monotonic_time(:millisecond) - since < patience_real_ms(0)
 
   @doc """
