@@ -238,10 +238,15 @@ defmodule Dolphin.Sim.Copter do
   def resolve_alt(_c, alt) when is_number(alt), do: alt * 1.0
 
   @doc false
-  def set_home(c, %{lat: lat, lon: lon, alt: alt}) do
-    c = %{c | home: %{lat: lat, lon: lon, alt: resolve_alt(c, alt)}}
+  # A new home, announced with HOME_POSITION.
+  def set_home(c, point) do
+    c = put_home(c, point)
     say(c, Streams.message(c, 242))
   end
+
+  @doc false
+  # A new home, not announced yet.
+  def put_home(c, %{lat: lat, lon: lon, alt: alt}), do: %{c | home: %{lat: lat, lon: lon, alt: resolve_alt(c, alt)}}
 
   # ---------------------------------------------------------------------------
   # Messages from a ground station.

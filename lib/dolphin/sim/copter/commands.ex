@@ -5,7 +5,7 @@ defmodule Dolphin.Sim.Copter.Commands do
   # component when it is addressed to it and the vehicle has one.
 
   import Bitwise
-  import Dolphin.Sim.Copter, only: [say: 2, say: 3, text: 3, in_air?: 1, ready?: 1, home_alt: 1, target_alt: 3, set_home: 2, position: 1]
+  import Dolphin.Sim.Copter, only: [say: 2, say: 3, text: 3, in_air?: 1, ready?: 1, home_alt: 1, target_alt: 3, put_home: 2, position: 1]
 
   alias Dolphin.MAVLink.Ardupilotmega, as: M
   alias Dolphin.Sim.{Copter, MissionServer, Streams}
@@ -28,8 +28,15 @@ defmodule Dolphin.Sim.Copter.Commands do
       {result, c} = Camera.command(c, command, params)
       say(c, ack(from, command, result), @camera)
     else
-      {result, c} = run_command(c, command, params, position)
-      say(c, ack(from, command, result))
+      # What a command asks to be sent goes out after its COMMAND_ACK, as
+      # ArduPilot queues it for its next round of sending (but see 410 below).
+      {result, c, afterwards} =
+        case run_command(c, command, params, position) do
+          {result, c} -> {result, c, []}
+          {result, c, messages} -> {result, c, messages}
+        end
+
+      Enum.reduce(afterwards, say(c, ack(from, command, result)), &say(&2, &1))
     end
   end
 
@@ -96,9 +103,9 @@ defmodule Dolphin.Sim.Copter.Commands do
 
     cond do
       not ready?(c) -> {@failed, c}
-      round(p1) == 1 -> {@accepted, set_home(c, position(c))}
+      round(p1) == 1 -> home_set_after_ack(c, position(c))
       not on_map?(point) -> {@denied, c}
-      true -> {@accepted, set_home(c, point)}
+      true -> home_set_after_ack(c, point)
     end
   end
 
@@ -134,10 +141,20 @@ defmodule Dolphin.Sim.Copter.Commands do
     end
   end
 
-  # MAV_CMD_REQUEST_MESSAGE, MAV_CMD_GET_HOME_POSITION, MAV_CMD_REQUEST_AUTOPILOT_CAPABILITIES
+  # MAV_CMD_REQUEST_MESSAGE, MAV_CMD_REQUEST_AUTOPILOT_CAPABILITIES: the
+  # message after the COMMAND_ACK. The older MAV_CMD_GET_HOME_POSITION sends
+  # HOME_POSITION at once, before it (both seen on ArduCopter SITL): a ground
+  # station that waits for the ACK before it looks for the message misses it
+  # from one, not from the other.
   defp run_command(c, 512, [p1 | _], _), do: request_message(c, round(p1))
-  defp run_command(c, 410, _params, _), do: request_message(c, 242)
   defp run_command(c, 520, _params, _), do: request_message(c, 148)
+
+  defp run_command(c, 410, _params, _) do
+    case request_message(c, 242) do
+      {@accepted, c, [home]} -> {@accepted, say(c, home)}
+      refused -> refused
+    end
+  end
 
   # MAV_CMD_PREFLIGHT_REBOOT_SHUTDOWN (p1 = 1: reboot), refused while armed.
   defp run_command(c, 246, [p1 | _], _) do
@@ -156,8 +173,14 @@ defmodule Dolphin.Sim.Copter.Commands do
   defp request_message(c, msgid) do
     case Streams.message(c, msgid) do
       nil -> {@denied, c}
-      message -> {@accepted, say(c, message)}
+      message -> {@accepted, c, [message]}
     end
+  end
+
+  # A new home, its HOME_POSITION after the COMMAND_ACK.
+  defp home_set_after_ack(c, point) do
+    c = put_home(c, point)
+    {@accepted, c, [Streams.message(c, 242)]}
   end
 
   # A COMMAND_INT carries its point in x/y/z (degE7, metres in its frame);

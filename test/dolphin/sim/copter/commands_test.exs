@@ -17,7 +17,7 @@ defmodule Dolphin.Sim.Copter.CommandsTest do
   defp run(c, command, params, position \\ nil, compid \\ 1) do
     params = Enum.map(params ++ List.duplicate(0.0, 7 - length(params)), &(&1 * 1.0))
     c = Commands.command(c, command, params, position, compid, @gcs)
-    [{from, %M.CommandAck{command: ^command, result: result, target_system: 255, target_component: 190}} | _] = c.out
+    [{from, %M.CommandAck{command: ^command, result: result, target_system: 255, target_component: 190}}] = Enum.filter(c.out, &match?({_, %M.CommandAck{}}, &1))
     {%{c | out: []}, {from, result}}
   end
 
@@ -79,9 +79,14 @@ defmodule Dolphin.Sim.Copter.CommandsTest do
     assert {%{photos: 1}, {1, 0}} = run(ready(), 2000, [0, 0, 1], nil, 100)
   end
 
-  test "requests: a known message is sent, an unknown one denied; unknown commands unsupported" do
-    c = Commands.command(ready(), 512, [242.0 | List.duplicate(0.0, 6)], nil, 1, @gcs)
-    assert [{1, %M.CommandAck{result: 0}}, {1, %M.HomePosition{}}] = c.out
+  # The order is ArduCopter's (SITL): a ground station that reads on only
+  # after the ACK misses what came before it.
+  test "requests: a known message is sent after the ACK (before it for GET_HOME_POSITION), an unknown one denied; unknown commands unsupported" do
+    sent = fn command, params -> Commands.command(ready(), command, params ++ List.duplicate(0.0, 7 - length(params)), nil, 1, @gcs).out |> Enum.reverse() |> Enum.map(&elem(&1, 1).__struct__) end
+    assert sent.(512, [242.0]) == [M.CommandAck, M.HomePosition]
+    assert sent.(520, [1.0]) == [M.CommandAck, M.AutopilotVersion]
+    assert sent.(179, [1.0]) == [M.CommandAck, M.HomePosition]
+    assert sent.(410, []) == [M.HomePosition, M.CommandAck]
     assert {_, {1, 2}} = run(ready(), 512, [9999])
     assert {_, {1, 3}} = run(ready(), 31_000, [])
   end
