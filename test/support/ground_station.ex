@@ -26,12 +26,31 @@ defmodule Dolphin.Test.GroundStation do
     Dolphin.Link.Connection.port(name)
   end
 
-  @doc "A UDP port on 127.0.0.1 nobody listens on now (for a link a test opens later)."
+  # Ports for links opened later are taken below the system's ephemeral
+  # range (32768 and up on Linux): a port the system handed out and took
+  # back would be handed out again, to another test's socket, which would
+  # then hear what was meant for this one's link.
+  @later_ports 20_000..32_767
+
+  @doc """
+  A UDP port on 127.0.0.1 nobody listens on now (for a link a test opens
+  later), outside the range the system hands ephemeral ports from, and a
+  different one at every call in this BEAM.
+  """
   def free_udp_port do
-    {:ok, socket} = :gen_udp.open(0, ip: {127, 0, 0, 1})
-    {:ok, port} = :inet.port(socket)
-    :gen_udp.close(socket)
-    port
+    # Two BEAMs (the suite's parts) start far apart in the range.
+    offset = :erlang.phash2(System.pid(), Enum.count(@later_ports))
+    n = System.unique_integer([:positive, :monotonic])
+    port = @later_ports.first + rem(offset + n, Enum.count(@later_ports))
+
+    case :gen_udp.open(port, ip: {127, 0, 0, 1}) do
+      {:ok, socket} ->
+        :gen_udp.close(socket)
+        port
+
+      {:error, :eaddrinuse} ->
+        free_udp_port()
+    end
   end
 
   @doc "Stops the simulated vehicles and forgets every vehicle the ground station knew."

@@ -10,8 +10,9 @@ defmodule Dolphin.Test.Timings do
       module                                      wall_s  tests_s  tests  file
 
   Beside it, in the same name with `.failures` for `.txt`, one line per test
-  that failed (its file and line, its name, the first line of what went
-  wrong), so that the last lines of a long log can name every failure.
+  that failed (its file and line, its name, and what went wrong, its lines
+  joined, up to 600 characters), so that the last lines of a long log — all
+  a CI report may keep — name every failure and say why.
   """
   use GenServer
 
@@ -63,17 +64,18 @@ defmodule Dolphin.Test.Timings do
   defp record_failure(s, _test), do: s
 
   defp failure_line(%ExUnit.Test{name: name, tags: tags}, what),
-    do: "#{Path.relative_to_cwd(tags[:file] || "?")}:#{tags[:line]} #{name}: #{String.slice(what, 0, 200)}"
+    do: "#{Path.relative_to_cwd(tags[:file] || "?")}:#{tags[:line]} #{name}: #{String.slice(what, 0, 600)}"
 
   defp what_went_wrong(:error, %ExUnit.AssertionError{message: message, expr: expr}, _stack) do
     if expr == ExUnit.AssertionError.no_value(),
-      do: first_line(message),
-      else: first_line(message) <> " " <> first_line(Macro.to_string(expr))
+      do: one_line(message),
+      else: one_line(message) <> " " <> one_line(Macro.to_string(expr))
   end
 
-  defp what_went_wrong(kind, reason, stack), do: first_line(Exception.format_banner(kind, reason, stack))
+  defp what_went_wrong(kind, reason, stack), do: one_line(Exception.format_banner(kind, reason, stack))
 
-  defp first_line(text), do: text |> String.trim() |> String.split("\n", parts: 2) |> hd()
+  # Lines joined with " | ", blank ones and indentation dropped.
+  defp one_line(text), do: text |> String.split("\n", trim: true) |> Enum.map(&String.trim/1) |> Enum.reject(&(&1 == "")) |> Enum.join(" | ")
 
   defp write(%{path: path, modules: modules, failures: failures}) do
     rows =

@@ -51,8 +51,10 @@ defmodule Dolphin.Test.UDPProxySimTest do
     download = Vehicles.download_mission(1)
     stats = UDPProxy.stats(proxy)
 
-    :ok = stop_supervised({:proxy, seed})
+    # The vehicle first: it would go on sending to the proxy's port, which
+    # another test may have by then.
     Dolphin.Test.GroundStation.forget_vehicles()
+    :ok = stop_supervised({:proxy, seed})
 
     exact_download? =
       match?({:ok, back} when length(back) == length(uploaded), download) and
@@ -65,11 +67,15 @@ defmodule Dolphin.Test.UDPProxySimTest do
     if uploaded? and held and exact_download? do
       nil
     else
-      "seed #{seed} (#{inspect(faults)} %): upload #{inspect(upload)}, the vehicle holds the mission: #{held}, " <>
-        "download #{if exact_download?, do: "exact", else: inspect(download)}, " <>
+      "seed #{seed} (#{inspect(faults)} %): upload #{outcome(upload)}, the vehicle holds the mission: #{held}, " <>
+        "download #{if exact_download?, do: "exact", else: outcome(download)}, " <>
         "dropped to the ground station #{stats.to_gcs.dropped}, to the vehicle #{stats.to_vehicle.dropped}"
     end
   end
+
+  defp outcome({:error, error}) when is_exception(error), do: "failed: " <> Exception.message(error)
+  defp outcome({:ok, items}) when is_list(items), do: "#{length(items)} items, not as uploaded: #{inspect(Enum.map(items, &meaning/1), limit: 8)}"
+  defp outcome(other), do: inspect(other)
 
   test "missions go up and come back exactly over up to 30 % loss each way, 10 % duplicates and 10 % reordering", %{gcs_port: gcs_port} do
     uploaded = items(30)
