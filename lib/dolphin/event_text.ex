@@ -53,6 +53,7 @@ defmodule Dolphin.EventText do
     :vehicle_returned,
     :separation_hold,
     :separation_clear,
+    :mission_restarted,
     :sensor_declared,
     :sensor_threshold
   ]
@@ -152,6 +153,16 @@ defmodule Dolphin.EventText do
 
   def event_text(%{event: :separation_clear} = e),
     do: "vehicle #{e.vehicle} goes on after #{Format.seconds(e.held_ms)} held" <> if(e.distance, do: " (vehicle #{e.other} #{e.distance} m away)", else: "")
+
+  def event_text(%{event: :mission_restarted} = e) do
+    why =
+      case to_string(e.reason) do
+        "disarmed_while_held" -> "the autopilot disarmed it on the ground while it was held"
+        _ -> "the autopilot disarmed it on the ground before its take-off"
+      end
+
+    "vehicle #{e.vehicle}: #{inspect(e.name)} armed and started again (#{why})"
+  end
 
   def event_text(%{event: :sensor_declared} = e),
     do: "sensor #{e.sensor}: #{e.source}" <> if(e.unit, do: " in #{e.unit}", else: "") <> if(e.stale_after, do: ", unknown #{Format.seconds(e.stale_after)} after its last reading", else: "")

@@ -36,6 +36,8 @@ defmodule Dolphin.Events do
      "before mission `name` flew, the vehicle was given its fence and confirmed it: `fence` the fence list's items as the autopilot keeps them (`[MAV_CMD, lat×10⁷, lon×10⁷, param1]`: a polygon's corners or a circle and its radius), `rally` its rally points (`[lat×10⁷, lon×10⁷, metres above home]`)"},
     {:separation_hold, [:vehicle, :other, :action, :distance, :height, :closest, :in_s, :limit_m, :limit_height_m],
      "the live separation monitor (`Dolphin.Separation`) holds `vehicle` (`action` `hold`), or, held and the other still coming at it, moves it out of the way (`aside`: a copter twice the vertical separation up or down): it and `other` are `distance` m apart across and `height` m in height, and would have come within the least separation (`limit_m` m across, `limit_height_m` m in height) in `in_s` s (at best `closest` m across); its mission waits, not failed"},
+    {:mission_restarted, [:vehicle, :name, :reason],
+     "the autopilot disarmed the vehicle on the ground before mission `name` took it off the ground, and the mission platform set it to GUIDED, armed it and started the mission again; `reason`: `disarmed_while_held` (held there by the separation monitor, let go since: ArduCopter disarms a copter standing armed in BRAKE) or `disarmed_before_start` (between its arming and the start)"},
     {:separation_clear, [:vehicle, :other, :distance, :held_ms],
      "the way is clear: held `vehicle` goes on with its mission after `held_ms` clock ms; `other` (the vehicle it was held for) is `distance` m away across (null: no longer in the air)"},
     {:condition_met, [:run, :task_id, :condition, :branch],

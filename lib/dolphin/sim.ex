@@ -97,6 +97,8 @@ defmodule Dolphin.Sim do
       default the fleet's `:home`),
       `:capacity_mah`, `:hover_current`, `:cruise_speed`, `:climb_speed`,
       `:descent_speed`, `:wp_radius`, `:rtl_alt`, `:disarm_delay_ms`,
+      `:spool_up_ms` (how long the motors spool up before a take-off
+      leaves the ground; default 3000, as ArduCopter SITL),
       `:arm_min_battery`, `:battery_low`, `:battery_critical`,
       `:battery_failsafe` (`:none`, `:rtl`, `:land`), `:gcs_failsafe`,
       `:gcs_sysid`, `:request_int` (ask for items with MISSION_REQUEST_INT),
@@ -313,6 +315,7 @@ defmodule Dolphin.Sim do
     boot_ms: {:at_least_0, "milliseconds"},
     ekf_ready_ms: {:at_least_0, "milliseconds"},
     disarm_delay_ms: {:at_least_0, "milliseconds"},
+    spool_up_ms: {:at_least_0, "milliseconds"},
     rtl_alt: {:at_least_0, "metres"},
     capacity_mah: {{:positive, 1_000_000}, "mAh"},
     hover_current: {{:positive, 200}, "amperes"},

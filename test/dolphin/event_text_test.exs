@@ -53,6 +53,12 @@ defmodule Dolphin.EventTextTest do
 
       assert EventText.event_text(%{event: :separation_clear, vehicle: 2, other: 1, distance: 99.9, held_ms: 4_600}) == "vehicle 2 goes on after 4.6 s held (vehicle 1 99.9 m away)"
 
+      assert EventText.event_text(%{event: :mission_restarted, vehicle: 2, name: "North", reason: "disarmed_while_held"}) ==
+               ~s[vehicle 2: "North" armed and started again (the autopilot disarmed it on the ground while it was held)]
+
+      assert EventText.event_text(%{event: :mission_restarted, vehicle: 2, name: "North", reason: :disarmed_before_start}) ==
+               ~s[vehicle 2: "North" armed and started again (the autopilot disarmed it on the ground before its take-off)]
+
       # A polygon of four corners (four items) and a circle: two zones.
       square = for _ <- 1..4, do: [5002, 404_442_330, -73_752_340, 4]
 

@@ -270,6 +270,33 @@ defmodule Dolphin.SITLTest do
     assert {:ok, :done} = Engine.run(Engine.on(hop(home), [id]))
   end
 
+  # At 3x the motors' spool-up (3 s of clock) lasts a second of real time:
+  # the hold, sent the moment MISSION_START is accepted, comes within it.
+  test "held on the ground during its take-off's spool-up, ArduCopter disarms itself; let go, the mission arms, starts again and flies" do
+    [id] = Backend.start(:sitl, 1, speedup: 3)
+    home = Backend.home(id)
+    pick(id)
+    Dolphin.Events.subscribe()
+    {:ok, pid} = Dolphin.Mission.Executor.start_link(hop(home), id, owner: self())
+    Dolphin.Test.SeparationHold.at_first_flight(pid)
+
+    # BRAKE holds nothing on the ground: DISARM_DELAY (10 s) after it, ArduCopter disarms.
+    Wait.until(fn -> match?({:ok, %{mode: :brake, armed: false}}, Vehicles.state(id)) end, Clock.to_real_ms(180_000), fn -> "vehicle #{id} disarmed in BRAKE: #{inspect(Vehicles.view(id))}" end)
+    {:ok, st} = Vehicles.state(id)
+    assert st.landed == :on_ground and st.position.relative_alt < 1
+    assert "Disarming motors" in Enum.map(st.status_texts, &elem(&1, 1))
+    # A few more views: the mission waits.
+    Clock.sleep(3_000)
+    assert {:flying, _} = :sys.get_state(pid)
+
+    Dolphin.Test.SeparationHold.let_go(pid)
+    assert_receive {:dolphin_platform, ^pid, :done}, Clock.to_real_ms(240_000)
+    assert_received {:dolphin, :events, %{event: :mission_restarted, vehicle: ^id, reason: :disarmed_while_held}}
+    {:ok, st} = Vehicles.state(id)
+    refute st.armed
+    assert Geo.distance(Geo.location(st.position.lat, st.position.lon), home) < 5
+  end
+
   # The killed instance's exit is logged: expected here.
   @tag :capture_log
   test "a vehicle that vanishes mid-mission is lost within the connection timeout; its task fails and the watch handler runs" do

@@ -113,7 +113,8 @@ defmodule Dolphin.Mission.Executor do
       min_separation: Map.get(opts, :min_separation),
       # Held by the separation monitor: nil, or what it wants (:hold, :go)
       # and how far the vehicle is (:holding, :held, :resuming, :resumed
-      # until a view shows AUTO again).
+      # until a view shows AUTO again), and `grounded`: held before it left
+      # the ground, the autopilot disarmed it there (see judge/2).
       separation: nil,
       arm_timeout_ms: Map.get(opts, :arm_timeout_ms, @arm_timeout_ms),
       # How its missions fly (Dolphin.Vehicles.View.airframe/2), from its view once known.
@@ -270,7 +271,7 @@ defmodule Dolphin.Mission.Executor do
   def handle_event({:timeout, :disarmed}, :disarmed, :flying, %{view: st} = data) do
     cond do
       not disarmed_before_flight?(data, st) -> judge(%{data | disarmed_idle: false}, st)
-      data.rearms < @rearms -> next(:guided, %{data | rearms: data.rearms + 1, disarmed_idle: false, flight: Flight.new(data.ending)})
+      data.rearms < @rearms -> restart_disarmed(data)
       true -> fail(:flying, data, disarmed_before_start(data), vehicle_fault?: true, texts: texts(data))
     end
   end
@@ -423,6 +424,7 @@ defmodule Dolphin.Mission.Executor do
       _ -> fail(:start, data, {:refused, e})
     end
   end
+
   defp answered(state, {:error, e}, data), do: fail(state, data, {:refused, e})
 
   defp uploaded(data) do
@@ -501,12 +503,14 @@ defmodule Dolphin.Mission.Executor do
 
   # What the monitor wants now; one exchange with the vehicle at a time,
   # the next one once it ends.
-  defp separation(%{separation: nil} = data, :hold), do: separation_step(%{data | separation: %{want: :hold, phase: :resumed}})
+  defp separation(%{separation: nil} = data, :hold), do: separation_step(%{data | separation: %{want: :hold, phase: :resumed, grounded: false}})
   defp separation(%{separation: nil} = data, :go), do: {:keep_state, data}
   defp separation(data, want), do: separation_step(put_in(data.separation.want, want))
 
   defp separation_step(%{separation: %{want: :hold, phase: :resumed}} = data),
     do: exchange(put_in(data.separation.phase, :holding), fn -> Manoeuvres.hold(data.vehicle, fresh: true) end)
+
+  defp separation_step(%{separation: %{want: :go, phase: :held, grounded: true}} = data), do: start_again(data)
 
   defp separation_step(%{separation: %{want: :go, phase: :held}} = data),
     do: exchange(put_in(data.separation.phase, :resuming), fn -> Manoeuvres.command(data.vehicle, "AUTO", fn -> Vehicles.set_mode(data.vehicle, :auto) end) end)
@@ -549,9 +553,33 @@ defmodule Dolphin.Mission.Executor do
   defp back_in_mission(%{separation: %{phase: :resumed, want: :go}} = data, %{mode: :auto}), do: %{data | separation: nil}
   defp back_in_mission(data, _st), do: data
 
+  # Held by the monitor before it left the ground, a copter stands there
+  # armed in BRAKE (or LOITER), which holds nothing on the ground: ArduCopter
+  # disarms it after DISARM_DELAY (docs/ardupilot.md). It has not left its
+  # mission: it waits, disarmed, and once let go it is set to GUIDED, armed
+  # and started again (the mission resumes at its take-off).
+  defp held_grounded?(%{separation: %{}, flight: flight, airframe: airframe}, st),
+    do: Airframe.takes_off?(airframe) and not flight.airborne_seen and not st.armed? and st.landed in [:on_ground, nil]
+
+  defp held_grounded?(_data, _st), do: false
+
+  defp start_again(data) do
+    Events.emit(:mission_restarted, %{vehicle: data.vehicle, name: data.name, reason: :disarmed_while_held})
+    next(:guided, %{data | separation: nil, flight: Flight.new(data.ending), disarmed_idle: false, grounded: nil})
+  end
+
   # --- :flying ----------------------------------------------------------------
 
   defp judge(data, st) do
+    cond do
+      not held_grounded?(data, st) -> judge_flight(data, st)
+      # Let go while the vehicle was being disarmed (its AUTO found it so).
+      data.separation.want == :go and data.separation.phase == :resumed -> start_again(data)
+      true -> {:keep_state, put_in(data.separation.grounded, true), [{{:timeout, :grounded}, :cancel}, {{:timeout, :disarmed}, :cancel}]}
+    end
+  end
+
+  defp judge_flight(data, st) do
     {verdict, progress, flight} = Flight.judge(data.flight, st)
     verdict = separated_verdict(data, st, verdict)
     data = back_in_mission(data, st)
@@ -624,6 +652,11 @@ defmodule Dolphin.Mission.Executor do
   # waited in AUTO, disarmed, for ever.
   defp disarmed_before_flight?(data, st),
     do: not data.flight.armed_seen and not st.armed? and st.landed in [:on_ground, nil]
+
+  defp restart_disarmed(data) do
+    Events.emit(:mission_restarted, %{vehicle: data.vehicle, name: data.name, reason: :disarmed_before_start})
+    next(:guided, %{data | rearms: data.rearms + 1, disarmed_idle: false, flight: Flight.new(data.ending)})
+  end
 
   defp disarmed_before_start(data) do
     if Airframe.takes_off?(data.airframe),

@@ -47,6 +47,10 @@ defmodule Dolphin.Sim.Copter do
                 # 0 for none.
                 boot_ms: 0,
                 disarm_delay_ms: 10_000,
+                # The motors spool up this long before a take-off leaves the
+                # ground (about 3 s on ArduCopter SITL between "Arming motors"
+                # and the first metre).
+                spool_up_ms: 3_000,
                 battery: 1.0,
                 charge_rate: 0.005,
                 charger: nil,

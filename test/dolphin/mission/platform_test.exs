@@ -211,6 +211,30 @@ defmodule Dolphin.Mission.PlatformTest do
     assert {:ok, %{mode: :brake, armed: true}} = Sim.info(1)
   end
 
+  # ArduCopter disarms a copter that stands armed on the ground in BRAKE
+  # (docs/ardupilot.md): held by the separation monitor before it left the
+  # ground, the mission waits, and once let go arms and starts again.
+  test "held before it left the ground and disarmed there by the autopilot, a copter is armed and started again once let go", %{port: port} do
+    # Motors that spool up for 50 s of clock time: the hold comes during it.
+    [{1, home}] = start_fleet(port, count: 1, spool_up_ms: 50_000)
+    Events.subscribe()
+    {:ok, pid} = Dolphin.Mission.Executor.start_link(out_and_back(home), 1, owner: self())
+
+    Dolphin.Test.SeparationHold.at_first_flight(pid)
+    Wait.until(fn -> match?({:ok, %{armed: false, mode: :brake, landed: :on_ground}}, Sim.info(1)) end, 30_000, fn -> "vehicle 1 disarmed in BRAKE: #{inspect(Sim.info(1))}" end)
+    # Its views come at 1 Hz of clock time: a few more, and the mission still waits.
+    Clock.sleep(3_000)
+    refute_received {:dolphin_platform, ^pid, {:failed, _}}
+    assert {:flying, _} = :sys.get_state(pid)
+
+    Dolphin.Test.SeparationHold.let_go(pid)
+    assert_receive {:dolphin_platform, ^pid, :done}, 60_000
+    assert_received {:dolphin, :events, %{event: :mission_restarted, vehicle: 1, name: "out and back", reason: :disarmed_while_held}}
+    {:ok, info} = Sim.info(1)
+    refute info.armed
+    assert Dolphin.Geo.distance(Dolphin.Geo.location(info.position.lat, info.position.lon), home) < 3
+  end
+
   test "stopped right after MISSION_START, before telemetry shows it, the vehicle still holds", %{port: port} do
     [{1, home}] = start_fleet(port, count: 1)
     {:ok, run} = Engine.start(Engine.on(out_and_back(home), [1]))

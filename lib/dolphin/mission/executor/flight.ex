@@ -4,7 +4,7 @@ defmodule Dolphin.Mission.Executor.Flight do
   # views (Dolphin.Vehicles.View), each in turn, to progress and an end (done, or the
   # vehicle left the mission), with what it has seen of this flight.
 
-  defstruct [:ending, active: false, armed_seen: false, auto_seen: false, landing_check: false, on_land_item: false, progress: nil]
+  defstruct [:ending, active: false, armed_seen: false, auto_seen: false, airborne_seen: false, landing_check: false, on_land_item: false, progress: nil]
 
   @typedoc "How the mission ends (`Dolphin.Mission.ending/1`) and what this flight has shown so far."
   @type t :: %__MODULE__{
@@ -12,6 +12,7 @@ defmodule Dolphin.Mission.Executor.Flight do
           active: boolean(),
           armed_seen: boolean(),
           auto_seen: boolean(),
+          airborne_seen: boolean(),
           landing_check: boolean(),
           on_land_item: boolean(),
           progress: map() | nil
@@ -85,7 +86,7 @@ defmodule Dolphin.Mission.Executor.Flight do
     # Reports travel separately (mode and armed bit with the 1 Hz heartbeat,
     # the mission state with MISSION_CURRENT): leaving AUTO or disarming counts
     # only once the heartbeat has shown AUTO, or armed, during this mission.
-    f = %{f | active: active, armed_seen: f.armed_seen or (active and st.armed?), auto_seen: f.auto_seen or (active and st.mode == :auto)}
+    f = %{f | active: active, armed_seen: f.armed_seen or (active and st.armed?), auto_seen: f.auto_seen or (active and st.mode == :auto), airborne_seen: f.airborne_seen or (active and airborne?(st))}
     %{f | on_land_item: f.on_land_item or (active and st.armed? and on_land_item?(f, mission))}
   end
 
@@ -115,6 +116,11 @@ defmodule Dolphin.Mission.Executor.Flight do
   # before the heartbeat shows the disarm: what counts is that the vehicle
   # flew the final land item armed, then disarmed on the ground.
   defp landed_at_end?(f, st), do: f.on_land_item and st.landed in [:on_ground, nil]
+
+  # Off the ground: said so, or (no landed state reported) a metre above home.
+  defp airborne?(%{landed: landed}) when landed in [:in_air, :landing], do: true
+  defp airborne?(%{landed: nil, relative_altitude: h}) when is_number(h), do: h >= 1.0
+  defp airborne?(_st), do: false
 
   defp on_land_item?(%{ending: {:landing, seq}}, mission), do: mission.current == seq
   defp on_land_item?(_f, _mission), do: false

@@ -19,16 +19,15 @@ defmodule Dolphin.Sim.Copter.Flight do
   alias Dolphin.Sim.Copter
   alias Dolphin.Sim.Copter.{Mission, Modes}
 
-  @spool_up_ms 3_000
   @pi :math.pi()
 
-  # The motors spool up before the copter leaves the ground (about 3 s on
-  # ArduCopter SITL between "Arming motors" and the first metre).
+  # The motors spool up before the copter leaves the ground (its config's
+  # `spool_up_ms`).
   @spec start_takeoff(Copter.t(), float()) :: Copter.t()
   def start_takeoff(%{config: %{airframe: :plane}} = c, alt), do: Dolphin.Sim.Copter.Plane.start_takeoff(c, alt)
 
   def start_takeoff(c, alt) do
-    %{c | nav: {:spool_up, c.time_ms + @spool_up_ms, {:climb, c.n, c.e, alt}}, landed: :takeoff, ground_since: nil}
+    %{c | nav: {:spool_up, c.time_ms + c.config.spool_up_ms, {:climb, c.n, c.e, alt}}, landed: :takeoff, ground_since: nil}
   end
 
   # A GUIDED target: only in GUIDED and in the air.

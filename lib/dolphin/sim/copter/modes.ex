@@ -117,9 +117,18 @@ defmodule Dolphin.Sim.Copter.Modes do
         {@failed, text(c, 2, "Auto: Missing Takeoff Cmd")}
 
       true ->
-        {@accepted, enter_mode(leave_mode(c), mode)}
+        {@accepted, c |> abandon_takeoff(mode) |> leave_mode() |> enter_mode(mode)}
     end
   end
+
+  # A copter whose motors still spool up for a take-off, put in any mode but
+  # AUTO, never leaves the ground: it stands armed there, and DISARM_DELAY
+  # counts from now (ArduCopter SITL, put in BRAKE during the spool-up,
+  # disarmed itself 10-12 s later).
+  defp abandon_takeoff(%{config: %{airframe: :copter}, armed: true, landed: :takeoff} = c, mode) when mode != :auto,
+    do: if(in_air?(c), do: c, else: %{c | landed: :on_ground, ground_since: c.time_ms})
+
+  defp abandon_takeoff(c, _mode), do: c
 
   defp upcase(mode), do: mode |> Atom.to_string() |> String.upcase()
 

@@ -71,6 +71,22 @@ defmodule Dolphin.Sim.Copter.ModesTest do
     refute Modes.auto_disarm(%{c | time_ms: c.time_ms + 10_000}).armed
   end
 
+  # ArduCopter SITL (docs/ardupilot.md): held in BRAKE while its motors spool
+  # up for a take-off, it never leaves the ground and disarms 10-12 s later.
+  test "put in BRAKE while its motors spool up, it stays on the ground and disarms itself after DISARM_DELAY" do
+    {0, c} = Modes.arm(%{ready() | mode: :guided}, false)
+    c = Dolphin.Sim.Copter.Flight.start_takeoff(c, @home.alt + 20)
+    c = Copter.step(c, 1_000)
+    assert c.landed == :takeoff
+    {0, c} = Modes.set_mode_named(c, :brake)
+    braked = c.time_ms
+    c = Enum.reduce(1..99, c, fn _, c -> Copter.step(c, 100) end)
+    assert c.armed and c.landed == :on_ground and c.alt == @home.alt
+    c = Enum.reduce(1..2, c, fn _, c -> Copter.step(c, 100) end)
+    refute c.armed
+    assert c.time_ms - braked in 10_000..10_200
+  end
+
   test "the GCS failsafe returns home after 5 s without the ground station, when enabled" do
     c = in_air(ready(%{gcs_failsafe: true}), %{gcs_heard_ms: 1_000})
     assert Modes.gcs_failsafe(%{c | time_ms: 6_000}).mode == :guided
