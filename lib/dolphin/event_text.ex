@@ -158,7 +158,7 @@ defmodule Dolphin.EventText do
     why =
       case to_string(e.reason) do
         "disarmed_while_held" -> "the autopilot disarmed it on the ground while it was held"
-        _ -> "the autopilot disarmed it on the ground before its take-off"
+        _ -> "the autopilot disarmed it before the mission got under way"
       end
 
     "vehicle #{e.vehicle}: #{inspect(e.name)} armed and started again (#{why})"

@@ -34,7 +34,8 @@ defmodule Dolphin.Separation do
   left to go on: holding either would only keep them close.
 
   A held vehicle goes on (`{:separation, :clear, ...}`: its mission resumes
-  where it was) once, for a second of clock time, no vehicle in the air is
+  where it was; a copter held before it left the ground, which ArduCopter
+  disarms there, is armed and its mission started again) once, for a second of clock time, no vehicle in the air is
   closer than one and a half times the separation and none would come
   closer than that within the horizon were it to fly on as it was flying
   when held (a vehicle itself held, for this one or for another, whose

@@ -104,7 +104,11 @@ defmodule Dolphin.Sim do
       `:gcs_sysid`, `:request_int` (ask for items with MISSION_REQUEST_INT),
       `:disarms_at_arming` (a fault: the vehicle disarms itself at once
       after each of its next N arms, in the same instant, as ArduRover SITL
-      was seen doing once on a loaded host; default 0).
+      was seen doing once on a loaded host; default 0), `:gives_up_uploads`
+      (a fault: each of its next N uploads is dropped at its last item,
+      answered MAV_MISSION_ERROR with nothing stored, as a vehicle whose
+      patience ran out just then answers once its OPERATION_CANCELLED is
+      lost; default 0).
 
   Every option is checked before anything starts, so that no vehicle is
   started with a value it cannot report in MAVLink or that means nothing:
@@ -333,6 +337,7 @@ defmodule Dolphin.Sim do
     airframe: {{:one_of, [:copter, :plane, :rover, :boat, :sub]}, nil},
     gcs_failsafe: {:boolean, nil},
     disarms_at_arming: {{:one_of, Enum.to_list(0..100)}, "a number of arms"},
+    gives_up_uploads: {{:one_of, Enum.to_list(0..100)}, "a number of uploads"},
     request_int: {:boolean, nil},
     gcs_sysid: {{:one_of, Enum.to_list(1..255)}, "a system id"}
   }

@@ -57,7 +57,7 @@ defmodule Dolphin.EventTextTest do
                ~s[vehicle 2: "North" armed and started again (the autopilot disarmed it on the ground while it was held)]
 
       assert EventText.event_text(%{event: :mission_restarted, vehicle: 2, name: "North", reason: :disarmed_before_start}) ==
-               ~s[vehicle 2: "North" armed and started again (the autopilot disarmed it on the ground before its take-off)]
+               ~s[vehicle 2: "North" armed and started again (the autopilot disarmed it before the mission got under way)]
 
       # A polygon of four corners (four items) and a circle: two zones.
       square = for _ <- 1..4, do: [5002, 404_442_330, -73_752_340, 4]

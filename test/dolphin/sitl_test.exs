@@ -270,10 +270,10 @@ defmodule Dolphin.SITLTest do
     assert {:ok, :done} = Engine.run(Engine.on(hop(home), [id]))
   end
 
-  # At 3x the motors' spool-up (3 s of clock) lasts a second of real time:
+  # At 2x the motors' spool-up (3 s of clock) lasts 1.5 s of real time:
   # the hold, sent the moment MISSION_START is accepted, comes within it.
   test "held on the ground during its take-off's spool-up, ArduCopter disarms itself; let go, the mission arms, starts again and flies" do
-    [id] = Backend.start(:sitl, 1, speedup: 3)
+    [id] = Backend.start(:sitl, 1, speedup: 2)
     home = Backend.home(id)
     pick(id)
     Dolphin.Events.subscribe()

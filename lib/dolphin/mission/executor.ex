@@ -6,6 +6,10 @@ defmodule Dolphin.Mission.Executor do
   #
   #   :hold -> :clear -> :upload -> :verify -> [:fence] -> :guided -> :arm -> :start -> :flying -> done | failed
   #
+  # (:verify goes back to :upload when an unconfirmed upload reads back
+  # otherwise; :flying back to :guided when the autopilot disarmed the
+  # vehicle on the ground before its flight began.)
+  #
   # :hold waits for the end of the vehicle's boot and holds it if it is flying
   # another mission; then clear; upload; download it back and compare by
   # meaning (never start an unverified mission); the mission's fence, or the
@@ -113,8 +117,8 @@ defmodule Dolphin.Mission.Executor do
       min_separation: Map.get(opts, :min_separation),
       # Held by the separation monitor: nil, or what it wants (:hold, :go)
       # and how far the vehicle is (:holding, :held, :resuming, :resumed
-      # until a view shows AUTO again), and `grounded`: held before it left
-      # the ground, the autopilot disarmed it there (see judge/2).
+      # until a view shows AUTO again), and `disarmed_held`: held before it
+      # left the ground, the autopilot disarmed it there (see judge/2).
       separation: nil,
       arm_timeout_ms: Map.get(opts, :arm_timeout_ms, @arm_timeout_ms),
       # How its missions fly (Dolphin.Vehicles.View.airframe/2), from its view once known.
@@ -136,6 +140,9 @@ defmodule Dolphin.Mission.Executor do
       attempt: 1,
       upload_started: nil,
       retransmissions: 0,
+      # Uploads in a row that ended without the vehicle's final ACCEPTED
+      # (every item sent; whether it holds the mission is for the read-back).
+      unconfirmed: 0,
       # The vehicle's STATUSTEXTs when the flight began (see judge/2).
       flight_texts: [],
       flight: nil,
@@ -181,6 +188,9 @@ defmodule Dolphin.Mission.Executor do
   def handle_event(:enter, _old, :flying, data) do
     data = %{data | flight_texts: Vehicles.status_texts(data.vehicle)}
     :ok = Dolphin.Separation.flying(data.vehicle, started_at: data.started_at, rank: data.rank, limits: data.min_separation)
+    # Flying again after a restart: what the monitor sent before it took
+    # the registration (it replies after) is about the flight before.
+    flush_separation()
     # Judged at once on what it was last sent; else on the next view.
     if data.view, do: judge(data, data.view), else: {:keep_state, data}
   end
@@ -271,7 +281,7 @@ defmodule Dolphin.Mission.Executor do
   def handle_event({:timeout, :disarmed}, :disarmed, :flying, %{view: st} = data) do
     cond do
       not disarmed_before_flight?(data, st) -> judge(%{data | disarmed_idle: false}, st)
-      data.rearms < @rearms -> restart_disarmed(data)
+      data.rearms < @rearms -> restart(data, :disarmed_before_start)
       true -> fail(:flying, data, disarmed_before_start(data), vehicle_fault?: true, texts: texts(data))
     end
   end
@@ -333,6 +343,14 @@ defmodule Dolphin.Mission.Executor do
   # be older than the vehicle's state: a stop then assumes it may be flying.
   defp commanded?(state), do: state in [:arm, :start, :flying]
 
+  defp flush_separation do
+    receive do
+      {:separation, _, _} -> flush_separation()
+    after
+      0 -> :ok
+    end
+  end
+
   defp hold(vehicle, fresh?) do
     case Manoeuvres.hold(vehicle, fresh: fresh?) do
       :ok -> :ok
@@ -368,12 +386,12 @@ defmodule Dolphin.Mission.Executor do
   defp answered(:hold, :ok, data), do: next(:clear, data)
   defp answered(:clear, :ok, data), do: next(:upload, data)
 
-  defp answered(:upload, :ok, data), do: uploaded(data)
+  defp answered(:upload, :ok, data), do: uploaded(%{data | unconfirmed: 0})
 
   # Every item went out but the vehicle's final MISSION_ACK was lost (it is
   # never repeated): whether the vehicle has the mission is for the
   # verification, which downloads it, to say.
-  defp answered(:upload, {:error, %Dolphin.MissionError{result: :unconfirmed}}, data), do: uploaded(data)
+  defp answered(:upload, {:error, %Dolphin.MissionError{result: :unconfirmed}}, data), do: uploaded(%{data | unconfirmed: data.unconfirmed + 1})
 
   # A transfer that timed out on a lossy link (the protocol's own retries ran
   # out; it starts a transaction again itself while the vehicle answers) is
@@ -384,8 +402,17 @@ defmodule Dolphin.Mission.Executor do
 
   defp answered(:verify, {:ok, back}, data) do
     case Mission.compare_download(data.items, back) do
-      :ok -> next(if(data.fence, do: :fence, else: :guided), data)
-      {:error, e} -> fail(:verify, data, {:read_back_differs, e})
+      :ok ->
+        next(if(data.fence, do: :fence, else: :guided), data)
+
+      # Unconfirmed, the upload may have been given up by the vehicle (its
+      # cancel lost too, on a host too busy to tell the two apart by time):
+      # uploaded again, a few times.
+      {:error, _} when data.unconfirmed in 1..(@transfer_attempts - 1) ->
+        next(:upload, data)
+
+      {:error, e} ->
+        fail(:verify, data, {:read_back_differs, e})
     end
   end
 
@@ -503,14 +530,14 @@ defmodule Dolphin.Mission.Executor do
 
   # What the monitor wants now; one exchange with the vehicle at a time,
   # the next one once it ends.
-  defp separation(%{separation: nil} = data, :hold), do: separation_step(%{data | separation: %{want: :hold, phase: :resumed, grounded: false}})
+  defp separation(%{separation: nil} = data, :hold), do: separation_step(%{data | separation: %{want: :hold, phase: :resumed, disarmed_held: false}})
   defp separation(%{separation: nil} = data, :go), do: {:keep_state, data}
   defp separation(data, want), do: separation_step(put_in(data.separation.want, want))
 
   defp separation_step(%{separation: %{want: :hold, phase: :resumed}} = data),
     do: exchange(put_in(data.separation.phase, :holding), fn -> Manoeuvres.hold(data.vehicle, fresh: true) end)
 
-  defp separation_step(%{separation: %{want: :go, phase: :held, grounded: true}} = data), do: start_again(data)
+  defp separation_step(%{separation: %{want: :go, phase: :held, disarmed_held: true}} = data), do: restart(data, :disarmed_while_held)
 
   defp separation_step(%{separation: %{want: :go, phase: :held}} = data),
     do: exchange(put_in(data.separation.phase, :resuming), fn -> Manoeuvres.command(data.vehicle, "AUTO", fn -> Vehicles.set_mode(data.vehicle, :auto) end) end)
@@ -521,6 +548,8 @@ defmodule Dolphin.Mission.Executor do
   # Moving aside is for good measure: refused (the vehicle touched down meanwhile), it holds where it is.
   defp separated({:error, _}, %{separation: %{phase: :aside}} = data), do: separation_step(put_in(data.separation.phase, :held))
 
+  # Disarmed on the ground while its AUTO was on the way: whatever the answer, started again.
+  defp separated(_result, %{separation: %{phase: :resuming, disarmed_held: true}} = data), do: restart(data, :disarmed_while_held)
   defp separated(:ok, %{separation: %{phase: :resuming}} = data), do: separation_step(put_in(data.separation.phase, :resumed))
   defp separated({:error, e}, data), do: fail(:flying, data, {:refused, e})
 
@@ -557,25 +586,41 @@ defmodule Dolphin.Mission.Executor do
   # armed in BRAKE (or LOITER), which holds nothing on the ground: ArduCopter
   # disarms it after DISARM_DELAY (docs/ardupilot.md). It has not left its
   # mission: it waits, disarmed, and once let go it is set to GUIDED, armed
-  # and started again (the mission resumes at its take-off).
-  defp held_grounded?(%{separation: %{}, flight: flight, airframe: airframe}, st),
-    do: Airframe.takes_off?(airframe) and not flight.airborne_seen and not st.armed? and st.landed in [:on_ground, nil]
+  # and started again (the mission resumes at its take-off). Only in the
+  # mode it was held in (or AUTO, let go): a pilot or a failsafe that took
+  # it to another is left alone. Each restart needs the monitor to let go
+  # after a hold: they cannot run away on their own.
+  defp disarmed_held?(%{separation: %{}, flight: flight, airframe: :copter}, st),
+    do: not flight.airborne_seen and not st.armed? and st.landed in [:on_ground, nil] and st.mode in [:auto | Manoeuvres.hold_modes(:copter)]
 
-  defp held_grounded?(_data, _st), do: false
+  defp disarmed_held?(_data, _st), do: false
 
-  defp start_again(data) do
-    Events.emit(:mission_restarted, %{vehicle: data.vehicle, name: data.name, reason: :disarmed_while_held})
-    next(:guided, %{data | separation: nil, flight: Flight.new(data.ending), disarmed_idle: false, grounded: nil})
+  # Disarmed on the ground before the flight began: set to GUIDED, armed and
+  # started again, its watchdogs stopped (they are the flight's).
+  defp restart(data, reason) do
+    Events.emit(:mission_restarted, %{vehicle: data.vehicle, name: data.name, reason: reason})
+    rearms = if reason == :disarmed_before_start, do: data.rearms + 1, else: data.rearms
+    data = %{data | separation: nil, flight: Flight.new(data.ending), disarmed_idle: false, grounded: nil, still: nil, rearms: rearms}
+    {:next_state, :guided, %{data | attempt: 1}, for(t <- [:grounded, :disarmed, :stuck], do: {{:timeout, t}, :cancel})}
   end
 
   # --- :flying ----------------------------------------------------------------
 
   defp judge(data, st) do
     cond do
-      not held_grounded?(data, st) -> judge_flight(data, st)
-      # Let go while the vehicle was being disarmed (its AUTO found it so).
-      data.separation.want == :go and data.separation.phase == :resumed -> start_again(data)
-      true -> {:keep_state, put_in(data.separation.grounded, true), [{{:timeout, :grounded}, :cancel}, {{:timeout, :disarmed}, :cancel}]}
+      disarmed_held?(data, st) and data.separation.want == :go and data.separation.phase == :resumed ->
+        # Let go, its AUTO came while (or after) the autopilot disarmed it.
+        restart(data, :disarmed_while_held)
+
+      disarmed_held?(data, st) ->
+        {:keep_state, put_in(data.separation.disarmed_held, true), for(t <- [:grounded, :disarmed, :stuck], do: {{:timeout, t}, :cancel})}
+
+      # Armed again, or in the air: a disarmed view before was an old one.
+      match?(%{disarmed_held: true}, data.separation) ->
+        judge_flight(put_in(data.separation.disarmed_held, false), st)
+
+      true ->
+        judge_flight(data, st)
     end
   end
 
@@ -652,11 +697,6 @@ defmodule Dolphin.Mission.Executor do
   # waited in AUTO, disarmed, for ever.
   defp disarmed_before_flight?(data, st),
     do: not data.flight.armed_seen and not st.armed? and st.landed in [:on_ground, nil]
-
-  defp restart_disarmed(data) do
-    Events.emit(:mission_restarted, %{vehicle: data.vehicle, name: data.name, reason: :disarmed_before_start})
-    next(:guided, %{data | rearms: data.rearms + 1, disarmed_idle: false, flight: Flight.new(data.ending)})
-  end
 
   defp disarmed_before_start(data) do
     if Airframe.takes_off?(data.airframe),

@@ -62,7 +62,9 @@ defmodule Dolphin.Sim.Copter do
                 # A fault: disarmed again at once after each of the next N arms.
                 disarms_at_arming: 0,
                 gcs_sysid: 255,
-                request_int: false
+                request_int: false,
+                # A fault: the next N uploads given up at their last item (Dolphin.Sim.MissionServer).
+                gives_up_uploads: 0
               },
               Map.take(Dolphin.Airframe.Copter.performance(), @motion)
             )
@@ -154,7 +156,7 @@ defmodule Dolphin.Sim.Copter do
       mode: if(airframe == :copter, do: :stabilize, else: :manual),
       speed: config.cruise_speed,
       battery: config.battery,
-      missions: MissionServer.new(request_int: config.request_int),
+      missions: MissionServer.new(request_int: config.request_int, gives_up: config.gives_up_uploads),
       params: Streams.default_params(sysid, config)
     }
   end

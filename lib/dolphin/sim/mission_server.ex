@@ -28,6 +28,10 @@ defmodule Dolphin.Sim.MissionServer do
   #   sent, for test vehicles). Frames are normalised on the way back (the
   #   `_INT` frames read back as their float twins), as ArduPilot does.
   # - Fence (1) and rally (2) lists are kept as uploaded.
+  # - A fault for tests, `gives_up: n`: the next n uploads are dropped at their
+  #   last item, answered MAV_MISSION_ERROR and nothing stored — what a ground
+  #   station sees of a vehicle whose patience ran out just before that item
+  #   came, its OPERATION_CANCELLED lost.
 
   alias Dolphin.MAVLink.Ardupilotmega, as: M
   alias Dolphin.MAVLink.MissionItems
@@ -53,6 +57,7 @@ defmodule Dolphin.Sim.MissionServer do
   defstruct lists: %{0 => [], 1 => [], 2 => []},
             upload: nil,
             request_int: false,
+            gives_up: 0,
             home: true,
             home_stored: true,
             limit: 650
@@ -63,7 +68,7 @@ defmodule Dolphin.Sim.MissionServer do
 
   @spec new(keyword()) :: t()
   def new(opts \\ []),
-    do: %__MODULE__{request_int: Keyword.get(opts, :request_int, false), limit: Keyword.get(opts, :limit, 650), home: Keyword.get(opts, :home, true)}
+    do: %__MODULE__{request_int: Keyword.get(opts, :request_int, false), limit: Keyword.get(opts, :limit, 650), home: Keyword.get(opts, :home, true), gives_up: Keyword.get(opts, :gives_up, 0)}
 
   @doc false
   @spec supported?(non_neg_integer()) :: boolean()
@@ -118,6 +123,9 @@ defmodule Dolphin.Sim.MissionServer do
 
       type == 0 and seq > 0 and not supported?(item.command) ->
         {%{s | upload: nil}, complaint ++ [{:send, ack(peer, type, @unsupported)}, {:text, 6, "Mission: unsupported command #{item.command}"}]}
+
+      seq + 1 == up.count and s.gives_up > 0 ->
+        {%{s | upload: nil, gives_up: s.gives_up - 1}, [{:send, ack(peer, type, @error)}]}
 
       seq + 1 == up.count ->
         list = Enum.reverse([MissionItems.to_int(item) | up.items])

@@ -40,8 +40,11 @@ defmodule Dolphin.Vehicles.MissionProtocol do
   transaction starts again with MISSION_COUNT, up to `:restarts` times
   (default 4). If every item went out and the vehicle answers the last one
   with `MAV_MISSION_ERROR` (no upload under way: its ACCEPTED was lost, or it
-  gave up), the result is `{:error, %MissionError{result: :unconfirmed}}`:
-  only reading the mission back says whether it holds it.
+  gave up) within half its patience (4 s of clock time) of its last request,
+  the result is `{:error, %MissionError{result: :unconfirmed}}`: only
+  reading the mission back says whether it holds it (a mission task does,
+  and uploads again if it does not). Later than that, it may well have
+  given up: the transaction starts again.
 
   **Download** (`:download`): MISSION_REQUEST_LIST until MISSION_COUNT, then
   MISSION_REQUEST_INT for the missing items, a window of them at a time for
@@ -400,11 +403,13 @@ defmodule Dolphin.Vehicles.MissionProtocol do
   end
 
   # No upload under way on the vehicle. Once every item went out, and the
-  # vehicle took one less than its patience ago (so it did not give up), it
-  # took the last one and its ACCEPTED was lost: only reading the mission
-  # back can tell. Otherwise it gave up: the next timeout starts again.
+  # vehicle took one well within its patience (half of it: what it last
+  # asked for is stamped when this process reads it, which a busy host
+  # delays), it did not give up: it took the last one and its ACCEPTED was
+  # lost, which only reading the mission back can confirm. Otherwise it may
+  # have given up: the next timeout starts again.
   defp upload_ack(@error, :sending, data) do
-    if MapSet.size(data.sent) == data.count and now() - data.stalled_since < Clock.to_real_ms(@vehicle_patience_ms),
+    if MapSet.size(data.sent) == data.count and now() - data.stalled_since < Clock.to_real_ms(@vehicle_patience_ms) / 2,
       do: fail(data, :unconfirmed, "every item was sent, but the vehicle's MISSION_ACK never came and it is no longer receiving"),
       else: {:keep_state, %{data | not_receiving: true}}
   end

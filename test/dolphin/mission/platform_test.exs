@@ -235,6 +235,33 @@ defmodule Dolphin.Mission.PlatformTest do
     assert Dolphin.Geo.distance(Dolphin.Geo.location(info.position.lat, info.position.lon), home) < 3
   end
 
+  test "held during its spool-up and let go before the autopilot disarms it, a copter takes off again in AUTO: no restart", %{port: port} do
+    # An autopilot that would wait ten minutes to disarm it.
+    [{1, home}] = start_fleet(port, count: 1, spool_up_ms: 50_000, disarm_delay_ms: 600_000)
+    Events.subscribe()
+    {:ok, pid} = Dolphin.Mission.Executor.start_link(out_and_back(home), 1, owner: self())
+    Dolphin.Test.SeparationHold.at_first_flight(pid)
+    Wait.until(fn -> match?({:ok, %{armed: true, mode: :brake, landed: :on_ground}}, Sim.info(1)) end, 30_000, fn -> "vehicle 1 held in BRAKE: #{inspect(Sim.info(1))}" end)
+
+    Dolphin.Test.SeparationHold.let_go(pid)
+    assert_receive {:dolphin_platform, ^pid, :done}, 60_000
+    refute_received {:dolphin, :events, %{event: :mission_restarted}}
+    {:ok, info} = Sim.info(1)
+    refute info.armed
+    assert Dolphin.Geo.distance(Dolphin.Geo.location(info.position.lat, info.position.lon), home) < 3
+  end
+
+  # The vehicle said it had no upload under way just after it asked for the
+  # last item, so the protocol took its ACCEPTED for lost (unconfirmed); but
+  # it had given up, and holds nothing. The read-back shows it: uploaded again.
+  test "an unconfirmed upload the vehicle does not hold is uploaded again, then flown", %{port: port} do
+    [{1, home}] = start_fleet(port, count: 1, gives_up_uploads: 1)
+    Events.subscribe()
+    assert {:ok, :done} = Engine.run(Engine.on(out_and_back(home), [1]))
+    uploads = for {:dolphin, :events, %{event: :mission_uploaded, vehicle: 1}} <- flush(), do: :uploaded
+    assert length(uploads) == 2
+  end
+
   test "stopped right after MISSION_START, before telemetry shows it, the vehicle still holds", %{port: port} do
     [{1, home}] = start_fleet(port, count: 1)
     {:ok, run} = Engine.start(Engine.on(out_and_back(home), [1]))

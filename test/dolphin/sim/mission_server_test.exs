@@ -28,6 +28,14 @@ defmodule Dolphin.Sim.MissionServerTest do
     assert Enum.map(MissionServer.items(s), & &1.seq) == [1, 2]
   end
 
+  test "the gives_up fault: the next uploads dropped at their last item with MAV_MISSION_ERROR, nothing stored; then as usual" do
+    {s, replies} = upload(MissionServer.new(gives_up: 1), [item(0), item(1), item(2)])
+    assert [{:send, %M.MissionAck{type: 1}}] = replies
+    assert MissionServer.items(s) == [] and s.upload == nil
+    {s, [{:send, %M.MissionAck{type: 0}} | _]} = upload(s, [item(0), item(1), item(2)])
+    assert Enum.map(MissionServer.items(s), & &1.seq) == [1, 2]
+  end
+
   test "MISSION_REQUEST_INT when configured so" do
     {_s, [{:send, %M.MissionRequestInt{seq: 0}}]} = MissionServer.handle(MissionServer.new(request_int: true), count(2), @gcs, ctx())
   end

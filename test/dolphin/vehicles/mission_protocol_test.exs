@@ -173,6 +173,49 @@ defmodule Dolphin.Vehicles.MissionProtocolTest do
     assert {:error, %MissionError{result: :timeout, operation: :upload}} = Vehicles.upload_mission(sysid, items(3), attempts: 3)
   end
 
+  # The protocol's process alone, the test as the vehicle: what it sends
+  # comes here as {:sent, message}, its result as {ref, result}.
+  defp protocol_upload(items) do
+    test = self()
+    ref = make_ref()
+    request = %{operation: :upload, sysid: 1, mission_type: :mission, items: items, send: &send(test, {:sent, &1}), reply_to: {test, ref}}
+    {:ok, pid} = Dolphin.Vehicles.MissionProtocol.start_link(request, send_ahead: false)
+    assert_receive {:sent, %M.MissionCount{count: 3}}, 5_000
+    {pid, ref}
+  end
+
+  # Every item asked for and sent, the last request `ago` ms of real time before now.
+  defp all_items_sent(pid, ago) do
+    for seq <- 0..2 do
+      send(pid, {:mission, %M.MissionRequestInt{seq: seq}})
+      assert_receive {:sent, %M.MissionItemInt{seq: ^seq}}, 5_000
+    end
+
+    Process.sleep(ago)
+    send(pid, {:mission, %M.MissionAck{type: 1}})
+  end
+
+  # MAV_MISSION_ERROR to the last item: the vehicle has no upload under way.
+  # Soon after its last request it cannot have given up (its patience is
+  # 8 s of its time since the last item it took): its ACCEPTED was lost.
+  # Later it may have given up, its OPERATION_CANCELLED lost too (and a busy
+  # host stamps requests late): the upload starts again, never unconfirmed.
+  test "an upload the vehicle says is over: unconfirmed soon after its last request, started again later", %{port: _port} do
+    # In real time half the patience is 4 s: no pause of a loaded host comes near.
+    {pid, ref} = protocol_upload(items(3))
+    all_items_sent(pid, 0)
+    assert_receive {^ref, {:error, %MissionError{result: :unconfirmed}}}, 1_000
+
+    # At 10x it is 400 ms of real time.
+    Clock.set_speedup(10)
+    {pid, ref} = protocol_upload(items(3))
+    all_items_sent(pid, Clock.to_real_ms(4_000) + 50)
+    # The next timeout (a second of clock at most) starts the upload again.
+    assert_receive {:sent, %M.MissionCount{count: 3}}, 5_000
+    refute_received {^ref, _}
+    :gen_statem.stop(pid)
+  end
+
   # An upload whose final ACCEPTED was lost ends :unconfirmed; the reading
   # back says. `nil` when the vehicle has exactly `mission` and the ground
   # station read it back so, else what went wrong.

@@ -117,9 +117,10 @@ defmodule Dolphin.Mission.Executor.Flight do
   # flew the final land item armed, then disarmed on the ground.
   defp landed_at_end?(f, st), do: f.on_land_item and st.landed in [:on_ground, nil]
 
-  # Off the ground: said so, or (no landed state reported) a metre above home.
+  # Off the ground: said so, or a metre above home while taking off or with
+  # no landed state reported.
   defp airborne?(%{landed: landed}) when landed in [:in_air, :landing], do: true
-  defp airborne?(%{landed: nil, relative_altitude: h}) when is_number(h), do: h >= 1.0
+  defp airborne?(%{landed: landed, relative_altitude: h}) when landed in [nil, :takeoff] and is_number(h), do: h >= 1.0
   defp airborne?(_st), do: false
 
   defp on_land_item?(%{ending: {:landing, seq}}, mission), do: mission.current == seq
