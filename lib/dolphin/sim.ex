@@ -108,7 +108,9 @@ defmodule Dolphin.Sim do
       (a fault: each of its next N uploads is dropped at its last item,
       answered MAV_MISSION_ERROR with nothing stored, as a vehicle whose
       patience ran out just then answers once its OPERATION_CANCELLED is
-      lost; default 0).
+      lost; default 0), `:unacked_commands` (a fault: these commands, by
+      MAV_CMD number, are run but never acknowledged, as ArduPilot drops a
+      COMMAND_ACK its full link has no room for; default none).
 
   Every option is checked before anything starts, so that no vehicle is
   started with a value it cannot report in MAVLink or that means nothing:
@@ -338,6 +340,7 @@ defmodule Dolphin.Sim do
     gcs_failsafe: {:boolean, nil},
     disarms_at_arming: {{:one_of, Enum.to_list(0..100)}, "a number of arms"},
     gives_up_uploads: {{:one_of, Enum.to_list(0..100)}, "a number of uploads"},
+    unacked_commands: {:commands, "MAV_CMD numbers"},
     request_int: {:boolean, nil},
     gcs_sysid: {{:one_of, Enum.to_list(1..255)}, "a system id"}
   }
@@ -364,6 +367,7 @@ defmodule Dolphin.Sim do
         {:one_of, [_ | _] = values} when length(values) > 10 -> {value in values, "#{unit} from #{hd(values)} to #{List.last(values)}"}
         {:one_of, values} -> {value in values, "one of #{Enum.map_join(values, ", ", &inspect/1)}"}
         :boolean -> {is_boolean(value), "true or false"}
+        :commands -> {is_list(value) and Enum.all?(value, &(is_integer(&1) and &1 in 0..65_535)), "a list of #{unit} (0 to 65535)"}
       end
 
     unless ok?, do: "bad #{inspect(key)} #{inspect(value)}: #{allowed}"

@@ -257,6 +257,9 @@ defmodule Dolphin.SimTest do
       {[ekf_ready_ms: -1], "bad :ekf_ready_ms -1: milliseconds, 0 or more"},
       {[battery_failsafe: :explode], "bad :battery_failsafe :explode: one of :none, :rtl, :land"},
       {[gcs_sysid: 0], "bad :gcs_sysid 0: a system id from 1 to 255"},
+      {[unacked_commands: [300, -1]], "bad :unacked_commands [300, -1]: a list of MAV_CMD numbers (0 to 65535)"},
+      {[spool_up_ms: -5], "bad :spool_up_ms -5: milliseconds, 0 or more"},
+      {[gives_up_uploads: 1.5], "bad :gives_up_uploads 1.5: a number of uploads from 0 to 100"},
       {[faults: %{loss: 5}], "bad fault :loss: 5"},
       {[faults: 5], "bad :faults 5: a map or keyword list"}
     ]

@@ -445,6 +445,13 @@ defmodule Dolphin.Mission.Executor do
   # Refused: a copter that touched down since the mission was looked at (its
   # landing was under way, as a stopped mission leaves one) has no take-off
   # to fly; one that only comes back and lands is done if it stands there.
+  # Never answered, MISSION_START may still have been taken: an autopilot
+  # whose link to us is full drops its COMMAND_ACK (ArduPilot sends none
+  # when the link has no room). A vehicle that reported this mission
+  # running meanwhile (the views while the answer was awaited) flies it: it
+  # is followed as started, and judged at once on what it showed.
+  defp answered(:start, {:error, %{refusal: %Dolphin.CommandError{result: :timeout}}}, %{flight: %Flight{active: true}} = data), do: next(:flying, data)
+
   defp answered(:start, {:error, e}, data) do
     case Vehicles.view(data.vehicle) do
       {:ok, st} -> if on_the_ground(data, st) == :already_there, do: done(data), else: fail(:start, data, {:refused, e})

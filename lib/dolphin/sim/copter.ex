@@ -64,7 +64,9 @@ defmodule Dolphin.Sim.Copter do
                 gcs_sysid: 255,
                 request_int: false,
                 # A fault: the next N uploads given up at their last item (Dolphin.Sim.MissionServer).
-                gives_up_uploads: 0
+                gives_up_uploads: 0,
+                # A fault: commands (MAV_CMD numbers) run but never acknowledged.
+                unacked_commands: []
               },
               Map.take(Dolphin.Airframe.Copter.performance(), @motion)
             )

@@ -251,6 +251,16 @@ defmodule Dolphin.Mission.PlatformTest do
     assert Dolphin.Geo.distance(Dolphin.Geo.location(info.position.lat, info.position.lon), home) < 3
   end
 
+  # ArduPilot drops a COMMAND_ACK when its link has no room: MISSION_START
+  # taken, never answered, the vehicle flies the mission in AUTO.
+  test "a MISSION_START taken but never acknowledged: the mission is followed as started, and done", %{port: port} do
+    [{1, home}] = start_fleet(port, count: 1, unacked_commands: [300])
+    assert {:ok, :done} = Engine.run(Engine.on(out_and_back(home), [1]))
+    {:ok, info} = Sim.info(1)
+    refute info.armed
+    assert Dolphin.Geo.distance(Dolphin.Geo.location(info.position.lat, info.position.lon), home) < 3
+  end
+
   # The vehicle said it had no upload under way just after it asked for the
   # last item, so the protocol took its ACCEPTED for lost (unconfirmed); but
   # it had given up, and holds nothing. The read-back shows it: uploaded again.

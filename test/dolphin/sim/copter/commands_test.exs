@@ -72,6 +72,13 @@ defmodule Dolphin.Sim.Copter.CommandsTest do
     assert [{1, %M.CommandAck{result: 0}}, {:reboot, nil}] = c.out
   end
 
+  test "the unacked_commands fault: the command is run, its COMMAND_ACK never sent" do
+    c = Commands.command(ready(%{unacked_commands: [176]}), 176, [1.0, 4.0 | List.duplicate(0.0, 5)], nil, 1, @gcs)
+    refute Enum.any?(c.out, &match?({_, %M.CommandAck{}}, &1))
+    assert c.mode == :guided
+    assert {_, {1, 0}} = run(c, 400, [1])
+  end
+
   test "camera commands: to the camera component when there is one, else to the autopilot" do
     assert {%{photos: 1}, {100, 0}} = run(ready(%{camera: true}), 2000, [0, 0, 1], nil, 100)
     assert {%{photos: 1}, {1, 0}} = run(ready(), 203, [0, 0, 0, 0, 1])
