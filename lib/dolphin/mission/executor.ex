@@ -598,7 +598,7 @@ defmodule Dolphin.Mission.Executor do
   # it to another is left alone. Each restart needs the monitor to let go
   # after a hold: they cannot run away on their own.
   defp disarmed_held?(%{separation: %{}, flight: flight, airframe: :copter}, st),
-    do: not flight.airborne_seen and not st.armed? and st.landed in [:on_ground, nil] and st.mode in [:auto | Manoeuvres.hold_modes(:copter)]
+    do: not flight.airborne_seen and disarmed_on_ground?(st) and st.mode in [:auto | Manoeuvres.hold_modes(:copter)]
 
   defp disarmed_held?(_data, _st), do: false
 
@@ -703,7 +703,9 @@ defmodule Dolphin.Mission.Executor do
   # host once armed and disarmed in one instant, and the mission would have
   # waited in AUTO, disarmed, for ever.
   defp disarmed_before_flight?(data, st),
-    do: not data.flight.armed_seen and not st.armed? and st.landed in [:on_ground, nil]
+    do: not data.flight.armed_seen and disarmed_on_ground?(st)
+
+  defp disarmed_on_ground?(st), do: not st.armed? and st.landed in [:on_ground, nil]
 
   defp disarmed_before_start(data) do
     if Airframe.takes_off?(data.airframe),
