@@ -281,7 +281,7 @@ defmodule Dolphin.SITLTest do
     Dolphin.Test.SeparationHold.at_first_flight(pid)
 
     # BRAKE holds nothing on the ground: DISARM_DELAY (10 s) after it, ArduCopter disarms.
-    Wait.until(fn -> match?({:ok, %{mode: :brake, armed: false}}, Vehicles.state(id)) end, Clock.to_real_ms(180_000), fn -> "vehicle #{id} disarmed in BRAKE: #{inspect(Vehicles.view(id))}" end)
+    Wait.until(fn -> match?({:ok, %{mode: :brake, armed: false}}, Vehicles.state(id)) end, div(Clock.to_real_ms(180_000), 20), fn -> "vehicle #{id} disarmed in BRAKE: #{inspect(Vehicles.view(id))}" end)
     {:ok, st} = Vehicles.state(id)
     assert st.landed == :on_ground and st.position.relative_alt < 1
     assert "Disarming motors" in Enum.map(st.status_texts, &elem(&1, 1))
