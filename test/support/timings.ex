@@ -72,6 +72,13 @@ defmodule Dolphin.Test.Timings do
       else: one_line(message) <> " " <> one_line(Macro.to_string(expr))
   end
 
+  # ExUnit's advice on changing the timeout would fill the line: where the
+  # test was waiting says more.
+  defp what_went_wrong(:error, %ExUnit.TimeoutError{timeout: ms}, stack) do
+    where = Enum.find_value(stack, fn {_m, _f, _a, at} -> if String.ends_with?(to_string(at[:file]), "_test.exs"), do: "#{at[:file]}:#{at[:line]}" end)
+    "timed out after #{ms} ms" <> if(where, do: ", waiting at #{where}", else: "")
+  end
+
   defp what_went_wrong(kind, reason, stack), do: one_line(Exception.format_banner(kind, reason, stack))
 
   # Lines joined with " | ", blank ones and indentation dropped.
