@@ -120,6 +120,8 @@ defmodule Dolphin.Mission.Executor do
       # until a view shows AUTO again), and `disarmed_held`: held before it
       # left the ground, the autopilot disarmed it there (see judge/2).
       separation: nil,
+      # Held by the monitor before it left the ground, in this flight.
+      held_on_ground: false,
       arm_timeout_ms: Map.get(opts, :arm_timeout_ms, @arm_timeout_ms),
       # How its missions fly (Dolphin.Vehicles.View.airframe/2), from its view once known.
       airframe: nil,
@@ -537,7 +539,9 @@ defmodule Dolphin.Mission.Executor do
 
   # What the monitor wants now; one exchange with the vehicle at a time,
   # the next one once it ends.
-  defp separation(%{separation: nil} = data, :hold), do: separation_step(%{data | separation: %{want: :hold, phase: :resumed, disarmed_held: false}})
+  defp separation(%{separation: nil} = data, :hold),
+    do: separation_step(%{data | separation: %{want: :hold, phase: :resumed, disarmed_held: false}, held_on_ground: data.held_on_ground or not data.flight.airborne_seen})
+
   defp separation(%{separation: nil} = data, :go), do: {:keep_state, data}
   defp separation(data, want), do: separation_step(put_in(data.separation.want, want))
 
@@ -597,7 +601,11 @@ defmodule Dolphin.Mission.Executor do
   # mode it was held in (or AUTO, let go): a pilot or a failsafe that took
   # it to another is left alone. Each restart needs the monitor to let go
   # after a hold: they cannot run away on their own.
-  defp disarmed_held?(%{separation: %{}, flight: flight, airframe: :copter}, st),
+  # Let go, its AUTO may still find it disarmed: ArduCopter's DISARM_DELAY
+  # runs on until the motors spool up again (held for 9.9 s, released as
+  # it ran out, a copter disarmed in AUTO): held on the ground once, it is
+  # judged so until it is seen in the air.
+  defp disarmed_held?(%{held_on_ground: true, flight: flight, airframe: :copter}, st),
     do: not flight.airborne_seen and disarmed_on_ground?(st) and st.mode in [:auto | Manoeuvres.hold_modes(:copter)]
 
   defp disarmed_held?(_data, _st), do: false
@@ -607,7 +615,7 @@ defmodule Dolphin.Mission.Executor do
   defp restart(data, reason) do
     Events.emit(:mission_restarted, %{vehicle: data.vehicle, name: data.name, reason: reason})
     rearms = if reason == :disarmed_before_start, do: data.rearms + 1, else: data.rearms
-    data = %{data | separation: nil, flight: Flight.new(data.ending), disarmed_idle: false, grounded: nil, still: nil, rearms: rearms}
+    data = %{data | separation: nil, held_on_ground: false, flight: Flight.new(data.ending), disarmed_idle: false, grounded: nil, still: nil, rearms: rearms}
     {:next_state, :guided, %{data | attempt: 1}, for(t <- [:grounded, :disarmed, :stuck], do: {{:timeout, t}, :cancel})}
   end
 
@@ -615,7 +623,7 @@ defmodule Dolphin.Mission.Executor do
 
   defp judge(data, st) do
     cond do
-      disarmed_held?(data, st) and data.separation.want == :go and data.separation.phase == :resumed ->
+      disarmed_held?(data, st) and (data.separation == nil or (data.separation.want == :go and data.separation.phase == :resumed)) ->
         # Let go, its AUTO came while (or after) the autopilot disarmed it.
         restart(data, :disarmed_while_held)
 

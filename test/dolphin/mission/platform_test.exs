@@ -254,6 +254,25 @@ defmodule Dolphin.Mission.PlatformTest do
     assert Dolphin.Geo.distance(Dolphin.Geo.location(info.position.lat, info.position.lon), home) < 3
   end
 
+  # Let go as DISARM_DELAY ran out (held 9.9 s in search_and_signal.exs), the
+  # copter was disarmed in AUTO before its motors spooled up again: here
+  # the disarm comes in AUTO, after the resume, by command.
+  @tag timeout: 300_000
+  test "held before it left the ground, let go, then disarmed in AUTO before it left the ground: armed and started again", %{port: port} do
+    [{1, home}] = start_fleet(port, count: 1, spool_up_ms: 50_000, disarm_delay_ms: 600_000, speedup: 10)
+    Events.subscribe()
+    {:ok, pid} = Dolphin.Mission.Executor.start_link(out_and_back(home), 1, owner: self())
+    Dolphin.Test.SeparationHold.at_first_flight(pid)
+    Wait.until(fn -> match?({:ok, %{armed: true, mode: :brake, landed: :on_ground}}, Sim.info(1)) end, 1_500, fn -> "vehicle 1 held in BRAKE: #{inspect(Sim.info(1))}" end)
+    Dolphin.Test.SeparationHold.let_go(pid)
+    # Back in AUTO as the executor sees it (its hold over), still spooling up.
+    Wait.until(fn -> match?({:flying, %{separation: nil}}, :sys.get_state(pid)) and match?({:ok, %{mode: :auto}}, Vehicles.view(1)) end)
+    {:ok, _} = Vehicles.disarm(1)
+
+    assert_receive {:dolphin_platform, ^pid, :done}, 120_000
+    assert_received {:dolphin, :events, %{event: :mission_restarted, vehicle: 1, reason: :disarmed_while_held}}
+  end
+
   # ArduPilot drops a COMMAND_ACK when its link has no room: MISSION_START
   # taken, never answered, the vehicle flies the mission in AUTO.
   test "a MISSION_START taken but never acknowledged: the mission is followed as started, and done", %{port: port} do
