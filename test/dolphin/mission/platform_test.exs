@@ -214,15 +214,29 @@ defmodule Dolphin.Mission.PlatformTest do
   # ArduCopter disarms a copter that stands armed on the ground in BRAKE
   # (docs/ardupilot.md): held by the separation monitor before it left the
   # ground, the mission waits, and once let go arms and starts again.
-  @tag timeout: 300_000
-  test "held before it left the ground and disarmed there by the autopilot, a copter is armed and started again once let go", %{port: port} do
-    # Motors that spool up for 50 s of clock time, 5 s of real time at 10x:
-    # the hold, sent the moment MISSION_START is accepted, comes during it.
-    [{1, home}] = start_fleet(port, count: 1, spool_up_ms: 50_000, speedup: 10)
+  # Vehicle 1's mission (out and back), held the moment it first flies: its
+  # motors spool up for 50 s of clock time, 5 s of real time at 10x, and the
+  # hold, sent as MISSION_START is accepted, comes during it. `opts` are the
+  # vehicle's settings.
+  defp held_at_spool_up(port, opts) do
+    [{1, home}] = start_fleet(port, [count: 1, spool_up_ms: 50_000, speedup: 10] ++ opts)
     Events.subscribe()
     {:ok, pid} = Dolphin.Mission.Executor.start_link(out_and_back(home), 1, owner: self())
-
     Dolphin.Test.SeparationHold.at_first_flight(pid)
+    {home, pid}
+  end
+
+  # The mission done, the vehicle disarmed at home.
+  defp done_at_home(pid, home) do
+    assert_receive {:dolphin_platform, ^pid, :done}, 120_000
+    {:ok, info} = Sim.info(1)
+    refute info.armed
+    assert Dolphin.Geo.distance(Dolphin.Geo.location(info.position.lat, info.position.lon), home) < 3
+  end
+
+  @tag timeout: 300_000
+  test "held before it left the ground and disarmed there by the autopilot, a copter is armed and started again once let go", %{port: port} do
+    {home, pid} = held_at_spool_up(port, [])
     Wait.until(fn -> match?({:ok, %{armed: false, mode: :brake, landed: :on_ground}}, Sim.info(1)) end, 1_500, fn -> "vehicle 1 disarmed in BRAKE: #{inspect(Sim.info(1))}" end)
     # Its views come at 1 Hz of clock time: a few more, and the mission still waits.
     Clock.sleep(3_000)
@@ -230,28 +244,19 @@ defmodule Dolphin.Mission.PlatformTest do
     assert {:flying, _} = :sys.get_state(pid)
 
     Dolphin.Test.SeparationHold.let_go(pid)
-    assert_receive {:dolphin_platform, ^pid, :done}, 120_000
+    done_at_home(pid, home)
     assert_received {:dolphin, :events, %{event: :mission_restarted, vehicle: 1, name: "out and back", reason: :disarmed_while_held}}
-    {:ok, info} = Sim.info(1)
-    refute info.armed
-    assert Dolphin.Geo.distance(Dolphin.Geo.location(info.position.lat, info.position.lon), home) < 3
   end
 
   @tag timeout: 300_000
   test "held during its spool-up and let go before the autopilot disarms it, a copter takes off again in AUTO: no restart", %{port: port} do
-    # An autopilot that would wait ten minutes to disarm it; the hold as above.
-    [{1, home}] = start_fleet(port, count: 1, spool_up_ms: 50_000, disarm_delay_ms: 600_000, speedup: 10)
-    Events.subscribe()
-    {:ok, pid} = Dolphin.Mission.Executor.start_link(out_and_back(home), 1, owner: self())
-    Dolphin.Test.SeparationHold.at_first_flight(pid)
+    # An autopilot that would wait ten minutes to disarm it.
+    {home, pid} = held_at_spool_up(port, disarm_delay_ms: 600_000)
     Wait.until(fn -> match?({:ok, %{armed: true, mode: :brake, landed: :on_ground}}, Sim.info(1)) end, 1_500, fn -> "vehicle 1 held in BRAKE: #{inspect(Sim.info(1))}" end)
 
     Dolphin.Test.SeparationHold.let_go(pid)
-    assert_receive {:dolphin_platform, ^pid, :done}, 120_000
+    done_at_home(pid, home)
     refute_received {:dolphin, :events, %{event: :mission_restarted}}
-    {:ok, info} = Sim.info(1)
-    refute info.armed
-    assert Dolphin.Geo.distance(Dolphin.Geo.location(info.position.lat, info.position.lon), home) < 3
   end
 
   # Let go as DISARM_DELAY ran out (held 9.9 s in search_and_signal.exs), the
@@ -259,17 +264,14 @@ defmodule Dolphin.Mission.PlatformTest do
   # the disarm comes in AUTO, after the resume, by command.
   @tag timeout: 300_000
   test "held before it left the ground, let go, then disarmed in AUTO before it left the ground: armed and started again", %{port: port} do
-    [{1, home}] = start_fleet(port, count: 1, spool_up_ms: 50_000, disarm_delay_ms: 600_000, speedup: 10)
-    Events.subscribe()
-    {:ok, pid} = Dolphin.Mission.Executor.start_link(out_and_back(home), 1, owner: self())
-    Dolphin.Test.SeparationHold.at_first_flight(pid)
+    {home, pid} = held_at_spool_up(port, disarm_delay_ms: 600_000)
     Wait.until(fn -> match?({:ok, %{armed: true, mode: :brake, landed: :on_ground}}, Sim.info(1)) end, 1_500, fn -> "vehicle 1 held in BRAKE: #{inspect(Sim.info(1))}" end)
     Dolphin.Test.SeparationHold.let_go(pid)
     # Back in AUTO as the executor sees it (its hold over), still spooling up.
     Wait.until(fn -> match?({:flying, %{separation: nil}}, :sys.get_state(pid)) and match?({:ok, %{mode: :auto}}, Vehicles.view(1)) end)
     {:ok, _} = Vehicles.disarm(1)
 
-    assert_receive {:dolphin_platform, ^pid, :done}, 120_000
+    done_at_home(pid, home)
     assert_received {:dolphin, :events, %{event: :mission_restarted, vehicle: 1, reason: :disarmed_while_held}}
   end
 
