@@ -117,8 +117,7 @@ defmodule Dolphin.Mission.Executor do
       min_separation: Map.get(opts, :min_separation),
       # Held by the separation monitor: nil, or what it wants (:hold, :go)
       # and how far the vehicle is (:holding, :held, :resuming, :resumed
-      # until a view shows AUTO again), and `disarmed_held`: held before it
-      # left the ground, the autopilot disarmed it there (see judge/2).
+      # until a view shows AUTO again).
       separation: nil,
       # Held by the monitor before it left the ground, in this flight.
       held_on_ground: false,
@@ -540,7 +539,7 @@ defmodule Dolphin.Mission.Executor do
   # What the monitor wants now; one exchange with the vehicle at a time,
   # the next one once it ends.
   defp separation(%{separation: nil} = data, :hold),
-    do: separation_step(%{data | separation: %{want: :hold, phase: :resumed, disarmed_held: false}, held_on_ground: data.held_on_ground or not data.flight.airborne_seen})
+    do: separation_step(%{data | separation: %{want: :hold, phase: :resumed}, held_on_ground: data.held_on_ground or not data.flight.airborne_seen})
 
   defp separation(%{separation: nil} = data, :go), do: {:keep_state, data}
   defp separation(data, want), do: separation_step(put_in(data.separation.want, want))
@@ -548,10 +547,11 @@ defmodule Dolphin.Mission.Executor do
   defp separation_step(%{separation: %{want: :hold, phase: :resumed}} = data),
     do: exchange(put_in(data.separation.phase, :holding), fn -> Manoeuvres.hold(data.vehicle, fresh: true) end)
 
-  defp separation_step(%{separation: %{want: :go, phase: :held, disarmed_held: true}} = data), do: restart(data, :disarmed_while_held)
-
-  defp separation_step(%{separation: %{want: :go, phase: :held}} = data),
-    do: exchange(put_in(data.separation.phase, :resuming), fn -> Manoeuvres.command(data.vehicle, "AUTO", fn -> Vehicles.set_mode(data.vehicle, :auto) end) end)
+  defp separation_step(%{separation: %{want: :go, phase: :held}} = data) do
+    if disarmed_held?(data, data.view),
+      do: restart(data, :disarmed_while_held),
+      else: exchange(put_in(data.separation.phase, :resuming), fn -> Manoeuvres.command(data.vehicle, "AUTO", fn -> Vehicles.set_mode(data.vehicle, :auto) end) end)
+  end
 
   defp separation_step(data), do: {:keep_state, data}
 
@@ -560,9 +560,17 @@ defmodule Dolphin.Mission.Executor do
   defp separated({:error, _}, %{separation: %{phase: :aside}} = data), do: separation_step(put_in(data.separation.phase, :held))
 
   # Disarmed on the ground while its AUTO was on the way: whatever the answer, started again.
-  defp separated(_result, %{separation: %{phase: :resuming, disarmed_held: true}} = data), do: restart(data, :disarmed_while_held)
-  defp separated(:ok, %{separation: %{phase: :resuming}} = data), do: separation_step(put_in(data.separation.phase, :resumed))
-  defp separated({:error, e}, data), do: fail(:flying, data, {:refused, e})
+  defp separated(result, %{separation: %{phase: :resuming}} = data) do
+    cond do
+      disarmed_held?(data, data.view) -> restart(data, :disarmed_while_held)
+      result == :ok -> separation_step(put_in(data.separation.phase, :resumed))
+      true -> separated_failed(result, data)
+    end
+  end
+
+  defp separated(result, data), do: separated_failed(result, data)
+
+  defp separated_failed({:error, e}, data), do: fail(:flying, data, {:refused, e})
 
   # Where a held copter goes out of the other's way: `m` metres up, or down
   # when its fence's ceiling is nearer; nil when neither keeps 5 m clear of
@@ -600,11 +608,13 @@ defmodule Dolphin.Mission.Executor do
   # and started again (the mission resumes at its take-off). Only in the
   # mode it was held in (or AUTO, let go): a pilot or a failsafe that took
   # it to another is left alone. Each restart needs the monitor to let go
-  # after a hold: they cannot run away on their own.
-  # Let go, its AUTO may still find it disarmed: ArduCopter's DISARM_DELAY
-  # runs on until the motors spool up again (held for 9.9 s, released as
-  # it ran out, a copter disarmed in AUTO): held on the ground once, it is
-  # judged so until it is seen in the air.
+  # after a hold: they cannot run away on their own. Let go, its AUTO may
+  # still find it disarmed (ArduCopter's DISARM_DELAY runs on until the
+  # motors spool up again: held for 9.9 s, released as it ran out, a copter
+  # was disarmed in AUTO): held on the ground once, it is judged so until
+  # it is seen in the air. Judged on its latest view (nil: none yet).
+  defp disarmed_held?(_data, nil), do: false
+
   defp disarmed_held?(%{held_on_ground: true, flight: flight, airframe: :copter}, st),
     do: not flight.airborne_seen and disarmed_on_ground?(st) and st.mode in [:auto | Manoeuvres.hold_modes(:copter)]
 
@@ -616,8 +626,11 @@ defmodule Dolphin.Mission.Executor do
     Events.emit(:mission_restarted, %{vehicle: data.vehicle, name: data.name, reason: reason})
     rearms = if reason == :disarmed_before_start, do: data.rearms + 1, else: data.rearms
     data = %{data | separation: nil, held_on_ground: false, flight: Flight.new(data.ending), disarmed_idle: false, grounded: nil, still: nil, rearms: rearms}
-    {:next_state, :guided, %{data | attempt: 1}, for(t <- [:grounded, :disarmed, :stuck], do: {{:timeout, t}, :cancel})}
+    {:next_state, :guided, %{data | attempt: 1}, cancel_watches()}
   end
+
+  # The flight's watchdogs (see judge_flight/2): stopped while it waits held, and before a restart.
+  defp cancel_watches, do: for(t <- [:grounded, :disarmed, :stuck], do: {{:timeout, t}, :cancel})
 
   # --- :flying ----------------------------------------------------------------
 
@@ -628,11 +641,7 @@ defmodule Dolphin.Mission.Executor do
         restart(data, :disarmed_while_held)
 
       disarmed_held?(data, st) ->
-        {:keep_state, put_in(data.separation.disarmed_held, true), for(t <- [:grounded, :disarmed, :stuck], do: {{:timeout, t}, :cancel})}
-
-      # Armed again, or in the air: a disarmed view before was an old one.
-      match?(%{disarmed_held: true}, data.separation) ->
-        judge_flight(put_in(data.separation.disarmed_held, false), st)
+        {:keep_state, data, cancel_watches()}
 
       true ->
         judge_flight(data, st)
