@@ -9,6 +9,7 @@ defmodule Dolphin.Test.GroundStation do
   import ExUnit.Callbacks, only: [on_exit: 1]
 
   alias Dolphin.{Link, Vehicles}
+  alias Dolphin.Link.Connection
 
   @doc "Opens a link (closed when the test ends; `opts` as `Dolphin.Link.connect/2`'s) and returns the port simulated vehicles send to."
   def open(opts \\ []) do
@@ -23,7 +24,7 @@ defmodule Dolphin.Test.GroundStation do
       end)
     end)
 
-    Dolphin.Link.Connection.port(name)
+    Connection.port(name)
   end
 
   # Ports for links opened later are taken below the system's ephemeral
@@ -53,10 +54,45 @@ defmodule Dolphin.Test.GroundStation do
     end
   end
 
-  @doc "Stops the simulated vehicles and forgets every vehicle the ground station knew."
+  @doc """
+  Stops the simulated vehicles and forgets every vehicle the ground station
+  knew, once the links opened by `open/1` have read all the vehicles sent.
+  """
   def forget_vehicles do
     Dolphin.Sim.stop()
+    Enum.each(opened_links(), &drain/1)
     Enum.each(Vehicles.list(), &Vehicles.forget/1)
     Dolphin.Clock.set_speedup(1)
+  end
+
+  # What stopped vehicles sent may still wait in a link's socket: read after
+  # they were forgotten, it would discover one again at an address nobody
+  # answers from any more, and the next vehicle given its system id would be
+  # another ("1@127.0.0.1:…"), not vehicle 1. A datagram sent to the link
+  # now is read after all of that: once the link has counted its bytes (no
+  # frame begins with them), what came before it has been delivered.
+  @marker <<0, 0, 0, 0, 0, 0, 0, 0>>
+
+  defp drain(name) do
+    port = Connection.port(name)
+    skipped = fn -> Connection.info(name).stats.bytes_skipped end
+    before = skipped.()
+    {:ok, socket} = :gen_udp.open(0, ip: {127, 0, 0, 1})
+
+    try do
+      :ok = :gen_udp.send(socket, {127, 0, 0, 1}, port, @marker)
+      Dolphin.Test.Wait.until(fn -> skipped.() >= before + byte_size(@marker) end, 250, fn -> "(link #{name} reading what came before a marker datagram)" end)
+    after
+      :gen_udp.close(socket)
+    end
+  catch
+    # The test closed that link itself meanwhile: nothing left to read.
+    :exit, _ -> :ok
+  end
+
+  defp opened_links do
+    Dolphin.Instance.names().registry
+    |> Registry.select([{{{:link, :"$1"}, :_, :_}, [], [:"$1"]}])
+    |> Enum.filter(&(is_binary(&1) and String.starts_with?(&1, "test-gcs-")))
   end
 end

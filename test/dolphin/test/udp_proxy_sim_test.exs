@@ -39,6 +39,8 @@ defmodule Dolphin.Test.UDPProxySimTest do
   defp transfer(gcs_port, seed, uploaded) do
     :rand.seed(:exsss, {seed, 14, 15})
     faults = [loss: :rand.uniform(31) - 1, duplicate: :rand.uniform(11) - 1, reorder: :rand.uniform(11) - 1]
+    # Vehicle 1 must be the one behind this proxy, not one heard before it.
+    assert Vehicles.list() == [], "seed #{seed}: vehicles known before it started: #{inspect(Vehicles.list())}"
     proxy = start_supervised!({UDPProxy, gcs: gcs_port, seed: seed}, id: {:proxy, seed})
     {:ok, [1]} = Sim.start(count: 1, gcs: UDPProxy.port(proxy), speedup: @speedup)
     # Discovered on a clean link, then impaired.
@@ -50,11 +52,14 @@ defmodule Dolphin.Test.UDPProxySimTest do
     held = Enum.map(info.mission, &meaning/1) == Enum.map(tl(uploaded), &meaning/1)
     download = Vehicles.download_mission(1)
     stats = UDPProxy.stats(proxy)
+    known = Vehicles.list()
 
     # The vehicle first: it would go on sending to the proxy's port, which
-    # another test may have by then.
-    Dolphin.Test.GroundStation.forget_vehicles()
+    # another test may have by then. Then the proxy, then what the ground
+    # station heard through it (read to its end: GroundStation).
+    :ok = Sim.stop()
     :ok = stop_supervised({:proxy, seed})
+    Dolphin.Test.GroundStation.forget_vehicles()
 
     exact_download? =
       match?({:ok, back} when length(back) == length(uploaded), download) and
@@ -69,7 +74,8 @@ defmodule Dolphin.Test.UDPProxySimTest do
     else
       "seed #{seed} (#{inspect(faults)} %): upload #{outcome(upload)}, the vehicle holds the mission: #{held}, " <>
         "download #{if exact_download?, do: "exact", else: outcome(download)}, " <>
-        "dropped to the ground station #{stats.to_gcs.dropped}, to the vehicle #{stats.to_vehicle.dropped}"
+        "datagrams to the ground station #{stats.to_gcs.received} (#{stats.to_gcs.dropped} dropped), " <>
+        "to the vehicle #{stats.to_vehicle.received} (#{stats.to_vehicle.dropped} dropped), vehicles known: #{inspect(known)}"
     end
   end
 
