@@ -67,8 +67,10 @@ defmodule Dolphin.Test.GroundStation do
 
   # What stopped vehicles sent may still wait in a link's socket: read after
   # they were forgotten, it would discover one again at an address nobody
-  # answers from any more, and the next vehicle given its system id would be
-  # another ("1@127.0.0.1:…"), not vehicle 1. A datagram sent to the link
+  # answers from any more, and the next vehicle given its system id, heard
+  # from another address, would be a path of that ghost, unused until the
+  # ghost's address has been quiet for 10 s of real time
+  # (Dolphin.Vehicles.Paths: the ghost's own unique id never comes). A datagram sent to the link
   # now is read after all of that: once the link has counted its bytes (no
   # frame begins with them), what came before it has been delivered.
   @marker <<0, 0, 0, 0, 0, 0, 0, 0>>

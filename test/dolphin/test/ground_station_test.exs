@@ -2,7 +2,8 @@ defmodule Dolphin.Test.GroundStationTest do
   # The clean-up between simulated fleets (test/support/ground_station.ex):
   # what the vehicles sent before they stopped is read before they are
   # forgotten, or it brings one back as a ghost at an address nobody answers
-  # from (and the next vehicle 1 would be "1@…"). Its own Dolphin.Instance: async.
+  # from (and the next vehicle 1 would be taken for another path of it).
+  # Its own Dolphin.Instance: async.
   use ExUnit.Case, async: true
 
   alias Dolphin.MAVLink.Frame
