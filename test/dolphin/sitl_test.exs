@@ -277,8 +277,7 @@ defmodule Dolphin.SITLTest do
     home = Backend.home(id)
     pick(id)
     Dolphin.Events.subscribe()
-    {:ok, pid} = Dolphin.Mission.Executor.start_link(hop(home), id, owner: self())
-    Dolphin.Test.SeparationHold.at_first_flight(pid)
+    {:ok, pid} = Dolphin.Mission.Executor.start_link(hop(home), id, [owner: self()] ++ Dolphin.Test.SeparationHold.at_first_flight())
 
     # BRAKE holds nothing on the ground: DISARM_DELAY (10 s) after it, ArduCopter disarms.
     Wait.until(fn -> match?({:ok, %{mode: :brake, armed: false}}, Vehicles.state(id)) end, div(Clock.to_real_ms(180_000), 20), fn -> "vehicle #{id} disarmed in BRAKE: #{inspect(Vehicles.view(id))}" end)

@@ -5,14 +5,19 @@ defmodule Dolphin.Test.SeparationHold do
   first flies, while a copter's motors still spool up on the ground.
   """
 
-  @doc "Sends `executor` the monitor's hold, from within it, as it first enters `:flying` (once)."
-  def at_first_flight(executor) do
+  @doc """
+  The executor's start option (`Dolphin.Mission.Executor.start_link/3`)
+  that sends it the monitor's hold, from within it, as it first enters
+  `:flying` (once). Given at its start: installed after it, it may come
+  too late (a test process descheduled while the mission starts).
+  """
+  def at_first_flight do
     hold_once = fn
       :waiting, {:consume, _, from, :flying}, _ when from != :flying -> send(self(), {:separation, :hold, %{}}) && :sent
       acc, _event, _state -> acc
     end
 
-    :ok = :sys.install(executor, {hold_once, :waiting})
+    [debug: [{:install, {hold_once, :waiting}}]]
   end
 
   @doc "The monitor lets `executor`'s vehicle go."

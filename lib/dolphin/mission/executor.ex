@@ -80,8 +80,13 @@ defmodule Dolphin.Mission.Executor do
   @boot_poll_ms 200
   @transfer_attempts 3
 
+  # `opts`: the platform's, and `:debug`, `:gen_statem`'s debug options
+  # (`:sys`), in effect from its first event.
   @spec start_link(Mission.t(), byte(), keyword()) :: :gen_statem.start_ret()
-  def start_link(mission, vehicle, opts), do: :gen_statem.start_link(__MODULE__, {mission, vehicle, Map.new(opts)}, [])
+  def start_link(mission, vehicle, opts) do
+    {debug, opts} = Keyword.pop(opts, :debug, [])
+    :gen_statem.start_link(__MODULE__, {mission, vehicle, Map.new(opts)}, debug: debug)
+  end
 
   @doc false
   # Returns once the vehicle is safe: :ok, or {:error, why} when it could not be made to hold.
@@ -300,9 +305,13 @@ defmodule Dolphin.Mission.Executor do
   def handle_event(:state_timeout, :check_landed, :flying, data) do
     case Vehicles.view(data.vehicle) do
       {:ok, st} ->
-        case Flight.landed(data.flight, st) do
-          :done -> done(data)
-          {:failed, cause} -> fail(:flying, data, cause)
+        if data.flight.armed_seen and disarmed_before_flight?(data, st) do
+          disarmed_before_take_off(data, st)
+        else
+          case Flight.landed(data.flight, st) do
+            :done -> done(data)
+            {:failed, cause} -> fail(:flying, data, cause)
+          end
         end
 
       _ ->
@@ -643,9 +652,20 @@ defmodule Dolphin.Mission.Executor do
       disarmed_held?(data, st) ->
         {:keep_state, data, cancel_watches()}
 
+      data.flight.armed_seen and disarmed_before_flight?(data, st) ->
+        disarmed_before_take_off(data, st)
+
       true ->
         judge_flight(data, st)
     end
+  end
+
+  # Seen armed, disarmed before it left the ground: judged by the rearm
+  # watch (watch_disarmed/2), not as the end of its flight, nor as a landing
+  # whose reports are awaited (their timer is this state's only one here).
+  defp disarmed_before_take_off(data, st) do
+    {data, disarmed} = watch_disarmed(%{data | flight: %{data.flight | landing_check: false}}, st)
+    {:keep_state, data, [{:state_timeout, :cancel} | disarmed]}
   end
 
   defp judge_flight(data, st) do
@@ -715,14 +735,31 @@ defmodule Dolphin.Mission.Executor do
     end
   end
 
-  # Never seen armed in this flight, disarmed (on the ground, for one that
-  # takes off). A rover, boat or submarine too: ArduRover SITL on a loaded
-  # host once armed and disarmed in one instant, and the mission would have
-  # waited in AUTO, disarmed, for ever.
+  # Disarmed (on the ground, for one that takes off) before the flight
+  # began: never seen armed in this flight — a rover, boat or submarine too:
+  # ArduRover SITL on a loaded host once armed and disarmed in one instant,
+  # and the mission would have waited in AUTO, disarmed, for ever —, or a
+  # copter seen armed that never left the ground, its take-off still ahead,
+  # in AUTO or GUIDED. Over 30 % loss on a loaded host, ArduCopter's
+  # DISARM_DELAY ran out in GUIDED before MISSION_START came; the heartbeat
+  # saying so was lost, and MISSION_CURRENT's ACTIVE (the start taken while
+  # disarmed) came with the armed bit of the heartbeat before it: seen
+  # armed, then disarmed in AUTO at the take-off.
   defp disarmed_before_flight?(data, st),
-    do: not data.flight.armed_seen and disarmed_on_ground?(st)
+    do: disarmed_on_ground?(st) and (not data.flight.armed_seen or (st.mode in [:auto, :guided] and take_off_ahead?(data, st)))
 
-  defp disarmed_on_ground?(st), do: not st.armed? and st.landed in [:on_ground, nil]
+  defp take_off_ahead?(data, st) do
+    take_off = Enum.find(data.items, &(&1.command == @takeoff))
+    current = st.mission.current
+    Airframe.takes_off?(data.airframe) and not data.flight.airborne_seen and take_off != nil and (current == nil or current <= take_off.seq)
+  end
+
+  # A copter disarmed during its take-off's spool-up may be reported
+  # landed TAKEOFF until its next EXTENDED_SYS_STATE: below a metre, it
+  # stands on the ground.
+  defp disarmed_on_ground?(st), do: not st.armed? and (st.landed in [:on_ground, nil] or (st.landed == :takeoff and low?(st)))
+
+  defp low?(%{relative_altitude: h}), do: not is_number(h) or h < @ground_m
 
   defp disarmed_before_start(data) do
     if Airframe.takes_off?(data.airframe),

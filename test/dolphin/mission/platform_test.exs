@@ -221,9 +221,24 @@ defmodule Dolphin.Mission.PlatformTest do
   defp held_at_spool_up(port, opts) do
     [{1, home}] = start_fleet(port, [count: 1, spool_up_ms: 50_000, speedup: 10] ++ opts)
     Events.subscribe()
-    {:ok, pid} = Dolphin.Mission.Executor.start_link(out_and_back(home), 1, owner: self())
-    Dolphin.Test.SeparationHold.at_first_flight(pid)
+    {:ok, pid} = Dolphin.Mission.Executor.start_link(out_and_back(home), 1, [owner: self()] ++ Dolphin.Test.SeparationHold.at_first_flight())
     {home, pid}
+  end
+
+  # Where vehicle 1 and `pid`'s mission are, for a wait that timed out: the
+  # simulator's truth, the mission's step and hold, and its end if it ended.
+  defp where_held(pid) do
+    ending =
+      receive do
+        {:dolphin_platform, ^pid, {:failed, f}} -> "failed: " <> inspect(f, limit: 12)
+        {:dolphin_platform, ^pid, :done} -> "done (never held?)"
+      after
+        0 -> "none yet"
+      end
+
+    truth = with {:ok, info} <- Sim.info(1), do: Map.take(info, [:armed, :mode, :landed, :current, :position])
+    step = if Process.alive?(pid), do: with({step, data} <- :sys.get_state(pid), do: {step, Map.take(data, [:separation, :held_on_ground, :rearms, :leaving])}), else: :ended
+    "vehicle 1: #{inspect(truth)}; the mission: #{inspect(step)}; its end: #{ending}"
   end
 
   # The mission done, the vehicle disarmed at home.
@@ -237,7 +252,7 @@ defmodule Dolphin.Mission.PlatformTest do
   @tag timeout: 300_000
   test "held before it left the ground and disarmed there by the autopilot, a copter is armed and started again once let go", %{port: port} do
     {home, pid} = held_at_spool_up(port, [])
-    Wait.until(fn -> match?({:ok, %{armed: false, mode: :brake, landed: :on_ground}}, Sim.info(1)) end, 1_500, fn -> "vehicle 1 disarmed in BRAKE: #{inspect(Sim.info(1))}" end)
+    Wait.until(fn -> match?({:ok, %{armed: false, mode: :brake, landed: :on_ground}}, Sim.info(1)) end, 1_500, fn -> "vehicle 1 disarmed in BRAKE: " <> where_held(pid) end)
     # Its views come at 1 Hz of clock time: a few more, and the mission still waits.
     Clock.sleep(3_000)
     refute_received {:dolphin_platform, ^pid, {:failed, _}}
@@ -252,7 +267,7 @@ defmodule Dolphin.Mission.PlatformTest do
   test "held during its spool-up and let go before the autopilot disarms it, a copter takes off again in AUTO: no restart", %{port: port} do
     # An autopilot that would wait ten minutes to disarm it.
     {home, pid} = held_at_spool_up(port, disarm_delay_ms: 600_000)
-    Wait.until(fn -> match?({:ok, %{armed: true, mode: :brake, landed: :on_ground}}, Sim.info(1)) end, 1_500, fn -> "vehicle 1 held in BRAKE: #{inspect(Sim.info(1))}" end)
+    Wait.until(fn -> match?({:ok, %{armed: true, mode: :brake, landed: :on_ground}}, Sim.info(1)) end, 1_500, fn -> "vehicle 1 held in BRAKE: " <> where_held(pid) end)
 
     Dolphin.Test.SeparationHold.let_go(pid)
     done_at_home(pid, home)
@@ -265,7 +280,7 @@ defmodule Dolphin.Mission.PlatformTest do
   @tag timeout: 300_000
   test "held before it left the ground, let go, then disarmed in AUTO before it left the ground: armed and started again", %{port: port} do
     {home, pid} = held_at_spool_up(port, disarm_delay_ms: 600_000)
-    Wait.until(fn -> match?({:ok, %{armed: true, mode: :brake, landed: :on_ground}}, Sim.info(1)) end, 1_500, fn -> "vehicle 1 held in BRAKE: #{inspect(Sim.info(1))}" end)
+    Wait.until(fn -> match?({:ok, %{armed: true, mode: :brake, landed: :on_ground}}, Sim.info(1)) end, 1_500, fn -> "vehicle 1 held in BRAKE: " <> where_held(pid) end)
     Dolphin.Test.SeparationHold.let_go(pid)
     # Back in AUTO as the executor sees it (its hold over), still spooling up.
     Wait.until(fn -> match?({:flying, %{separation: nil}}, :sys.get_state(pid)) and match?({:ok, %{mode: :auto}}, Vehicles.view(1)) end)
@@ -273,6 +288,29 @@ defmodule Dolphin.Mission.PlatformTest do
 
     done_at_home(pid, home)
     assert_received {:dolphin, :events, %{event: :mission_restarted, vehicle: 1, reason: :disarmed_while_held}}
+  end
+
+  # Over 30 % loss on a loaded host (the lossy-link example, vehicle 2):
+  # DISARM_DELAY ran out in GUIDED before MISSION_START came, the heartbeat
+  # saying so was lost, and the mission's ACTIVE came with the armed bit of
+  # the one before: seen armed in its mission, then disarmed in AUTO, on the
+  # ground. Here the disarm comes in AUTO during the spool-up, by command.
+  @tag timeout: 300_000
+  test "seen armed in its mission, disarmed in AUTO before it left the ground: armed and started again", %{port: port} do
+    [{1, home}] = start_fleet(port, count: 1, spool_up_ms: 50_000, speedup: 10)
+    Events.subscribe()
+    {:ok, pid} = Dolphin.Mission.Executor.start_link(out_and_back(home), 1, owner: self())
+
+    Wait.until(
+      fn -> match?({:flying, %{flight: %{armed_seen: true, airborne_seen: false}}}, :sys.get_state(pid)) and match?({:ok, %{armed: true, mode: :auto, landed: :takeoff}}, Sim.info(1)) end,
+      1_500,
+      fn -> "vehicle 1 seen armed in its mission, spooling up: " <> where_held(pid) end
+    )
+
+    {:ok, _} = Vehicles.disarm(1)
+    done_at_home(pid, home)
+    assert_received {:dolphin, :events, %{event: :mission_restarted, vehicle: 1, reason: :disarmed_before_start}}
+    refute_received {:dolphin_platform, ^pid, {:failed, _}}
   end
 
   # ArduPilot drops a COMMAND_ACK when its link has no room: MISSION_START
