@@ -34,7 +34,10 @@ defmodule Dolphin.Vehicles.MissionProtocol do
   a duplicate and is not answered twice. `ACCEPTED` ends it once every item
   has gone out at least once (so a stale ACCEPTED of an earlier transfer
   never makes a wrong mission look accepted); refusals (`NO_SPACE`,
-  `UNSUPPORTED`, ...) end it with that result.
+  `UNSUPPORTED`, ...) end it with that result. `DENIED` to MISSION_COUNT
+  (another ground station's upload under way, or a late answer to a
+  download's request) is asked again at every timeout, and is the result
+  only when the exchange is given up.
 
   If the vehicle cancels, or stops answering after it had answered, the
   transaction starts again with MISSION_COUNT, up to `:restarts` times
@@ -201,6 +204,8 @@ defmodule Dolphin.Vehicles.MissionProtocol do
       stalled_since: now(),
       # The vehicle answered an item with MAV_MISSION_ERROR: no upload under way there.
       not_receiving: false,
+      # It answered MISSION_COUNT with MAV_MISSION_DENIED.
+      denied: false,
       # Download: requested and not received yet, seq => {real ms, sends}.
       asked: %{}
     })
@@ -218,6 +223,7 @@ defmodule Dolphin.Vehicles.MissionProtocol do
   def handle_event(:state_timeout, :rto, {:count, tries}, data) do
     case stall(data) do
       {:retry, data} -> {:next_state, {:count, tries + 1}, data}
+      {:give_up, %{denied: true} = data} -> fail(data, :denied, "busy with another ground station's upload")
       {:give_up, data} -> restart_or_fail(data, "no request for items after MISSION_COUNT")
     end
   end
@@ -421,8 +427,13 @@ defmodule Dolphin.Vehicles.MissionProtocol do
        when result in [@accepted, @error, @invalid_sequence, @cancelled],
        do: {:keep_state, data}
 
-  # DENIED after an item names another ground station's upload; to our COUNT, a refusal.
+  # DENIED after an item names another ground station's upload. To our
+  # COUNT too (ArduPilot denies a COUNT while another station uploads), or
+  # it is a late answer to a request of a download just before (denied
+  # while a duplicated COUNT had the vehicle receiving): asked again at the
+  # next timeout, and said if the upload is given up.
   defp upload_ack(@denied, :sending, data), do: {:keep_state, data}
+  defp upload_ack(@denied, {:count, _}, data), do: {:keep_state, %{data | denied: true}}
   defp upload_ack(result, _state, data), do: fail(data, result(result), nil)
 
   # The vehicle asks for `seq`: every item before it is accepted.

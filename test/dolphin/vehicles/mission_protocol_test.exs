@@ -175,11 +175,11 @@ defmodule Dolphin.Vehicles.MissionProtocolTest do
 
   # The protocol's process alone, the test as the vehicle: what it sends
   # comes here as {:sent, message}, its result as {ref, result}.
-  defp protocol_upload(items) do
+  defp protocol_upload(items, opts \\ []) do
     test = self()
     ref = make_ref()
     request = %{operation: :upload, sysid: 1, mission_type: :mission, items: items, send: &send(test, {:sent, &1}), reply_to: {test, ref}}
-    {:ok, pid} = Dolphin.Vehicles.MissionProtocol.start_link(request, send_ahead: false)
+    {:ok, pid} = Dolphin.Vehicles.MissionProtocol.start_link(request, [send_ahead: false] ++ opts)
     assert_receive {:sent, %M.MissionCount{count: 3}}, 5_000
     {pid, ref}
   end
@@ -214,6 +214,44 @@ defmodule Dolphin.Vehicles.MissionProtocolTest do
     assert_receive {:sent, %M.MissionCount{count: 3}}, 5_000
     refute_received {^ref, _}
     :gen_statem.stop(pid)
+  end
+
+  # ArduPilot denies a MISSION_COUNT while another ground station uploads,
+  # and a download's request during an upload: a late answer to one (a
+  # loaded run of the lossy property got one just after its download) looks
+  # the same. Asked again; DENIED to every try, it is the result.
+  test "DENIED to MISSION_COUNT: asked again, and the upload goes on once the vehicle takes it; DENIED all along, the result", %{port: _port} do
+    Clock.set_speedup(10)
+    {pid, ref} = protocol_upload(items(3))
+    send(pid, {:mission, %M.MissionAck{type: 14}})
+    assert_receive {:sent, %M.MissionCount{count: 3}}, 5_000
+
+    for seq <- 0..2 do
+      send(pid, {:mission, %M.MissionRequestInt{seq: seq}})
+      assert_receive {:sent, %M.MissionItemInt{seq: ^seq}}, 5_000
+    end
+
+    send(pid, {:mission, %M.MissionAck{type: 0}})
+    assert_receive {^ref, :ok}, 5_000
+
+    {pid, ref} = protocol_upload(items(3), attempts: 3)
+    send(pid, {:mission, %M.MissionAck{type: 14}})
+    assert %MissionError{result: :denied} = error = deny_counts(pid, ref)
+    assert Exception.message(error) =~ "refused the mission upload: MAV_MISSION_DENIED (busy with another ground station's upload)"
+  end
+
+  # Every MISSION_COUNT answered DENIED, until the upload's result comes.
+  defp deny_counts(pid, ref) do
+    receive do
+      {:sent, %M.MissionCount{}} ->
+        send(pid, {:mission, %M.MissionAck{type: 14}})
+        deny_counts(pid, ref)
+
+      {^ref, {:error, error}} ->
+        error
+    after
+      5_000 -> flunk("the upload neither asked again nor ended")
+    end
   end
 
   # An upload whose final ACCEPTED was lost ends :unconfirmed; the reading
