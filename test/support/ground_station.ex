@@ -11,9 +11,12 @@ defmodule Dolphin.Test.GroundStation do
   alias Dolphin.{Link, Vehicles}
   alias Dolphin.Link.Connection
 
+  # The names of the links open/1 opens begin so (forget_vehicles/0 finds them by it).
+  @link_prefix "test-gcs-"
+
   @doc "Opens a link (closed when the test ends; `opts` as `Dolphin.Link.connect/2`'s) and returns the port simulated vehicles send to."
   def open(opts \\ []) do
-    name = "test-gcs-#{System.unique_integer([:positive])}"
+    name = @link_prefix <> "#{System.unique_integer([:positive])}"
     {:ok, link} = Link.connect("udpin:127.0.0.1:0", [name: name] ++ opts)
     instance = Dolphin.Instance.current()
 
@@ -95,6 +98,6 @@ defmodule Dolphin.Test.GroundStation do
   defp opened_links do
     Dolphin.Instance.names().registry
     |> Registry.select([{{{:link, :"$1"}, :_, :_}, [], [:"$1"]}])
-    |> Enum.filter(&(is_binary(&1) and String.starts_with?(&1, "test-gcs-")))
+    |> Enum.filter(&(is_binary(&1) and String.starts_with?(&1, @link_prefix)))
   end
 end

@@ -305,7 +305,7 @@ defmodule Dolphin.Mission.Executor do
   def handle_event(:state_timeout, :check_landed, :flying, data) do
     case Vehicles.view(data.vehicle) do
       {:ok, st} ->
-        if data.flight.armed_seen and disarmed_before_flight?(data, st) do
+        if disarmed_after_arming?(data, st) do
           disarmed_before_take_off(data, st)
         else
           case Flight.landed(data.flight, st) do
@@ -652,13 +652,16 @@ defmodule Dolphin.Mission.Executor do
       disarmed_held?(data, st) ->
         {:keep_state, data, cancel_watches()}
 
-      data.flight.armed_seen and disarmed_before_flight?(data, st) ->
+      disarmed_after_arming?(data, st) ->
         disarmed_before_take_off(data, st)
 
       true ->
         judge_flight(data, st)
     end
   end
+
+  # Seen armed in this flight, then disarmed before it began (see disarmed_before_flight?/2).
+  defp disarmed_after_arming?(data, st), do: data.flight.armed_seen and disarmed_before_flight?(data, st)
 
   # Seen armed, disarmed before it left the ground: judged by the rearm
   # watch (watch_disarmed/2), not as the end of its flight, nor as a landing

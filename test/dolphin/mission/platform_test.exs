@@ -218,10 +218,21 @@ defmodule Dolphin.Mission.PlatformTest do
   # motors spool up for 50 s of clock time, 5 s of real time at 10x, and the
   # hold, sent as MISSION_START is accepted, comes during it. `opts` are the
   # vehicle's settings.
-  defp held_at_spool_up(port, opts) do
+  defp held_at_spool_up(port, opts), do: spooling_up(port, opts, Dolphin.Test.SeparationHold.at_first_flight())
+
+  # Vehicle 1's mission with a take-off whose spool-up lasts 50 s of clock
+  # time; `executor_opts` beside its owner.
+  defp spooling_up(port, opts, executor_opts) do
     [{1, home}] = start_fleet(port, [count: 1, spool_up_ms: 50_000, speedup: 10] ++ opts)
     Events.subscribe()
-    {:ok, pid} = Dolphin.Mission.Executor.start_link(out_and_back(home), 1, [owner: self()] ++ Dolphin.Test.SeparationHold.at_first_flight())
+    {:ok, pid} = Dolphin.Mission.Executor.start_link(out_and_back(home), 1, [owner: self()] ++ executor_opts)
+    {home, pid}
+  end
+
+  # Held in BRAKE, armed, on the ground, by an autopilot that would wait ten minutes to disarm it.
+  defp held_armed_in_brake(port) do
+    {home, pid} = held_at_spool_up(port, disarm_delay_ms: 600_000)
+    Wait.until(fn -> match?({:ok, %{armed: true, mode: :brake, landed: :on_ground}}, Sim.info(1)) end, 1_500, fn -> "vehicle 1 held in BRAKE: " <> where_held(pid) end)
     {home, pid}
   end
 
@@ -265,10 +276,7 @@ defmodule Dolphin.Mission.PlatformTest do
 
   @tag timeout: 300_000
   test "held during its spool-up and let go before the autopilot disarms it, a copter takes off again in AUTO: no restart", %{port: port} do
-    # An autopilot that would wait ten minutes to disarm it.
-    {home, pid} = held_at_spool_up(port, disarm_delay_ms: 600_000)
-    Wait.until(fn -> match?({:ok, %{armed: true, mode: :brake, landed: :on_ground}}, Sim.info(1)) end, 1_500, fn -> "vehicle 1 held in BRAKE: " <> where_held(pid) end)
-
+    {home, pid} = held_armed_in_brake(port)
     Dolphin.Test.SeparationHold.let_go(pid)
     done_at_home(pid, home)
     refute_received {:dolphin, :events, %{event: :mission_restarted}}
@@ -279,8 +287,7 @@ defmodule Dolphin.Mission.PlatformTest do
   # the disarm comes in AUTO, after the resume, by command.
   @tag timeout: 300_000
   test "held before it left the ground, let go, then disarmed in AUTO before it left the ground: armed and started again", %{port: port} do
-    {home, pid} = held_at_spool_up(port, disarm_delay_ms: 600_000)
-    Wait.until(fn -> match?({:ok, %{armed: true, mode: :brake, landed: :on_ground}}, Sim.info(1)) end, 1_500, fn -> "vehicle 1 held in BRAKE: " <> where_held(pid) end)
+    {home, pid} = held_armed_in_brake(port)
     Dolphin.Test.SeparationHold.let_go(pid)
     # Back in AUTO as the executor sees it (its hold over), still spooling up.
     Wait.until(fn -> match?({:flying, %{separation: nil}}, :sys.get_state(pid)) and match?({:ok, %{mode: :auto}}, Vehicles.view(1)) end)
@@ -297,9 +304,7 @@ defmodule Dolphin.Mission.PlatformTest do
   # ground. Here the disarm comes in AUTO during the spool-up, by command.
   @tag timeout: 300_000
   test "seen armed in its mission, disarmed in AUTO before it left the ground: armed and started again", %{port: port} do
-    [{1, home}] = start_fleet(port, count: 1, spool_up_ms: 50_000, speedup: 10)
-    Events.subscribe()
-    {:ok, pid} = Dolphin.Mission.Executor.start_link(out_and_back(home), 1, owner: self())
+    {home, pid} = spooling_up(port, [], [])
 
     Wait.until(
       fn -> match?({:flying, %{flight: %{armed_seen: true, airborne_seen: false}}}, :sys.get_state(pid)) and match?({:ok, %{armed: true, mode: :auto, landed: :takeoff}}, Sim.info(1)) end,
