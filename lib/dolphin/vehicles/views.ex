@@ -10,13 +10,16 @@ defmodule Dolphin.Vehicles.Views do
   not need a local vehicle process). Writing a view is also announcing it:
 
     1. the row is replaced;
-    2. `{:view, view}` is published on `Dolphin.PubSub` topic
-       `{:vehicle, id}`, the vehicle's one topic (the engine's condition
-       watchers follow it);
-    3. the transitions from the previous row (`Dolphin.Vehicles.View.transitions/2`)
+    2. the transitions from the previous row (`Dolphin.Vehicles.View.transitions/2`)
        are emitted as `Dolphin.Events` events: `vehicle_discovered` once
        the type is known, `mode_changed`, `armed`, `disarmed`,
        `mission_item_reached`, `vehicle_lost`, `vehicle_reconnected`;
+    3. `{:view, view}` is published on `Dolphin.PubSub` topic
+       `{:vehicle, id}`, the vehicle's one topic (the engine's condition
+       watchers follow it). After the events: whatever a reader of the view
+       does about it (a mission ends on the disarm, and with it the script)
+       comes after the event in every subscriber's mailbox, and an events
+       file closed at the script's end has it;
     4. the same transitions' `{:vehicle_discovered, id}`, `{:vehicle_lost, id}`
        and `{:vehicle_reconnected, id}` are published on topic `:vehicles`,
        after the view (whoever hears of a loss finds the view saying so);
@@ -160,9 +163,9 @@ defmodule Dolphin.Vehicles.Views do
   # run's stand-in vehicles), not the notices.
   @spec announce(View.t() | nil, View.t(), boolean()) :: :ok
   def announce(old, %View{id: id} = new, events?) do
-    PubSub.publish({:vehicle, id}, {:view, new})
     transitions = View.transitions(old, new)
     if events?, do: Enum.each(transitions, fn {event, meta} -> Events.emit(event, meta) end)
+    PubSub.publish({:vehicle, id}, {:view, new})
     for {event, _} <- transitions, event in @notices, do: PubSub.publish(:vehicles, {event, id})
 
     # A sensor heard for the first time is one too (`pick(sensors: ...)`); its readings are not.

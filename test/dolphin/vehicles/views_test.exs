@@ -90,6 +90,18 @@ defmodule Dolphin.Vehicles.ViewsTest do
            ]
   end
 
+  # The events file of a run is closed at the script's end, which a reader of
+  # the view may bring about (a landing mission ends on the disarm): its
+  # events must reach a subscriber before the view does.
+  test "a view's events come before the view itself, in every subscriber's mailbox" do
+    :ok = Views.put(%View{id: @id, type: :uav, armed?: true})
+    _ = messages()
+    :ok = Views.put(%View{id: @id, type: :uav, armed?: false})
+
+    order = for {:dolphin, topic, what} <- messages(), topic in [{:vehicle, @id}, :events], do: if(topic == :events, do: what.event, else: :view)
+    assert order == [:disarmed, :view]
+  end
+
   defp messages do
     receive do
       message -> [message | messages()]
