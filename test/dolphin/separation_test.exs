@@ -58,7 +58,7 @@ defmodule Dolphin.SeparationTest do
         forward(test)
       end)
 
-    assert_receive {:registered, ^id}
+    assert_receive {:registered, ^id}, 5_000
     pid
   end
 

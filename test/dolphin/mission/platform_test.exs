@@ -382,10 +382,13 @@ defmodule Dolphin.Mission.PlatformTest do
 
   test "a copter that disarms on the ground before MISSION_START reaches it is armed and started again, and flies once the start comes in time", %{port: port} do
     # Every datagram takes 0.5 s of the vehicle's time each way, and it
-    # disarms 0.2 s after its arm (DISARM_DELAY): the start, sent when the
-    # arm's answer comes, comes too late, as ArduCopter's 10 s can pass on a
-    # slow, lossy link; the task would wait in AUTO, disarmed, for ever.
-    [{1, home}] = start_fleet(port, count: 1, disarm_delay_ms: 200)
+    # disarms 0.7 s after its arm (DISARM_DELAY): the start, sent when the
+    # arm's answer comes, reaches it 1 s after the arm, too late, as
+    # ArduCopter's 10 s can pass on a slow, lossy link; the task would wait in
+    # AUTO, disarmed, for ever. At 10x: with the link quick again, the start
+    # must come within those 0.7 s of clock, 70 ms of real time (at 50x, and
+    # 0.2 s, it was 4 ms, which a loaded host missed four times in a row).
+    [{1, home}] = start_fleet(port, count: 1, disarm_delay_ms: 700, speedup: 10)
     :ok = Sim.set_faults(1, latency: 500)
     test = self()
     instance = Dolphin.Instance.current()
