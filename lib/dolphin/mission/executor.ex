@@ -39,6 +39,11 @@ defmodule Dolphin.Mission.Executor do
 
   @arm_timeout_ms 120_000
   @landing_reports_ms 5_000
+  # And never under this much real time: the reports cross a host that may
+  # be busy (at 50x, 5 s of clock are 100 ms, and a loaded host delivered a
+  # simulated copter's final item reached later than that). The wait ends as
+  # soon as they come; this only bounds a wait for reports that never do.
+  @landing_reports_floor_real_ms 2_000
   # How long (clock ms) a vehicle that left its mission is given to say why.
   @reason_ms 1_000
   @takeoff 22
@@ -698,7 +703,7 @@ defmodule Dolphin.Mission.Executor do
       # reports the final item after "Disarming motors"): the reports are
       # given their time, which a state change would not cut short.
       :check_landed ->
-        {:keep_state, data, [{:state_timeout, Clock.to_real_ms(@landing_reports_ms), :check_landed} | watch]}
+        {:keep_state, data, [{:state_timeout, max(Clock.to_real_ms(@landing_reports_ms), @landing_reports_floor_real_ms), :check_landed} | watch]}
     end
   end
 
