@@ -191,11 +191,14 @@ defmodule Dolphin.SeparationTest do
   end
 
   test "a vehicle whose last view is old is judged where it has flown since, not where that view put it", %{ids: {a, b, _c}} do
-    Dolphin.Clock.set_speedup(100)
+    # At 10x: from a's start the two are 8 s of clock (0.8 s of real time)
+    # from their closest; at 100x a loaded host's monitor judged a only once
+    # they had passed each other.
+    Dolphin.Clock.set_speedup(10)
     # b, ours, 700 m east flying west at 15 m/s; then nothing new from it for 30 s of clock time.
     executor(b, 1_000)
     flying(b, 0, 700, {0.0, -15.0, 0.0})
-    Process.sleep(300)
+    Process.sleep(3_000)
     # a, started later, flies east at 15 m/s: b is 250 m off by now, closing at 30 m/s.
     executor(a, 2_000)
     flying(a, 0, 0, {0.0, 15.0, 0.0})

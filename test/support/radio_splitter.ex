@@ -94,6 +94,8 @@ defmodule Dolphin.Test.RadioSplitter do
   def init({gcs, seed}) do
     # Trapping exits lets terminate/2 close the sockets when the parent stops us.
     Process.flag(:trap_exit, true)
+    # The network, at the links' priority (see Dolphin.Test.UDPProxy).
+    Process.flag(:priority, :high)
 
     with {:ok, socket} <- :gen_udp.open(0, socket_opts()),
          {:ok, port} <- :inet.port(socket) do

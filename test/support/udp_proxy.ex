@@ -202,6 +202,11 @@ defmodule Dolphin.Test.UDPProxy do
     # Trapping exits lets terminate/2 close the sockets when the parent (a test
     # process or a supervisor) stops us.
     Process.flag(:trap_exit, true)
+    # It plays the network, which a busy BEAM does not slow: at high priority,
+    # as the ground station's links are (at normal priority, one of a radio
+    # splitter's two sides fell 0.75 s behind the other on a loaded host, and
+    # the ground station rightly judged its path silent).
+    Process.flag(:priority, :high)
     :rand.seed(:exsss, config.seed)
 
     case :gen_udp.open(config.port, socket_opts()) do
