@@ -40,7 +40,15 @@ defmodule Dolphin.Examples.FireWatchTest do
   if Dolphin.SITL.available?(:copter) do
     @tag :sitl
     test "on ArduCopter SITL with the sensor sidecar on each autopilot's second port: found, looked at, surveys flown", %{tmp_dir: dir} do
-      run = ExampleRun.run(dir, "fire_watch", "-sitl", ["--sitl", "copter:2+smoke", "--world", @world, "--speedup", "10"], nil)
+      # At 5x, where ArduCopter keeps its pace beside the other lanes. At 10x,
+      # with the whole suite at once, its pace swung between 6.2x and 10.6x
+      # within seconds; the clock follows the slowest vehicle a second
+      # behind (Dolphin.SITL.Pace), and the flight report, which lines the
+      # events up with the log by one rate and one offset, found only 11 of
+      # 26 anchors within its 3 s and refused them (the mismatch of earlier
+      # runs, docs/testing.md): a report of a run whose pace swings is still
+      # to be placed piece by piece.
+      run = ExampleRun.run(dir, "fire_watch", "-sitl", ["--sitl", "copter:2+smoke", "--world", @world, "--speedup", "5"], nil)
       assert run.output =~ "sensor sidecar on 127.0.0.1:"
       found_and_looked_at!(run, "-sitl", dir)
     end
