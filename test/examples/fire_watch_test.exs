@@ -3,10 +3,9 @@ defmodule Dolphin.Examples.FireWatchTest do
   # simulator with the world file it names: the fire, which the script does
   # not know of, is found, looked at, and both surveys are flown to their end.
   # The simulator's tests each in a Dolphin.Instance of their own, beside
-  # other tests. The SITL test in the application's instance (`make test`
-  # runs it alone, --max-cases 1): in an instance of its own, its events
-  # twice did not line up with its telemetry log for the report (not
-  # understood yet, docs/testing.md); in the application's they always have.
+  # other tests. The SITL test in the application's instance, as it always
+  # was (`make test` runs it alone in its lane, --max-cases 1); why its
+  # report once refused its events is said at the test.
   use ExUnit.Case, async: true
 
   alias Dolphin.Test.ExampleRun
