@@ -96,7 +96,9 @@ defmodule Dolphin.Sim do
       `:charger` (where a landed vehicle charges besides its own home:
       default the fleet's `:home`),
       `:capacity_mah`, `:hover_current`, `:cruise_speed`, `:climb_speed`,
-      `:descent_speed`, `:wp_radius`, `:rtl_alt`, `:disarm_delay_ms`,
+      `:descent_speed`, `:wp_radius`, `:rtl_alt`, `:disarm_delay_ms`
+      (DISARM_DELAY: a copter armed on the ground with nothing to do
+      disarms after it; default 10000, 0 never, as on ArduCopter),
       `:spool_up_ms` (how long the motors spool up before a take-off
       leaves the ground; default 3000, as ArduCopter SITL),
       `:arm_min_battery`, `:battery_low`, `:battery_critical`,

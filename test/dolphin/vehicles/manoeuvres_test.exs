@@ -33,7 +33,8 @@ defmodule Dolphin.Vehicles.ManoeuvresTest do
     setup ctx do
       port = Dolphin.Test.GroundStation.open()
       # Arming is refused until its position estimate is ready, that long (clock time) after boot.
-      {:ok, [1]} = Sim.start(count: 1, gcs: port, speedup: @speedup, ekf_ready_ms: Map.get(ctx, :ekf_ready_ms, 150_000))
+      # DISARM_DELAY (10 s, 0.2 s of real time at 50x) is off where a test keeps a copter armed on the ground.
+      {:ok, [1]} = Sim.start(count: 1, gcs: port, speedup: @speedup, ekf_ready_ms: Map.get(ctx, :ekf_ready_ms, 150_000), disarm_delay_ms: Map.get(ctx, :disarm_delay_ms, 10_000))
       # Without a position estimate, a copter has no home: heard and booted is enough then.
       Wait.until(fn -> if ctx[:ekf_ready_ms], do: Vehicles.ready?(1), else: match?({:ok, %{home: %{}, position: %{}}}, Vehicles.state(1)) end)
       :ok
@@ -86,12 +87,12 @@ defmodule Dolphin.Vehicles.ManoeuvresTest do
       assert {:error, %ManoeuvreError{action: "arming", waited_ms: 0}} = Manoeuvres.take_off(1, 10, within: 0)
 
       # A command the vehicle refuses (a take-off disarmed) is an error with the refusal.
-      assert {:error, %ManoeuvreError{manoeuvre: :command, action: "take-off", refusal: %CommandError{vehicle: 1}} = e} =
-               Manoeuvres.command(1, "take-off", fn -> Vehicles.takeoff(1, 10) end)
+      assert {:error, %ManoeuvreError{manoeuvre: :command, action: "take-off", refusal: %CommandError{vehicle: 1}} = e} = Manoeuvres.command(1, "take-off", fn -> Vehicles.takeoff(1, 10) end)
 
       assert Exception.message(e) =~ ~r/^take-off refused: vehicle 1 refused MAV_CMD_NAV_TAKEOFF/
     end
 
+    @tag disarm_delay_ms: 0
     test "a vehicle armed on the ground, in a mode that does not hold, is held by disarming it" do
       Wait.until(fn -> Manoeuvres.guided(1) == :ok end)
       assert :ok = Manoeuvres.arm_when_ready(1, within: 300_000)

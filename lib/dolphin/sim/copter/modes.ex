@@ -82,9 +82,10 @@ defmodule Dolphin.Sim.Copter.Modes do
     Mission.finish_landing_item(%{c | resume: nil})
   end
 
-  # DISARM_DELAY: armed on the ground with nothing to do (a copter's).
+  # DISARM_DELAY: armed on the ground with nothing to do (a copter's); 0
+  # turns it off, as on ArduCopter.
   @spec auto_disarm(Copter.t()) :: Copter.t()
-  def auto_disarm(%{armed: true, landed: :on_ground, nav: :idle, ground_since: since, config: %{airframe: :copter}} = c) when since != nil do
+  def auto_disarm(%{armed: true, landed: :on_ground, nav: :idle, ground_since: since, config: %{airframe: :copter, disarm_delay_ms: delay}} = c) when since != nil and delay > 0 do
     if c.time_ms - since >= c.config.disarm_delay_ms, do: disarm_now(c), else: c
   end
 

@@ -69,6 +69,8 @@ defmodule Dolphin.Sim.Copter.ModesTest do
     {0, c} = Modes.arm(%{ready() | mode: :guided}, false)
     assert Modes.auto_disarm(%{c | time_ms: c.time_ms + 9_999}).armed
     refute Modes.auto_disarm(%{c | time_ms: c.time_ms + 10_000}).armed
+    # DISARM_DELAY 0 turns it off (ArduCopter's auto_disarm_check).
+    assert Modes.auto_disarm(%{c | time_ms: c.time_ms + 3_600_000, config: %{c.config | disarm_delay_ms: 0}}).armed
   end
 
   # ArduCopter SITL (docs/ardupilot.md): held in BRAKE while its motors spool
@@ -84,7 +86,7 @@ defmodule Dolphin.Sim.Copter.ModesTest do
     assert c.armed and c.landed == :on_ground and c.alt == @home.alt
     c = Enum.reduce(1..2, c, fn _, c -> Copter.step(c, 100) end)
     refute c.armed
-    assert c.time_ms - braked in 10_000..10_200
+    assert (c.time_ms - braked) in 10_000..10_200
   end
 
   test "the GCS failsafe returns home after 5 s without the ground station, when enabled" do
