@@ -208,10 +208,16 @@ defmodule Dolphin.ConsoleTest do
     id = String.to_integer(id)
 
     Wait.until(fn -> match?({:ok, %{mode: :auto, mission: %{current: 2}}}, Vehicles.state(2)) end, 1_000)
-    tasks()
-    text = out(io)
+    # The tree shows the mission's progress as its task heard it, which may
+    # come a moment after the vehicle's own view.
+    text =
+      Wait.until(fn ->
+        tasks()
+        text = out(io)
+        if text =~ ~r/└─ \d+ mission "Patrol"  vehicle 2\s+item 2\/2/, do: text
+      end)
+
     assert text =~ ~s{run #{id} task mission "Patrol" (started from this console, running for}
-    assert text =~ ~r/└─ \d+ mission "Patrol"  vehicle 2\s+item 2\/2/
     vehicles()
     assert out(io) =~ ~r/\n 2  uav\s+copter\s+AUTO .* \d+ mission "Patrol" \(run #{id}\)\n/
 
