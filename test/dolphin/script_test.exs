@@ -68,9 +68,9 @@ defmodule Dolphin.ScriptTest do
   describe "the macros only build data" do
     test "conditions become closures with their source" do
       v = 7
-      assert %Until{cond: %Cond{source: "Dolphin.DSL.battery(v) < 0.3", meta: %{line: _}}} =
-               Dolphin.DSL.until(Dolphin.Engine.idle(1), Dolphin.DSL.battery(v) < 0.3)
+      assert %Until{cond: %Cond{source: "Dolphin.DSL.battery(v) < 0.3", meta: %{line: _}}} = Dolphin.DSL.until(Dolphin.Engine.idle(1), Dolphin.DSL.battery(v) < 0.3)
       assert %WaitFor{then: %Dolphin.Engine.Idle{}} = Dolphin.DSL.wait_for(true, then: Dolphin.Engine.idle(1))
+
       one_of =
         Dolphin.DSL.one_of do
           1 > 2 -> Dolphin.Engine.idle(1)
@@ -230,8 +230,10 @@ defmodule Dolphin.ScriptTest do
       {:messages, messages} = Process.info(self(), :messages)
       events = for {:dolphin, :events, %{event: e} = event} <- messages, e in [:task_finished, :script_finished], do: event
 
-      assert [%{event: :task_finished, result: :stopped, reason: "stopped: the run was terminated (SIGTERM)"}, %{event: :script_finished, result: :stopped, reason: "stopped: the run was terminated (SIGTERM)"}] =
-               events
+      assert [
+               %{event: :task_finished, result: :stopped, reason: "stopped: the run was terminated (SIGTERM)"},
+               %{event: :script_finished, result: :stopped, reason: "stopped: the run was terminated (SIGTERM)"}
+             ] = events
     end
 
     test "a running script's runner is an OTP process: :sys.get_state/1 and :sys.trace/2 see into it", ctx do
@@ -266,11 +268,13 @@ defmodule Dolphin.ScriptTest do
     test "a script whose caller dies stops its tasks, then says it ended", ctx do
       fake_vehicles(ctx, 1)
       me = self()
-      script = compile!("""
-      use Dolphin.Script
-      _v = pick()
-      execute Dolphin.Engine.FakePlatform.task("patrol", duration: :infinity, notify: :erlang.list_to_pid(#{inspect(:erlang.pid_to_list(me))}))
-      """)
+
+      script =
+        compile!("""
+        use Dolphin.Script
+        _v = pick()
+        execute Dolphin.Engine.FakePlatform.task("patrol", duration: :infinity, notify: :erlang.list_to_pid(#{inspect(:erlang.pid_to_list(me))}))
+        """)
 
       # The caller runs in the test's context (its fleet and clock).
       context = Dolphin.Engine.Context.current()
@@ -283,10 +287,21 @@ defmodule Dolphin.ScriptTest do
           Process.sleep(:infinity)
         end)
 
+      caller_ref = Process.monitor(caller)
       assert_receive {:script, pid}, 5_000
       ref = Process.monitor(pid)
+      # A loaded run once found the script ended before this point (its
+      # monitor said :noproc): if it comes again, the failure tells how.
+      receive do
+        {:DOWN, ^ref, :process, ^pid, why} ->
+          flunk("the script ended before its caller was killed (#{inspect(why)}); caller alive: #{Process.alive?(caller)}; received: #{inspect(Process.info(self(), :messages), limit: :infinity)}")
+      after
+        0 -> :ok
+      end
+
       assert_platform(:started, "patrol")
       Process.exit(caller, :kill)
+      assert_receive {:DOWN, ^caller_ref, :process, ^caller, :killed}, 5_000
       assert %{reason: :shutdown} = assert_platform(:stopped, "patrol")
       assert_receive {:DOWN, ^ref, :process, ^pid, :normal}, 30_000
       assert_received {:dolphin, :events, %{event: :script_finished, result: :stopped, reason: "stopped: shutting down"}}
