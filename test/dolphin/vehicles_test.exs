@@ -139,8 +139,7 @@ defmodule Dolphin.VehiclesTest do
     assert 11 in Vehicles.list()
 
     # What ArduPilot needs to start streaming: REQUEST_DATA_STREAM and SET_MESSAGE_INTERVAL.
-    assert %Frame{sysid: 255, message: %M.RequestDataStream{target_system: 11, start_stop: 1}} =
-             UDPPeer.receive_until(peer, &match?(%M.RequestDataStream{}, &1.message))
+    assert %Frame{sysid: 255, message: %M.RequestDataStream{target_system: 11, start_stop: 1}} = UDPPeer.receive_until(peer, &match?(%M.RequestDataStream{}, &1.message))
 
     # The message intervals come one at a time, each once the previous one is
     # answered (as ArduPilot does, with COMMAND_ACK accepted).
@@ -154,8 +153,7 @@ defmodule Dolphin.VehiclesTest do
     # GLOBAL_POSITION_INT, SYS_STATUS, BATTERY_STATUS, MISSION_CURRENT, EXTENDED_SYS_STATE, HOME_POSITION
     assert asked == [33, 1, 147, 42, 245, 242]
 
-    assert %Frame{sysid: 255, compid: 190, message: %M.Heartbeat{type: 6, autopilot: 8}} =
-             UDPPeer.receive_until(peer, &match?(%M.Heartbeat{}, &1.message))
+    assert %Frame{sysid: 255, compid: 190, message: %M.Heartbeat{type: 6, autopilot: 8}} = UDPPeer.receive_until(peer, &match?(%M.Heartbeat{}, &1.message))
 
     {:ok, state} = Vehicles.state(11)
     assert {state.mode, state.armed, state.autopilot} == {:guided, true, :ardupilot}
@@ -273,6 +271,34 @@ defmodule Dolphin.VehiclesTest do
     assert_receive {:dolphin, :vehicles, {:vehicle_lost, 17}}, 10_000
   end
 
+  test "a frame waiting in the vehicle's mailbox behind its silence check ends the silence: not lost", %{port: port, peer: peer} do
+    Vehicles.subscribe(:all)
+    # Set before discovery (kept for the process to come): its silence limit is 3 s exactly.
+    {:error, :unknown_vehicle} = Vehicles.set_timeout(15, 3_000)
+    UDPPeer.send_message(peer, port, copter(), sysid: 15)
+    assert_receive {:dolphin, :vehicles, {:vehicle_discovered, 15}}, 10_000
+    vehicle = Vehicles.whereis(15)
+
+    # Silent, as far as its state says, for ten timeouts; its next check
+    # due now and sent by hand (its timer cancelled), so that it runs on time.
+    :sys.replace_state(vehicle, fn s ->
+      Process.cancel_timer(s.check_timer)
+      last = Clock.now_ms() - 30_000
+      %{s | check_timer: make_ref(), check_due_ms: Clock.now_ms(), state: %{s.state | link: %{s.state.link | last_seen_ms: last}}}
+    end)
+
+    # The process held up while its check and then a frame are queued.
+    true = :erlang.suspend_process(vehicle)
+    send(vehicle, :check_link)
+    UDPPeer.send_message(peer, port, copter(), sysid: 15, seq: 1)
+    Wait.until(fn -> match?({:messages, [:check_link, {:"$gen_cast", {:frame, _, _}}]}, Process.info(vehicle, :messages)) end)
+    true = :erlang.resume_process(vehicle)
+
+    Wait.until(fn -> match?({:ok, %{link: %{received: 2}}}, Vehicles.state(15)) end)
+    assert {:ok, %{connected?: true}} = Vehicles.view(15)
+    refute_received {:dolphin, :vehicles, {:vehicle_lost, 15}}
+  end
+
   test "a crashed vehicle process is restarted and rebuilt from the next telemetry; a crashed link loses no vehicle",
        %{name: name, port: port, peer: peer} do
     UDPPeer.send_message(peer, port, copter(), sysid: 14)
@@ -311,10 +337,8 @@ defmodule Dolphin.VehiclesTest do
     message = fn {:error, %Link.EndpointError{} = e} -> Exception.message(e) end
     assert "endpoint \"udpin:127.0.0.1\"" <> _ = message.(Link.connect("udpin:127.0.0.1"))
     assert "endpoint \"serial:x:1\"" <> _ = message.(Link.connect("udpin:127.0.0.1:0", name: "fwd", forward: ["serial:x:1"]))
-    assert "udpin:127.0.0.1:0: cannot open: can only forward to udpout endpoints, not udpin:127.0.0.1:9" =
-             message.(Link.connect("udpin:127.0.0.1:0", name: "fwd", forward: ["udpin:127.0.0.1:9"]))
+    assert "udpin:127.0.0.1:0: cannot open: can only forward to udpout endpoints, not udpin:127.0.0.1:9" = message.(Link.connect("udpin:127.0.0.1:0", name: "fwd", forward: ["udpin:127.0.0.1:9"]))
     # The setup's link holds `port`.
     assert message.(Link.connect("udpin:127.0.0.1:#{port}", name: "busy")) == "udpin:127.0.0.1:#{port}: cannot open: address already in use"
   end
-
 end

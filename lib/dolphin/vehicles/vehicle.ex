@@ -358,11 +358,20 @@ defmodule Dolphin.Vehicles.Vehicle do
     s = %{s | check_due_ms: now + period, paths: Paths.forget_silent(s.paths, now, s.timeout_ms)}
     last = s.state.link.last_seen_ms
 
-    if on_time? and not s.lost and last != nil and now - last > silence_limit_ms(s) do
+    # A frame already in this process's mailbox, behind the check, ends the
+    # silence: the next check judges once it is read.
+    if on_time? and not s.lost and last != nil and now - last > silence_limit_ms(s) and not frame_waiting?() do
       # The view first: whoever hears of the loss finds the view saying so.
       {:noreply, publish_view(%{s | lost: true})}
     else
       {:noreply, s}
+    end
+  end
+
+  defp frame_waiting? do
+    case Process.info(self(), :message_queue_len) do
+      {:message_queue_len, 0} -> false
+      _ -> self() |> Process.info(:messages) |> elem(1) |> Enum.any?(&match?({:"$gen_cast", {:frame, _, _}}, &1))
     end
   end
 
