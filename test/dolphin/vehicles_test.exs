@@ -226,9 +226,10 @@ defmodule Dolphin.VehiclesTest do
     :ok = Vehicles.set_timeout(18, 1_000)
     s = :sys.get_state(pid)
     assert s.timeout_ms == 1_000
-    # Its silence is now looked at every 100 ms of clock time (here 1x).
+    # Its silence is now looked at every 100 ms of clock time (here 1x); the
+    # timer may have fired since its state was read (false), on a loaded host.
     remaining = Process.read_timer(s.check_timer)
-    assert is_integer(remaining) and remaining <= 100
+    assert remaining == false or remaining <= 100
     assert s.check_due_ms - Clock.now_ms() <= 100
   end
 
