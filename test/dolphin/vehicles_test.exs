@@ -272,6 +272,26 @@ defmodule Dolphin.VehiclesTest do
     assert_receive {:dolphin, :vehicles, {:vehicle_lost, 17}}, 10_000
   end
 
+  test "a silence that began at a higher speed-up is judged by real time's floor, not by the clock time run up before the clock slowed", %{port: port, peer: peer} do
+    Vehicles.subscribe(:all)
+    Clock.set_speedup(100)
+    UDPPeer.send_message(peer, port, copter(), sysid: 11)
+    assert_receive {:dolphin, :vehicles, {:vehicle_discovered, 11}}, 10_000
+    vehicle = Vehicles.whereis(11)
+
+    # Silent for 0.5 s of real time at 100x (50 s of clock time, past the
+    # 20 s timeout, within the 5 s floor), then the clock slows to 1x, as
+    # it follows a SITL vehicle that fell behind: at 1x the floor is the
+    # timeout, which the clock time run up at 100x already passes.
+    Process.sleep(500)
+    Clock.set_speedup(1)
+    slowed = Clock.now_ms()
+    # A check after the change (each sets the next one a period, 2 s of clock time, ahead).
+    Wait.until(fn -> :sys.get_state(vehicle).check_due_ms > slowed + 2_000 end)
+    refute :sys.get_state(vehicle).lost
+    refute_received {:dolphin, :vehicles, {:vehicle_lost, 11}}
+  end
+
   test "a frame waiting in the vehicle's mailbox behind its silence check ends the silence: not lost", %{port: port, peer: peer} do
     Vehicles.subscribe(:all)
     # Set before discovery (kept for the process to come): its silence limit is 3 s exactly.

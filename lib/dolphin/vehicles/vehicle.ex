@@ -31,6 +31,7 @@ defmodule Dolphin.Vehicles.Vehicle do
     :check_due_ms,
     :check_timer,
     :requests_left,
+    :heard_real_ms,
     exact_timeout?: false,
     lost: false,
     view: nil,
@@ -43,7 +44,8 @@ defmodule Dolphin.Vehicles.Vehicle do
 
   # The process's state. `paths`: one path per link (and address) the vehicle
   # is heard on (Dolphin.Vehicles.Paths), the one it was discovered on in
-  # use; `judge_due`: when they are judged next (real ms). `state`: the
+  # use; `judge_due`: when they are judged next (real ms); `heard_real_ms`:
+  # when its last fresh frame came (real ms). `state`: the
   # vehicle as its frames say (Dolphin.Vehicles.State); `heard`: the cell in
   # which its last frame's time is written for readers (Dolphin.Vehicles.Views.heard/2).
   # `check_due_ms`: when
@@ -158,6 +160,7 @@ defmodule Dolphin.Vehicles.Vehicle do
        exact_timeout?: set != nil,
        check_due_ms: now + check_period(timeout),
        check_timer: check_timer,
+       heard_real_ms: real,
        requests_left: @request_tries
      }}
   end
@@ -165,7 +168,8 @@ defmodule Dolphin.Vehicles.Vehicle do
   @impl true
   def handle_cast({:frame, frame, link}, s) do
     now = Clock.now_ms()
-    {verdict, paths} = Paths.heard(s.paths, link, frame, now, real_ms())
+    real = real_ms()
+    {verdict, paths} = Paths.heard(s.paths, link, frame, now, real)
     s = %{s | paths: identify(paths, link, frame)}
     # Heard again: the view that says so is the one with this frame in it
     # (published below), so that whoever is told reads what was heard.
@@ -184,6 +188,7 @@ defmodule Dolphin.Vehicles.Vehicle do
 
       :fresh ->
         Views.heard(s.heard, now)
+        s = %{s | heard_real_ms: real}
         old = s.state
         s = publish(s, %{State.apply(old, frame, now) | link_quality: Paths.quality(s.paths)})
         arm_staleness(s, Readings.fresh(old.sensors, s.state.sensors))
@@ -360,7 +365,7 @@ defmodule Dolphin.Vehicles.Vehicle do
 
     # A frame already in this process's mailbox, behind the check, ends the
     # silence: the next check judges once it is read.
-    if on_time? and not s.lost and last != nil and now - last > silence_limit_ms(s) and not frame_waiting?() do
+    if on_time? and not s.lost and last != nil and silent?(s, now - last, real_ms() - s.heard_real_ms) and not frame_waiting?() do
       # The view first: whoever hears of the loss finds the view saying so.
       {:noreply, publish_view(%{s | lost: true})}
     else
@@ -395,7 +400,10 @@ defmodule Dolphin.Vehicles.Vehicle do
   speed-up: ArduCopter SITL at 15x beside two busy loops went 1.3 s of real
   time without a frame (20 s of clock time), and one of six at 10x, on two
   cores loaded four times over, 3.5 s (its own clock stood still meanwhile).
-  At 1x the floor is the timeout itself.
+  At 1x the floor is the timeout itself. The floor is measured in real
+  time: when the speed-up changes during a silence (the clock follows a
+  SITL vehicle's pace), the silence is judged against the timeout in clock
+  time and the floor in real time, not against this figure at the new speed-up.
 
       iex> Dolphin.Vehicles.Vehicle.lost_after_ms(20_000, 1)
       20000
@@ -408,8 +416,12 @@ defmodule Dolphin.Vehicles.Vehicle do
   def lost_after_ms(timeout_ms, speedup), do: max(timeout_ms, round(min(timeout_ms, @lost_floor_real_ms) * speedup))
 
   # A timeout set for the vehicle is what its setter asked for, to the letter.
-  defp silence_limit_ms(%{exact_timeout?: true, timeout_ms: ms}), do: ms
-  defp silence_limit_ms(s), do: lost_after_ms(s.timeout_ms, Clock.speedup())
+  # The default's floor is real time, measured as such: a silence that began
+  # at a higher speed-up (the clock slowed since to a fallen-behind SITL's
+  # pace) is not judged by the floor of the lower one, which its clock time,
+  # run up at the higher, would already pass.
+  defp silent?(%{exact_timeout?: true, timeout_ms: ms}, clock_ms, _real_ms), do: clock_ms > ms
+  defp silent?(s, clock_ms, real_ms), do: clock_ms > s.timeout_ms and real_ms > min(s.timeout_ms, @lost_floor_real_ms)
 
   # What the autopilot heard on a path says it is: its unique id.
   defp identify(paths, via, %Frame{compid: 1, message: %M.AutopilotVersion{} = version}), do: Paths.identified(paths, via, State.unique_id(version))
