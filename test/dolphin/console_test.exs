@@ -135,6 +135,16 @@ defmodule Dolphin.ConsoleTest do
     refute one.armed
   end
 
+  test "a watch shows a vehicle lost while it is watched", %{io: io} do
+    # The watch runs in a process of its own (linked: it ends with the
+    # test), printing to the test's device.
+    watcher = Task.async(fn -> watch(2, every: 100, timeout: 120_000, keys: false) end)
+    refute await_out(io, ~r/^\s+\d+\.\d s  \S+.*mission/m) =~ "LOST"
+    :ok = Sim.stop(2)
+    assert await_out(io, ~r/  LOST$/m) =~ ~r/^\s+\d+\.\d s  .*  LOST$/m
+    Task.shutdown(watcher, :brutal_kill)
+  end
+
   test "take off, go to a point, hold, land; messages, watch, events", %{io: io} do
     takeoff(1, 10)
     text = out(io)

@@ -323,10 +323,11 @@ defmodule Dolphin.Console.Format do
   def severity(n), do: Enum.at(~w(EMERGENCY ALERT CRITICAL ERROR WARNING NOTICE INFO DEBUG), n, "#{n}")
 
   @doc false
-  # One line of the watch ticker, from a vehicle state (Dolphin.Vehicles.State
-  # plus :lost); `t_ms` is the real time since the watch began.
-  @spec ticker(map(), integer()) :: String.t()
-  def ticker(state, t_ms) do
+  # One line of the watch ticker, from a vehicle state (Dolphin.Vehicles.State)
+  # and whether the vehicle is lost (its view says so: the state does not);
+  # `t_ms` is the real time since the watch began.
+  @spec ticker(map(), boolean(), integer()) :: String.t()
+  def ticker(state, lost?, t_ms) do
     pos = state.position || %{}
     mission = state.mission || %{}
 
@@ -340,7 +341,7 @@ defmodule Dolphin.Console.Format do
       "hdg " <> if(pos[:heading], do: String.pad_leading("#{round(pos[:heading])}", 3), else: "  -"),
       "mission " <> mission_progress(mission),
       to_string(state.landed || ""),
-      if(Map.get(state, :lost), do: "LOST", else: "")
+      if(lost?, do: "LOST", else: "")
     ]
     |> Enum.join("  ")
     |> String.trim_trailing()

@@ -270,7 +270,7 @@ defmodule Dolphin.Console.Vehicle do
     case Vehicles.state(id) do
       {:ok, state} ->
         for {_sev, text} <- Enum.reverse(Format.new_texts(texts, state.status_texts)), do: say("        >> " <> text)
-        say(Format.ticker(state, System.monotonic_time(:millisecond) - start))
+        say(Format.ticker(state, lost?(id), System.monotonic_time(:millisecond) - start))
         next = min(System.monotonic_time(:millisecond) + every, deadline)
 
         case pause(reader, next) do
@@ -282,6 +282,8 @@ defmodule Dolphin.Console.Vehicle do
         "vehicle #{id} is gone"
     end
   end
+
+  defp lost?(id), do: match?({:ok, %{connected?: false}}, Vehicles.view(id))
 
   # Waits until `until` (monotonic ms) or a line typed on the console.
   defp pause(reader, until) do

@@ -47,8 +47,21 @@ defmodule Dolphin.Console.FormatTest do
   describe "vehicles" do
     defp row(attrs) do
       Map.merge(
-        %{id: 1, type: "uav", airframe: "copter", mode: :guided, armed: true, battery: 0.87, lat: 40.444233, lon: -7.375234, alt: 20.0,
-          link: %{received: 97, lost: 3}, seen_ms: 120, lost?: false, activity: nil},
+        %{
+          id: 1,
+          type: "uav",
+          airframe: "copter",
+          mode: :guided,
+          armed: true,
+          battery: 0.87,
+          lat: 40.444233,
+          lon: -7.375234,
+          alt: 20.0,
+          link: %{received: 97, lost: 3},
+          seen_ms: 120,
+          lost?: false,
+          activity: nil
+        },
         Map.new(attrs)
       )
     end
@@ -159,14 +172,18 @@ defmodule Dolphin.Console.FormatTest do
 
     test "a ticker line" do
       state = %{
-        mode: :auto, armed: true, battery: 0.5, position: %{lat: 40.1, lon: -7.2, alt: 850.0, relative_alt: 30.04, heading: 89.6},
-        mission: %{current: 2, total: 4, state: :active, reached: 1}, landed: :in_air, lost: false
+        mode: :auto,
+        armed: true,
+        battery: 0.5,
+        position: %{lat: 40.1, lon: -7.2, alt: 850.0, relative_alt: 30.04, heading: 89.6},
+        mission: %{current: 2, total: 4, state: :active, reached: 1},
+        landed: :in_air
       }
 
-      line = Format.ticker(state, 2_500)
+      line = Format.ticker(state, false, 2_500)
       assert line =~ ~r/^\s+2\.5 s  AUTO\s+ARMED\s+\[#####     \]  50 %  40\.100000, -7\.200000  alt\s+30\.0 m  hdg  90  mission 2\/4  in_air$/
 
-      lost = Format.ticker(%{state | position: nil, mission: %{}, lost: true, battery: nil, armed: false}, 0)
+      lost = Format.ticker(%{state | position: nil, mission: %{}, battery: nil, armed: false}, true, 0)
       assert lost =~ "disarmed"
       assert lost =~ "mission -"
       assert lost =~ ~r/LOST$/
