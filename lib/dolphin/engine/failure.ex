@@ -38,9 +38,32 @@ defmodule Dolphin.Engine.Failure do
           name: String.t() | nil,
           vehicle: non_neg_integer() | nil,
           meta: map(),
-          reason: term(),
+          reason: reason(),
           progress: map() | nil
         }
+
+  @typedoc "The reasons the engine gives (see the moduledoc)."
+  @type engine_reason ::
+          {:exception, Exception.t(), Exception.stacktrace()}
+          | {:exit, term()}
+          | {:throw, term()}
+          | {:condition_error, String.t(), Exception.t()}
+          | {:vehicle_lost, Dolphin.Vehicles.Id.t()}
+          | {:platform_exited, term()}
+          | {:stop_timeout, non_neg_integer()}
+          | {:stop_failed, reason()}
+          | {:handler_failed, reason()}
+          | {:crashed, term()}
+          | {:not_reassigned, reason(), reason() | {:no_vehicle, Dolphin.Fleet.VehicleSet.t() | nil, Dolphin.Engine.Platform.requirements()} | {:cannot_resume, module()}}
+
+  @typedoc """
+  Why a task failed: the engine's own reasons, a platform's exception that
+  words itself (`Dolphin.Mission.Failure`, `Dolphin.Fleet.AllocationError`,
+  `Dolphin.ManoeuvreError`), or whatever else a platform of a user's gives
+  (`c:Dolphin.Engine.Platform.stop/2` and its task's exits are the
+  platform's to define: worded with `inspect/1` when nothing else fits).
+  """
+  @type reason :: engine_reason() | Exception.t() | {:vehicle_fault, String.t()} | term()
 
   @doc "A one-line explanation."
   @spec message(t()) :: String.t()
@@ -61,6 +84,7 @@ defmodule Dolphin.Engine.Failure do
   def format_reason({:vehicle_lost, id}), do: "vehicle #{id} lost"
   def format_reason({:vehicle_fault, text}), do: text
   def format_reason({:not_reassigned, reason, why}), do: "#{format_reason(reason)}; no other vehicle could take it over: #{format_reason(why)}"
+
   def format_reason({:no_vehicle, set, requirements}) do
     among = if set, do: "among #{Dolphin.Fleet.VehicleSet.format(set)}", else: "among the vehicles the script picked"
     "no vehicle #{among} is connected, free and meets its requirements#{requirement_words(requirements)}"
@@ -118,7 +142,10 @@ defmodule Dolphin.Engine.Failure do
   defp format_exception(other), do: inspect(other)
 
   defp requirement_words(req) do
-    case Enum.filter([req[:type] && "type #{inspect(req[:type])}", req[:airframe] && "airframe #{inspect(req[:airframe])}", req[:payloads] not in [nil, []] && "payloads #{inspect(req[:payloads])}"], & &1) do
+    case Enum.filter(
+           [req[:type] && "type #{inspect(req[:type])}", req[:airframe] && "airframe #{inspect(req[:airframe])}", req[:payloads] not in [nil, []] && "payloads #{inspect(req[:payloads])}"],
+           & &1
+         ) do
       [] -> ""
       said -> " (" <> Enum.join(said, ", ") <> ")"
     end

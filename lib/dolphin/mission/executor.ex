@@ -366,12 +366,9 @@ defmodule Dolphin.Mission.Executor do
     end
   end
 
-  defp hold(vehicle, fresh?) do
-    case Manoeuvres.hold(vehicle, fresh: fresh?) do
-      :ok -> :ok
-      {:error, e} -> {:error, Exception.message(e)}
-    end
-  end
+  # A hold that failed is told to the engine as the manoeuvre's error (data,
+  # worded where it is shown).
+  defp hold(vehicle, fresh?), do: Manoeuvres.hold(vehicle, fresh: fresh?)
 
   # --- steps ------------------------------------------------------------------
 

@@ -34,6 +34,14 @@ defmodule Dolphin.Engine.FailureTest do
     assert Failure.format_reason(:stopped) == "stopped: the task above it ended"
   end
 
+  test "a stop that failed carries the manoeuvre's error as data, worded where it is shown" do
+    refusal = %Dolphin.CommandError{command: :mav_cmd_do_set_mode, vehicle: 2, result: :denied, attempts: 1}
+    hold = %Dolphin.ManoeuvreError{manoeuvre: :hold, vehicle: 2, action: "hold", refusal: refusal}
+
+    assert Failure.format_reason({:stop_failed, hold}) ==
+             "could not be stopped: the vehicle could not be made to hold position: vehicle 2 refused MAV_CMD_DO_SET_MODE: MAV_RESULT_DENIED"
+  end
+
   test "an unforeseen reason is shown as it is" do
     assert Failure.format_reason({:weird, 1}) == "{:weird, 1}"
     assert Failure.format_reason({:crashed, {:badarg, []}}) == "engine process crashed ({:badarg, []})"
