@@ -85,6 +85,92 @@ defmodule Dolphin.Mission.Executor do
   @boot_poll_ms 200
   @transfer_attempts 3
 
+  # The process's data. `leaving`: why the vehicle left its mission (a
+  # failsafe, the pilot), while it is given the time to say so. `fence`: its
+  # own, else the script's (the run's platform options). `started_at` (clock
+  # ms; of two vehicles about to come too close, the later one's holds),
+  # `rank` and `min_separation` (nil: the default) are for
+  # Dolphin.Separation; `separation`: nil, or what the monitor wants (:hold,
+  # :go) and how far the vehicle is (:holding, :held, :resuming, :resumed
+  # until a view shows AUTO again); `held_on_ground`: held by it before it
+  # left the ground, in this flight. `airframe`: how its missions fly
+  # (Dolphin.Vehicles.View.airframe/2), from its view once known.
+  # `grounded`: where the vehicle was first seen armed on the ground in
+  # :flying, while it stays so; `disarmed_idle`: seen disarmed on the ground
+  # in :flying before its flight began (a timer runs); `rearms`: how many
+  # times it was armed and started again; `still`: where and at which item it
+  # was first seen standing still short of a waypoint in :flying, while it
+  # stays so. `task` and `attempt`: the exchange of the current step, and the
+  # how-manieth try of it. `unconfirmed`: uploads in a row that ended without
+  # the vehicle's final ACCEPTED (every item sent; whether it holds the
+  # mission is for the read-back). `flight_texts`: the vehicle's STATUSTEXTs
+  # when the flight began (see judge/2). `view`: the last view of the vehicle
+  # it was sent (:start, :flying): the flight is judged on the views in the
+  # order they came, never on a read of the table, which can be newer than
+  # views still waiting in the mailbox.
+  defstruct [
+    :mission,
+    :name,
+    :fence,
+    :vehicle,
+    :owner,
+    :started_at,
+    :rank,
+    :min_separation,
+    :arm_timeout_ms,
+    :boot_deadline,
+    leaving: nil,
+    separation: nil,
+    held_on_ground: false,
+    airframe: nil,
+    grounded: nil,
+    disarmed_idle: false,
+    rearms: 0,
+    still: nil,
+    items: nil,
+    ending: nil,
+    task: nil,
+    attempt: 1,
+    upload_started: nil,
+    retransmissions: 0,
+    unconfirmed: 0,
+    flight_texts: [],
+    flight: nil,
+    view: nil
+  ]
+
+  @typedoc false
+  @type t :: %__MODULE__{
+          mission: Mission.t(),
+          name: String.t() | nil,
+          fence: Dolphin.Fence.t() | nil,
+          vehicle: Dolphin.Vehicles.Id.t(),
+          owner: pid() | nil,
+          started_at: integer(),
+          rank: {term(), term()},
+          min_separation: number() | nil,
+          arm_timeout_ms: non_neg_integer(),
+          boot_deadline: integer(),
+          leaving: term(),
+          separation: map() | nil,
+          held_on_ground: boolean(),
+          airframe: Dolphin.Airframe.t() | nil,
+          grounded: term(),
+          disarmed_idle: boolean(),
+          rearms: non_neg_integer(),
+          still: term(),
+          items: [struct()] | nil,
+          ending: term(),
+          task: Task.t() | nil,
+          attempt: pos_integer(),
+          upload_started: integer() | nil,
+          retransmissions: non_neg_integer(),
+          unconfirmed: non_neg_integer(),
+          flight_texts: [{integer(), String.t()}],
+          flight: Flight.t() | nil,
+          view: Dolphin.Vehicles.View.t() | nil
+        }
+
   # `opts`: the platform's, and `:debug`, `:gen_statem`'s debug options
   # (`:sys`), in effect from its first event.
   @spec start_link(Mission.t(), byte(), keyword()) :: :gen_statem.start_ret()
@@ -109,58 +195,17 @@ defmodule Dolphin.Mission.Executor do
     # from the message itself (no call to the vehicle's process).
     Vehicles.subscribe(vehicle)
 
-    data = %{
+    data = %__MODULE__{
       mission: mission,
       name: mission.name,
-      # Why the vehicle left its mission (a failsafe, the pilot), while it is
-      # given the time to say so.
-      leaving: nil,
-      # Its own fence, else the script's (the run's platform options).
       fence: mission.fence || Map.get(opts, :fence),
       vehicle: vehicle,
       owner: opts.owner,
-      # When the task started (clock ms; of two vehicles about to come too
-      # close, the later one's holds) and the run's least separation (nil:
-      # the default), for Dolphin.Separation.
       started_at: Clock.now_ms(),
       rank: {Map.get(opts, :run), Map.get(opts, :task_id)},
       min_separation: Map.get(opts, :min_separation),
-      # Held by the separation monitor: nil, or what it wants (:hold, :go)
-      # and how far the vehicle is (:holding, :held, :resuming, :resumed
-      # until a view shows AUTO again).
-      separation: nil,
-      # Held by the monitor before it left the ground, in this flight.
-      held_on_ground: false,
       arm_timeout_ms: Map.get(opts, :arm_timeout_ms, @arm_timeout_ms),
-      # How its missions fly (Dolphin.Vehicles.View.airframe/2), from its view once known.
-      airframe: nil,
-      # Where the vehicle was first seen armed on the ground in :flying, while it stays so.
-      grounded: nil,
-      # Seen disarmed on the ground in :flying before its flight began (a
-      # timer runs), and how many times it was armed and started again.
-      disarmed_idle: false,
-      rearms: 0,
-      # Where and at which item the vehicle was first seen standing still
-      # short of a waypoint in :flying, while it stays so.
-      still: nil,
-      items: nil,
-      ending: nil,
-      boot_deadline: Clock.now_ms() + @boot_timeout_ms,
-      # The exchange of the current step, and the how-manieth try of it.
-      task: nil,
-      attempt: 1,
-      upload_started: nil,
-      retransmissions: 0,
-      # Uploads in a row that ended without the vehicle's final ACCEPTED
-      # (every item sent; whether it holds the mission is for the read-back).
-      unconfirmed: 0,
-      # The vehicle's STATUSTEXTs when the flight began (see judge/2).
-      flight_texts: [],
-      flight: nil,
-      # The last view of the vehicle it was sent (:start, :flying): the flight
-      # is judged on the views in the order they came, never on a read of the
-      # table, which can be newer than views still waiting in the mailbox.
-      view: nil
+      boot_deadline: Clock.now_ms() + @boot_timeout_ms
     }
 
     {:ok, :hold, data}
