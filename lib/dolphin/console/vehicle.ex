@@ -253,17 +253,24 @@ defmodule Dolphin.Console.Vehicle do
         say("watching vehicle #{id} (#{if reader, do: "Enter stops, ", else: ""}stops by itself after #{Format.duration(timeout)})")
         start = System.monotonic_time(:millisecond)
         why = tick(id, Vehicles.status_texts(id), reader, start, start + timeout, every)
-        if reader, do: Process.exit(reader, :kill)
+        if reader, do: stop_reader(reader)
         say("watch ended (#{why})")
       end
     end)
   end
 
-  # Reads a line of the console in its own process: the watch goes on until it comes.
+  # Reads a line of the console in its own process: the watch goes on until
+  # it comes. Linked: a watch that ends any other way (an exception, its
+  # caller's exit) leaves no reader behind to take the next line typed.
   defp key_reader do
     me = self()
     gl = Process.group_leader()
-    spawn(fn -> send(me, {:watch_key, self(), IO.gets(gl, "")}) end)
+    spawn_link(fn -> send(me, {:watch_key, self(), IO.gets(gl, "")}) end)
+  end
+
+  defp stop_reader(reader) do
+    Process.unlink(reader)
+    Process.exit(reader, :kill)
   end
 
   defp tick(id, texts, reader, start, deadline, every) do

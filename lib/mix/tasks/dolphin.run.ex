@@ -197,7 +197,7 @@ defmodule Mix.Tasks.Dolphin.Run do
       # block redrawn in place would fight the prompt.
       # The application is up before the prompt comes, so that the console's helpers work at once.
       Mix.Task.run("app.start")
-      {:ok, _} = Task.start(fn -> main(argv, plain: true, ask: &Dolphin.Console.Runs.ask/1) end)
+      {:ok, _} = Task.Supervisor.start_child(Dolphin.Console.Commands, fn -> main(argv, plain: true, ask: &Dolphin.Console.Runs.ask/1) end)
       :ok
     else
       # Until the run catches them (while it runs, they stop the script: see
