@@ -25,7 +25,9 @@ defmodule Dolphin.Cluster.Mirror do
       same way;
     * fails over: when the chosen station's node goes down, or it stops
       hearing the vehicle while another station hears it, the route moves to
-      the other (`station_changed` event) without any `vehicle_lost`; a
+      the other (`station_changed` event) without any `vehicle_lost`, and
+      the other's views are put once they show the vehicle later than the
+      last one put (a station a little behind never takes it back); a
       vehicle no station hears any more is lost (at once when its last
       station's node goes down, else when the station's own vehicle times
       out), and reconnected when a station hears it again;
@@ -44,7 +46,7 @@ defmodule Dolphin.Cluster.Mirror do
 
   alias Dolphin.{Clock, Events}
   alias Dolphin.Cluster.{Choice, Station}
-  alias Dolphin.Vehicles.{Routes, Views}
+  alias Dolphin.Vehicles.{Routes, View, Views}
 
   @reconnect_every_ms 1_000
   @stale_floor_ms 250
@@ -90,7 +92,9 @@ defmodule Dolphin.Cluster.Mirror do
        waiting: %{},
        # station pid => %{node, monitor}
        stations: %{},
-       # id => %{hearings: %{station => hearing}, chosen, lost, conflict}
+       # id => %{hearings: %{station => hearing}, chosen, lost, conflict,
+       # behind}: `behind`, the view published last, while the station
+       # chosen since has only older ones (see announce/4)
        vehicles: %{},
        stale_ms: Keyword.get(opts, :stale_ms, Choice.stale_ms())
      }}
@@ -292,7 +296,7 @@ defmodule Dolphin.Cluster.Mirror do
 
   # A vehicle a station tells of for the first time (or with a new process).
   defp hear(s, id, station, pid, view) do
-    v = Map.get(s.vehicles, id, %{hearings: %{}, chosen: nil, lost: nil, conflict: nil})
+    v = Map.get(s.vehicles, id, %{hearings: %{}, chosen: nil, lost: nil, conflict: nil, behind: nil})
     hearing = %{pid: pid, view: view, age_ms: nil, link: view.link}
     v = %{v | hearings: Map.put(v.hearings, station, hearing)}
     decide(s, id, check_conflict(v, id, station), "heard by #{node(station)}")
@@ -304,14 +308,31 @@ defmodule Dolphin.Cluster.Mirror do
       v = if why == :view, do: check_conflict(v, id, station), else: v
       s = decide(s, id, v, why)
       # A new view of the chosen station, once the choice is settled.
-      if why == :view and s.vehicles[id].chosen == station and not s.vehicles[id].lost, do: publish_view(id, v.hearings[station].pid, h_view(s, id, station))
-      s
+      if why == :view and s.vehicles[id].chosen == station and not s.vehicles[id].lost, do: publish_chosen(s, id), else: s
     else
       _ -> s
     end
   end
 
-  defp h_view(s, id, station), do: s.vehicles[id].hearings[station].view
+  # The chosen station's latest view, unless it is still behind the one
+  # published before the switch to it.
+  defp publish_chosen(s, id) do
+    v = s.vehicles[id]
+    h = v.hearings[v.chosen]
+
+    cond do
+      v.behind == nil ->
+        publish_view(id, h.pid, h.view)
+        s
+
+      View.newer?(h.view, v.behind) ->
+        publish_view(id, h.pid, h.view)
+        put_in(s.vehicles[id].behind, nil)
+
+      true ->
+        s
+    end
+  end
 
   # Two stations whose views of one id are two different vehicles: the first
   # one (the chosen) keeps the vehicle, the other is never chosen while it
@@ -345,10 +366,8 @@ defmodule Dolphin.Cluster.Mirror do
         %{s | vehicles: Map.put(s.vehicles, id, v)}
 
       true ->
-        v = %{v | chosen: chosen || old.chosen, lost: lost}
-        s = %{s | vehicles: Map.put(s.vehicles, id, v)}
-        announce(id, old, v, why)
-        s
+        v = announce(id, old, %{v | chosen: chosen || old.chosen, lost: lost}, why)
+        %{s | vehicles: Map.put(s.vehicles, id, v)}
     end
   end
 
@@ -357,33 +376,58 @@ defmodule Dolphin.Cluster.Mirror do
   # of the network does not get shorter with the speed-up.
   defp stale_ms(s), do: max(s.stale_ms, round(@stale_floor_ms * Clock.speedup()))
 
+  # What the choice made for one vehicle changes, published; returns the
+  # vehicle's record. A station switched to may be a little behind the one
+  # it replaces (each station's views come as it folds the frames): its view
+  # is published only once it shows the vehicle later than the view already
+  # published (Dolphin.Vehicles.View.newer?/2), so that readers never see the
+  # vehicle go back in time (back to a mode it has left: a mission's
+  # executor would judge it left its mission).
   defp announce(id, old, v, why) do
     h = v.hearings[v.chosen]
 
-    cond do
-      old.chosen == nil ->
-        # New here: the route, then the view, which says it is discovered.
-        publish_view(id, h.pid, view_of(h, v.lost))
+    v =
+      cond do
+        old.chosen == nil ->
+          # New here: the route, then the view, which says it is discovered.
+          publish_view(id, h.pid, view_of(h, v.lost))
+          v
 
-      old.chosen != v.chosen ->
-        Events.emit(:station_changed, %{vehicle: id, from: node(old.chosen), to: node(v.chosen), reason: reason_words(why)})
-        publish_view(id, h.pid, view_of(h, v.lost))
+        old.chosen != v.chosen ->
+          Events.emit(:station_changed, %{vehicle: id, from: node(old.chosen), to: node(v.chosen), reason: reason_words(why)})
+          switch_view(id, h, v)
 
-      true ->
-        :ok
-    end
+        true ->
+          v
+      end
 
     cond do
       old.lost == false and v.lost ->
         # The view says it is lost (Dolphin.Vehicles.Views derives the news).
-        last = if h, do: h.view, else: last_view(id)
+        last = if h && v.behind == nil, do: h.view, else: last_view(id)
         publish_view(id, Routes.get(id), last && %{last | connected?: false})
+        %{v | behind: nil}
 
       old.lost == true and not v.lost ->
         publish_view(id, h.pid, h.view)
+        %{v | behind: nil}
 
       true ->
-        :ok
+        v
+    end
+  end
+
+  # The route moves to the station switched to at once (commands go where
+  # the vehicle is heard); its view waits, if it is behind the one published.
+  defp switch_view(id, h, v) do
+    published = v.behind || last_view(id)
+
+    if v.lost or published == nil or View.newer?(h.view, published) do
+      publish_view(id, h.pid, view_of(h, v.lost))
+      %{v | behind: nil}
+    else
+      if Routes.get(id) != h.pid, do: Routes.put(id, h.pid)
+      %{v | behind: published}
     end
   end
 

@@ -33,6 +33,7 @@ defmodule Dolphin.Vehicles.View do
   | `home` | `Dolphin.Geo.Location` of its home, or `nil` until reported |
   | `system_status` | MAV_STATE number (0 UNINIT, 1 BOOT, ... 4 ACTIVE), `nil` until reported |
   | `link` | `%{rtt_ms, loss_in, loss_out}`: round trip and loss each way, `nil`s until measured (`Dolphin.Vehicles.LinkQuality`) |
+  | `boot_ms` | the autopilot's own clock (GLOBAL_POSITION_INT's `time_boot_ms`) at its latest position report, `nil` until heard: of two views of one vehicle from two paths or two stations, the one with the later clock is the newer (`newer?/2`) |
   | `sensors` | the readings of the sensors scripts declared (`Dolphin.Sensors.Readings`), by source; `%{}` until one is heard |
   | `status_texts` | the autopilot's last STATUSTEXTs, `{severity, text}`, newest first (see `Dolphin.Vehicles.State`); what it said since an earlier view is `Dolphin.Vehicles.State.texts_since/2` of the two |
   """
@@ -58,8 +59,12 @@ defmodule Dolphin.Vehicles.View do
             home: nil,
             system_status: nil,
             link: %{rtt_ms: nil, loss_in: nil, loss_out: nil},
+            boot_ms: nil,
             status_texts: [],
             sensors: %{}
+
+  # A clock further back than this is the autopilot's after a restart, not a view behind.
+  @restart_ms 60_000
 
   @type class :: :uav | :ugv | :usv | :uuv | :other
   @type airframe :: Dolphin.Airframe.t()
@@ -85,6 +90,7 @@ defmodule Dolphin.Vehicles.View do
           home: Dolphin.Geo.Location.t() | nil,
           system_status: non_neg_integer() | nil,
           link: %{rtt_ms: non_neg_integer() | nil, loss_in: float() | nil, loss_out: float() | nil},
+          boot_ms: non_neg_integer() | nil,
           status_texts: [{non_neg_integer(), String.t()}],
           sensors: Dolphin.Sensors.Readings.t()
         }
@@ -275,10 +281,32 @@ defmodule Dolphin.Vehicles.View do
       home: state.home && Dolphin.Geo.Location.new(state.home.lat, state.home.lon, state.home.alt),
       system_status: state.system_status,
       link: Map.take(Dolphin.Vehicles.State.link_figures(state), [:rtt_ms, :loss_in, :loss_out]),
+      boot_ms: state.boot && elem(state.boot, 0),
       status_texts: state.status_texts,
       sensors: state.sensors
     }
   end
+
+  @doc """
+  Whether view `a` shows the vehicle later than view `b` does, by the
+  autopilot's own clock (`boot_ms`): two stations that hear one vehicle each
+  have their view of it, one of them a little behind the other. Views that
+  do not both carry the clock, and a clock that went back by more than a
+  minute (the autopilot restarted), count as newer: nothing says otherwise.
+
+      iex> alias Dolphin.Vehicles.View
+      iex> View.newer?(%View{boot_ms: 1_200}, %View{boot_ms: 1_000})
+      true
+      iex> View.newer?(%View{boot_ms: 1_000}, %View{boot_ms: 1_000})
+      false
+      iex> View.newer?(%View{boot_ms: 2_000}, %View{boot_ms: 90_000})
+      true
+      iex> View.newer?(%View{boot_ms: nil}, %View{boot_ms: 1_000})
+      true
+  """
+  @spec newer?(t(), t()) :: boolean()
+  def newer?(%__MODULE__{boot_ms: a}, %__MODULE__{boot_ms: b}) when is_integer(a) and is_integer(b), do: a > b or a + @restart_ms < b
+  def newer?(%__MODULE__{}, %__MODULE__{}), do: true
 
   # No MISSION_CURRENT yet: the total is not known, nor is the progress.
   defp progress(%{total: nil}), do: nil

@@ -106,6 +106,41 @@ defmodule Dolphin.ClusterTest do
     refute_received {:dolphin, :vehicles, {:vehicle_lost, 21}}
   end
 
+  test "a failover to a station that is behind never takes the vehicle's view back: its views are put once they have caught up" do
+    gs1 = Cluster.start_station("gs1")
+    gs2 = Cluster.start_station("gs2")
+    splitter = start_supervised!({Dolphin.Test.RadioSplitter, gcs: [gs1.port, gs2.port]})
+    {:ok, [21]} = Dolphin.Sim.start(gcs: Dolphin.Test.RadioSplitter.port(splitter), sysids: [21], speedup: @speedup)
+    :ok = Dolphin.Cluster.join(gs1.node)
+    Cluster.await_vehicles([21])
+    :ok = Dolphin.Cluster.join(gs2.node)
+    Wait.until(fn -> match?(%{21 => %{stations: [_, _]}}, Dolphin.Cluster.Mirror.routes()) end, 20_000, fn -> "vehicle 21 heard by both" end)
+    %{21 => %{chosen: first}} = Dolphin.Cluster.Mirror.routes()
+    {side, other} = if first == gs1.node, do: {:a, gs2}, else: {:b, gs1}
+    {:ok, %{mode: :stabilize}} = Vehicles.view(21)
+
+    # The other station falls behind: what it hears waits in its mailbox.
+    :ok = Cluster.call(other.peer, :sys, :suspend, [Dolphin.Cluster.Station])
+    assert {:ok, :accepted} = Vehicles.set_mode(21, :guided)
+    Wait.until(fn -> match?({:ok, %{mode: :guided}}, Vehicles.view(21)) end, 10_000, fn -> "vehicle 21 in GUIDED" end)
+    {:ok, %{boot_ms: switched_at}} = Vehicles.view(21)
+
+    Events.subscribe()
+    :ok = Dolphin.Test.RadioSplitter.cut(splitter, side)
+    other_node = other.node
+    Wait.until(fn -> match?(%{21 => %{chosen: ^other_node}}, Dolphin.Cluster.Mirror.routes()) end, 20_000, fn -> "vehicle 21 switched to #{other_node}" end)
+    # The route is the other station's; the view stays the latest, not its older one.
+    assert node(Vehicles.whereis(21)) == other_node
+    assert {:ok, %{mode: :guided, connected?: true}} = Vehicles.view(21)
+
+    :ok = Cluster.call(other.peer, :sys, :resume, [Dolphin.Cluster.Station])
+    Wait.until(fn -> match?({:ok, %{boot_ms: b}} when b > switched_at, Vehicles.view(21)) end, 10_000, fn -> "vehicle 21's views from #{other_node}" end)
+    assert {:ok, %{mode: :guided}} = Vehicles.view(21)
+    events = Wait.received_events()
+    assert Enum.any?(events, &match?(%{event: :station_changed, vehicle: 21, to: ^other_node}, &1)), inspect(events)
+    refute Enum.any?(events, &match?(%{event: :mode_changed, vehicle: 21}, &1)), inspect(events)
+  end
+
   test "a netsplit: the station's vehicles are lost at once, and reconnected when the nodes meet again" do
     gs1 = Cluster.start_station("gs1", sysids: [1, 2])
     :ok = Dolphin.Cluster.join(gs1.node)
