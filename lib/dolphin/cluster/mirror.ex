@@ -50,6 +50,9 @@ defmodule Dolphin.Cluster.Mirror do
 
   @reconnect_every_ms 1_000
   @stale_floor_ms 250
+  # How long (real ms) a station switched to may stay behind before its view
+  # is put anyway.
+  @catch_up_real_ms 5_000
 
   @doc false
   def start_link(opts), do: GenServer.start_link(__MODULE__, opts, name: __MODULE__)
@@ -94,7 +97,8 @@ defmodule Dolphin.Cluster.Mirror do
        stations: %{},
        # id => %{hearings: %{station => hearing}, chosen, lost, conflict,
        # behind}: `behind`, the view published last, while the station
-       # chosen since has only older ones (see announce/4)
+       # chosen since has only older ones, and since when (real ms; see
+       # announce/4)
        vehicles: %{},
        stale_ms: Keyword.get(opts, :stale_ms, Choice.stale_ms())
      }}
@@ -176,6 +180,7 @@ defmodule Dolphin.Cluster.Mirror do
   end
 
   def handle_info({:nodeup, _node, _info}, s), do: {:noreply, subscribe_all(s)}
+  def handle_info({:catch_up, id}, s), do: {:noreply, catch_up(s, id)}
 
   # A joined node that went away is tried again until it answers; :pg then
   # tells of its station, and the station's vehicles come back.
@@ -325,7 +330,7 @@ defmodule Dolphin.Cluster.Mirror do
         publish_view(id, h.pid, h.view)
         s
 
-      View.newer?(h.view, v.behind) ->
+      View.newer?(h.view, v.behind.view) ->
         publish_view(id, h.pid, h.view)
         put_in(s.vehicles[id].behind, nil)
 
@@ -420,16 +425,34 @@ defmodule Dolphin.Cluster.Mirror do
   # The route moves to the station switched to at once (commands go where
   # the vehicle is heard); its view waits, if it is behind the one published.
   defp switch_view(id, h, v) do
-    published = v.behind || last_view(id)
+    published = if v.behind, do: v.behind.view, else: last_view(id)
 
     if v.lost or published == nil or View.newer?(h.view, published) do
       publish_view(id, h.pid, view_of(h, v.lost))
       %{v | behind: nil}
     else
       if Routes.get(id) != h.pid, do: Routes.put(id, h.pid)
-      %{v | behind: published}
+      Process.send_after(self(), {:catch_up, id}, @catch_up_real_ms)
+      %{v | behind: %{view: published, since: real_ms()}}
     end
   end
+
+  # A station that has not caught up within @catch_up_real_ms has its view
+  # put all the same: its clock may not move (a vehicle at rest whose
+  # position reports are all alike publishes no new view), and what it
+  # says is the latest there is.
+  defp catch_up(s, id) do
+    with %{^id => %{behind: %{since: since}, lost: false} = v} <- s.vehicles,
+         true <- real_ms() - since >= @catch_up_real_ms,
+         %{} = h <- v.hearings[v.chosen] do
+      publish_view(id, h.pid, h.view)
+      put_in(s.vehicles[id].behind, nil)
+    else
+      _ -> s
+    end
+  end
+
+  defp real_ms, do: System.monotonic_time(:millisecond)
 
   defp reason_words(why) when is_binary(why), do: why
   defp reason_words(:heard), do: "the station that had it stopped hearing it"

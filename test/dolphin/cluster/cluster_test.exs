@@ -106,7 +106,11 @@ defmodule Dolphin.ClusterTest do
     refute_received {:dolphin, :vehicles, {:vehicle_lost, 21}}
   end
 
-  test "a failover to a station that is behind never takes the vehicle's view back: its views are put once they have caught up" do
+  # Vehicle 21 heard by two stations; the one not chosen is held behind
+  # (what it hears waits in its station's mailbox) while the vehicle goes
+  # to GUIDED; then the chosen one's path is cut and the route switches to
+  # the one behind. Returns the splitter and the station switched to.
+  defp switch_to_a_station_behind do
     gs1 = Cluster.start_station("gs1")
     gs2 = Cluster.start_station("gs2")
     splitter = start_supervised!({Dolphin.Test.RadioSplitter, gcs: [gs1.port, gs2.port]})
@@ -119,26 +123,41 @@ defmodule Dolphin.ClusterTest do
     {side, other} = if first == gs1.node, do: {:a, gs2}, else: {:b, gs1}
     {:ok, %{mode: :stabilize}} = Vehicles.view(21)
 
-    # The other station falls behind: what it hears waits in its mailbox.
     :ok = Cluster.call(other.peer, :sys, :suspend, [Dolphin.Cluster.Station])
     assert {:ok, :accepted} = Vehicles.set_mode(21, :guided)
     Wait.until(fn -> match?({:ok, %{mode: :guided}}, Vehicles.view(21)) end, 10_000, fn -> "vehicle 21 in GUIDED" end)
-    {:ok, %{boot_ms: switched_at}} = Vehicles.view(21)
 
     Events.subscribe()
     :ok = Dolphin.Test.RadioSplitter.cut(splitter, side)
     other_node = other.node
     Wait.until(fn -> match?(%{21 => %{chosen: ^other_node}}, Dolphin.Cluster.Mirror.routes()) end, 20_000, fn -> "vehicle 21 switched to #{other_node}" end)
+    other
+  end
+
+  test "a failover to a station that is behind never takes the vehicle's view back: its views are put once they have caught up" do
+    other = switch_to_a_station_behind()
     # The route is the other station's; the view stays the latest, not its older one.
-    assert node(Vehicles.whereis(21)) == other_node
-    assert {:ok, %{mode: :guided, connected?: true}} = Vehicles.view(21)
+    assert node(Vehicles.whereis(21)) == other.node
+    assert {:ok, %{mode: :guided, connected?: true, boot_ms: switched_at}} = Vehicles.view(21)
 
     :ok = Cluster.call(other.peer, :sys, :resume, [Dolphin.Cluster.Station])
-    Wait.until(fn -> match?({:ok, %{boot_ms: b}} when b > switched_at, Vehicles.view(21)) end, 10_000, fn -> "vehicle 21's views from #{other_node}" end)
+    Wait.until(fn -> match?({:ok, %{boot_ms: b}} when b > switched_at, Vehicles.view(21)) end, 10_000, fn -> "vehicle 21's views from #{other.node}" end)
     assert {:ok, %{mode: :guided}} = Vehicles.view(21)
     events = Wait.received_events()
+    other_node = other.node
     assert Enum.any?(events, &match?(%{event: :station_changed, vehicle: 21, to: ^other_node}, &1)), inspect(events)
     refute Enum.any?(events, &match?(%{event: :mode_changed, vehicle: 21}, &1)), inspect(events)
+  end
+
+  test "a station switched to that stays behind has its view put all the same after 5 s of real time" do
+    other = switch_to_a_station_behind()
+    # Held: what it has is older than what was put.
+    {:ok, %{mode: :guided}} = Vehicles.view(21)
+    # Still behind 5 s of real time after the switch (it cannot catch up:
+    # it is suspended), its latest view is what there is.
+    Wait.until(fn -> match?({:ok, %{mode: :stabilize}}, Vehicles.view(21)) end, 20_000, fn -> "the view of #{other.node} put" end)
+    :ok = Cluster.call(other.peer, :sys, :resume, [Dolphin.Cluster.Station])
+    Wait.until(fn -> match?({:ok, %{mode: :guided}}, Vehicles.view(21)) end, 10_000, fn -> "vehicle 21 in GUIDED again, from #{other.node}" end)
   end
 
   test "a netsplit: the station's vehicles are lost at once, and reconnected when the nodes meet again" do
