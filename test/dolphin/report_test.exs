@@ -191,6 +191,64 @@ defmodule Dolphin.ReportTest do
     assert File.read!(out) =~ "<b>East</b>: the vehicle left its mission"
   end
 
+  describe "a pace that swung during the run" do
+    # The vehicles' pace against the clock asked for, by 60 s of the events'
+    # clock: 0.6 of it, then all of it, and so on (ArduCopter SITL beside
+    # other work); the log's seconds at event second e.
+    defp swung(e), do: swung(e, 0.0, 0.0)
+    defp swung(e, from, t) when e - from <= 60, do: t + (e - from) * pace(from)
+    defp swung(e, from, t), do: swung(e, from + 60, t + 60 * pace(from))
+    defp pace(from), do: if(rem(round(from / 60), 2) == 0, do: 0.6, else: 1.0)
+
+    # Three vehicles armed, in AUTO and reaching an item every 7 s for ten
+    # minutes of the events' clock, each anchor logged a heartbeat late or
+    # early (up to half a second); `edit` changes the events.
+    defp swinging_run(edit \\ & &1) do
+      :rand.seed(:exsss, {7, 7, 7})
+      late = fn -> :rand.uniform() - 0.5 end
+
+      per_vehicle =
+        for v <- 1..3 do
+          items = for {e, seq} <- Enum.with_index(Stream.iterate(10.0 + v, &(&1 + 7)) |> Enum.take_while(&(&1 < 590)), 1), do: {e, seq}
+          events = [%{"event" => "armed", "vehicle" => v, "t_ms" => (5 + v) * 1000}, %{"event" => "mode_changed", "vehicle" => v, "mode" => "auto", "t_ms" => (6 + v) * 1000}]
+          events = events ++ for({e, seq} <- items, do: %{"event" => "mission_item_reached", "vehicle" => v, "seq" => seq, "t_ms" => round(e * 1000)})
+          log = %{arming: [swung(5.0 + v) + late.()], modes: [{swung(6.0 + v) + late.(), :auto}], reached: for({e, seq} <- items, do: {swung(e) + late.(), seq})}
+          {v, events, log}
+        end
+
+      events = (Enum.flat_map(per_vehicle, &elem(&1, 1)) ++ [%{"event" => "script_finished", "t_ms" => 595_000}]) |> edit.() |> Enum.sort_by(& &1["t_ms"])
+
+      log = %{
+        vehicles: [1, 2, 3],
+        span_s: swung(600.0),
+        speedup: 10,
+        arming: Map.new(per_vehicle, fn {v, _, l} -> {v, l.arming} end),
+        modes: Map.new(per_vehicle, fn {v, _, l} -> {v, l.modes} end),
+        reached: Map.new(per_vehicle, fn {v, _, l} -> {v, l.reached} end),
+        heard: %{},
+        cut: false
+      }
+
+      {events, log}
+    end
+
+    test "its events are placed through the anchors themselves, each within a heartbeat of where the vehicles were" do
+      {events, log} = swinging_run()
+      assert {:ok, {:piecewise, knots} = timeline} = Dolphin.Report.Events.align(events, log, "swung.jsonl")
+      assert length(knots) > 200
+
+      for %{"t_ms" => t} <- events do
+        assert_in_delta Dolphin.Report.Events.place(timeline, t), swung(t / 1000), 1.5
+      end
+    end
+
+    test "another run's events are still refused" do
+      {events, log} = swinging_run(fn events -> Enum.map(events, &%{&1 | "t_ms" => :rand.uniform(600_000)}) end)
+      assert {:error, %Error{reason: :events_mismatch, detail: detail}} = Dolphin.Report.Events.align(events, log, "other.jsonl")
+      assert detail =~ "line up with the telemetry log"
+    end
+  end
+
   test "without events: the log alone", %{tmp_dir: dir} do
     out = Path.join(dir, "report.html")
     assert {:ok, %{events: nil, script_result: nil}} = Report.write(tlog(dir), nil, out, title: "Survey <north>")

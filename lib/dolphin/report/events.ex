@@ -28,6 +28,10 @@ defmodule Dolphin.Report.Events do
   # A rate other than 1 is measured on no fewer anchors than this.
   @rated_least_anchors 4
   @most_rate 1.25
+  # A time line through the anchors themselves (a pace that swung) is taken
+  # on no fewer anchors than this, and the most it is worked out on.
+  @piecewise_least_anchors 6
+  @piecewise_anchors 1_000
   # Clock seconds, and real seconds at the run's speed-up, that starting a
   # run's links and vehicles may take.
   @start_s 30.0
@@ -70,18 +74,28 @@ defmodule Dolphin.Report.Events do
     :error, reason -> {:error, reason}
   end
 
+  @typedoc false
+  # `{scale, offset}`: an event at `t_ms` is at `scale * t_ms / 1000 +
+  # offset` seconds of the log's clock; `{:piecewise, knots}`: straight
+  # between the knots, `[{event s, log s}]` rising in both, and at their
+  # overall rate beyond them.
+  @type timeline :: {float(), float()} | {:piecewise, [{float(), float()}]}
+
   @doc false
-  # Where the events go on the log's time line: `{scale, offset}`, an event
-  # at `t_ms` is at `scale * t_ms / 1000 + offset` seconds of the log's
-  # clock. The log's clock is the vehicles' own (their boot clocks against
-  # the log's stamps); the events' is the ground station's, which runs at the
+  # Where the events go on the log's time line (a timeline(), see place/2).
+  # The log's clock is the vehicles' own (their boot clocks against the
+  # log's stamps); the events' is the ground station's, which runs at the
   # speed-up asked for. A vehicle that cannot keep that pace (ArduCopter SITL
   # on a loaded machine, at half its speed-up) falls behind it, so the two
-  # time lines differ in rate as well as in origin: both are fitted. `log` is
-  # the log's anchors: %{vehicles: [id], span_s: s, speedup: k, arming: %{id
-  # => [t]}, modes: %{id => [{t, mode}]}, reached: %{id => [{t, seq}]},
-  # heard: %{id => t}, cut: bool}.
-  @spec align([map()], map(), Path.t()) :: {:ok, {float(), float()}} | {:error, Error.t()}
+  # time lines differ in rate as well as in origin: both are fitted. A pace
+  # that swung during the run (ArduCopter SITL beside other work went from
+  # 6.2x to 10.6x of its 10x and back within seconds) fits no one rate: the
+  # time line then runs through the anchors themselves, the longest chain of
+  # them that rises at a pace a vehicle can have. `log` is the log's anchors:
+  # %{vehicles: [id], span_s: s, speedup: k, arming: %{id => [t]}, modes:
+  # %{id => [{t, mode}]}, reached: %{id => [{t, seq}]}, heard: %{id => t},
+  # cut: bool}.
+  @spec align([map()], map(), Path.t()) :: {:ok, timeline()} | {:error, Error.t()}
   def align([], _log, _path), do: {:ok, {1.0, 0.0}}
 
   def align(events, log, path) do
@@ -100,9 +114,21 @@ defmodule Dolphin.Report.Events do
         # Two free numbers fit a few scattered anchors more easily than one:
         # a rate of its own is taken only when nearly all anchors agree with it.
         cond do
-          n >= @rated_least_anchors and rated_agree >= 0.8 * n -> overlap(events, rated, log, path)
-          plain_agree * 2 >= n -> overlap(events, plain, log, path)
-          true -> mismatch(path, "only #{plain_agree} of #{n} arming, mode and mission-item events line up with the telemetry log's frames")
+          n >= @rated_least_anchors and rated_agree >= 0.8 * n ->
+            overlap(events, rated, log, path)
+
+          plain_agree * 2 >= n ->
+            overlap(events, plain, log, path)
+
+          true ->
+            # Nearly all anchors on one chain, as nearly all must agree with a rate.
+            case chain(pairs) do
+              {knots, sampled} when sampled >= @piecewise_least_anchors and length(knots) >= 0.8 * sampled ->
+                overlap(events, {:piecewise, rising(knots)}, log, path)
+
+              _ ->
+                mismatch(path, "only #{max(plain_agree, rated_agree)} of #{n} arming, mode and mission-item events line up with the telemetry log's frames")
+            end
         end
 
       true ->
@@ -149,6 +175,60 @@ defmodule Dolphin.Report.Events do
     {{scale, offset}, Enum.count(pairs, fn {e, t} -> abs(t - (scale * e + offset)) <= @tolerance_s end)}
   end
 
+  # The longest chain of anchors, in the order of the events, each the
+  # next's at a pace a vehicle can have (@least_rate to @most_rate, give or
+  # take a heartbeat's lateness each): anchors paired wrongly (the nth mode
+  # change of the events with another one of the log) fall off it. Worked out
+  # on at most @piecewise_anchors of them, evenly spread: `{chain, how many}`.
+  defp chain(pairs) do
+    sample = pairs |> Enum.sort() |> take_every(max(1, ceil(length(pairs) / @piecewise_anchors)))
+
+    {{_, best}, _} =
+      Enum.reduce(sample, {{0, []}, []}, fn {e, t} = anchor, {best, chains} ->
+        # chains: the longest chain ending at each anchor so far, {length,
+        # anchors newest first}, newest first.
+        {n, longest} =
+          chains
+          |> Enum.filter(fn {_, [{e0, t0} | _]} -> follows?(e - e0, t - t0) end)
+          |> Enum.max_by(&elem(&1, 0), fn -> {0, []} end)
+
+        mine = {n + 1, [anchor | longest]}
+        {if(n + 1 > elem(best, 0), do: mine, else: best), [mine | chains]}
+      end)
+
+    {Enum.reverse(best), length(sample)}
+  end
+
+  defp follows?(de, dt), do: dt >= @least_rate * de - @tolerance_s and dt <= @most_rate * de + @tolerance_s
+
+  # Knots for a time line: each later than the one before on both (anchors of
+  # one moment a heartbeat apart may not be).
+  defp rising([first | rest]) do
+    rest
+    |> Enum.reduce([first], fn {e, t}, [{e0, t0} | _] = acc -> if e > e0 and t > t0, do: [{e, t} | acc], else: acc end)
+    |> Enum.reverse()
+  end
+
+  @doc false
+  # Where an event at `t_ms` of the events' clock is on the log's (seconds).
+  @spec place(timeline(), number()) :: float()
+  def place({:piecewise, [{e0, t0} | _] = knots}, t_ms) do
+    e = t_ms / 1000
+    {el, tl} = List.last(knots)
+    # Beyond the knots, at their overall rate (1 for a single knot).
+    rate = if el > e0, do: (tl - t0) / (el - e0), else: 1.0
+
+    case Enum.find(Enum.zip(knots, tl_of(knots)), fn {{a, _}, {b, _}} -> e >= a and e <= b end) do
+      {{a, ta}, {b, tb}} -> ta + (e - a) * (tb - ta) / (b - a)
+      nil when e < e0 -> t0 + (e - e0) * rate
+      nil -> tl + (e - el) * rate
+    end
+  end
+
+  def place({scale, offset}, t_ms), do: scale * t_ms / 1000 + offset
+
+  defp tl_of([_ | rest]), do: rest
+
   defp take_every(list, 1), do: list
   defp take_every(list, n), do: Enum.take_every(list, n)
 
@@ -156,9 +236,9 @@ defmodule Dolphin.Report.Events do
   # little later: the vehicles and links stop after the script, a few real
   # seconds); events far outside the log's time are another run's. A log cut
   # short may end before the events do.
-  defp overlap(events, {scale, offset} = timeline, log, path) do
-    first = scale * hd(events)["t_ms"] / 1000 + offset
-    last = scale * List.last(events)["t_ms"] / 1000 + offset
+  defp overlap(events, timeline, log, path) do
+    first = place(timeline, hd(events)["t_ms"])
+    last = place(timeline, List.last(events)["t_ms"])
     slack = max(30.0, 0.2 * log.span_s)
     teardown = 30.0 + 0.1 * log.span_s + 5.0 * log.speedup
     finished = Enum.any?(events, &(&1["event"] == "script_finished"))

@@ -24,17 +24,17 @@ defmodule Dolphin.Report.Model do
   @wgs84_e2 6.69437999014e-3
 
   @doc false
-  @spec build(FlightLog.t(), [map()], {float(), float()}) :: map()
-  # `timeline`: where an event goes on the log's time line, {scale, offset}
-  # (Dolphin.Report.Events.align/3).
-  def build(%FlightLog{} = log, events, {scale, offset} = _timeline) do
+  @spec build(FlightLog.t(), [map()], Dolphin.Report.Events.timeline()) :: map()
+  # `timeline`: where an event goes on the log's time line
+  # (Dolphin.Report.Events.align/3, place/2).
+  def build(%FlightLog{} = log, events, timeline) do
     k = FlightLog.speedup(log)
     clock = FlightLog.clock(log)
     span = clock.(log.last_us)
     ids = log.vehicles |> Map.keys() |> Enum.sort()
     ref = reference(log, ids)
     project = projection(ref)
-    events = Enum.map(events, &Map.put(&1, "t", scale * &1["t_ms"] / 1000 + offset))
+    events = Enum.map(events, &Map.put(&1, "t", Dolphin.Report.Events.place(timeline, &1["t_ms"])))
     tasks = tasks(events, span)
 
     sensors = sensors(events)
