@@ -16,6 +16,7 @@
  */
 #include <erl_nif.h>
 #include <stdint.h>
+#include <string.h>
 
 #include "crc16.h"
 
@@ -58,6 +59,35 @@ static ERL_NIF_TERM frame_checksum(ErlNifEnv *env, int argc, const ERL_NIF_TERM 
   return enif_make_uint(env, crc16_accumulate_byte(crc, extra));
 }
 
+/* frame_v2(Header, MsgId, Payload, CrcExtra): the MAVLink 2 frame of a whole
+ * Payload (its message's full length): its trailing zero bytes dropped (one
+ * kept at least), the length put into Header (the frame's first seven bytes
+ * as a little-endian integer whose length byte is 0), then MsgId, the
+ * payload kept and the checksum, in one new binary. */
+static ERL_NIF_TERM frame_v2(ErlNifEnv *env, int argc, const ERL_NIF_TERM argv[]) {
+  ErlNifUInt64 header;
+  unsigned msgid, extra;
+  ErlNifBinary payload;
+  ERL_NIF_TERM frame;
+  (void)argc;
+  if (!enif_get_uint64(env, argv[0], &header) || (header & 0xFF00) != 0 || header > 0xFFFFFFFFFFFFFFull ||
+      !enif_get_uint(env, argv[1], &msgid) || msgid > 0xFFFFFF || !enif_inspect_binary(env, argv[2], &payload) ||
+      payload.size == 0 || payload.size > 255 || !enif_get_uint(env, argv[3], &extra) || extra > 255)
+    return enif_make_badarg(env);
+  size_t len = payload.size;
+  while (len > 1 && payload.data[len - 1] == 0) len--;
+  header |= (ErlNifUInt64)len << 8;
+  unsigned char *out = enif_make_new_binary(env, 12 + len, &frame);
+  if (out == NULL) return enif_make_badarg(env);
+  for (int i = 0; i < 7; i++) out[i] = (unsigned char)(header >> (8 * i));
+  for (int i = 0; i < 3; i++) out[7 + i] = (unsigned char)(msgid >> (8 * i));
+  memcpy(out + 10, payload.data, len);
+  uint16_t crc = crc16_accumulate_byte(crc16_accumulate(0xFFFF, out + 1, 9 + len), extra);
+  out[10 + len] = (unsigned char)(crc & 0xFF);
+  out[11 + len] = (unsigned char)(crc >> 8);
+  return frame;
+}
+
 static ERL_NIF_TERM implementation(ErlNifEnv *env, int argc, const ERL_NIF_TERM argv[]) {
   (void)argc; (void)argv;
   return enif_make_atom(env, "native");
@@ -67,6 +97,7 @@ static ErlNifFunc functions[] = {
     {"implementation", 0, implementation, 0},
     {"checksum", 4, checksum, 0},
     {"frame_checksum", 5, frame_checksum, 0},
+    {"frame_v2", 4, frame_v2, 0},
 };
 
 ERL_NIF_INIT(Elixir.Dolphin.MAVLink.CRC, functions, load, NULL, NULL, NULL)

@@ -51,7 +51,7 @@ defmodule Dolphin.MAVLink.CRC do
   @spec implementation() :: :native | :erlang
   def implementation, do: :erlang
 
-  # The C library replaces checksum/4, frame_checksum/5 and implementation/0
+  # The C library replaces checksum/4, frame_checksum/5, frame_v2/4 and implementation/0
   # when it loads; if it does not, their Erlang definitions stay.
   @on_load :load_native
   defp load_native do
@@ -85,11 +85,54 @@ defmodule Dolphin.MAVLink.CRC do
     accumulate_byte(crc_extra, accumulate(binary_part(payload, 0, len), accumulate_byte(msgid >>> 16, crc)))
   end
 
+  @doc """
+  The MAVLink 2 frame of `payload`, the whole of its message (`max_len`
+  bytes): its trailing zero bytes dropped (one kept at least), its length
+  put into `header` (the frame's first seven bytes as one little-endian
+  integer, its length byte 0), then `msgid`, the payload kept and the
+  checksum. In C with the library: the frame is built in one call.
+  """
+  @spec frame_v2(non_neg_integer(), non_neg_integer(), binary(), byte()) :: binary()
+  def frame_v2(header, msgid, payload, crc_extra), do: frame_v2_erlang(header, msgid, payload, crc_extra)
+
+  @doc false
+  # frame_v2/4 in Erlang, kept callable when the C library replaces it (for its tests).
+  @spec frame_v2_erlang(non_neg_integer(), non_neg_integer(), binary(), byte()) :: binary()
+  def frame_v2_erlang(header, msgid, payload, crc_extra) do
+    len = trimmed_size(payload, byte_size(payload))
+    header = header ||| len <<< 8
+    crc = frame_checksum(header, msgid, payload, len, crc_extra)
+    <<header::little-56, msgid::little-24, payload::binary-size(len), crc::little-16>>
+  end
+
+  # MAVLink 2 drops trailing zero bytes of the payload, keeping at least one.
+  # Only the length is found here (the frame takes that many bytes of the
+  # payload as it is built): four bytes per look, the last one first.
+  defp trimmed_size(payload, n) when n >= 4 do
+    <<_::binary-size(n - 4), tail::32, _::binary>> = payload
+
+    cond do
+      tail == 0 -> trimmed_size(payload, n - 4)
+      (tail &&& 0xFF) != 0 -> n
+      (tail &&& 0xFFFF) != 0 -> n - 1
+      (tail &&& 0xFFFFFF) != 0 -> n - 2
+      true -> n - 3
+    end
+  end
+
+  defp trimmed_size(_payload, n) when n <= 1, do: 1
+
+  defp trimmed_size(payload, n) do
+    case payload do
+      <<_::binary-size(n - 1), 0, _::binary>> -> trimmed_size(payload, n - 1)
+      _ -> n
+    end
+  end
+
   @doc "Continues a CRC over `data`."
   @spec accumulate(binary(), crc()) :: crc()
   def accumulate(
-        <<w1::little-16, w2::little-16, w3::little-16, w4::little-16, w5::little-16, w6::little-16,
-          w7::little-16, w8::little-16, rest::binary>>,
+        <<w1::little-16, w2::little-16, w3::little-16, w4::little-16, w5::little-16, w6::little-16, w7::little-16, w8::little-16, rest::binary>>,
         crc
       ) do
     crc = elem(@table16, bxor(crc, w1))

@@ -35,7 +35,7 @@ defmodule Dolphin.MAVLink.Frame do
   and strips trailing zero bytes from MAVLink 2 payloads (keeping one).
   """
 
-  import Bitwise, only: [&&&: 2, |||: 2, <<<: 2]
+  import Bitwise, only: [|||: 2, <<<: 2]
 
   alias Dolphin.MAVLink.{CRC, Message, Value}
 
@@ -246,13 +246,12 @@ defmodule Dolphin.MAVLink.Frame do
   defp encode([], {id, crc_extra, min_len, payload}, message, version, sysid, compid, seq, compat, signing) do
     case version do
       2 ->
-        len = trimmed_size(payload, byte_size(payload))
         flags = if signing, do: @signed, else: 0
-        # The first seven bytes as one integer: each segment of a binary
-        # construction costs more than the shifts.
-        header = @magic_v2 ||| len <<< 8 ||| flags <<< 16 ||| compat <<< 24 ||| seq <<< 32 ||| sysid <<< 40 ||| compid <<< 48
-        crc = CRC.frame_checksum(header, id, payload, len, crc_extra)
-        frame = <<header::little-56, id::little-24, payload::binary-size(len), crc::little-16>>
+        # The first seven bytes as one integer (its length byte is the
+        # frame's to fill): each segment of a binary construction costs more
+        # than the shifts. The frame is then built in one call.
+        header = @magic_v2 ||| flags <<< 16 ||| compat <<< 24 ||| seq <<< 32 ||| sysid <<< 40 ||| compid <<< 48
+        frame = CRC.frame_v2(header, id, payload, crc_extra)
         if signing, do: sign(frame, signing), else: frame
 
       1 when signing != nil ->
@@ -290,29 +289,5 @@ defmodule Dolphin.MAVLink.Frame do
     block = <<link_id, timestamp::little-48>>
     <<signature::binary-6, _::binary>> = :crypto.hash(:sha256, [key, unsigned, block])
     IO.iodata_to_binary([unsigned, block, signature])
-  end
-
-  # MAVLink 2 drops trailing zero bytes of the payload, keeping at least one.
-  # Only the length is found here (the frame takes that many bytes of the
-  # payload as it is built): four bytes per look, the last one first.
-  defp trimmed_size(payload, n) when n >= 4 do
-    <<_::binary-size(n - 4), tail::32, _::binary>> = payload
-
-    cond do
-      tail == 0 -> trimmed_size(payload, n - 4)
-      (tail &&& 0xFF) != 0 -> n
-      (tail &&& 0xFFFF) != 0 -> n - 1
-      (tail &&& 0xFFFFFF) != 0 -> n - 2
-      true -> n - 3
-    end
-  end
-
-  defp trimmed_size(_payload, n) when n <= 1, do: 1
-
-  defp trimmed_size(payload, n) do
-    case payload do
-      <<_::binary-size(n - 1), 0, _::binary>> -> trimmed_size(payload, n - 1)
-      _ -> n
-    end
   end
 end

@@ -43,7 +43,31 @@ defmodule Dolphin.MAVLink.CRCTest do
     )
   end
 
+  test "frame_v2/4 builds the MAVLink 2 frame of a payload: trailing zeros dropped, length, checksum, as the Erlang reference" do
+    check(
+      forall({T.vector(5, T.range(0, 255)), T.range(0, 0xFFFFFF), T.non_empty(T.binary()), T.non_neg_integer(), T.range(0, 255)}, fn
+        {[flags, compat, seq, sysid, compid], msgid, bytes, zeros, extra} ->
+          # Payloads ending in zeros (most do: fields left 0), up to 255 bytes in all.
+          payload = binary_part(bytes <> :binary.copy(<<0>>, rem(zeros, 40)), 0, min(byte_size(bytes) + rem(zeros, 40), 255))
+          header = 0xFD ||| flags <<< 16 ||| compat <<< 24 ||| seq <<< 32 ||| sysid <<< 40 ||| compid <<< 48
+          kept = max(byte_size(String.trim_trailing(payload, <<0>>)), 1)
+          body = <<kept, flags, compat, seq, sysid, compid, msgid::little-24, binary_part(payload, 0, kept)::binary>>
+          crc = CRC.accumulate_byte(extra, CRC.accumulate(body, 0xFFFF))
+          reference = <<0xFD, body::binary, crc::little-16>>
+          assert CRC.frame_v2(header, msgid, payload, extra) == reference
+          assert CRC.frame_v2_erlang(header, msgid, payload, extra) == reference
+          true
+      end),
+      numtests: 2000
+    )
+  end
+
   test "reads of bytes outside the binary, and bad values, raise instead of reading memory" do
+    assert_raise ArgumentError, fn -> CRC.frame_v2(0xFD ||| 5 <<< 8, 0, "ab", 0) end
+    assert_raise ArgumentError, fn -> CRC.frame_v2(0xFD, 0x1000000, "ab", 0) end
+    assert_raise ArgumentError, fn -> CRC.frame_v2(0xFD, 0, "", 0) end
+    assert_raise ArgumentError, fn -> CRC.frame_v2(0xFD, 0, :binary.copy("a", 256), 0) end
+    assert_raise ArgumentError, fn -> CRC.frame_v2(0xFD, 0, "ab", 256) end
     assert_raise ArgumentError, fn -> CRC.checksum("abc", 2, 2, 0) end
     assert_raise ArgumentError, fn -> CRC.checksum("abc", 4, 0, 0) end
     assert_raise ArgumentError, fn -> CRC.checksum("abc", -1, 1, 0) end
