@@ -63,9 +63,6 @@ defmodule Dolphin.Vehicles.View do
             status_texts: [],
             sensors: %{}
 
-  # A clock further back than this is the autopilot's after a restart, not a view behind.
-  @restart_ms 60_000
-
   @type class :: :uav | :ugv | :usv | :uuv | :other
   @type airframe :: Dolphin.Airframe.t()
   @type t :: %__MODULE__{
@@ -291,21 +288,20 @@ defmodule Dolphin.Vehicles.View do
   Whether view `a` shows the vehicle later than view `b` does, by the
   autopilot's own clock (`boot_ms`): two stations that hear one vehicle each
   have their view of it, one of them a little behind the other. Views that
-  do not both carry the clock, and a clock that went back by more than a
-  minute (the autopilot restarted), count as newer: nothing says otherwise.
+  do not both carry the clock count as newer: nothing says otherwise. (An
+  autopilot that restarted has its clock start again: whoever waits for a
+  newer view bounds the wait, as `Dolphin.Cluster.Mirror` does.)
 
       iex> alias Dolphin.Vehicles.View
       iex> View.newer?(%View{boot_ms: 1_200}, %View{boot_ms: 1_000})
       true
       iex> View.newer?(%View{boot_ms: 1_000}, %View{boot_ms: 1_000})
       false
-      iex> View.newer?(%View{boot_ms: 2_000}, %View{boot_ms: 90_000})
-      true
       iex> View.newer?(%View{boot_ms: nil}, %View{boot_ms: 1_000})
       true
   """
   @spec newer?(t(), t()) :: boolean()
-  def newer?(%__MODULE__{boot_ms: a}, %__MODULE__{boot_ms: b}) when is_integer(a) and is_integer(b), do: a > b or a + @restart_ms < b
+  def newer?(%__MODULE__{boot_ms: a}, %__MODULE__{boot_ms: b}) when is_integer(a) and is_integer(b), do: a > b
   def newer?(%__MODULE__{}, %__MODULE__{}), do: true
 
   # No MISSION_CURRENT yet: the total is not known, nor is the progress.
