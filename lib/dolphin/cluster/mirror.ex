@@ -24,7 +24,8 @@ defmodule Dolphin.Cluster.Mirror do
       vehicle is forgotten (`{:vehicle_forgotten, id}`), are announced the
       same way;
     * fails over: when the chosen station's node goes down, or it stops
-      hearing the vehicle while another station hears it, the route moves to
+      hearing the vehicle (or tells nothing for 3 s of real time: its node
+      hangs) while another station hears it, the route moves to
       the other (`station_changed` event) without any `vehicle_lost`, and
       the other's views are put once they show the vehicle later than the
       last one put (a station a little behind never takes it back); a
@@ -53,6 +54,9 @@ defmodule Dolphin.Cluster.Mirror do
   # How long (real ms) a station switched to may stay behind before its view
   # is put anyway.
   @catch_up_real_ms 5_000
+  # How long (real ms) a station may tell nothing before what it last told
+  # is no longer believed.
+  @silent_station_real_ms 3_000
 
   @doc false
   def start_link(opts), do: GenServer.start_link(__MODULE__, opts, name: __MODULE__)
@@ -302,14 +306,14 @@ defmodule Dolphin.Cluster.Mirror do
   # A vehicle a station tells of for the first time (or with a new process).
   defp hear(s, id, station, pid, view) do
     v = Map.get(s.vehicles, id, %{hearings: %{}, chosen: nil, lost: nil, conflict: nil, behind: nil})
-    hearing = %{pid: pid, view: view, age_ms: nil, link: view.link}
+    hearing = %{pid: pid, view: view, age_ms: nil, link: view.link, told_ms: real_ms()}
     v = %{v | hearings: Map.put(v.hearings, station, hearing)}
     decide(s, id, check_conflict(v, id, station), "heard by #{node(station)}")
   end
 
   defp update_hearing(s, id, station, fun, why) do
     with %{^id => v} <- s.vehicles, %{^station => h} <- v.hearings do
-      v = %{v | hearings: Map.put(v.hearings, station, fun.(h))}
+      v = %{v | hearings: Map.put(v.hearings, station, %{fun.(h) | told_ms: real_ms()})}
       v = if why == :view, do: check_conflict(v, id, station), else: v
       s = decide(s, id, v, why)
       # A new view of the chosen station, once the choice is settled.
@@ -362,7 +366,7 @@ defmodule Dolphin.Cluster.Mirror do
   # The choice made again for one vehicle, and what it changes published.
   defp decide(s, id, v, why) do
     hearings = if v.conflict, do: Map.delete(v.hearings, v.conflict.other), else: v.hearings
-    chosen = Choice.choose(hearings, v.chosen, stale_ms: stale_ms(s), pinned: v.conflict != nil)
+    chosen = Choice.choose(silent_as_stale(hearings, s), v.chosen, stale_ms: stale_ms(s), pinned: v.conflict != nil)
     lost = Choice.lost?(hearings)
     old = v
 
@@ -380,6 +384,19 @@ defmodule Dolphin.Cluster.Mirror do
   # real time: stations report ages that often, and a pause of this host or
   # of the network does not get shorter with the speed-up.
   defp stale_ms(s), do: max(s.stale_ms, round(@stale_floor_ms * Clock.speedup()))
+
+  # A station tells how long ago it heard each vehicle every
+  # Dolphin.Cluster.Station heard interval (250 ms of real time); one that
+  # has told nothing for @silent_station_real_ms (its node hangs, or it is
+  # starved) is not taken at the age it last told: its hearings count as
+  # stale, so that another station takes over and none is switched to.
+  defp silent_as_stale(hearings, s) do
+    now = real_ms()
+
+    Map.new(hearings, fn {station, h} ->
+      if now - h.told_ms > @silent_station_real_ms, do: {station, %{h | age_ms: stale_ms(s) + 1}}, else: {station, h}
+    end)
+  end
 
   # What the choice made for one vehicle changes, published; returns the
   # vehicle's record. A station switched to may be a little behind the one

@@ -77,7 +77,9 @@ defmodule Dolphin.ClusterTest do
     assert {:ok, %{connected?: true}} = Vehicles.view(1)
   end
 
-  test "a vehicle heard by two stations whose first path dies mid-mission fails over and its mission completes" do
+  # Two stations, each on its own radio path (a splitter's sides :a and :b)
+  # to simulated vehicle 21, both joined and hearing it.
+  defp both_hear_21 do
     gs1 = Cluster.start_station("gs1")
     gs2 = Cluster.start_station("gs2")
     splitter = start_supervised!({Dolphin.Test.RadioSplitter, gcs: [gs1.port, gs2.port]})
@@ -85,7 +87,12 @@ defmodule Dolphin.ClusterTest do
     :ok = Dolphin.Cluster.join(gs1.node)
     Cluster.await_vehicles([21])
     :ok = Dolphin.Cluster.join(gs2.node)
-    Wait.until(fn -> match?(%{21 => %{stations: [_, _]}}, Dolphin.Cluster.Mirror.routes()) end, 20_000, fn -> "vehicle 21 heard by both" end)
+    Wait.until(fn -> match?(%{21 => %{stations: [_, _]}}, Dolphin.Cluster.Mirror.routes()) end, 1_500, fn -> "vehicle 21 heard by both" end)
+    {gs1, gs2, splitter}
+  end
+
+  test "a vehicle heard by two stations whose first path dies mid-mission fails over and its mission completes" do
+    {gs1, gs2, splitter} = both_hear_21()
 
     Events.subscribe()
     Vehicles.subscribe(:all)
@@ -112,14 +119,7 @@ defmodule Dolphin.ClusterTest do
   # GUIDED; then the chosen one's path is cut and the route switches to the
   # one behind. Returns that station.
   defp switch_to_a_station_behind(lag_ms) do
-    gs1 = Cluster.start_station("gs1")
-    gs2 = Cluster.start_station("gs2")
-    splitter = start_supervised!({Dolphin.Test.RadioSplitter, gcs: [gs1.port, gs2.port]})
-    {:ok, [21]} = Dolphin.Sim.start(gcs: Dolphin.Test.RadioSplitter.port(splitter), sysids: [21], speedup: @speedup)
-    :ok = Dolphin.Cluster.join(gs1.node)
-    Cluster.await_vehicles([21])
-    :ok = Dolphin.Cluster.join(gs2.node)
-    Wait.until(fn -> match?(%{21 => %{stations: [_, _]}}, Dolphin.Cluster.Mirror.routes()) end, 1_500, fn -> "vehicle 21 heard by both" end)
+    {gs1, gs2, splitter} = both_hear_21()
     %{21 => %{chosen: first}} = Dolphin.Cluster.Mirror.routes()
     {side, other_side, other} = if first == gs1.node, do: {:a, :b, gs2}, else: {:b, :a, gs1}
     {:ok, %{mode: :stabilize, boot_ms: before_lag}} = Vehicles.view(21)
@@ -154,6 +154,26 @@ defmodule Dolphin.ClusterTest do
     other_node = other.node
     assert Enum.any?(events, &match?(%{event: :station_changed, vehicle: 21, to: ^other_node}, &1)), inspect(events)
     refute Enum.any?(events, &match?(%{event: :mode_changed, vehicle: 21}, &1)), inspect(events)
+  end
+
+  test "a station that tells nothing any more (its node hangs) gives its vehicles to another that hears them" do
+    {gs1, gs2, _splitter} = both_hear_21()
+    %{21 => %{chosen: first}} = Dolphin.Cluster.Mirror.routes()
+    {hung, other} = if first == gs1.node, do: {gs1, gs2}, else: {gs2, gs1}
+    Events.subscribe()
+
+    # Its node stays up and its vehicle process hears the vehicle; its
+    # station says nothing more to the controller.
+    :ok = Cluster.call(hung.peer, :sys, :suspend, [Dolphin.Cluster.Station])
+    other_node = other.node
+    Wait.until(fn -> match?(%{21 => %{chosen: ^other_node}}, Dolphin.Cluster.Mirror.routes()) end, 1_500, fn -> "vehicle 21 given to #{other_node}" end)
+    # Commands go the new way.
+    assert {:ok, :accepted} = Vehicles.set_mode(21, :guided)
+    hung_node = hung.node
+    events = Wait.received_events()
+    assert Enum.any?(events, &match?(%{event: :station_changed, vehicle: 21, from: ^hung_node, to: ^other_node}, &1)), inspect(events)
+    refute Enum.any?(events, &match?(%{event: :vehicle_lost, vehicle: 21}, &1))
+    :ok = Cluster.call(hung.peer, :sys, :resume, [Dolphin.Cluster.Station])
   end
 
   test "a netsplit: the station's vehicles are lost at once, and reconnected when the nodes meet again" do
