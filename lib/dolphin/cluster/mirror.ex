@@ -97,7 +97,8 @@ defmodule Dolphin.Cluster.Mirror do
        joined: MapSet.new(),
        # Joins waiting for a station of their node: node => [{from, timer}].
        waiting: %{},
-       # station pid => %{node, monitor}
+       # station pid => %{node, monitor, told_ms}: `told_ms`, when it last
+       # told anything (real ms)
        stations: %{},
        # id => %{hearings: %{station => hearing}, chosen, lost, conflict,
        # behind}: `behind`, the view published last, while the station
@@ -167,7 +168,9 @@ defmodule Dolphin.Cluster.Mirror do
   def handle_info({ref, :leave, :stations, _pids}, %{pg_ref: ref} = s), do: {:noreply, s}
 
   def handle_info({:dolphin_station, station, event}, s) do
-    if Map.has_key?(s.stations, station), do: {:noreply, station_event(s, station, event)}, else: {:noreply, s}
+    if Map.has_key?(s.stations, station),
+      do: {:noreply, station_event(put_in(s.stations[station].told_ms, real_ms()), station, event)},
+      else: {:noreply, s}
   end
 
   def handle_info({:DOWN, _ref, :process, station, reason}, s) do
@@ -233,7 +236,7 @@ defmodule Dolphin.Cluster.Mirror do
       case Station.subscribe(station, self()) do
         {:ok, %{speedup: k} = hello} ->
           if k == Clock.speedup() do
-            s = %{s | stations: Map.put(s.stations, station, %{node: node(station), monitor: Process.monitor(station)})}
+            s = %{s | stations: Map.put(s.stations, station, %{node: node(station), monitor: Process.monitor(station), told_ms: real_ms()})}
             Events.emit(:station_joined, %{station: node(station), heard: length(hello.vehicles)})
             s = Enum.reduce(hello.vehicles, s, fn {id, pid, view}, s -> hear(s, id, station, pid, view) end)
             answer_waiters(s, node(station))
@@ -306,14 +309,14 @@ defmodule Dolphin.Cluster.Mirror do
   # A vehicle a station tells of for the first time (or with a new process).
   defp hear(s, id, station, pid, view) do
     v = Map.get(s.vehicles, id, %{hearings: %{}, chosen: nil, lost: nil, conflict: nil, behind: nil})
-    hearing = %{pid: pid, view: view, age_ms: nil, link: view.link, told_ms: real_ms()}
+    hearing = %{pid: pid, view: view, age_ms: nil, link: view.link}
     v = %{v | hearings: Map.put(v.hearings, station, hearing)}
     decide(s, id, check_conflict(v, id, station), "heard by #{node(station)}")
   end
 
   defp update_hearing(s, id, station, fun, why) do
     with %{^id => v} <- s.vehicles, %{^station => h} <- v.hearings do
-      v = %{v | hearings: Map.put(v.hearings, station, %{fun.(h) | told_ms: real_ms()})}
+      v = %{v | hearings: Map.put(v.hearings, station, fun.(h))}
       v = if why == :view, do: check_conflict(v, id, station), else: v
       s = decide(s, id, v, why)
       # A new view of the chosen station, once the choice is settled.
@@ -394,7 +397,10 @@ defmodule Dolphin.Cluster.Mirror do
     now = real_ms()
 
     Map.new(hearings, fn {station, h} ->
-      if now - h.told_ms > @silent_station_real_ms, do: {station, %{h | age_ms: stale_ms(s) + 1}}, else: {station, h}
+      case s.stations do
+        %{^station => %{told_ms: told}} when now - told > @silent_station_real_ms -> {station, %{h | age_ms: stale_ms(s) + 1}}
+        _ -> {station, h}
+      end
     end)
   end
 
@@ -448,7 +454,7 @@ defmodule Dolphin.Cluster.Mirror do
       publish_view(id, h.pid, view_of(h, v.lost))
       %{v | behind: nil}
     else
-      if Routes.get(id) != h.pid, do: Routes.put(id, h.pid)
+      route(id, h.pid)
       Process.send_after(self(), {:catch_up, id}, @catch_up_real_ms)
       %{v | behind: %{view: published, since: real_ms()}}
     end
@@ -495,9 +501,11 @@ defmodule Dolphin.Cluster.Mirror do
   defp publish_view(_id, _pid, nil), do: :ok
 
   defp publish_view(id, pid, view) do
-    if Routes.get(id) != pid, do: Routes.put(id, pid)
+    route(id, pid)
     unless local?(id) or Views.get(id) == {:ok, view}, do: Views.put(view)
   end
+
+  defp route(id, pid), do: if(Routes.get(id) != pid, do: Routes.put(id, pid))
 
   defp local?(id), do: Dolphin.Vehicles.whereis_local(id) != nil
 end

@@ -212,22 +212,24 @@ defmodule Dolphin.Report.Events do
   @doc false
   # Where an event at `t_ms` of the events' clock is on the log's (seconds).
   @spec place(timeline(), number()) :: float()
-  def place({:piecewise, [{e0, t0} | _] = knots}, t_ms) do
+  def place({:piecewise, [{e0, _} | _] = knots}, t_ms) do
     e = t_ms / 1000
-    {el, tl} = List.last(knots)
-    # Beyond the knots, at their overall rate (1 for a single knot).
-    rate = if el > e0, do: (tl - t0) / (el - e0), else: 1.0
-
-    case Enum.find(Enum.zip(knots, tl_of(knots)), fn {{a, _}, {b, _}} -> e >= a and e <= b end) do
-      {{a, ta}, {b, tb}} -> ta + (e - a) * (tb - ta) / (b - a)
-      nil when e < e0 -> t0 + (e - e0) * rate
-      nil -> tl + (e - el) * rate
-    end
+    if e < e0, do: beyond(knots, hd(knots), e), else: along(knots, e, knots)
   end
 
   def place({scale, offset}, t_ms), do: scale * t_ms / 1000 + offset
 
-  defp tl_of([_ | rest]), do: rest
+  defp along([{a, ta}, {b, tb} | _], e, _knots) when e <= b, do: ta + (e - a) * (tb - ta) / (b - a)
+  defp along([_ | [_ | _] = rest], e, knots), do: along(rest, e, knots)
+  defp along([last], e, knots), do: beyond(knots, last, e)
+
+  # Before the first knot or after the last: from that knot at the knots'
+  # overall rate (1 for a single knot).
+  defp beyond([{e0, t0} | _] = knots, {ek, tk}, e) do
+    {el, tl} = List.last(knots)
+    rate = if el > e0, do: (tl - t0) / (el - e0), else: 1.0
+    tk + (e - ek) * rate
+  end
 
   defp take_every(list, 1), do: list
   defp take_every(list, n), do: Enum.take_every(list, n)
