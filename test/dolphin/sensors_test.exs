@@ -226,10 +226,14 @@ defmodule Dolphin.SensorsTest do
       Vehicles.subscribe(id)
       :ok = Vehicles.watch_sensors([smoke])
 
-      view = await_view(id, &(length(Map.get(&1.sensors, @smoke_source, %{history: []}).history) >= 6))
-      {times, values, _} = view.sensors[@smoke_source].history |> Enum.take(6) |> :lists.unzip3()
-      # Ten a second of vehicle time (the default is two), none noisy: the same value every time.
-      assert (hd(times) - List.last(times)) / 5 < 250, "readings at #{inspect(times)}"
+      view = await_view(id, &(length(Map.get(&1.sensors, @smoke_source, %{history: []}).history) >= 11))
+      {times, values, _} = view.sensors[@smoke_source].history |> Enum.take(11) |> :lists.unzip3()
+      # Ten a second of vehicle time (the default is two), none noisy: the
+      # same value every time. The median gap between readings, not their
+      # span: a simulator starved for a moment (a loaded machine) delivers
+      # a few late, then together.
+      gaps = times |> Enum.chunk_every(2, 1, :discard) |> Enum.map(fn [later, earlier] -> later - earlier end) |> Enum.sort()
+      assert Enum.at(gaps, 5) < 250, "readings at #{inspect(times)}"
       assert [_] = Enum.uniq(values)
     end
 

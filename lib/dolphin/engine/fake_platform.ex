@@ -77,6 +77,9 @@ defmodule Dolphin.Engine.FakePlatform do
     :exit, _ -> :ok
   end
 
+  @impl Dolphin.Engine.Platform
+  def stop_request(reason), do: {:stop, reason}
+
   @impl GenServer
   def init({t, vehicle, opts}) do
     # Linked to the engine's leaf: an exit from it means the leaf died without stopping us.

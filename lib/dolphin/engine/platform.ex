@@ -23,8 +23,8 @@ defmodule Dolphin.Engine.Platform do
      of `progress/2` before that, then exits (normally). A process that exits
      without reporting fails the task with its exit reason.
   4. To stop it (`until`, `during`, `one_of`, a failed sibling, the operator,
-     the vehicle lost), the engine calls `c:stop/2` from the leaf process and
-     waits for it to return, at most the run's stop timeout (15 s of clock
+     the vehicle lost), the engine calls `c:stop/2` (or sends
+     `c:stop_request/1`) from the leaf process and waits for it to return, at most the run's stop timeout (15 s of clock
      time by default; then the process is killed and the task fails). `stop`
      returns once the vehicle is safe — for a mission: holding position — and
      the process is gone or going. Reasons: `{:condition_met, task_id}`,
@@ -71,6 +71,18 @@ defmodule Dolphin.Engine.Platform do
   @callback stop(pid(), reason :: term()) :: :ok | {:error, term()}
 
   @doc """
+  The request the task's process answers to stop, when that process is a
+  `GenServer` or a `:gen_statem` that handles the call `stop/2` makes
+  (`{:stop, reason}`, say). The engine then sends it from the leaf as a
+  request (`:gen_server.send_request/2`) and waits for the reply, bounded
+  by the stop timeout, instead of calling `c:stop/2` in a helper process:
+  one process less for each stop, which a burst of conditions tripped at
+  once feels. The reply is what `c:stop/2` returns; a process gone before
+  it replied counts as stopped (it had finished or failed).
+  """
+  @callback stop_request(reason :: term()) :: term()
+
+  @doc """
   Whether a failure reason is the vehicle's doing (lost, a failsafe, a
   refused arm) rather than the task's: `reassign` hands only those over to
   another vehicle. Without it, only `{:vehicle_lost, id}` is.
@@ -97,7 +109,7 @@ defmodule Dolphin.Engine.Platform do
   """
   @callback abandoned(vehicle :: non_neg_integer(), opts :: keyword()) :: :ok
 
-  @optional_callbacks kind: 1, vehicle_fault?: 1, resume: 4, abandoned: 2
+  @optional_callbacks kind: 1, stop_request: 1, vehicle_fault?: 1, resume: 4, abandoned: 2
 
   @doc "Reports progress (a map, shown in `task_progress` events) to the engine."
   @spec progress(pid(), map()) :: :ok

@@ -160,7 +160,19 @@ defmodule Dolphin.Engine.Runner do
   # --- the node process ---
 
   @doc false
-  def init_node({task, parent, ctx, run, parent_id}) do
+  # A node ends by throwing :"$dolphin_node_end" (end_node/0) from wherever
+  # it finished, and returns from here: exit(:normal) would go through
+  # proc_lib's exit path, which builds a crash report's dummy arguments and
+  # formats its reason for every node, a cost a burst of ending nodes feels.
+  def init_node(arg) do
+    run_node(arg)
+  catch
+    :throw, :"$dolphin_node_end" -> :ok
+  end
+
+  defp end_node, do: throw(:"$dolphin_node_end")
+
+  defp run_node({task, parent, ctx, run, parent_id}) do
     Process.flag(:trap_exit, true)
     Context.put(ctx)
 
@@ -626,7 +638,7 @@ defmodule Dolphin.Engine.Runner do
 
     emit_finished(s, result, reason)
     if report?, do: send(s.parent, {:"$dolphin_result", self(), result})
-    exit(:normal)
+    end_node()
   end
 
   defp collected(s, %{pid: pid, task: task}) do
@@ -648,7 +660,7 @@ defmodule Dolphin.Engine.Runner do
       do: send(s.parent, {:"$dolphin_result", self(), result}),
       else: send(s.parent, {:"$dolphin_started", self(), {:finished, result}})
 
-    exit(:normal)
+    end_node()
   end
 
   defp wrap({:failed, %Failure{}} = failed, _s), do: failed
@@ -670,6 +682,44 @@ defmodule Dolphin.Engine.Runner do
   defp platform_stop(%{platform: nil} = s, _reason), do: {:ok, s}
 
   defp platform_stop(%{platform: pid, task: %PlatformTask{platform: platform}} = s, reason) do
+    outcome =
+      if function_exported?(platform, :stop_request, 1),
+        do: stop_by_request(pid, platform.stop_request(reason), s.ctx),
+        else: stop_in_helper(pid, platform, reason, s.ctx)
+
+    {outcome, %{s | platform: nil}}
+  end
+
+  # The platform's process answers a call to stop: the request is sent from
+  # here and its reply awaited, bounded. No process is spawned for it, which
+  # a burst of a thousand stops feels. A process gone before it answered had
+  # finished or failed already (what `stop/2` of both platforms says too).
+  defp stop_by_request(pid, request, ctx) do
+    req = :gen_server.send_request(pid, request)
+
+    case :gen_server.receive_response(req, ctx.clock.real_ms(ctx.stop_timeout_ms)) do
+      {:reply, :ok} ->
+        :ok
+
+      {:reply, {:error, why}} ->
+        {:error, {:stop_failed, why}}
+
+      {:reply, other} ->
+        {:error, {:stop_failed, other}}
+
+      {:error, {_exit, ^pid}} ->
+        :ok
+
+      # (The request is abandoned: no late reply or :DOWN of it comes.)
+      :timeout ->
+        Process.exit(pid, :kill)
+        {:error, {:stop_timeout, ctx.stop_timeout_ms}}
+    end
+  end
+
+  # Any other platform's stop/2 runs in a helper, so that its wait is bounded
+  # whatever the function does.
+  defp stop_in_helper(pid, platform, reason, ctx) do
     me = self()
 
     {helper, mon} =
@@ -696,14 +746,14 @@ defmodule Dolphin.Engine.Runner do
         {:"$dolphin_stopped", ^helper, other} -> {:error, {:stop_failed, other}}
         {:DOWN, ^mon, :process, ^helper, why} -> {:error, {:stop_failed, {:exit, why}}}
       after
-        s.ctx.clock.real_ms(s.ctx.stop_timeout_ms) ->
+        ctx.clock.real_ms(ctx.stop_timeout_ms) ->
           Process.exit(helper, :kill)
           Process.exit(pid, :kill)
-          {:error, {:stop_timeout, s.ctx.stop_timeout_ms}}
+          {:error, {:stop_timeout, ctx.stop_timeout_ms}}
       end
 
     Process.demonitor(mon, [:flush])
-    {outcome, %{s | platform: nil}}
+    outcome
   end
 
   defp emit(s, event, fields),

@@ -182,7 +182,12 @@ defmodule Dolphin.Mission.Executor do
   @doc false
   # Returns once the vehicle is safe: :ok, or {:error, why} when it could not be made to hold.
   @spec stop(pid(), term()) :: :ok | {:error, String.t()}
-  def stop(pid, reason), do: :gen_statem.call(pid, {:stop, reason}, :infinity)
+  def stop(pid, reason), do: :gen_statem.call(pid, stop_request(reason), :infinity)
+
+  @doc false
+  # The call stop/2 makes, for a caller that sends it as a request of its own (the engine's leaf).
+  @spec stop_request(term()) :: {:stop, term()}
+  def stop_request(reason), do: {:stop, reason}
 
   @impl true
   def callback_mode, do: [:handle_event_function, :state_enter]

@@ -172,4 +172,7 @@ defmodule Dolphin.Mission.Platform do
     # Already over (it finished or failed as it was being stopped).
     :exit, _ -> :ok
   end
+
+  @impl true
+  def stop_request(reason), do: Executor.stop_request(reason)
 end

@@ -272,6 +272,28 @@ defmodule Dolphin.Engine.CombinatorsTest do
       assert {:error, %Failure{name: "stuck", reason: {:stop_timeout, 50}}} = run(t, stop_timeout_ms: 50)
     end
 
+    test "a stop the platform refuses fails the task, whether it is sent as a request or called in a helper", ctx do
+      fake_vehicles(ctx, 1, pick: true)
+
+      for task <- [tp("refuses", duration: :infinity, stop_result: {:error, "no hold"}), by_callback(tp("refuses", duration: :infinity, stop_result: {:error, "no hold"}))] do
+        assert {:error, %Failure{name: "refuses", reason: {:stop_failed, "no hold"}} = f} = run(during(5, task))
+        assert Failure.message(f) =~ "could not be stopped: no hold"
+        assert_received_stop("refuses")
+      end
+    end
+
+    test "a platform without stop_request/1 is stopped through stop/2 in a helper: waited for, and bounded", ctx do
+      fake_vehicles(ctx, 1, pick: true)
+      assert {:ok, :done} = run(during(5, by_callback(tp("holds", duration: :infinity, stop_ms: 100))))
+      %{pid: pid} = assert_received_stop("holds")
+      refute Process.alive?(pid)
+
+      t = during(5, by_callback(tp("stuck", duration: :infinity, stop_ms: 10_000_000)))
+      assert {:error, %Failure{name: "stuck", reason: {:stop_timeout, 50}}} = run(t, stop_timeout_ms: 50)
+      %{pid: pid} = assert_received_stop("stuck")
+      refute Process.alive?(pid)
+    end
+
     test "a platform process that exits without reporting fails its task", ctx do
       fake_vehicles(ctx, 1, pick: true)
       {:ok, run} = start(tp("dies", duration: :infinity))
@@ -339,8 +361,31 @@ defmodule Dolphin.Engine.CombinatorsTest do
 
   defp wait_running(name), do: Dolphin.Test.Wait.until(fn -> Enum.any?(Dolphin.Engine.tasks(), &(&1.name == name)) end)
 
+  # The fake platform's task as a platform that has no stop_request/1.
+  defp by_callback(fake), do: Dolphin.Engine.platform_task(Dolphin.Engine.CombinatorsTest.CallbackStop, fake)
+
   defp assert_received_stop(name) do
     assert_receive {:fake_platform, :stopped, %{name: ^name} = info}, 5_000
     info
   end
+end
+
+defmodule Dolphin.Engine.CombinatorsTest.CallbackStop do
+  @moduledoc false
+  # The fake platform without stop_request/1: the engine stops its tasks by
+  # calling stop/2 in a helper process.
+  @behaviour Dolphin.Engine.Platform
+
+  alias Dolphin.Engine.FakePlatform
+
+  @impl true
+  defdelegate name(spec), to: FakePlatform
+  @impl true
+  defdelegate kind(spec), to: FakePlatform
+  @impl true
+  defdelegate requirements(spec), to: FakePlatform
+  @impl true
+  defdelegate start(spec, vehicle, opts), to: FakePlatform
+  @impl true
+  defdelegate stop(pid, reason), to: FakePlatform
 end
