@@ -98,7 +98,8 @@ defmodule Dolphin.Mission.Executor do
   # `grounded`: where the vehicle was first seen armed on the ground in
   # :flying, while it stays so; `disarmed_idle`: seen disarmed on the ground
   # in :flying before its flight began (a timer runs); `rearms`: how many
-  # times it was armed and started again; `still`: where and at which item it
+  # times it was armed and started again; `restarted`: started again at
+  # least once (GUIDED is then asked for whatever the view says); `still`: where and at which item it
   # was first seen standing still short of a waypoint in :flying, while it
   # stays so. `task` and `attempt`: the exchange of the current step, and the
   # how-manieth try of it. `unconfirmed`: uploads in a row that ended without
@@ -126,6 +127,7 @@ defmodule Dolphin.Mission.Executor do
     grounded: nil,
     disarmed_idle: false,
     rearms: 0,
+    restarted: false,
     still: nil,
     items: nil,
     ending: nil,
@@ -158,6 +160,7 @@ defmodule Dolphin.Mission.Executor do
           grounded: term(),
           disarmed_idle: boolean(),
           rearms: non_neg_integer(),
+          restarted: boolean(),
           still: term(),
           items: [struct()] | nil,
           ending: term(),
@@ -240,7 +243,12 @@ defmodule Dolphin.Mission.Executor do
     exchange(data, fn -> Dolphin.Vehicles.Fences.apply(data.vehicle, data.fence, home, data.airframe) end)
   end
 
-  def handle_event(:enter, _old, :guided, data), do: exchange(data, fn -> Manoeuvres.guided(data.vehicle, within: data.arm_timeout_ms) end)
+  # After a restart, GUIDED is asked for whatever the view says: the resume
+  # from a separation hold may have had AUTO accepted just before the
+  # autopilot disarmed the copter, and a view still in GUIDED left it to be
+  # armed in AUTO, refused for the whole arming bound ("AUTO mode not armable").
+  def handle_event(:enter, _old, :guided, data),
+    do: exchange(data, fn -> Manoeuvres.guided(data.vehicle, within: data.arm_timeout_ms, force: data.restarted) end)
   def handle_event(:enter, _old, :arm, data), do: exchange(data, fn -> Manoeuvres.arm_when_ready(data.vehicle, within: data.arm_timeout_ms) end)
 
   def handle_event(:enter, _old, :start, data),
@@ -686,7 +694,7 @@ defmodule Dolphin.Mission.Executor do
   defp restart(data, reason) do
     Events.emit(:mission_restarted, %{vehicle: data.vehicle, name: data.name, reason: reason})
     rearms = if reason == :disarmed_before_start, do: data.rearms + 1, else: data.rearms
-    data = %{data | separation: nil, held_on_ground: false, flight: Flight.new(data.ending), disarmed_idle: false, grounded: nil, still: nil, rearms: rearms}
+    data = %{data | separation: nil, held_on_ground: false, flight: Flight.new(data.ending), disarmed_idle: false, grounded: nil, still: nil, rearms: rearms, restarted: true}
     {:next_state, :guided, %{data | attempt: 1}, cancel_watches()}
   end
 

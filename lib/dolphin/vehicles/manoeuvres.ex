@@ -179,7 +179,9 @@ defmodule Dolphin.Vehicles.Manoeuvres do
   Switches to GUIDED, unless the vehicle is in GUIDED already (then nothing
   is sent); a refusal that passes once the autopilot has a position is
   asked again for `within:` ms of clock time (default 0: once). `report:`
-  as for `arm_when_ready/2`.
+  as for `arm_when_ready/2`. `force: true` sends it whatever the view says:
+  for a caller that has just had another mode accepted, which the view may
+  not show yet.
   """
   @spec guided(byte(), keyword()) :: result()
   def guided(vehicle, opts \\ []) do
@@ -187,7 +189,7 @@ defmodule Dolphin.Vehicles.Manoeuvres do
     deadline = Clock.now_ms() + within
 
     case Vehicles.view(vehicle) do
-      {:ok, %{mode: :guided}} -> :ok
+      {:ok, %{mode: :guided}} -> if opts[:force], do: guided_until(vehicle, deadline) |> reported(:guided, opts), else: :ok
       _ -> guided_until(vehicle, deadline) |> reported(:guided, opts)
     end
   end

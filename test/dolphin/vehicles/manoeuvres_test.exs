@@ -75,6 +75,17 @@ defmodule Dolphin.Vehicles.ManoeuvresTest do
       assert :ok = Manoeuvres.hold(1)
     end
 
+    test "GUIDED is not asked for again while the view says GUIDED, unless forced (the view may lag a mode just accepted)" do
+      me = self()
+      report = &send(me, {:report, &1})
+      Wait.until(fn -> Manoeuvres.guided(1) == :ok end)
+      Wait.until(fn -> match?({:ok, %{mode: :guided}}, Vehicles.view(1)) end)
+      assert :ok = Manoeuvres.guided(1, report: report)
+      refute_received {:report, _}
+      assert :ok = Manoeuvres.guided(1, report: report, force: true)
+      assert_received {:report, {:accepted, :guided}}
+    end
+
     @tag ekf_ready_ms: 3_600_000
     test "arming refused for longer than the bound: the error says for how long and what the autopilot said" do
       assert :ok = Manoeuvres.guided(1)
