@@ -7,7 +7,10 @@
 #              battery of one vehicle drops; time until its task's stop
 #              callback runs (the others keep running). Many samples.
 #   all N:     N untils all reading the same vehicle, whose battery drops:
-#              time until each of the N stop callbacks (a burst).
+#              time until each of the N stop callbacks (a burst); ten
+#              bursts, their stops together, and the CPU time of each.
+#              With one scheduler (ERL_FLAGS="+S 1:1") that CPU time is the
+#              work itself; with two it includes the schedulers' spinning.
 #
 # The vehicles are Dolphin.Fleet.FakeSource fakes: the change is published on
 # Dolphin.PubSub exactly as a real vehicle's telemetry is, so this measures
@@ -101,14 +104,25 @@ one_of = fn n, samples ->
   latencies
 end
 
-# All N: every until reads the same vehicle.
+# All N: every until reads the same vehicle. Also returns the CPU time the
+# VM used from the change to the last stop (all its threads: with more than
+# one scheduler, their spinning before they sleep is in it too).
 all_n = fn n ->
   run = Bench.start(n, ids, fn _i, _v -> shared end)
+  {cpu0, _} = :erlang.statistics(:runtime)
   t0 = System.monotonic_time()
   FakeSource.set(source, shared, battery: 0.2)
   latencies = for _ <- 1..n, do: receive(do: ({:fake_platform, :stopped, %{at: t1}} -> Bench.us(t1 - t0)))
+  {cpu1, _} = :erlang.statistics(:runtime)
   Bench.finish(run, source, [shared])
-  latencies
+  {latencies, cpu1 - cpu0}
+end
+
+# Bursts of N, one after another: every stop of all of them, and the CPU
+# milliseconds of each burst.
+bursts = fn n, times ->
+  runs = for _ <- 1..times, do: all_n.(n)
+  {Enum.flat_map(runs, &elem(&1, 0)), Enum.map(runs, &elem(&1, 1))}
 end
 
 IO.puts("reaction: state change -> stop callback (#{System.schedulers_online()} schedulers, OTP #{System.otp_release()}, Elixir #{System.version()})")
@@ -117,9 +131,14 @@ IO.puts(String.pad_trailing("", 34) <> String.pad_leading("samples", 8) <> Strin
 # Warm-up (code loading, first allocations).
 one_of.(10, 10)
 all_n.(10)
+median = fn list -> Enum.at(Enum.sort(list), div(length(list), 2)) end
 
 Bench.row("1 condition", Bench.stats(Enum.flat_map(1..300, fn _ -> one_of.(1, 1) end)))
 Bench.row("one of 100 concurrent conditions", Bench.stats(one_of.(100, 100)))
 Bench.row("one of 1000 concurrent conditions", Bench.stats(Enum.flat_map(1..2, fn _ -> one_of.(1000, 300) end)))
-Bench.row("all 100 at once (one vehicle)", Bench.stats(all_n.(100)))
-Bench.row("all 1000 at once (one vehicle)", Bench.stats(all_n.(1000)))
+{stops, cpu} = bursts.(100, 10)
+Bench.row("all 100 at once (one vehicle)", Bench.stats(stops))
+IO.puts("  (10 bursts; CPU per burst, median: #{median.(cpu)} ms)")
+{stops, cpu} = bursts.(1000, 10)
+Bench.row("all 1000 at once (one vehicle)", Bench.stats(stops))
+IO.puts("  (10 bursts; CPU per burst, median: #{median.(cpu)} ms)")
