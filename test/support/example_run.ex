@@ -127,9 +127,13 @@ defmodule Dolphin.Test.ExampleRun do
     end
   end
 
+  # What a task stopped by the run's --for says (Dolphin.Engine.Failure).
+  @deadline Dolphin.Engine.Failure.format_reason(:deadline)
+
   # For each mission name, in the order they finished: how each ended and the
   # items it reached. A run ended by --for stops what flies at that moment:
-  # those last tasks are not part of the history.
+  # those last tasks are not part of the history (known by their reason: a
+  # stop can end well before the script does, a hold over a lossy link).
   def history(all, bounded?) do
     reached =
       for %{"event" => "task_progress", "task_id" => id, "progress" => %{"reached" => r}} <- all, r != nil, reduce: %{} do
@@ -140,7 +144,7 @@ defmodule Dolphin.Test.ExampleRun do
 
     all
     |> Enum.filter(&(&1["event"] == "task_finished" and &1["kind"] == "mission"))
-    |> Enum.reject(&(bounded? and &1["result"] == "stopped" and &1["t_ms"] >= ending - 2_000))
+    |> Enum.reject(&(bounded? and &1["result"] == "stopped" and (&1["reason"] == @deadline or &1["t_ms"] >= ending - 2_000)))
     # (why: a failure's reason, for the messages; never compared.)
     |> Enum.group_by(& &1["name"], &%{result: &1["result"], reached: Map.get(reached, &1["task_id"], []), why: &1["reason"]})
   end

@@ -55,13 +55,13 @@ defmodule Dolphin.CLI.SignalsTest do
 
     Signals.catch_signals(self())
     send(above, :go)
-    assert_receive :caught
+    assert_receive :caught, 5_000
     kill_self("TERM")
     assert_receive {:above, {:dolphin_signal, :sigterm}}, 10_000
     refute_received {:dolphin_signal, _}
 
     send(above, :release)
-    assert_receive :released
+    assert_receive :released, 5_000
     kill_self("TERM")
     assert_receive {:dolphin_signal, :sigterm}, 10_000
 

@@ -403,7 +403,9 @@ defmodule Dolphin.Mission.PlatformTest do
       :ok = Sim.set_faults(1, latency: 0)
     end)
 
-    assert_receive :watching
+    # (Subscribed: spawned on a busy host, that can take longer than
+    # assert_receive's default 100 ms.)
+    assert_receive :watching, 5_000
     assert {:ok, :done} = Engine.run(Engine.on(out_and_back(home), [1]))
     {:ok, info} = Sim.info(1)
     assert Dolphin.Geo.distance(Dolphin.Geo.location(info.position.lat, info.position.lon), home) < 3
