@@ -698,14 +698,8 @@ defmodule Dolphin.Engine.Runner do
     req = :gen_server.send_request(pid, request)
 
     case :gen_server.receive_response(req, ctx.clock.real_ms(ctx.stop_timeout_ms)) do
-      {:reply, :ok} ->
-        :ok
-
-      {:reply, {:error, why}} ->
-        {:error, {:stop_failed, why}}
-
-      {:reply, other} ->
-        {:error, {:stop_failed, other}}
+      {:reply, result} ->
+        stop_outcome(result)
 
       {:error, {_exit, ^pid}} ->
         :ok
@@ -741,9 +735,7 @@ defmodule Dolphin.Engine.Runner do
 
     outcome =
       receive do
-        {:"$dolphin_stopped", ^helper, :ok} -> :ok
-        {:"$dolphin_stopped", ^helper, {:error, why}} -> {:error, {:stop_failed, why}}
-        {:"$dolphin_stopped", ^helper, other} -> {:error, {:stop_failed, other}}
+        {:"$dolphin_stopped", ^helper, result} -> stop_outcome(result)
         {:DOWN, ^mon, :process, ^helper, why} -> {:error, {:stop_failed, {:exit, why}}}
       after
         ctx.clock.real_ms(ctx.stop_timeout_ms) ->
@@ -755,6 +747,11 @@ defmodule Dolphin.Engine.Runner do
     Process.demonitor(mon, [:flush])
     outcome
   end
+
+  # What a platform's stop returned (stop/2, or the reply to stop_request/1).
+  defp stop_outcome(:ok), do: :ok
+  defp stop_outcome({:error, why}), do: {:error, {:stop_failed, why}}
+  defp stop_outcome(other), do: {:error, {:stop_failed, other}}
 
   defp emit(s, event, fields),
     do: Dolphin.Events.emit(event, Map.merge(%{run: s.run.id, task_id: s.id}, fields), s.ctx.clock.now_ms())

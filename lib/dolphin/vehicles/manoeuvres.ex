@@ -188,8 +188,10 @@ defmodule Dolphin.Vehicles.Manoeuvres do
     within = Keyword.get(opts, :within, 0)
     deadline = Clock.now_ms() + within
 
+    force = Keyword.get(opts, :force, false)
+
     case Vehicles.view(vehicle) do
-      {:ok, %{mode: :guided}} -> if opts[:force], do: guided_until(vehicle, deadline) |> reported(:guided, opts), else: :ok
+      {:ok, %{mode: :guided}} when not force -> :ok
       _ -> guided_until(vehicle, deadline) |> reported(:guided, opts)
     end
   end
