@@ -18,7 +18,8 @@ defmodule Dolphin.Sim.MissionServer do
   # - While an upload is under way, downloads are DENIED, and a clear is
   #   accepted and ends the upload; when none is, an item draws
   #   MAV_MISSION_ERROR (so a ground station that resends the last item after a
-  #   lost ACCEPTED learns the upload is over).
+  #   lost ACCEPTED learns the upload is over). A ground station's MISSION_ACK
+  #   changes nothing: ArduCopter goes on with an upload after one.
   # - A cleared mission counts 0 items, not even home, until home is written
   #   again (at arming: `home_written/1`, or by an upload).
   # - A request for an item past the end draws MISSION_COUNT (ArduPilot
@@ -180,8 +181,10 @@ defmodule Dolphin.Sim.MissionServer do
 
   def handle(%__MODULE__{} = s, %M.MissionClearAll{mission_type: type}, peer, _ctx), do: {s, [{:send, ack(peer, type, @unsupported)}]}
 
-  # A ground station's acknowledgement of a download, or a cancellation of our upload.
-  def handle(%__MODULE__{upload: %{peer: peer}} = s, %M.MissionAck{}, peer, _ctx), do: {%{s | upload: nil}, []}
+  # Anything else, MISSION_ACK included: ArduCopter SITL 4.7 goes on with an
+  # upload under way after a ground station's MISSION_ACK, even
+  # OPERATION_CANCELLED. Ending it there let the late ACK of the download
+  # before an upload cancel that upload.
   def handle(%__MODULE__{} = s, _other, _peer, _ctx), do: {s, []}
 
   @doc "Home is written to the mission's item 0 (ArduCopter does so when it arms)."

@@ -52,6 +52,25 @@ defmodule Dolphin.Sim.MissionServerTest do
     {_s, [{:send, %M.MissionAck{type: 15}} | _]} = MissionServer.timeout(s, 8_001)
   end
 
+  # Seen on ArduCopter SITL 4.7: after MISSION_COUNT, a MISSION_ACK from the
+  # ground station (ACCEPTED, as a download ends, or OPERATION_CANCELLED)
+  # draws nothing, and the upload goes on to its ACCEPTED.
+  test "a ground station's MISSION_ACK during an upload changes nothing" do
+    {s, _} = MissionServer.handle(MissionServer.new(), count(3), @gcs, ctx())
+
+    s =
+      for type <- [0, 15], reduce: s do
+        s ->
+          {s, []} = MissionServer.handle(s, %M.MissionAck{type: type, mission_type: 0}, @gcs, ctx())
+          s
+      end
+
+    {s, [{:send, %M.MissionRequest{seq: 1}}]} = MissionServer.handle(s, item(0), @gcs, ctx())
+    {s, [{:send, %M.MissionRequest{seq: 2}}]} = MissionServer.handle(s, item(1), @gcs, ctx())
+    {s, [{:send, %M.MissionAck{type: 0}} | _]} = MissionServer.handle(s, item(2), @gcs, ctx())
+    assert Enum.map(MissionServer.items(s), & &1.seq) == [1, 2]
+  end
+
   test "while an upload is under way downloads are DENIED; after it, an item is an ERROR" do
     {s, _} = MissionServer.handle(MissionServer.new(), count(2), @gcs, ctx())
     {s, [{:send, %M.MissionAck{type: 14}}]} = MissionServer.handle(s, %M.MissionRequestList{mission_type: 0}, @gcs, ctx())
