@@ -156,13 +156,14 @@ defmodule Dolphin.SITL.DifferentialTest do
   end
 
   # The mission protocol's answers to what a lossy link makes of an upload
-  # (an item out of order, a download or a clear during the upload, the last
+  # (a MISSION_ACK of ours arriving late, an item out of order, a download or a clear during the upload, the last
   # item again after the end, a request past the end), step by step: the
   # simulator must answer as ArduCopter does, which the uploader relies on.
   @probe [
     count: [%M.MissionCount{count: 4}],
     item_0: [{:item, 0}],
-    item_out_of_order: [{:item, 2}],
+    ack_while_receiving: [%M.MissionAck{type: 0}, %M.MissionAck{type: 15}, {:item, 1}],
+    item_out_of_order: [{:item, 3}],
     download_while_receiving: [%M.MissionRequestList{}],
     clear_while_receiving: [%M.MissionClearAll{}],
     the_rest: [{:item, 1}, {:item, 2}, {:item, 3}],
@@ -222,6 +223,8 @@ defmodule Dolphin.SITL.DifferentialTest do
     sitl = probe(:sitl)
     sim = probe(:sim)
     # What ArduCopter answered (docs/ardupilot.md), so that a change of either shows.
+    # Our ACKs (a download's ACCEPTED, a cancel) leave the upload going.
+    assert sitl[:ack_while_receiving] == [request: 2]
     assert sitl[:item_out_of_order] == [ack: 13]
     assert sitl[:download_while_receiving] == [ack: 14]
     assert sitl[:last_item_again] == [ack: 1]
