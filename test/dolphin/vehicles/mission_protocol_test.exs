@@ -278,18 +278,25 @@ defmodule Dolphin.Vehicles.MissionProtocolTest do
   # time: more than a loaded machine's pauses.
   @tag timeout: 600_000
   test "up to 30 % loss, 10 % duplicates, 10 % reordering: every upload and its download are exact", %{port: port} do
+    exact_transfers(port, T.integer(1, 150), T.integer(0, 30), 15)
+  end
+
+  # Lists of every type, `sizes` long, uploaded and read back one after the
+  # other at 10x over a link that loses (`losses` %), duplicates and
+  # reorders (up to 10 % each): every one exact, on the vehicle too.
+  defp exact_transfers(port, sizes, losses, numtests) do
     Clock.set_speedup(10)
     {sysid, vehicle} = vehicle(port, [])
 
     check(
-      forall({T.elements([:mission, :fence, :rally]), T.integer(1, 150), T.integer(0, 30), T.integer(0, 10), T.integer(0, 10)}, fn {type, n, loss, dup, reorder} ->
+      forall({T.elements([:mission, :fence, :rally]), sizes, losses, T.integer(0, 10), T.integer(0, 10)}, fn {type, n, loss, dup, reorder} ->
         ScriptedVehicle.set_faults(vehicle, loss: loss / 100, duplicate: dup / 100, reorder: reorder / 100)
         failure = upload_and_verify(sysid, vehicle, items(n, type), mission_type: type)
         ScriptedVehicle.set_faults(vehicle, [])
         assert failure == nil, "#{type}: #{n} items, #{loss} % loss, #{dup} % duplicates, #{reorder} % reordering: #{failure}"
         true
       end),
-      numtests: 15
+      numtests: numtests
     )
   end
 
@@ -300,19 +307,7 @@ defmodule Dolphin.Vehicles.MissionProtocolTest do
   # does not; about one case in fifty failed.
   @tag timeout: 600_000
   test "short lists back to back over a faulty link: no transfer spoils the next", %{port: port} do
-    Clock.set_speedup(10)
-    {sysid, vehicle} = vehicle(port, [])
-
-    check(
-      forall({T.elements([:mission, :fence, :rally]), T.integer(1, 6), T.integer(0, 10), T.integer(0, 10)}, fn {type, n, dup, reorder} ->
-        ScriptedVehicle.set_faults(vehicle, loss: 0.05, duplicate: dup / 100, reorder: reorder / 100)
-        failure = upload_and_verify(sysid, vehicle, items(n, type), mission_type: type)
-        ScriptedVehicle.set_faults(vehicle, [])
-        assert failure == nil, "#{type}: #{n} items, #{dup} % duplicates, #{reorder} % reordering: #{failure}"
-        true
-      end),
-      numtests: 150
-    )
+    exact_transfers(port, T.integer(1, 6), T.integer(0, 10), 150)
   end
 
   # Beyond what it promises (40 % loss, a vehicle whose patience is 80 ms of
