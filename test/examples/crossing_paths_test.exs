@@ -15,7 +15,8 @@ defmodule Dolphin.Examples.CrossingPathsTest do
 
   @example Path.expand("../../examples/crossing_paths.exs", __DIR__)
 
-  # The simulator at 5x, not the 10x of the example's header. The monitor
+  # The simulator at 5x, not the 10x of the example's header, for the
+  # example and the head-on fixture alike (the same monitor). The monitor
   # moves each view on for its age from when it came, so a host that holds
   # views back misplaces vehicles by their speed times that delay, in clock
   # time. Beside the SITL lanes, at 10x, a fresh clone saw the held copter

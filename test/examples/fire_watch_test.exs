@@ -75,7 +75,9 @@ defmodule Dolphin.Examples.FireWatchTest do
       receive do
         {:dolphin, :vehicles, {:vehicle_discovered, id}} -> assert {:ok, 6600.0} = Dolphin.Vehicles.set_param(id, "BATT_CAPACITY", 6600)
       after
-        60_000 -> flunk("the two copters were not discovered within a minute")
+        60_000 ->
+          ended = with {:ok, run} <- Task.yield(task, 0), do: "; the run ended:\n#{run.output}", else: (_ -> "")
+          flunk("the two copters were not discovered within a minute#{ended}")
       end
     end
 

@@ -1,7 +1,7 @@
 defmodule Dolphin.Sim.MissionServer do
   @moduledoc false
   # The vehicle side of the MAVLink mission protocol, as ArduCopter plays it
-  # (see ARDUPILOT.md), as a pure state machine: `handle/4` takes one message
+  # (see docs/ardupilot.md), as a pure state machine: `handle/4` takes one message
   # from a ground station and returns the replies; `timeout/2` runs the upload's
   # re-request timer, due at `deadline/1`.
   #

@@ -156,8 +156,9 @@ defmodule Dolphin.SITL.DifferentialTest do
   end
 
   # The mission protocol's answers to what a lossy link makes of an upload
-  # (a MISSION_ACK of ours arriving late, an item out of order, a download or a clear during the upload, the last
-  # item again after the end, a request past the end), step by step: the
+  # (a MISSION_ACK of ours arriving late, an item out of order, a download
+  # or a clear during the upload, the last item again after the end, a
+  # request past the end), step by step: the
   # simulator must answer as ArduCopter does, which the uploader relies on.
   @probe [
     count: [%M.MissionCount{count: 4}],
