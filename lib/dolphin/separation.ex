@@ -33,6 +33,12 @@ defmodule Dolphin.Separation do
   Two vehicles already closer than the separation but moving apart are
   left to go on: holding either would only keep them close.
 
+  Each vehicle is judged where it is by now: its reported position moved on
+  by its velocity for the time since the autopilot *made* the report, by
+  the autopilot's own clock (`Dolphin.Separation.ReportClock`), not since
+  the report reached the monitor, so a host or a link that holds reports
+  back does not put a vehicle where it was.
+
   A held vehicle goes on (`{:separation, :clear, ...}`: its mission resumes
   where it was; a copter held before it left the ground, which ArduCopter
   disarms there, is armed and its mission started again) once, for a second of clock time, no vehicle in the air is
@@ -55,7 +61,7 @@ defmodule Dolphin.Separation do
   use GenServer
 
   alias Dolphin.{Clock, Events, Geo}
-  alias Dolphin.Separation.Prediction
+  alias Dolphin.Separation.{Prediction, ReportClock}
   alias Dolphin.Vehicles.{Manoeuvres, Views}
 
   @default_limits %{horizontal: 20.0, vertical: 10.0}
@@ -108,8 +114,9 @@ defmodule Dolphin.Separation do
   defmodule Flying do
     @moduledoc false
     # One registered vehicle: who flies its mission, since when, its limits,
-    # its latest view (and the clock time it came), and its hold, if held.
-    defstruct [:id, :pid, :ref, :started_at, :rank, :limits, :view, :seen_at, held: nil]
+    # its latest view (and the clock time its position was reported,
+    # `Dolphin.Separation.ReportClock`), and its hold, if held.
+    defstruct [:id, :pid, :ref, :started_at, :rank, :limits, :view, :reported_at, held: nil]
   end
 
   @impl true
@@ -120,7 +127,8 @@ defmodule Dolphin.Separation do
     # A vehicle forgotten or lost leaves the station's vehicles read last (heard/1) at once.
     Dolphin.Vehicles.subscribe(:all)
     # `holding`: the ids of the held vehicles (looked at on every view and tick).
-    {:ok, %{flying: %{}, holding: MapSet.new(), ticking: false, heard: nil}}
+    # `clocks`: each vehicle's `ReportClock`, by id.
+    {:ok, %{flying: %{}, holding: MapSet.new(), ticking: false, heard: nil, clocks: %{}}}
   end
 
   @impl true
@@ -128,7 +136,8 @@ defmodule Dolphin.Separation do
     s = forget(s, id)
     Dolphin.Vehicles.subscribe(id)
     view = with {:ok, v} <- Views.get(id), do: v, else: (_ -> nil)
-    flying = %Flying{id: id, pid: pid, ref: Process.monitor(pid), started_at: started_at, rank: rank, limits: limits, view: view, seen_at: Clock.now_ms()}
+    reported_at = ReportClock.reported_at(s.clocks[id], view && view.boot_ms, Clock.now_ms())
+    flying = %Flying{id: id, pid: pid, ref: Process.monitor(pid), started_at: started_at, rank: rank, limits: limits, view: view, reported_at: reported_at}
     # The station's vehicles are read anew for a new mission (what the table
     # holds now, not what it held up to a tick ago).
     {:reply, :ok, put_in(%{s | heard: nil}.flying[id], flying)}
@@ -168,15 +177,21 @@ defmodule Dolphin.Separation do
   # One of them applied; `seen`: the registered vehicles a view came for.
   defp update({:dolphin, {:vehicle, id}, {:view, view}}, {s, seen}) do
     case s.flying do
-      %{^id => f} -> {put_in(s.flying[id], %{f | view: view, seen_at: Clock.now_ms()}), MapSet.put(seen, id)}
-      _ -> {s, seen}
+      %{^id => f} ->
+        now = Clock.now_ms()
+        clock = ReportClock.observe(s.clocks[id], view.boot_ms, now)
+        f = %{f | view: view, reported_at: ReportClock.reported_at(clock, view.boot_ms, now)}
+        {%{s | flying: Map.put(s.flying, id, f), clocks: Map.put(s.clocks, id, clock)}, MapSet.put(seen, id)}
+
+      _ ->
+        {s, seen}
     end
   end
 
   # A vehicle forgotten is nowhere: its last view is no longer a place to keep
   # clear of, even while its mission's process has not yet gone.
   defp update({:dolphin, :vehicles, {:vehicle_forgotten, id}}, {s, seen}) do
-    s = %{s | heard: nil}
+    s = %{s | heard: nil, clocks: Map.delete(s.clocks, id)}
     {if(Map.has_key?(s.flying, id), do: put_in(s.flying[id].view, nil), else: s), seen}
   end
 
@@ -211,8 +226,8 @@ defmodule Dolphin.Separation do
     if airborne?(f.view) do
       {others, s} = others(s, f)
       plane = Geo.tangent_plane(f.view.position)
-      mine = motion(plane, f.view, now - f.seen_at)
-      Enum.reduce(others, s, fn other, s -> judge_pair(s, id, mine, motion(plane, other.view, now - other.seen_at), other, now) end)
+      mine = motion(plane, f.view, now - f.reported_at)
+      Enum.reduce(others, s, fn other, s -> judge_pair(s, id, mine, motion(plane, other.view, now - other.reported_at), other, now) end)
     else
       s
     end
@@ -325,11 +340,11 @@ defmodule Dolphin.Separation do
     plane = Geo.tangent_plane(f.view.position)
     # From where it is across, at the height it was held at (one that moved
     # aside goes back to it as it goes on).
-    {{n, e, _}, _} = motion(plane, f.view, now - f.seen_at)
+    {{n, e, _}, _} = motion(plane, f.view, now - f.reported_at)
     going_on = {{n, e, f.held.height}, f.held.velocity}
 
     Enum.all?(others, fn other ->
-      theirs = motion(plane, other.view, now - other.seen_at)
+      theirs = motion(plane, other.view, now - other.reported_at)
       limits = limits(f, other) |> Map.new(fn {k, m} -> {k, m * @clear_margin} end)
       Prediction.apart?(going_on, theirs, limits) and Prediction.conflict(going_on, theirs, limits, @horizon_s) == :clear
     end)
@@ -397,15 +412,18 @@ defmodule Dolphin.Separation do
     now = Clock.now_ms()
     views = Views.all()
     placed = Enum.filter(views, &(&1.position != nil))
-    airborne = for view <- placed, airborne?(view), into: %{}, do: {view.id, %{id: view.id, view: view, seen_at: now}}
+    # (Read up to a tick after they came: the least difference learnt is a
+    # little high, which errs towards a report made later, as before.)
+    clocks = Enum.reduce(placed, s.clocks, fn view, clocks -> Map.put(clocks, view.id, ReportClock.observe(clocks[view.id], view.boot_ms, now)) end)
+    airborne = for view <- placed, airborne?(view), into: %{}, do: {view.id, %{id: view.id, view: view, reported_at: ReportClock.reported_at(clocks[view.id], view.boot_ms, now)}}
     cells = Enum.group_by(placed, &cell(&1.position), & &1.id)
     fastest = Enum.reduce(placed, 0.0, &max(Dolphin.Vehicles.View.speed(&1), &2))
     widest = Enum.reduce(Map.values(s.flying), @default_limits.horizontal, &max(&1.limits.horizontal, &2))
     # How far a registered vehicle is moved on from where its last view (the
     # cells') put it, at most: its speed for the age of that view.
-    drift = Enum.reduce(Map.values(s.flying), 0.0, fn o, most -> if o.view, do: max(most, Dolphin.Vehicles.View.speed(o.view) * max(now - o.seen_at, 0) / 1000), else: most end)
+    drift = Enum.reduce(Map.values(s.flying), 0.0, fn o, most -> if o.view, do: max(most, Dolphin.Vehicles.View.speed(o.view) * max(now - o.reported_at, 0) / 1000), else: most end)
     heard = %{at: now, airborne: airborne, cells: cells, fastest: fastest, widest: widest, drift: drift}
-    {heard, %{s | heard: heard}}
+    {heard, %{s | heard: heard, clocks: clocks}}
   end
 
   defp cell(%{lat: lat, lon: lon}), do: {floor(lat * @metres_a_degree / @cell_m), floor(lon * @metres_a_degree / @cell_m)}
@@ -416,7 +434,7 @@ defmodule Dolphin.Separation do
     own = max(Dolphin.Vehicles.View.speed(f.view), if(f.held, do: speed(f.held.velocity), else: 0.0))
     # Its own view moved on for its age, the others' (heard.drift), and the
     # tick's worth of moving since the cells were made (twice: both may move).
-    moved = Dolphin.Vehicles.View.speed(f.view) * max(Clock.now_ms() - f.seen_at, 0) / 1000 + heard.drift + 2 * @tick_ms / 1000 * heard.fastest
+    moved = Dolphin.Vehicles.View.speed(f.view) * max(Clock.now_ms() - f.reported_at, 0) / 1000 + heard.drift + 2 * @tick_ms / 1000 * heard.fastest
     reach = max(f.limits.horizontal, heard.widest) * @clear_margin + @horizon_s * (own + heard.fastest) + moved
     cos = :math.cos(abs(lat) * :math.pi() / 180)
 

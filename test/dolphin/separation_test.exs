@@ -25,7 +25,8 @@ defmodule Dolphin.SeparationTest do
     %{ids: ids}
   end
 
-  # A copter `north`, `east` metres from the base, 30 m up, flying at `velocity` {n, e, up} m/s.
+  # A copter `north`, `east` metres from the base, 30 m up, flying at `velocity` {n, e, up} m/s
+  # (`boot_ms:` the autopilot's clock when it reported so; none by default).
   defp flying(id, north, east, velocity, opts \\ []) do
     up = Keyword.get(opts, :up, 30)
 
@@ -39,7 +40,8 @@ defmodule Dolphin.SeparationTest do
       mode: :auto,
       position: Geo.offset(Keyword.get(opts, :base, @base), north, east, up),
       relative_altitude: up * 1.0,
-      velocity: velocity
+      velocity: velocity,
+      boot_ms: Keyword.get(opts, :boot_ms)
     })
   end
 
@@ -203,6 +205,22 @@ defmodule Dolphin.SeparationTest do
     executor(a, 2_000)
     flying(a, 0, 0, {0.0, 15.0, 0.0})
     assert_receive {:separation, :hold, %{vehicle: ^a, other: ^b}}, 2_000
+  end
+
+  test "a report that reaches the monitor late is judged by the autopilot's clock: where the vehicle is by now, not where the report put it", %{ids: {a, b, _c} = ids} do
+    # a, started later, hovers at the base; the autopilots' clocks are ours.
+    executor(b, 1_000)
+    executor(a, 2_000)
+    flying(a, 0, 0, {0.0, 0.0, 0.0})
+    # b comes west at 15 m/s, 400 m off, its report on time: 280 m off in 8 s.
+    flying(b, 0, 400, {0.0, -15.0, 0.0}, boot_ms: Dolphin.Clock.now_ms())
+    no_event(:separation_hold, ids)
+    # A report made 5 s before it came puts b 180 m off: 60 m off in 8 s, clear.
+    # b has flown 75 m since: 105 m off, past a within 8 s. (Taken as made
+    # when it came, this report held nothing.)
+    flying(b, 0, 180, {0.0, -15.0, 0.0}, boot_ms: Dolphin.Clock.now_ms() - 5_000)
+    assert_receive {:separation, :hold, %{vehicle: ^a, other: ^b, distance: distance}}, 2_000
+    assert distance < 140, "b judged #{distance} m off"
   end
 
   test "two tasks started together: the one the engine made later holds, whichever registered first", %{ids: {a, b, _c}} do

@@ -1,0 +1,57 @@
+defmodule Dolphin.Separation.ReportClockTest do
+  # When a position report was made, from the autopilot's clock and when
+  # reports came: late ones, an autopilot clock that runs slow, a reboot.
+  use ExUnit.Case, async: true
+
+  alias Dolphin.Separation.ReportClock
+
+  doctest ReportClock
+
+  # Reports every 200 ms of the autopilot's clock from `boot_ms`, made at
+  # `made` (our clock) and each coming `delay.(i)` ms later; the clock after them.
+  defp reports(clock, boot_ms, made, n, pace \\ 1.0, delay \\ fn _ -> 0 end) do
+    Enum.reduce(0..(n - 1), clock, fn i, clock -> ReportClock.observe(clock, boot_ms + round(200 * i * pace), made + 200 * i + delay.(i)) end)
+  end
+
+  test "a report held up is taken as made when the autopilot made it; one on time, when it came" do
+    clock = reports(nil, 5_000, 100_000, 10)
+    # The 11th, made at 102,000, came 1.5 s late.
+    late = ReportClock.observe(clock, 7_000, 103_500)
+    assert ReportClock.reported_at(late, 7_000, 103_500) == 102_000
+    on_time = ReportClock.observe(clock, 7_000, 102_000)
+    assert ReportClock.reported_at(on_time, 7_000, 102_000) == 102_000
+  end
+
+  test "the least delay is the base: reports that all come late by varying amounts are placed by the earliest" do
+    clock = reports(nil, 0, 50_000, 10, 1.0, fn i -> 300 + rem(i * 37, 120) end)
+    # The quickest of them came 300 ms after it was made: a report that comes 900 ms late is 600 ms older than it looks.
+    clock = ReportClock.observe(clock, 2_000, 52_900)
+    assert ReportClock.reported_at(clock, 2_000, 52_900) == 52_300
+  end
+
+  test "never later than it came, and a view with no autopilot clock is taken as made when it came" do
+    clock = reports(nil, 0, 10_000, 5)
+    # (A report whose clock runs ahead of ours: made, by our clock, when it came.)
+    assert ReportClock.reported_at(clock, 5_000, 12_000) == 12_000
+    assert ReportClock.observe(clock, nil, 12_000) == clock
+    assert ReportClock.reported_at(clock, nil, 12_000) == 12_000
+    assert ReportClock.reported_at(nil, 800, 12_000) == 12_000
+  end
+
+  test "an autopilot clock that runs at half our pace: reports on time are placed within 2 s of when they came, however long it runs" do
+    # 10 minutes of reports at half pace, on time: its clock falls 5 min behind ours.
+    clock = reports(nil, 0, 0, 3_000, 0.5)
+    boot = round(200 * 3_000 * 0.5)
+    assert ReportClock.reported_at(clock, boot, 600_000) >= 600_000 - 2_000
+  end
+
+  test "a clock that goes back 10 s or more is an autopilot rebooted: its reports are placed afresh; a little back, one overtaken" do
+    clock = reports(nil, 600_000, 1_000_000, 10)
+    # Rebooted at 1,003,000: its clock starts at 0 and the first report comes 400 ms late; the next on time.
+    rebooted = clock |> ReportClock.observe(0, 1_003_400) |> ReportClock.observe(200, 1_003_200 + 200)
+    assert ReportClock.reported_at(rebooted, 200, 1_003_400) == 1_003_400
+    # Made at 1,001,000 and overtaken, it comes at 1,003,000; the next, made at 1,002,000, comes late too.
+    overtaken = clock |> ReportClock.observe(601_000, 1_003_000) |> ReportClock.observe(602_000, 1_003_500)
+    assert ReportClock.reported_at(overtaken, 602_000, 1_003_500) == 1_002_000
+  end
+end
