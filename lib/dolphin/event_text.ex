@@ -113,7 +113,7 @@ defmodule Dolphin.EventText do
     do: "vehicle #{e.vehicle} was claimed on both sides of a netsplit: #{e.kept}'s claim kept, #{e.dropped}'s dropped"
 
   def event_text(%{event: :vehicle_conflict} = e),
-    do: "vehicle #{e.vehicle}: #{Enum.join(e.stations, " and ")} hear two different vehicles (#{e.reason}); following #{hd(e.stations)} only"
+    do: "vehicle #{e.vehicle}: #{Enum.join(e.stations, " and ")} hear two different vehicles (#{e.reason}); the one #{List.last(e.stations)} hears is vehicle #{e.other} here"
 
   def event_text(%{event: :path_changed} = e),
     do: "vehicle #{e.vehicle}: now through #{e.to} (#{path_reason(e.reason, e.from)})"

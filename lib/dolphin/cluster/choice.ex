@@ -18,9 +18,6 @@ defmodule Dolphin.Cluster.Choice do
       make the route flap;
     * a chosen station that is no longer fresh gives way to the best fresh
       one: fresh first, then the lower link loss, then the shorter round trip;
-    * while a conflict stands (`conflict/3`: two stations hear one system id
-      with different vehicles behind them), the first station is kept,
-      whatever the other says;
     * with no fresh hearing the choice stays where it was: the vehicle is lost
       only when no station has it connected any more (`lost?/1`).
 
@@ -58,9 +55,9 @@ defmodule Dolphin.Cluster.Choice do
 
   @doc """
   The station to use among `hearings` (station => hearing), given the one
-  chosen so far (`nil` for none) and options `:stale_ms` and `:pinned` (a
-  conflict stands: keep `current` whatever happens, if it still hears the
-  vehicle at all).
+  chosen so far (`nil` for none) and option `:stale_ms`. (Stations whose
+  views of one id are two vehicles, `conflict/2`, are not hearings of one
+  vehicle: the mirror names them apart.)
   """
   @spec choose(%{term() => hearing()}, term() | nil, keyword()) :: term() | nil
   def choose(hearings, current, opts \\ []) do
@@ -68,7 +65,6 @@ defmodule Dolphin.Cluster.Choice do
     current_h = Map.get(hearings, current)
 
     cond do
-      opts[:pinned] && current_h -> current
       current_h && fresh?(current_h, opts) -> keep_or_switch(current, current_h, fresh)
       fresh != [] -> fresh |> Enum.min_by(fn {station, h} -> {score(h), station} end) |> elem(0)
       current_h -> current

@@ -32,10 +32,17 @@ defmodule Dolphin.Cluster.Mirror do
       vehicle no station hears any more is lost (at once when its last
       station's node goes down, else when the station's own vehicle times
       out), and reconnected when a station hears it again;
-    * refuses to merge two vehicles: two stations whose views of one system
-      id disagree (`Dolphin.Cluster.Choice.conflict/2`) raise a
-      `vehicle_conflict` event, and the first station stays the only route
-      while the conflict stands.
+    * never merges two vehicles: when two stations' views of one id
+      disagree (`Dolphin.Cluster.Choice.conflict/2`: two autopilots, two
+      classes, two places), the vehicle stays the first station's and the
+      other station's is another vehicle here, named by its id there and
+      that station's node, `"ID@NODE"` (`30` of `gs2@host` is `"30@gs2"`;
+      see `Dolphin.Vehicles.Id`): a `vehicle_conflict` event says so, the
+      new name is discovered as any vehicle is, and from then on
+      everything that station tells of that id is of the new name (a third
+      station that hears the same autopilot fails over with it). Most
+      vehicles leave the factory as system id 1: two sites of one cluster
+      may each fly theirs.
 
   It follows only the stations of the nodes joined with
   `Dolphin.Cluster.join/2` (`follow/2`); a node that only serves as a
@@ -100,11 +107,13 @@ defmodule Dolphin.Cluster.Mirror do
        # station pid => %{node, monitor, told_ms}: `told_ms`, when it last
        # told anything (real ms)
        stations: %{},
-       # id => %{hearings: %{station => hearing}, chosen, lost, conflict,
-       # behind}: `behind`, the view published last, while the station
-       # chosen since has only older ones, and since when (real ms; see
-       # announce/4)
+       # id => %{hearings: %{station => hearing}, chosen, lost, behind}:
+       # `behind`, the view published last, while the station chosen since
+       # has only older ones, and since when (real ms; see announce/4)
        vehicles: %{},
+       # {station node, its id} => the id here, for the vehicles that are
+       # not the same here (see split/5)
+       names: %{},
        stale_ms: Keyword.get(opts, :stale_ms, Choice.stale_ms())
      }}
   end
@@ -238,7 +247,7 @@ defmodule Dolphin.Cluster.Mirror do
           if k == Clock.speedup() do
             s = %{s | stations: Map.put(s.stations, station, %{node: node(station), monitor: Process.monitor(station), told_ms: real_ms()})}
             Events.emit(:station_joined, %{station: node(station), heard: length(hello.vehicles)})
-            s = Enum.reduce(hello.vehicles, s, fn {id, pid, view}, s -> hear(s, id, station, pid, view) end)
+            s = Enum.reduce(hello.vehicles, s, fn {id, pid, view}, s -> told_of(s, station, id, pid, view) end)
             answer_waiters(s, node(station))
           else
             Logger.warning("not following the ground station on #{node(station)}: it runs at speed-up #{k}, this node at #{Clock.speedup()}")
@@ -275,8 +284,7 @@ defmodule Dolphin.Cluster.Mirror do
 
     Enum.reduce(s.vehicles, s, fn {id, v}, s ->
       if Map.has_key?(v.hearings, station) do
-        v = %{v | hearings: Map.delete(v.hearings, station), conflict: drop_conflict(v.conflict, station)}
-        decide(s, id, v, "#{st.node} left: #{why}")
+        decide(s, id, %{v | hearings: Map.delete(v.hearings, station)}, "#{st.node} left: #{why}")
       else
         s
       end
@@ -286,41 +294,86 @@ defmodule Dolphin.Cluster.Mirror do
   defp down_words(:noconnection), do: "its node is unreachable"
   defp down_words(reason), do: "its process ended (#{inspect(reason)})"
 
-  defp station_event(s, station, {:discovered, id, pid, view}), do: hear(s, id, station, pid, view)
-  defp station_event(s, station, {:view, id, view}), do: update_hearing(s, id, station, &%{&1 | view: view}, :view)
+  defp station_event(s, station, {:discovered, id, pid, view}), do: told_of(s, station, id, pid, view)
+  defp station_event(s, station, {:view, id, view}), do: update_hearing(s, here(s, station, id), station, &%{&1 | view: view}, :view)
 
-  defp station_event(s, station, {event, id}) when event in [:lost, :reconnected], do: update_hearing(s, id, station, & &1, event)
+  defp station_event(s, station, {event, id}) when event in [:lost, :reconnected], do: update_hearing(s, here(s, station, id), station, & &1, event)
 
   defp station_event(s, station, {:forgotten, id}) do
+    id = here(s, station, id)
+
     case s.vehicles do
-      %{^id => v} -> decide(s, id, %{v | hearings: Map.delete(v.hearings, station), conflict: drop_conflict(v.conflict, station)}, "forgotten by #{node(station)}")
+      %{^id => v} -> decide(s, id, %{v | hearings: Map.delete(v.hearings, station)}, "forgotten by #{node(station)}")
       _ -> s
     end
   end
 
   defp station_event(s, station, {:heard, heard}) do
     Enum.reduce(heard, s, fn {id, {age, link}}, s ->
-      update_hearing(s, id, station, &%{&1 | age_ms: age, link: link}, :heard)
+      update_hearing(s, here(s, station, id), station, &%{&1 | age_ms: age, link: link}, :heard)
     end)
   end
 
   defp station_event(s, _station, _other), do: s
 
+  # The id here of what a station calls `id`, once it has told of it: the
+  # name it was given apart, if the station is heard under it.
+  defp here(s, station, id) do
+    key = {node(station), id}
+
+    with %{^key => other} <- s.names,
+         %{^other => %{hearings: %{^station => _}}} <- s.vehicles do
+      other
+    else
+      _ -> id
+    end
+  end
+
+  # A vehicle a station tells of (its discovery there, or the station
+  # followed anew): under the name it was given apart while it is the
+  # vehicle of that name (the same autopilot, or close to where it was
+  # last), else under its own id again (another vehicle behind it now:
+  # the station restarted with another fleet, say), where it may be named
+  # apart anew.
+  defp told_of(s, station, id, pid, view) do
+    key = {node(station), id}
+
+    case s.names do
+      %{^key => other} ->
+        if here(s, station, id) == other or conflict_with(s, other, view) == :same,
+          do: hear(s, other, station, pid, view),
+          else: hear(%{s | names: Map.delete(s.names, key)}, id, station, pid, view)
+
+      _ ->
+        hear(s, id, station, pid, view)
+    end
+  end
+
   # A vehicle a station tells of for the first time (or with a new process).
   defp hear(s, id, station, pid, view) do
-    v = Map.get(s.vehicles, id, %{hearings: %{}, chosen: nil, lost: nil, conflict: nil, behind: nil})
+    v = Map.get(s.vehicles, id, %{hearings: %{}, chosen: nil, lost: nil, behind: nil})
     hearing = %{pid: pid, view: view, age_ms: nil, link: view.link}
     v = %{v | hearings: Map.put(v.hearings, station, hearing)}
-    decide(s, id, check_conflict(v, id, station), "heard by #{node(station)}")
+
+    case conflict(v, station) do
+      :same -> decide(s, id, v, "heard by #{node(station)}")
+      {:conflict, why} -> split(s, id, v, station, why)
+    end
   end
 
   defp update_hearing(s, id, station, fun, why) do
     with %{^id => v} <- s.vehicles, %{^station => h} <- v.hearings do
       v = %{v | hearings: Map.put(v.hearings, station, fun.(h))}
-      v = if why == :view, do: check_conflict(v, id, station), else: v
-      s = decide(s, id, v, why)
-      # A new view of the chosen station, once the choice is settled.
-      if why == :view and s.vehicles[id].chosen == station and not s.vehicles[id].lost, do: publish_chosen(s, id), else: s
+
+      case if(why == :view, do: conflict(v, station), else: :same) do
+        :same ->
+          s = decide(s, id, v, why)
+          # A new view of the chosen station, once the choice is settled.
+          if why == :view and s.vehicles[id].chosen == station and not s.vehicles[id].lost, do: publish_chosen(s, id), else: s
+
+        {:conflict, reason} ->
+          split(s, id, v, station, reason)
+      end
     else
       _ -> s
     end
@@ -346,30 +399,58 @@ defmodule Dolphin.Cluster.Mirror do
     end
   end
 
-  # Two stations whose views of one id are two different vehicles: the first
-  # one (the chosen) keeps the vehicle, the other is never chosen while it
-  # stands.
-  defp check_conflict(%{conflict: nil, chosen: chosen} = v, id, station) when chosen != nil and chosen != station do
-    with %{^chosen => first} <- v.hearings,
-         {:conflict, why} <- Choice.conflict(first.view, v.hearings[station].view) do
-      Events.emit(:vehicle_conflict, %{vehicle: id, stations: [node(chosen), node(station)], reason: why})
-      Logger.warning("vehicle #{id}: #{node(chosen)} and #{node(station)} hear two different vehicles (#{why}); following #{node(chosen)} only")
-      %{v | conflict: %{first: chosen, other: station}}
-    else
-      _ -> v
+  # Whether the view of `station` is of another vehicle than the chosen
+  # station's.
+  defp conflict(%{chosen: chosen} = v, station) when chosen != nil and chosen != station do
+    case v.hearings do
+      %{^chosen => first} -> Choice.conflict(first.view, v.hearings[station].view)
+      _ -> :same
     end
   end
 
-  defp check_conflict(v, _id, _station), do: v
+  defp conflict(_v, _station), do: :same
 
-  defp drop_conflict(%{first: s}, s), do: nil
-  defp drop_conflict(%{other: s}, s), do: nil
-  defp drop_conflict(conflict, _station), do: conflict
+  # Two stations whose views of one id are two vehicles: the chosen
+  # station's keeps the id, the other's is another vehicle from now on —
+  # one another station already told of under this station's id, if the
+  # two are the same (a third station failing over with the second), else
+  # a new one, "ID@NODE".
+  defp split(s, id, v, station, why) do
+    h = v.hearings[station]
+    s = decide(s, id, %{v | hearings: Map.delete(v.hearings, station)}, "#{node(station)} hears another vehicle")
+    theirs = h.view.id
+    other = Enum.find(same_named(s, theirs), &(conflict_with(s, &1, h.view) == :same)) || new_name(s, theirs, station)
+    Events.emit(:vehicle_conflict, %{vehicle: id, stations: [node(v.chosen), node(station)], reason: why, other: other})
+    Logger.warning("vehicle #{id}: #{node(v.chosen)} and #{node(station)} hear two different vehicles (#{why}); the one #{node(station)} hears is #{other} here")
+    s = %{s | names: Map.put(s.names, {node(station), theirs}, other)}
+    hear(s, other, station, h.pid, h.view)
+  end
+
+  # The vehicles here named apart for what some station calls `theirs`.
+  defp same_named(s, theirs), do: for({{_node, ^theirs}, other} <- s.names, Map.has_key?(s.vehicles, other), uniq: true, do: other)
+
+  # Whether `view` is of another vehicle than `id` here: than its chosen
+  # station's view, or the view last put for it when no station hears it.
+  defp conflict_with(s, id, view) do
+    case s.vehicles do
+      %{^id => %{chosen: chosen, hearings: %{} = hearings}} when is_map_key(hearings, chosen) -> Choice.conflict(hearings[chosen].view, view)
+      %{^id => _} -> if last = last_view(id), do: Choice.conflict(last, view), else: {:conflict, "nothing is known of it"}
+      _ -> {:conflict, "nothing is known of it"}
+    end
+  end
+
+  # "ID@NODE" by the node's name (`gs2` of `gs2@host`), else by the whole
+  # node, else numbered: a name no vehicle here has.
+  defp new_name(s, theirs, station) do
+    short = station |> node() |> Atom.to_string() |> String.split("@") |> hd()
+    named = ["#{theirs}@#{short}", "#{theirs}@#{node(station)}"] |> Stream.concat(Stream.map(Stream.iterate(2, &(&1 + 1)), &"#{theirs}@#{short}-#{&1}"))
+    Enum.find(named, &(not Map.has_key?(s.vehicles, &1) and Dolphin.Vehicles.whereis_local(&1) == nil and &1 not in Map.values(s.names)))
+  end
 
   # The choice made again for one vehicle, and what it changes published.
   defp decide(s, id, v, why) do
-    hearings = if v.conflict, do: Map.delete(v.hearings, v.conflict.other), else: v.hearings
-    chosen = Choice.choose(silent_as_stale(hearings, s), v.chosen, stale_ms: stale_ms(s), pinned: v.conflict != nil)
+    hearings = v.hearings
+    chosen = Choice.choose(silent_as_stale(hearings, s), v.chosen, stale_ms: stale_ms(s))
     lost = Choice.lost?(hearings)
     old = v
 
@@ -502,6 +583,8 @@ defmodule Dolphin.Cluster.Mirror do
 
   defp publish_view(id, pid, view) do
     route(id, pid)
+    # (Under the name it has here: a vehicle named apart is another id there.)
+    view = %{view | id: id}
     unless local?(id) or Views.get(id) == {:ok, view}, do: Views.put(view)
   end
 

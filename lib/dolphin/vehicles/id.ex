@@ -18,6 +18,12 @@ defmodule Dolphin.Vehicles.Id do
   (`Dolphin.Vehicles.resolve/1`), so a script that must not depend on which
   vehicle was heard first names both by network.
 
+  On a cluster's controller (`Dolphin.Cluster`), a vehicle is named as its
+  ground station names it; when a second station hears another autopilot
+  behind an id the first station's vehicle has, the second's is
+  `"ID@NODE"`, its id there and that station's node name (`"30@gs2"`,
+  `"1@sim2@gs2"`; `Dolphin.Cluster.Mirror`).
+
   A vehicle id is therefore a system id (an integer) or a qualified name (a
   string): `Dolphin.Vehicles`, the fleet's `pick(id: ...)`, events, the
   console and the reports carry it as it is.

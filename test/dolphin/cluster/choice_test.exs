@@ -29,10 +29,6 @@ defmodule Dolphin.Cluster.ChoiceTest do
     assert Choice.choose(%{a: h(10, 0.0, 10)}, nil) == :a
   end
 
-  test "a pinned choice (a conflict stands) is kept while its station hears the vehicle" do
-    assert Choice.choose(%{a: h(10_000, 0.0, 10), b: h(10, 0.0, 10)}, :a, pinned: true) == :a
-  end
-
   test "lost: no station has the vehicle connected" do
     assert Choice.lost?(%{})
     assert Choice.lost?(%{a: h(10, 0.0, 10, false)})

@@ -119,27 +119,4 @@ defmodule Dolphin.Cluster.CLITest do
     assert lines =~ ~s("event":"armed","vehicle":7)
     assert lines =~ ~s("event":"script_finished","reason":null,"result":"done")
   end
-
-  test "two stations claiming one system id with different vehicles: a conflict is reported, the vehicle is not merged" do
-    here = %{lat: 40.444233, lon: -7.375234, alt: 820.0}
-    there = %{lat: 40.454233, lon: -7.375234, alt: 820.0}
-    gs1 = Cluster.start_station("gs1", sysids: [30], sim: [home: here])
-    gs2 = Cluster.start_station("gs2", sysids: [30], sim: [home: there])
-    Dolphin.Events.subscribe()
-    :ok = Dolphin.Cluster.join(gs1.node)
-    Cluster.await_vehicles([30])
-    :ok = Dolphin.Cluster.join(gs2.node)
-
-    assert_receive {:dolphin, :events, %{event: :vehicle_conflict, vehicle: 30, stations: [first, second], reason: why}}, 20_000
-    assert {first, second} == {gs1.node, gs2.node}
-    # By their autopilots' unique ids once both are known, else by where they are.
-    assert why =~ ~r/two autopilots \(unique ids \d+ and \d+\)|m apart/
-    assert node(Dolphin.Vehicles.whereis(30)) == gs1.node
-
-    # It stays with the first station, however long the other hears it.
-    Process.sleep(Dolphin.Clock.to_real_ms(5_000))
-    refute_received {:dolphin, :events, %{event: :station_changed, vehicle: 30}}
-    {:ok, view} = Dolphin.Vehicles.view(30)
-    assert Dolphin.Geo.distance(view.position, Dolphin.Geo.location(here.lat, here.lon)) < 50
-  end
 end

@@ -33,6 +33,68 @@ defmodule Dolphin.ClusterTest do
     for id <- [1, 11], do: assert(Enum.any?(events, &match?(%{event: :armed, vehicle: ^id}, &1)))
   end
 
+  test "two stations whose vehicles share a system id: two vehicles here, the second named ID@NODE, and both fly" do
+    here = %{lat: 40.444233, lon: -7.375234, alt: 820.0}
+    there = %{lat: 40.454233, lon: -7.375234, alt: 820.0}
+    gs1 = Cluster.start_station("gs1", sysids: [30], sim: [home: here])
+    gs2 = Cluster.start_station("gs2", sysids: [30], sim: [home: there])
+    Events.subscribe()
+    :ok = Dolphin.Cluster.join(gs1.node)
+    Cluster.await_vehicles([30])
+    :ok = Dolphin.Cluster.join(gs2.node)
+
+    other = "30@" <> hd(String.split(Atom.to_string(gs2.node), "@"))
+    assert_receive {:dolphin, :events, %{event: :vehicle_conflict, vehicle: 30, stations: [first, second], reason: why, other: ^other}}, 20_000
+    assert {first, second} == {gs1.node, gs2.node}
+    # By their autopilots' unique ids once both are known, else by where they are.
+    assert why =~ ~r/two autopilots \(unique ids \d+ and \d+\)|m apart/
+    Cluster.await_vehicles([30, other])
+    assert node(Vehicles.whereis(30)) == gs1.node
+    assert node(Vehicles.whereis(other)) == gs2.node
+    {:ok, mine} = Vehicles.view(30)
+    {:ok, theirs} = Vehicles.view(other)
+    assert Dolphin.Geo.distance(mine.position, Dolphin.Geo.location(here.lat, here.lon)) < 50
+    assert Dolphin.Geo.distance(theirs.position, Dolphin.Geo.location(there.lat, there.lon)) < 50
+    assert theirs.id == other and mine.uid != theirs.uid
+
+    # Each flies its own hop; neither is ever routed through the other's station.
+    assert {:ok, %{result: :done}} = Dolphin.Script.run(Hops.script([{30, 15, 30}, {other, 15, 30}]))
+    events = Wait.received_events()
+    for id <- [30, other], event <- [:armed, :disarmed], do: assert(Enum.any?(events, &match?(%{event: ^event, vehicle: ^id}, &1)), "#{inspect(id)} #{event}")
+    refute Enum.any?(events, &match?(%{event: :station_changed}, &1))
+    assert node(Vehicles.whereis(30)) == gs1.node and node(Vehicles.whereis(other)) == gs2.node
+  end
+
+  test "a vehicle named apart is one vehicle for every station that hears it: a third station is a second route to it, and it fails over" do
+    gs1 = Cluster.start_station("gs1", sysids: [21], sim: [home: %{lat: 40.444233, lon: -7.375234, alt: 820.0}])
+    gs2 = Cluster.start_station("gs2")
+    gs3 = Cluster.start_station("gs3")
+    # Another vehicle 21, 1.1 km north, heard by gs2 and gs3.
+    splitter = start_supervised!({Dolphin.Test.RadioSplitter, gcs: [gs2.port, gs3.port]})
+    {:ok, [21]} = Dolphin.Sim.start(gcs: Dolphin.Test.RadioSplitter.port(splitter), sysids: [21], speedup: @speedup, home: %{lat: 40.454233, lon: -7.375234, alt: 820.0})
+    Events.subscribe()
+    :ok = Dolphin.Cluster.join(gs1.node)
+    Cluster.await_vehicles([21])
+    :ok = Dolphin.Cluster.join(gs2.node)
+    assert_receive {:dolphin, :events, %{event: :vehicle_conflict, vehicle: 21, other: other}}, 20_000
+    assert other == "21@" <> hd(String.split(Atom.to_string(gs2.node), "@"))
+    :ok = Dolphin.Cluster.join(gs3.node)
+    Wait.until(fn -> match?(%{^other => %{stations: [_, _]}}, Dolphin.Cluster.Mirror.routes()) end, 10_000, fn -> "#{other} heard by gs2 and gs3: #{inspect(Dolphin.Cluster.Mirror.routes())}" end)
+    assert %{21 => %{stations: [only]}} = Dolphin.Cluster.Mirror.routes()
+    assert only == gs1.node
+    # gs3's vehicle 21 is gs2's: no third name.
+    assert for({:dolphin, :events, %{event: :vehicle_conflict, other: o}} <- Process.info(self(), :messages) |> elem(1), do: o) -- [other] == []
+
+    # Its chosen path is cut: the other station takes it over, and vehicle 21 stays gs1's.
+    %{^other => %{chosen: first}} = Dolphin.Cluster.Mirror.routes()
+    {side, to} = if first == gs2.node, do: {:a, gs3.node}, else: {:b, gs2.node}
+    :ok = Dolphin.Test.RadioSplitter.cut(splitter, side)
+    assert_receive {:dolphin, :events, %{event: :station_changed, vehicle: ^other, from: ^first, to: ^to}}, 20_000
+    # (The route moves just after the event.)
+    Wait.until(fn -> node(Vehicles.whereis(other)) == to end, 5_000, fn -> "#{other} routed to #{to}" end)
+    assert node(Vehicles.whereis(21)) == gs1.node
+  end
+
   defp in_air?(id), do: match?({:ok, %{relative_altitude: h}} when is_number(h) and h > 5, Vehicles.view(id))
 
   test "a station killed mid-mission: its vehicle is lost on the controller, its task fails and a watch handles it" do
