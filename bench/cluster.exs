@@ -1,9 +1,14 @@
 # Several ground stations (Dolphin.Cluster) on this machine: a controller (this
-# VM), two station nodes and one node of simulated vehicles, all on 127.0.0.1.
-# The simulated vehicles (BENCH_VEHICLES, default 250: half send to each
-# station) stand in for the radios of two sites; at speed-up BENCH_SPEEDUP
-# (default 2) each sends its GLOBAL_POSITION_INT (asked for at 5 Hz of
-# vehicle time) 10 times a second, plus its other telemetry.
+# VM), BENCH_STATIONS station nodes (default 2) and, for each, a node of
+# simulated vehicles, all on 127.0.0.1. The simulated vehicles
+# (BENCH_VEHICLES, default 250, shared out evenly, at most 254 a station)
+# stand in for the radios of the sites; every station's vehicles are system
+# ids 1, 2, ..., as two sites that numbered their fleets alike: on the
+# controller one station's keep their ids and the others' are named apart,
+# "ID@NODE" (Dolphin.Cluster.Mirror), so that the controller holds more than
+# 255. At speed-up BENCH_SPEEDUP (default 2) each sends its
+# GLOBAL_POSITION_INT (asked for at 5 Hz of vehicle time) 10 times a second,
+# plus its other telemetry.
 #
 # Printed, over BENCH_SECONDS (default 20) of steady state:
 #   * the CPU of each node, as a share of one core (a station: its links,
@@ -11,17 +16,19 @@
 #   * the telemetry latency from station to controller: from the moment a
 #     view is published on the station to the moment the controller's mirror
 #     publishes it locally (a probe subscribed on each node; the OS clock,
-#     one on this machine, stamps both);
+#     one on this machine, stamps both; a view is matched by its content,
+#     its id aside);
 #   * the reaction of a condition on the controller to a change on a station:
 #     `until(task, battery(v) < 0.3)` running on the controller for BENCH_REACTIONS
 #     (default 40) remote vehicles; each vehicle's battery is dropped in turn,
 #     and the time from the station's publication of the low view to the
 #     task's stop callback on the controller is measured (target p99 < 20 ms).
 #
-# Why not 300 vehicles: a MAVLink system id is a byte (1..255), and one fleet
-# cannot tell apart two vehicles of one id (two stations hearing one id with
-# different vehicles are a conflict, Dolphin.Cluster.Choice.conflict/2). 250 is
-# the most that fits in even halves.
+# Until a station's vehicle i is known to be another autopilot than the
+# first station's i (its unique id comes a moment after its first
+# HEARTBEAT), the controller takes the two for one vehicle heard twice; the
+# bench waits until it holds all of them apart, and reads from the mirror's
+# routes which station each of its ids is.
 #
 #   MIX_ENV=prod mix run bench/cluster.exs
 
@@ -54,7 +61,8 @@ defmodule ClusterBench do
       receive do
         {:dolphin, {:vehicle, id}, {:view, v}} ->
           t = :os.system_time(:microsecond)
-          :ets.insert_new(:bench_probe, {{id, :erlang.phash2(v)}, t})
+          # (By content: the controller names some vehicles apart.)
+          :ets.insert_new(:bench_probe, {{id, :erlang.phash2(%{v | id: nil})}, t})
           if is_number(v.battery) and v.battery < 0.3, do: :ets.insert_new(:bench_probe, {{:low, id}, t})
           loop()
 
@@ -71,29 +79,35 @@ defmodule ClusterBench do
 
   def main do
     n = env("BENCH_VEHICLES", 250)
+    m = env("BENCH_STATIONS", 2)
     k = env("BENCH_SPEEDUP", 2)
     seconds = env("BENCH_SECONDS", 20)
     reactions = env("BENCH_REACTIONS", 40)
-    if n > 254, do: Mix.raise("BENCH_VEHICLES: at most 254 (a MAVLink system id is 1..255)")
-    half = div(n, 2)
+    per = div(n, m)
+    if per > 254 or per * m != n, do: Mix.raise("BENCH_VEHICLES: a multiple of BENCH_STATIONS, at most 254 a station (a MAVLink system id is 1..255)")
 
     start_controller()
     Dolphin.Clock.set_speedup(k)
-    IO.puts("cluster: #{n} simulated vehicles over 2 stations at speed-up #{k}; #{System.schedulers_online()} schedulers here, OTP #{System.otp_release()}, Elixir #{System.version()}")
+    IO.puts("cluster: #{n} simulated vehicles over #{m} stations (ids 1..#{per} on each) at speed-up #{k}; #{System.schedulers_online()} schedulers here, OTP #{System.otp_release()}, Elixir #{System.version()}")
 
-    gs1 = station("bench_gs1", k)
-    gs2 = station("bench_gs2", k)
-    sims = node_up("bench_sims", k)
-    ids1 = Enum.to_list(1..half)
-    ids2 = Enum.to_list((half + 1)..n)
-    {:ok, ^ids1} = call(sims, Dolphin.Sim, :start, [[gcs: gs1.port, first_sysid: 1, count: half, speedup: k]])
-    {:ok, ^ids2} = call(sims, Dolphin.Sim, :start, [[gcs: gs2.port, first_sysid: half + 1, count: n - half, speedup: k]])
+    stations =
+      for i <- 1..m do
+        gs = station("bench_gs#{i}", k)
+        sims = node_up("bench_sims#{i}", k)
+        ids = Enum.to_list(1..per)
+        {:ok, ^ids} = call(sims, Dolphin.Sim, :start, [[gcs: gs.port, first_sysid: 1, count: per, speedup: k]])
+        %{gs: gs, sims: sims, ids: ids}
+      end
 
-    :ok = Dolphin.Cluster.join(gs1.node, speedup: k)
-    :ok = Dolphin.Cluster.join(gs2.node, speedup: k)
+    for st <- stations, do: :ok = Dolphin.Cluster.join(st.gs.node, speedup: k)
     t0 = System.monotonic_time(:millisecond)
-    await(fn -> Enum.count(ids1 ++ ids2, &connected?/1) == n end, 180_000, "all #{n} vehicles on the controller")
+    await(fn -> Enum.count(Dolphin.Vehicles.list(), &connected?/1) == n end, 300_000, "all #{n} vehicles on the controller, held apart")
     IO.puts("all #{n} vehicles known to the controller after #{System.monotonic_time(:millisecond) - t0} ms")
+
+    # Each id here: its station and its id there.
+    by_node = Map.new(stations, &{&1.gs.node, &1})
+    where = Map.new(Dolphin.Cluster.Mirror.routes(), fn {id, %{chosen: node}} -> {id, {by_node[node], local_id(id)}} end)
+    ids = Dolphin.Vehicles.Id.sort(Map.keys(where))
 
     # A vehicle on the ground publishes a view only when something changes:
     # they all take off and fly north, commanded from the controller through
@@ -101,7 +115,7 @@ defmodule ClusterBench do
     t0 = System.monotonic_time(:millisecond)
 
     flying =
-      (ids1 ++ ids2)
+      ids
       |> Task.async_stream(&fly/1, max_concurrency: 64, timeout: 300_000)
       |> Enum.count(&match?({:ok, :ok}, &1))
 
@@ -109,30 +123,36 @@ defmodule ClusterBench do
     Process.sleep(3_000)
 
     # Steady state: CPU and latency.
-    probes = for {node, ids} <- [{gs1, ids1}, {gs2, ids2}], do: {node, call(node, ClusterBench.Probe, :start, [ids])}
-    here = ClusterBench.Probe.start(ids1 ++ ids2)
-    cpu0 = for p <- [gs1, gs2, sims], into: %{}, do: {p.name, call(p, :erlang, :statistics, [:runtime])}
+    probes = for st <- stations, into: %{}, do: {st.gs.node, call(st.gs, ClusterBench.Probe, :start, [st.ids])}
+    here = ClusterBench.Probe.start(ids)
+    nodes = Enum.flat_map(stations, &[&1.gs, &1.sims])
+    cpu0 = for p <- nodes, into: %{}, do: {p.name, call(p, :erlang, :statistics, [:runtime])}
     my0 = :erlang.statistics(:runtime)
     w0 = System.monotonic_time(:millisecond)
     Process.sleep(seconds * 1_000)
     wall = System.monotonic_time(:millisecond) - w0
-    cpu1 = for p <- [gs1, gs2, sims], into: %{}, do: {p.name, call(p, :erlang, :statistics, [:runtime])}
+    cpu1 = for p <- nodes, into: %{}, do: {p.name, call(p, :erlang, :statistics, [:runtime])}
     my1 = :erlang.statistics(:runtime)
 
-    station_rows = Enum.flat_map(probes, fn {p, _} -> call(p, ClusterBench.Probe, :take, []) end) |> Map.new()
-    latencies = for {key, t} <- ClusterBench.Probe.take(), match?({id, _} when is_integer(id), key), t0 = station_rows[key], do: t - t0
+    published = for st <- stations, into: %{}, do: {st.gs.node, Map.new(call(st.gs, ClusterBench.Probe, :take, []))}
+
+    latencies =
+      for {{id, hash}, t} <- ClusterBench.Probe.take(), Map.has_key?(where, id), {st, local} = where[id], t0 = published[st.gs.node][{local, hash}], do: t - t0
+
     views = length(latencies)
 
-    IO.puts("\nCPU over #{Float.round(wall / 1000, 1)} s (share of one core; 2 vCPUs shared by all nodes):")
-    for p <- [gs1, gs2, sims], do: IO.puts("  #{String.pad_trailing(p.name, 10)} #{pct(cpu1[p.name], cpu0[p.name], wall)}")
-    IO.puts("  #{String.pad_trailing("controller", 10)} #{pct(my1, my0, wall)}")
+    IO.puts("\nCPU over #{Float.round(wall / 1000, 1)} s (share of one core; #{System.schedulers_online()} vCPUs shared by all nodes):")
+    for p <- nodes, do: IO.puts("  #{String.pad_trailing(p.name, 12)} #{pct(cpu1[p.name], cpu0[p.name], wall)}")
+    controller_ms = elem(my1, 0) - elem(my0, 0)
+    per_view = if views > 0, do: Float.round(controller_ms * 1000 / views, 1), else: "-"
+    IO.puts("  #{String.pad_trailing("controller", 12)} #{pct(my1, my0, wall)}: #{round(controller_ms / wall * 1_000_000 / n)} µs of CPU a second per vehicle, #{per_view} µs per view mirrored")
     IO.puts("\nviews mirrored: #{views} (#{round(views / (wall / 1000))}/s)")
     row("telemetry latency station -> controller", stats(latencies))
 
     # Reaction: conditions on the controller, changes on the stations.
-    Enum.each(probes, fn {p, pid} -> call(p, ClusterBench.Probe, :clear, [pid]) end)
+    Enum.each(stations, fn st -> call(st.gs, ClusterBench.Probe, :clear, [probes[st.gs.node]]) end)
     ClusterBench.Probe.clear(here)
-    sample = Enum.take_random(ids1 ++ ids2, reactions)
+    sample = Enum.take_random(ids, reactions)
     Context.put(%Context{fleet: Dolphin.Fleet, source: {Dolphin.Fleet.MAVLinkSource, nil}, owner: self()})
     {:ok, _} = Dolphin.Fleet.pick(Dolphin.Fleet, self(), id: sample, count: length(sample), timeout: 30_000)
 
@@ -149,7 +169,8 @@ defmodule ClusterBench do
     stopped =
       for v <- sample do
         name = "t#{v}"
-        :ok = call(sims, Dolphin.Sim, :set_battery, [v, 0.2])
+        {st, local} = where[v]
+        :ok = call(st.sims, Dolphin.Sim, :set_battery, [local, 0.2])
 
         receive do
           {:fake_platform, :stopped, %{name: ^name}} -> {v, :os.system_time(:microsecond)}
@@ -158,12 +179,16 @@ defmodule ClusterBench do
         end
       end
 
-    lows = Enum.flat_map(probes, fn {p, _} -> call(p, ClusterBench.Probe, :take, []) end) |> Map.new()
-    reaction = for {v, t} <- stopped, t0 = lows[{:low, v}], do: t - t0
+    lows = for st <- stations, into: %{}, do: {st.gs.node, Map.new(call(st.gs, ClusterBench.Probe, :take, []))}
+    reaction = for {v, t} <- stopped, {st, local} = where[v], t0 = lows[st.gs.node][{:low, local}], do: t - t0
     row("condition reaction (station view -> stop)", stats(reaction))
     _ = Engine.stop(run)
     IO.puts("\n(p99 target of the reaction: < 20 ms = 20000 µs)")
   end
+
+  # Its id on its station: "7@bench_gs2" is 7 there.
+  defp local_id(id) when is_integer(id), do: id
+  defp local_id(id), do: Dolphin.Vehicles.Id.sysid(id)
 
   defp fly(id) do
     alias Dolphin.Vehicles.Manoeuvres
