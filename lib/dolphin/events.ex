@@ -9,7 +9,7 @@ defmodule Dolphin.Events do
     {:station_left, [:station, :reason], "the ground station on node `station` left (its node went down, was cut off, or its station ended); `reason` says which"},
     {:station_changed, [:vehicle, :from, :to, :reason], "a vehicle is now reached through the ground station on node `to` instead of `from` (failover; its tasks go on)"},
     {:vehicle_conflict, [:vehicle, :stations, :reason, :other],
-     "two ground stations (`stations`, node names, the followed one first) hear one id with different vehicles behind it: `vehicle` stays the first's, the second's is vehicle `other` here (`\"ID@NODE\"`, discovered as any vehicle is); never merged"},
+     "two ground stations (`stations`, node names, the followed one first) hear one id with different vehicles behind it: `vehicle` stays the chosen station's (`stations`' first), the other's is vehicle `other` here (`\"ID@NODE\"`, discovered as any vehicle is); never merged"},
     {:claim_conflict, [:vehicle, :kept, :dropped],
      "after a netsplit, both sides had claimed the vehicle (`Dolphin.Fleet.Claims`): the claim of the owner on node `kept` stays, the other's (on `dropped`) was dropped without stopping anything"},
     {:path_changed, [:vehicle, :from, :to, :reason],

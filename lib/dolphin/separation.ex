@@ -412,7 +412,7 @@ defmodule Dolphin.Separation do
     now = Clock.now_ms()
     views = Views.all()
     placed = Enum.filter(views, &(&1.position != nil))
-    # (Read up to a tick after they came: the least difference learnt is a
+    # (Read after they came, at least a tick apart: the least difference learnt is a
     # little high, which errs towards a report made later, as before.)
     clocks = Enum.reduce(placed, s.clocks, fn view, clocks -> Map.put(clocks, view.id, ReportClock.observe(clocks[view.id], view.boot_ms, now)) end)
     airborne = for view <- placed, airborne?(view), into: %{}, do: {view.id, %{id: view.id, view: view, reported_at: ReportClock.reported_at(clocks[view.id], view.boot_ms, now)}}

@@ -32,12 +32,14 @@ defmodule Dolphin.Cluster.Mirror do
       vehicle no station hears any more is lost (at once when its last
       station's node goes down, else when the station's own vehicle times
       out), and reconnected when a station hears it again;
-    * never merges two vehicles: when two stations' views of one id
+    * keeps two vehicles apart: once two stations' views of one id
       disagree (`Dolphin.Cluster.Choice.conflict/2`: two autopilots, two
-      classes, two places), the vehicle stays the first station's and the
-      other station's is another vehicle here, named by its id there and
-      that station's node, `"ID@NODE"` (`30` of `gs2@host` is `"30@gs2"`;
-      see `Dolphin.Vehicles.Id`): a `vehicle_conflict` event says so, the
+      classes, two places), the vehicle stays the chosen station's (the
+      first to hear it, unless it failed over since) and the other
+      station's is another vehicle here, named by its id there and that
+      station's node name, `"ID@NODE"` (`30` of `gs2@host` is `"30@gs2"`;
+      by the whole node name, or numbered, if that is taken; see
+      `Dolphin.Vehicles.Id`): a `vehicle_conflict` event says so, the
       new name is discovered as any vehicle is, and from then on
       everything that station tells of that id is of the new name (a third
       station that hears the same autopilot fails over with it). Most
@@ -89,8 +91,16 @@ defmodule Dolphin.Cluster.Mirror do
   def stations, do: GenServer.call(__MODULE__, :stations)
 
   @doc "Which stations hear each mirrored vehicle and which is chosen: `%{id => %{chosen: node, stations: [node], lost: boolean}}`."
-  @spec routes() :: %{byte() => map()}
+  @spec routes() :: %{Dolphin.Vehicles.Id.t() => map()}
   def routes, do: GenServer.call(__MODULE__, :routes)
+
+  @doc """
+  A mirrored vehicle as each station that hears it calls it: `[{node, id
+  there}]` (`[]` for a vehicle mirrored from nowhere). A cluster-wide claim
+  holds these too (`Dolphin.Fleet.Claims`).
+  """
+  @spec heard_as(Dolphin.Vehicles.Id.t()) :: [{node(), Dolphin.Vehicles.Id.t()}]
+  def heard_as(id), do: GenServer.call(__MODULE__, {:heard_as, id})
 
   # --- the process -------------------------------------------------------------
 
@@ -137,6 +147,11 @@ defmodule Dolphin.Cluster.Mirror do
   def handle_call(:joined, _from, s), do: {:reply, Enum.sort(s.joined), s}
   def handle_call(:stations, _from, s), do: {:reply, Map.new(s.stations, fn {pid, st} -> {pid, st.node} end), s}
 
+  def handle_call({:heard_as, id}, _from, s) do
+    heard = with %{^id => v} <- s.vehicles, do: for({station, h} <- v.hearings, do: {node(station), h.view.id}), else: (_ -> [])
+    {:reply, Enum.sort(heard), s}
+  end
+
   def handle_call(:routes, _from, s) do
     routes =
       Map.new(s.vehicles, fn {id, v} ->
@@ -169,7 +184,8 @@ defmodule Dolphin.Cluster.Mirror do
       unless local?(id), do: Views.delete(id)
     end
 
-    {:reply, :ok, %{s | vehicles: Map.delete(s.vehicles, id)}}
+    # (A name apart that is gone may be given again.)
+    {:reply, :ok, %{s | vehicles: Map.delete(s.vehicles, id), names: Map.reject(s.names, fn {_key, other} -> other == id end)}}
   end
 
   @impl true
@@ -419,11 +435,16 @@ defmodule Dolphin.Cluster.Mirror do
     h = v.hearings[station]
     s = decide(s, id, %{v | hearings: Map.delete(v.hearings, station)}, "#{node(station)} hears another vehicle")
     theirs = h.view.id
-    other = Enum.find(same_named(s, theirs), &(conflict_with(s, &1, h.view) == :same)) || new_name(s, theirs, station)
+    # (The station's own id here first: a station named apart may come to hear that vehicle.)
+    known = Enum.uniq([theirs | same_named(s, theirs)]) -- [id]
+    other = Enum.find(known, &(Map.has_key?(s.vehicles, &1) and conflict_with(s, &1, h.view) == :same)) || new_name(s, theirs, station)
+    key = {node(station), theirs}
+    s = %{s | names: if(other == theirs, do: Map.delete(s.names, key), else: Map.put(s.names, key, other))}
+    s = hear(s, other, station, h.pid, h.view)
+    # (Once the vehicle of that name is there to be looked up.)
     Events.emit(:vehicle_conflict, %{vehicle: id, stations: [node(v.chosen), node(station)], reason: why, other: other})
     Logger.warning("vehicle #{id}: #{node(v.chosen)} and #{node(station)} hear two different vehicles (#{why}); the one #{node(station)} hears is #{other} here")
-    s = %{s | names: Map.put(s.names, {node(station), theirs}, other)}
-    hear(s, other, station, h.pid, h.view)
+    s
   end
 
   # The vehicles here named apart for what some station calls `theirs`.

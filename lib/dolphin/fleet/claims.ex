@@ -21,6 +21,16 @@ defmodule Dolphin.Fleet.Claims do
   `release/1` sends each member `{Dolphin.Fleet.Claims, :released, ids}`, and
   a waiting pick can be served again.
 
+  One vehicle may have different ids on different nodes: a controller
+  names a second station's vehicle of an id it already has `"ID@NODE"`
+  (`Dolphin.Cluster.Mirror`), where that station and another controller
+  call it by its id. So a claim also holds the vehicle as each station that
+  hears it calls it (`{node, id there}`; a vehicle of this node's own: this
+  node and its id): a pick of one vehicle under two names is refused on
+  either node, whichever name it uses. Those are taken when the claim is
+  made (a station that begins to hear the vehicle later is not in it) and
+  let go with the claim.
+
   After a netsplit, both sides may have claimed one vehicle. When they meet
   again, `:global` keeps one claim (the one whose owner's node sorts first)
   and drops the other *without killing its owner*, and the double claim is
@@ -55,11 +65,22 @@ defmodule Dolphin.Fleet.Claims do
   end
 
   defp claim_locked(ids, owner) do
-    case Enum.filter(ids, fn id -> owner_of(id) not in [nil, owner] end) do
+    heard = Map.new(ids, &{&1, heard_as(&1)})
+
+    case Enum.filter(ids, fn id -> Enum.any?([id | Enum.map(heard[id], &{:heard, &1})], &(owner_of(&1) not in [nil, owner])) end) do
       [] ->
         for id <- ids, owner_of(id) == nil do
           {:ok, holder} = Task.Supervisor.start_child({Dolphin.Fleet.ClaimHolders, node(owner)}, __MODULE__, :hold, [id, owner])
           :yes = :global.register_name(name(id), holder, &__MODULE__.resolve/3)
+
+          aliases =
+            for as <- heard[id], key = {:heard, as}, owner_of(key) == nil do
+              {:ok, alias_holder} = Task.Supervisor.start_child({Dolphin.Fleet.ClaimHolders, node(owner)}, __MODULE__, :hold, [key, owner])
+              :yes = :global.register_name(name(key), alias_holder, &__MODULE__.resolve/3)
+              {key, alias_holder}
+            end
+
+          send(holder, {:aliases, aliases})
         end
 
         :ok
@@ -77,6 +98,7 @@ defmodule Dolphin.Fleet.Claims do
         {@lock, self()},
         fn ->
           for id <- ids, holder = :global.whereis_name(name(id)), holder != :undefined do
+            for {key, _} <- aliases_of(holder), do: :global.unregister_name(name(key))
             :global.unregister_name(name(id))
             send(holder, :release)
           end
@@ -93,6 +115,21 @@ defmodule Dolphin.Fleet.Claims do
   defp released(ids) do
     for fleet <- :pg.get_members(Dolphin.Cluster.scope(), :fleets), fleet != self(),
         do: send(fleet, {__MODULE__, :released, ids})
+  end
+
+  defp aliases_of(holder) do
+    GenServer.call(holder, :aliases, 5_000)
+  catch
+    :exit, _ -> []
+  end
+
+  # The vehicle as each station that hears it calls it: `{node, id there}`.
+  defp heard_as(id) do
+    cond do
+      Dolphin.Vehicles.whereis_local(id) -> [{node(), id}]
+      Process.whereis(Dolphin.Cluster.Mirror) -> Dolphin.Cluster.Mirror.heard_as(id)
+      true -> []
+    end
   end
 
   @doc "The owner of the claim on `id`, or nil."
@@ -112,23 +149,34 @@ defmodule Dolphin.Fleet.Claims do
   # owner's node (:global allows one name per process, and an owner may
   # claim several vehicles). It ends with the claim: released, its owner
   # gone (then fleets are told), or dropped after a netsplit.
-  def hold(id, owner) do
+  # (A claim's aliases, the vehicle as its stations call it, are held by
+  # processes of their own, `{key, holder}`, told to the claim's holder: let
+  # go with the claim.)
+  def hold(key, owner) do
     ref = Process.monitor(owner)
-    hold(id, owner, ref)
+    hold(key, owner, ref, [])
   end
 
-  defp hold(id, owner, ref) do
+  defp hold(key, owner, ref, aliases) do
     receive do
       {:"$gen_call", from, :owner} ->
         GenServer.reply(from, owner)
-        hold(id, owner, ref)
+        hold(key, owner, ref, aliases)
+
+      {:"$gen_call", from, :aliases} ->
+        GenServer.reply(from, aliases)
+        hold(key, owner, ref, aliases)
+
+      {:aliases, more} ->
+        hold(key, owner, ref, aliases ++ more)
 
       {:DOWN, ^ref, :process, _, _} ->
-        :global.unregister_name(name(id))
-        released([id])
+        # (Each alias's holder sees the owner go too.)
+        :global.unregister_name(name(key))
+        unless match?({:heard, _}, key), do: released([key])
 
       :release ->
-        :ok
+        Enum.each(aliases, fn {_key, holder} -> send(holder, :release) end)
 
       :dropped ->
         :ok
@@ -138,7 +186,7 @@ defmodule Dolphin.Fleet.Claims do
   @doc "Of `ids`, those claimed by an owner other than `owner` (for a pick to skip)."
   @spec taken([non_neg_integer()], pid()) :: [non_neg_integer()]
   def taken(ids, owner) do
-    if Node.alive?(), do: Enum.filter(ids, fn id -> owner_of(id) not in [nil, owner] end), else: []
+    if Node.alive?(), do: Enum.filter(ids, fn id -> Enum.any?([id | Enum.map(heard_as(id), &{:heard, &1})], &(owner_of(&1) not in [nil, owner])) end), else: []
   end
 
   @doc """
@@ -158,6 +206,8 @@ defmodule Dolphin.Fleet.Claims do
     report(id, keep, drop)
     keep
   end
+
+  defp report({:heard, {node, id}}, keep, drop), do: report("#{id}@#{node}", keep, drop)
 
   defp report(id, keep, drop) do
     Logger.error("vehicle #{id} was claimed on both sides of a netsplit, by an owner on #{node(keep)} and one on #{node(drop)}: the claim of #{node(keep)} is kept, the other dropped; nobody was stopped")

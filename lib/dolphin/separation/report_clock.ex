@@ -29,24 +29,33 @@ defmodule Dolphin.Separation.ReportClock do
   when it came.
 
   The least difference is kept over the last 2 to 4 s of clock time (two
-  buckets of 2 s): an autopilot whose clock runs slower than ours
-  (a SITL behind its speed-up on a busy host) raises the difference
-  steadily, and an offset kept for ever would then make every report look
-  older than it is. A clock that goes back by more than 10 s (the autopilot
-  rebooted) starts the estimate afresh; one a little back (a report
-  overtaken by a later one, over another link) only counts for the least
-  difference.
+  buckets of 2 s; after a silence of more than 4 s, the current bucket
+  only): an autopilot whose clock runs slower than ours (a SITL behind its
+  speed-up on a busy host) raises the difference steadily, and an offset
+  kept for ever would then make every report look older than it is. When
+  the least difference of a finished bucket is above the one before it
+  (a slower clock, or reports held back for more than a bucket), the
+  current bucket alone is the base: a report is then placed at most
+  (1 − pace) × 2 s too early. A clock that goes back by more than 10 s, or
+  a report more than 10 s later than the least (the autopilot rebooted,
+  or another one took its id), starts the estimate afresh; one a little
+  back (a report overtaken by a later one, over another link) only counts
+  for the least difference.
   """
 
   # The window's bucket, clock ms.
   @bucket_ms 2_000
-  # A clock this far back (ms) is an autopilot that rebooted.
+  # A clock this far back (ms), or a report this much later than the
+  # least, is an autopilot that rebooted.
   @reboot_ms 10_000
+  # A finished bucket's least difference this much (ms) above the one
+  # before it is a rise, not jitter.
+  @rise_ms 20
 
-  defstruct [:boot_ms, :least, :since, :before]
+  defstruct [:boot_ms, :least, :since, :before, rising: false]
 
   @typedoc "One vehicle's estimate (`nil` before its first report)."
-  @type t :: %__MODULE__{boot_ms: integer(), least: integer(), since: integer(), before: integer() | nil} | nil
+  @type t :: %__MODULE__{boot_ms: integer(), least: integer(), since: integer(), before: integer() | nil, rising: boolean()} | nil
 
   @doc """
   The estimate after a report with the autopilot's clock at `boot_ms` arrived
@@ -55,13 +64,23 @@ defmodule Dolphin.Separation.ReportClock do
   @spec observe(t(), integer() | nil, integer()) :: t()
   def observe(clock, nil, _arrived_ms), do: clock
 
-  def observe(%__MODULE__{boot_ms: last} = clock, boot_ms, arrived_ms) when boot_ms > last - @reboot_ms do
+  def observe(%__MODULE__{boot_ms: last} = clock, boot_ms, arrived_ms) when boot_ms > last - @reboot_ms and arrived_ms - boot_ms - @reboot_ms < clock.least do
     difference = arrived_ms - boot_ms
     latest = max(last, boot_ms)
+    elapsed = arrived_ms - clock.since
 
-    if arrived_ms - clock.since >= @bucket_ms,
-      do: %{clock | boot_ms: latest, least: difference, since: arrived_ms, before: clock.least},
-      else: %{clock | boot_ms: latest, least: min(clock.least, difference)}
+    cond do
+      elapsed < @bucket_ms ->
+        %{clock | boot_ms: latest, least: min(clock.least, difference)}
+
+      elapsed < 2 * @bucket_ms ->
+        rising = clock.before != nil and clock.least > clock.before + @rise_ms
+        %{clock | boot_ms: latest, least: difference, since: arrived_ms, before: clock.least, rising: rising}
+
+      # (After a silence, the bucket before is too old to go by.)
+      true ->
+        %{clock | boot_ms: latest, least: difference, since: arrived_ms, before: nil, rising: false}
+    end
   end
 
   def observe(_clock, boot_ms, arrived_ms), do: %__MODULE__{boot_ms: boot_ms, least: arrived_ms - boot_ms, since: arrived_ms}
@@ -71,8 +90,8 @@ defmodule Dolphin.Separation.ReportClock do
   it having arrived at `arrived_ms`.
   """
   @spec reported_at(t(), integer() | nil, integer()) :: integer()
-  def reported_at(%__MODULE__{least: least, before: before}, boot_ms, arrived_ms) when is_integer(boot_ms),
-    do: min(arrived_ms, boot_ms + min(least, before || least))
+  def reported_at(%__MODULE__{least: least, before: before, rising: rising}, boot_ms, arrived_ms) when is_integer(boot_ms),
+    do: min(arrived_ms, boot_ms + if(rising or before == nil, do: least, else: min(least, before)))
 
   def reported_at(_clock, _boot_ms, arrived_ms), do: arrived_ms
 end

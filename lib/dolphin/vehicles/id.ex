@@ -19,10 +19,10 @@ defmodule Dolphin.Vehicles.Id do
   vehicle was heard first names both by network.
 
   On a cluster's controller (`Dolphin.Cluster`), a vehicle is named as its
-  ground station names it; when a second station hears another autopilot
-  behind an id the first station's vehicle has, the second's is
-  `"ID@NODE"`, its id there and that station's node name (`"30@gs2"`,
-  `"1@sim2@gs2"`; `Dolphin.Cluster.Mirror`).
+  ground station names it; when another station hears another autopilot
+  behind an id a vehicle there already has, that station's is `"ID@NODE"`,
+  its id there and that station's node name (`"30@gs2"`, `"1@sim2@gs2"`;
+  `Dolphin.Cluster.Mirror`).
 
   A vehicle id is therefore a system id (an integer) or a qualified name (a
   string): `Dolphin.Vehicles`, the fleet's `pick(id: ...)`, events, the

@@ -67,4 +67,38 @@ defmodule Dolphin.Cluster.PicksTest do
       for {where, owner} <- sides, do: :ok = release_all(where, owner)
     end
   end
+
+  test "a vehicle the controller names apart is one vehicle to picks: its station's own script and the controller never both get it" do
+    gs1 = Cluster.start_station("gs1", sysids: [30], sim: [home: %{lat: 40.444233, lon: -7.375234, alt: 820.0}])
+    gs2 = Cluster.start_station("gs2", sysids: [30], sim: [home: %{lat: 40.454233, lon: -7.375234, alt: 820.0}])
+    Dolphin.Events.subscribe()
+    assert :ok = Dolphin.Cluster.join(gs1.node)
+    Cluster.await_vehicles([30])
+    assert :ok = Dolphin.Cluster.join(gs2.node)
+    assert_receive {:dolphin, :events, %{event: :vehicle_conflict, vehicle: 30, other: apart}}, 20_000
+    Cluster.await_vehicles([30, apart])
+    assert Dolphin.Cluster.Mirror.heard_as(apart) == [{gs2.node, 30}]
+
+    here = spawn(fn -> Process.sleep(:infinity) end)
+    there = Cluster.call(gs2.peer, :erlang, :spawn, [Process, :sleep, [:infinity]])
+
+    # gs2's own script has its 30: the controller cannot have it as the name it gave it.
+    assert {:ok, _} = pick(gs2.peer, there, id: 30, timeout: 1_000)
+    assert {:error, _} = pick(:here, here, id: apart, timeout: 1_000)
+    :ok = release_all(gs2.peer, there)
+
+    # And the other way round.
+    assert {:ok, _} = pick(:here, here, id: apart, timeout: 1_000)
+    assert {:error, _} = pick(gs2.peer, there, id: 30, timeout: 1_000)
+    :ok = release_all(:here, here)
+    assert {:ok, _} = pick(gs2.peer, there, id: 30, timeout: 1_000)
+    :ok = release_all(gs2.peer, there)
+
+    # gs1's 30 is another vehicle: picked here while gs2's is picked there
+    # only if the plain id is free; the controller's 30 and gs2's 30 share a
+    # name, which a claim holds too (it errs towards refusing).
+    assert {:ok, _} = pick(:here, here, id: 30, timeout: 1_000)
+    assert {:ok, _} = pick(:here, here, id: apart, timeout: 1_000)
+    :ok = release_all(:here, here)
+  end
 end
