@@ -98,7 +98,8 @@ defmodule Dolphin.Fleet.Claims do
         {@lock, self()},
         fn ->
           for id <- ids, holder = :global.whereis_name(name(id)), holder != :undefined do
-            for {key, _} <- aliases_of(holder), do: :global.unregister_name(name(key))
+            # (Only those it still holds: after a netsplit another's may have the name.)
+            for {key, alias_holder} <- aliases_of(holder), :global.whereis_name(name(key)) == alias_holder, do: :global.unregister_name(name(key))
             :global.unregister_name(name(id))
             send(holder, :release)
           end
