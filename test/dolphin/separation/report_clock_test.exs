@@ -13,20 +13,21 @@ defmodule Dolphin.Separation.ReportClockTest do
     Enum.reduce(0..(n - 1), clock, fn i, clock -> ReportClock.observe(clock, boot_ms + round(200 * i * pace), made + 200 * i + delay.(i)) end)
   end
 
+  # One more report, with the autopilot's clock at `boot_ms`, coming at
+  # `arrived_ms`: when it is taken as made.
+  defp made_at(clock, boot_ms, arrived_ms), do: clock |> ReportClock.observe(boot_ms, arrived_ms) |> ReportClock.reported_at(boot_ms, arrived_ms)
+
   test "a report held up is taken as made when the autopilot made it; one on time, when it came" do
     clock = reports(nil, 5_000, 100_000, 10)
     # The 11th, made at 102,000, came 1.5 s late.
-    late = ReportClock.observe(clock, 7_000, 103_500)
-    assert ReportClock.reported_at(late, 7_000, 103_500) == 102_000
-    on_time = ReportClock.observe(clock, 7_000, 102_000)
-    assert ReportClock.reported_at(on_time, 7_000, 102_000) == 102_000
+    assert made_at(clock, 7_000, 103_500) == 102_000
+    assert made_at(clock, 7_000, 102_000) == 102_000
   end
 
   test "the least delay is the base: reports that all come late by varying amounts are placed by the earliest" do
     clock = reports(nil, 0, 50_000, 10, 1.0, fn i -> 300 + rem(i * 37, 120) end)
     # The quickest of them came 300 ms after it was made: a report that comes 900 ms late is 600 ms older than it looks.
-    clock = ReportClock.observe(clock, 2_000, 52_900)
-    assert ReportClock.reported_at(clock, 2_000, 52_900) == 52_300
+    assert made_at(clock, 2_000, 52_900) == 52_300
   end
 
   test "never later than it came, and a view with no autopilot clock is taken as made when it came" do
@@ -54,11 +55,9 @@ defmodule Dolphin.Separation.ReportClockTest do
   test "after a silence the bucket before it is not gone by; a report far later than the least starts afresh" do
     clock = reports(nil, 0, 10_000, 10, 0.95)
     # 60 s of nothing, then a report on time (the clock at 0.95 of ours): made when it came.
-    after_silence = ReportClock.observe(clock, 58_900, 71_000)
-    assert ReportClock.reported_at(after_silence, 58_900, 71_000) == 71_000
+    assert made_at(clock, 58_900, 71_000) == 71_000
     # A report 30 s later than the least, its clock still going forward (another autopilot with that id).
-    other = ReportClock.observe(clock, 2_000, 42_000)
-    assert ReportClock.reported_at(other, 2_000, 42_000) == 42_000
+    assert made_at(clock, 2_000, 42_000) == 42_000
   end
 
   test "a clock that goes back 10 s or more is an autopilot rebooted: its reports are placed afresh; a little back, one overtaken" do
