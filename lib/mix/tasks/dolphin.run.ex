@@ -141,7 +141,9 @@ defmodule Mix.Tasks.Dolphin.Run do
 
   Ctrl-C (SIGINT) or SIGTERM stops the script the way `--for` does: running
   tasks are stopped (each says why), vehicles are told to hold, the summary
-  is printed and the events end with `script_finished` (result `stopped`).
+  is printed and the script's events end with `script_finished` (result
+  `stopped`); the vehicles' own events may follow it until the run ends (a
+  vehicle's `mode_changed` as its heartbeat shows the hold it accepted).
   The same signal again within a second is taken as a repeat (a key pressed
   twice, `timeout` signalling the run and its process group); once the log
   says `still stopping`, another exits at once, without waiting for the
