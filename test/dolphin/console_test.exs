@@ -293,8 +293,7 @@ defmodule Dolphin.ConsoleTest do
     assert text =~ ~r/^run #{id} script .*patrol.exs\s+running for .+\n└─ run \d+\n   └─ \d+ mission "Patrol"  vehicle 2\s+item 2\/2/
 
     stop(String.to_integer(id))
-    assert out(io) =~ "stopping run #{id} (script "
-    await_out(io, ~r/run #{id} script .*patrol.exs: stopped: its tasks were stopped, vehicles hold/)
+    await_all(io, ["stopping run #{id} (script ", ~r/run #{id} script .*patrol.exs: stopped: its tasks were stopped, vehicles hold/])
     Wait.until(fn -> match?({:ok, %{mode: m, armed: true}} when m in [:brake, :guided], Vehicles.state(2)) end)
     tasks()
     assert out(io) == "no tasks running\n"
@@ -347,15 +346,13 @@ defmodule Dolphin.ConsoleTest do
 
     one = Enum.find(Engine.tasks(), &(&1.name == "one"))
     stop(one.task_id)
-    assert out(io) =~ ~s{stopping task #{one.task_id} idle "one"; its parent goes on as if it had completed}
-    await_out(io, ~r/run #{id} task sequence .*: done/)
+    # (What the stop leads to may be printed before the stop's own line is read.)
+    await_all(io, [~s{stopping task #{one.task_id} idle "one"; its parent goes on as if it had completed}, ~r/run #{id} task sequence .*: done/])
 
     run(Engine.idle(3_600_000, name: "three"))
     [_, id] = Regex.run(~r/run (\d+) started/, out(io))
     stop_all()
-    text = out(io)
-    assert text =~ "stopping run #{id} (task idle \"three\"), run #{other_run}: their tasks stop and their vehicles hold"
-    await_out(io, ~r/run #{id} task idle "three": stopped/)
+    await_all(io, ["stopping run #{id} (task idle \"three\"), run #{other_run}: their tasks stop and their vehicles hold", ~r/run #{id} task idle "three": stopped/])
     Wait.until(fn -> Engine.runs() == [] end)
   end
 
