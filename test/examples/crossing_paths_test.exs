@@ -39,20 +39,27 @@ defmodule Dolphin.Examples.CrossingPathsTest do
     assert run.result == "done"
     {:ok, log} = Dolphin.Report.FlightLog.read_file(run.tlog)
 
-    # The later one held, once, for the other; then went on.
+    # The later one held for the other (once, in step), then let go.
     case for(%{"event" => "separation_hold"} = e <- run.events, do: e) do
       [] when out_of_step == :may_be ->
         # The monitor's 20 m, less a metre for the log's samples against the telemetry it judged.
         refute conflict_in_log?(log, 19.0), "no hold, though the log shows the two heading within 19 m of each other"
 
       holds ->
-        assert [hold] = holds
-        assert [clear] = for(%{"event" => "separation_clear"} = e <- run.events, do: e)
-        assert {clear["vehicle"], clear["other"]} == {hold["vehicle"], hold["other"]}
-        # A conflict predicted within the monitor's 8 s: the least distance ahead
-        # is within the limit (at its edge when the two graze it, 20.0 once rounded).
-        assert hold["in_s"] <= 8 and hold["closest"] <= hold["limit_m"], "the hold: #{inspect(hold)}"
-        assert clear["held_ms"] >= 1_000
+        # Out of step (SITL), the other may still be speeding up when the
+        # held one is let go: the monitor's straight lines then see a
+        # conflict again, and hold it again. Each hold is then let go in turn.
+        if out_of_step == :never, do: assert([_] = holds)
+        holds_and_clears = for %{"event" => e} = ev <- run.events, e in ["separation_hold", "separation_clear"], do: ev
+        assert Enum.map(holds_and_clears, & &1["event"]) == List.flatten(List.duplicate(["separation_hold", "separation_clear"], length(holds))), inspect(holds_and_clears)
+
+        for [hold, clear] <- Enum.chunk_every(holds_and_clears, 2) do
+          assert {clear["vehicle"], clear["other"]} == {hold["vehicle"], hold["other"]}
+          # A conflict predicted within the monitor's 8 s: the least distance ahead
+          # is within the limit (at its edge when the two graze it, 20.0 once rounded).
+          assert hold["in_s"] <= 8 and hold["closest"] <= hold["limit_m"], "the hold: #{inspect(hold)}"
+          assert clear["held_ms"] >= 1_000
+        end
     end
 
     # Both missions flown to their end.
