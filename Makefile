@@ -30,6 +30,7 @@ bench: bootstrap
 	MIX_ENV=prod mix run bench/cluster.exs
 	MIX_ENV=prod mix run bench/separation.exs
 	MIX_ENV=prod elixir --erl "+sbwt none +sbwtdcpu none +sbwtdio none" -S mix run bench/datagram_floor.exs
+	MIX_ENV=prod mix run bench/frame_work.exs
 
 dialyzer: bootstrap
 	scripts/dialyzer

@@ -22,6 +22,9 @@
 #
 #   MIX_ENV=prod mix run bench/intake.exs     (VEHICLES=500 NETWORKS=2 WINDOW=5 for a smaller one)
 #
+#   ON_CPU=1 adds how long the ground station's processes ran over the window
+#   (traced: scheduled in to scheduled out), by kind, against its whole CPU.
+#
 #   The ground station's VM as docs/operating.md advises for a large fleet
 #   (no busy-waiting schedulers; the simulator's VM keeps the defaults):
 #   MIX_ENV=prod elixir --erl "+sbwt none +sbwtdcpu none +sbwtdio none" -S mix run bench/intake.exs
@@ -69,8 +72,56 @@ defmodule Bench.Intake do
     if Enum.all?(results, &match?({:ok, _}, &1)) do
       {base, for(k <- 1..networks, do: "net#{k}")}
     else
-      for {{:ok, _}, k} <- Enum.with_index(results, 1), do: Link.disconnect("net#{k}")
+      for {:ok, link} <- results, do: Link.disconnect(link)
       open_links(networks)
+    end
+  end
+
+  # A tracer of every process's scheduling, summing the µs each kind of
+  # process ran (its initial call: the link, a vehicle, ...).
+  def start_on_cpu do
+    tracer = spawn(fn -> on_cpu_loop(%{}, %{}) end)
+    Process.flag(:priority, :high)
+    :erlang.trace(:all, true, [:running, :monotonic_timestamp, {:tracer, tracer}])
+    Process.flag(:priority, :normal)
+    tracer
+  end
+
+  def stop_on_cpu(tracer) do
+    :erlang.trace(:all, false, [:running])
+    send(tracer, {:done, self()})
+
+    receive do
+      {:on_cpu, totals} -> totals
+    end
+  end
+
+  defp on_cpu_loop(since, totals) do
+    receive do
+      {:trace_ts, pid, :in, _mfa, t} ->
+        on_cpu_loop(Map.put(since, pid, t), totals)
+
+      {:trace_ts, pid, :out, _mfa, t} ->
+        case Map.pop(since, pid) do
+          {nil, since} -> on_cpu_loop(since, totals)
+          {t0, since} -> on_cpu_loop(since, Map.update(totals, pid, t - t0, &(&1 + t - t0)))
+        end
+
+      {:done, from} ->
+        # Drained: the trace messages still queued came before the :done.
+        by_kind =
+          Enum.reduce(totals, %{}, fn {pid, native}, acc ->
+            Map.update(acc, kind(pid), native, &(&1 + native))
+          end)
+
+        send(from, {:on_cpu, Map.new(by_kind, fn {k, native} -> {k, System.convert_time_unit(native, :native, :microsecond)} end)})
+    end
+  end
+
+  defp kind(pid) do
+    case Process.info(pid, [:dictionary, :registered_name, :initial_call]) do
+      nil -> :gone
+      info -> info[:dictionary][:"$initial_call"] || (info[:registered_name] != [] && info[:registered_name]) || info[:initial_call]
     end
   end
 
@@ -154,10 +205,17 @@ frames0 = Intake.frames(links)
 cpu0 = Intake.cpu_ms(System.pid())
 sim_cpu0 = Intake.cpu_ms(sim_pid)
 wall0 = System.monotonic_time(:millisecond)
+# ON_CPU=1: how long the processes ran (scheduled in to scheduled out), by
+# kind, over the window: the rest of the VM's CPU is the runtime's outside
+# any process (schedulers, polling, ports) and the kernel's.
+on_cpu = if System.get_env("ON_CPU"), do: Intake.start_on_cpu()
+
 # PERF=FILE: a perf profile of this VM over the window (run with ERL_FLAGS="+JPperf true").
 if perf = System.get_env("PERF"),
   do: System.cmd("perf", ["record", "-F", "999", "-g", "-p", System.pid(), "-o", perf, "--", "sleep", "#{window_s}"], stderr_to_stdout: true),
   else: Process.sleep(window_s * 1000)
+
+on_cpu = on_cpu && Intake.stop_on_cpu(on_cpu)
 
 frames1 = Intake.frames(links)
 cpu1 = Intake.cpu_ms(System.pid())
@@ -208,3 +266,15 @@ IO.puts("""
   over the whole run, discovery included: #{ours} of #{received} received (#{kernel_drops} machine-wide, the simulator's sockets \
 included); the simulator counted #{sent} frames sent by the vehicles that answered at its end
 """)
+
+if on_cpu do
+  # The tracer's own time is not counted; tracing itself costs the traced some.
+  in_processes = on_cpu |> Map.values() |> Enum.sum()
+  per_frame = fn us -> Float.round(us / max(frames, 1), 2) end
+  IO.puts("  (ON_CPU) the processes ran #{per_frame.(in_processes)} µs a frame of the #{Float.round(cpu_ms * 1000 / max(frames, 1), 2)} (tracing included); by kind:")
+
+  on_cpu
+  |> Enum.sort_by(&(-elem(&1, 1)))
+  |> Enum.take(8)
+  |> Enum.each(fn {kind, us} -> IO.puts("    #{inspect(kind)}: #{per_frame.(us)} µs a frame") end)
+end
