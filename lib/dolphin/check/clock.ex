@@ -37,10 +37,6 @@ defmodule Dolphin.Check.Clock do
   # A busy loop runs 200 – 400 million a second on a core of this machine;
   # a dry run's process does some thousands between waits.
   @patience_reductions 20_000_000
-  # Not idle and not running for this long (real ms): something of the dry
-  # run that never waits nor runs (a process suspended by hand) holds it no
-  # longer; time moves on, as after a busy loop.
-  @stalled_real_ms 60_000
   # The VM not quiet for this long (real ms): something else keeps it busy.
   @busy_vm_ms 1
   # Nothing set on this clock and nothing running: the script may wait on
@@ -250,9 +246,8 @@ defmodule Dolphin.Check.Clock do
   defp patience_spent?(%{busy_since: nil}, _real), do: false
 
   defp patience_spent?(s, real) do
-    real - s.busy_since >= @stalled_real_ms or
-      (real - s.busy_since >= @patience_real_ms and
-         Enum.reduce(own_reductions(), 0, fn {pid, now}, sum -> sum + now - Map.get(s.busy_work, pid, 0) end) >= @patience_reductions)
+    real - s.busy_since >= @patience_real_ms and
+      Enum.reduce(own_reductions(), 0, fn {pid, now}, sum -> sum + now - Map.get(s.busy_work, pid, 0) end) >= @patience_reductions
   end
 
   # The reductions of each of the dry run's processes (its group leader is this clock).
