@@ -20,11 +20,8 @@ defmodule Dolphin.Check.Clock do
   # a `receive` with nothing it wants in its mailbox. The rest of the VM may
   # be as busy as it likes (other dry runs, other tests) without holding
   # this one up. A process of the dry run that never stops running (a busy
-  # loop) cannot hold it for ever: after @patience_real_ms of it, in which
-  # the dry run's processes ran @patience_reductions, time moves on anyway.
-  # A process that is ready to run but gets no core (a loaded host), or a
-  # shared one that is busy for others (the logger), is no busy loop: the
-  # dry run's own reductions hardly grow meanwhile, and time waits for it.
+  # loop) cannot hold it for ever: after @patience_real_ms of it, time
+  # moves on anyway.
 
   use GenServer
 
@@ -34,9 +31,6 @@ defmodule Dolphin.Check.Clock do
   @now 1
   @ended 2
   @patience_real_ms 2_000
-  # A busy loop runs 200 – 400 million a second on a core of this machine;
-  # a dry run's process does some thousands between waits.
-  @patience_reductions 20_000_000
   # The VM not quiet for this long (real ms): something else keeps it busy.
   @busy_vm_ms 1
   # Nothing set on this clock and nothing running: the script may wait on
@@ -158,7 +152,7 @@ defmodule Dolphin.Check.Clock do
           cells
       end
 
-    {:ok, %{cells: cells, shared: shared_processes(), others: %{}, moving?: false, horizon: nil, owner: nil, timers: :gb_trees.empty(), refs: %{}, seq: 0, busy_since: nil, busy_work: %{}, empty_since: nil}}
+    {:ok, %{cells: cells, shared: shared_processes(), others: %{}, moving?: false, horizon: nil, owner: nil, timers: :gb_trees.empty(), refs: %{}, seq: 0, busy_since: nil, empty_since: nil}}
   end
 
   @impl GenServer
@@ -210,8 +204,8 @@ defmodule Dolphin.Check.Clock do
     ended? = :atomics.get(s.cells, @ended) == 1
 
     cond do
-      not idle? and not patience_spent?(s, real) ->
-        look_again(again_ms, if(s.busy_since, do: s, else: %{s | busy_since: real, busy_work: own_reductions()}))
+      not idle? and (s.busy_since == nil or real - s.busy_since < @patience_real_ms) ->
+        look_again(again_ms, %{s | busy_since: s.busy_since || real})
 
       # What reached this clock before its dry run was idle (a timer set,
       # maybe sooner than the next; output a process waits on) is taken
@@ -239,22 +233,6 @@ defmodule Dolphin.Check.Clock do
         send(pid, msg)
         {:noreply, %{s | timers: :gb_trees.delete(key, timers), refs: Map.delete(s.refs, ref), busy_since: nil, empty_since: nil}, 0}
     end
-  end
-
-  # The dry run has not been idle for @patience_real_ms, and its own
-  # processes ran meanwhile as a busy loop runs.
-  defp patience_spent?(%{busy_since: nil}, _real), do: false
-
-  defp patience_spent?(s, real) do
-    real - s.busy_since >= @patience_real_ms and
-      Enum.reduce(own_reductions(), 0, fn {pid, now}, sum -> sum + now - Map.get(s.busy_work, pid, 0) end) >= @patience_reductions
-  end
-
-  # The reductions of each of the dry run's processes (its group leader is this clock).
-  defp own_reductions do
-    me = self()
-
-    for pid <- Process.list(), [group_leader: ^me, reductions: reductions] <- [Process.info(pid, [:group_leader, :reductions])], into: %{}, do: {pid, reductions}
   end
 
   defp horizon(s) do
