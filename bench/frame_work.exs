@@ -1,6 +1,7 @@
 # Dolphin's own work per telemetry frame, apart from the runtime's cost of
-# moving it: the link's decoding of a datagram, and the vehicle process's
-# folding of the frame (path bookkeeping, duplicate check, state, change
+# moving it: the link's handling of a datagram (decoding it, alone and with
+# the routing of its frame to the vehicle's process), and the vehicle's
+# fold of the frame (path bookkeeping, duplicate check, state, change
 # detection, the view written and published when it changed), each run in a
 # loop in this one process — no socket, no message, no process woken.
 #
