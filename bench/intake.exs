@@ -81,9 +81,7 @@ defmodule Bench.Intake do
   # process ran (its initial call: the link, a vehicle, ...).
   def start_on_cpu do
     tracer = spawn(fn -> on_cpu_loop(%{}, %{}) end)
-    Process.flag(:priority, :high)
     :erlang.trace(:all, true, [:running, :monotonic_timestamp, {:tracer, tracer}])
-    Process.flag(:priority, :normal)
     tracer
   end
 
@@ -118,7 +116,8 @@ defmodule Bench.Intake do
     end
   end
 
-  defp kind(pid) do
+  # A process's kind: proc_lib's initial call, else its registered name, else its initial call.
+  def kind(pid) do
     case Process.info(pid, [:dictionary, :registered_name, :initial_call]) do
       nil -> :gone
       info -> info[:dictionary][:"$initial_call"] || (info[:registered_name] != [] && info[:registered_name]) || info[:initial_call]
@@ -227,15 +226,8 @@ frames = frames1 - frames0
 
 if red0 do
   # Where the work went: reductions by kind of process.
-  kind = fn pid ->
-    case Process.info(pid, [:dictionary, :registered_name, :initial_call]) do
-      nil -> :gone
-      info -> info[:dictionary][:"$initial_call"] || info[:registered_name] || info[:initial_call]
-    end
-  end
-
   reductions.()
-  |> Enum.map(fn {pid, r} -> {kind.(pid), r - Map.get(red0, pid, 0)} end)
+  |> Enum.map(fn {pid, r} -> {Intake.kind(pid), r - Map.get(red0, pid, 0)} end)
   |> Enum.group_by(&elem(&1, 0), &elem(&1, 1))
   |> Enum.map(fn {k, rs} -> {k, Enum.sum(rs), length(rs)} end)
   |> Enum.sort_by(&(-elem(&1, 1)))
