@@ -7,7 +7,7 @@ defmodule Dolphin.Engine.Run do
   # its stop callback — before it exits. A proc_lib process with full :sys
   # support; its :sys parent is its supervisor, handed over by start_link/1.
 
-  alias Dolphin.Engine.{Context, On, PlatformTask, Runner, Task}
+  alias Dolphin.Engine.{Conditions, Context, On, PlatformTask, Runner, Task}
 
   @doc false
   def child_spec(args),
@@ -106,7 +106,8 @@ defmodule Dolphin.Engine.Run do
     Process.flag(:trap_exit, true)
     Context.put(ctx)
     Process.link(caller)
-    run = %{id: run_id, pid: self()}
+    # The `until`s' conditions are watched in one process of the run (Dolphin.Engine.Conditions).
+    run = %{id: run_id, pid: self(), conditions: Conditions.start_link(ctx, run_id)}
     Registry.register(Dolphin.Engine.Registry, {:run, run_id}, %{caller: caller, owner: ctx.owner, task: task, instance: ctx.instance})
     :proc_lib.init_ack({:ok, self()})
 
@@ -146,6 +147,12 @@ defmodule Dolphin.Engine.Run do
 
       {:EXIT, ^root, reason} ->
         done(s, {:failed, Runner.failure(s.tree, {:crashed, reason})})
+
+      # Its conditions process crashed (an engine fault): nothing it watched
+      # would end its task, so the run stops.
+      {:EXIT, pid, reason} when pid == s.run.conditions ->
+        stop_root(s, :shutdown)
+        done(s, {:failed, Runner.failure(s.tree, {:crashed, {:conditions, reason}})})
 
       {:EXIT, ^caller, reason} ->
         stop_root(s, {:parent_exit, reason})

@@ -15,7 +15,7 @@ defmodule Dolphin.Engine.Runner do
   # runs (or {:"$dolphin_started", pid, {:finished, result}} if it ended at once),
   # {:"$dolphin_result", pid, result} as it ends.
 
-  alias Dolphin.Engine.{Context, Failure, PlatformTask, Task, Watcher}
+  alias Dolphin.Engine.{Conditions, Context, Failure, PlatformTask, Stops, Task, Watcher}
 
   # A node's state, which :sys.get_state/1 hands back.
   defstruct [
@@ -34,10 +34,13 @@ defmodule Dolphin.Engine.Runner do
     :platform,
     :tick,
     :debug,
+    :stop_alias,
+    :stop_outcome,
     children: %{},
     pids: %{},
     started: 0,
     watches: [],
+    elsewhere: %{},
     timers: %{},
     code: %{},
     acked: false,
@@ -51,9 +54,13 @@ defmodule Dolphin.Engine.Runner do
   started before it, which orders them), `pids`, pid => key of each child,
   and `started`, how many children it has started;
   `watches`, [{key, cond}] in watch order, and `watcher`, what those
-  conditions read (and the vehicle of a platform task); `timers`, key =>
+  conditions read (and the vehicle of a platform task); `elsewhere`, key =>
+  cond of the conditions the run's conditions process watches for this
+  node (an `until`'s: `Dolphin.Engine.Conditions`); `timers`, key =>
   {ref, token, at} (at: its deadline in clock ms); `code`, key => {:pending, ref, token, fun} | {:running, pid};
-  `platform`, the platform task's process (a leaf); `tick`, the 1 s timer of
+  `platform`, the platform task's process (a leaf), `stop_alias`, where its
+  answer to a stop comes (`Dolphin.Engine.Stops`), and `stop_outcome`, that
+  answer when it came before the leaf was told to stop; `tick`, the 1 s timer of
   conditions on time; `acked`, whether the parent was told it started;
   `halted`, the outcome of the platform's stop in phase 1; `debug`, the :sys
   debug options (`:sys.trace/2`, `:sys.log/2`, ...).
@@ -78,6 +85,9 @@ defmodule Dolphin.Engine.Runner do
           pids: %{pid() => term()},
           started: non_neg_integer(),
           watches: [{term(), Dolphin.Engine.Cond.t()}],
+          elsewhere: %{term() => Dolphin.Engine.Cond.t()},
+          stop_alias: reference() | nil,
+          stop_outcome: :ok | {:error, term()} | nil,
           timers: %{term() => {reference(), reference(), integer()}},
           code: %{term() => {:pending, reference(), reference(), function()} | {:running, pid()}},
           acked: boolean(),
@@ -221,6 +231,7 @@ defmodule Dolphin.Engine.Runner do
   defp handle_msg(msg, s) do
     parent = s.parent
     platform = s.platform
+    stop_alias = s.stop_alias
 
     case msg do
       {:"$dolphin_result", pid, result} ->
@@ -266,10 +277,30 @@ defmodule Dolphin.Engine.Runner do
       {:dolphin, {:dolphin_signals, table}, _} ->
         loop(reevaluate(s, {:signals, table}))
 
+      # The run's conditions process found this node's condition true, sent
+      # the stops of the platforms under it and said condition_met.
+      {:"$dolphin_condition", key} ->
+        case Map.pop(s.elsewhere, key) do
+          {nil, _} -> loop(s)
+          {_cond, elsewhere} -> %{s | elsewhere: elsewhere} |> feed({:condition, key}, :said) |> loop()
+        end
+
+      # ... or could not evaluate it: watched here again (and evaluated at once).
+      {:"$dolphin_condition_back", key} ->
+        case Map.pop(s.elsewhere, key) do
+          {nil, _} -> loop(s)
+          {cond, elsewhere} -> %{s | elsewhere: elsewhere, watches: s.watches ++ [{key, cond}]} |> ensure_tick() |> reevaluate({:key, key}) |> loop()
+        end
+
       {:dolphin_platform, ^platform, msg} when platform != nil ->
         # Once it reported its end, the platform's process is going: nothing to stop.
-        s = if msg == :done or match?({:failed, _}, msg), do: %{s | platform: nil}, else: s
+        s = if msg == :done or match?({:failed, _}, msg), do: platform_ended(s), else: s
         loop(feed(s, {:platform, msg}))
+
+      # The platform's answer to a stop another process sent it
+      # (Dolphin.Engine.Stops), before this leaf was told to stop: kept for then.
+      {[:alias | ^stop_alias], reply} when platform != nil ->
+        loop(%{platform_ended(s) | stop_outcome: stop_outcome(reply)})
 
       {:"$dolphin_stop", reason} ->
         s |> halt(reason) |> stopped(reason)
@@ -349,8 +380,13 @@ defmodule Dolphin.Engine.Runner do
       key = Enum.find_value(s.code, fn {k, v} -> if v == {:running, pid}, do: k end) ->
         %{s | code: Map.delete(s.code, key)} |> feed({:code_result, key, {:error, {:exit, reason}}})
 
+      # Sent a stop by another process, it ended before it answered: it had
+      # finished or failed, and counts as stopped (as when the leaf asks).
+      pid == s.platform and s.stop_alias != nil and Stops.sent?(s.id) ->
+        %{platform_ended(s) | stop_outcome: :ok}
+
       pid == s.platform ->
-        %{s | platform: nil} |> feed({:platform_exit, reason})
+        s |> platform_ended() |> feed({:platform_exit, reason})
 
       true ->
         s
@@ -374,6 +410,13 @@ defmodule Dolphin.Engine.Runner do
 
   defp feed(s, event) do
     {effects, cstate} = s.mod.handle(event, s.cstate)
+    run_effects(effects, %{s | cstate: cstate})
+  end
+
+  # An event whose condition_met the run's conditions process has emitted already.
+  defp feed(s, event, :said) do
+    {effects, cstate} = s.mod.handle(event, s.cstate)
+    effects = Enum.reject(effects, &(match?({:emit, :condition_met, _}, &1) or match?({:emit, :condition_met, _, _}, &1)))
     run_effects(effects, %{s | cstate: cstate})
   end
 
@@ -427,7 +470,21 @@ defmodule Dolphin.Engine.Runner do
     end
   end
 
+  # An `until`'s condition is watched by the run's conditions process, which
+  # stops the platforms under it itself (Dolphin.Engine.Conditions); one
+  # that follows the vehicles its task flies is watched here.
+  defp effect({:watch, key, %{follow: false} = cond}, %{kind: :until, run: %{conditions: hub}} = s) do
+    Conditions.watch(hub, key, cond, s.id, s.id + Task.count(s.task) - 1)
+    %{s | elsewhere: Map.put(s.elsewhere, key, cond), watcher: Watcher.forget(s.watcher, key)}
+  end
+
   defp effect({:watch, key, cond}, s), do: ensure_tick(%{follow_flown(s, cond) | watches: s.watches ++ [{key, cond}]})
+
+  defp effect({:unwatch, key}, %{elsewhere: elsewhere} = s) when is_map_key(elsewhere, key) do
+    Conditions.unwatch(s.run.conditions, key)
+    %{s | elsewhere: Map.delete(elsewhere, key)}
+  end
+
   defp effect({:unwatch, key}, s), do: %{s | watches: List.keydelete(s.watches, key, 0), watcher: Watcher.forget(s.watcher, key)}
 
   defp effect({:timer, key, ms}, s) do
@@ -478,7 +535,7 @@ defmodule Dolphin.Engine.Runner do
           e -> {:error, {:exception, e, __STACKTRACE__}}
         end
         |> case do
-          {:ok, pid} when is_pid(pid) -> %{s | platform: pid}
+          {:ok, pid} when is_pid(pid) -> %{s | platform: pid, stop_alias: stoppable(s.id, pid, platform)}
           {:error, reason} -> feed(s, {:platform_start_failed, reason})
           other -> feed(s, {:platform_start_failed, "#{inspect(platform)}.start/3 returned #{inspect(other)}"})
         end
@@ -493,12 +550,7 @@ defmodule Dolphin.Engine.Runner do
   end
 
   defp effect({:emit, :condition_met, fields, sensor_reads}, s) do
-    emit(s, :condition_met, fields)
-
-    for {v, sensor} <- sensor_reads,
-        detection = Dolphin.Engine.Watcher.detection(v, sensor),
-        do: emit(s, :sensor_threshold, Dolphin.Sensors.Detection.event_fields(detection, fields.condition, nil))
-
+    emit_condition_met(s.run.id, s.id, s.ctx, fields, sensor_reads)
     s
   end
 
@@ -555,6 +607,7 @@ defmodule Dolphin.Engine.Runner do
   end
 
   defp concerns?(_s, _key, _cond, :all), do: true
+  defp concerns?(_s, key, _cond, {:key, only}), do: key == only
   defp concerns?(_s, _key, %{follow: true}, {:vehicle, _}), do: true
   defp concerns?(s, key, _cond, read), do: Watcher.reads?(s.watcher, key, read)
 
@@ -613,7 +666,8 @@ defmodule Dolphin.Engine.Runner do
     kill_code(s)
     Enum.each(in_start_order(s), &stop_node(&1.pid, reason))
     {outcome, s} = platform_stop(s, reason)
-    %{s | timers: %{}, tick: nil, watches: [], code: %{}, halted: outcome}
+    Enum.each(Map.keys(s.elsewhere), &Conditions.unwatch(s.run.conditions, &1))
+    %{s | timers: %{}, tick: nil, watches: [], elsewhere: %{}, code: %{}, halted: outcome}
   end
 
   defp kill_code(s) do
@@ -679,15 +733,45 @@ defmodule Dolphin.Engine.Runner do
   end
 
   # Stops the platform task (if it runs), bounded; {:ok | {:error, reason}, s}.
-  defp platform_stop(%{platform: nil} = s, _reason), do: {:ok, s}
+  # (Its answer to a stop sent by another process may have come already.)
+  defp platform_stop(%{platform: nil} = s, _reason), do: {s.stop_outcome || :ok, s}
 
   defp platform_stop(%{platform: pid, task: %PlatformTask{platform: platform}} = s, reason) do
     outcome =
-      if function_exported?(platform, :stop_request, 1),
-        do: stop_by_request(pid, platform.stop_request(reason), s.ctx),
-        else: stop_in_helper(pid, platform, reason, s.ctx)
+      cond do
+        s.stop_alias == nil -> stop_in_helper(pid, platform, reason, s.ctx)
+        Stops.claim(s.id) -> stop_by_request(pid, platform.stop_request(reason), s.ctx)
+        true -> await_stop(pid, s.stop_alias, s.ctx)
+      end
 
-    {outcome, %{s | platform: nil}}
+    {outcome, platform_ended(s)}
+  end
+
+  # A platform that answers a stop request may be sent its stop by the run's
+  # conditions process (Dolphin.Engine.Stops): the alias its answer comes to.
+  defp stoppable(task_id, pid, platform) do
+    if function_exported?(platform, :stop_request, 1), do: Stops.register(task_id, pid, platform)
+  end
+
+  defp platform_ended(s) do
+    if s.stop_alias, do: Stops.forget(s.id, s.stop_alias)
+    %{s | platform: nil, stop_alias: nil}
+  end
+
+  # The answer to the stop the run's conditions process sent, bounded as the
+  # leaf's own request is.
+  defp await_stop(pid, alias, ctx) do
+    case Stops.await(pid, alias, ctx.clock.real_ms(ctx.stop_timeout_ms)) do
+      {:reply, result} ->
+        stop_outcome(result)
+
+      :gone ->
+        :ok
+
+      :timeout ->
+        Process.exit(pid, :kill)
+        {:error, {:stop_timeout, ctx.stop_timeout_ms}}
+    end
   end
 
   # The platform's process answers a call to stop: the request is sent from
@@ -753,8 +837,24 @@ defmodule Dolphin.Engine.Runner do
   defp stop_outcome({:error, why}), do: {:error, {:stop_failed, why}}
   defp stop_outcome(other), do: {:error, {:stop_failed, other}}
 
-  defp emit(s, event, fields),
-    do: Dolphin.Events.emit(event, Map.merge(%{run: s.run.id, task_id: s.id}, fields), s.ctx.clock.now_ms())
+  defp emit(s, event, fields), do: emit_event(s.run.id, s.id, s.ctx, event, fields)
+
+  @doc false
+  # A condition_met event, and a sensor_threshold event for each {vehicle,
+  # sensor} the condition read (its reading now); also emitted by the run's
+  # conditions process for the `until`s it watches.
+  def emit_condition_met(run_id, task_id, ctx, fields, sensor_reads) do
+    emit_event(run_id, task_id, ctx, :condition_met, fields)
+
+    for {v, sensor} <- sensor_reads,
+        detection = Dolphin.Engine.Watcher.detection(v, sensor),
+        do: emit_event(run_id, task_id, ctx, :sensor_threshold, Dolphin.Sensors.Detection.event_fields(detection, fields.condition, nil))
+
+    :ok
+  end
+
+  defp emit_event(run_id, task_id, ctx, event, fields),
+    do: Dolphin.Events.emit(event, Map.merge(%{run: run_id, task_id: task_id}, fields), ctx.clock.now_ms())
 
   defp vehicles_in(task), do: for(%PlatformTask{vehicle: v} when v != nil <- Task.flatten(task), do: v) |> Enum.uniq()
 end

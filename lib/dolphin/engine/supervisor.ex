@@ -15,6 +15,8 @@ defmodule Dolphin.Engine.Supervisor do
 
     # The default signal table (scripts make their own), owned by this supervisor.
     Dolphin.Engine.Signals.new(Dolphin.Engine.Signals)
+    # The platforms a run's conditions process may stop (Dolphin.Engine.Stops), owned by this supervisor.
+    Dolphin.Engine.Stops.new()
 
     children = [
       {Registry, keys: :unique, name: Dolphin.Engine.Registry},

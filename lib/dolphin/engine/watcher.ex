@@ -92,6 +92,29 @@ defmodule Dolphin.Engine.Watcher do
   end
 
   @doc """
+  Forgets what the condition of `key` read, letting go of `unread`: what
+  the caller knows no other condition reads (`forget/2` works that out
+  itself, in time that grows with all that is read). What is followed
+  whatever the conditions read stays.
+  """
+  @spec forget(t(), term(), [Snapshot.read()]) :: t()
+  def forget(%__MODULE__{} = w, key, unread) do
+    Enum.reduce(unread, %{w | reads: Map.delete(w.reads, key)}, fn
+      {:vehicle, id}, w ->
+        if MapSet.member?(w.followed, id) or not Map.has_key?(w.vehicles, id) do
+          w
+        else
+          Source.unsubscribe(id)
+          %{w | vehicles: Map.delete(w.vehicles, id)}
+        end
+
+      {:signals, table}, w ->
+        if MapSet.member?(w.signals, table), do: PubSub.unsubscribe({:dolphin_signals, table})
+        %{w | signals: MapSet.delete(w.signals, table)}
+    end)
+  end
+
+  @doc """
   Follows a vehicle whatever the conditions read (a platform task's, whose
   loss ends the task; those a task flies): subscribes, then reads it.
   Returns the read and the watcher.
@@ -111,6 +134,10 @@ defmodule Dolphin.Engine.Watcher do
   def update(%__MODULE__{vehicles: vehicles} = w, %View{id: id} = view) do
     if Map.has_key?(vehicles, id), do: %{w | vehicles: Map.put(vehicles, id, view)}, else: w
   end
+
+  @doc "What the condition of `key` has read (while it is watched)."
+  @spec reads(t(), term()) :: MapSet.t(Snapshot.read())
+  def reads(%__MODULE__{reads: reads}, key), do: Map.get(reads, key, MapSet.new())
 
   @doc "Whether the condition of `key` has read `read` (a change of it may change the condition)."
   @spec reads?(t(), term(), Snapshot.read()) :: boolean()

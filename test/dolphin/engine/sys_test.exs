@@ -47,12 +47,16 @@ defmodule Dolphin.Engine.SysTest do
     listed = fn -> Enum.sort(for %{run: ^run, pid: pid} <- tasks(), do: pid) end
     Dolphin.Test.Wait.until(fn -> Enum.sort(nodes) == listed.() end, 250, fn -> "#{inspect(Enum.sort(nodes))} == #{inspect(listed.())}" end)
 
-    # Debug hooks see the messages a node handles: the until node gets the vehicle's change.
+    # The run's conditions process answers too: it watches the until's condition.
     [{_, until_pid, _}] = for {_, _, %{kind: :until}} = p <- procs, do: p
+    %{watched: watched} = :sys.get_state(hd(states).run.conditions, 5_000)
+    assert [{^until_pid, :c}] = Map.keys(watched)
+
+    # Debug hooks see the messages a node handles: the until node is told its condition holds.
     me = self()
     :ok = :sys.install(until_pid, {fn acc, event, _name -> send(me, {:sys_event, event}) && acc end, nil})
     FakeSource.set(ctx.source, a, battery: 0.2)
-    assert_receive {:sys_event, {:in, {:dolphin, {:vehicle, ^a}, _}}}, 5_000
+    assert_receive {:sys_event, {:in, {:"$dolphin_condition", :c}}}, 5_000
     assert {:ok, :done} = await(run, 10_000)
   end
 
