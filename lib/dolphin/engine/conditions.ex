@@ -151,8 +151,7 @@ defmodule Dolphin.Engine.Conditions do
       |> Enum.reduce({[], s}, fn {_n, k}, {met, s} ->
         w = Map.fetch!(s.watched, k)
         {result, watcher} = Watcher.evaluate(s.watcher, k, w.cond)
-        read_more? = MapSet.size(Watcher.reads(watcher, k)) != MapSet.size(Watcher.reads(s.watcher, k))
-        s = if read_more?, do: index(%{s | watcher: watcher}, k, w.n), else: %{s | watcher: watcher}
+        s = if watcher === s.watcher, do: s, else: index(%{s | watcher: watcher}, k, w.n)
 
         case result do
           {:ok, true} ->
