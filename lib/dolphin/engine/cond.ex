@@ -12,8 +12,9 @@ defmodule Dolphin.Engine.Cond do
   expression, rewriting its readers to read the snapshot
   (`Dolphin.Engine.Snapshot.battery(snapshot, v1)`). The engine evaluates a
   condition when its task starts, again whenever something it read changes
-  — the state of a vehicle it read, a signal it polled: its node's
-  `Dolphin.Engine.Watcher` follows those and hands the condition a snapshot
+  — the state of a vehicle it read, a signal it polled: a
+  `Dolphin.Engine.Watcher` (its node's, or for an `until` its run's
+  conditions process's) follows those and hands the condition a snapshot
   of them — and on a slow tick for conditions on anything else (time). A
   condition returning another closure or condition is evaluated through it,
   on the same snapshot, so `until(t, my_condition)` works with a variable.

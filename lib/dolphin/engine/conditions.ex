@@ -30,6 +30,9 @@ defmodule Dolphin.Engine.Conditions do
 
   alias Dolphin.Engine.{Context, Node, Runner, Stops, Watcher}
 
+  # How many conditions the slow tick re-evaluates between two looks at the mailbox.
+  @tick_part 100
+
   @doc false
   # Started in the run's process (its group leader: a dry run knows its processes by it).
   def start_link(ctx, run_id) do
@@ -39,7 +42,8 @@ defmodule Dolphin.Engine.Conditions do
   end
 
   @doc false
-  def watch(hub, key, cond, task_id, last_id), do: send(hub, {:watch, self(), key, cond, task_id, last_id})
+  def watch(hub, key, cond, task_id, last_id),
+    do: send(hub, {:watch, self(), key, cond, task_id, last_id})
 
   @doc false
   def unwatch(hub, key), do: send(hub, {:unwatch, self(), key})
@@ -80,13 +84,29 @@ defmodule Dolphin.Engine.Conditions do
 
       {:tick, token} ->
         case s.tick do
-          {_ref, ^token} -> %{s | tick: nil} |> evaluate(for({k, w} <- s.watched, do: {w.n, k})) |> ensure_tick() |> loop()
-          _ -> loop(s)
+          {_ref, ^token} ->
+            %{s | tick: nil}
+            |> on_tick(Enum.sort(for {k, w} <- s.watched, do: {w.n, k}))
+            |> ensure_tick()
+            |> loop()
+
+          _ ->
+            loop(s)
         end
+
+      {:tick_rest, keys} ->
+        loop(on_tick(s, keys))
 
       {:watch, node, key, cond, task_id, last_id} ->
         k = {node, key}
-        s = %{s | watched: Map.put(s.watched, k, %{cond: cond, task_id: task_id, last_id: last_id, n: s.n}), n: s.n + 1}
+
+        s = %{
+          s
+          | watched:
+              Map.put(s.watched, k, %{cond: cond, task_id: task_id, last_id: last_id, n: s.n}),
+            n: s.n + 1
+        }
+
         s = add_node(s, node, key)
         # Evaluated at once, on what is read now (subscribed first): a change
         # between the node's own check and this is not missed.
@@ -135,10 +155,19 @@ defmodule Dolphin.Engine.Conditions do
     end
   end
 
-  # Evaluates the conditions given as {n, key}, in watch order (n); sends
-  # the stops of each that holds at once, and once all are evaluated says
-  # condition_met for them and tells their nodes: every stop is on its way
-  # before any `until` or leaf is woken.
+  # The slow tick's re-evaluation of every condition, a part at a time:
+  # what comes in meanwhile (a vehicle's change) is not kept waiting behind
+  # a thousand evaluations.
+  defp on_tick(s, keys) do
+    {now, rest} = Enum.split(keys, @tick_part)
+    if rest != [], do: send(self(), {:tick_rest, rest})
+    evaluate(s, now)
+  end
+
+  # Evaluates the conditions given as {n, key}, in watch order (n), those
+  # still watched; sends the stops of each that holds at once, and once all
+  # are evaluated says condition_met for them and tells their nodes: every
+  # stop is on its way before any `until` or leaf is woken.
   defp evaluate(s, keys) do
     # Until every stop is sent, the processes those stops wake (and anything
     # else of normal priority) wait: a slice of this work is not put behind
@@ -146,11 +175,24 @@ defmodule Dolphin.Engine.Conditions do
     Process.flag(:priority, :high)
 
     {met, s} =
-      keys
-      |> Enum.sort()
-      |> Enum.reduce({[], s}, fn {_n, k}, {met, s} ->
-        w = Map.fetch!(s.watched, k)
+      keys |> Enum.sort() |> Enum.reduce({[], s}, fn {_n, k}, acc -> evaluate_one(k, acc) end)
+
+    Process.flag(:priority, :normal)
+
+    met
+    |> Enum.reverse()
+    |> Enum.reduce(s, fn {{node, key} = k, w}, s ->
+      condition_met(s, w)
+      send(node, {:"$dolphin_condition", key})
+      drop(s, k)
+    end)
+  end
+
+  defp evaluate_one(k, {met, s}) do
+    case s.watched do
+      %{^k => w} ->
         {result, watcher} = Watcher.evaluate(s.watcher, k, w.cond)
+        # (A watcher that read nothing new comes back the same term: compared at once.)
         s = if watcher === s.watcher, do: s, else: index(%{s | watcher: watcher}, k, w.n)
 
         case result do
@@ -165,17 +207,11 @@ defmodule Dolphin.Engine.Conditions do
           {:error, _, _} ->
             {met, give_back(s, k)}
         end
-      end)
 
-    Process.flag(:priority, :normal)
-
-    met
-    |> Enum.reverse()
-    |> Enum.reduce(s, fn {{node, key} = k, w}, s ->
-      condition_met(s, w)
-      send(node, {:"$dolphin_condition", key})
-      drop(s, k)
-    end)
+      # No longer watched (a part of the tick's, after its node let it go).
+      _ ->
+        {met, s}
+    end
   end
 
   # The event its `until` would have emitted (Dolphin.Engine.Until), with the
@@ -184,8 +220,11 @@ defmodule Dolphin.Engine.Conditions do
   # (their holds are seen a radio round trip later).
   defp condition_met(s, w) do
     case Node.cond_met(w.cond) do
-      {:emit, :condition_met, fields} -> Runner.emit_condition_met(s.run_id, w.task_id, s.ctx, fields, [])
-      {:emit, :condition_met, fields, reads} -> Runner.emit_condition_met(s.run_id, w.task_id, s.ctx, fields, reads)
+      {:emit, :condition_met, fields} ->
+        Runner.emit_condition_met(s.run_id, w.task_id, s.ctx, fields, [])
+
+      {:emit, :condition_met, fields, reads} ->
+        Runner.emit_condition_met(s.run_id, w.task_id, s.ctx, fields, reads)
     end
   end
 
@@ -217,7 +256,13 @@ defmodule Dolphin.Engine.Conditions do
             nodes -> nodes
           end
 
-        %{s | watched: watched, readers: readers, nodes: nodes, watcher: Watcher.forget(s.watcher, k, unread)}
+        %{
+          s
+          | watched: watched,
+            readers: readers,
+            nodes: nodes,
+            watcher: Watcher.forget(s.watcher, k, unread)
+        }
     end
   end
 
@@ -234,8 +279,11 @@ defmodule Dolphin.Engine.Conditions do
 
   defp add_node(s, node, key) do
     case s.nodes do
-      %{^node => {ref, keys}} -> %{s | nodes: Map.put(s.nodes, node, {ref, MapSet.put(keys, key)})}
-      _ -> %{s | nodes: Map.put(s.nodes, node, {Process.monitor(node), MapSet.new([key])})}
+      %{^node => {ref, keys}} ->
+        %{s | nodes: Map.put(s.nodes, node, {ref, MapSet.put(keys, key)})}
+
+      _ ->
+        %{s | nodes: Map.put(s.nodes, node, {Process.monitor(node), MapSet.new([key])})}
     end
   end
 

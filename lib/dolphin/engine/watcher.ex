@@ -3,10 +3,13 @@ defmodule Dolphin.Engine.Watcher do
   The inputs of a task node's conditions: the engine side of "conditions are
   re-evaluated on every change of what they read".
 
-  A watcher is a value held by the node's process. It follows the vehicles
-  and signal tables that the node's conditions read (and the vehicle of a
-  platform task, and the vehicles a task flies when one of its conditions
-  reads through functions nobody sees into: `follow/2`): the node's process
+  A watcher is a value held by a process: a node's (its conditions, and
+  the vehicle of a platform task), or a run's conditions process (the
+  conditions of its `until` nodes, which it evaluates in one place so that
+  a change that trips many stops them all at once). It follows the
+  vehicles and signal tables that the conditions read (and the vehicles a
+  task flies when one of its conditions reads through functions nobody
+  sees into: `follow/2`): the process holding it
   is subscribed to their topics on `Dolphin.PubSub`, and the watcher keeps
   the latest `Dolphin.Vehicles.View` of each vehicle, replaced whole by each
   one published (`update/2`).
