@@ -650,6 +650,42 @@ defmodule Dolphin.Vehicles do
   defp check_items!(other), do: raise(ArgumentError, "a mission is a list of items, got: #{inspect(other)}")
 
   @doc false
+  # Called by links with the frames one wake-up decoded, in order, each with
+  # the path it came by: as route/2 does for each, but what goes to one
+  # vehicle's process goes in one message (its process wakes once for them).
+  @spec route_all([{Frame.t(), term()}]) :: :ok
+  def route_all([{frame, link}]), do: route(frame, link)
+
+  def route_all(routed) do
+    {by_pid, order} =
+      Enum.reduce(routed, {%{}, []}, fn {%Frame{sysid: sysid} = frame, link} = one, {by_pid, order} ->
+        id = Dolphin.Vehicles.Views.vehicle_on(sysid, link)
+
+        case whereis_local(id) do
+          nil ->
+            # (Its process, once started, is found for the frames after this one.)
+            discover(id, frame, link)
+            {by_pid, order}
+
+          pid ->
+            case by_pid do
+              %{^pid => frames} -> {Map.put(by_pid, pid, [one | frames]), order}
+              _ -> {Map.put(by_pid, pid, [one]), [pid | order]}
+            end
+        end
+      end)
+
+    for pid <- Enum.reverse(order) do
+      case Map.fetch!(by_pid, pid) do
+        [{frame, link}] -> GenServer.cast(pid, {:frame, frame, link})
+        frames -> GenServer.cast(pid, {:frames, Enum.reverse(frames)})
+      end
+    end
+
+    :ok
+  end
+
+  @doc false
   # Called by links for every frame and the path it came by (a
   # Dolphin.Link.Connection.via()): cast it to its vehicle, discovering the
   # vehicle on its first HEARTBEAT from a vehicle component.

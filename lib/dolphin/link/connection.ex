@@ -4,9 +4,11 @@ defmodule Dolphin.Link.Connection do
   `Dolphin.Link.Endpoint`).
 
   It decodes what it receives (a UDP datagram holds whole frames, several are
-  fine; a TCP stream splits frames anywhere) and hands each frame to
-  `Dolphin.Vehicles.route/2`, which casts it to the vehicle's process: the link
-  never waits on a vehicle. With `udpin` it remembers the source address of
+  fine; a TCP stream splits frames anywhere) and hands the frames to
+  `Dolphin.Vehicles.route_all/1`, which casts each vehicle's to its process
+  in one message: the link never waits on a vehicle. Datagrams waiting in
+  its mailbox (it was busy) are taken in the same wake-up, up to 64, so
+  that under load a vehicle's process wakes once for several frames. With `udpin` it remembers the source address of
   every system id, so that each vehicle is answered where it sends from and
   many vehicles share one port. A `tcp` link connects, and reconnects with
   backoff (0.5 s doubling to 5 s) whenever the connection is lost.
@@ -31,7 +33,8 @@ defmodule Dolphin.Link.Connection do
       are signed; incoming signed frames are verified; with `require: true`
       unsigned ones are dropped;
     * `:router` — a 2-arity function given each frame and the path it came
-      by, a `t:via/0` (default `Dolphin.Vehicles.route/2`);
+      by, a `t:via/0` (by default the frames go to `Dolphin.Vehicles.route_all/1`
+      together, as above);
     * `:network` — the name of the network this link is (see
       `Dolphin.Vehicles.Id`): the vehicles it hears are told apart by system
       id alone, whatever address each sends from, and a vehicle whose system
@@ -69,6 +72,8 @@ defmodule Dolphin.Link.Connection do
   # How long (real ms) a frame another link recorded in the same .tlog makes
   # an identical one a copy (see "Links that share a .tlog").
   @copy_window_ms 1_000
+  # How many datagrams waiting in the mailbox one wake-up takes at most (see handle_info/2).
+  @drain_max 64
 
   @doc false
   def child_spec(opts) do
@@ -168,6 +173,8 @@ defmodule Dolphin.Link.Connection do
          seq: 0,
          gcs: {Keyword.get_lazy(opts, :gcs_sysid, fn -> Application.get_env(:dolphin, :gcs_sysid, 255) end), Keyword.get(opts, :gcs_compid, 190)},
          router: Keyword.get(opts, :router, &Dolphin.Vehicles.route/2),
+         # The default router takes what a wake-up decoded at once (Dolphin.Vehicles.route_all/1).
+         batch?: not Keyword.has_key?(opts, :router),
          stats: %Stats{},
          # Fresh, for each datagram (see handle_info/2); signed links verify every frame: no fast path.
          datagram_parser: Parser.new(batch: opts[:signing] == nil),
@@ -225,14 +232,15 @@ defmodule Dolphin.Link.Connection do
   end
 
   @impl true
+  # The datagrams already waiting behind this one are taken in the same
+  # wake-up (up to @drain_max), and what they hold for each vehicle is
+  # handed to its process in one message: under load, several frames per
+  # wake-up of a vehicle's process instead of one. Nothing waits for more
+  # to come: on a quiet link each datagram is its own batch.
   def handle_info({:udp, socket, ip, port, datagram}, %{socket: socket} = state) do
-    forward(state, datagram)
-    # A datagram is whole frames: decode it on its own (a fresh parser, made
-    # once: a parser's making costs more than a small frame's decoding), then end it.
-    {frames, parser} = Parser.feed(%{state.datagram_parser | signing: state.signing}, datagram)
-    {last, parser} = Parser.finish(parser)
-    state = %{state | stats: add_stats(state.stats, Parser.stats(parser)), signing: parser.signing}
-    {:noreply, deliver(state, frames ++ last, {ip, port})}
+    {state, routed} = drain(datagram_in(state, ip, port, datagram, []), socket, @drain_max - 1)
+    if routed != [], do: Dolphin.Vehicles.route_all(Enum.reverse(routed))
+    {:noreply, state}
   end
 
   def handle_info({:udp_passive, socket}, %{socket: socket} = state) do
@@ -246,7 +254,9 @@ defmodule Dolphin.Link.Connection do
     before = Parser.stats(state.stream)
     {frames, parser} = Parser.feed(state.stream, data)
     state = %{state | stream: parser, stats: add_stats(state.stats, diff_stats(Parser.stats(parser), before)), signing: parser.signing}
-    {:noreply, deliver(state, frames, :tcp)}
+    {state, routed} = deliver(state, frames, :tcp, [])
+    if routed != [], do: Dolphin.Vehicles.route_all(Enum.reverse(routed))
+    {:noreply, state}
   end
 
   def handle_info({:tcp_passive, socket}, %{socket: socket} = state) do
@@ -329,14 +339,45 @@ defmodule Dolphin.Link.Connection do
     %{state | backoff: min(state.backoff * 2, @backoff_max)}
   end
 
-  defp deliver(state, frames, from) do
+  # (The frames of a TCP read are handed over the same way.)
+  defp drain({state, routed}, _socket, 0), do: {state, routed}
+
+  defp drain({state, routed}, socket, left) do
+    receive do
+      {:udp, ^socket, ip, port, datagram} -> drain(datagram_in(state, ip, port, datagram, routed), socket, left - 1)
+    after
+      0 -> {state, routed}
+    end
+  end
+
+  # One datagram: forwarded, decoded, its frames recorded and routed (or,
+  # with the default router, added to `routed`, newest first).
+  defp datagram_in(state, ip, port, datagram, routed) do
+    forward(state, datagram)
+    # A datagram is whole frames: decode it on its own (a fresh parser, made
+    # once: a parser's making costs more than a small frame's decoding), then end it.
+    {frames, parser} = Parser.feed(%{state.datagram_parser | signing: state.signing}, datagram)
+    {last, parser} = Parser.finish(parser)
+    state = %{state | stats: add_stats(state.stats, Parser.stats(parser)), signing: parser.signing}
+    deliver(state, frames ++ last, {ip, port}, routed)
+  end
+
+  defp deliver(state, frames, from, routed) do
     {gcs_sysid, _} = state.gcs
 
-    Enum.reduce(frames, state, fn frame, state ->
+    Enum.reduce(frames, {state, routed}, fn frame, {state, routed} ->
       record_in(state, frame)
+      via = {state.name, if(state.endpoint.kind == :udpin, do: from)}
+
       # A reply addressed to another ground station on the link is not ours.
-      if for_us?(frame.message, gcs_sysid), do: state.router.(frame, {state.name, if(state.endpoint.kind == :udpin, do: from)})
-      heard(state, frame.sysid, from)
+      routed =
+        cond do
+          not for_us?(frame.message, gcs_sysid) -> routed
+          state.batch? -> [{frame, via} | routed]
+          true -> state.router.(frame, via) && routed
+        end
+
+      {heard(state, frame.sysid, from), routed}
     end)
   end
 

@@ -201,6 +201,11 @@ defmodule Dolphin.Vehicles.Vehicle do
     end
   end
 
+  # Several frames a link took in one wake-up: each as if it came alone.
+  def handle_cast({:frames, frames}, s) do
+    {:noreply, Enum.reduce(frames, s, fn {frame, link}, s -> elem(handle_cast({:frame, frame, link}, s), 1) end)}
+  end
+
   def handle_cast(:settings_changed, s), do: {:noreply, publish_view(s)}
 
   def handle_cast(:sensors_changed, s) do

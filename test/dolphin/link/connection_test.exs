@@ -54,6 +54,34 @@ defmodule Dolphin.Link.ConnectionTest do
     :gen_tcp.close(listen)
   end
 
+  test "datagrams waiting for a busy link reach their vehicle in one message, in order, each applied" do
+    name = "batch-#{System.unique_integer([:positive])}"
+    {:ok, link} = Link.connect("udpin:127.0.0.1:0", name: name)
+    cleanup(link, [23, 24])
+    port = Connection.port(name)
+    peer = UDPPeer.open()
+    send_bytes = fn bytes -> :ok = :gen_udp.send(peer, {127, 0, 0, 1}, port, bytes) end
+
+    for sysid <- [23, 24], do: send_bytes.(Frame.encode(copter(), sysid: sysid, compid: 1))
+    Wait.until(fn -> match?({:ok, _}, Vehicles.state(23)) and match?({:ok, _}, Vehicles.state(24)) end)
+    vehicle = Vehicles.whereis_local(23)
+    :erlang.trace(vehicle, true, [:receive])
+
+    # The link busy: what comes meanwhile waits in its mailbox.
+    :ok = :sys.suspend(link)
+    for {battery, seq} <- Enum.with_index([90, 80, 70, 60], 1), do: send_bytes.(Frame.encode(%M.SysStatus{battery_remaining: battery}, sysid: 23, compid: 1, seq: seq))
+    send_bytes.(Frame.encode(%M.SysStatus{battery_remaining: 10}, sysid: 24, compid: 1, seq: 1))
+    send_bytes.(Frame.encode(%M.SysStatus{battery_remaining: 50}, sysid: 23, compid: 1, seq: 5))
+    Wait.until(fn -> Process.info(link, :message_queue_len) == {:message_queue_len, 6} end)
+    :ok = :sys.resume(link)
+
+    assert_receive {:trace, ^vehicle, :receive, {:"$gen_cast", {:frames, frames}}}, 5_000
+    assert Enum.map(frames, fn {frame, _via} -> frame.message.battery_remaining end) == [90, 80, 70, 60, 50]
+    :erlang.trace(vehicle, false, [:receive])
+    Wait.until(fn -> match?({:ok, %{battery: 0.5}}, Vehicles.state(23)) and match?({:ok, %{battery: 0.1}}, Vehicles.state(24)) end)
+    assert %{stats: %{frames: 8}} = Connection.info(name)
+  end
+
   @tag :tmp_dir
   test "two links recording to one .tlog record a frame heard on both once, and a frame heard twice on one link twice", %{tmp_dir: dir} do
     tlog = Path.join(dir, "shared.tlog")
