@@ -135,17 +135,7 @@ defmodule Dolphin.Engine.Conditions do
   @doc false
   def system_terminate(reason, _parent, _debug, _s), do: exit(reason)
 
-  @doc false
-  def system_get_state(s), do: {:ok, s}
-
-  @doc false
-  def system_replace_state(fun, s) do
-    s = fun.(s)
-    {:ok, s, s}
-  end
-
-  @doc false
-  def system_code_change(s, _module, _old_vsn, _extra), do: {:ok, s}
+  use Dolphin.Engine.SysState
 
   # The conditions that read `read`, as {n, key}.
   defp readers(s, read) do

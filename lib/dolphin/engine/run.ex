@@ -182,17 +182,7 @@ defmodule Dolphin.Engine.Run do
     exit(reason)
   end
 
-  @doc false
-  def system_get_state(s), do: {:ok, s}
-
-  @doc false
-  def system_replace_state(fun, s) do
-    s = fun.(s)
-    {:ok, s, s}
-  end
-
-  @doc false
-  def system_code_change(s, _module, _old_vsn, _extra), do: {:ok, s}
+  use Dolphin.Engine.SysState
 
   @doc false
   def write_debug(device, {:in, msg}, run_id), do: IO.write(device, "*DBG* run #{run_id} got #{inspect(msg)}\n")
