@@ -11,9 +11,20 @@ defmodule Dolphin.Engine.Conditions do
   # it evaluates every condition that reads what changed, in the order they
   # were watched, then sends each platform under an `until` whose condition
   # holds its stop (Dolphin.Engine.Stops), all of them before anything else
-  # runs; only then does it say `condition_met` (the event, as the `until`
-  # would have) and tell the `until`s, which stop their subtrees as before
-  # (the leaves await the answers to the stops already sent).
+  # runs; only then does it tell the `until`s, which say `condition_met` and
+  # stop their subtrees as before (the leaves await the answers to the stops
+  # already sent). An `until` that has ended meanwhile says nothing.
+  #
+  # The platforms under an `until` are those of the tasks whose ids lie in
+  # its subtree's interval: a subtree started later (`reassign`'s,
+  # `on_sensor`'s missions) has ids of its own and is stopped the usual way,
+  # by its leaves when the `until` stops them.
+  #
+  # The conditions run here are those the script macros compile (readers,
+  # arithmetic, comparisons) and functions of the snapshot given to
+  # Dolphin.Engine.Cond.new/2: one that took long would hold up every
+  # `until` of the run, so a pass that goes on past @high_ms gives up its
+  # priority (below).
   #
   # What a condition reads is followed here exactly as a node does it
   # (Dolphin.Engine.Watcher); the slow tick re-evaluates them all. A
@@ -28,10 +39,12 @@ defmodule Dolphin.Engine.Conditions do
   # process answering OTP's system messages (:sys.get_state/1 shows what it
   # watches), whose :sys parent is the run.
 
-  alias Dolphin.Engine.{Context, Node, Runner, Stops, Watcher}
+  alias Dolphin.Engine.{Context, Stops, Watcher}
 
   # How many conditions the slow tick re-evaluates between two looks at the mailbox.
   @tick_part 100
+  # How long (real ms) a pass keeps high priority.
+  @high_ms 20
 
   @doc false
   # Started in the run's process (its group leader: a dry run knows its processes by it).
@@ -85,9 +98,8 @@ defmodule Dolphin.Engine.Conditions do
       {:tick, token} ->
         case s.tick do
           {_ref, ^token} ->
-            %{s | tick: nil}
+            %{s | tick: :running}
             |> on_tick(Enum.sort(for {k, w} <- s.watched, do: {w.n, k}))
-            |> ensure_tick()
             |> loop()
 
           _ ->
@@ -147,32 +159,42 @@ defmodule Dolphin.Engine.Conditions do
 
   # The slow tick's re-evaluation of every condition, a part at a time:
   # what comes in meanwhile (a vehicle's change) is not kept waiting behind
-  # a thousand evaluations.
+  # a thousand evaluations. The next tick is set once the last part is done.
   defp on_tick(s, keys) do
     {now, rest} = Enum.split(keys, @tick_part)
-    if rest != [], do: send(self(), {:tick_rest, rest})
-    evaluate(s, now)
+    s = evaluate(s, now)
+
+    case rest do
+      [] -> ensure_tick(%{s | tick: nil})
+      _ -> send(self(), {:tick_rest, rest}) && s
+    end
   end
 
   # Evaluates the conditions given as {n, key}, in watch order (n), those
   # still watched; sends the stops of each that holds at once, and once all
-  # are evaluated says condition_met for them and tells their nodes: every
-  # stop is on its way before any `until` or leaf is woken.
+  # are evaluated tells their nodes: every stop is on its way before any
+  # `until` or leaf is woken.
   defp evaluate(s, keys) do
     # Until every stop is sent, the processes those stops wake (and anything
     # else of normal priority) wait: a slice of this work is not put behind
-    # a thousand platforms in the run queue.
+    # a thousand platforms in the run queue. (For @high_ms at most.)
     Process.flag(:priority, :high)
+    high_until = System.monotonic_time(:millisecond) + @high_ms
 
     {met, s} =
-      keys |> Enum.sort() |> Enum.reduce({[], s}, fn {_n, k}, acc -> evaluate_one(k, acc) end)
+      keys
+      |> Enum.sort()
+      |> Enum.reduce({[], s}, fn {_n, k}, acc ->
+        acc = evaluate_one(k, acc)
+        if System.monotonic_time(:millisecond) > high_until, do: Process.flag(:priority, :normal)
+        acc
+      end)
 
     Process.flag(:priority, :normal)
 
     met
     |> Enum.reverse()
-    |> Enum.reduce(s, fn {{node, key} = k, w}, s ->
-      condition_met(s, w)
+    |> Enum.reduce(s, fn {{node, key} = k, _w}, s ->
       send(node, {:"$dolphin_condition", key})
       drop(s, k)
     end)
@@ -201,20 +223,6 @@ defmodule Dolphin.Engine.Conditions do
       # No longer watched (a part of the tick's, after its node let it go).
       _ ->
         {met, s}
-    end
-  end
-
-  # The event its `until` would have emitted (Dolphin.Engine.Until), with the
-  # sensors it read: said here, as soon as the stops are sent and before the
-  # `until` is told, so before anything the vehicles answer to the stops
-  # (their holds are seen a radio round trip later).
-  defp condition_met(s, w) do
-    case Node.cond_met(w.cond) do
-      {:emit, :condition_met, fields} ->
-        Runner.emit_condition_met(s.run_id, w.task_id, s.ctx, fields, [])
-
-      {:emit, :condition_met, fields, reads} ->
-        Runner.emit_condition_met(s.run_id, w.task_id, s.ctx, fields, reads)
     end
   end
 

@@ -212,6 +212,7 @@ defmodule Dolphin.Engine.Run do
   end
 
   defp release(s) do
+    Dolphin.Engine.Stops.forget_run(s.run.id)
     Dolphin.Fleet.unreserve(s.ctx.fleet, s.run.id)
   catch
     # No fleet (a run without platform tasks in a bare test): nothing was reserved.

@@ -277,12 +277,14 @@ defmodule Dolphin.Engine.Runner do
       {:dolphin, {:dolphin_signals, table}, _} ->
         loop(reevaluate(s, {:signals, table}))
 
-      # The run's conditions process found this node's condition true, sent
-      # the stops of the platforms under it and said condition_met.
+      # The run's conditions process found this node's condition true and
+      # sent the stops of the platforms under it; the node says
+      # condition_met and stops its subtree as if it had found it itself
+      # (unless it no longer watches it: it has ended meanwhile).
       {:"$dolphin_condition", key} ->
         case Map.pop(s.elsewhere, key) do
           {nil, _} -> loop(s)
-          {_cond, elsewhere} -> %{s | elsewhere: elsewhere} |> feed({:condition, key}, :said) |> loop()
+          {_cond, elsewhere} -> %{s | elsewhere: elsewhere} |> feed({:condition, key}) |> loop()
         end
 
       # ... or could not evaluate it: watched here again (and evaluated at once).
@@ -413,13 +415,6 @@ defmodule Dolphin.Engine.Runner do
     run_effects(effects, %{s | cstate: cstate})
   end
 
-  # An event whose condition_met the run's conditions process has emitted already.
-  defp feed(s, event, :said) do
-    {effects, cstate} = s.mod.handle(event, s.cstate)
-    effects = Enum.reject(effects, &(match?({:emit, :condition_met, _}, &1) or match?({:emit, :condition_met, _, _}, &1)))
-    run_effects(effects, %{s | cstate: cstate})
-  end
-
   defp run_effects(effects, s), do: Enum.reduce(effects, s, &effect/2)
 
   defp effect({:start, key, task}, s) do
@@ -474,7 +469,7 @@ defmodule Dolphin.Engine.Runner do
   # stops the platforms under it itself (Dolphin.Engine.Conditions); one
   # that follows the vehicles its task flies is watched here.
   defp effect({:watch, key, %{follow: false} = cond}, %{kind: :until, run: %{conditions: hub}} = s) do
-    Conditions.watch(hub, key, cond, s.id, s.id + Task.count(s.task) - 1)
+    Conditions.watch(hub, key, cond, s.id, last_id(s.task))
     %{s | elsewhere: Map.put(s.elsewhere, key, cond), watcher: Watcher.forget(s.watcher, key)}
   end
 
@@ -535,7 +530,7 @@ defmodule Dolphin.Engine.Runner do
           e -> {:error, {:exception, e, __STACKTRACE__}}
         end
         |> case do
-          {:ok, pid} when is_pid(pid) -> %{s | platform: pid, stop_alias: stoppable(s.id, pid, platform)}
+          {:ok, pid} when is_pid(pid) -> %{s | platform: pid, stop_alias: stoppable(s, pid, platform)}
           {:error, reason} -> feed(s, {:platform_start_failed, reason})
           other -> feed(s, {:platform_start_failed, "#{inspect(platform)}.start/3 returned #{inspect(other)}"})
         end
@@ -550,7 +545,12 @@ defmodule Dolphin.Engine.Runner do
   end
 
   defp effect({:emit, :condition_met, fields, sensor_reads}, s) do
-    emit_condition_met(s.run.id, s.id, s.ctx, fields, sensor_reads)
+    emit(s, :condition_met, fields)
+
+    for {v, sensor} <- sensor_reads,
+        detection = Dolphin.Engine.Watcher.detection(v, sensor),
+        do: emit(s, :sensor_threshold, Dolphin.Sensors.Detection.event_fields(detection, fields.condition, nil))
+
     s
   end
 
@@ -558,6 +558,11 @@ defmodule Dolphin.Engine.Runner do
   defp effect({:finish, result}, s), do: finish(s, result)
 
   # --- conditions ---
+
+  # The last task id of a subtree: ids are given in pre-order, before the
+  # `on` nodes are taken out (Dolphin.Engine.Run.prepare/4), so a subtree's
+  # ids are one interval, from its root's to its largest.
+  defp last_id(task), do: task |> Task.flatten() |> Enum.map(& &1.id) |> Enum.max()
 
   # A condition whose reads nobody sees (it calls functions the macros could
   # not see into, or reads live) is re-evaluated on the changes of the
@@ -749,8 +754,8 @@ defmodule Dolphin.Engine.Runner do
 
   # A platform that answers a stop request may be sent its stop by the run's
   # conditions process (Dolphin.Engine.Stops): the alias its answer comes to.
-  defp stoppable(task_id, pid, platform) do
-    if function_exported?(platform, :stop_request, 1), do: Stops.register(task_id, pid, platform)
+  defp stoppable(s, pid, platform) do
+    if function_exported?(platform, :stop_request, 1), do: Stops.register(s.id, pid, platform, s.run.id)
   end
 
   defp platform_ended(s) do
@@ -837,24 +842,8 @@ defmodule Dolphin.Engine.Runner do
   defp stop_outcome({:error, why}), do: {:error, {:stop_failed, why}}
   defp stop_outcome(other), do: {:error, {:stop_failed, other}}
 
-  defp emit(s, event, fields), do: emit_event(s.run.id, s.id, s.ctx, event, fields)
-
-  @doc false
-  # A condition_met event, and a sensor_threshold event for each {vehicle,
-  # sensor} the condition read (its reading now); also emitted by the run's
-  # conditions process for the `until`s it watches.
-  def emit_condition_met(run_id, task_id, ctx, fields, sensor_reads) do
-    emit_event(run_id, task_id, ctx, :condition_met, fields)
-
-    for {v, sensor} <- sensor_reads,
-        detection = Dolphin.Engine.Watcher.detection(v, sensor),
-        do: emit_event(run_id, task_id, ctx, :sensor_threshold, Dolphin.Sensors.Detection.event_fields(detection, fields.condition, nil))
-
-    :ok
-  end
-
-  defp emit_event(run_id, task_id, ctx, event, fields),
-    do: Dolphin.Events.emit(event, Map.merge(%{run: run_id, task_id: task_id}, fields), ctx.clock.now_ms())
+  defp emit(s, event, fields),
+    do: Dolphin.Events.emit(event, Map.merge(%{run: s.run.id, task_id: s.id}, fields), s.ctx.clock.now_ms())
 
   defp vehicles_in(task), do: for(%PlatformTask{vehicle: v} when v != nil <- Task.flatten(task), do: v) |> Enum.uniq()
 end

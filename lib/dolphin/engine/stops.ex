@@ -3,8 +3,9 @@ defmodule Dolphin.Engine.Stops do
   # The platform tasks running now whose stop another process than their
   # leaf may send: a table (public, one per node, made by
   # Dolphin.Engine.Supervisor) of {task_id, platform_pid, leaf_pid, alias,
-  # platform_module}, one row per leaf whose platform answers a stop request
-  # (Dolphin.Engine.Platform.stop_request/1).
+  # platform_module, run_id}, one row per leaf whose platform answers a stop
+  # request (Dolphin.Engine.Platform.stop_request/1). A run's rows go when
+  # it ends, whatever became of its leaves.
   #
   # Why: a burst of conditions tripped by one change. A run's conditions
   # process (Dolphin.Engine.Conditions) evaluates the `until`s' conditions;
@@ -35,10 +36,17 @@ defmodule Dolphin.Engine.Stops do
   @doc false
   # A leaf's platform started: it may be stopped from outside. Returns the
   # alias the platform's reply to a stop comes to.
-  def register(task_id, platform_pid, platform) do
+  def register(task_id, platform_pid, platform, run_id) do
     alias = :erlang.alias()
-    :ets.insert(@table, {task_id, platform_pid, self(), alias, platform})
+    :ets.insert(@table, {task_id, platform_pid, self(), alias, platform, run_id})
     alias
+  end
+
+  @doc false
+  # A run has ended: no row of it stays (a leaf that crashed left its own).
+  def forget_run(run_id) do
+    :ets.match_delete(@table, {:_, :_, :_, :_, :_, run_id})
+    :ok
   end
 
   @doc false
@@ -68,9 +76,17 @@ defmodule Dolphin.Engine.Stops do
     next = :ets.next(@table, id)
 
     case :ets.take(@table, id) do
-      [{^id, pid, leaf, alias, platform}] ->
-        send(pid, {:"$gen_call", {leaf, [:alias | alias]}, platform.stop_request(reason)})
-        stop_from(next, last, reason, n + 1)
+      [{^id, pid, leaf, alias, platform, _run} = row] ->
+        case request(platform, reason) do
+          {:ok, request} ->
+            send(pid, {:"$gen_call", {leaf, [:alias | alias]}, request})
+            stop_from(next, last, reason, n + 1)
+
+          # The leaf asks itself, and meets the error where it always did.
+          :error ->
+            :ets.insert(@table, row)
+            stop_from(next, last, reason, n)
+        end
 
       [] ->
         stop_from(next, last, reason, n)
@@ -78,6 +94,12 @@ defmodule Dolphin.Engine.Stops do
   end
 
   defp stop_from(_id, _last, _reason, n), do: n
+
+  defp request(platform, reason) do
+    {:ok, platform.stop_request(reason)}
+  catch
+    _kind, _why -> :error
+  end
 
   @doc false
   # The leaf's wait for the answer to a stop someone else sent (bounded,

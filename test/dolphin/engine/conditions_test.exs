@@ -79,6 +79,23 @@ defmodule Dolphin.Engine.ConditionsTest do
     for %{event: :task_finished, kind: :test} = e <- events, do: assert(e.result == :stopped)
   end
 
+  test "the platforms under an until are stopped while the until itself is busy (the stops do not wait for it)", ctx do
+    [v, w1, w2] = fake_vehicles(ctx, 3, pick: true)
+    {:ok, run} = start(until(concurrent([on(tp("a"), [w1]), on(tp("b"), [w2])]), low(v), name: "u"))
+    assert_platform(:started, "a")
+    assert_platform(:started, "b")
+    [%{pid: until}] = Enum.filter(tasks(), &(&1.run == run and &1.name == "u"))
+
+    :ok = :sys.suspend(until)
+    FakeSource.set(ctx.source, v, battery: 0.1)
+    assert %{reason: {:condition_met, _}} = assert_platform(:stopped, "a")
+    assert %{reason: {:condition_met, _}} = assert_platform(:stopped, "b")
+    :ok = :sys.resume(until)
+
+    assert {:ok, :done} = await(run, 10_000)
+    assert {:met, _} = List.keyfind(summary(events_of(run)), :met, 0)
+  end
+
   test "nested untils tripped by one change stop their platform once", ctx do
     [v, w] = fake_vehicles(ctx, 2, pick: true)
     {:ok, run} = start(on(until(until(tp("inner task"), low(v), name: "inner"), low(v), name: "outer"), [w]))
@@ -125,5 +142,7 @@ defmodule Dolphin.Engine.ConditionsTest do
     FakeSource.set(ctx.source, v, battery: 0.1)
     assert {:ok, :done} = await(run, 10_000)
     assert_receive {:DOWN, ^ref, :process, ^hub, _}, 5_000
+    # No row of the run is left for a conditions process to stop.
+    assert :ets.match(Dolphin.Engine.Stops, {:_, :_, :_, :_, :_, run}) == []
   end
 end
