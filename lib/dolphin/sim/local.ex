@@ -239,8 +239,10 @@ defmodule Dolphin.Sim.Local do
     # The simulator names a vehicle of a later network {network's number, system id} (Dolphin.Sim).
     key = if network.number > 1, do: &{network.number, &1}, else: & &1
     Enum.each(sysids, &Dolphin.Sim.stop(key.(&1)))
-    Enum.each(ids(network), &Dolphin.Vehicles.forget/1)
+    # The link first: a heartbeat it still held would discover a vehicle
+    # just forgotten again.
     Dolphin.Link.disconnect(link)
+    Enum.each(ids(network), &Dolphin.Vehicles.forget/1)
   end
 
   # The first network's vehicles announce themselves within a heartbeat:
