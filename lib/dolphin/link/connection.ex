@@ -239,8 +239,7 @@ defmodule Dolphin.Link.Connection do
   # to come: on a quiet link each datagram is its own batch.
   def handle_info({:udp, socket, ip, port, datagram}, %{socket: socket} = state) do
     {state, routed} = drain(datagram_in(state, ip, port, datagram, []), socket, @drain_max - 1)
-    if routed != [], do: Dolphin.Vehicles.route_all(Enum.reverse(routed))
-    {:noreply, state}
+    {:noreply, hand_over(state, routed)}
   end
 
   def handle_info({:udp_passive, socket}, %{socket: socket} = state) do
@@ -254,9 +253,9 @@ defmodule Dolphin.Link.Connection do
     before = Parser.stats(state.stream)
     {frames, parser} = Parser.feed(state.stream, data)
     state = %{state | stream: parser, stats: add_stats(state.stats, diff_stats(Parser.stats(parser), before)), signing: parser.signing}
+    # (The frames of a read are handed over together, as a wake-up's datagrams are.)
     {state, routed} = deliver(state, frames, :tcp, [])
-    if routed != [], do: Dolphin.Vehicles.route_all(Enum.reverse(routed))
-    {:noreply, state}
+    {:noreply, hand_over(state, routed)}
   end
 
   def handle_info({:tcp_passive, socket}, %{socket: socket} = state) do
@@ -339,7 +338,6 @@ defmodule Dolphin.Link.Connection do
     %{state | backoff: min(state.backoff * 2, @backoff_max)}
   end
 
-  # (The frames of a TCP read are handed over the same way.)
   defp drain({state, routed}, _socket, 0), do: {state, routed}
 
   defp drain({state, routed}, socket, left) do
@@ -362,6 +360,14 @@ defmodule Dolphin.Link.Connection do
     deliver(state, frames ++ last, {ip, port}, routed)
   end
 
+  # What the default router was kept for (newest first): to the vehicles, each's in one message.
+  defp hand_over(state, []), do: state
+
+  defp hand_over(state, routed) do
+    Dolphin.Vehicles.route_all(Enum.reverse(routed))
+    state
+  end
+
   defp deliver(state, frames, from, routed) do
     {gcs_sysid, _} = state.gcs
 
@@ -372,9 +378,16 @@ defmodule Dolphin.Link.Connection do
       # A reply addressed to another ground station on the link is not ours.
       routed =
         cond do
-          not for_us?(frame.message, gcs_sysid) -> routed
-          state.batch? -> [{frame, via} | routed]
-          true -> state.router.(frame, via) && routed
+          not for_us?(frame.message, gcs_sysid) ->
+            routed
+
+          state.batch? ->
+            [{frame, via} | routed]
+
+          # (Whatever a router given returns.)
+          true ->
+            state.router.(frame, via)
+            routed
         end
 
       {heard(state, frame.sysid, from), routed}

@@ -82,6 +82,20 @@ defmodule Dolphin.Link.ConnectionTest do
     assert %{stats: %{frames: 8}} = Connection.info(name)
   end
 
+  test "a router given is called for each frame, whatever it returns" do
+    name = "router-#{System.unique_integer([:positive])}"
+    me = self()
+    {:ok, link} = Link.connect("udpin:127.0.0.1:0", name: name, router: fn frame, _via -> send(me, {:routed, frame.seq}) && nil end)
+    cleanup(link, [])
+    peer = UDPPeer.open()
+    for seq <- [1, 2], do: :ok = :gen_udp.send(peer, {127, 0, 0, 1}, Connection.port(name), Frame.encode(copter(), sysid: 25, compid: 1, seq: seq))
+    assert_receive {:routed, 1}, 5_000
+    assert_receive {:routed, 2}, 5_000
+    # Still the same link, which counted both (a call: after it has handled them).
+    assert %{stats: %{frames: 2}} = Connection.info(name)
+    assert Process.alive?(link)
+  end
+
   @tag :tmp_dir
   test "two links recording to one .tlog record a frame heard on both once, and a frame heard twice on one link twice", %{tmp_dir: dir} do
     tlog = Path.join(dir, "shared.tlog")
