@@ -149,10 +149,10 @@ defmodule Dolphin.Engine.Conditions do
 
   use Dolphin.Engine.SysState
 
-  # The conditions that read `read`, as {n, key}.
+  # The conditions that read `read`, as {n, key}, in watch order.
   defp readers(s, read) do
     case s.readers do
-      %{^read => keys} -> for {k, n} <- keys, do: {n, k}
+      %{^read => keys} -> Enum.sort(for {k, n} <- keys, do: {n, k})
       _ -> []
     end
   end
@@ -170,7 +170,7 @@ defmodule Dolphin.Engine.Conditions do
     end
   end
 
-  # Evaluates the conditions given as {n, key}, in watch order (n), those
+  # Evaluates the conditions given as {n, key} in watch order (n), those
   # still watched; sends the stops of each that holds at once, and once all
   # are evaluated tells their nodes: every stop is on its way before any
   # `until` or leaf is woken.
@@ -182,9 +182,7 @@ defmodule Dolphin.Engine.Conditions do
     high_until = System.monotonic_time(:millisecond) + @high_ms
 
     {met, s} =
-      keys
-      |> Enum.sort()
-      |> Enum.reduce({[], s}, fn {_n, k}, acc ->
+      Enum.reduce(keys, {[], s}, fn {_n, k}, acc ->
         acc = evaluate_one(k, acc)
         if System.monotonic_time(:millisecond) > high_until, do: Process.flag(:priority, :normal)
         acc
