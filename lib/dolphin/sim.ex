@@ -254,6 +254,27 @@ defmodule Dolphin.Sim do
     end
   end
 
+  @doc """
+  Does `action` to a vehicle the moment it reaches mission item `seq`, right
+  after it reports MISSION_ITEM_REACHED for it: what a test or a demonstration
+  needs to lose a vehicle at a given point of its mission, exactly there,
+  however far behind the ground station's hearing runs. `action` is `:crash`
+  (nothing more is heard from it and its process ends, as `crash/1`),
+  `{:faults, faults}` (as `set_faults/2`: `{:faults, silence: true}`) or
+  `{:battery, fraction}` (as `set_battery/2`). Each is done once; several
+  for one item are done in the order given.
+  """
+  @spec on_item_reached(byte(), non_neg_integer(), :crash | {:faults, map() | keyword()} | {:battery, number()}) ::
+          :ok | {:error, :unknown_vehicle | Dolphin.Sim.Error.t()}
+  def on_item_reached(sysid, seq, action) when is_integer(seq) and seq >= 0 do
+    case action do
+      :crash -> call(sysid, {:on_item_reached, seq, action})
+      {:battery, f} when is_number(f) and f >= 0 and f <= 1 -> call(sysid, {:on_item_reached, seq, action})
+      {:faults, faults} when is_map(faults) or is_list(faults) -> call(sysid, {:on_item_reached, seq, action})
+      other -> Dolphin.Sim.Error.bad_option("bad action #{inspect(other)} at item #{seq}: :crash, {:faults, faults} or {:battery, fraction}")
+    end
+  end
+
   defp call(sysid, request) do
     case whereis(sysid) do
       nil -> {:error, :unknown_vehicle}

@@ -233,6 +233,40 @@ defmodule Dolphin.SimTest do
     assert Sim.vehicles() == [1]
   end
 
+  test "actions at a mission item happen right after its report: silenced, low battery, crashed", %{port: port} do
+    Vehicles.subscribe(:all)
+    {:ok, [1, 2]} = Sim.start(count: 2, gcs: port, speedup: 20, ekf_ready_ms: 1_000)
+    wait(fn -> state(1).home && state(2).home end, 10, "both ready")
+    for id <- [1, 2], do: Vehicles.set_timeout(id, 3_000)
+
+    # Two actions at one item, in the order given; the battery before it.
+    :ok = Sim.on_item_reached(1, 1, {:battery, 0.5})
+    :ok = Sim.on_item_reached(1, 2, {:faults, silence: true})
+    :ok = Sim.on_item_reached(2, 2, :crash)
+    assert {:error, %Sim.Error{message: "bad action :explode at item 3" <> _}} = Sim.on_item_reached(1, 3, :explode)
+    assert {:error, %Sim.Error{message: "bad fault :noise" <> _}} = Sim.on_item_reached(1, 3, {:faults, noise: 1})
+    assert {:error, :unknown_vehicle} = Sim.on_item_reached(9, 1, :crash)
+
+    for id <- [1, 2] do
+      home = state(id).home
+      items = [item(0, 16, {home.lat, home.lon, 0}), item(1, 22, {0, 0, 10})] ++ for(s <- 2..5, do: item(s, 16, {home.lat + s * 2.0e-5, home.lon, 10}))
+      :ok = Vehicles.upload_mission(id, items)
+      {:ok, :accepted} = Vehicles.set_mode(id, :guided)
+      arm(id)
+      {:ok, :accepted} = Vehicles.start_mission(id)
+    end
+
+    # Both reports of item 2 came through; nothing after them.
+    assert_receive {:dolphin, :vehicles, {:vehicle_lost, 1}}, 10_000
+    assert_receive {:dolphin, :vehicles, {:vehicle_lost, 2}}, 10_000
+    assert state(1).mission.reached == 2 and state(2).mission.reached == 2
+    # Vehicle 1 flew on, unheard, on half a battery; vehicle 2 is gone.
+    {:ok, info} = Sim.info(1)
+    assert info.faults.silence and info.battery <= 0.5
+    assert Sim.info(2) == {:error, :unknown_vehicle}
+    assert Sim.vehicles() == [1]
+  end
+
   test "bad options are refused with what was wrong" do
     assert {:error, %Sim.Error{reason: :bad_option, message: "the simulator needs :gcs" <> _}} = Sim.start(count: 1)
     assert {:error, %Sim.Error{message: "bad :count 0" <> _}} = Sim.start(count: 0, gcs: 14_550)

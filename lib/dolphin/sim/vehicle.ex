@@ -69,7 +69,9 @@ defmodule Dolphin.Sim.Vehicle do
           unsendable: MapSet.new(),
           sent: 0,
           received: 0,
-          companion: companion(opts, seed)
+          companion: companion(opts, seed),
+          # Actions to do when a mission item is reached (Dolphin.Sim.on_item_reached/3).
+          on_item_reached: %{}
         }
 
         # The first heartbeat at once: a booting vehicle is heard at once.
@@ -131,6 +133,17 @@ defmodule Dolphin.Sim.Vehicle do
     e in ArgumentError -> {:reply, Dolphin.Sim.Error.bad_option(Exception.message(e)), s}
   end
 
+  def handle_call({:on_item_reached, seq, {:faults, faults} = action}, _from, s) do
+    # Checked now, so that a bad fault is said to the caller, not at the item.
+    _ = Faults.update(s.faults_out, faults)
+    {:reply, :ok, %{s | on_item_reached: Map.update(s.on_item_reached, seq, [action], &(&1 ++ [action]))}}
+  rescue
+    e in ArgumentError -> {:reply, Dolphin.Sim.Error.bad_option(Exception.message(e)), s}
+  end
+
+  def handle_call({:on_item_reached, seq, action}, _from, s),
+    do: {:reply, :ok, %{s | on_item_reached: Map.update(s.on_item_reached, seq, [action], &(&1 ++ [action]))}}
+
   def handle_call({:set, :battery, fraction}, _from, s), do: {:reply, :ok, update_model(s, &%{&1 | battery: fraction * 1.0})}
 
   @impl true
@@ -167,6 +180,10 @@ defmodule Dolphin.Sim.Vehicle do
     :ok = :inet.setopts(socket, active: 100)
     {:noreply, s}
   end
+
+  # Dolphin.Sim.on_item_reached/3's :crash: silenced already, the process ends
+  # as a vehicle destroyed (a normal exit: its supervisor leaves it gone).
+  def handle_info(:crash, s), do: {:stop, :normal, s}
 
   def handle_info({:late_in, bytes}, s), do: {:noreply, s |> receive_datagram(bytes) |> transmit()}
 
@@ -214,10 +231,32 @@ defmodule Dolphin.Sim.Vehicle do
   defp transmit_one({compid, message}, s) do
     seq = Map.get(s.seqs, compid, 0)
 
-    case encode(message, s.sysid, compid, seq) do
-      {:ok, bytes} -> send_frame(s, compid, seq, bytes)
-      {:error, kind, e} -> unsendable(s, kind, e)
+    s =
+      case encode(message, s.sysid, compid, seq) do
+        {:ok, bytes} -> send_frame(s, compid, seq, bytes)
+        {:error, kind, e} -> unsendable(s, kind, e)
+      end
+
+    case message do
+      %Dolphin.MAVLink.Ardupilotmega.MissionItemReached{seq: item} -> item_reached(s, item)
+      _ -> s
     end
+  end
+
+  # Right after the item's report has gone: the actions asked for at it.
+  defp item_reached(s, item) do
+    case Map.pop(s.on_item_reached, item) do
+      {nil, _} -> s
+      {actions, rest} -> Enum.reduce(actions, %{s | on_item_reached: rest}, &item_action/2)
+    end
+  end
+
+  defp item_action({:faults, faults}, s), do: %{s | faults_out: Faults.update(s.faults_out, faults), faults_in: Faults.update(s.faults_in, faults)}
+  defp item_action({:battery, fraction}, s), do: update_model(s, &%{&1 | battery: fraction * 1.0})
+
+  defp item_action(:crash, s) do
+    send(self(), :crash)
+    item_action({:faults, silence: true}, s)
   end
 
   # A value the message cannot carry (a position off the map...) is a fault

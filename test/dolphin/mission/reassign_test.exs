@@ -111,21 +111,25 @@ defmodule Dolphin.Mission.ReassignTest do
       do: Mission.new("Survey", [C.home(home), C.take_off(%{home | h: home.h + 20}), C.survey_area(60, 60, 20, :north_east), C.return_home()])
 
     # Flies the survey on vehicle 1 (vehicle 2 standing by), kills vehicle 1
-    # once it has reached item `k` (`how`: its process crashed, or its radio
-    # silenced past the connection timeout); returns the items each vehicle
-    # reached, in the survey's numbering, and the reassignment.
+    # the moment it reaches item `k` (`how`: its process crashed, its radio
+    # silenced past the connection timeout, or its battery low); returns the
+    # items each vehicle reached, in the survey's numbering, and the
+    # reassignment. The simulator does it at the item itself: at 50x a
+    # station that hears late (a loaded host) would otherwise kill a vehicle
+    # that had flown on, or finished.
     defp fly_and_kill(port, k, how) do
       home = start_fleet(port)
+
+      action =
+        case how do
+          :crash -> :crash
+          :silence -> {:faults, silence: true}
+          :battery -> {:battery, 0.15}
+        end
+
+      :ok = Sim.on_item_reached(1, k, action)
       Events.subscribe()
       {:ok, run} = Engine.start(Engine.reassign(Engine.on(plain_survey(home), [1]), from: [1, 2]))
-      receive_event(&match?(%{event: :mission_item_reached, vehicle: 1, seq: ^k}, &1))
-
-      case how do
-        :crash -> :ok = Sim.crash(1)
-        :silence -> :ok = Sim.set_faults(1, silence: true)
-        :battery -> :ok = Sim.set_battery(1, 0.15)
-      end
-
       result = Engine.await(run, 120_000)
       events = flush_events()
       Events.unsubscribe()
