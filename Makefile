@@ -24,6 +24,7 @@ bench: bootstrap
 	MIX_ENV=prod VEHICLES=1000 NETWORKS=4 elixir --erl "+sbwt none +sbwtdcpu none +sbwtdio none" -S mix run bench/intake.exs
 	MIX_ENV=prod mix run bench/sim.exs
 	MIX_ENV=prod mix run bench/reaction.exs
+	MIX_ENV=prod mix run bench/reaction_floor.exs
 	MIX_ENV=prod mix run bench/sensor_reaction.exs
 	MIX_ENV=prod mix run bench/report.exs
 	MIX_ENV=prod mix run bench/live_view.exs
