@@ -1,18 +1,31 @@
 # Several ground stations (Dolphin.Cluster) on this machine: a controller (this
-# VM), BENCH_STATIONS station nodes (default 2) and, for each, a node of
-# simulated vehicles, all on 127.0.0.1. The simulated vehicles
-# (BENCH_VEHICLES, default 250, shared out evenly, at most 254 a station)
-# stand in for the radios of the sites; every station's vehicles are system
-# ids 1, 2, ..., as two sites that numbered their fleets alike: on the
-# controller one station's keep their ids and the others' are named apart,
-# "ID@NODE" (Dolphin.Cluster.Mirror), so that the controller holds more than
-# 255. At speed-up BENCH_SPEEDUP (default 2) each sends its
-# GLOBAL_POSITION_INT (asked for at 5 Hz of vehicle time) 10 times a second,
-# plus its other telemetry.
+# VM) and BENCH_STATIONS station nodes (default 2), all on 127.0.0.1, with
+# BENCH_VEHICLES vehicles (default 250) shared out evenly. Every station's
+# vehicles are system ids 1, 2, ..., as two sites that numbered their fleets
+# alike: on the controller one station's keep their ids and the others' are
+# named apart, "ID@NODE" (Dolphin.Cluster.Mirror), so that the controller
+# holds more than 255. The vehicles come from one of two feeds (BENCH_FEED):
+#
+#   sim (default): for each station, a node of simulated vehicles
+#     (Dolphin.Sim), at most 254 a station, at speed-up BENCH_SPEEDUP
+#     (default 2). Each sends its GLOBAL_POSITION_INT (asked for at 5 Hz of
+#     vehicle time) 10 times a second, plus its other telemetry; they take
+#     off and fly north, commanded from the controller, so that every
+#     position report is a new view. The simulators cost more CPU than the
+#     stations: this machine runs a few hundred vehicles this way.
+#   replay: telemetry encoded beforehand, sent by one OS process
+#     (bench/cluster_feed.py), each vehicle from its own UDP socket:
+#     BENCH_RATE (default 2) GLOBAL_POSITION_INT a second, each a new
+#     position, plus a SYS_STATUS and a HEARTBEAT a second and its
+#     AUTOPILOT_VERSION (a unique id) once a cycle of 256 frames. A station
+#     of more than 250 vehicles gets a `udpin` link per 250, each its own
+#     network ("7@net2" on the station). Sending is all the feed costs, so
+#     thousands of vehicles fit on this machine; speed-up BENCH_SPEEDUP
+#     (default 1: the frames come in real time).
 #
 # Printed, over BENCH_SECONDS (default 20) of steady state:
 #   * the CPU of each node, as a share of one core (a station: its links,
-#     vehicle processes and Dolphin.Cluster.Station; the simulator node apart);
+#     vehicle processes and Dolphin.Cluster.Station; the feed apart);
 #   * the telemetry latency from station to controller: from the moment a
 #     view is published on the station to the moment the controller's mirror
 #     publishes it locally (a probe subscribed on each node; the OS clock,
@@ -31,6 +44,7 @@
 # routes which station each of its ids is.
 #
 #   MIX_ENV=prod mix run bench/cluster.exs
+#   BENCH_FEED=replay BENCH_VEHICLES=2000 BENCH_STATIONS=4 MIX_ENV=prod mix run bench/cluster.exs
 
 Code.require_file("percentiles.exs", __DIR__)
 
@@ -69,35 +83,52 @@ defmodule ClusterBench do
         :clear ->
           :ets.delete_all_objects(:bench_probe)
           loop()
+
+        :lows_only ->
+          :ets.delete_all_objects(:bench_probe)
+          lows_loop()
+      end
+    end
+
+    # The reaction's part: only when each vehicle's low view came.
+    defp lows_loop do
+      receive do
+        {:dolphin, {:vehicle, id}, {:view, v}} ->
+          if is_number(v.battery) and v.battery < 0.3, do: :ets.insert_new(:bench_probe, {{:low, id}, :os.system_time(:microsecond)})
+          lows_loop()
       end
     end
 
     def take, do: :ets.tab2list(:bench_probe)
     def clear(pid), do: send(pid, :clear)
+    def lows_only(pid), do: send(pid, :lows_only)
   end
   """
 
   def main do
     n = env("BENCH_VEHICLES", 250)
     m = env("BENCH_STATIONS", 2)
-    k = env("BENCH_SPEEDUP", 2)
+    feed = System.get_env("BENCH_FEED", "sim")
+    k = env("BENCH_SPEEDUP", if(feed == "replay", do: 1, else: 2))
+    rate = env("BENCH_RATE", 2)
     seconds = env("BENCH_SECONDS", 20)
     reactions = env("BENCH_REACTIONS", 40)
     per = div(n, m)
-    if per > 254 or per * m != n, do: Mix.raise("BENCH_VEHICLES: a multiple of BENCH_STATIONS, at most 254 a station (a MAVLink system id is 1..255)")
+
+    cond do
+      feed not in ["sim", "replay"] -> Mix.raise("BENCH_FEED: sim or replay, not #{inspect(feed)}")
+      per * m != n -> Mix.raise("BENCH_VEHICLES: a multiple of BENCH_STATIONS")
+      feed == "sim" and per > 254 -> Mix.raise("BENCH_VEHICLES: at most 254 a station with BENCH_FEED=sim (a MAVLink system id is 1..255); BENCH_FEED=replay for more")
+      true -> :ok
+    end
 
     start_controller()
     Dolphin.Clock.set_speedup(k)
-    IO.puts("cluster: #{n} simulated vehicles over #{m} stations (ids 1..#{per} on each) at speed-up #{k}; #{System.schedulers_online()} schedulers here, OTP #{System.otp_release()}, Elixir #{System.version()}")
 
-    stations =
-      for i <- 1..m do
-        gs = station("bench_gs#{i}", k)
-        sims = node_up("bench_sims#{i}", k)
-        ids = Enum.to_list(1..per)
-        {:ok, ^ids} = call(sims, Dolphin.Sim, :start, [[gcs: gs.port, first_sysid: 1, count: per, speedup: k]])
-        %{gs: gs, sims: sims, ids: ids}
-      end
+    what = if feed == "sim", do: "simulated vehicles", else: "vehicles replayed (#{rate} positions a second each)"
+    IO.puts("cluster: #{n} #{what} over #{m} stations (#{per} a station, system ids from 1 on each) at speed-up #{k}; #{System.schedulers_online()} schedulers here, OTP #{System.otp_release()}, Elixir #{System.version()}")
+
+    {stations, feeder} = if feed == "sim", do: {sim_stations(m, per, k), nil}, else: replay_stations(m, per, k, rate)
 
     for st <- stations, do: :ok = Dolphin.Cluster.join(st.gs.node, speedup: k)
     t0 = System.monotonic_time(:millisecond)
@@ -106,32 +137,39 @@ defmodule ClusterBench do
 
     # Each id here: its station and its id there.
     by_node = Map.new(stations, &{&1.gs.node, &1})
-    where = Map.new(Dolphin.Cluster.Mirror.routes(), fn {id, %{chosen: node}} -> {id, {by_node[node], local_id(id)}} end)
+    where = Map.new(Dolphin.Cluster.Mirror.routes(), fn {id, %{chosen: node}} -> {id, {by_node[node], local_id(id, node)}} end)
     ids = Dolphin.Vehicles.Id.sort(Map.keys(where))
+    stations = Enum.map(stations, &Map.put(&1, :ids, call(&1.gs, Dolphin.Vehicles, :list, [])))
 
-    # A vehicle on the ground publishes a view only when something changes:
-    # they all take off and fly north, commanded from the controller through
-    # their stations, so that every position report is a new view.
-    t0 = System.monotonic_time(:millisecond)
+    if feed == "sim" do
+      # A vehicle on the ground publishes a view only when something changes:
+      # they all take off and fly north, commanded from the controller through
+      # their stations, so that every position report is a new view.
+      t0 = System.monotonic_time(:millisecond)
 
-    flying =
-      ids
-      |> Task.async_stream(&fly/1, max_concurrency: 64, timeout: 300_000)
-      |> Enum.count(&match?({:ok, :ok}, &1))
+      flying =
+        ids
+        |> Task.async_stream(&fly/1, max_concurrency: 64, timeout: 300_000)
+        |> Enum.count(&match?({:ok, :ok}, &1))
 
-    IO.puts("#{flying} of #{n} vehicles flying after #{System.monotonic_time(:millisecond) - t0} ms (take-off, then a go-to 5 km north); settling 3 s")
+      IO.puts("#{flying} of #{n} vehicles flying after #{System.monotonic_time(:millisecond) - t0} ms (take-off, then a go-to 5 km north)")
+    end
+
+    IO.puts("settling 3 s")
     Process.sleep(3_000)
 
     # Steady state: CPU and latency.
     probes = for st <- stations, into: %{}, do: {st.gs.node, call(st.gs, ClusterBench.Probe, :start, [st.ids])}
     here = ClusterBench.Probe.start(ids)
-    nodes = Enum.flat_map(stations, &[&1.gs, &1.sims])
+    nodes = Enum.flat_map(stations, &Enum.reject([&1.gs, &1.sims], fn p -> p == nil end))
     cpu0 = for p <- nodes, into: %{}, do: {p.name, call(p, :erlang, :statistics, [:runtime])}
+    feeder_cpu0 = feeder && feeder_cpu(feeder)
     my0 = :erlang.statistics(:runtime)
     w0 = System.monotonic_time(:millisecond)
     Process.sleep(seconds * 1_000)
     wall = System.monotonic_time(:millisecond) - w0
     cpu1 = for p <- nodes, into: %{}, do: {p.name, call(p, :erlang, :statistics, [:runtime])}
+    feeder_cpu1 = feeder && feeder_cpu(feeder)
     my1 = :erlang.statistics(:runtime)
 
     published = for st <- stations, into: %{}, do: {st.gs.node, Map.new(call(st.gs, ClusterBench.Probe, :take, []))}
@@ -143,6 +181,7 @@ defmodule ClusterBench do
 
     IO.puts("\nCPU over #{Float.round(wall / 1000, 1)} s (share of one core; #{System.schedulers_online()} vCPUs shared by all nodes):")
     for p <- nodes, do: IO.puts("  #{String.pad_trailing(p.name, 12)} #{pct(cpu1[p.name], cpu0[p.name], wall)}")
+    if feeder, do: IO.puts("  #{String.pad_trailing("feed", 12)} #{Float.round((feeder_cpu1 - feeder_cpu0) / wall * 100, 1)} % (bench/cluster_feed.py)")
     controller_ms = elem(my1, 0) - elem(my0, 0)
     per_view = if views > 0, do: Float.round(controller_ms * 1000 / views, 1), else: "-"
     IO.puts("  #{String.pad_trailing("controller", 12)} #{pct(my1, my0, wall)}: #{round(controller_ms / wall * 1_000_000 / n)} µs of CPU a second per vehicle, #{per_view} µs per view mirrored")
@@ -150,8 +189,8 @@ defmodule ClusterBench do
     row("telemetry latency station -> controller", stats(latencies))
 
     # Reaction: conditions on the controller, changes on the stations.
-    Enum.each(stations, fn st -> call(st.gs, ClusterBench.Probe, :clear, [probes[st.gs.node]]) end)
-    ClusterBench.Probe.clear(here)
+    Enum.each(stations, fn st -> call(st.gs, ClusterBench.Probe, :lows_only, [probes[st.gs.node]]) end)
+    ClusterBench.Probe.lows_only(here)
     sample = Enum.take_random(ids, reactions)
     Context.put(%Context{fleet: Dolphin.Fleet, source: {Dolphin.Fleet.MAVLinkSource, nil}, owner: self()})
     {:ok, _} = Dolphin.Fleet.pick(Dolphin.Fleet, self(), id: sample, count: length(sample), timeout: 30_000)
@@ -170,7 +209,7 @@ defmodule ClusterBench do
       for v <- sample do
         name = "t#{v}"
         {st, local} = where[v]
-        :ok = call(st.sims, Dolphin.Sim, :set_battery, [local, 0.2])
+        drop_battery(st, local, v, feeder)
 
         receive do
           {:fake_platform, :stopped, %{name: ^name}} -> {v, :os.system_time(:microsecond)}
@@ -184,11 +223,84 @@ defmodule ClusterBench do
     row("condition reaction (station view -> stop)", stats(reaction))
     _ = Engine.stop(run)
     IO.puts("\n(p99 target of the reaction: < 20 ms = 20000 µs)")
+    if feeder, do: Port.close(feeder.port)
   end
 
-  # Its id on its station: "7@bench_gs2" is 7 there.
-  defp local_id(id) when is_integer(id), do: id
-  defp local_id(id), do: Dolphin.Vehicles.Id.sysid(id)
+  defp drop_battery(%{sims: sims}, local, _v, nil), do: :ok = call(sims, Dolphin.Sim, :set_battery, [local, 0.2])
+
+  # The feed's vehicles are numbered by their unique ids (index + 1).
+  defp drop_battery(_st, _local, v, feeder) do
+    {:ok, %{uid: uid}} = Dolphin.Vehicles.view(v)
+    true = Port.command(feeder.port, "low #{uid - 1}\n")
+    :ok
+  end
+
+  defp sim_stations(m, per, k) do
+    for i <- 1..m do
+      gs = station("bench_gs#{i}", k)
+      sims = node_up("bench_sims#{i}", k)
+      ids = Enum.to_list(1..per)
+      {:ok, ^ids} = call(sims, Dolphin.Sim, :start, [[gcs: gs.port, first_sysid: 1, count: per, speedup: k]])
+      %{gs: gs, sims: sims}
+    end
+  end
+
+  # Stations with a `udpin` link per 250 vehicles, each link its own network,
+  # and the feed that sends to them.
+  @per_network 250
+  defp replay_stations(m, per, k, rate) do
+    networks = div(per + @per_network - 1, @per_network)
+
+    stations =
+      for i <- 1..m do
+        p = node_up("bench_gs#{i}", k)
+
+        ports =
+          for j <- 1..networks do
+            {:ok, _} = call(p, Dolphin.Link, :connect, ["udpin:127.0.0.1:0", [name: "net#{j}", network: "net#{j}"]])
+            call(p, Dolphin.Link.Connection, :port, ["net#{j}"])
+          end
+
+        %{gs: p, sims: nil, ports: ports}
+      end
+
+    # Vehicle `index` (0-based over all stations) has unique id index + 1.
+    vehicles =
+      for {st, i} <- Enum.with_index(stations), j <- 0..(per - 1) do
+        %{port: Enum.at(st.ports, div(j, @per_network)), sysid: rem(j, @per_network) + 1, index: i * per + j}
+      end
+
+    fps = rate + 2
+    path = Path.join(System.tmp_dir!(), "dolphin_cluster_feed_#{System.unique_integer([:positive])}.bin")
+    File.write!(path, Enum.map(vehicles, &ClusterBench.Feed.vehicle(&1, fps)))
+    script = Path.expand("cluster_feed.py", __DIR__)
+    port = Port.open({:spawn_executable, System.find_executable("python3")}, [:binary, :exit_status, {:line, 256}, args: [script, path, "#{fps}"]])
+    await_line(port, "feeding")
+    File.rm(path)
+    {:os_pid, os_pid} = Port.info(port, :os_pid)
+    {stations, %{port: port, os_pid: os_pid}}
+  end
+
+  defp await_line(port, prefix) do
+    receive do
+      {^port, {:data, {:eol, line}}} -> if String.starts_with?(line, prefix), do: :ok, else: await_line(port, prefix)
+      {^port, {:exit_status, status}} -> Mix.raise("the feed exited (#{status}) before it started")
+    after
+      120_000 -> Mix.raise("the feed did not start within 120 s")
+    end
+  end
+
+  # CPU milliseconds of the feed's OS process (user + system), from /proc.
+  defp feeder_cpu(%{os_pid: pid}) do
+    [utime, stime] = File.read!("/proc/#{pid}/stat") |> String.split(" ") |> Enum.slice(13, 2) |> Enum.map(&String.to_integer/1)
+    (utime + stime) * 10
+  end
+
+  # Its id on its station ("7@bench_gs2" is 7 there, "7@net2@bench_gs2" is "7@net2").
+  defp local_id(id, node) do
+    {^node, there} = List.keyfind(Dolphin.Cluster.Mirror.heard_as(id), node, 0)
+    there
+  end
 
   defp fly(id) do
     alias Dolphin.Vehicles.Manoeuvres
@@ -200,7 +312,8 @@ defmodule ClusterBench do
     end
   end
 
-  defp connected?(id), do: match?({:ok, %{connected?: true, position: %{}}}, Dolphin.Vehicles.view(id))
+  # Heard, placed, and known by its autopilot's unique id (held apart from its namesakes for good).
+  defp connected?(id), do: match?({:ok, %{connected?: true, position: %{}, uid: uid}} when is_integer(uid), Dolphin.Vehicles.view(id))
 
   defp pct({total1, _}, {total0, _}, wall), do: "#{Float.round((total1 - total0) / wall * 100, 1)} %"
 
@@ -212,6 +325,8 @@ defmodule ClusterBench do
     end
 
     Node.set_cookie(:dolphin_bench)
+    # (Each vehicle a second station names apart is a warning here: thousands.)
+    Logger.configure(level: :error)
     Code.compile_string(@probe)
   end
 
@@ -249,6 +364,47 @@ defmodule ClusterBench do
 
   defp row(label, %{n: n, p50: p50, p99: p99, max: max}),
     do: IO.puts(String.pad_trailing(label, 44) <> "n=#{n}  p50 #{p50} µs  p99 #{p99} µs  max #{max} µs")
+end
+
+defmodule ClusterBench.Feed do
+  @moduledoc false
+  # The frames bench/cluster_feed.py replays for one vehicle: its station
+  # link's port, then two cycles of @cycle frames, the second with the
+  # battery low (see the script's file format).
+  alias Dolphin.MAVLink.Ardupilotmega, as: M
+  alias Dolphin.MAVLink.Frame
+
+  import Bitwise
+
+  @cycle 256
+
+  def vehicle(%{port: port} = v, fps) do
+    frames = cycle(v, fps, 80) ++ cycle(v, fps, 20)
+    [<<port::little-16, @cycle::little-16>> | Enum.map(frames, &<<byte_size(&1)::little-16, &1::binary>>)]
+  end
+
+  defp cycle(%{sysid: sysid} = v, fps, battery),
+    do: for(i <- 0..(@cycle - 1), do: Frame.encode(message(i, v, fps, battery), sysid: sysid, compid: 1, seq: i))
+
+  # A HEARTBEAT first, then each second `fps - 2` positions, a SYS_STATUS
+  # and a HEARTBEAT; its unique id (AUTOPILOT_VERSION, which the feed
+  # cannot send when asked) in place of every 16th frame from the second
+  # on: a station that has yet to tell the path is this vehicle's drops
+  # what it hears on it.
+  defp message(0, _v, _fps, _battery), do: heartbeat()
+  defp message(i, %{index: index}, _fps, _battery) when rem(i, 16) == 1, do: %M.AutopilotVersion{capabilities: 0xFFFF, flight_sw_version: 0x04060000, uid: index + 1, vendor_id: 0x1209, product_id: 0x5740}
+
+  defp message(i, %{index: index}, fps, battery) do
+    case rem(i - 2, fps) do
+      p when p == fps - 1 -> heartbeat()
+      p when p == fps - 2 -> %M.SysStatus{voltage_battery: 12_100, current_battery: 2_800, battery_remaining: battery, load: 200}
+      # A new position each time, 2 m further north.
+      _ -> %M.GlobalPositionInt{time_boot_ms: div(i * 1000, fps), lat: 411_780_000 + rem(index, 1000) * 1_000 + i * 180, lon: -85_960_000 + div(index, 1000) * 10_000, alt: 132_000, relative_alt: 30_000, vx: 500, hdg: 0}
+    end
+  end
+
+  # A copter flying in GUIDED, armed.
+  defp heartbeat, do: %M.Heartbeat{type: 2, autopilot: 3, base_mode: 1 ||| 8 ||| 16 ||| 128, custom_mode: 4, system_status: 4, mavlink_version: 3}
 end
 
 ClusterBench.main()
