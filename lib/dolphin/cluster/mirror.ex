@@ -310,6 +310,7 @@ defmodule Dolphin.Cluster.Mirror do
   defp down_words(:noconnection), do: "its node is unreachable"
   defp down_words(reason), do: "its process ended (#{inspect(reason)})"
 
+  defp station_event(s, station, {:batch, events}), do: Enum.reduce(events, s, &station_event(&2, station, &1))
   defp station_event(s, station, {:discovered, id, pid, view}), do: told_of(s, station, id, pid, view)
   defp station_event(s, station, {:view, id, view}), do: update_hearing(s, here(s, station, id), station, &%{&1 | view: view}, :view)
 
@@ -604,8 +605,11 @@ defmodule Dolphin.Cluster.Mirror do
 
   defp publish_view(id, pid, view) do
     route(id, pid)
-    # (Under the name it has here: a vehicle named apart is another id there.)
-    view = %{view | id: id}
+    # Under the name it has here (a vehicle named apart is another id
+    # there), and heard on no network of this node's: a station's network
+    # names are its own, and another station's vehicle may be named here
+    # by the very "SYSID@NETWORK" this one answers to there.
+    view = %{view | id: id, network: nil}
     unless local?(id) or Views.get(id) == {:ok, view}, do: Views.put(view)
   end
 

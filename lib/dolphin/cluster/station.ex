@@ -16,8 +16,12 @@ defmodule Dolphin.Cluster.Station do
     * `{:discovered, id, vehicle_pid, view}`, `{:lost, id}`,
       `{:reconnected, id}`, `{:forgotten, id}`;
     * `{:view, id, view}` — each new view of a vehicle, whole, as soon as
-      it is published here (not batched: a controller's conditions react to
-      it, and one message per view keeps the latency to the network's);
+      it is published here (a controller's conditions react to it: nothing
+      waits to be batched);
+    * `{:batch, events}` — several of the events above, in the order they
+      came: those that were already waiting when this process took the
+      first (at most 64), so that a busy station sends one
+      message where it would send dozens, and a quiet one sends each alone;
     * `{:heard, %{id => {age_ms, link}}}` — every `:heard_every_ms` of real
       time: how long ago (clock ms) each vehicle's last frame came and its
       link figures, so that a controller tells a stale station (it stops
@@ -30,6 +34,8 @@ defmodule Dolphin.Cluster.Station do
   alias Dolphin.Vehicles.Views
 
   @heard_every_ms 250
+  # At most this many events in one {:batch, events} message.
+  @events_at_once 64
 
   @doc false
   def start_link(opts), do: GenServer.start_link(__MODULE__, opts, name: __MODULE__)
@@ -59,36 +65,17 @@ defmodule Dolphin.Cluster.Station do
     {:reply, {:ok, %{node: node(), speedup: Clock.speedup(), vehicles: vehicles}}, s}
   end
 
+  # What vehicles this node hears say, told on: several that waited
+  # together go in one message (see the module doc).
   @impl true
-  def handle_info({:dolphin, :vehicles, {:vehicle_discovered, id}}, s) do
-    case Vehicles.whereis_local(id) do
-      nil ->
-        {:noreply, s}
+  def handle_info({:dolphin, _topic, _event} = message, s) do
+    {events, s} = gather(message, s, [], @events_at_once)
 
-      pid ->
-        s = watch(s, id, pid)
-        tell(s, {:discovered, id, pid, local_view(id)})
-        {:noreply, s}
+    case events do
+      [] -> {:noreply, s}
+      [event] -> {:noreply, tell(s, event)}
+      events -> {:noreply, tell(s, {:batch, events})}
     end
-  end
-
-  def handle_info({:dolphin, :vehicles, {:vehicle_forgotten, id}}, s) do
-    if Map.has_key?(s.vehicles, id) do
-      PubSub.unsubscribe({:vehicle, id})
-      tell(s, {:forgotten, id})
-    end
-
-    {:noreply, %{s | vehicles: Map.delete(s.vehicles, id)}}
-  end
-
-  def handle_info({:dolphin, :vehicles, {event, id}}, s) when event in [:vehicle_lost, :vehicle_reconnected] do
-    if Map.has_key?(s.vehicles, id), do: tell(s, {if(event == :vehicle_lost, do: :lost, else: :reconnected), id})
-    {:noreply, s}
-  end
-
-  def handle_info({:dolphin, {:vehicle, id}, {:view, view}}, s) do
-    if Map.has_key?(s.vehicles, id), do: tell(s, {:view, id, view})
-    {:noreply, s}
   end
 
   def handle_info(:heard, %{subscribers: subs} = s) when subs == %{}, do: {:noreply, %{s | timer: nil}}
@@ -114,7 +101,48 @@ defmodule Dolphin.Cluster.Station do
     {:noreply, if(s.subscribers == %{}, do: unfollow(s), else: s)}
   end
 
-  def handle_info({:dolphin, _topic, _event}, s), do: {:noreply, s}
+  # This message's events for the controllers, and those of the notices
+  # that wait behind it (at most `n` in all), in the order they came.
+  defp gather(message, s, acc, n) do
+    {told, s} = notice(message, s)
+    acc = Enum.reverse(told, acc)
+
+    receive do
+      {:dolphin, _topic, _event} = next when n > 1 -> gather(next, s, acc, n - 1)
+    after
+      0 -> {Enum.reverse(acc), s}
+    end
+  end
+
+  # One notice of the local vehicles: the events it makes for the controllers.
+  defp notice({:dolphin, :vehicles, {:vehicle_discovered, id}}, s) do
+    case Vehicles.whereis_local(id) do
+      nil -> {[], s}
+      pid -> {[{:discovered, id, pid, local_view(id)}], watch(s, id, pid)}
+    end
+  end
+
+  defp notice({:dolphin, :vehicles, {:vehicle_forgotten, id}}, s) do
+    told =
+      if Map.has_key?(s.vehicles, id) do
+        PubSub.unsubscribe({:vehicle, id})
+        [{:forgotten, id}]
+      else
+        []
+      end
+
+    {told, %{s | vehicles: Map.delete(s.vehicles, id)}}
+  end
+
+  defp notice({:dolphin, :vehicles, {event, id}}, s) when event in [:vehicle_lost, :vehicle_reconnected] do
+    if Map.has_key?(s.vehicles, id), do: {[{if(event == :vehicle_lost, do: :lost, else: :reconnected), id}], s}, else: {[], s}
+  end
+
+  defp notice({:dolphin, {:vehicle, id}, {:view, view}}, s) do
+    if Map.has_key?(s.vehicles, id), do: {[{:view, id, view}], s}, else: {[], s}
+  end
+
+  defp notice({:dolphin, _topic, _event}, s), do: {[], s}
 
   # The first subscriber: follow every local vehicle from now on.
   defp follow(s) do

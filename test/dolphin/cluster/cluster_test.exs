@@ -238,6 +238,79 @@ defmodule Dolphin.ClusterTest do
     :ok = Cluster.call(hung.peer, :sys, :resume, [Dolphin.Cluster.Station])
   end
 
+  test "what a busy station's notices waited for goes in one message, in the order it came, and the controller ends on the latest" do
+    gs1 = Cluster.start_station("gs1", sysids: [1, 2])
+    :ok = Dolphin.Cluster.join(gs1.node)
+    Cluster.await_vehicles([1, 2])
+    # A second subscriber beside the controller's mirror: this test process.
+    station = Cluster.call(gs1.peer, Process, :whereis, [Dolphin.Cluster.Station])
+    {:ok, %{vehicles: [_, _]}} = Dolphin.Cluster.Station.subscribe(station, self())
+
+    # Held up while both vehicles' views change: they charge at home, a
+    # percent every 40 ms at 50x, each percent a new view.
+    :ok = Cluster.call(gs1.peer, Dolphin.Sim, :set_battery, [1, 0.2])
+    :ok = Cluster.call(gs1.peer, Dolphin.Sim, :set_battery, [2, 0.2])
+    Wait.until(fn -> match?({:ok, %{battery: b}} when b < 0.3, Cluster.call(gs1.peer, Vehicles, :view, [2])) end, 1_500, fn -> "vehicle 2 low on its station" end)
+    :ok = Cluster.call(gs1.peer, :sys, :suspend, [Dolphin.Cluster.Station])
+    Wait.until(fn -> match?({:ok, %{battery: b}} when b >= 0.35, Cluster.call(gs1.peer, Vehicles, :view, [2])) end, 1_500, fn -> "vehicle 2 charged again on its station" end)
+    {:ok, %{battery: charged}} = Cluster.call(gs1.peer, Vehicles, :view, [1])
+    flush_station(station)
+    :ok = Cluster.call(gs1.peer, :sys, :resume, [Dolphin.Cluster.Station])
+
+    assert_receive {:dolphin_station, ^station, {:batch, [_, _ | _] = events}}, 5_000
+    assert length(events) <= 64
+    # Each vehicle's views in the order it published them.
+    for id <- [1, 2] do
+      batteries = for {:view, ^id, view} <- events, do: view.battery
+      assert batteries == Enum.sort(batteries)
+    end
+
+    # The controller, told the same way, ends on views as late as those.
+    Wait.until(fn -> match?({:ok, %{battery: b}} when b >= charged, Vehicles.view(1)) end, 1_500, fn -> "the controller's view of 1 at #{charged} or more" end)
+  end
+
+  # What the station told before it was held up.
+  defp flush_station(station) do
+    receive do
+      {:dolphin_station, ^station, _} -> flush_station(station)
+    after
+      0 -> :ok
+    end
+  end
+
+  test "a station's network names mean nothing on the controller: a pick by a name takes the vehicle of that name, not another station's namesake" do
+    # gs1: vehicle 5 heard first on its network "b", another 5 on "a" ("5@a" there).
+    gs1 = Cluster.start_node("gs1")
+    gs2 = Cluster.start_node("gs2")
+    # gs2: its first 5 on network "c", another on "b": "5@b" there.
+    for {st, first, second, home} <- [{gs1, "b", "a", 40.444233}, {gs2, "c", "b", 40.454233}] do
+      for {network, lat} <- [{first, home}, {second, home + 0.002}] do
+        {:ok, _} = Cluster.call(st.peer, Dolphin.Link, :connect, ["udpin:127.0.0.1:0", [name: network, network: network]])
+        port = Cluster.call(st.peer, Dolphin.Link.Connection, :port, [network])
+        {:ok, _} = Cluster.call(st.peer, Dolphin.Sim, :start, [[gcs: port, sysids: [5], network: network, speedup: Dolphin.Clock.speedup(), home: %{lat: lat, lon: -7.375234, alt: 820.0}]])
+        Wait.until(fn -> length(Cluster.call(st.peer, Vehicles, :list, [])) == if(network == first, do: 1, else: 2) end, 1_500, fn -> "vehicle 5 on network #{network}" end)
+      end
+    end
+
+    assert Enum.sort(Cluster.call(gs1.peer, Vehicles, :list, []), &(to_string(&1) <= to_string(&2))) == [5, "5@a"]
+    assert Enum.sort(Cluster.call(gs2.peer, Vehicles, :list, []), &(to_string(&1) <= to_string(&2))) == [5, "5@b"]
+    :ok = Dolphin.Cluster.join(gs1.node)
+    Cluster.await_vehicles([5, "5@a"])
+    :ok = Dolphin.Cluster.join(gs2.node)
+    gs2_5 = "5@" <> hd(String.split(Atom.to_string(gs2.node), "@"))
+    # Here: gs1's 5 and "5@a", gs2's 5 named apart and its "5@b" as it is.
+    Cluster.await_vehicles([5, "5@a", gs2_5, "5@b"])
+
+    # gs1's 5 is on its network "b" there; here it is 5, heard on no network of this node.
+    assert {:ok, %{network: nil}} = Vehicles.view(5)
+    {:ok, fleet} = Dolphin.Fleet.start_link(name: :network_names_fleet, source: {Dolphin.Fleet.MAVLinkSource, nil}, events: false)
+    assert {:ok, picked} = Dolphin.Fleet.pick(fleet, self(), id: ["5@b"], count: 1, timeout: 5_000)
+    assert Dolphin.Fleet.VehicleSet.ids(picked) == ["5@b"]
+    {:ok, %{uid: uid}} = Vehicles.view("5@b")
+    assert uid == Cluster.call(gs2.peer, Vehicles, :view, ["5@b"]) |> elem(1) |> Map.fetch!(:uid)
+    GenServer.stop(fleet)
+  end
+
   test "a netsplit: the station's vehicles are lost at once, and reconnected when the nodes meet again" do
     gs1 = Cluster.start_station("gs1", sysids: [1, 2])
     :ok = Dolphin.Cluster.join(gs1.node)
