@@ -193,6 +193,7 @@ defmodule ClusterBench do
     ClusterBench.Probe.lows_only(here)
     sample = Enum.take_random(ids, reactions)
     Context.put(%Context{fleet: Dolphin.Fleet, source: {Dolphin.Fleet.MAVLinkSource, nil}, owner: self()})
+    Dolphin.Vehicles.subscribe(:all)
     {:ok, _} = Dolphin.Fleet.pick(Dolphin.Fleet, self(), id: sample, count: length(sample), timeout: 30_000)
 
     tasks =
@@ -202,7 +203,14 @@ defmodule ClusterBench do
       end
 
     {:ok, run} = Engine.start(Engine.concurrent(tasks))
-    for _ <- sample, do: receive(do: ({:fake_platform, :started, _} -> :ok))
+
+    for _ <- sample do
+      receive do
+        {:fake_platform, :started, _} -> :ok
+        {Dolphin.Engine, _run, {:error, e}} -> Mix.raise("the reaction's run failed: #{Exception.message(e)}\n#{lost_report(sample)}")
+      end
+    end
+
     Process.sleep(500)
 
     stopped =
@@ -224,6 +232,17 @@ defmodule ClusterBench do
     _ = Engine.stop(run)
     IO.puts("\n(p99 target of the reaction: < 20 ms = 20000 µs)")
     if feeder, do: Port.close(feeder.port)
+  end
+
+  # Which vehicles of `ids` the controller does not have connected now, and since when (events kept by Dolphin.Events).
+  defp lost_report(ids) do
+    now = for id <- ids, {:ok, %{connected?: false} = v} <- [Dolphin.Vehicles.view(id)], into: "" do
+      "  #{inspect(id)} not connected here: heard by #{inspect(Dolphin.Cluster.Mirror.heard_as(id))}, view #{inspect(Map.take(v, [:boot_ms, :uid, :network]))}\n"
+    end
+
+    # What the controller said of them meanwhile (the bench follows :vehicles from the pick on).
+    told = Stream.repeatedly(fn -> receive(do: ({:dolphin, :vehicles, e} -> e), after: (0 -> nil)) end) |> Enum.take_while(& &1) |> Enum.filter(fn {_, id} -> id in ids end)
+    now <> "  events: #{inspect(told)}"
   end
 
   defp drop_battery(%{sims: sims}, local, _v, nil), do: :ok = call(sims, Dolphin.Sim, :set_battery, [local, 0.2])
