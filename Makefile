@@ -29,6 +29,7 @@ bench: bootstrap
 	MIX_ENV=prod mix run bench/report.exs
 	MIX_ENV=prod mix run bench/live_view.exs
 	MIX_ENV=prod mix run bench/cluster.exs
+	MIX_ENV=prod BENCH_FEED=replay BENCH_VEHICLES=2000 BENCH_STATIONS=4 mix run bench/cluster.exs
 	MIX_ENV=prod mix run bench/separation.exs
 	MIX_ENV=prod elixir --erl "+sbwt none +sbwtdcpu none +sbwtdio none" -S mix run bench/datagram_floor.exs
 	MIX_ENV=prod mix run bench/frame_work.exs

@@ -22,7 +22,9 @@ defmodule Dolphin.Vehicles.Id do
   ground station names it; when another station hears another autopilot
   behind an id a vehicle there already has, that station's is `"ID@NODE"`,
   its id there and that station's node name (`"30@gs2"`, `"1@sim2@gs2"`;
-  `Dolphin.Cluster.Mirror`).
+  `Dolphin.Cluster.Mirror`). There a vehicle answers to that name only,
+  not to the qualified name its station also knows it by: networks are
+  each station's own.
 
   A vehicle id is therefore a system id (an integer) or a qualified name (a
   string): `Dolphin.Vehicles`, the fleet's `pick(id: ...)`, events, the
