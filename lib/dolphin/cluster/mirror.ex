@@ -383,6 +383,13 @@ defmodule Dolphin.Cluster.Mirror do
       v = %{v | hearings: Map.put(v.hearings, station, fun.(h))}
 
       case if(why == :view, do: conflict(v, station), else: :same) do
+        # What most of a station's four summaries a second are: the age of a
+        # vehicle only it hears, and has. Nothing to choose: one hearing
+        # keeps its station whatever its age, and an age moves no view
+        # (nor whether it is lost, which its view says).
+        :same when why == :heard and map_size(v.hearings) == 1 and v.chosen == station and v.lost == (not h.view.connected?) ->
+          %{s | vehicles: Map.put(s.vehicles, id, v)}
+
         :same ->
           s = decide(s, id, v, why)
           # A new view of the chosen station, once the choice is settled.
