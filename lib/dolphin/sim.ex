@@ -262,7 +262,9 @@ defmodule Dolphin.Sim do
   (nothing more is heard from it and its process ends, as `crash/1`),
   `{:faults, faults}` (as `set_faults/2`: `{:faults, silence: true}`) or
   `{:battery, fraction}` (as `set_battery/2`). Each is done once; several
-  for one item are done in the order given.
+  for one item are done in the order given; a reboot forgets those not
+  done yet. A crash silences the vehicle at once and ends its process once
+  the frames its faults hold back (latency, reordering) have gone out.
   """
   @spec on_item_reached(byte(), non_neg_integer(), :crash | {:faults, map() | keyword()} | {:battery, number()}) ::
           :ok | {:error, :unknown_vehicle | Dolphin.Sim.Error.t()}

@@ -239,9 +239,11 @@ defmodule Dolphin.SimTest do
     wait(fn -> state(1).home && state(2).home end, 10, "both ready")
     for id <- [1, 2], do: Vehicles.set_timeout(id, 3_000)
 
-    # Two actions at one item, in the order given; the battery before it.
+    # Two actions at one item, in the order given (all lost, then none
+    # lost but silent: the second wins); the battery before it.
     :ok = Sim.on_item_reached(1, 1, {:battery, 0.5})
-    :ok = Sim.on_item_reached(1, 2, {:faults, silence: true})
+    :ok = Sim.on_item_reached(1, 2, {:faults, loss: 1.0})
+    :ok = Sim.on_item_reached(1, 2, {:faults, loss: 0.0, silence: true})
     :ok = Sim.on_item_reached(2, 2, :crash)
     assert {:error, %Sim.Error{message: "bad action :explode at item 3" <> _}} = Sim.on_item_reached(1, 3, :explode)
     assert {:error, %Sim.Error{message: "bad fault :noise" <> _}} = Sim.on_item_reached(1, 3, {:faults, noise: 1})
@@ -262,7 +264,7 @@ defmodule Dolphin.SimTest do
     assert state(1).mission.reached == 2 and state(2).mission.reached == 2
     # Vehicle 1 flew on, unheard, on half a battery; vehicle 2 is gone.
     {:ok, info} = Sim.info(1)
-    assert info.faults.silence and info.battery <= 0.5
+    assert info.faults.silence and info.faults.loss == 0.0 and info.battery <= 0.5
     assert Sim.info(2) == {:error, :unknown_vehicle}
     assert Sim.vehicles() == [1]
   end

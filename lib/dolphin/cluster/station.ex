@@ -107,10 +107,16 @@ defmodule Dolphin.Cluster.Station do
     {told, s} = notice(message, s)
     acc = Enum.reverse(told, acc)
 
-    receive do
-      {:dolphin, _topic, _event} = next when n > 1 -> gather(next, s, acc, n - 1)
-    after
-      0 -> {Enum.reverse(acc), s}
+    # (Not even a look at the mailbox once the batch is full: a look that
+    # takes nothing walks all of it.)
+    if n > 1 do
+      receive do
+        {:dolphin, _topic, _event} = next -> gather(next, s, acc, n - 1)
+      after
+        0 -> {Enum.reverse(acc), s}
+      end
+    else
+      {Enum.reverse(acc), s}
     end
   end
 
@@ -118,7 +124,10 @@ defmodule Dolphin.Cluster.Station do
   defp notice({:dolphin, :vehicles, {:vehicle_discovered, id}}, s) do
     case Vehicles.whereis_local(id) do
       nil -> {[], s}
-      pid -> {[{:discovered, id, pid, local_view(id)}], watch(s, id, pid)}
+      # Followed first, then read: a view put in between comes as a notice.
+      pid ->
+        s = watch(s, id, pid)
+        {[{:discovered, id, pid, local_view(id)}], s}
     end
   end
 

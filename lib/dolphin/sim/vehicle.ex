@@ -226,7 +226,8 @@ defmodule Dolphin.Sim.Vehicle do
     Enum.reduce(outputs, %{s | companion: companion}, &transmit_one/2)
   end
 
-  defp transmit_one({:reboot, nil}, s), do: %{s | model: Copter.reboot(s.model), clock_origin: Clock.now_ms()}
+  # A reboot forgets the actions asked for at mission items: they were for the flight it ends.
+  defp transmit_one({:reboot, nil}, s), do: %{s | model: Copter.reboot(s.model), clock_origin: Clock.now_ms(), on_item_reached: %{}}
 
   defp transmit_one({compid, message}, s) do
     seq = Map.get(s.seqs, compid, 0)
@@ -254,8 +255,11 @@ defmodule Dolphin.Sim.Vehicle do
   defp item_action({:faults, faults}, s), do: %{s | faults_out: Faults.update(s.faults_out, faults), faults_in: Faults.update(s.faults_in, faults)}
   defp item_action({:battery, fraction}, s), do: update_model(s, &%{&1 | battery: fraction * 1.0})
 
+  # Silent at once; the process ends once the frames its faults hold back
+  # (latency, reordering: the item's report among them) have gone out.
   defp item_action(:crash, s) do
-    send(self(), :crash)
+    held = s.faults_out.latency + if(s.faults_out.reorder > 0, do: 100, else: 0)
+    if held > 0, do: Clock.send_after(self(), :crash, held + 1), else: send(self(), :crash)
     item_action({:faults, silence: true}, s)
   end
 

@@ -253,8 +253,8 @@ defmodule Dolphin.ClusterTest do
     Wait.until(fn -> match?({:ok, %{battery: b}} when b < 0.3, Cluster.call(gs1.peer, Vehicles, :view, [2])) end, 1_500, fn -> "vehicle 2 low on its station" end)
     :ok = Cluster.call(gs1.peer, :sys, :suspend, [Dolphin.Cluster.Station])
     Wait.until(fn -> match?({:ok, %{battery: b}} when b >= 0.35, Cluster.call(gs1.peer, Vehicles, :view, [2])) end, 1_500, fn -> "vehicle 2 charged again on its station" end)
-    {:ok, %{battery: charged}} = Cluster.call(gs1.peer, Vehicles, :view, [1])
     flush_station(station)
+    Vehicles.subscribe(1)
     :ok = Cluster.call(gs1.peer, :sys, :resume, [Dolphin.Cluster.Station])
 
     assert_receive {:dolphin_station, ^station, {:batch, [_, _ | _] = events}}, 5_000
@@ -265,8 +265,22 @@ defmodule Dolphin.ClusterTest do
       assert batteries == Enum.sort(batteries)
     end
 
-    # The controller, told the same way, ends on views as late as those.
-    Wait.until(fn -> match?({:ok, %{battery: b}} when b >= charged, Vehicles.view(1)) end, 1_500, fn -> "the controller's view of 1 at #{charged} or more" end)
+    # The controller, told the same way, publishes every one of them: the
+    # charges vehicle 1 passed while its station was held up came in the batch only.
+    batched = for {:view, 1, view} <- events, do: view.battery
+    assert batched != []
+    published = published_batteries(1, List.last(batched), [])
+    assert MapSet.subset?(MapSet.new(batched), MapSet.new(published)), "batched #{inspect(batched)}, published here #{inspect(published)}"
+  end
+
+  # The batteries of the views of `id` published here, up to one at `last`.
+  defp published_batteries(id, last, acc) do
+    receive do
+      {:dolphin, {:vehicle, ^id}, {:view, %{battery: ^last}}} -> Enum.reverse([last | acc])
+      {:dolphin, {:vehicle, ^id}, {:view, view}} -> published_batteries(id, last, [view.battery | acc])
+    after
+      5_000 -> flunk("no view of #{id} at #{last} here; published: #{inspect(Enum.reverse(acc))}")
+    end
   end
 
   # What the station told before it was held up.
