@@ -383,13 +383,6 @@ defmodule Dolphin.Cluster.Mirror do
       v = %{v | hearings: Map.put(v.hearings, station, fun.(h))}
 
       case if(why == :view, do: conflict(v, station), else: :same) do
-        # What most of a station's four summaries a second are: the age of a
-        # vehicle only it hears, and has. Nothing to choose: one hearing
-        # keeps its station whatever its age, and an age moves no view
-        # (nor whether it is lost, which its view says).
-        :same when why == :heard and map_size(v.hearings) == 1 and v.chosen == station and v.lost == (not h.view.connected?) ->
-          %{s | vehicles: Map.put(s.vehicles, id, v)}
-
         :same ->
           s = decide(s, id, v, why)
           # A new view of the chosen station, once the choice is settled.
@@ -479,7 +472,7 @@ defmodule Dolphin.Cluster.Mirror do
   # The choice made again for one vehicle, and what it changes published.
   defp decide(s, id, v, why) do
     hearings = v.hearings
-    chosen = Choice.choose(silent_as_stale(hearings, s), v.chosen, stale_ms: stale_ms(s))
+    chosen = choose(s, hearings, v.chosen)
     lost = Choice.lost?(hearings)
     old = v
 
@@ -492,6 +485,12 @@ defmodule Dolphin.Cluster.Mirror do
         %{s | vehicles: Map.put(s.vehicles, id, v)}
     end
   end
+
+  # A vehicle only the station it has hears (most, and most of what stations
+  # tell: four summaries of ages a second, a view each position): nothing
+  # to choose, that station keeps it whatever its age (Choice.choose/3).
+  defp choose(_s, hearings, chosen) when map_size(hearings) == 1 and is_map_key(hearings, chosen), do: chosen
+  defp choose(s, hearings, chosen), do: Choice.choose(silent_as_stale(hearings, s), chosen, stale_ms: stale_ms(s))
 
   # Stale after stale_ms of clock time, but never under @stale_floor_ms of
   # real time: stations report ages that often, and a pause of this host or
