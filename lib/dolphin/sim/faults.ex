@@ -24,6 +24,9 @@ defmodule Dolphin.Sim.Faults do
   import Bitwise, only: [<<<: 2, bxor: 2]
 
   @keys [:loss, :duplicate, :reorder, :corrupt, :latency, :silence]
+  # A datagram reordered is held back this long (clock ms) on top of the latency.
+  @reorder_min_ms 20
+  @reorder_max_ms 100
 
   defstruct loss: 0.0, duplicate: 0.0, reorder: 0.0, corrupt: 0.0, latency: 0, silence: false, rand: nil
 
@@ -78,12 +81,16 @@ defmodule Dolphin.Sim.Faults do
       {datagram, r} = if corrupt < f.corrupt, do: flip(datagram, r), else: {datagram, r}
       {late, r} = :rand.uniform_s(r)
       {extra, r} = :rand.uniform_s(r)
-      delay = if late < f.reorder, do: f.latency + 20 + round(extra * 80), else: f.latency
+      delay = if late < f.reorder, do: f.latency + @reorder_min_ms + round(extra * (@reorder_max_ms - @reorder_min_ms)), else: f.latency
       {twice, r} = :rand.uniform_s(r)
       copies = if twice < f.duplicate, do: [{delay, datagram}, {delay, datagram}], else: [{delay, datagram}]
       {copies, %{f | rand: r}}
     end
   end
+
+  @doc "The longest (clock ms) these faults hold a datagram back: its latency, and a reordering's hold on top."
+  @spec longest_hold(t()) :: non_neg_integer()
+  def longest_hold(%__MODULE__{} = f), do: f.latency + if(f.reorder > 0, do: @reorder_max_ms, else: 0)
 
   defp flip(<<>>, r), do: {<<>>, r}
 

@@ -133,16 +133,13 @@ defmodule Dolphin.Sim.Vehicle do
     e in ArgumentError -> {:reply, Dolphin.Sim.Error.bad_option(Exception.message(e)), s}
   end
 
-  def handle_call({:on_item_reached, seq, {:faults, faults} = action}, _from, s) do
-    # Checked now, so that a bad fault is said to the caller, not at the item.
-    _ = Faults.update(s.faults_out, faults)
+  def handle_call({:on_item_reached, seq, action}, _from, s) do
+    # Faults are checked now, so that a bad one is said to the caller, not at the item.
+    with {:faults, faults} <- action, do: Faults.update(s.faults_out, faults)
     {:reply, :ok, %{s | on_item_reached: Map.update(s.on_item_reached, seq, [action], &(&1 ++ [action]))}}
   rescue
     e in ArgumentError -> {:reply, Dolphin.Sim.Error.bad_option(Exception.message(e)), s}
   end
-
-  def handle_call({:on_item_reached, seq, action}, _from, s),
-    do: {:reply, :ok, %{s | on_item_reached: Map.update(s.on_item_reached, seq, [action], &(&1 ++ [action]))}}
 
   def handle_call({:set, :battery, fraction}, _from, s), do: {:reply, :ok, update_model(s, &%{&1 | battery: fraction * 1.0})}
 
@@ -258,8 +255,11 @@ defmodule Dolphin.Sim.Vehicle do
   # Silent at once; the process ends once the frames its faults hold back
   # (latency, reordering: the item's report among them) have gone out.
   defp item_action(:crash, s) do
-    held = s.faults_out.latency + if(s.faults_out.reorder > 0, do: 100, else: 0)
-    if held > 0, do: Clock.send_after(self(), :crash, held + 1), else: send(self(), :crash)
+    case Faults.longest_hold(s.faults_out) do
+      0 -> send(self(), :crash)
+      held -> Clock.send_after(self(), :crash, held + 1)
+    end
+
     item_action({:faults, silence: true}, s)
   end
 
