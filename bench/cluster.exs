@@ -47,6 +47,7 @@
 #   BENCH_FEED=replay BENCH_VEHICLES=2000 BENCH_STATIONS=4 MIX_ENV=prod mix run bench/cluster.exs
 
 Code.require_file("percentiles.exs", __DIR__)
+Code.require_file("os_process.exs", __DIR__)
 
 defmodule ClusterBench do
   alias Dolphin.Engine
@@ -163,13 +164,13 @@ defmodule ClusterBench do
     here = ClusterBench.Probe.start(ids)
     nodes = Enum.flat_map(stations, &Enum.reject([&1.gs, &1.sims], fn p -> p == nil end))
     cpu0 = for p <- nodes, into: %{}, do: {p.name, call(p, :erlang, :statistics, [:runtime])}
-    feeder_cpu0 = feeder && feeder_cpu(feeder)
+    feeder_cpu0 = feeder && Bench.OSProcess.cpu_ms(feeder.os_pid)
     my0 = :erlang.statistics(:runtime)
     w0 = System.monotonic_time(:millisecond)
     Process.sleep(seconds * 1_000)
     wall = System.monotonic_time(:millisecond) - w0
     cpu1 = for p <- nodes, into: %{}, do: {p.name, call(p, :erlang, :statistics, [:runtime])}
-    feeder_cpu1 = feeder && feeder_cpu(feeder)
+    feeder_cpu1 = feeder && Bench.OSProcess.cpu_ms(feeder.os_pid)
     my1 = :erlang.statistics(:runtime)
 
     published = for st <- stations, into: %{}, do: {st.gs.node, Map.new(call(st.gs, ClusterBench.Probe, :take, []))}
@@ -294,25 +295,10 @@ defmodule ClusterBench do
     File.write!(path, Enum.map(vehicles, &ClusterBench.Feed.vehicle(&1, fps)))
     script = Path.expand("cluster_feed.py", __DIR__)
     port = Port.open({:spawn_executable, System.find_executable("python3")}, [:binary, :exit_status, {:line, 256}, args: [script, path, "#{fps}"]])
-    await_line(port, "feeding")
+    Bench.OSProcess.await_line(port, ~r/^feeding/, 120_000)
     File.rm(path)
     {:os_pid, os_pid} = Port.info(port, :os_pid)
     {stations, %{port: port, os_pid: os_pid}}
-  end
-
-  defp await_line(port, prefix) do
-    receive do
-      {^port, {:data, {:eol, line}}} -> if String.starts_with?(line, prefix), do: :ok, else: await_line(port, prefix)
-      {^port, {:exit_status, status}} -> Mix.raise("the feed exited (#{status}) before it started")
-    after
-      120_000 -> Mix.raise("the feed did not start within 120 s")
-    end
-  end
-
-  # CPU milliseconds of the feed's OS process (user + system), from /proc.
-  defp feeder_cpu(%{os_pid: pid}) do
-    [utime, stime] = File.read!("/proc/#{pid}/stat") |> String.split(" ") |> Enum.slice(13, 2) |> Enum.map(&String.to_integer/1)
-    (utime + stime) * 10
   end
 
   # Its id on its station ("7@bench_gs2" is 7 there, "7@net2@bench_gs2" is "7@net2").

@@ -29,6 +29,8 @@
 #   (no busy-waiting schedulers; the simulator's VM keeps the defaults):
 #   MIX_ENV=prod elixir --erl "+sbwt none +sbwtdcpu none +sbwtdio none" -S mix run bench/intake.exs
 
+Code.require_file("os_process.exs", __DIR__)
+
 alias Dolphin.Link
 alias Dolphin.Link.Connection
 
@@ -37,12 +39,6 @@ networks = String.to_integer(System.get_env("NETWORKS", "8"))
 window_s = String.to_integer(System.get_env("WINDOW", "10"))
 
 defmodule Bench.Intake do
-  # CPU milliseconds of an OS process (user + system), from /proc.
-  def cpu_ms(pid) do
-    [utime, stime] = File.read!("/proc/#{pid}/stat") |> String.split(" ") |> Enum.slice(13, 2) |> Enum.map(&String.to_integer/1)
-    (utime + stime) * 10
-  end
-
   def rcvbuf_errors do
     [names, values | _] = File.read!("/proc/net/snmp") |> String.split("\n") |> Enum.filter(&String.starts_with?(&1, "Udp:"))
     Enum.zip(String.split(names), String.split(values)) |> Map.new() |> Map.fetch!("RcvbufErrors") |> String.to_integer()
@@ -126,17 +122,6 @@ defmodule Bench.Intake do
 
   def frames(links), do: links |> Enum.map(&Connection.info(&1).stats.frames) |> Enum.sum()
 
-  # Lines of the simulator's output, as they come, until `pattern` matches one.
-  def await_line(port, pattern, timeout_ms) do
-    receive do
-      {^port, {:data, {:eol, line}}} -> if line =~ pattern, do: line, else: await_line(port, pattern, timeout_ms)
-      {^port, {:data, {:noeol, _}}} -> await_line(port, pattern, timeout_ms)
-      {^port, {:exit_status, status}} -> raise "the simulator exited (#{status}) before printing #{inspect(pattern)}"
-    after
-      timeout_ms -> raise "the simulator printed no #{inspect(pattern)} within #{timeout_ms} ms"
-    end
-  end
-
   def wait_until(what, timeout_ms, fun) do
     deadline = System.monotonic_time(:millisecond) + timeout_ms
 
@@ -159,7 +144,7 @@ mix = System.find_executable("mix")
 args = ~w(dolphin.sim --count #{vehicles} --networks #{networks} --gcs udpout:127.0.0.1:#{base} --for #{run_s})
 sim = Port.open({:spawn_executable, mix}, [:binary, :exit_status, {:line, 4096}, args: args, env: [{~c"MIX_ENV", ~c"#{Mix.env()}"}]])
 {:os_pid, sim_pid} = Port.info(sim, :os_pid)
-Intake.await_line(sim, ~r/^simulating/, 120_000)
+Bench.OSProcess.await_line(sim, ~r/^simulating/, 120_000)
 
 # The emulator's own flags (before "--" on its command line): the schedulers' busy waiting among them.
 vm_flags = File.read!("/proc/self/cmdline") |> String.split(<<0>>) |> Enum.drop(1) |> Enum.take_while(&(&1 != "--")) |> Enum.join(" ")
@@ -201,8 +186,8 @@ red0 = if System.get_env("DEBUG"), do: reductions.()
 ports = Enum.to_list(base..(base + networks - 1))
 drops0 = Intake.socket_drops(ports)
 frames0 = Intake.frames(links)
-cpu0 = Intake.cpu_ms(System.pid())
-sim_cpu0 = Intake.cpu_ms(sim_pid)
+cpu0 = Bench.OSProcess.cpu_ms(System.pid())
+sim_cpu0 = Bench.OSProcess.cpu_ms(sim_pid)
 wall0 = System.monotonic_time(:millisecond)
 # ON_CPU=1: how long the processes ran (scheduled in to scheduled out), by
 # kind, over the window: the rest of the VM's CPU is the runtime's outside
@@ -217,8 +202,8 @@ if perf = System.get_env("PERF"),
 on_cpu = on_cpu && Intake.stop_on_cpu(on_cpu)
 
 frames1 = Intake.frames(links)
-cpu1 = Intake.cpu_ms(System.pid())
-sim_cpu1 = Intake.cpu_ms(sim_pid)
+cpu1 = Bench.OSProcess.cpu_ms(System.pid())
+sim_cpu1 = Bench.OSProcess.cpu_ms(sim_pid)
 wall1 = System.monotonic_time(:millisecond)
 window_drops = Intake.socket_drops(ports) - drops0
 
@@ -239,7 +224,7 @@ wall_ms = wall1 - wall0
 cpu_ms = cpu1 - cpu0
 
 # The simulator's end: how many frames its vehicles sent.
-[_, sent] = Regex.run(~r/sent (\d+) frames/, Intake.await_line(sim, ~r/sent \d+ frames/, (run_s + 120) * 1000))
+[_, sent] = Regex.run(~r/sent (\d+) frames/, Bench.OSProcess.await_line(sim, ~r/sent \d+ frames/, (run_s + 120) * 1000))
 sent = String.to_integer(sent)
 receive do: ({^sim, {:exit_status, _}} -> :ok), after: (30_000 -> :ok)
 # What was still in a socket or a mailbox when the simulator stopped.

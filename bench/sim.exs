@@ -58,10 +58,8 @@ defmodule Bench.Sink do
   end
 end
 
-cpu_ms = fn ->
-  [utime, stime] = File.read!("/proc/self/stat") |> String.split(" ") |> Enum.slice(13, 2) |> Enum.map(&String.to_integer/1)
-  (utime + stime) * 10
-end
+Code.require_file("os_process.exs", __DIR__)
+cpu_ms = fn -> Bench.OSProcess.cpu_ms(System.pid()) end
 
 command = fn command, params ->
   [p1, p2, p3, p4, p5, p6, p7] = Enum.map(params ++ List.duplicate(0, 7 - length(params)), &(&1 * 1.0))
