@@ -290,6 +290,13 @@ defmodule Dolphin.ScriptTest do
       caller_ref = Process.monitor(caller)
       assert_receive {:script, pid}, 5_000
       ref = Process.monitor(pid)
+      # The monitor is a signal to the runner, and signals from one sender
+      # are taken in order: once the runner has answered a system message
+      # sent after it, the monitor is in place. Signals from two senders
+      # keep no order, so without this the caller's exit, sent later, was
+      # once taken first on a loaded VM, and the monitor's DOWN came as
+      # :noproc after the script's last event.
+      _ = :sys.get_state(pid, 30_000)
       # A loaded run once found the script ended before this point (its
       # monitor said :noproc): if it comes again, the failure tells how.
       receive do
