@@ -21,7 +21,11 @@ defmodule Dolphin.Check.Clock do
   # be as busy as it likes (other dry runs, other tests) without holding
   # this one up. A process of the dry run that never stops running (a busy
   # loop) cannot hold it for ever: after @patience_real_ms of it, time
-  # moves on anyway.
+  # moves on anyway. Not while the process that keeps the dry run from being
+  # idle is held from running, though: ready to run (or suspended) and not
+  # run at all since the clock's last look, as on a loaded host that gives
+  # it no core. That is no busy loop, and time waits for it, up to
+  # @held_real_ms.
 
   use GenServer
 
@@ -31,6 +35,8 @@ defmodule Dolphin.Check.Clock do
   @now 1
   @ended 2
   @patience_real_ms 2_000
+  # The longest a dry run's process held from running holds the clock (real ms).
+  @held_real_ms 60_000
   # The VM not quiet for this long (real ms): something else keeps it busy.
   @busy_vm_ms 1
   # Nothing set on this clock and nothing running: the script may wait on
@@ -152,7 +158,7 @@ defmodule Dolphin.Check.Clock do
           cells
       end
 
-    {:ok, %{cells: cells, shared: shared_processes(), others: %{}, moving?: false, horizon: nil, owner: nil, timers: :gb_trees.empty(), refs: %{}, seq: 0, busy_since: nil, empty_since: nil}}
+    {:ok, %{cells: cells, shared: shared_processes(), others: %{}, moving?: false, horizon: nil, owner: nil, timers: :gb_trees.empty(), refs: %{}, seq: 0, busy_since: nil, empty_since: nil, held: nil, held?: false}}
   end
 
   @impl GenServer
@@ -204,7 +210,7 @@ defmodule Dolphin.Check.Clock do
     ended? = :atomics.get(s.cells, @ended) == 1
 
     cond do
-      not idle? and (s.busy_since == nil or real - s.busy_since < @patience_real_ms) ->
+      not idle? and patient?(s, real) ->
         look_again(again_ms, %{s | busy_since: s.busy_since || real})
 
       # What reached this clock before its dry run was idle (a timer set,
@@ -235,6 +241,9 @@ defmodule Dolphin.Check.Clock do
     end
   end
 
+  defp patient?(%{busy_since: nil}, _real), do: true
+  defp patient?(s, real), do: real - s.busy_since < @patience_real_ms or (s.held? and real - s.busy_since < @held_real_ms)
+
   defp horizon(s) do
     :atomics.put(s.cells, @now, max(:atomics.get(s.cells, @now), s.horizon))
     :atomics.put(s.cells, @ended, 1)
@@ -262,15 +271,18 @@ defmodule Dolphin.Check.Clock do
   # scripts' and runs' supervisors). Asked one by one, they are not seen at
   # one moment: each is asked twice, and only if none ran in between (its
   # reductions unchanged) were they all waiting at once, between the two
-  # rounds.
+  # rounds. The first of them found not waiting, if it is ready to run or
+  # suspended, is remembered with its reductions: found so again at a later
+  # look, it has not run in between (`held?`).
   defp idle(s, real) do
     quiet? = :erlang.statistics(:total_active_tasks) <= 1
+    s = %{s | held?: false}
 
     cond do
       loading?() -> {false, s}
       quiet? -> {true, s}
       s.busy_since == nil or real - s.busy_since < @busy_vm_ms -> {false, s}
-      true -> with({idle?, others} <- dry_run_waiting?(s.shared, s.others), do: {idle?, %{s | others: others}})
+      true -> dry_run_waiting?(s)
     end
   end
 
@@ -279,16 +291,17 @@ defmodule Dolphin.Check.Clock do
       Process.info(Process.whereis(:erl_prim_loader), [:status, :current_function]) != [status: :waiting, current_function: {:erl_prim_loader, :loop, 3}]
   end
 
-  # {idle?, the processes known to be none of the above}.
-  defp dry_run_waiting?(shared, others) do
-    case waiting(shared, others) do
-      {:busy, others} -> {false, others}
-      {first, others} -> {again(first) == first, others}
+  defp dry_run_waiting?(s) do
+    case waiting(s.shared, s.others) do
+      {{:busy, nil}, others} -> {false, %{s | others: others}}
+      {{:busy, held}, others} -> {false, %{s | others: others, held: held, held?: held == s.held}}
+      {first, others} -> {again(first) == first, %{s | others: others}}
     end
   end
 
   # The reductions of the processes above, all waiting ({pid, reductions}),
-  # or :busy; and the processes known to be none of them: each of the rest
+  # or {:busy, {pid, reductions} of the first found ready to run or suspended,
+  # or nil}; and the processes known to be none of them: each of the rest
   # of the VM is asked once it is seen waiting (a process takes its group
   # leader as it starts, and keeps it).
   defp waiting(shared, others) do
@@ -302,7 +315,11 @@ defmodule Dolphin.Check.Clock do
       else
         case Process.info(pid, [:group_leader, :status, :reductions]) do
           [group_leader: gl, status: status, reductions: reductions] when gl == me or is_map_key(shared, gl) or is_map_key(shared, pid) ->
-            if status == :waiting, do: {:cont, {[{pid, reductions} | acc], others}}, else: {:halt, {:busy, others}}
+            case status do
+              :waiting -> {:cont, {[{pid, reductions} | acc], others}}
+              held when held in [:runnable, :suspended] -> {:halt, {{:busy, {pid, reductions}}, others}}
+              _ -> {:halt, {{:busy, nil}, others}}
+            end
 
           [group_leader: _, status: :waiting, reductions: _] ->
             {:cont, {acc, Map.put(others, pid, true)}}
