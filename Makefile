@@ -22,6 +22,7 @@ bench: bootstrap
 	MIX_ENV=prod mix run bench/mission_upload.exs
 	MIX_ENV=prod VEHICLES=1000 NETWORKS=4 mix run bench/intake.exs
 	MIX_ENV=prod VEHICLES=1000 NETWORKS=4 elixir --erl "+sbwt none +sbwtdcpu none +sbwtdio none" -S mix run bench/intake.exs
+	MIX_ENV=prod FEED=replay VEHICLES=2000 NETWORKS=8 elixir --erl "+sbwt none +sbwtdcpu none +sbwtdio none" -S mix run bench/intake.exs
 	MIX_ENV=prod mix run bench/sim.exs
 	MIX_ENV=prod mix run bench/reaction.exs
 	MIX_ENV=prod mix run bench/reaction_floor.exs

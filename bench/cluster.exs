@@ -14,7 +14,7 @@
 #     position report is a new view. The simulators cost more CPU than the
 #     stations: this machine runs a few hundred vehicles this way.
 #   replay: telemetry encoded beforehand, sent by one OS process
-#     (bench/cluster_feed.py), each vehicle from its own UDP socket:
+#     (bench/replay_feed.exs), each vehicle from its own UDP socket:
 #     BENCH_RATE (default 2) GLOBAL_POSITION_INT a second, each a new
 #     position, plus a SYS_STATUS and a HEARTBEAT a second and its
 #     AUTOPILOT_VERSION (a unique id) once a cycle of 256 frames. A station
@@ -48,6 +48,7 @@
 
 Code.require_file("percentiles.exs", __DIR__)
 Code.require_file("os_process.exs", __DIR__)
+Code.require_file("replay_feed.exs", __DIR__)
 
 defmodule ClusterBench do
   alias Dolphin.Engine
@@ -182,7 +183,7 @@ defmodule ClusterBench do
 
     IO.puts("\nCPU over #{Float.round(wall / 1000, 1)} s (share of one core; #{System.schedulers_online()} vCPUs shared by all nodes):")
     for p <- nodes, do: IO.puts("  #{String.pad_trailing(p.name, 12)} #{pct(cpu1[p.name], cpu0[p.name], wall)}")
-    if feeder, do: IO.puts("  #{String.pad_trailing("feed", 12)} #{Float.round((feeder_cpu1 - feeder_cpu0) / wall * 100, 1)} % (bench/cluster_feed.py)")
+    if feeder, do: IO.puts("  #{String.pad_trailing("feed", 12)} #{Float.round((feeder_cpu1 - feeder_cpu0) / wall * 100, 1)} % (bench/replay_feed.py)")
     controller_ms = elem(my1, 0) - elem(my0, 0)
     per_view = if views > 0, do: Float.round(controller_ms * 1000 / views, 1), else: "-"
     IO.puts("  #{String.pad_trailing("controller", 12)} #{pct(my1, my0, wall)}: #{round(controller_ms / wall * 1_000_000 / n)} µs of CPU a second per vehicle, #{per_view} µs per view mirrored")
@@ -251,7 +252,7 @@ defmodule ClusterBench do
   # The feed's vehicles are numbered by their unique ids (index + 1).
   defp drop_battery(_st, _local, v, feeder) do
     {:ok, %{uid: uid}} = Dolphin.Vehicles.view(v)
-    true = Port.command(feeder.port, "low #{uid - 1}\n")
+    Bench.ReplayFeed.low_battery(feeder, uid - 1)
     :ok
   end
 
@@ -290,15 +291,8 @@ defmodule ClusterBench do
         %{port: Enum.at(st.ports, div(j, @per_network)), sysid: rem(j, @per_network) + 1, index: i * per + j}
       end
 
-    fps = rate + 2
-    path = Path.join(System.tmp_dir!(), "dolphin_cluster_feed_#{System.unique_integer([:positive])}.bin")
-    File.write!(path, Enum.map(vehicles, &ClusterBench.Feed.vehicle(&1, fps)))
-    script = Path.expand("cluster_feed.py", __DIR__)
-    port = Port.open({:spawn_executable, System.find_executable("python3")}, [:binary, :exit_status, {:line, 256}, args: [script, path, "#{fps}"]])
-    Bench.OSProcess.await_line(port, ~r/^feeding/, 120_000)
-    File.rm(path)
-    {:os_pid, os_pid} = Port.info(port, :os_pid)
-    {stations, %{port: port, os_pid: os_pid}}
+    # A position `rate` times a second, a SYS_STATUS and a HEARTBEAT.
+    {stations, Bench.ReplayFeed.start(vehicles, rate + 2)}
   end
 
   # Its id on its station ("7@bench_gs2" is 7 there, "7@net2@bench_gs2" is "7@net2").
@@ -369,47 +363,6 @@ defmodule ClusterBench do
 
   defp row(label, %{n: n, p50: p50, p99: p99, max: max}),
     do: IO.puts(String.pad_trailing(label, 44) <> "n=#{n}  p50 #{p50} µs  p99 #{p99} µs  max #{max} µs")
-end
-
-defmodule ClusterBench.Feed do
-  @moduledoc false
-  # The frames bench/cluster_feed.py replays for one vehicle: its station
-  # link's port, then two cycles of @cycle frames, the second with the
-  # battery low (see the script's file format).
-  alias Dolphin.MAVLink.Ardupilotmega, as: M
-  alias Dolphin.MAVLink.Frame
-
-  import Bitwise
-
-  @cycle 256
-
-  def vehicle(%{port: port} = v, fps) do
-    frames = cycle(v, fps, 80) ++ cycle(v, fps, 20)
-    [<<port::little-16, @cycle::little-16>> | Enum.map(frames, &<<byte_size(&1)::little-16, &1::binary>>)]
-  end
-
-  defp cycle(%{sysid: sysid} = v, fps, battery),
-    do: for(i <- 0..(@cycle - 1), do: Frame.encode(message(i, v, fps, battery), sysid: sysid, compid: 1, seq: i))
-
-  # A HEARTBEAT first, then each second `fps - 2` positions, a SYS_STATUS
-  # and a HEARTBEAT; its unique id (AUTOPILOT_VERSION, which the feed
-  # cannot send when asked) in place of every 16th frame from the second
-  # on: a station that has yet to tell the path is this vehicle's drops
-  # what it hears on it.
-  defp message(0, _v, _fps, _battery), do: heartbeat()
-  defp message(i, %{index: index}, _fps, _battery) when rem(i, 16) == 1, do: %M.AutopilotVersion{capabilities: 0xFFFF, flight_sw_version: 0x04060000, uid: index + 1, vendor_id: 0x1209, product_id: 0x5740}
-
-  defp message(i, %{index: index}, fps, battery) do
-    case rem(i - 2, fps) do
-      p when p == fps - 1 -> heartbeat()
-      p when p == fps - 2 -> %M.SysStatus{voltage_battery: 12_100, current_battery: 2_800, battery_remaining: battery, load: 200}
-      # A new position each time, 2 m further north.
-      _ -> %M.GlobalPositionInt{time_boot_ms: div(i * 1000, fps), lat: 411_780_000 + rem(index, 1000) * 1_000 + i * 180, lon: -85_960_000 + div(index, 1000) * 10_000, alt: 132_000, relative_alt: 30_000, vx: 500, hdg: 0}
-    end
-  end
-
-  # A copter flying in GUIDED, armed.
-  defp heartbeat, do: %M.Heartbeat{type: 2, autopilot: 3, base_mode: 1 ||| 8 ||| 16 ||| 128, custom_mode: 4, system_status: 4, mavlink_version: 3}
 end
 
 ClusterBench.main()

@@ -22,6 +22,16 @@
 #
 #   MIX_ENV=prod mix run bench/intake.exs     (VEHICLES=500 NETWORKS=2 WINDOW=5 for a smaller one)
 #
+#   FEED=replay: the vehicles replayed instead of simulated
+#   (bench/replay_feed.exs: telemetry encoded beforehand, sent by one
+#   Python process, each vehicle from its own socket, RATE frames a second
+#   a vehicle, default 11: positions at 9 Hz, SYS_STATUS and HEARTBEAT at
+#   1 Hz, each position a new one). The simulator of 2,000 vehicles needs
+#   more than this machine's two cores beside the ground station; the feed
+#   takes a tenth of one. Nothing answers the ground station's requests
+#   there (the unique id comes in the cycle), and every vehicle moves, so
+#   each position is a view published.
+#
 #   ON_CPU=1 adds how long the ground station's processes ran over the window
 #   (traced: scheduled in to scheduled out), by kind, against its whole CPU.
 #
@@ -30,6 +40,7 @@
 #   MIX_ENV=prod elixir --erl "+sbwt none +sbwtdcpu none +sbwtdio none" -S mix run bench/intake.exs
 
 Code.require_file("os_process.exs", __DIR__)
+Code.require_file("replay_feed.exs", __DIR__)
 
 alias Dolphin.Link
 alias Dolphin.Link.Connection
@@ -37,6 +48,15 @@ alias Dolphin.Link.Connection
 vehicles = String.to_integer(System.get_env("VEHICLES", "2000"))
 networks = String.to_integer(System.get_env("NETWORKS", "8"))
 window_s = String.to_integer(System.get_env("WINDOW", "10"))
+feed = System.get_env("FEED", "sim")
+rate = String.to_integer(System.get_env("RATE", "11"))
+per_network = div(vehicles + networks - 1, networks)
+
+cond do
+  feed not in ["sim", "replay"] -> Mix.raise("FEED: sim or replay, not #{inspect(feed)}")
+  per_network > 255 -> Mix.raise("#{vehicles} vehicles over #{networks} networks: at most 255 a network (a system id is a byte)")
+  true -> :ok
+end
 
 defmodule Bench.Intake do
   def rcvbuf_errors do
@@ -140,15 +160,28 @@ rcvbuf0 = Intake.rcvbuf_errors()
 # vehicles: the simulator runs long enough for that and the window.
 discovery_s = 30 + div(vehicles * 60, 1000)
 run_s = discovery_s + 60 + window_s
-mix = System.find_executable("mix")
-args = ~w(dolphin.sim --count #{vehicles} --networks #{networks} --gcs udpout:127.0.0.1:#{base} --for #{run_s})
-sim = Port.open({:spawn_executable, mix}, [:binary, :exit_status, {:line, 4096}, args: args, env: [{~c"MIX_ENV", ~c"#{Mix.env()}"}]])
-{:os_pid, sim_pid} = Port.info(sim, :os_pid)
-Bench.OSProcess.await_line(sim, ~r/^simulating/, 120_000)
+{sim, sim_pid} =
+  case feed do
+    "sim" ->
+      mix = System.find_executable("mix")
+      args = ~w(dolphin.sim --count #{vehicles} --networks #{networks} --gcs udpout:127.0.0.1:#{base} --for #{run_s})
+      sim = Port.open({:spawn_executable, mix}, [:binary, :exit_status, {:line, 4096}, args: args, env: [{~c"MIX_ENV", ~c"#{Mix.env()}"}]])
+      {:os_pid, sim_pid} = Port.info(sim, :os_pid)
+      Bench.OSProcess.await_line(sim, ~r/^simulating/, 120_000)
+      {sim, sim_pid}
+
+    "replay" ->
+      # Vehicle k of network n: system id k + 1, unique id n * per_network + k + 1.
+      replayed = for i <- 0..(vehicles - 1), do: %{port: base + div(i, per_network), sysid: rem(i, per_network) + 1, index: i}
+      replay = Bench.ReplayFeed.start(replayed, rate)
+      {replay, replay.os_pid}
+  end
+
+source = if feed == "sim", do: "simulated vehicles", else: "vehicles replayed at #{rate} frames a second each (bench/replay_feed.py)"
 
 # The emulator's own flags (before "--" on its command line): the schedulers' busy waiting among them.
 vm_flags = File.read!("/proc/self/cmdline") |> String.split(<<0>>) |> Enum.drop(1) |> Enum.take_while(&(&1 != "--")) |> Enum.join(" ")
-IO.puts("telemetry intake: #{vehicles} simulated vehicles over #{networks} networks (another OS process), #{System.schedulers_online()} schedulers, OTP #{System.otp_release()}, VM flags: #{if vm_flags == "", do: "none", else: vm_flags}")
+IO.puts("telemetry intake: #{vehicles} #{source} over #{networks} networks (another OS process), #{System.schedulers_online()} schedulers, OTP #{System.otp_release()}, VM flags: #{if vm_flags == "", do: "none", else: vm_flags}")
 
 started = System.monotonic_time(:millisecond)
 
@@ -223,10 +256,18 @@ end
 wall_ms = wall1 - wall0
 cpu_ms = cpu1 - cpu0
 
-# The simulator's end: how many frames its vehicles sent.
-[_, sent] = Regex.run(~r/sent (\d+) frames/, Bench.OSProcess.await_line(sim, ~r/sent \d+ frames/, (run_s + 120) * 1000))
-sent = String.to_integer(sent)
-receive do: ({^sim, {:exit_status, _}} -> :ok), after: (30_000 -> :ok)
+# The simulator's end (the feed's at once): how many frames its vehicles sent.
+sent =
+  case feed do
+    "sim" ->
+      [_, sent] = Regex.run(~r/sent (\d+) frames/, Bench.OSProcess.await_line(sim, ~r/sent \d+ frames/, (run_s + 120) * 1000))
+      receive do: ({^sim, {:exit_status, _}} -> :ok), after: (30_000 -> :ok)
+      String.to_integer(sent)
+
+    "replay" ->
+      Bench.ReplayFeed.stop(sim)
+  end
+
 # What was still in a socket or a mailbox when the simulator stopped.
 Process.sleep(1_000)
 received = Intake.frames(links)
@@ -238,10 +279,10 @@ IO.puts("""
   #{frames} frames received (#{round(frames * 1000 / wall_ms)} frames/s, #{Float.round(frames * 1000 / wall_ms / vehicles, 1)} a vehicle)
   ground station CPU #{cpu_ms} ms = #{Float.round(cpu_ms / wall_ms * 100, 1)} % of one core, #{Float.round(cpu_ms / wall_ms * 100 / vehicles, 4)} % a vehicle, \
 #{Float.round(cpu_ms * 1000 / max(frames, 1), 2)} µs of CPU a frame
-  simulator CPU #{Float.round((sim_cpu1 - sim_cpu0) / wall_ms * 100, 1)} % of one core
+  #{if feed == "sim", do: "simulator", else: "feed"} CPU #{Float.round((sim_cpu1 - sim_cpu0) / wall_ms * 100, 1)} % of one core
   lost to the ground station's slowness (datagrams the kernel dropped for want of room in its sockets): #{window_drops} in the window
-  over the whole run, discovery included: #{ours} of #{received} received (#{kernel_drops} machine-wide, the simulator's sockets \
-included); the simulator counted #{sent} frames sent by the vehicles that answered at its end
+  over the whole run, discovery included: #{ours} of #{received} received (#{kernel_drops} machine-wide, the #{if feed == "sim", do: "simulator", else: "feed"}'s sockets \
+included); #{if feed == "sim", do: "the simulator counted #{sent} frames sent by the vehicles that answered at its end", else: "the feed sent #{sent}"}
 """)
 
 if on_cpu do

@@ -1,11 +1,12 @@
 """Replays the telemetry of many vehicles for bench/cluster.exs
-(BENCH_FEED=replay): frames encoded beforehand by the bench, each vehicle
+(BENCH_FEED=replay) and bench/intake.exs (FEED=replay), started by
+bench/replay_feed.exs: frames encoded beforehand by the bench, each vehicle
 from its own UDP socket on 127.0.0.1 to its ground station's link, at
 FRAMES_PER_SECOND a vehicle, evenly spread. No simulation runs here: sending
 a datagram is all it costs, so a machine of two cores can feed thousands of
 vehicles to several ground stations.
 
-    python3 cluster_feed.py FILE FRAMES_PER_SECOND
+    python3 replay_feed.py FILE FRAMES_PER_SECOND
 
 FILE, little-endian, for each vehicle: its station link's port (u16), the
 length N of its cycle (u16), then N frames of its normal cycle and N of its
@@ -14,7 +15,8 @@ cycles has the same sequence number, so a vehicle switched to its other
 cycle goes on without a gap.
 
 Standard input, a command a line: "low I" switches vehicle I (0-based, in
-the file's order) to its low-battery cycle; end of input stops the feed.
+the file's order) to its low-battery cycle; "quit", or the end of input,
+stops the feed.
 Prints "feeding N vehicles" once every socket is open, and the number of
 frames sent when it stops.
 """
