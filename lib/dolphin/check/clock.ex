@@ -21,11 +21,7 @@ defmodule Dolphin.Check.Clock do
   # be as busy as it likes (other dry runs, other tests) without holding
   # this one up. A process of the dry run that never stops running (a busy
   # loop) cannot hold it for ever: after @patience_real_ms of it, time
-  # moves on anyway. Not while a process that keeps the dry run from being
-  # idle is held from running, though: ready to run (or suspended) and not
-  # run at all between two of the clock's looks, as on a loaded host that
-  # gives it no core. That is no busy loop, and time waits for it, up to
-  # @held_real_ms.
+  # moves on anyway.
 
   use GenServer
 
@@ -35,8 +31,6 @@ defmodule Dolphin.Check.Clock do
   @now 1
   @ended 2
   @patience_real_ms 2_000
-  # The longest a dry run's process held from running holds the clock (real ms).
-  @held_real_ms 60_000
   # The VM not quiet for this long (real ms): something else keeps it busy.
   @busy_vm_ms 1
   # Nothing set on this clock and nothing running: the script may wait on
@@ -158,7 +152,7 @@ defmodule Dolphin.Check.Clock do
           cells
       end
 
-    {:ok, %{cells: cells, shared: shared_processes(), others: %{}, moving?: false, horizon: nil, owner: nil, timers: :gb_trees.empty(), refs: %{}, seq: 0, busy_since: nil, empty_since: nil, held: %{}, held?: false}}
+    {:ok, %{cells: cells, shared: shared_processes(), others: %{}, moving?: false, horizon: nil, owner: nil, timers: :gb_trees.empty(), refs: %{}, seq: 0, busy_since: nil, empty_since: nil}}
   end
 
   @impl GenServer
@@ -210,7 +204,7 @@ defmodule Dolphin.Check.Clock do
     ended? = :atomics.get(s.cells, @ended) == 1
 
     cond do
-      not idle? and patient?(s, real) ->
+      not idle? and (s.busy_since == nil or real - s.busy_since < @patience_real_ms) ->
         look_again(again_ms, %{s | busy_since: s.busy_since || real})
 
       # What reached this clock before its dry run was idle (a timer set,
@@ -237,12 +231,9 @@ defmodule Dolphin.Check.Clock do
         s = if at > s.horizon and not ended?, do: horizon(s), else: s
         if at > :atomics.get(s.cells, @now), do: :atomics.put(s.cells, @now, at)
         send(pid, msg)
-        {:noreply, %{s | timers: :gb_trees.delete(key, timers), refs: Map.delete(s.refs, ref), busy_since: nil, empty_since: nil, held: %{}, held?: false}, 0}
+        {:noreply, %{s | timers: :gb_trees.delete(key, timers), refs: Map.delete(s.refs, ref), busy_since: nil, empty_since: nil}, 0}
     end
   end
-
-  defp patient?(%{busy_since: nil}, _real), do: true
-  defp patient?(s, real), do: real - s.busy_since < @patience_real_ms or (s.held? and real - s.busy_since < @held_real_ms)
 
   defp horizon(s) do
     :atomics.put(s.cells, @now, max(:atomics.get(s.cells, @now), s.horizon))
@@ -272,12 +263,6 @@ defmodule Dolphin.Check.Clock do
   # one moment: each is asked twice, and only if none ran in between (its
   # reductions unchanged) were they all waiting at once, between the two
   # rounds.
-  #
-  # A look stops at the first of them found not waiting, until the dry run
-  # has not been idle for half the patience. From then on each look asks
-  # them all, and remembers those ready to run or suspended with their
-  # reductions: one found so again, its reductions the same, has not run
-  # between the two looks (`held?`, kept until the next such look).
   defp idle(s, real) do
     quiet? = :erlang.statistics(:total_active_tasks) <= 1
 
@@ -285,7 +270,7 @@ defmodule Dolphin.Check.Clock do
       loading?() -> {false, s}
       quiet? -> {true, s}
       s.busy_since == nil or real - s.busy_since < @busy_vm_ms -> {false, s}
-      true -> dry_run_waiting?(s, real - s.busy_since >= div(@patience_real_ms, 2))
+      true -> with({idle?, others} <- dry_run_waiting?(s.shared, s.others), do: {idle?, %{s | others: others}})
     end
   end
 
@@ -294,56 +279,40 @@ defmodule Dolphin.Check.Clock do
       Process.info(Process.whereis(:erl_prim_loader), [:status, :current_function]) != [status: :waiting, current_function: {:erl_prim_loader, :loop, 3}]
   end
 
-  defp dry_run_waiting?(s, all?) do
-    {found, held, others} = waiting(s.shared, s.others, all?)
-
-    s =
-      if all?,
-        do: %{s | others: others, held: held, held?: Enum.any?(held, fn {pid, reductions} -> Map.get(s.held, pid) == reductions end)},
-        else: %{s | others: others}
-
-    case found do
-      :busy -> {false, s}
-      first -> {again(first) == first, s}
+  # {idle?, the processes known to be none of the above}.
+  defp dry_run_waiting?(shared, others) do
+    case waiting(shared, others) do
+      {:busy, others} -> {false, others}
+      {first, others} -> {again(first) == first, others}
     end
   end
 
   # The reductions of the processes above, all waiting ({pid, reductions}),
-  # or :busy; those of them ready to run or suspended (pid => reductions;
-  # asked only with `all?`, else the look stops at the first not waiting);
-  # and the processes known to be none of them: each of the rest of the VM
-  # is asked once it is seen waiting (a process takes its group leader as
-  # it starts, and keeps it).
-  defp waiting(shared, others, all?) do
+  # or :busy; and the processes known to be none of them: each of the rest
+  # of the VM is asked once it is seen waiting (a process takes its group
+  # leader as it starts, and keeps it).
+  defp waiting(shared, others) do
     me = self()
     pids = Process.list()
     others = if map_size(others) > 2 * length(pids), do: Map.take(others, pids), else: others
 
-    Enum.reduce_while(pids, {[], %{}, others}, fn pid, {acc, held, others} ->
+    Enum.reduce_while(pids, {[], others}, fn pid, {acc, others} ->
       if pid == me or is_map_key(others, pid) do
-        {:cont, {acc, held, others}}
+        {:cont, {acc, others}}
       else
         case Process.info(pid, [:group_leader, :status, :reductions]) do
           [group_leader: gl, status: status, reductions: reductions] when gl == me or is_map_key(shared, gl) or is_map_key(shared, pid) ->
-            look(status, pid, reductions, all?, {acc, held, others})
+            if status == :waiting, do: {:cont, {[{pid, reductions} | acc], others}}, else: {:halt, {:busy, others}}
 
           [group_leader: _, status: :waiting, reductions: _] ->
-            {:cont, {acc, held, Map.put(others, pid, true)}}
+            {:cont, {acc, Map.put(others, pid, true)}}
 
           _ ->
-            {:cont, {acc, held, others}}
+            {:cont, {acc, others}}
         end
       end
     end)
   end
-
-  # One of the processes above, in `waiting/3`'s accumulator (the waiting
-  # ones' reductions, or :busy once one is not).
-  defp look(:waiting, pid, reductions, _all?, {acc, held, others}) when acc != :busy, do: {:cont, {[{pid, reductions} | acc], held, others}}
-  defp look(:waiting, _pid, _reductions, _all?, step), do: {:cont, step}
-  defp look(_status, _pid, _reductions, false, {_acc, held, others}), do: {:halt, {:busy, held, others}}
-  defp look(status, pid, reductions, true, {_acc, held, others}) when status in [:runnable, :suspended], do: {:cont, {:busy, Map.put(held, pid, reductions), others}}
-  defp look(_status, _pid, _reductions, true, {_acc, held, others}), do: {:cont, {:busy, held, others}}
 
   # The same processes asked again: their reductions, or :busy.
   defp again(first) do
