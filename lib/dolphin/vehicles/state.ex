@@ -277,11 +277,25 @@ defmodule Dolphin.Vehicles.State do
   as `{:link_quality, figures}`).
   """
   @spec changes(t(), t()) :: [{atom(), term()}]
-  def changes(old, new) do
+  def changes(%__MODULE__{} = old, %__MODULE__{} = new) do
+    # Field by field, written out: a comprehension over the fields' names
+    # called a closure per field, a fifth of a moving vehicle's fold.
     fields =
-      for field <- [:type, :autopilot, :mode, :armed, :system_status, :position, :home, :battery, :mission, :landed, :status_texts, :uid, :components, :sensors],
-          Map.fetch!(old, field) != Map.fetch!(new, field),
-          do: {field, Map.fetch!(new, field)}
+      []
+      |> changed(:sensors, old.sensors, new.sensors)
+      |> changed(:components, old.components, new.components)
+      |> changed(:uid, old.uid, new.uid)
+      |> changed(:status_texts, old.status_texts, new.status_texts)
+      |> changed(:landed, old.landed, new.landed)
+      |> changed(:mission, old.mission, new.mission)
+      |> changed(:battery, old.battery, new.battery)
+      |> changed(:home, old.home, new.home)
+      |> changed(:position, old.position, new.position)
+      |> changed(:system_status, old.system_status, new.system_status)
+      |> changed(:armed, old.armed, new.armed)
+      |> changed(:mode, old.mode, new.mode)
+      |> changed(:autopilot, old.autopilot, new.autopilot)
+      |> changed(:type, old.type, new.type)
 
     # The link's figures, not its bookkeeping (pending TIMESYNCs, counters).
     case {link_figures(old), link_figures(new)} do
@@ -289,6 +303,9 @@ defmodule Dolphin.Vehicles.State do
       {_, figures} -> fields ++ [{:link_quality, figures}]
     end
   end
+
+  defp changed(fields, _field, old, new) when old == new, do: fields
+  defp changed(fields, field, _old, new), do: [{field, new} | fields]
 
   @doc "The link's round trip (ms) and loss both ways, nil until measured: see `Dolphin.Vehicles.LinkQuality`."
   @spec link_figures(t()) :: LinkQuality.figures()

@@ -101,4 +101,14 @@ defmodule Dolphin.Vehicles.StateTest do
     assert State.changes(a, b) == [battery: 0.5]
     assert State.changes(b, State.apply(b, frame(%M.SysStatus{battery_remaining: 50}), 300)) == []
   end
+
+  test "changes names every public field that changed, in the fields' order, and an equal number as no change" do
+    a = fold([{%M.Heartbeat{type: 2, autopilot: 3, custom_mode: 4}, []}])
+    fields = [:type, :autopilot, :mode, :armed, :system_status, :position, :home, :battery, :mission, :landed, :status_texts, :uid, :components, :sensors]
+    changed = Enum.reduce(fields, a, fn field, s -> Map.put(s, field, {:new, field}) end)
+    assert State.changes(a, changed) == Enum.map(fields, &{&1, {:new, &1}})
+    assert State.changes(changed, Map.put(changed, :sensors, {:new, :sensors})) == []
+    # A pack at 1 and at 1.0 is the same pack: no change to tell.
+    assert State.changes(%{a | battery: 1}, %{a | battery: 1.0}) == []
+  end
 end
