@@ -28,9 +28,9 @@
 #   a vehicle, default 11: positions at 9 Hz, SYS_STATUS and HEARTBEAT at
 #   1 Hz, each position a new one). The simulator of 2,000 vehicles needs
 #   more than this machine's two cores beside the ground station; the feed
-#   takes a tenth of one. Nothing answers the ground station's requests
-#   there (the unique id comes in the cycle), and every vehicle moves, so
-#   each position is a view published.
+#   took a fifth of one at 2,000. Nothing answers the ground station's
+#   requests there (the unique id comes in the cycle), and every vehicle
+#   moves, so each position is a view published.
 #
 #   ON_CPU=1 adds how long the ground station's processes ran over the window
 #   (traced: scheduled in to scheduled out), by kind, against its whole CPU.
