@@ -260,9 +260,15 @@ defmodule Dolphin.Check.Clock do
   # every process: the runtime's own (the logger, :global) and the
   # application's outside any instance (the engine's registry, the
   # scripts' and runs' supervisors). Asked one by one, they are not seen at
-  # one moment: each is asked twice, and only if none ran in between (its
-  # reductions unchanged) were they all waiting at once, between the two
-  # rounds.
+  # one moment: the VM is asked twice, and only if the second round finds
+  # the same processes, none of which ran in between (its reductions
+  # unchanged), were they all waiting at once, between the two rounds. The
+  # second round lists the VM's processes anew: a process started during
+  # the first, after its list was taken, by one asked later and found
+  # waiting (for that start to finish) would be missed by asking the first
+  # round's processes again — a stand-in flight not yet run, its start time
+  # not yet read, while time moved on (seen beside busy loops: a Flight
+  # started that way once or twice a run of three dry runs side by side).
   defp idle(s, real) do
     quiet? = :erlang.statistics(:total_active_tasks) <= 1
 
@@ -282,8 +288,14 @@ defmodule Dolphin.Check.Clock do
   # {idle?, the processes known to be none of the above}.
   defp dry_run_waiting?(shared, others) do
     case waiting(shared, others) do
-      {:busy, others} -> {false, others}
-      {first, others} -> {again(first) == first, others}
+      {:busy, others} ->
+        {false, others}
+
+      {first, others} ->
+        case waiting(shared, others) do
+          {:busy, others} -> {false, others}
+          {second, others} -> {Enum.sort(second) == Enum.sort(first), others}
+        end
     end
   end
 
@@ -311,20 +323,6 @@ defmodule Dolphin.Check.Clock do
             {:cont, {acc, others}}
         end
       end
-    end)
-  end
-
-  # The same processes asked again: their reductions, or :busy.
-  defp again(first) do
-    Enum.reduce_while(first, [], fn {pid, _}, acc ->
-      case Process.info(pid, [:status, :reductions]) do
-        [status: :waiting, reductions: reductions] -> {:cont, [{pid, reductions} | acc]}
-        _ -> {:halt, :busy}
-      end
-    end)
-    |> then(fn
-      :busy -> :busy
-      list -> Enum.reverse(list)
     end)
   end
 
