@@ -82,6 +82,12 @@ defmodule Dolphin.Separation do
   @aside_factor 2
   # Below this speed (m/s) a held vehicle has stopped.
   @stopped_ms 1.0
+  # A held vehicle's braking (m/s²), for where it will stop: less than a
+  # copter's, so that its stop is not placed short of where it comes.
+  @brake_mps2 2.5
+  # The earlier of two holds instead of the later only when that keeps
+  # them this much further apart (m across).
+  @better_by_m 2.0
 
   @doc "The separation kept when a script sets none: metres across and in height."
   @spec default_limits() :: %{horizontal: float(), vertical: float()}
@@ -244,11 +250,11 @@ defmodule Dolphin.Separation do
       {:conflict, in_s, closest} ->
         {across, height} = Prediction.apart(mine, theirs)
         seen = %{distance: across, height: height, closest: closest, in_s: in_s, limits: limits}
-        {holder, ahead} = holder(f, other)
+        {holder, ahead, catching_up?} = holder(f, other, mine, theirs, limits)
         s = give_way_back(s, ahead, holder, now)
 
         cond do
-          holder.held == nil -> hold(s, holder, ahead, seen, now)
+          holder.held == nil -> hold(s, holder, ahead, catching_up?, seen, now)
           # Held, stopped, and the other still coming at it: a copter climbs (or
           # descends) out of its way, once a hold.
           not holder.held.aside and stopped?(holder.view) -> aside(s, holder, ahead, seen)
@@ -259,9 +265,39 @@ defmodule Dolphin.Separation do
 
   # Which of the two holds, and for which: the one whose task started later
   # (tasks started within a second of each other, by `execute` or `|||`:
-  # the one written later), a vehicle flying none of ours never.
-  defp holder(%Flying{} = f, %Flying{} = o), do: if(later?(o, f), do: {o, f.id}, else: {f, o.id})
-  defp holder(%Flying{} = f, other), do: {f, other.id}
+  # the one written later), a vehicle flying none of ours never. But not a
+  # vehicle the other is catching up with: stopped where it is going, it
+  # would wait in the other's way (two on one line, the one behind faster:
+  # held ahead, a copter was run into before it could climb aside). When
+  # neither is held yet and the earlier one stopped keeps them clearly
+  # further apart than the later one stopped, the earlier one holds
+  # (`catching_up?`), and stays the one held while it is. {holder, the
+  # other's id, catching_up?}.
+  defp holder(%Flying{} = f, %Flying{} = o, mine, theirs, limits) do
+    {later, earlier, later_motion, earlier_motion} = if later?(o, f), do: {o, f, theirs, mine}, else: {f, o, mine, theirs}
+
+    cond do
+      match?(%{other: id, catching_up?: true} when id == later.id, earlier.held) -> {earlier, later.id, true}
+      later.held != nil or earlier.held != nil -> {later, earlier.id, false}
+      closest_if_stopped(earlier_motion, later_motion, limits) > closest_if_stopped(later_motion, earlier_motion, limits) + @better_by_m -> {earlier, later.id, true}
+      true -> {later, earlier.id, false}
+    end
+  end
+
+  defp holder(%Flying{} = f, other, _mine, _theirs, _limits), do: {f, other.id, false}
+
+  # How close (metres across, at most the limit: clear) two would come
+  # within the horizon were the first to brake to a stop as it is held.
+  defp closest_if_stopped({{n, e, u}, {vn, ve, vu}}, theirs, limits) do
+    # It comes to rest v²/2a further on.
+    k = :math.sqrt(vn * vn + ve * ve + vu * vu) / (2 * @brake_mps2)
+    stopped = {{n + vn * k, e + ve * k, u + vu * k}, {0.0, 0.0, 0.0}}
+
+    case Prediction.conflict(stopped, theirs, limits, @horizon_s) do
+      :clear -> limits.horizontal
+      {:conflict, _in_s, closest} -> closest
+    end
+  end
 
   defp later?(a, b) do
     if abs(a.started_at - b.started_at) >= @together_ms, do: a.started_at > b.started_at, else: {a.rank, a.id} > {b.rank, b.id}
@@ -277,10 +313,10 @@ defmodule Dolphin.Separation do
     end
   end
 
-  defp hold(s, holder, other, seen, now) do
+  defp hold(s, holder, other, catching_up?, seen, now) do
     send(holder.pid, {:separation, :hold, Map.merge(seen, %{vehicle: holder.id, other: other})})
     emit_hold(holder.id, other, seen, :hold)
-    held = %{other: other, since: now, velocity: velocity(holder.view), height: holder.view.position.h, aside: false, clear_since: nil}
+    held = %{other: other, catching_up?: catching_up?, since: now, velocity: velocity(holder.view), height: holder.view.position.h, aside: false, clear_since: nil}
     s = %{s | holding: MapSet.put(s.holding, holder.id)}
     tick(put_in(s.flying[holder.id], %{holder | held: held}))
   end
@@ -350,7 +386,9 @@ defmodule Dolphin.Separation do
     end)
   end
 
-  defp waits_for?(%Flying{held: %{other: other}} = o, f), do: other == f.id or later?(o, f)
+  # (One it holds for because it was catching up with it waits for nobody
+  # on its account: held itself, that one still stands in its way.)
+  defp waits_for?(%Flying{held: %{other: other}} = o, f), do: other == f.id or (later?(o, f) and not match?(%{other: id, catching_up?: true} when id == o.id, f.held))
   defp waits_for?(_other, _f), do: false
 
   defp let_go(s, f, others, now) do

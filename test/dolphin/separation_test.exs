@@ -209,6 +209,8 @@ defmodule Dolphin.SeparationTest do
 
   test "a report that reaches the monitor late is judged by the autopilot's clock: where the vehicle is by now, not where the report put it", %{ids: {a, b, _c} = ids} do
     # a, started later, hovers at the base; the autopilots' clocks are ours.
+    # (b, coming at it, holds: stopped, b stays clear of a, while a, still
+    # already, would be run into.)
     executor(b, 1_000)
     executor(a, 2_000)
     flying(a, 0, 0, {0.0, 0.0, 0.0})
@@ -219,8 +221,35 @@ defmodule Dolphin.SeparationTest do
     # b has flown 75 m since: 105 m off, past a within 8 s. (Taken as made
     # when it came, this report held nothing.)
     flying(b, 0, 180, {0.0, -15.0, 0.0}, boot_ms: Dolphin.Clock.now_ms() - 5_000)
-    assert_receive {:separation, :hold, %{vehicle: ^a, other: ^b, distance: distance}}, 2_000
+    assert_receive {:separation, :hold, %{vehicle: ^b, other: ^a, distance: distance}}, 2_000
     assert distance < 140, "b judged #{distance} m off"
+  end
+
+  test "one line, the later one ahead and the earlier catching up with it: the one behind holds, not the one it would run into", %{ids: {a, b, c} = ids} do
+    # Both east along the base's parallel at one height: b, whose task
+    # started later, 30 m ahead at 4 m/s (slowing for its turn), a behind at
+    # 10 m/s. Held, b would stop in a's way; a stopped stays behind b.
+    executor(a, 1_000)
+    executor(b, 2_000)
+    flying(b, 0, 30, {0.0, 4.0, 0.0})
+    flying(a, 0, 0, {0.0, 10.0, 0.0})
+    assert_receive {:separation, :hold, %{vehicle: ^a, other: ^b}}
+    assert_receive {:dolphin, :events, %{event: :separation_hold, vehicle: ^a, other: ^b, action: :hold}}
+    refute_receive {:separation, _, %{vehicle: ^b}}, 300
+    assert Map.take(Separation.held(), [a, b, c]) == %{a => b}
+
+    # The choice stays while a is held: b's views do not turn it round.
+    flying(a, 0, 12, {0.0, 0.0, 0.0})
+    flying(b, 0, 34, {0.0, 1.0, 0.0})
+    refute_receive {:separation, :hold, %{vehicle: ^b}}, 300
+    assert Map.take(Separation.held(), [a, b, c]) == %{a => b}
+
+    # b turns north and goes: a goes on once clear of it.
+    flying(b, 0, 40, {10.0, 0.0, 0.0})
+    flying(b, 60, 40, {10.0, 0.0, 0.0})
+    flying(b, 200, 40, {10.0, 0.0, 0.0})
+    assert_receive {:separation, :clear, %{vehicle: ^a}}, 5_000
+    no_event(:separation_hold, ids)
   end
 
   test "two tasks started together: the one the engine made later holds, whichever registered first", %{ids: {a, b, _c}} do
