@@ -21,6 +21,11 @@ defmodule Dolphin.Separation do
       `Dolphin.Vehicles.Manoeuvres.hold_modes/1`, without failing its
       mission); a vehicle not flying one of our missions is never held, so
       the one that is holds;
+    * but not in the other's way: when neither is held yet and the earlier
+      one stopped (braking at 2.5 m/s²) would keep the two clearly further
+      apart than the later one stopped — one catching up with the other on
+      its line, or coming at it while it hovers — the earlier one holds,
+      and stays the one held while it is;
     * a held copter that the other still comes at once it has stopped (two
       vehicles on one line, or bound for one point) moves out of its way:
       twice the vertical separation up, or down when its fence's ceiling is
