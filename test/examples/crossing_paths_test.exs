@@ -135,6 +135,24 @@ defmodule Dolphin.Examples.CrossingPathsTest do
     assert Enum.any?(log.vehicles[held].positions, fn {_, _, _, rel_mm, _, _} -> rel_mm > 45_000 end)
   end
 
+  test "one behind the other on one line: the one catching up holds, not the later one ahead it would run into", %{tmp_dir: dir} do
+    run = ExampleRun.run(dir, Path.expand("../fixtures/separation/catching_up.exs", __DIR__), "", ["--sim", "2", "--speedup", @sim_speedup], nil)
+    assert run.code == 0, run.output
+    all = run.events
+
+    # Vehicle 1 (west, its task made first) behind, vehicle 2 ahead. Held
+    # ahead, 2 stopped in 1's way: on the simulator it was run into at 0.1 m
+    # across, before it could climb 20 m aside.
+    assert [%{"vehicle" => 1, "other" => 2, "action" => "hold"} | _] = holds = for(%{"event" => "separation_hold"} = e <- all, do: e)
+    assert Enum.all?(holds, &(&1["vehicle"] == 1)), inspect(holds)
+    assert [%{"vehicle" => 1, "other" => 2} | _] = for(%{"event" => "separation_clear"} = e <- all, do: e)
+    assert [%{"result" => "done"}, %{"result" => "done"}] = for(%{"event" => "task_finished", "kind" => "mission"} = e <- all, do: e)
+
+    {:ok, log} = Dolphin.Report.FlightLog.read_file(run.tlog)
+    least = Dolphin.Report.Separation.closest(log).least
+    assert least.across > 20, "the two came #{Float.round(least.across, 1)} m apart at #{Float.round(least.at_s, 1)} s"
+  end
+
   if Dolphin.SITL.available?(:copter) do
     @tag :sitl
     test "on ArduCopter SITL: held, let go, and kept apart as on the simulator", %{tmp_dir: dir} do
