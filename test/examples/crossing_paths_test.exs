@@ -158,5 +158,20 @@ defmodule Dolphin.Examples.CrossingPathsTest do
     test "on ArduCopter SITL: held, let go, and kept apart as on the simulator", %{tmp_dir: dir} do
       kept_apart!(ExampleRun.run(dir, "crossing_paths", "-sitl", ["--sitl", "2", "--speedup", "5"], nil), :may_be)
     end
+
+    # Out of step (one SITL taking off seconds after the other), the one
+    # behind may never catch up: no hold then, and the one ahead never held.
+    @tag :sitl
+    test "on ArduCopter SITL: one behind the other on one line, the one ahead is never held and the two stay apart", %{tmp_dir: dir} do
+      run = ExampleRun.run(dir, Path.expand("../fixtures/separation/catching_up.exs", __DIR__), "-sitl", ["--sitl", "2", "--speedup", "5"], nil)
+      assert run.code == 0, run.output
+      holds = for %{"event" => "separation_hold"} = e <- run.events, do: e
+      assert Enum.all?(holds, &(&1["vehicle"] == 1)), inspect(holds)
+      assert [%{"result" => "done"}, %{"result" => "done"}] = for(%{"event" => "task_finished", "kind" => "mission"} = e <- run.events, do: e)
+
+      {:ok, log} = Dolphin.Report.FlightLog.read_file(run.tlog)
+      least = Dolphin.Report.Separation.closest(log).least
+      assert least.across > 20, "the two came #{Float.round(least.across, 1)} m apart at #{Float.round(least.at_s, 1)} s (holds: #{inspect(holds)})"
+    end
   end
 end
