@@ -21,11 +21,12 @@ defmodule Dolphin.Separation do
       `Dolphin.Vehicles.Manoeuvres.hold_modes/1`, without failing its
       mission); a vehicle not flying one of our missions is never held, so
       the one that is holds;
-    * but not in the other's way: when neither is held yet and the earlier
-      one stopped (braking at 2.5 m/s²) would keep the two clearly further
-      apart than the later one stopped — one catching up with the other on
-      its line, or coming at it while it hovers — the earlier one holds,
-      and stays the one held while it is;
+    * but not in the other's way: when neither is held yet, the later one
+      is moving, the earlier one is a copter and, stopped (braking at
+      2.5 m/s²), would keep the two clearly further apart than the later
+      one stopped — it is catching up with the other on its line, or would
+      reach a crossing after it — the earlier one holds instead, and stays
+      the one held while it is;
     * a held copter that the other still comes at once it has stopped (two
       vehicles on one line, or bound for one point) moves out of its way:
       twice the vertical separation up, or down when its fence's ceiling is
@@ -274,18 +275,25 @@ defmodule Dolphin.Separation do
   # vehicle the other is catching up with: stopped where it is going, it
   # would wait in the other's way (two on one line, the one behind faster:
   # held ahead, a copter was run into before it could climb aside). When
-  # neither is held yet and the earlier one stopped keeps them clearly
-  # further apart than the later one stopped, the earlier one holds
-  # (`catching_up?`), and stays the one held while it is. {holder, the
-  # other's id, catching_up?}.
+  # neither is held yet, the later one is moving, the earlier one is a
+  # copter (it stops where it brakes; a plane circles) and, stopped, keeps
+  # them clearly further apart than the later one stopped, the earlier one
+  # holds (`catching_up?`), and stays the one held while it is. (A later
+  # one that already hovers holds as before: holding the other would keep
+  # it waiting for as long as that one hovers, where this one can climb
+  # aside.) {holder, the other's id, catching_up?}.
   defp holder(%Flying{} = f, %Flying{} = o, mine, theirs, limits) do
     {later, earlier, later_motion, earlier_motion} = if later?(o, f), do: {o, f, theirs, mine}, else: {f, o, mine, theirs}
 
     cond do
       match?(%{other: id, catching_up?: true} when id == later.id, earlier.held) -> {earlier, later.id, true}
       later.held != nil or earlier.held != nil -> {later, earlier.id, false}
-      closest_if_stopped(earlier_motion, later_motion, limits) > closest_if_stopped(later_motion, earlier_motion, limits) + @better_by_m -> {earlier, later.id, true}
-      true -> {later, earlier.id, false}
+      earlier.view.airframe == :copter and not stopped?(later.view) and
+          closest_if_stopped(earlier_motion, later_motion, limits) > closest_if_stopped(later_motion, earlier_motion, limits) + @better_by_m ->
+        {earlier, later.id, true}
+
+      true ->
+        {later, earlier.id, false}
     end
   end
 
@@ -391,9 +399,7 @@ defmodule Dolphin.Separation do
     end)
   end
 
-  # (One it holds for because it was catching up with it waits for nobody
-  # on its account: held itself, that one still stands in its way.)
-  defp waits_for?(%Flying{held: %{other: other}} = o, f), do: other == f.id or (later?(o, f) and not match?(%{other: id, catching_up?: true} when id == o.id, f.held))
+  defp waits_for?(%Flying{held: %{other: other}} = o, f), do: other == f.id or later?(o, f)
   defp waits_for?(_other, _f), do: false
 
   defp let_go(s, f, others, now) do

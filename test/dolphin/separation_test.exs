@@ -209,8 +209,6 @@ defmodule Dolphin.SeparationTest do
 
   test "a report that reaches the monitor late is judged by the autopilot's clock: where the vehicle is by now, not where the report put it", %{ids: {a, b, _c} = ids} do
     # a, started later, hovers at the base; the autopilots' clocks are ours.
-    # (b, coming at it, holds: stopped, b stays clear of a, while a, still
-    # already, would be run into.)
     executor(b, 1_000)
     executor(a, 2_000)
     flying(a, 0, 0, {0.0, 0.0, 0.0})
@@ -221,8 +219,17 @@ defmodule Dolphin.SeparationTest do
     # b has flown 75 m since: 105 m off, past a within 8 s. (Taken as made
     # when it came, this report held nothing.)
     flying(b, 0, 180, {0.0, -15.0, 0.0}, boot_ms: Dolphin.Clock.now_ms() - 5_000)
-    assert_receive {:separation, :hold, %{vehicle: ^b, other: ^a, distance: distance}}, 2_000
+    assert_receive {:separation, :hold, %{vehicle: ^a, other: ^b, distance: distance}}, 2_000
     assert distance < 140, "b judged #{distance} m off"
+  end
+
+  test "catching up, a plane behind is not held instead: held, it would circle, not stop; the later one ahead holds as before", %{ids: {a, b, _c}} do
+    executor(a, 1_000)
+    executor(b, 2_000)
+    flying(b, 0, 30, {0.0, 4.0, 0.0})
+    flying(a, 0, 0, {0.0, 10.0, 0.0}, airframe: :plane)
+    assert_receive {:separation, :hold, %{vehicle: ^b, other: ^a}}
+    refute_receive {:separation, :hold, %{vehicle: ^a}}, 300
   end
 
   test "one line, the later one ahead and the earlier catching up with it: the one behind holds, not the one it would run into", %{ids: {a, b, c} = ids} do
