@@ -21,12 +21,12 @@ defmodule Dolphin.Separation do
       `Dolphin.Vehicles.Manoeuvres.hold_modes/1`, without failing its
       mission); a vehicle not flying one of our missions is never held, so
       the one that is holds;
-    * but not in the other's way: when neither is held yet, the later one
-      is moving, the earlier one is a copter and, stopped (braking at
-      2.5 m/s²), would keep the two clearly further apart than the later
-      one stopped — it is catching up with the other on its line, or would
-      reach a crossing after it — the earlier one holds instead, and stays
-      the one held while it is;
+    * but not in the other's way: when neither is held yet, the earlier
+      one is a copter and, stopped (braking at 2.5 m/s²), would keep the
+      two clearly further apart than the later one stopped — it is
+      catching up with the other on its line, coming at it while it
+      hovers, or would reach a crossing after it — the earlier one holds
+      instead, and stays the one held while it is;
     * a held copter that the other still comes at once it has stopped (two
       vehicles on one line, or bound for one point) moves out of its way:
       twice the vertical separation up, or down when its fence's ceiling is
@@ -275,20 +275,21 @@ defmodule Dolphin.Separation do
   # vehicle the other is catching up with: stopped where it is going, it
   # would wait in the other's way (two on one line, the one behind faster:
   # held ahead, a copter was run into before it could climb aside). When
-  # neither is held yet, the later one is moving, the earlier one is a
-  # copter (it stops where it brakes; a plane circles) and, stopped, keeps
-  # them clearly further apart than the later one stopped, the earlier one
-  # holds (`catching_up?`), and stays the one held while it is. (A later
-  # one that already hovers holds as before: holding the other would keep
-  # it waiting for as long as that one hovers, where this one can climb
-  # aside.) {holder, the other's id, catching_up?}.
+  # neither is held yet, the earlier one is a copter (it stops where it
+  # brakes; a plane circles) and, stopped, keeps them clearly further apart
+  # than the later one stopped, the earlier one holds (`catching_up?`), and
+  # stays the one held while it is. That includes a later one hovering in
+  # its way, or slowed to a stop at a turn (on ArduCopter SITL the one
+  # ahead was below 1 m/s there): held, it would only climb aside, the race
+  # that was lost; the earlier one waits for it to go on instead.
+  # {holder, the other's id, catching_up?}.
   defp holder(%Flying{} = f, %Flying{} = o, mine, theirs, limits) do
     {later, earlier, later_motion, earlier_motion} = if later?(o, f), do: {o, f, theirs, mine}, else: {f, o, mine, theirs}
 
     cond do
       match?(%{other: id, catching_up?: true} when id == later.id, earlier.held) -> {earlier, later.id, true}
       later.held != nil or earlier.held != nil -> {later, earlier.id, false}
-      earlier.view.airframe == :copter and not stopped?(later.view) and
+      earlier.view.airframe == :copter and
           closest_if_stopped(earlier_motion, later_motion, limits) > closest_if_stopped(later_motion, earlier_motion, limits) + @better_by_m ->
         {earlier, later.id, true}
 

@@ -209,6 +209,8 @@ defmodule Dolphin.SeparationTest do
 
   test "a report that reaches the monitor late is judged by the autopilot's clock: where the vehicle is by now, not where the report put it", %{ids: {a, b, _c} = ids} do
     # a, started later, hovers at the base; the autopilots' clocks are ours.
+    # (b, coming at it, holds: stopped, b stays clear of a, where a, held,
+    # could only climb aside.)
     executor(b, 1_000)
     executor(a, 2_000)
     flying(a, 0, 0, {0.0, 0.0, 0.0})
@@ -219,7 +221,7 @@ defmodule Dolphin.SeparationTest do
     # b has flown 75 m since: 105 m off, past a within 8 s. (Taken as made
     # when it came, this report held nothing.)
     flying(b, 0, 180, {0.0, -15.0, 0.0}, boot_ms: Dolphin.Clock.now_ms() - 5_000)
-    assert_receive {:separation, :hold, %{vehicle: ^a, other: ^b, distance: distance}}, 2_000
+    assert_receive {:separation, :hold, %{vehicle: ^b, other: ^a, distance: distance}}, 2_000
     assert distance < 140, "b judged #{distance} m off"
   end
 
