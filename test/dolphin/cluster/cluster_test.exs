@@ -179,23 +179,29 @@ defmodule Dolphin.ClusterTest do
   # `lag_ms` of real time late (its radio path is slow: its views are
   # behind, while it hears the vehicle all along). The vehicle goes to
   # GUIDED; then the chosen one's path is cut and the route switches to the
-  # one behind. Returns that station.
+  # one behind. Returns that station; the caller is subscribed to the
+  # events from before the switch to GUIDED.
   defp switch_to_a_station_behind(lag_ms) do
     {gs1, gs2, splitter} = both_hear_21()
     %{21 => %{chosen: first}} = Dolphin.Cluster.Mirror.routes()
     {side, other_side, other} = if first == gs1.node, do: {:a, :b, gs2}, else: {:b, :a, gs1}
     {:ok, %{mode: :stabilize, boot_ms: before_lag}} = Vehicles.view(21)
+    Events.subscribe()
 
     # The other station falls behind: what it hears from now on comes late,
     # and a fifth of it not at all (its link is never the better one).
     :ok = Dolphin.Test.RadioSplitter.set(splitter, other_side, to_gcs: [latency: lag_ms, loss: 0.2])
     Wait.until(fn -> match?({:ok, %{boot_ms: b, connected?: true}} when b > before_lag, Cluster.call(other.peer, Vehicles, :view, [21])) end, 1_500, fn -> "#{other.node} hearing vehicle 21 late" end)
-    assert %{21 => %{chosen: ^first}} = Dolphin.Cluster.Mirror.routes()
+    # At 50x a hearing is stale after 250 ms of real time without a frame:
+    # on a starved host the first path can go that long unread while the
+    # late one has just delivered, and the route moves to the station
+    # behind before the cut (CI saw it once). It comes back, the first
+    # being fresh and clearly better; the cut below makes the switch again.
+    Wait.until(fn -> match?(%{21 => %{chosen: ^first}}, Dolphin.Cluster.Mirror.routes()) end, 1_500, fn -> "vehicle 21 routed through #{first}: #{inspect(Dolphin.Cluster.Mirror.routes())}" end)
 
     assert {:ok, :accepted} = Vehicles.set_mode(21, :guided)
     Wait.until(fn -> match?({:ok, %{mode: :guided}}, Vehicles.view(21)) end, 1_500, fn -> "vehicle 21 in GUIDED" end)
 
-    Events.subscribe()
     :ok = Dolphin.Test.RadioSplitter.cut(splitter, side)
     other_node = other.node
     Wait.until(fn -> match?(%{21 => %{chosen: ^other_node}}, Dolphin.Cluster.Mirror.routes()) end, 1_500, fn -> "vehicle 21 switched to #{other_node}" end)
@@ -214,8 +220,11 @@ defmodule Dolphin.ClusterTest do
     assert {:ok, %{mode: :guided}} = Vehicles.view(21)
     events = Wait.received_events()
     other_node = other.node
+    # After GUIDED was shown, no other mode: the view never went back.
+    since_guided = Enum.drop_while(events, &(not match?(%{event: :mode_changed, vehicle: 21, mode: :guided}, &1)))
+    assert [_guided | later] = since_guided
     assert Enum.any?(events, &match?(%{event: :station_changed, vehicle: 21, to: ^other_node}, &1)), inspect(events)
-    refute Enum.any?(events, &match?(%{event: :mode_changed, vehicle: 21}, &1)), inspect(events)
+    refute Enum.any?(later, &match?(%{event: :mode_changed, vehicle: 21}, &1)), inspect(events)
   end
 
   test "a station that tells nothing any more (its node hangs) gives its vehicles to another that hears them" do
