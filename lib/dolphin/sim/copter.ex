@@ -321,16 +321,20 @@ defmodule Dolphin.Sim.Copter do
     do: say(c, %M.MissionAck{target_system: sysid, target_component: compid, type: 4, mission_type: type})
 
   defp handle_message(c, message, from) do
-    {missions, replies} = MissionServer.handle(c.missions, message, from, %{now: c.time_ms, home: Mission.home_item(c)})
+    {missions, replies} = MissionServer.handle(c.missions, message, from, %{now: c.time_ms, real: real_ms(), home: Mission.home_item(c)})
     mission_replies(%{c | missions: missions}, replies)
   end
 
   @doc "Runs the mission server's timer."
   @spec mission_timeout(t()) :: t()
   def mission_timeout(c) do
-    {missions, replies} = MissionServer.timeout(c.missions, c.time_ms)
+    {missions, replies} = MissionServer.timeout(c.missions, c.time_ms, real_ms())
     mission_replies(%{c | missions: missions}, replies)
   end
+
+  # The upload's patience also counts real time (Dolphin.Sim.MissionServer):
+  # the model's time catches up with the clock after a pause of the host.
+  defp real_ms, do: System.monotonic_time(:millisecond)
 
   defp mission_replies(c, replies) do
     Enum.reduce(replies, c, fn

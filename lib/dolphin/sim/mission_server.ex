@@ -11,7 +11,8 @@ defmodule Dolphin.Sim.MissionServer do
   #   complaint). Only the item asked for is taken, and the next one asked for
   #   at once; any other draws INVALID_SEQUENCE and nothing else (the next
   #   request is the timer's). Asked again when a second passes without a
-  #   request sent; OPERATION_CANCELLED after 8 s without an item taken. A
+  #   request sent; OPERATION_CANCELLED after 8 s without an item taken
+  #   (and, when the caller gives real time, 2 s of it: see below). A
   #   second MISSION_COUNT from the same ground station starts again; from
   #   another, DENIED while one is busy. More than `limit` items, NO_SPACE; an
   #   unknown command, UNSUPPORTED.
@@ -33,12 +34,21 @@ defmodule Dolphin.Sim.MissionServer do
   #   last item, answered MAV_MISSION_ERROR and nothing stored — what a ground
   #   station sees of a vehicle whose patience ran out just before that item
   #   came, its OPERATION_CANCELLED lost.
+  #
+  # The 8 s are vehicle time. ArduPilot SITL's time stands still while its
+  # host starves it; the simulator's runs on with the clock and catches up
+  # after a pause, so at 25x a pause of this host of a third of a second
+  # looked like 8 s of silence and ended the upload (a lossy-link run beside
+  # busy loops lost five in a row). Given real time (`ctx.real`, `timeout/3`),
+  # the upload also waits @upload_timeout_real_floor_ms of it: at 1x the 8 s
+  # decide, as on ArduPilot.
 
   alias Dolphin.MAVLink.Ardupilotmega, as: M
   alias Dolphin.MAVLink.MissionItems
 
   @rerequest_ms 1_000
   @upload_timeout_ms 8_000
+  @upload_timeout_real_floor_ms 2_000
 
   # MAV_MISSION_RESULT values.
   @accepted 0
@@ -106,7 +116,7 @@ defmodule Dolphin.Sim.MissionServer do
         {%{s | upload: nil, lists: Map.put(s.lists, type, [])}, [{:send, ack(peer, type, @accepted)}, {:changed, type}]}
 
       true ->
-        up = %{peer: peer, type: type, count: count, items: [], received: ctx.now, requested: ctx.now}
+        up = %{peer: peer, type: type, count: count, items: [], received: ctx.now, received_real: ctx[:real], requested: ctx.now}
         s = %{s | upload: up}
         {s, [request(s, 0)]}
     end
@@ -138,7 +148,7 @@ defmodule Dolphin.Sim.MissionServer do
         {%{s | upload: nil, lists: lists}, complaint ++ done}
 
       true ->
-        s = %{s | upload: %{up | items: [MissionItems.to_int(item) | up.items], received: ctx.now, requested: ctx.now}}
+        s = %{s | upload: %{up | items: [MissionItems.to_int(item) | up.items], received: ctx.now, received_real: ctx[:real], requested: ctx.now}}
         {s, complaint ++ [request(s, seq + 1)]}
     end
   end
@@ -191,13 +201,18 @@ defmodule Dolphin.Sim.MissionServer do
   @spec home_written(t()) :: t()
   def home_written(%__MODULE__{} = s), do: %{s | home_stored: true}
 
-  @doc "The re-request timer: ask again after a second, give up after 8 s without an item."
-  @spec timeout(t(), integer()) :: {t(), [reply()]}
-  def timeout(%__MODULE__{upload: nil} = s, _now), do: {s, []}
+  @doc """
+  The re-request timer: ask again after a second, give up after 8 s without
+  an item — and, when `real` (monotonic ms) is given here and was in the
+  ctx of the item, after #{@upload_timeout_real_floor_ms} ms of real time too.
+  """
+  @spec timeout(t(), integer(), integer() | nil) :: {t(), [reply()]}
+  def timeout(server, now, real \\ nil)
+  def timeout(%__MODULE__{upload: nil} = s, _now, _real), do: {s, []}
 
-  def timeout(%__MODULE__{upload: up} = s, now) do
+  def timeout(%__MODULE__{upload: up} = s, now, real) do
     cond do
-      now - up.received > @upload_timeout_ms ->
+      now - up.received > @upload_timeout_ms and patience_spent_in_real_time?(up, real) ->
         {%{s | upload: nil}, [{:send, ack(up.peer, up.type, @cancelled)}, {:text, 3, "Mission upload timeout"}]}
 
       now - up.requested >= @rerequest_ms ->
@@ -208,6 +223,9 @@ defmodule Dolphin.Sim.MissionServer do
         {s, []}
     end
   end
+
+  defp patience_spent_in_real_time?(%{received_real: since}, real) when is_integer(since) and is_integer(real), do: real - since > @upload_timeout_real_floor_ms
+  defp patience_spent_in_real_time?(_up, _real), do: true
 
   defp download_list(%{home: true, home_stored: false}, 0, _home), do: []
   defp download_list(%{home: true} = s, 0, home), do: [home || %M.MissionItemInt{command: 16, frame: 0}] ++ Enum.map(items(s, 0), &normalise/1)

@@ -114,6 +114,21 @@ defmodule Dolphin.Sim.MissionServerTest do
     assert MissionServer.deadline(s) == nil
   end
 
+  test "given real time, the upload also waits 2 s of it: a pause of the host that the sped-up clock counts as 8 s does not end it" do
+    {s, _} = MissionServer.handle(MissionServer.new(), count(3), @gcs, Map.put(ctx(0), :real, 100))
+    {s, [_]} = MissionServer.handle(s, item(0), @gcs, Map.put(ctx(200), :real, 110))
+
+    # 9 s of vehicle time since the item, in 1.5 s of real time: asked again, not cancelled.
+    {s, [{:send, %M.MissionRequest{seq: 1}}]} = MissionServer.timeout(s, 9_200, 1_610)
+    # Once 2 s of real time have passed as well, cancelled.
+    {s, [{:send, %M.MissionAck{type: 15}}, {:text, 3, "Mission upload timeout"}]} = MissionServer.timeout(s, 9_300, 2_111)
+    assert MissionServer.deadline(s) == nil
+
+    # Real time alone does not end it before the vehicle's 8 s.
+    {s, _} = MissionServer.handle(MissionServer.new(), count(3), @gcs, Map.put(ctx(0), :real, 0))
+    {_, [{:send, %M.MissionRequest{seq: 0}}]} = MissionServer.timeout(s, 7_000, 60_000)
+  end
+
   test "too many items, an unknown command, a second uploader" do
     {_, [{:send, %M.MissionAck{type: 4}}, {:text, 3, "Only 650 items are supported"}]} = MissionServer.handle(MissionServer.new(), count(60_000), @gcs, ctx())
 

@@ -73,6 +73,22 @@ defmodule Dolphin.Sim.Copter.MissionTest do
     assert [{1, %M.Statustext{}}, {1, %M.MissionCurrent{seq: 2}}, {1, %M.MissionItemReached{seq: 1}}, {1, :old}] = c.out
   end
 
+  # What the vehicle process does after a pause of its host: the model's
+  # time catches up with the clock in one go, 9 s of it here in a moment of
+  # real time. ArduPilot SITL's own time would have stood still.
+  test "an upload under way is not ended by the model's time catching up after a pause of the host" do
+    c = Copter.handle(ready(), %M.MissionCount{target_system: 1, target_component: 1, count: 3, mission_type: 0}, @gcs)
+    c = Copter.handle(c, item(0, 16), @gcs)
+    c = Enum.reduce(1..180, c, fn _, c -> Copter.step(c, 50) end)
+    {out, c} = Copter.flush(c)
+    refute Enum.any?(out, &match?({_, %M.Statustext{text: "Mission upload timeout"}}, &1))
+    assert Enum.any?(out, &match?({_, %M.MissionRequest{seq: 1}}, &1))
+
+    c = Enum.reduce([item(1, 16), item(2, 16)], c, &Copter.handle(&2, &1, @gcs))
+    {out, _} = Copter.flush(c)
+    assert Enum.any?(out, &match?({_, %M.MissionAck{type: 0}}, &1))
+  end
+
   test "a new mission resets the progress, unless flying one in AUTO" do
     c = upload(ready(), [item(1, 16), item(2, 16)])
     assert %{current: 0, mission_state: 2} = Mission.changed(%{c | current: 2, resume: 2})
