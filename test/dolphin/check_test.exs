@@ -80,6 +80,23 @@ defmodule Dolphin.CheckTest do
     assert wider =~ "the least separation is 40 m across or 15 m in height"
   end
 
+  # examples/two_vehicles.exs (`make run`): two surveys that share their
+  # first leg and part at its end, each stopped by its battery part way
+  # along a 3 km leg, then both home to land at one point. Placed at the
+  # last corner each had reached, the two stood together there until
+  # stopped and flew home as one: the check's one conflict was at that
+  # corner, and the landing it had hidden is what `make run` showed (the
+  # second copter let down onto the first, parked).
+  test "flights stopped part way along a leg are placed there: two surveys that part, then land at one point together" do
+    report = Check.run("examples/two_vehicles.exs", sim: 2)
+    assert [%{line: 38, message: message}] = Enum.filter(report.findings, &(&1.kind == :separation))
+    assert message =~ ~r/^vehicles 1 and 2 come within 0 m of each other across and 0 m in height 10\.\d min into the run, at 40\.444233, -7\.375234 /
+    assert message =~ ~s|(mission "Return to base" on vehicle 1 and mission "Return to base" on vehicle 2)|
+    # Home from a kilometre or so out along each survey's second leg, not from its first corner (630 m).
+    assert [_, _] = returns = for(%{mission: "Return to base", length_m: length} <- report.missions, do: length)
+    assert Enum.all?(returns, &(&1 > 1_000)), inspect(returns)
+  end
+
   test "a script that does not compile is an error with its line", %{fleet: fleet} do
     report = check("unknown_word.exs", fleet)
     assert %{severity: :error, line: 3, message: message} = finding(report, :compile)

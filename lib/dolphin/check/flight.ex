@@ -77,15 +77,36 @@ defmodule Dolphin.Check.Flight do
     {:stop, :normal, :ok, s}
   end
 
-  # Where the flight is after `elapsed_s`: the last point of the estimate's
-  # path reached by then (the vehicle holds there when stopped).
+  # Where the flight is after `elapsed_s` (the vehicle holds there when
+  # stopped): that far along the way from the last point of the estimate's
+  # path reached by then to the next, as the estimate flies it. (Placed at
+  # the last point reached, two surveys stopped 80 s into 3 km legs that
+  # part at their first corner stood together there, and flew home and
+  # landed as one: the check saw one conflict, at the corner.)
   defp left_at(%{estimate: nil} = s, elapsed_s), do: Dolphin.Check.Recorder.ended(s.recorder, s.vehicle, nil, false, elapsed_s)
 
   defp left_at(s, elapsed_s) do
-    e = s.estimate
-    {_, at, airborne?, _} = e.path |> Enum.take_while(fn {t, _, _, _} -> t <= elapsed_s end) |> List.last() || {0.0, e.start_at, s.airborne?, 0}
+    {at, airborne?} = position_at(s.estimate, s.airborne?, elapsed_s)
     if at, do: FakeSource.set(s.test, s.vehicle, position: at, relative_altitude: if(airborne?, do: 20.0, else: 0.0))
     Dolphin.Check.Recorder.ended(s.recorder, s.vehicle, at, airborne?, elapsed_s)
+  end
+
+  @doc false
+  # {where, in the air?} `elapsed_s` into flying estimate `e`, which starts
+  # on the ground or in the air (`airborne?`). Between two points of its
+  # path it flies, as Dolphin.Check.Separation draws it.
+  @spec position_at(map(), boolean(), float()) :: {Dolphin.Geo.Location.t() | nil, boolean()}
+  def position_at(e, airborne?, elapsed_s) do
+    {reached, ahead} = Enum.split_while(e.path, fn {t, _, _, _} -> t <= elapsed_s end)
+    {t0, p0, f0, _} = List.last(reached) || {0.0, e.start_at, airborne?, 0}
+
+    case ahead do
+      [{t1, %Dolphin.Geo.Location{} = p1, f1, _} | _] when is_struct(p0, Dolphin.Geo.Location) and t1 > t0 ->
+        {Dolphin.Geo.Shapes.along(p0, p1, (elapsed_s - t0) / (t1 - t0)), f0 or f1}
+
+      _ ->
+        {p0, f0}
+    end
   end
 
   defp empty_before_stop(%{estimate: e} = s) do

@@ -88,14 +88,23 @@ defmodule Dolphin.Check.Recorder do
     %{s | timelines: Map.put(s.timelines, id, t), flights: Map.put(s.flights, id, %{start_ms: now_ms, path: estimate.path})}
   end
 
-  # Its path up to `elapsed_s` (or all of it) joins the vehicle's timeline.
-  defp close_flight(s, id, elapsed_s) do
+  # Its path up to `elapsed_s` (or all of it) joins the vehicle's timeline,
+  # ending where the flight stopped (`stop`, {at, airborne?}: part way
+  # along to its next point).
+  defp close_flight(s, id, elapsed_s, stop \\ nil) do
     case Map.pop(s.flights, id) do
       {nil, _} ->
         s
 
       {flight, flights} ->
         points = for {t, at, airborne?, _seq} <- flight.path, elapsed_s == :all or t <= elapsed_s, do: {flight.start_ms + round(t * 1000), at, airborne?}
+
+        points =
+          case stop do
+            {%Dolphin.Geo.Location{} = at, airborne?} when is_number(elapsed_s) -> points ++ [{flight.start_ms + round(elapsed_s * 1000), at, airborne?}]
+            _ -> points
+          end
+
         timeline = Map.update!(s.timelines, id, fn t -> %{t | points: Enum.reverse(points, t.points)} end)
         %{s | flights: flights, timelines: timeline}
     end
@@ -106,7 +115,7 @@ defmodule Dolphin.Check.Recorder do
 
   @impl true
   def handle_cast({:ended, id, at, airborne?, elapsed_s}, s) do
-    s = close_flight(s, id, elapsed_s)
+    s = close_flight(s, id, elapsed_s, {at, airborne?})
     vehicles = Map.update(s.vehicles, id, %{payloads: [], home: nil, airborne?: airborne?, at: at}, &Map.merge(&1, %{airborne?: airborne?, at: at}))
     {:noreply, %{s | vehicles: vehicles}}
   end
