@@ -77,6 +77,10 @@ defmodule Dolphin.Sim.Copter do
             origin: %{lat: 0.0, lon: 0.0, alt: 0.0},
             plane: nil,
             time_ms: 0,
+            # Real (monotonic) ms when the vehicle process last gave the
+            # model time or a message: an upload's patience counts it too
+            # (Dolphin.Sim.MissionServer). nil: vehicle time only.
+            real_ms: nil,
             n: 0.0,
             e: 0.0,
             alt: 0.0,
@@ -321,20 +325,16 @@ defmodule Dolphin.Sim.Copter do
     do: say(c, %M.MissionAck{target_system: sysid, target_component: compid, type: 4, mission_type: type})
 
   defp handle_message(c, message, from) do
-    {missions, replies} = MissionServer.handle(c.missions, message, from, %{now: c.time_ms, real: real_ms(), home: Mission.home_item(c)})
+    {missions, replies} = MissionServer.handle(c.missions, message, from, %{now: c.time_ms, real: c.real_ms, home: Mission.home_item(c)})
     mission_replies(%{c | missions: missions}, replies)
   end
 
   @doc "Runs the mission server's timer."
   @spec mission_timeout(t()) :: t()
   def mission_timeout(c) do
-    {missions, replies} = MissionServer.timeout(c.missions, c.time_ms, real_ms())
+    {missions, replies} = MissionServer.timeout(c.missions, c.time_ms, c.real_ms)
     mission_replies(%{c | missions: missions}, replies)
   end
-
-  # The upload's patience also counts real time (Dolphin.Sim.MissionServer):
-  # the model's time catches up with the clock after a pause of the host.
-  defp real_ms, do: System.monotonic_time(:millisecond)
 
   defp mission_replies(c, replies) do
     Enum.reduce(replies, c, fn

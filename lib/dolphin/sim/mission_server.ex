@@ -2,7 +2,7 @@ defmodule Dolphin.Sim.MissionServer do
   @moduledoc false
   # The vehicle side of the MAVLink mission protocol, as ArduCopter plays it
   # (see docs/ardupilot.md), as a pure state machine: `handle/4` takes one message
-  # from a ground station and returns the replies; `timeout/2` runs the upload's
+  # from a ground station and returns the replies; `timeout/3` runs the upload's
   # re-request timer, due at `deadline/1`.
   #
   # - Uploads are asked for item by item with MISSION_REQUEST (ArduPilot's
@@ -12,7 +12,8 @@ defmodule Dolphin.Sim.MissionServer do
   #   at once; any other draws INVALID_SEQUENCE and nothing else (the next
   #   request is the timer's). Asked again when a second passes without a
   #   request sent; OPERATION_CANCELLED after 8 s without an item taken
-  #   (and, when the caller gives real time, 2 s of it: see below). A
+  #   (and, when the caller gives real time, 2 s of it, which above 4x is
+  #   what decides: see below). A
   #   second MISSION_COUNT from the same ground station starts again; from
   #   another, DENIED while one is busy. More than `limit` items, NO_SPACE; an
   #   unknown command, UNSUPPORTED.
@@ -89,16 +90,21 @@ defmodule Dolphin.Sim.MissionServer do
   @spec items(t(), 0..2) :: [struct()]
   def items(%__MODULE__{lists: lists}, type \\ 0), do: Map.get(lists, type, [])
 
-  @doc "When the upload's re-request timer is due (vehicle ms), or nil."
+  @doc """
+  When the upload's re-request timer is due (vehicle ms), or nil. With real
+  time given, the next re-request: the 8 s may have passed while the real
+  floor has not.
+  """
   @spec deadline(t()) :: integer() | nil
   def deadline(%__MODULE__{upload: nil}), do: nil
+  def deadline(%__MODULE__{upload: %{received_real: real} = up}) when is_integer(real), do: up.requested + @rerequest_ms
   def deadline(%__MODULE__{upload: up}), do: min(up.requested + @rerequest_ms, up.received + @upload_timeout_ms)
 
   @doc """
   One message from the ground station `peer`. `home` is the item 0 to hand out
   on a download of the mission. Returns the new state and what to do.
   """
-  @spec handle(t(), struct(), peer(), %{now: integer(), home: struct() | nil}) :: {t(), [reply()]}
+  @spec handle(t(), struct(), peer(), %{required(:now) => integer(), required(:home) => struct() | nil, optional(:real) => integer() | nil}) :: {t(), [reply()]}
   def handle(server, message, peer, ctx)
 
   def handle(%__MODULE__{upload: %{peer: other}} = s, %M.MissionCount{mission_type: type}, peer, _ctx) when other != peer,

@@ -146,7 +146,7 @@ defmodule Dolphin.Sim.Vehicle do
   @impl true
   def handle_info(:tick, s) do
     target = Clock.now_ms() - s.clock_origin
-    {model, steps} = catch_up(s.model, target, 0)
+    {model, steps} = catch_up(real_now(s.model), target, 0)
     lag = max(target - model.time_ms - @step_ms, 0)
     s = s |> Map.put(:model, model) |> Map.put(:lag_ms, lag) |> transmit() |> sense()
 
@@ -189,6 +189,11 @@ defmodule Dolphin.Sim.Vehicle do
     {:noreply, s}
   end
 
+  # The model's time catches up with the clock after a pause of this host,
+  # where ArduPilot SITL's stands still: what needs to tell a pause from
+  # silence (an upload's patience) reads real time as well.
+  defp real_now(model), do: %{model | real_ms: System.monotonic_time(:millisecond)}
+
   defp catch_up(model, target, steps) when steps < @max_catch_up and model.time_ms + @step_ms <= target,
     do: catch_up(Copter.step(model, @step_ms), target, steps + 1)
 
@@ -196,7 +201,7 @@ defmodule Dolphin.Sim.Vehicle do
 
   defp receive_datagram(s, bytes) do
     {frames, _parser} = Parser.feed(Parser.new(), bytes)
-    s = %{s | received: s.received + 1}
+    s = %{s | received: s.received + 1, model: real_now(s.model)}
 
     Enum.reduce(frames, s, fn frame, s ->
       if for_us?(frame.message, s.sysid),

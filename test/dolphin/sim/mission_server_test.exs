@@ -127,6 +127,15 @@ defmodule Dolphin.Sim.MissionServerTest do
     # Real time alone does not end it before the vehicle's 8 s.
     {s, _} = MissionServer.handle(MissionServer.new(), count(3), @gcs, Map.put(ctx(0), :real, 0))
     {_, [{:send, %M.MissionRequest{seq: 0}}]} = MissionServer.timeout(s, 7_000, 60_000)
+
+    # Past the 8 s, within the 2 s of real time: its timer is the next re-request, not the 8 s already past.
+    {s, _} = MissionServer.handle(MissionServer.new(), count(3), @gcs, Map.put(ctx(0), :real, 0))
+    {s, [{:send, %M.MissionRequest{seq: 0}}]} = MissionServer.timeout(s, 9_000, 1_000)
+    assert MissionServer.deadline(s) == 10_000
+
+    # Real time on one side only: the vehicle's 8 s decide.
+    {s, _} = MissionServer.handle(MissionServer.new(), count(3), @gcs, ctx(0))
+    {_, [{:send, %M.MissionAck{type: 15}}, _]} = MissionServer.timeout(s, 9_000, 1)
   end
 
   test "too many items, an unknown command, a second uploader" do

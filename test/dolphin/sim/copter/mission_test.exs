@@ -75,9 +75,11 @@ defmodule Dolphin.Sim.Copter.MissionTest do
 
   # What the vehicle process does after a pause of its host: the model's
   # time catches up with the clock in one go, 9 s of it here in a moment of
-  # real time. ArduPilot SITL's own time would have stood still.
+  # real time (the process gives the model real time: `real_ms`). ArduPilot
+  # SITL's own time would have stood still.
   test "an upload under way is not ended by the model's time catching up after a pause of the host" do
-    c = Copter.handle(ready(), %M.MissionCount{target_system: 1, target_component: 1, count: 3, mission_type: 0}, @gcs)
+    c = %{ready() | real_ms: 1_000}
+    c = Copter.handle(c, %M.MissionCount{target_system: 1, target_component: 1, count: 3, mission_type: 0}, @gcs)
     c = Copter.handle(c, item(0, 16), @gcs)
     c = Enum.reduce(1..180, c, fn _, c -> Copter.step(c, 50) end)
     {out, c} = Copter.flush(c)
@@ -87,6 +89,14 @@ defmodule Dolphin.Sim.Copter.MissionTest do
     c = Enum.reduce([item(1, 16), item(2, 16)], c, &Copter.handle(&2, &1, @gcs))
     {out, _} = Copter.flush(c)
     assert Enum.any?(out, &match?({_, %M.MissionAck{type: 0}}, &1))
+
+    # The same silence over 2 s of real time as well: the upload ends.
+    c = %{ready() | real_ms: 1_000}
+    c = Copter.handle(c, %M.MissionCount{target_system: 1, target_component: 1, count: 3, mission_type: 0}, @gcs)
+    c = Copter.handle(c, item(0, 16), @gcs)
+    c = Enum.reduce(1..180, %{c | real_ms: 3_001}, fn _, c -> Copter.step(c, 50) end)
+    {out, _} = Copter.flush(c)
+    assert Enum.any?(out, &match?({_, %M.Statustext{text: "Mission upload timeout"}}, &1))
   end
 
   test "a new mission resets the progress, unless flying one in AUTO" do
