@@ -79,10 +79,12 @@ defmodule Dolphin.Check.Flight do
 
   # Where the flight is after `elapsed_s` (the vehicle holds there when
   # stopped): that far along the way from the last point of the estimate's
-  # path reached by then to the next, as the estimate flies it. (Placed at
-  # the last point reached, two surveys stopped 80 s into 3 km legs that
-  # part at their first corner stood together there, and flew home and
-  # landed as one: the check saw one conflict, at the corner.)
+  # path reached by then to the next, as Dolphin.Check.Separation draws it —
+  # an approximation where a point's time includes a loiter, a delay or a
+  # take-off's lead. (Placed at the last point reached, two surveys stopped
+  # 80 s into 3 km legs that part at their first corner stood together
+  # there, and flew home and landed as one: the check saw one conflict, at
+  # the corner.)
   defp left_at(%{estimate: nil} = s, elapsed_s), do: Dolphin.Check.Recorder.ended(s.recorder, s.vehicle, nil, false, elapsed_s)
 
   defp left_at(s, elapsed_s) do
@@ -93,19 +95,14 @@ defmodule Dolphin.Check.Flight do
 
   @doc false
   # {where, in the air?} `elapsed_s` into flying estimate `e`, which starts
-  # on the ground or in the air (`airborne?`). Between two points of its
-  # path it flies, as Dolphin.Check.Separation draws it.
+  # on the ground or in the air (`airborne?`): its path as a timeline.
   @spec position_at(map(), boolean(), float()) :: {Dolphin.Geo.Location.t() | nil, boolean()}
   def position_at(e, airborne?, elapsed_s) do
-    {reached, ahead} = Enum.split_while(e.path, fn {t, _, _, _} -> t <= elapsed_s end)
-    {t0, p0, f0, _} = List.last(reached) || {0.0, e.start_at, airborne?, 0}
+    points = for {t, %Dolphin.Geo.Location{} = at, flies?} <- [{0.0, e.start_at, airborne?} | Enum.map(e.path, fn {t, at, f, _seq} -> {t, at, f} end)], do: {round(t * 1000), at, flies?}
 
-    case ahead do
-      [{t1, %Dolphin.Geo.Location{} = p1, f1, _} | _] when is_struct(p0, Dolphin.Geo.Location) and t1 > t0 ->
-        {Dolphin.Geo.Shapes.along(p0, p1, (elapsed_s - t0) / (t1 - t0)), f0 or f1}
-
-      _ ->
-        {p0, f0}
+    case points do
+      [] -> {nil, airborne?}
+      points -> Dolphin.Check.Separation.position(points, round(elapsed_s * 1000))
     end
   end
 

@@ -173,6 +173,12 @@ defmodule Dolphin.Check.Separation do
 
   defp apart(c), do: :math.sqrt(c.horizontal * c.horizontal + c.vertical * c.vertical)
 
+  @doc false
+  # Where timeline `points` put their vehicle at `t`, and whether it flies
+  # then: straight and steady from each point to the next.
+  @spec position([point()], integer()) :: {Geo.Location.t(), boolean()}
+  def position(points, t), do: at(advance(points, t), t)
+
   # The timeline from the stretch that holds `t` on.
   defp advance([_, {t1, _, _} = next | rest], t) when t > t1, do: advance([next | rest], t)
   defp advance(points, _t), do: points
