@@ -147,6 +147,8 @@ defmodule Dolphin.Sim.Vehicle do
   def handle_info(:tick, s) do
     target = Clock.now_ms() - s.clock_origin
     {model, steps} = catch_up(real_now(s.model), target, 0)
+    # Several steps at once (a pause of the host): their present, not a burst of the past.
+    model = if steps > 1, do: Dolphin.Sim.Streams.latest_only(model), else: model
     lag = max(target - model.time_ms - @step_ms, 0)
     s = s |> Map.put(:model, model) |> Map.put(:lag_ms, lag) |> transmit() |> sense()
 
