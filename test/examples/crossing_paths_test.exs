@@ -147,13 +147,18 @@ defmodule Dolphin.Examples.CrossingPathsTest do
 
   test "one behind the other on one line: the one catching up holds, not the later one ahead it would run into", %{tmp_dir: dir} do
     run = ExampleRun.run(dir, Path.expand("../fixtures/separation/catching_up.exs", __DIR__), "", ["--sim", "2", "--speedup", @sim_speedup], nil)
-    # One hold, let go, both missions flown, never within 20 m.
-    kept_apart!(run)
+    # Each hold let go, both missions flown, never within 20 m. In step,
+    # one hold, at the turn; on a loaded host the two may start out of step
+    # (a fresh clone beside two busy loops saw vehicle 2 go to AUTO 1 s of
+    # clock after vehicle 1): the one behind is then held on the way too,
+    # let go, and held again at the turn.
+    kept_apart!(run, :may_be)
 
     # Vehicle 1 (west, its task made first) behind, vehicle 2 ahead. Held
     # ahead, 2 stopped in 1's way: on the simulator it was run into at 0.1 m
-    # across, before it could climb 20 m aside.
-    assert [%{"vehicle" => 1, "other" => 2, "action" => "hold"}] = for(%{"event" => "separation_hold"} = e <- run.events, do: e)
+    # across, before it could climb 20 m aside. Every hold is the one behind's.
+    holds = for %{"event" => "separation_hold"} = e <- run.events, do: {e["vehicle"], e["other"], e["action"]}
+    assert holds != [] and Enum.uniq(holds) == [{1, 2, "hold"}], inspect(holds)
   end
 
   if Dolphin.SITL.available?(:copter) do
