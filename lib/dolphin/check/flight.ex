@@ -98,7 +98,7 @@ defmodule Dolphin.Check.Flight do
   # on the ground or in the air (`airborne?`): its path as a timeline.
   @spec position_at(map(), boolean(), float()) :: {Dolphin.Geo.Location.t() | nil, boolean()}
   def position_at(e, airborne?, elapsed_s) do
-    points = for {t, %Dolphin.Geo.Location{} = at, flies?} <- [{0.0, e.start_at, airborne?} | Enum.map(e.path, fn {t, at, f, _seq} -> {t, at, f} end)], do: {round(t * 1000), at, flies?}
+    points = for {t, %Dolphin.Geo.Location{} = at, flies?, _seq} <- [{0.0, e.start_at, airborne?, 0} | e.path], do: {round(t * 1000), at, flies?}
 
     case points do
       [] -> {nil, airborne?}

@@ -350,7 +350,16 @@ defmodule Dolphin.Sim.Copter do
 
   @doc "Advances the vehicle by `dt_ms` of its time."
   @spec step(t(), pos_integer()) :: t()
-  def step(%__MODULE__{} = c, dt_ms) do
+  def step(%__MODULE__{} = c, dt_ms), do: c |> advance(dt_ms) |> Streams.due()
+
+  @doc """
+  A step without its telemetry streams: what the vehicle process runs when
+  it catches up with the clock after a pause of the host, sending the
+  streams once, for the present, after the last (`Streams.due/1` skips
+  what fell due meanwhile) — no autopilot sends a burst of old positions.
+  """
+  @spec advance(t(), pos_integer()) :: t()
+  def advance(%__MODULE__{} = c, dt_ms) do
     was_ready = ready?(c)
     c = %{c | time_ms: c.time_ms + dt_ms, burst: 0}
     before = length(c.out)
@@ -369,7 +378,6 @@ defmodule Dolphin.Sim.Copter do
     |> Modes.gcs_failsafe()
     |> mission_timeout()
     |> Mission.latest_reports(before)
-    |> Streams.due()
   end
 
   defp boot_events(c, was_ready) do

@@ -80,34 +80,6 @@ defmodule Dolphin.Sim.Streams do
 
   defp stop(c, msgid), do: %{c | streams: Map.delete(c.streams, msgid), due: Map.delete(c.due, msgid)}
 
-  @doc """
-  Of what the vehicle has still to send (`out`, newest first), the latest
-  of each stream message only (per component): what several steps run at
-  once — the model catching up with the clock after a pause of the host —
-  would otherwise send as a burst of old positions, which no autopilot
-  does (SITL's time stands still while it is starved; a late telemetry
-  loop sends its present state). Everything else is kept, in order.
-  """
-  @spec latest_only(Copter.t()) :: Copter.t()
-  def latest_only(%{out: out, streams: streams} = c) do
-    {kept, _seen} =
-      Enum.reduce(out, {[], MapSet.new()}, fn
-        {compid, %_{} = message} = sent, {kept, seen} ->
-          key = {compid, Dolphin.MAVLink.Message.id(message)}
-
-          cond do
-            not is_map_key(streams, elem(key, 1)) -> {[sent | kept], seen}
-            MapSet.member?(seen, key) -> {kept, seen}
-            true -> {[sent | kept], MapSet.put(seen, key)}
-          end
-
-        other, {kept, seen} ->
-          {[other | kept], seen}
-      end)
-
-    %{c | out: Enum.reverse(kept)}
-  end
-
   @doc "Sends every stream that is due, and schedules its next time."
   def due(%{streams: streams} = c) when map_size(streams) == 0, do: c
 

@@ -147,8 +147,8 @@ defmodule Dolphin.Sim.Vehicle do
   def handle_info(:tick, s) do
     target = Clock.now_ms() - s.clock_origin
     {model, steps} = catch_up(real_now(s.model), target, 0)
-    # Several steps at once (a pause of the host): their present, not a burst of the past.
-    model = if steps > 1, do: Dolphin.Sim.Streams.latest_only(model), else: model
+    # The streams once, after the last step: several at once (a pause of the host) send their present, not a burst of the past.
+    model = if steps > 0, do: Dolphin.Sim.Streams.due(model), else: model
     lag = max(target - model.time_ms - @step_ms, 0)
     s = s |> Map.put(:model, model) |> Map.put(:lag_ms, lag) |> transmit() |> sense()
 
@@ -197,7 +197,7 @@ defmodule Dolphin.Sim.Vehicle do
   defp real_now(model), do: %{model | real_ms: System.monotonic_time(:millisecond)}
 
   defp catch_up(model, target, steps) when steps < @max_catch_up and model.time_ms + @step_ms <= target,
-    do: catch_up(Copter.step(model, @step_ms), target, steps + 1)
+    do: catch_up(Copter.advance(model, @step_ms), target, steps + 1)
 
   defp catch_up(model, _target, steps), do: {model, steps}
 

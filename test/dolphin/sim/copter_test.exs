@@ -87,16 +87,16 @@ defmodule Dolphin.Sim.CopterTest do
   test "several steps at once: the latest of each stream only, everything else kept" do
     {c, _} = boot(%{ekf_ready_ms: 0}) |> run(1_000)
     {c, []} = tell(c, %M.RequestDataStream{target_system: 1, target_component: 1, req_stream_id: 0, req_message_rate: 4, start_stop: 1})
-    c = Enum.reduce(1..40, c, fn _, c -> Copter.step(c, @step) end)
-    c = Copter.text(c, 4, "between the steps")
-    {out, _} = c |> Dolphin.Sim.Streams.latest_only() |> Copter.flush()
+    caught_up = Enum.reduce(1..40, c, fn _, c -> Copter.advance(c, @step) end)
+    caught_up = Copter.text(caught_up, 4, "between the steps")
+    {out, _} = caught_up |> Dolphin.Sim.Streams.due() |> Copter.flush()
 
     assert [%M.GlobalPositionInt{time_boot_ms: at}] = for({1, %M.GlobalPositionInt{} = m} <- out, do: m)
-    assert at >= c.time_ms - 250
+    assert at >= caught_up.time_ms - 250
     assert [_] = for({1, %M.Heartbeat{}} <- out, do: :heartbeat)
     assert [%M.Statustext{text: "between the steps"}] = for({_, %M.Statustext{} = m} <- out, do: m)
-    # Not pruned, the same two seconds hold each of them in turn.
-    {all, _} = Copter.flush(c)
+    # Stepped with their streams, the same two seconds hold each of them in turn.
+    {all, _} = Enum.reduce(1..40, c, fn _, c -> Copter.step(c, @step) end) |> Copter.flush()
     assert length(for({1, %M.GlobalPositionInt{}} <- all, do: :position)) in 8..9
   end
 
